@@ -1,0 +1,3 @@
+"""jaxterrain: evolutionary terrain generation and terrain curricula for legged walkers, end to end in JAX."""
+
+__version__ = "0.1.0"

@@ -1,0 +1,522 @@
+"""Terrain features (paper section 3.2) and the traversability check (paper Algorithm 1).
+
+Per-pixel maps, each over every ``window x window`` window placed with a ``stride`` (VALID: no padding), on
+batches ``[B, H, W]`` (a single ``[H, W]`` map is accepted and gives an unbatched result)::
+
+    tri(h, window=3, stride=1)        # Wilson: mean_{i != centre} |w_i - z|   (the paper's "average difference")
+    tri(h, ..., algorithm="riley")    # Riley:  sqrt(sum_{i != centre} (w_i - z)^2)
+    tpi(h, window=3, stride=1)        # z - mean_{i != centre} w_i
+    roughness(h, window=3, stride=1)  # max(w) - min(w), centre included
+
+-> ``[B, H', W']`` float32 with ``H' = (H - window) // stride + 1`` (likewise ``W'``). ``z`` is the window's centre
+pixel, which we define as pixel ``(window // 2, window // 2)`` of the window (row, column from its top-left
+corner). For odd windows that is the true centre; GDAL's ``gdaldem`` uses ``window = 3`` (centre ``(1, 1)``) and at
+``window = 3, stride = 1`` our maps equal ``gdaldem tri -alg Wilson`` / ``tri -alg Riley`` / ``tpi`` /
+``roughness`` on interior pixels (``tests/test_features.py``). For even windows (the paper's ``window = 30``) there is
+no middle pixel: we take the lower-right one of the four central pixels, ``(15, 15)`` for ``window = 30``. Map pixel
+``(i, j)`` is the window whose top-left corner is input pixel ``(i * stride, j * stride)``. All features are in the
+heightmap's units.
+
+The scalar descriptor of a feature is the mean of its map (paper: window 30, stride 2)::
+
+    descriptors(h, names=("tri", "tpi", "roughness"), window=30, stride=2)   # [B, len(names)] float32
+
+Names come from a registry that takes any callable ``heightmaps[B, H, W] -> [B]`` (e.g. a learned traversability
+model): :func:`register_descriptor`, :func:`descriptor_names`.
+
+How it is computed (the fast path is exact; only float32 summation order differs from the reference):
+
+- Wilson / Riley TRI: one shifted difference per window offset. For offset ``(dy, dx)`` the neighbours of all
+  windows are one strided slice ``h[dy::stride, dx::stride]`` (cropped to ``[H', W']``); stride > 1 first splits
+  the map into its ``stride**2`` polyphase components so that every slice is contiguous. The map is
+  ``sum_{(dy, dx) != centre} |slice(dy, dx) - z|``. On GPU/TPU all ``k*k - 1`` terms are one unrolled elementwise
+  expression that XLA fuses into a single kernel with the descriptor's mean as its reduction: no
+  ``[k*k, H', W']`` patch tensor is ever stored and the heightmap is read from memory once. On CPU a loop over the
+  k window rows keeps the program small (fast compiles). Cost: ``(k*k - 1) * H' * W'`` subtract-abs-adds per map,
+  899 * 114^2 = 11.7 M at 256^2, k = 30, s = 2 (measured on one H100, jax 0.11.2: ~230 000 terrains/s for
+  ``("tri", "tpi", "roughness")`` together, ~255 000 for TRI alone, batch 4096). Batches above 2**29 elements are
+  processed in chunks (see ``_MAX_CHUNK_ELEMENTS``).
+- TPI is linear: ``tpi = z * k^2 / (k^2 - 1) - boxsum / (k^2 - 1)`` with a separable box sum; its descriptor is a
+  fixed weighted sum of the heightmap (each pixel weighted by how many windows contain it), one multiply-add per
+  pixel.
+- Roughness: separable ``lax.reduce_window`` max of z and of -z (rows, then columns).
+
+:func:`reference_maps` is a plain NumPy implementation over explicit windows, kept as ground truth for tests and as
+the CPU baseline of the benchmark.
+"""
+
+from __future__ import annotations
+
+from typing import Callable, NamedTuple, Sequence
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+from jax import lax
+
+from jaxterrain.terrain import TerrainScale, validate_scale
+
+__all__ = [
+    "HUMANOID_HEIGHT",
+    "tri",
+    "tpi",
+    "roughness",
+    "descriptors",
+    "register_descriptor",
+    "descriptor_names",
+    "is_traversable",
+    "max_window_range",
+    "reference_maps",
+    "output_shape",
+    "window_centre",
+]
+
+# Standing height of brax's humanoid (brax/envs/assets/humanoid.xml), measured with MuJoCo at the model's initial
+# pose: top of the head (sphere "head" at z = 1.59, radius 0.09 -> 1.68 m) minus the sole of the feet (spheres
+# "left_foot"/"right_foot" at z = 0.182, radius 0.075 -> 0.107 m) = 1.573 m. (The often-quoted 1.4 m is the
+# spawn height of the torso's centre, body "torso" pos="0 0 1.4", not the standing height.)
+HUMANOID_HEIGHT = 1.57
+
+_WILSON, _RILEY = "wilson", "riley"
+_UNROLL: bool | None = None  # force the TRI offset-sum strategy (see _offset_sum); None = by backend
+
+
+# ----------------------------------------------------------------------------------------------------------------
+# Input handling and validation (host side, static shapes only: also fine under jit)
+
+
+def _as_batch(heightmaps) -> tuple[jax.Array, bool]:
+    """``[B, H, W]`` or ``[H, W]`` -> (``[B, H, W]`` float32, was_single)."""
+    h = jnp.asarray(heightmaps)
+    if h.ndim == 2:
+        return h[None].astype(jnp.float32), True
+    if h.ndim != 3:
+        raise ValueError(f"heightmaps must have shape [B, H, W] or [H, W]; got shape {tuple(h.shape)}")
+    return h.astype(jnp.float32), False
+
+
+def _check_int(name: str, value, low: int, high: int | None) -> int:
+    rng = f"[{low}, {high}]" if high is not None else f">= {low}"
+    if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
+        raise ValueError(f"{name} must be an integer in {rng}; got {value!r}")
+    value = int(value)
+    if value < low or (high is not None and value > high):
+        raise ValueError(f"{name} must be an integer in {rng}; got {value}")
+    return value
+
+
+def _check_window(shape, window, stride) -> tuple[int, int]:
+    h, w = int(shape[-2]), int(shape[-1])
+    window = _check_int("window", window, 2, min(h, w))
+    stride = _check_int("stride", stride, 1, None)
+    return window, stride
+
+
+def output_shape(shape: Sequence[int], window: int, stride: int) -> tuple[int, int]:
+    """``(H', W')`` of a feature map of a ``[..., H, W]`` heightmap (VALID windows)."""
+    window, stride = _check_window(shape, window, stride)
+    return (int(shape[-2]) - window) // stride + 1, (int(shape[-1]) - window) // stride + 1
+
+
+def window_centre(window: int) -> int:
+    """Row (= column) of the centre pixel inside a window: ``window // 2`` (see the module docstring)."""
+    return window // 2
+
+
+# ----------------------------------------------------------------------------------------------------------------
+# Shifted views
+
+
+class _Views(NamedTuple):
+    """Shifted views of a batch: ``view(dy, dx)[b, i, j] = h[b, i * stride + dy, j * stride + dx]``, ``[B, H', W']``."""
+
+    phases: jax.Array  # [B, s, s, ni, nj] polyphase components (or [B, 1, 1, H, W] when stride = 1)
+    stride: int
+    out_h: int
+    out_w: int
+
+    def view(self, dy: int, dx: int) -> jax.Array:
+        s = self.stride
+        p, q = dy // s, dx // s
+        return self.phases[:, dy % s, dx % s, p : p + self.out_h, q : q + self.out_w]
+
+
+def _views(h: jax.Array, window: int, stride: int) -> _Views:
+    b, hh, ww = h.shape
+    ho, wo = (hh - window) // stride + 1, (ww - window) // stride + 1
+    s = stride
+    if s == 1:
+        return _Views(h[:, None, None], 1, ho, wo)
+    ni, nj = ho + (window - 1) // s, wo + (window - 1) // s
+    # Rows/columns beyond s*ni / s*nj are never inside a window; the zero padding (when s*ni > H) is never read.
+    h = h[:, : s * ni, : s * nj]
+    h = jnp.pad(h, ((0, 0), (0, s * ni - h.shape[1]), (0, s * nj - h.shape[2])))
+    phases = h.reshape(b, ni, s, nj, s).transpose(0, 2, 4, 1, 3)
+    return _Views(phases, s, ho, wo)
+
+
+def _offset_sum(
+    v: _Views, z: jax.Array, window: int, term: Callable[[jax.Array], jax.Array], unroll: bool | None = None
+) -> jax.Array:
+    """``sum_{(dy, dx) != centre} term(view(dy, dx) - z)`` -> ``[B, H', W']``.
+
+    ``unroll=True``: all ``k*k - 1`` terms as one unrolled elementwise expression, which XLA fuses into a single
+    kernel (fastest on GPU/TPU). ``unroll=False``: a ``fori_loop`` over the ``k`` window rows with the ``k`` terms of
+    a row unrolled (k times smaller program: XLA:CPU compiles the k = 30 case in ~1 s instead of ~15 s). ``None``
+    picks ``unroll = (jax.default_backend() != "cpu")`` unless the module switch ``_UNROLL`` (tests) is set. Both
+    give the same values up to float32 summation order.
+    """
+    if unroll is None:
+        unroll = _UNROLL if _UNROLL is not None else jax.default_backend() != "cpu"
+    c = window_centre(window)
+    if unroll:
+        rows = []
+        for dy in range(window):
+            acc = None
+            for dx in range(window):
+                if dy == c and dx == c:
+                    continue
+                t = term(v.view(dy, dx) - z)
+                acc = t if acc is None else acc + t
+            rows.append(acc)
+        while len(rows) > 1:  # pairwise over rows: shorter dependency chains, smaller rounding error
+            rows = [rows[i] + rows[i + 1] if i + 1 < len(rows) else rows[i] for i in range(0, len(rows), 2)]
+        return rows[0]
+
+    s, ho, wo = v.stride, v.out_h, v.out_w
+
+    def row(dy, acc):
+        phase_row = lax.dynamic_index_in_dim(v.phases, dy % s, axis=1, keepdims=False)  # [B, s, ni, nj]
+        band = lax.dynamic_slice_in_dim(phase_row, dy // s, ho, axis=2)  # [B, s, H', nj]
+        total = None
+        for dx in range(window):
+            t = term(band[:, dx % s, :, dx // s : dx // s + wo] - z)
+            if dx == c:  # the centre itself contributes term(0) = 0 for abs/square, but mask it explicitly
+                t = jnp.where(dy == c, jnp.zeros_like(t), t)
+            total = t if total is None else total + t
+        return acc + total
+
+    return lax.fori_loop(0, window, row, jnp.zeros_like(z))
+
+
+def _box(h: jax.Array, window: int, stride: int, init, op) -> jax.Array:
+    """Separable reduce_window (``op`` associative) over ``[B, H, W]`` -> ``[B, H', W']``."""
+    r = lax.reduce_window(h, init, op, (1, 1, window), (1, 1, stride), "VALID")
+    return lax.reduce_window(r, init, op, (1, window, 1), (1, stride, 1), "VALID")
+
+
+# ----------------------------------------------------------------------------------------------------------------
+# Per-pixel maps (batched cores: [B, H, W] float32 in, [B, H', W'] out; no validation)
+
+
+def _tri_core(h, window, stride, algorithm, v: _Views | None = None):
+    v = _views(h, window, stride) if v is None else v
+    c = window_centre(window)
+    z = v.view(c, c)
+    n = window * window - 1
+    if algorithm == _WILSON:
+        return _offset_sum(v, z, window, jnp.abs) / n
+    return jnp.sqrt(_offset_sum(v, z, window, jnp.square))
+
+
+def _tpi_core(h, window, stride, v: _Views | None = None):
+    v = _views(h, window, stride) if v is None else v
+    c = window_centre(window)
+    z = v.view(c, c)
+    box = _box(h, window, stride, 0.0, lax.add)
+    return z - (box - z) / (window * window - 1)
+
+
+def _roughness_core(h, window, stride):
+    hi = _box(h, window, stride, -jnp.inf, lax.max)
+    lo = -_box(-h, window, stride, -jnp.inf, lax.max)
+    return hi - lo
+
+
+def _check_algorithm(algorithm: str) -> str:
+    a = str(algorithm).lower()
+    if a not in (_WILSON, _RILEY):
+        raise ValueError(f"algorithm must be one of ('wilson', 'riley'); got {algorithm!r}")
+    return a
+
+
+def tri(heightmaps, window: int = 3, stride: int = 1, algorithm: str = "wilson") -> jax.Array:
+    """Terrain Ruggedness Index map.
+
+    Args:
+      heightmaps: ``[B, H, W]`` (or ``[H, W]``) float heightmaps.
+      window: window size k, 2 <= k <= min(H, W). Centre pixel ``(k // 2, k // 2)``.
+      stride: window step, >= 1.
+      algorithm: ``"wilson"`` (default; mean_{i != centre} |w_i - z|, the paper's definition and
+        ``gdaldem TRI -alg Wilson``) or ``"riley"`` (sqrt(sum_{i != centre} (w_i - z)^2), GDAL's default since 3.3).
+
+    Returns:
+      ``[B, H', W']`` float32 (``[H', W']`` for a single map), ``H' = (H - k) // stride + 1``.
+    """
+    algorithm = _check_algorithm(algorithm)
+    h, single = _as_batch(heightmaps)
+    window, stride = _check_window(h.shape, window, stride)
+    out = _tri_core(h, window, stride, algorithm)
+    return out[0] if single else out
+
+
+def tpi(heightmaps, window: int = 3, stride: int = 1) -> jax.Array:
+    """Topographic Position Index map: ``z - mean_{i != centre} w_i`` (``gdaldem TPI`` at k = 3).
+
+    ``[B, H, W]`` (or ``[H, W]``) -> ``[B, H', W']`` float32; window / stride as in :func:`tri`.
+    """
+    h, single = _as_batch(heightmaps)
+    window, stride = _check_window(h.shape, window, stride)
+    out = _tpi_core(h, window, stride)
+    return out[0] if single else out
+
+
+def roughness(heightmaps, window: int = 3, stride: int = 1) -> jax.Array:
+    """Roughness map: ``max(w) - min(w)`` over the whole window, centre included (``gdaldem roughness`` at k = 3).
+
+    ``[B, H, W]`` (or ``[H, W]``) -> ``[B, H', W']`` float32; window / stride as in :func:`tri`.
+    """
+    h, single = _as_batch(heightmaps)
+    window, stride = _check_window(h.shape, window, stride)
+    out = _roughness_core(h, window, stride)
+    return out[0] if single else out
+
+
+# ----------------------------------------------------------------------------------------------------------------
+# Descriptors
+
+
+def _tpi_weights(shape, window: int, stride: int) -> np.ndarray:
+    """``[H, W]`` weights with ``sum(h * weights) == mean(tpi map)`` (TPI is linear in h)."""
+    hh, ww = int(shape[-2]), int(shape[-1])
+    ho, wo = (hh - window) // stride + 1, (ww - window) // stride + 1
+    c = window_centre(window)
+    n = window * window - 1
+
+    def cover(size, out):  # how many windows (along one axis) contain each pixel
+        cnt = np.zeros(size, np.float64)
+        for i in range(out):
+            cnt[i * stride : i * stride + window] += 1
+        return cnt
+
+    def centres(size, out):
+        m = np.zeros(size, np.float64)
+        m[np.arange(out) * stride + c] = 1
+        return m
+
+    count = ho * wo
+    centre = np.outer(centres(hh, ho), centres(ww, wo))
+    covered = np.outer(cover(hh, ho), cover(ww, wo))
+    return ((centre * (n + 1) - covered) / (n * count)).astype(np.float32)
+
+
+_BUILTIN = ("tri", "tri_riley", "tpi", "roughness")
+
+
+def _builtin_descriptors(h: jax.Array, names: Sequence[str], window: int, stride: int) -> dict[str, jax.Array]:
+    """The built-in descriptors of a ``[B, H, W]`` batch, sharing the shifted views: name -> ``[B]``."""
+    out = {}
+    v = _views(h, window, stride) if ("tri" in names or "tri_riley" in names) else None
+    for name in names:
+        if name == "tri":
+            out[name] = jnp.mean(_tri_core(h, window, stride, _WILSON, v), axis=(1, 2))
+        elif name == "tri_riley":
+            out[name] = jnp.mean(_tri_core(h, window, stride, _RILEY, v), axis=(1, 2))
+        elif name == "tpi":
+            w = jnp.asarray(_tpi_weights(h.shape, window, stride))
+            out[name] = jnp.sum(h * w, axis=(1, 2))
+        elif name == "roughness":
+            out[name] = jnp.mean(_roughness_core(h, window, stride), axis=(1, 2))
+    return out
+
+
+# Above 2**29 input elements per call (8192 maps of 256 x 256) XLA:GPU's fused TRI kernel slows down ~4.5x
+# (measured on an H100: 233k terrains/s at B = 8192, 52k at B = 16384, presumably 64-bit indexing), so larger
+# batches are computed with lax.map in chunks of _CHUNK_ELEMENTS (4096 maps of 256 x 256: 189k terrains/s at
+# B = 16384; chunks of 8192 maps gave only 116k).
+_MAX_CHUNK_ELEMENTS = 2**29
+_CHUNK_ELEMENTS = 2**28
+
+
+def _chunked_builtin_descriptors(h, names, window, stride) -> dict[str, jax.Array]:
+    if not names:
+        return {}
+    b, hh, ww = h.shape
+    per_map = hh * ww
+    if b * per_map <= _MAX_CHUNK_ELEMENTS or b == 1:
+        return _builtin_descriptors(h, names, window, stride)
+    chunk = max(1, min(_CHUNK_ELEMENTS, _MAX_CHUNK_ELEMENTS) // per_map)
+
+    def one(x):  # [H, W] -> name -> []; lax.map vmaps it over chunks of `chunk` maps
+        return {k: v[0] for k, v in _builtin_descriptors(x[None], names, window, stride).items()}
+
+    return lax.map(one, h, batch_size=chunk)
+
+
+class Descriptor(NamedTuple):
+    """A registered descriptor: ``fn(heightmaps[B, H, W]) -> [B]``, or ``fn(heightmaps, window, stride) -> [B]``
+    when ``windowed`` (the built-in features)."""
+
+    fn: Callable
+    windowed: bool
+
+
+def _builtin_fn(name: str) -> Callable:
+    def fn(heightmaps, window: int = 30, stride: int = 2):
+        h, _ = _as_batch(heightmaps)
+        window, stride = _check_window(h.shape, window, stride)
+        return _builtin_descriptors(h, (name,), window, stride)[name]
+
+    fn.__name__ = f"{name}_descriptor"
+    return fn
+
+
+_REGISTRY: dict[str, Descriptor] = {name: Descriptor(_builtin_fn(name), True) for name in _BUILTIN}
+
+
+def register_descriptor(name: str, fn: Callable, *, windowed: bool = False, overwrite: bool = False) -> None:
+    """Add a descriptor usable by name in :func:`descriptors`.
+
+    Args:
+      name: a new name (``overwrite=True`` to replace an existing non-built-in one).
+      fn: ``fn(heightmaps[B, H, W] float32) -> [B]`` (e.g. a learned traversability model with its parameters
+        closed over), or with ``windowed=True`` ``fn(heightmaps, window, stride) -> [B]``. It must be traceable
+        (jit / vmap-able) if callers jit :func:`descriptors`.
+    """
+    if not isinstance(name, str) or not name:
+        raise ValueError(f"name must be a non-empty string; got {name!r}")
+    if not callable(fn):
+        raise ValueError(f"fn must be callable heightmaps[B, H, W] -> [B]; got {fn!r}")
+    if name in _BUILTIN:
+        raise ValueError(f"name {name!r} is a built-in descriptor and cannot be replaced; built-ins: {_BUILTIN}")
+    if name in _REGISTRY and not overwrite:
+        raise ValueError(f"descriptor {name!r} is already registered; pass overwrite=True to replace it")
+    _REGISTRY[name] = Descriptor(fn, bool(windowed))
+
+
+def unregister_descriptor(name: str) -> None:
+    """Remove a descriptor added with :func:`register_descriptor` (built-ins cannot be removed)."""
+    if name in _BUILTIN:
+        raise ValueError(f"name {name!r} is a built-in descriptor and cannot be removed")
+    if name not in _REGISTRY:
+        raise ValueError(f"unknown descriptor {name!r}; registered: {descriptor_names()}")
+    del _REGISTRY[name]
+
+
+def descriptor_names() -> tuple[str, ...]:
+    """Names accepted by :func:`descriptors`: the built-ins ``tri`` (Wilson), ``tri_riley``, ``tpi``,
+    ``roughness``, then registered ones in registration order."""
+    return tuple(_REGISTRY)
+
+
+def descriptors(
+    heightmaps, names: Sequence[str] = ("tri", "tpi", "roughness"), window: int = 30, stride: int = 2
+) -> jax.Array:
+    """Scalar descriptors: the mean over the map of each named feature (paper: window 30, stride 2).
+
+    Built-in names are computed together (shared shifted views; under ``jit`` XLA fuses them); other names call
+    their registered function on the whole batch. Not jitted: callers jit with
+    ``static_argnames=("names", "window", "stride")`` (``names`` as a tuple).
+
+    Args:
+      heightmaps: ``[B, H, W]`` (or ``[H, W]``) float heightmaps.
+      names: descriptor names, see :func:`descriptor_names`.
+      window, stride: as in :func:`tri`; only used by windowed descriptors.
+
+    Returns:
+      ``[B, len(names)]`` float32 in the order of ``names`` (``[len(names)]`` for a single map).
+    """
+    if isinstance(names, str):
+        names = (names,)
+    names = tuple(names)
+    if not names:
+        raise ValueError(f"names must name at least one descriptor out of {descriptor_names()}")
+    unknown = [n for n in names if n not in _REGISTRY]
+    if unknown:
+        raise ValueError(f"unknown descriptor name(s) {unknown}; valid names: {descriptor_names()}")
+    h, single = _as_batch(heightmaps)
+    if any(_REGISTRY[n].windowed for n in names):
+        window, stride = _check_window(h.shape, window, stride)
+    builtin = _chunked_builtin_descriptors(h, [n for n in dict.fromkeys(names) if n in _BUILTIN], window, stride)
+    cols = []
+    for n in names:
+        if n in builtin:
+            col = builtin[n]
+        else:
+            d = _REGISTRY[n]
+            col = d.fn(h, window, stride) if d.windowed else d.fn(h)
+            col = jnp.asarray(col)
+            if col.shape != (h.shape[0],):
+                raise ValueError(
+                    f"descriptor {n!r} returned shape {tuple(col.shape)}; it must return [B] = ({h.shape[0]},)"
+                )
+        cols.append(col.astype(jnp.float32))
+    out = jnp.stack(cols, axis=-1)
+    return out[0] if single else out
+
+
+# ----------------------------------------------------------------------------------------------------------------
+# Algorithm 1
+
+
+def max_window_range(heightmaps, window: int = 26) -> jax.Array:
+    """Largest ``max - min`` over all ``window x window`` windows (stride 1, VALID): ``[B, H, W]`` -> ``[B]``."""
+    h, single = _as_batch(heightmaps)
+    window, _ = _check_window(h.shape, window, 1)
+    out = jnp.max(_roughness_core(h, window, 1), axis=(1, 2))
+    return out[0] if single else out
+
+
+def is_traversable(
+    heightmaps, robot_height: float = HUMANOID_HEIGHT, window: int = 26, scale: TerrainScale = TerrainScale()
+) -> jax.Array:
+    """Paper Algorithm 1: a terrain is traversable unless some ``window x window`` patch rises more than
+    ``robot_height / 3`` (metres) between its lowest and highest point.
+
+    Returns ``max over windows (max - min) * scale.height <= robot_height / 3``. The paper's loop visits
+    ``rows - k`` window rows (``range(0, rows - k)``), which skips the last row/column of windows; we check every
+    VALID window (``rows - k + 1`` of them), so a step in the last ``k`` rows is not missed.
+
+    Args:
+      heightmaps: ``[B, H, W]`` (or ``[H, W]``) heightmaps in heightmap units (``[0, 1]`` for generators).
+      robot_height: metres, > 0. Default :data:`HUMANOID_HEIGHT` (brax humanoid, 1.57 m).
+      window: k, 2 <= k <= min(H, W); paper 26 ("approx. step length of robot"; 1.04 m at the default scale).
+      scale: :class:`jaxterrain.terrain.TerrainScale` giving metres per heightmap unit.
+
+    Returns:
+      ``[B]`` bool (``[]`` for a single map).
+    """
+    if isinstance(robot_height, (int, float, np.number)) and not (np.isfinite(robot_height) and robot_height > 0):
+        raise ValueError(f"robot_height must be a finite number of metres > 0; got {robot_height!r}")
+    validate_scale(scale)
+    rng = max_window_range(heightmaps, window)
+    return rng * scale.height <= robot_height / 3.0
+
+
+# ----------------------------------------------------------------------------------------------------------------
+# NumPy reference (tests, CPU benchmark baseline)
+
+
+def reference_maps(heightmaps, window: int = 3, stride: int = 1) -> dict[str, np.ndarray]:
+    """Plain NumPy maps over explicit windows (float64 inside): ``{"tri", "tri_riley", "tpi", "roughness"}`` ->
+    ``[B, H', W']`` float64 (``[H', W']`` for a single map). Slow ground truth; keep inputs small."""
+    h = np.asarray(heightmaps, np.float64)
+    single = h.ndim == 2
+    if single:
+        h = h[None]
+    if h.ndim != 3:
+        raise ValueError(f"heightmaps must have shape [B, H, W] or [H, W]; got shape {h.shape}")
+    window, stride = _check_window(h.shape, window, stride)
+    w = np.lib.stride_tricks.sliding_window_view(h, (window, window), axis=(1, 2))[:, ::stride, ::stride]
+    c = window_centre(window)
+    z = w[..., c, c]
+    flat = w.reshape(*w.shape[:3], window * window)
+    others = np.delete(flat, c * window + c, axis=-1)
+    d = others - z[..., None]
+    out = {
+        "tri": np.abs(d).mean(-1),
+        "tri_riley": np.sqrt((d * d).sum(-1)),
+        "tpi": z - others.mean(-1),
+        "roughness": flat.max(-1) - flat.min(-1),
+    }
+    return {k: v[0] for k, v in out.items()} if single else out

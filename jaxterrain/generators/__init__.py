@@ -1,0 +1,80 @@
+"""Terrain generators and their registry.
+
+    >>> from jaxterrain import generators
+    >>> generators.names()
+    ('cppn', 'diamond_square', 'gan', 'perlin', 'worley')
+    >>> gen = generators.get("perlin")           # a Generator (see base.py)
+
+Each module registers a factory ``factory(size=256, **options) -> Generator`` with :func:`register`; ``get`` calls
+it. Register your own generator the same way and every experiment command can use it by name.
+"""
+
+from __future__ import annotations
+
+import functools
+from typing import Callable
+
+from jaxterrain.generators.base import (
+    Generator,
+    GenomeSpec,
+    check_vector_genomes,
+    gaussian_mutation,
+    spec,
+    uniform_genomes,
+    vector_generator,
+)
+
+_FACTORIES: dict[str, Callable[..., Generator]] = {}
+
+
+def register(name: str) -> Callable[[Callable[..., Generator]], Callable[..., Generator]]:
+    """Decorator that registers a generator factory under ``name``."""
+
+    def wrap(factory: Callable[..., Generator]) -> Callable[..., Generator]:
+        if name in _FACTORIES:
+            raise ValueError(f"a generator named {name!r} is already registered")
+        _FACTORIES[name] = factory
+        return factory
+
+    return wrap
+
+
+def names() -> tuple[str, ...]:
+    """The registered generator names, sorted."""
+    return tuple(sorted(_FACTORIES))
+
+
+@functools.lru_cache(maxsize=None)
+def _cached(name: str, options: tuple) -> Generator:
+    return _FACTORIES[name](**dict(options))
+
+
+def get(name: str, **options) -> Generator:
+    """The generator registered as ``name``, built with ``options`` (e.g. ``size=64``); cached per options."""
+    if name not in _FACTORIES:
+        raise ValueError(f"unknown generator {name!r}; choose one of {', '.join(names())}")
+    return _cached(name, tuple(sorted(options.items())))
+
+
+# Built-in generators register themselves on import.
+from jaxterrain.generators import diamond_square, perlin, worley  # noqa: E402,F401
+
+for _optional in ("cppn", "gan"):
+    try:
+        __import__(f"jaxterrain.generators.{_optional}")
+    except ModuleNotFoundError as err:  # pragma: no cover - only while a module is being written
+        if err.name != f"jaxterrain.generators.{_optional}":
+            raise
+
+__all__ = [
+    "Generator",
+    "GenomeSpec",
+    "check_vector_genomes",
+    "gaussian_mutation",
+    "get",
+    "names",
+    "register",
+    "spec",
+    "uniform_genomes",
+    "vector_generator",
+]
