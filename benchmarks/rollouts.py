@@ -1,0 +1,347 @@
+"""Walker rollout throughput on the GPU machine, against raw MJX (XML solver options) and MuJoCo C's rollout.
+
+Measures, in one run (every figure after a warm-up / compile, device work waited for with block_until_ready):
+
+1. ours: physics steps/s of the batched walker (``jaxterrain.walker.WalkerEnv``, its default = fast solver
+   options) with the policy in the loop (obs -> policy MLP -> env.step, auto-reset on done), every env its own
+   256 x 256 terrain, at several batch sizes;
+2. (a) raw MJX with the XML's solver options (Newton, iterations 8, ls_iterations 50, Euler damping) and random
+   actions on the same terrains, plus raw MJX with our fast options (the policy/env overhead is the difference);
+3. (b) MuJoCo C ``mujoco.rollout`` with ``--threads`` threads on the same model and terrains, random controls
+   (both solver settings);
+4. ``difficulty`` timings: one paper generation (20 terrains x 20 attempts) via ``difficulty.evaluate`` and
+   4096 terrains x 20 attempts (the compiled batched rollout), with the number of env steps actually simulated
+   (the rollout loop stops when every attempt has ended);
+5. solver check: the policy's flat-ground normalised distance (best 5 / all 20 of 20 attempts on 8 flat terrains)
+   under our fast solver options and under the XML's - with the shipped base policy this is the evidence that the
+   fast settings keep the walking sound.
+
+The policy is the shipped base policy when ``jaxterrain.rl.load_policy()`` finds it, else an MLP of the PPO config's
+size with random parameters (said in the output). Terrains: Perlin terrains from ``jaxterrain.generators`` (a bank
+of ``--bank`` distinct maps, tiled to one per env), heights ``* scale.height`` metres.
+
+    python benchmarks/rollouts.py --out runs/rollouts.json
+
+Every batch size is one XLA compile (~0.5-1 min on the GPU machine); to stay inside a 10-minute command, split:
+``--skip eval,solver`` (throughput table) and ``--skip ours,raw,c`` (difficulty timings and solver check).
+"""
+
+from __future__ import annotations
+
+import argparse
+import copy
+import os
+import sys
+import time
+from pathlib import Path
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+import mujoco  # noqa: E402
+from mujoco import mjx  # noqa: E402
+
+from common import block, environment, markdown_table, write_json  # noqa: E402
+from jaxterrain import difficulty  # noqa: E402
+from jaxterrain.terrain import TerrainScale  # noqa: E402
+from jaxterrain.walker import SOLVER_FAST, SOLVER_XML, WalkerConfig, WalkerEnv  # noqa: E402
+
+
+def log(*a):
+    print(f"[{time.strftime('%H:%M:%S')}]", *a, flush=True)
+
+
+def terrain_bank(key, n: int, size: int) -> jax.Array:
+    """``[n, size, size]`` heightmaps in [0, 1]: Perlin from the generator registry, else random smooth waves."""
+    try:
+        from jaxterrain import generators
+
+        gen = generators.get("perlin", size=size)
+        maps = gen.render(gen.sample(key, n))
+        return jnp.clip(jnp.asarray(maps, jnp.float32), 0.0, 1.0)
+    except Exception as err:  # noqa: BLE001 - the benchmark must run without the generators too
+        log(f"perlin generator unavailable ({err!r}); using random smooth waves")
+        kf, kp = jax.random.split(key)
+        freqs = jax.random.uniform(kf, (n, 8, 2), minval=0.5, maxval=4.0)
+        phase = jax.random.uniform(kp, (n, 8), maxval=2 * np.pi)
+        g = jnp.linspace(0, 2 * np.pi, size)
+        yy, xx = jnp.meshgrid(g, g, indexing="ij")
+        waves = jnp.sin(freqs[..., 0, None, None] * xx + freqs[..., 1, None, None] * yy + phase[..., None, None])
+        h = waves.sum(1)
+        h = (h - h.min((1, 2), keepdims=True)) / (h.max((1, 2), keepdims=True) - h.min((1, 2), keepdims=True))
+        return h
+
+
+def make_policy(env: WalkerEnv, key):
+    """(policy(obs) -> action, description)."""
+    from jaxterrain import rl
+
+    try:
+        policy = rl.load_policy()
+        if int(policy.observation_size) == env.observation_size:
+            return policy, f"shipped base policy ({policy.path})"
+        log("shipped policy has another observation size; using a random MLP")
+    except (FileNotFoundError, ValueError, RuntimeError) as err:
+        log(f"no shipped policy ({err}); using a random MLP of the PPO size")
+    from jaxterrain.rl import networks as nets
+
+    cfg = rl.PPOConfig()
+
+    params = nets.init_params(key, cfg, env.observation_size, env.action_size)
+    stats = nets.init_stats(env.observation_size)
+
+    def policy(obs):
+        return nets.deterministic_action(cfg, env.action_size, params, stats, obs)
+
+    return policy, f"random-parameter MLP of the PPO size (policy_hidden={tuple(cfg.policy_hidden)})"
+
+
+# --------------------------------------------------------------------------------------------------------------
+def bench_ours(env, policy, terrains_m, env_steps, repeats):
+    """Policy in the loop with auto-reset; returns physics steps/s."""
+    b = terrains_m.shape[0]
+    reset = jax.vmap(env.reset)
+    step = jax.vmap(env.step)
+    act = jax.vmap(policy)
+
+    @jax.jit
+    def run(state, init, terrains):
+        def body(s, _):
+            s = step(s, act(s.obs), terrains)
+            done = s.done > 0
+            s = jax.tree.map(lambda a, r: jnp.where(done.reshape((-1,) + (1,) * (a.ndim - 1)), r, a), s, init)
+            return s, s.distance
+
+        return jax.lax.scan(body, state, None, length=env_steps)
+
+    init = jax.jit(reset)(jax.random.split(jax.random.PRNGKey(1), b), terrains_m)
+    t0 = time.perf_counter()
+    out = block(run(init, init, terrains_m))
+    compile_s = time.perf_counter() - t0
+    times = []
+    state = out[0]
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        state, _ = block(run(state, init, terrains_m))
+        times.append(time.perf_counter() - t0)
+    best = min(times)
+    return {"steps_per_s": b * env_steps * env.config.n_frames / best, "seconds": best, "first_call_s": compile_s,
+            "finite": bool(jnp.all(jnp.isfinite(state.obs)))}
+
+
+def bench_raw_mjx(env, terrains_m, phys_steps, repeats):
+    """Raw mjx.step with random controls (uniform in ctrlrange) on per-env hfields; no resets."""
+    b = terrains_m.shape[0]
+    mx = env.mjx_model
+    lo, hi = env._ctrl_lo, env._ctrl_hi
+    init = jax.jit(jax.vmap(env.reset))(jax.random.split(jax.random.PRNGKey(1), b), terrains_m).data
+
+    @jax.jit
+    def run(data, terrains, key):
+        hdata = jnp.clip(terrains / env.elevation_z, 0, 1).reshape(b, -1)
+
+        def one(d, h, k):
+            m = mx.replace(hfield_data=h)
+
+            def body(d, kk):
+                ctrl = jax.random.uniform(kk, (mx.nu,), minval=lo, maxval=hi)
+                return mjx.step(m, d.replace(ctrl=ctrl)), None
+
+            return jax.lax.scan(body, d, jax.random.split(k, phys_steps))[0]
+
+        return jax.vmap(one)(data, hdata, jax.random.split(key, b))
+
+    t0 = time.perf_counter()
+    out = block(run(init, terrains_m, jax.random.PRNGKey(2)))
+    compile_s = time.perf_counter() - t0
+    times = []
+    for r in range(repeats):
+        t0 = time.perf_counter()
+        out = block(run(init, terrains_m, jax.random.PRNGKey(3 + r)))
+        times.append(time.perf_counter() - t0)
+    best = min(times)
+    return {"steps_per_s": b * phys_steps / best, "seconds": best, "first_call_s": compile_s,
+            "nan_fraction": float(jnp.mean(~jnp.all(jnp.isfinite(out.qpos), axis=1)))}
+
+
+def bench_c_rollout(env, terrains_m_bank, qpos0, nroll, nstep, threads):
+    """MuJoCo C multithreaded rollout, one MjModel per distinct terrain, random controls."""
+    from mujoco import rollout
+
+    base = env.mj_model
+    models = []
+    for t in np.asarray(terrains_m_bank):
+        m = copy.copy(base)
+        m.hfield_data[:] = np.clip(t / env.elevation_z, 0, 1).ravel()
+        models.append(m)
+    k = len(models)
+    model_list = [models[i % k] for i in range(nroll)]
+    datas = [mujoco.MjData(base) for _ in range(threads)]
+    spec = mujoco.mjtState.mjSTATE_FULLPHYSICS
+    d = mujoco.MjData(base)
+    states = np.zeros((nroll, mujoco.mj_stateSize(base, spec)))
+    for i in range(nroll):
+        mujoco.mj_resetData(base, d)
+        d.qpos[:] = qpos0[i % k]
+        mujoco.mj_getState(base, d, states[i], spec)
+    rng = np.random.default_rng(0)
+    lo, hi = base.actuator_ctrlrange[:, 0], base.actuator_ctrlrange[:, 1]
+    control = rng.uniform(lo, hi, (nroll, nstep, base.nu))
+    rollout.rollout(model_list[:threads], datas, states[:threads], control[:threads, :10])  # warm-up
+    t0 = time.perf_counter()
+    state, _ = rollout.rollout(model_list, datas, states, control)
+    sec = time.perf_counter() - t0
+    return {"steps_per_s": nroll * nstep / sec, "seconds": sec, "threads": threads, "rollouts": nroll,
+            "nstep": nstep, "nan_fraction": float(np.mean(~np.all(np.isfinite(state[:, -1]), axis=1)))}
+
+
+def bench_difficulty(cfg, policy, heightmaps, attempts, repeats):
+    """Wall time of ``difficulty.evaluate`` (host validation + the one compiled batched rollout + best-5), after a
+    first call that compiles; the episode lengths (env steps simulated) come from that first call."""
+    b = heightmaps.shape[0]
+    fn = difficulty._compiled(cfg, attempts, policy, False)  # the function evaluate() calls (same cache entry)
+    t0 = time.perf_counter()
+    dist, length = block(fn(heightmaps * cfg.scale.height, jax.random.PRNGKey(7), None))
+    first = time.perf_counter() - t0
+    length = np.asarray(length)
+    times = []
+    for r in range(repeats):
+        t0 = time.perf_counter()
+        fit = block(difficulty.evaluate(heightmaps, jax.random.PRNGKey(8 + r), attempts, 5, policy=policy,
+                                        env_config=cfg))
+        times.append(time.perf_counter() - t0)
+    return {"terrains": b, "attempts": attempts, "seconds": min(times), "first_call_s": first,
+            "loop_iterations": int(length.max()), "mean_episode_steps": float(length.mean()),
+            "env_steps": int(length.sum()), "fitness_mean": float(jnp.mean(fit)), "fitness_min": float(jnp.min(fit)),
+            "fitness_max": float(jnp.max(fit)), "distance_mean": float(jnp.mean(dist))}
+
+
+def solver_check(cfg, policy, n_terrains=8, attempts=20):
+    """Flat-ground walking of the policy under our (fast) and the XML's solver options: best-5 and all-20 means."""
+    out = {}
+    flat = jnp.zeros((n_terrains,) + tuple(cfg.terrain_shape), jnp.float32)
+    for name, solver in (("fast", SOLVER_FAST), ("xml", SOLVER_XML)):
+        c = cfg._replace(solver=solver)
+        d = np.asarray(block(difficulty.rollout_distances(flat, jax.random.PRNGKey(5), attempts, policy=policy,
+                                                          env_config=c)))
+        out[name] = {"best5_mean": float(np.mean(np.sort(d, axis=1)[:, -5:])), "all_mean": float(d.mean()),
+                     "min": float(d.min()), "max": float(d.max())}
+    return out
+
+
+def main(argv=None):
+    p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("--out", default=None, help="JSON result path")
+    p.add_argument("--batch-sizes", default="8192,32768", help="ours: envs per batch")
+    p.add_argument("--raw-batch-sizes", default="32768", help="raw MJX (XML and fast solver): envs per batch")
+    p.add_argument("--env-steps", type=int, default=100, help="env steps per timed call (x5 physics steps)")
+    p.add_argument("--repeats", type=int, default=2)
+    p.add_argument("--size", type=int, default=256, help="terrain samples per side")
+    p.add_argument("--cell-size", type=float, default=TerrainScale().cell_size, help="metres per sample")
+    p.add_argument("--bank", type=int, default=256, help="distinct terrains, tiled over the envs")
+    p.add_argument("--threads", type=int, default=os.cpu_count() or 16, help="MuJoCo C rollout threads")
+    p.add_argument("--c-rollouts", type=int, default=1024)
+    p.add_argument("--c-steps", type=int, default=500, help="physics steps per C rollout")
+    p.add_argument("--eval-batches", default="20,4096", help="terrains per difficulty.evaluate timing")
+    p.add_argument("--skip", default="", help="comma list of parts to skip: ours,raw,c,eval,solver")
+    args = p.parse_args(argv)
+    skip = set(filter(None, args.skip.split(",")))
+
+    env_info = environment()
+    log("environment", env_info)
+    scale = TerrainScale(cell_size=args.cell_size)
+    cfg = WalkerConfig(terrain_shape=(args.size, args.size), scale=scale)
+    env = WalkerEnv(cfg)
+    env_xml = WalkerEnv(cfg._replace(solver=SOLVER_XML))
+    policy, policy_desc = make_policy(env, jax.random.PRNGKey(0))
+    log("policy:", policy_desc)
+    bank = terrain_bank(jax.random.PRNGKey(11), args.bank, args.size)
+    bank_m = bank * scale.height
+    rows, result = [], {"environment": env_info, "policy": policy_desc, "solver_ours": SOLVER_FAST._asdict(),
+                        "solver_xml": SOLVER_XML._asdict(), "terrain": {"shape": [args.size, args.size],
+                                                                         "scale": scale._asdict(),
+                                                                         "distinct": args.bank},
+                        "ours": [], "raw_mjx_xml": [], "raw_mjx_fast": [], "mujoco_c": [], "difficulty": []}
+
+    def per_env(b):
+        return jnp.tile(bank_m, (-(-b // args.bank), 1, 1))[:b]
+
+    def save():
+        write_json(args.out, result)
+
+    if "ours" not in skip:
+        for b in [int(v) for v in args.batch_sizes.split(",") if v]:
+            try:
+                r = bench_ours(env, policy, per_env(b), args.env_steps, args.repeats)
+            except Exception as err:  # noqa: BLE001 (out of memory: stop growing)
+                log(f"ours at {b} envs failed: {type(err).__name__}: {str(err)[:300]}")
+                break
+            r["batch"] = b
+            result["ours"].append(r)
+            rows.append({"what": "ours: walker + policy, fast solver", "batch": b, "M steps/s": r["steps_per_s"] / 1e6,
+                         "compile+1st s": r["first_call_s"]})
+            log(rows[-1])
+            save()
+    if "raw" not in skip:
+        for name, e in (("raw_mjx_xml", env_xml), ("raw_mjx_fast", env)):
+            for b in [int(v) for v in args.raw_batch_sizes.split(",") if v]:
+                try:
+                    r = bench_raw_mjx(e, per_env(b), args.env_steps * cfg.n_frames, args.repeats)
+                except Exception as err:  # noqa: BLE001
+                    log(f"{name} at {b} envs failed: {type(err).__name__}: {str(err)[:300]}")
+                    break
+                r["batch"] = b
+                result[name].append(r)
+                rows.append({"what": f"(a) {name.replace('_', ' ')}, random actions", "batch": b,
+                             "M steps/s": r["steps_per_s"] / 1e6, "compile+1st s": r["first_call_s"]})
+                log(rows[-1])
+                save()
+    if "c" not in skip:
+        qpos0 = np.asarray(jax.jit(jax.vmap(env.reset))(jax.random.split(jax.random.PRNGKey(1), args.bank),
+                                                         bank_m).data.qpos)
+        for name, e in (("xml", env_xml), ("fast", env)):
+            r = bench_c_rollout(e, bank_m, qpos0, args.c_rollouts, args.c_steps, args.threads)
+            r["solver"] = name
+            result["mujoco_c"].append(r)
+            rows.append({"what": f"(b) MuJoCo C rollout, {name} solver, {args.threads} threads",
+                         "batch": args.c_rollouts, "M steps/s": r["steps_per_s"] / 1e6})
+            log(rows[-1])
+            save()
+    if "eval" not in skip:
+        for b in [int(v) for v in args.eval_batches.split(",") if v]:
+            hm = jnp.tile(bank, (-(-b // args.bank), 1, 1))[:b]
+            r = bench_difficulty(cfg, policy, hm, 20, args.repeats if b <= 512 else 1)
+            result["difficulty"].append(r)
+            rows.append({"what": f"difficulty.evaluate {b} terrains x 20 attempts", "batch": b * 20,
+                         "seconds": r["seconds"], "compile+1st s": r["first_call_s"],
+                         "M steps/s": r["env_steps"] * cfg.n_frames / r["seconds"] / 1e6,
+                         "note": f"{r['env_steps']} env steps, loop {r['loop_iterations']}, "
+                                 f"fitness mean {r['fitness_mean']:.3f}"})
+            log(rows[-1])
+            save()
+    if "solver" not in skip:
+        r = solver_check(cfg, policy)
+        result["solver_check"] = r
+        for name, v in r.items():
+            rows.append({"what": f"flat ground, {name} solver: normalised distance best-5 / all-20",
+                         "note": f"{v['best5_mean']:.3f} / {v['all_mean']:.3f}"})
+            log(rows[-1])
+        save()
+    best_ours = max((r["steps_per_s"] for r in result["ours"]), default=0.0)
+    best_c = max((r["steps_per_s"] for r in result["mujoco_c"] if r["solver"] == "xml"), default=0.0)
+    result["summary"] = {"best_ours_steps_per_s": best_ours, "c_xml_steps_per_s": best_c,
+                         "speedup_vs_c": best_ours / best_c if best_c else None}
+    save()
+    print()
+    print(f"device: {env_info['device']}; policy: {policy_desc}; terrains: per-env {args.size}x{args.size}")
+    print(markdown_table(rows, ["what", "batch", "M steps/s", "seconds", "compile+1st s", "note"]))
+    print(f"\nours best {best_ours / 1e6:.2f} M physics steps/s; vs MuJoCo C (XML solver) "
+          f"{(best_ours / best_c) if best_c else float('nan'):.1f}x")
+
+
+if __name__ == "__main__":
+    main()

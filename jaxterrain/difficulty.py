@@ -1,0 +1,199 @@
+"""Terrain difficulty by the base policy (paper 3.3): fitness = mean of the best ``best`` of ``attempts`` normalised
+distances walked from random joint initialisations; difficulty = 1 - fitness.
+
+    fitness = difficulty.evaluate(heightmaps, key)              # [B, H, W] in [0, 1] -> [B] float32 in [0, 1]
+
+All ``B x attempts`` rollouts run in ONE batched, jit-compiled call: ``vmap`` over terrains (each its own
+heightfield) of ``vmap`` over attempts (terrain shared), a ``lax.while_loop`` over time that stops as soon as every
+rollout has ended (fall, far edge or ``env_config.episode_length``). A rollout's distance is
+:attr:`jaxterrain.walker.WalkerState.distance` at its first ``done``; invalid physics or a non-finite action
+(``state.failed``) counts as distance 0, so fitness is never NaN.
+
+``policy`` is deterministic: ``policy(obs [O]) -> action [A]`` in [-1, 1]; or, with ``policy_params`` given,
+``policy(policy_params, obs)`` - then new parameters do not re-compile (the curriculum's PPO can pass its own).
+Without ``policy`` the shipped base policy (``jaxterrain.rl.load_policy()``) is used.
+
+:func:`evaluate` and :func:`rollout_distances` are host-level entry points: they validate on the host and call a
+cached jit-compiled function. Inside your own jit (e.g. a QDax scoring function) use the pure
+:func:`batched_distances` / :func:`best_of`.
+"""
+
+from __future__ import annotations
+
+import functools
+from typing import Any, Callable, Optional
+
+import jax
+import jax.numpy as jnp
+
+from jaxterrain.terrain import TerrainScale, validate_scale
+from jaxterrain.walker import WalkerConfig, WalkerEnv
+
+__all__ = ["evaluate", "rollout_distances", "batched_distances", "best_of", "validate_heightmaps",
+           "default_policy", "make_env"]
+
+
+# ----------------------------------------------------------------------------------------------------------------
+# Pure functions (jit / vmap them yourself)
+# ----------------------------------------------------------------------------------------------------------------
+def best_of(distances: jax.Array, best: int) -> jax.Array:
+    """``[B, attempts]`` -> ``[B]``: mean of the ``best`` largest distances per row (NaN counted as 0)."""
+    d = jnp.nan_to_num(jnp.asarray(distances, jnp.float32), nan=0.0, posinf=0.0, neginf=0.0)
+    return jnp.mean(jax.lax.top_k(d, best)[0], axis=-1)
+
+
+def batched_distances(env: WalkerEnv, policy: Callable, terrains: jax.Array, key: jax.Array, attempts: int,
+                      policy_params: Any = None) -> tuple[jax.Array, jax.Array]:
+    """Roll out ``attempts`` episodes on each of ``terrains`` [B, H, W] (metres) until all have ended.
+
+    ``policy(obs)`` (or ``policy(policy_params, obs)`` when ``policy_params`` is not None) maps one observation
+    [O] to one action [A]. Returns ``(distances [B, attempts] float32 in [0, 1], steps [B, attempts] int32)``:
+    the normalised distance at each rollout's end (0 where the rollout failed: invalid physics / action) and its
+    length in env steps.
+    """
+    b = terrains.shape[0]
+    reset_keys = jax.random.split(key, (b, attempts))
+    del key
+    act = (lambda obs: policy(obs)) if policy_params is None else (lambda obs: policy(policy_params, obs))
+    reset = jax.vmap(jax.vmap(env.reset, in_axes=(0, None)), in_axes=(0, 0))
+    step = jax.vmap(jax.vmap(env.step, in_axes=(0, 0, None)), in_axes=(0, 0, 0))
+    act = jax.vmap(jax.vmap(act))
+    horizon = env.config.episode_length
+
+    state = reset(reset_keys, terrains)
+    ended = jnp.zeros((b, attempts), bool)
+    final = jnp.zeros((b, attempts), jnp.float32)
+    length = jnp.zeros((b, attempts), jnp.int32)
+
+    def cond(carry):
+        t, _, ended, _, _ = carry
+        return (t < horizon) & ~jnp.all(ended)
+
+    def body(carry):
+        t, state, ended, final, length = carry
+        state = step(state, act(state.obs), terrains)
+        dist = jnp.where(state.failed > 0, 0.0, state.distance)
+        final = jnp.where(ended, final, dist)
+        length = jnp.where(ended, length, state.steps)
+        ended = ended | (state.done > 0)
+        return t + 1, state, ended, final, length
+
+    _, _, _, final, length = jax.lax.while_loop(cond, body, (jnp.int32(0), state, ended, final, length))
+    return final, length
+
+
+# ----------------------------------------------------------------------------------------------------------------
+# Host-level entry points
+# ----------------------------------------------------------------------------------------------------------------
+def validate_heightmaps(heightmaps, name: str = "heightmaps") -> jax.Array:
+    """``[B, H, W]`` float array, finite, values in [0, 1], H, W >= 4 -> float32 jax array; else ``ValueError``."""
+    shape = getattr(heightmaps, "shape", None)
+    if shape is None:
+        raise ValueError(f"{name} must be an array [B, H, W], got {type(heightmaps).__name__}")
+    if len(shape) != 3 or shape[0] < 1 or shape[1] < 4 or shape[2] < 4:
+        raise ValueError(f"{name} must have shape [B, H, W] with B >= 1 and H, W >= 4, got {tuple(shape)}")
+    h = jnp.asarray(heightmaps, jnp.float32)
+    finite, lo, hi = (v.item() for v in jax.device_get((jnp.all(jnp.isfinite(h)), jnp.min(h), jnp.max(h))))
+    if not finite:
+        raise ValueError(f"{name} contains NaN or inf")
+    if lo < 0.0 or hi > 1.0:
+        raise ValueError(f"{name} values must lie in [0, 1] (heightmap units), got min {lo:.4g}, max {hi:.4g}")
+    return h
+
+
+@functools.lru_cache(maxsize=16)
+def make_env(config: WalkerConfig) -> WalkerEnv:
+    """A cached :class:`WalkerEnv` per config (building one compiles the MuJoCo model)."""
+    return WalkerEnv(config)
+
+
+@functools.lru_cache(maxsize=1)
+def default_policy() -> Callable:
+    """The shipped base policy (``jaxterrain.rl.load_policy()``), loaded once."""
+    try:
+        from jaxterrain.rl import load_policy
+    except ImportError as err:  # pragma: no cover
+        raise RuntimeError("policy=None needs jaxterrain.rl.load_policy (the shipped base policy); "
+                           "pass policy= explicitly") from err
+    try:
+        return load_policy()
+    except FileNotFoundError as err:
+        raise RuntimeError(f"policy=None needs the shipped base policy, which is missing ({err}); "
+                           "pass policy= explicitly") from err
+
+
+@functools.lru_cache(maxsize=32)
+def _compiled(config: WalkerConfig, attempts: int, policy: Callable, with_params: bool):
+    env = make_env(config)
+
+    def run(terrains_m, key, params):
+        return batched_distances(env, policy, terrains_m, key, attempts, params if with_params else None)
+
+    return jax.jit(run)
+
+
+def _resolve(heightmaps, attempts: int, policy, scale, env_config):
+    if not isinstance(attempts, int) or attempts < 1:
+        raise ValueError(f"attempts must be an int >= 1, got {attempts!r}")
+    h = validate_heightmaps(heightmaps)
+    shape = tuple(h.shape[1:])
+    if env_config is None:
+        scale = validate_scale(TerrainScale() if scale is None else scale)
+        env_config = WalkerConfig(terrain_shape=shape, scale=scale)
+    else:
+        if tuple(env_config.terrain_shape) != shape:
+            raise ValueError(f"heightmaps are {shape} but env_config.terrain_shape is "
+                             f"{tuple(env_config.terrain_shape)}")
+        if scale is not None and tuple(scale) != tuple(env_config.scale):
+            raise ValueError(f"scale {scale} differs from env_config.scale {env_config.scale}; pass one of them")
+    if policy is None:
+        policy = default_policy()
+    if not callable(policy):
+        raise ValueError(f"policy must be callable (obs) -> action, got {type(policy).__name__}")
+    obs_size = getattr(policy, "observation_size", None)
+    env = make_env(env_config)
+    if obs_size is not None and int(obs_size) != env.observation_size:
+        raise ValueError(f"policy expects observations of size {obs_size}, the env gives {env.observation_size} "
+                         f"(height_scan={env_config.height_scan})")
+    terrains_m = h * jnp.float32(env_config.scale.height)
+    return terrains_m, env_config, policy
+
+
+def rollout_distances(heightmaps, key: jax.Array, attempts: int = 20, policy: Optional[Callable] = None,
+                      scale: Optional[TerrainScale] = None, env_config: Optional[WalkerConfig] = None,
+                      policy_params: Any = None, chunk: Optional[int] = None) -> jax.Array:
+    """Normalised distances ``[B, attempts]`` float32 in [0, 1] of the policy on ``heightmaps`` [B, H, W] in [0, 1].
+
+    Heightmaps become metres by ``scale`` (default :class:`~jaxterrain.terrain.TerrainScale`); the env is
+    ``env_config`` (default ``WalkerConfig(terrain_shape=(H, W), scale=scale)``). All ``B x attempts`` rollouts are
+    one jit-compiled batched call (cached per config / attempts / policy); ``chunk`` (terrains per call) splits
+    very large batches to bound device memory. Failed rollouts (invalid physics, NaN action) count 0.
+    """
+    terrains_m, env_config, policy = _resolve(heightmaps, attempts, policy, scale, env_config)
+    if chunk is not None and (not isinstance(chunk, int) or chunk < 1):
+        raise ValueError(f"chunk must be an int >= 1 or None, got {chunk!r}")
+    fn = _compiled(env_config, attempts, policy, policy_params is not None)
+    b = terrains_m.shape[0]
+    if chunk is None or chunk >= b:
+        return fn(terrains_m, key, policy_params)[0]
+    keys = jax.random.split(key, -(-b // chunk))
+    del key
+    outs = []
+    for i, k in enumerate(keys):
+        part = terrains_m[i * chunk:(i + 1) * chunk]
+        n = part.shape[0]
+        if n < chunk:  # pad to the compiled shape
+            part = jnp.concatenate([part, jnp.repeat(part[-1:], chunk - n, axis=0)])
+        outs.append(fn(part, k, policy_params)[0][:n])
+    return jnp.concatenate(outs)
+
+
+def evaluate(heightmaps, key: jax.Array, attempts: int = 20, best: int = 5, policy: Optional[Callable] = None,
+             scale: Optional[TerrainScale] = None, env_config: Optional[WalkerConfig] = None,
+             policy_params: Any = None, chunk: Optional[int] = None) -> jax.Array:
+    """Fitness ``[B]`` float32 in [0, 1] of ``heightmaps`` [B, H, W] (values in [0, 1]): the mean of the ``best``
+    largest of ``attempts`` normalised distances (see :func:`rollout_distances`). Difficulty = 1 - fitness."""
+    if not isinstance(best, int) or not 1 <= best <= (attempts if isinstance(attempts, int) else best):
+        raise ValueError(f"best must be an int in [1, attempts={attempts}], got {best!r}")
+    d = rollout_distances(heightmaps, key, attempts, policy, scale, env_config, policy_params, chunk)
+    return best_of(d, best)

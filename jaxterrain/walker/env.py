@@ -1,0 +1,295 @@
+"""A pure-function MJX environment: brax's humanoid walking along +x over a heightfield passed as DATA.
+
+    env = WalkerEnv(WalkerConfig())                 # builds the MjModel / mjx.Model once (host)
+    state = env.reset(key, terrain)                 # terrain: [H, W] float32 metres, H = y rows, W = x columns
+    state = env.step(state, action, terrain)        # action: [17] in [-1, 1]
+
+Both are pure and vmappable: ``jax.vmap(env.step, in_axes=(0, 0, None))`` shares one terrain,
+``in_axes=(0, 0, 0)`` gives every environment its own terrain. The terrain enters the physics through
+``mjx_model.replace(hfield_data=...)`` inside the function (see :func:`jaxterrain.walker.model.metres_to_hfield`):
+nothing about the terrain is baked into a closure, so a curriculum can switch terrains inside one jit-compiled loop.
+
+Physical choices (all in :class:`WalkerConfig`):
+
+- Scale: ``terrain_shape`` samples at ``scale`` (default 256 x 256 at 0.04 m = a 10.24 m square, heights up to
+  0.5 m). Heights outside ``[0, scale.height]`` metres are clipped, for the physics and for the samples alike.
+- Spawn: torso at ``x_start = -radius_x + start_margin``, ``y = 0``, facing +x, joints at the XML pose plus uniform
+  noise of ``joint_noise`` rad (clipped into the joint ranges) and joint velocities with noise ``qvel_noise``
+  rad/s; the body is lowered so that its lowest foot sphere sits ``spawn_clearance`` above the highest terrain
+  sample in a 0.5 m x 0.5 m patch under the start point (forward kinematics per reset).
+- Termination (``done = 1``): a fall (torso height above the terrain under it outside ``healthy_z_range``, or the
+  torso leaving the sides / the back of the heightfield), reaching ``x_goal = radius_x - goal_margin``, the time
+  limit ``episode_length`` env steps, or invalid physics (non-finite state or ``|qvel| > max_qvel``) or a
+  non-finite action. Invalid steps keep the previous (finite) physics state, give reward 0 and set
+  ``failed = 1``; obs and reward are always finite. ``truncation = 1`` marks ends that are not failures
+  (goal or time limit): bootstrap the value there.
+- Reward (brax humanoid): ``forward_reward_weight * vx + healthy_reward - ctrl_cost_weight * |ctrl|^2`` with vx the
+  torso's x velocity over the env step and ctrl = 0.4 * action (the XML's ctrlrange).
+- Normalised distance ``clip((x - x_start) / (x_goal - x_start), 0, 1)`` of the torso's x, in ``state.distance``.
+- One env step = ``n_frames`` (5) physics steps of ``timestep`` (0.003 s): dt = 0.015 s, as in brax.
+- Solver: :data:`~jaxterrain.walker.model.SOLVER_FAST` (Newton, iterations 1, ls_iterations 4, no Euler damping)
+  by default - brax's own MJX settings for this humanoid; ``SOLVER_XML`` is the XML's (8 / 50 / damping on).
+"""
+
+from __future__ import annotations
+
+from typing import Any, NamedTuple
+
+import jax
+import jax.numpy as jnp
+import mujoco
+import numpy as np
+from mujoco import mjx
+
+from jaxterrain.walker.model import (
+    FOOT_GEOMS,
+    SOLVER_FAST,
+    SolverOptions,
+    TerrainScale,
+    build_model,
+    check_terrain_shape,
+    metres_to_hfield,
+)
+
+
+class WalkerConfig(NamedTuple):
+    """Static configuration of :class:`WalkerEnv` (hashable; lengths in metres, times in env steps)."""
+
+    terrain_shape: tuple[int, int] = (256, 256)  # (nrow = y samples, ncol = x samples)
+    scale: TerrainScale = TerrainScale()
+    solver: SolverOptions = SOLVER_FAST
+    timestep: float = 0.003  # physics step, s
+    n_frames: int = 5  # physics steps per env step
+    episode_length: int = 1000  # env steps (15 s)
+    # track
+    start_margin: float = 0.5  # x_start = -radius_x + start_margin
+    goal_margin: float = 0.5  # x_goal = radius_x - goal_margin
+    side_margin: float = 0.3  # fall when |y| > radius_y - side_margin
+    spawn_clearance: float = 0.01  # lowest foot this far above the highest terrain under the start
+    # termination
+    healthy_z_range: tuple[float, float] = (1.0, 2.0)  # torso z minus terrain height under the torso
+    max_qvel: float = 500.0  # |qvel| beyond this = exploding physics
+    # reset noise (uniform, +-)
+    joint_noise: float = 0.1  # rad on the 17 hinge joints
+    qvel_noise: float = 0.1  # rad/s on the hinge joint velocities
+    # reward
+    forward_reward_weight: float = 1.25
+    healthy_reward: float = 5.0
+    ctrl_cost_weight: float = 0.1
+    # optional height scan (off for the paper's protocol)
+    height_scan: bool = False
+    scan_x: tuple[float, float] = (0.0, 1.4)  # ahead of the torso, heading frame
+    scan_y: tuple[float, float] = (-0.4, 0.4)  # lateral, heading frame
+    scan_points: tuple[int, int] = (8, 5)  # (along x, along y)
+
+
+class WalkerState(NamedTuple):
+    """One environment's state (add leading axes under vmap).
+
+    data: mjx.Data (physics). obs [O] float32. reward, done, truncation, failed: [] float32 (done = 1 when the
+    episode ended this step; truncation = 1 when it ended at the goal or the time limit; failed = 1 for invalid
+    physics or a non-finite action). steps: [] int32 env steps since reset. x_start: [] float32 torso x at reset.
+    distance: [] float32 normalised distance in [0, 1]. metrics: dict of [] float32 (forward_reward,
+    reward_alive, reward_quadctrl, x_velocity, torso_height, distance).
+    """
+
+    data: Any
+    obs: jax.Array
+    reward: jax.Array
+    done: jax.Array
+    truncation: jax.Array
+    failed: jax.Array
+    steps: jax.Array
+    x_start: jax.Array
+    distance: jax.Array
+    metrics: dict
+
+
+def _check_config(c: WalkerConfig) -> None:
+    check_terrain_shape(c.terrain_shape)
+    if not (c.scale.cell_size > 0 and c.scale.height > 0):
+        raise ValueError(f"scale.cell_size and scale.height must be > 0, got {c.scale}")
+    if c.n_frames < 1:
+        raise ValueError(f"n_frames must be >= 1, got {c.n_frames}")
+    if c.episode_length < 1:
+        raise ValueError(f"episode_length must be >= 1, got {c.episode_length}")
+    lo, hi = c.healthy_z_range
+    if not lo < hi:
+        raise ValueError(f"healthy_z_range must be (low, high) with low < high, got {c.healthy_z_range}")
+    if c.joint_noise < 0 or c.qvel_noise < 0:
+        raise ValueError(f"joint_noise and qvel_noise must be >= 0, got {c.joint_noise}, {c.qvel_noise}")
+    if min(c.scan_points) < 1:
+        raise ValueError(f"scan_points must be >= 1 each, got {c.scan_points}")
+
+
+def sample_heights(terrain: jax.Array, x: jax.Array, y: jax.Array, radius_x: float, radius_y: float,
+                   max_height: float) -> jax.Array:
+    """Bilinear terrain height (metres) at world points ``x, y`` (same shape) on a ``[H, W]`` terrain.
+
+    Uses MuJoCo's hfield grid (column j at x = -radius_x + j * 2 radius_x / (W - 1), row i likewise in y);
+    points outside are clamped to the border. Sample values are clipped to [0, max_height] like the physics.
+    """
+    h, w = terrain.shape
+    u = jnp.clip((x + radius_x) / (2.0 * radius_x) * (w - 1), 0.0, w - 1.0)
+    v = jnp.clip((y + radius_y) / (2.0 * radius_y) * (h - 1), 0.0, h - 1.0)
+    j0 = jnp.clip(jnp.floor(u).astype(jnp.int32), 0, w - 2)
+    i0 = jnp.clip(jnp.floor(v).astype(jnp.int32), 0, h - 2)
+    fu, fv = u - j0, v - i0
+    t = lambda i, j: jnp.clip(terrain[i, j], 0.0, max_height)  # noqa: E731
+    top = (1 - fu) * t(i0, j0) + fu * t(i0, j0 + 1)
+    bot = (1 - fu) * t(i0 + 1, j0) + fu * t(i0 + 1, j0 + 1)
+    return (1 - fv) * top + fv * bot
+
+
+def _yaw(quat: jax.Array) -> jax.Array:
+    w, x, y, z = quat[0], quat[1], quat[2], quat[3]
+    return jnp.arctan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z))
+
+
+class WalkerEnv:
+    """brax's humanoid on a heightfield; ``reset``/``step`` are pure functions of (key/state, terrain).
+
+    Attributes: ``config``, ``mj_model`` (MuJoCo C model, flat terrain), ``mjx_model``, ``dt`` (s per env step),
+    ``radius_x/radius_y/elevation_z`` (hfield size), ``x_start``, ``x_goal``, ``track_length`` (m),
+    ``observation_size``, ``action_size`` (17; actions in [-1, 1]).
+    Observation: [torso height above terrain (1), torso quaternion (4), 17 joint angles, 23 qvel]
+    (+ ``scan_points[0] * scan_points[1]`` terrain heights minus torso z when ``config.height_scan``).
+    """
+
+    def __init__(self, config: WalkerConfig = WalkerConfig()):
+        _check_config(config)
+        self.config = config
+        self.mj_model = build_model(config.terrain_shape, config.scale, config.solver, config.timestep)
+        self.mjx_model = mjx.put_model(self.mj_model, impl="jax")
+        m = self.mj_model
+        self.dt = config.timestep * config.n_frames
+        self.radius_x, self.radius_y, self.elevation_z, self.base_z = (float(v) for v in m.hfield_size[0])
+        self.x_start = -self.radius_x + config.start_margin
+        self.x_goal = self.radius_x - config.goal_margin
+        self.track_length = self.x_goal - self.x_start
+        if self.track_length <= 0.5:
+            raise ValueError(f"terrain too small for the margins: track length {self.track_length:.2f} m "
+                             f"(terrain_shape={config.terrain_shape}, scale={config.scale})")
+        if self.radius_y - config.side_margin <= 0.2:
+            raise ValueError(f"terrain too narrow for side_margin={config.side_margin}")
+        self._qpos0 = np.asarray(m.qpos0, np.float32)
+        self._jnt_lo = np.asarray(m.jnt_range[1:, 0], np.float32)  # hinge joints (joint 0 = free root)
+        self._jnt_hi = np.asarray(m.jnt_range[1:, 1], np.float32)
+        self._ctrl_lo = np.asarray(m.actuator_ctrlrange[:, 0], np.float32)
+        self._ctrl_hi = np.asarray(m.actuator_ctrlrange[:, 1], np.float32)
+        self._feet = np.array([mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_GEOM, n) for n in FOOT_GEOMS])
+        self._foot_radius = np.asarray(m.geom_size[self._feet, 0], np.float32)
+        self.action_size = int(m.nu)
+        self.observation_size = 1 + 4 + (m.nq - 7) + m.nv
+        if config.height_scan:
+            self.observation_size += int(config.scan_points[0] * config.scan_points[1])
+        # spawn patch: 0.5 m x 0.5 m around the start point
+        px, py = np.meshgrid(np.linspace(-0.25, 0.25, 5), np.linspace(-0.25, 0.25, 5))
+        self._patch = (np.float32(self.x_start) + px.ravel().astype(np.float32), py.ravel().astype(np.float32))
+        sx, sy = np.meshgrid(np.linspace(*config.scan_x, config.scan_points[0]),
+                             np.linspace(*config.scan_y, config.scan_points[1]), indexing="ij")
+        self._scan = (sx.ravel().astype(np.float32), sy.ravel().astype(np.float32))
+
+    # ----------------------------------------------------------------------------------------------------------
+    def flat_terrain(self, height: float = 0.0) -> jax.Array:
+        """A flat ``[H, W]`` float32 terrain at ``height`` metres."""
+        return flat_terrain(self.config, height)
+
+    def terrain_height(self, terrain: jax.Array, x: jax.Array, y: jax.Array) -> jax.Array:
+        """Bilinear terrain height in metres under world points (see :func:`sample_heights`)."""
+        return sample_heights(terrain, x, y, self.radius_x, self.radius_y, self.elevation_z)
+
+    def model(self, terrain: jax.Array) -> mjx.Model:
+        """The mjx.Model with ``terrain`` ([H, W] metres) as its heightfield."""
+        terrain = jnp.asarray(terrain, jnp.float32)
+        if terrain.shape != tuple(self.config.terrain_shape):
+            raise ValueError(f"terrain must have shape {tuple(self.config.terrain_shape)} (config.terrain_shape), "
+                             f"got {terrain.shape}")
+        return self.mjx_model.replace(hfield_data=metres_to_hfield(terrain, self.elevation_z))
+
+    # ----------------------------------------------------------------------------------------------------------
+    def reset(self, key: jax.Array, terrain: jax.Array) -> WalkerState:
+        """Initial state at the start edge of ``terrain`` ([H, W] metres) with random joint angles/velocities."""
+        c = self.config
+        key_q, key_v = jax.random.split(key)
+        del key
+        terrain = jnp.asarray(terrain, jnp.float32)
+        m = self.model(terrain)
+        nj = self._qpos0.shape[0] - 7
+        joints = self._qpos0[7:] + jax.random.uniform(key_q, (nj,), minval=-c.joint_noise, maxval=c.joint_noise)
+        joints = jnp.clip(joints, self._jnt_lo, self._jnt_hi)
+        qpos = jnp.concatenate([jnp.array([self.x_start, 0.0, 0.0]), self._qpos0[3:7], joints])
+        qvel = jnp.concatenate([jnp.zeros(6), jax.random.uniform(key_v, (self.mj_model.nv - 6,),
+                                                                 minval=-c.qvel_noise, maxval=c.qvel_noise)])
+        data = mjx.make_data(self.mjx_model).replace(qpos=qpos, qvel=qvel)
+        data = mjx.kinematics(m, data)
+        foot_bottom = jnp.min(data.geom_xpos[self._feet, 2] - self._foot_radius)  # torso at z = 0
+        ground = jnp.max(self.terrain_height(terrain, *self._patch))
+        qpos = qpos.at[2].set(ground - foot_bottom + c.spawn_clearance)
+        data = mjx.kinematics(m, data.replace(qpos=qpos))
+        zero = jnp.zeros((), jnp.float32)
+        metrics = {"forward_reward": zero, "reward_alive": zero, "reward_quadctrl": zero, "x_velocity": zero,
+                   "torso_height": qpos[2] - self.terrain_height(terrain, qpos[0], qpos[1]), "distance": zero}
+        return WalkerState(data=data, obs=self._obs(data, terrain), reward=zero, done=zero, truncation=zero,
+                           failed=zero, steps=jnp.zeros((), jnp.int32), x_start=jnp.asarray(qpos[0], jnp.float32),
+                           distance=zero, metrics=metrics)
+
+    def step(self, state: WalkerState, action: jax.Array, terrain: jax.Array) -> WalkerState:
+        """Advance ``n_frames`` physics steps with ``action`` [A] in [-1, 1] (clipped) on ``terrain`` [H, W] m."""
+        c = self.config
+        terrain = jnp.asarray(terrain, jnp.float32)
+        m = self.model(terrain)
+        action = jnp.asarray(action, jnp.float32)
+        action_ok = jnp.all(jnp.isfinite(action))
+        a = jnp.clip(jnp.nan_to_num(action, nan=0.0, posinf=1.0, neginf=-1.0), -1.0, 1.0)
+        ctrl = self._ctrl_lo + (a + 1.0) * (self._ctrl_hi - self._ctrl_lo) * 0.5
+        d0 = state.data
+        d = jax.lax.fori_loop(0, c.n_frames, lambda _, d: mjx.step(m, d), d0.replace(ctrl=ctrl))
+        physics_ok = (jnp.all(jnp.isfinite(d.qpos)) & jnp.all(jnp.isfinite(d.qvel))
+                      & (jnp.max(jnp.abs(d.qvel)) <= c.max_qvel))
+        invalid = ~(physics_ok & action_ok)
+        d = jax.tree.map(lambda new, old: jnp.where(invalid, old, new), d, d0)
+
+        x, y, z = d.qpos[0], d.qpos[1], d.qpos[2]
+        x_velocity = jnp.where(invalid, 0.0, (x - d0.qpos[0]) / self.dt)
+        torso_height = z - self.terrain_height(terrain, x, y)
+        lo, hi = c.healthy_z_range
+        healthy = (torso_height > lo) & (torso_height < hi)
+        in_bounds = (jnp.abs(y) < self.radius_y - c.side_margin) & (x > -self.radius_x + 0.5 * c.start_margin)
+        fell = ~healthy | ~in_bounds | invalid
+        reached = x >= self.x_goal
+        steps = state.steps + 1
+        timeout = steps >= c.episode_length
+        done = fell | reached | timeout
+        truncation = done & ~fell
+
+        forward_reward = c.forward_reward_weight * x_velocity
+        ctrl_cost = c.ctrl_cost_weight * jnp.sum(jnp.square(ctrl))
+        reward = jnp.where(invalid, 0.0, forward_reward + c.healthy_reward - ctrl_cost)
+        distance = jnp.clip((x - state.x_start) / self.track_length, 0.0, 1.0)
+        f32 = lambda v: jnp.asarray(v, jnp.float32)  # noqa: E731
+        metrics = {"forward_reward": f32(jnp.where(invalid, 0.0, forward_reward)), "reward_alive": f32(
+            jnp.where(invalid, 0.0, c.healthy_reward)), "reward_quadctrl": f32(-ctrl_cost),
+                   "x_velocity": f32(x_velocity), "torso_height": f32(torso_height), "distance": f32(distance)}
+        return WalkerState(data=d, obs=self._obs(d, terrain), reward=f32(reward), done=f32(done),
+                           truncation=f32(truncation), failed=f32(invalid), steps=steps, x_start=state.x_start,
+                           distance=f32(distance), metrics=metrics)
+
+    # ----------------------------------------------------------------------------------------------------------
+    def _obs(self, data: mjx.Data, terrain: jax.Array) -> jax.Array:
+        qpos, qvel = data.qpos, data.qvel
+        z = qpos[2] - self.terrain_height(terrain, qpos[0], qpos[1])
+        parts = [z[None], qpos[3:], qvel]
+        if self.config.height_scan:
+            yaw = _yaw(qpos[3:7])
+            cy, sy = jnp.cos(yaw), jnp.sin(yaw)
+            px = qpos[0] + cy * self._scan[0] - sy * self._scan[1]
+            py = qpos[1] + sy * self._scan[0] + cy * self._scan[1]
+            parts.append(self.terrain_height(terrain, px, py) - qpos[2])
+        obs = jnp.concatenate(parts).astype(jnp.float32)
+        return jnp.clip(jnp.nan_to_num(obs, nan=0.0, posinf=1e4, neginf=-1e4), -1e4, 1e4)
+
+
+def flat_terrain(config: WalkerConfig = WalkerConfig(), height: float = 0.0) -> jax.Array:
+    """A flat ``config.terrain_shape`` float32 terrain at ``height`` metres."""
+    return jnp.full(tuple(config.terrain_shape), height, jnp.float32)

@@ -1,0 +1,147 @@
+"""The walker's MuJoCo model: brax's humanoid on a heightfield, edited in code with ``mujoco.MjSpec``.
+
+The XML is read at runtime from the installed brax package (``brax/envs/assets/humanoid.xml``); it is never copied
+into this repository. Edits (see :func:`build_spec`):
+
+- the floor plane becomes an ``<hfield>`` of ``terrain_shape = (nrow, ncol)`` samples whose size comes from
+  :func:`jaxterrain.terrain.hfield_size` (``radius_x, radius_y, elevation_z, base_z``); the hfield geom sits at
+  the world origin, so the surface height at a sample is ``hfield_data * elevation_z`` metres;
+- only the two foot spheres collide with the terrain (brax's humanoid already gives every other geom
+  ``contype = conaffinity = 0``; we check it), so there are no cylinder/ellipsoid-hfield pairs (MJX has none);
+- solver options come from the :class:`~jaxterrain.walker.env.WalkerConfig` (see ``SOLVER_FAST`` /
+  ``SOLVER_XML``).
+
+MuJoCo's heightfield layout (checked against ``mujoco/mjx/_src/mesh.py`` and by tests): ``hfield_data`` is
+row-major ``[nrow, ncol]``; row ``i`` lies at ``y = -radius_y + i * 2 radius_y / (nrow - 1)`` and column ``j`` at
+``x = -radius_x + j * 2 radius_x / (ncol - 1)``. So a terrain array ``[H, W]`` maps ``H`` to y and ``W`` to x, and the
+walker walks along +x, i.e. along the columns.
+"""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import mujoco
+import numpy as np
+
+from jaxterrain.terrain import TerrainScale, hfield_size
+
+HFIELD_NAME = "terrain"
+FLOOR_GEOM = "floor"
+FOOT_GEOMS = ("left_foot", "right_foot")
+TORSO_BODY = "torso"
+
+
+class SolverOptions(NamedTuple):
+    """MuJoCo solver options the walker is simulated with (``mjOption`` fields)."""
+
+    solver: str = "newton"  # "newton" | "cg"
+    iterations: int = 1
+    ls_iterations: int = 4
+    eulerdamp: bool = False
+
+
+# brax's own settings for this humanoid on the MJX backend (brax/envs/humanoid.py); about 6x faster than the XML's.
+SOLVER_FAST = SolverOptions("newton", 1, 4, False)
+# What humanoid.xml itself says (iterations=8) plus MuJoCo's defaults (ls_iterations=50, Euler damping on).
+SOLVER_XML = SolverOptions("newton", 8, 50, True)
+
+_SOLVERS = {"newton": mujoco.mjtSolver.mjSOL_NEWTON, "cg": mujoco.mjtSolver.mjSOL_CG}
+
+
+def humanoid_xml() -> str:
+    """The text of brax's ``envs/assets/humanoid.xml`` from the installed brax package."""
+    import importlib.util
+    from pathlib import Path
+
+    spec = importlib.util.find_spec("brax")  # locates the package without importing it (brax imports are heavy)
+    if spec is None or not spec.submodule_search_locations:
+        raise RuntimeError("brax is not installed: the walker reads brax/envs/assets/humanoid.xml from it")
+    return (Path(list(spec.submodule_search_locations)[0]) / "envs" / "assets" / "humanoid.xml").read_text()
+
+
+def check_terrain_shape(terrain_shape) -> tuple[int, int]:
+    shape = tuple(int(s) for s in terrain_shape)
+    if len(shape) != 2 or min(shape) < 4:
+        raise ValueError(f"terrain_shape must be (nrow, ncol) with both >= 4, got {terrain_shape!r}")
+    return shape  # type: ignore[return-value]
+
+
+def build_spec(terrain_shape=(256, 256), scale: TerrainScale = TerrainScale(),
+               solver: SolverOptions = SOLVER_FAST, timestep: float = 0.003) -> mujoco.MjSpec:
+    """brax's humanoid with its floor replaced by a flat (all-zero) ``terrain_shape`` hfield at ``scale``."""
+    nrow, ncol = check_terrain_shape(terrain_shape)
+    if solver.solver not in _SOLVERS:
+        raise ValueError(f"solver must be one of {sorted(_SOLVERS)}, got {solver.solver!r}")
+    if solver.iterations < 1 or solver.ls_iterations < 1:
+        raise ValueError(f"solver iterations and ls_iterations must be >= 1, got {solver}")
+    if not timestep > 0:
+        raise ValueError(f"timestep must be > 0 seconds, got {timestep}")
+    spec = mujoco.MjSpec.from_string(humanoid_xml())
+    floor = spec.geom(FLOOR_GEOM)
+    friction = np.array(floor.friction).copy()
+    spec.delete(floor)
+    size = [float(v) for v in hfield_size((nrow, ncol), scale)]
+    hfield = spec.add_hfield(name=HFIELD_NAME, nrow=nrow, ncol=ncol, size=size)
+    hfield.userdata = [0.0] * (nrow * ncol)
+    geom = spec.worldbody.add_geom(name=FLOOR_GEOM, type=mujoco.mjtGeom.mjGEOM_HFIELD, hfieldname=HFIELD_NAME,
+                                   contype=0, conaffinity=1, condim=3)
+    geom.friction = friction
+    geom.rgba = [0.5, 0.5, 0.5, 1.0]
+
+    spec.option.timestep = timestep
+    spec.option.solver = _SOLVERS[solver.solver]
+    spec.option.iterations = solver.iterations
+    spec.option.ls_iterations = solver.ls_iterations
+    if solver.eulerdamp:
+        spec.option.disableflags &= ~int(mujoco.mjtDisableBit.mjDSBL_EULERDAMP)
+    else:
+        spec.option.disableflags |= int(mujoco.mjtDisableBit.mjDSBL_EULERDAMP)
+    return spec
+
+
+def build_model(terrain_shape=(256, 256), scale: TerrainScale = TerrainScale(),
+                solver: SolverOptions = SOLVER_FAST, timestep: float = 0.003) -> mujoco.MjModel:
+    """Compiled :func:`build_spec`; checks that only the feet can touch the terrain."""
+    model = build_spec(terrain_shape, scale, solver, timestep).compile()
+    floor = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_GEOM, FLOOR_GEOM)
+    feet = {mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_GEOM, n) for n in FOOT_GEOMS}
+    for g in range(model.ngeom):
+        if g == floor:
+            continue
+        touches = (model.geom_contype[g] & model.geom_conaffinity[floor]) or (
+            model.geom_conaffinity[g] & model.geom_contype[floor])
+        if bool(touches) != (g in feet):
+            raise RuntimeError(f"unexpected floor contact setting for geom {model.geom(g).name!r}")
+        if g in feet and model.geom_type[g] != mujoco.mjtGeom.mjGEOM_SPHERE:
+            raise RuntimeError("the feet must be spheres (MJX hfield collisions)")
+        for g2 in range(model.ngeom):  # no self collisions either
+            if g2 != floor and g2 != g and (model.geom_contype[g] & model.geom_conaffinity[g2]):
+                raise RuntimeError("unexpected self-collision pair")
+    return model
+
+
+def metres_to_hfield(terrain_m, elevation_z):
+    """Terrain heights in metres ``[..., H, W]`` -> MuJoCo ``hfield_data`` values ``[..., H * W]``.
+
+    MuJoCo draws the surface at ``hfield_data * size[2]`` above the hfield geom (at z = 0 here), and expects data in
+    [0, 1]; so ``data = clip(terrain / elevation_z, 0, 1)`` row-major (row = y, column = x). Heights outside
+    ``[0, elevation_z]`` are clipped.
+    """
+    import jax.numpy as jnp
+
+    t = jnp.asarray(terrain_m, jnp.float32)
+    data = jnp.clip(t / elevation_z, 0.0, 1.0)
+    return data.reshape(t.shape[:-2] + (t.shape[-2] * t.shape[-1],))
+
+
+def standing_offset(model: mujoco.MjModel) -> float:
+    """Height of the torso origin above the lowest foot-sphere bottom in the XML's default (standing) pose."""
+    data = mujoco.MjData(model)
+    mujoco.mj_kinematics(model, data)
+    torso = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_BODY, TORSO_BODY)
+    bottoms = []
+    for name in FOOT_GEOMS:
+        g = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_GEOM, name)
+        bottoms.append(data.geom_xpos[g, 2] - model.geom_size[g, 0])
+    return float(data.xpos[torso, 2] - min(bottoms))

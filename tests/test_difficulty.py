@@ -1,0 +1,105 @@
+"""difficulty.evaluate on CPU: 32 x 32 heightmaps at 0.2 m cells, 60-step episodes, ONE compiled rollout shared by
+every test (the policy takes its parameters as data: NaN / huge / zero actions do not re-compile)."""
+
+from __future__ import annotations
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+from jaxterrain import difficulty
+from jaxterrain.terrain import TerrainScale
+from jaxterrain.walker import WalkerConfig
+
+SCALE = TerrainScale(cell_size=0.2, height=0.5)
+CFG = WalkerConfig(terrain_shape=(32, 32), scale=SCALE, episode_length=60)
+ATTEMPTS, BEST = 4, 2
+
+
+def linear_policy(params, obs):
+    """action = gain * joint angles + bias (env clips to [-1, 1]; NaN bias = NaN actions)."""
+    return params["gain"] * obs[5:22] + params["bias"]
+
+
+def _params(gain=0.0, bias=0.0):
+    return {"gain": jnp.float32(gain), "bias": jnp.full(17, bias, jnp.float32)}
+
+
+def _run(heightmaps, params, key=0, chunk=None):
+    return difficulty.rollout_distances(jnp.asarray(heightmaps, jnp.float32), jax.random.PRNGKey(key), ATTEMPTS,
+                                        policy=linear_policy, env_config=CFG, policy_params=params, chunk=chunk)
+
+
+@pytest.fixture(scope="module")
+def flat_pair():
+    return jnp.stack([jnp.zeros((32, 32)), jnp.zeros((32, 32))])
+
+
+def test_best_of_arithmetic():
+    d = jnp.array([[0.1, 0.9, 0.5, 0.3, 0.7, 0.2], [0.0, 0.0, 0.0, 0.0, 1.0, 0.4], [jnp.nan, 0.2, 0.2, 0.1, 0, 0]])
+    np.testing.assert_allclose(np.asarray(difficulty.best_of(d, 2)), [0.8, 0.7, 0.2], rtol=1e-6)
+    np.testing.assert_allclose(np.asarray(difficulty.best_of(d, 6)), [2.7 / 6, 1.4 / 6, 0.5 / 6], rtol=1e-6)
+    twenty = jnp.arange(20, dtype=jnp.float32)[None] / 20.0  # best 5 of 0.00..0.95 = mean(0.75..0.95)
+    np.testing.assert_allclose(np.asarray(difficulty.best_of(twenty, 5)), [0.85], rtol=1e-6)
+
+
+def test_validation_errors(flat_pair):
+    key = jax.random.PRNGKey(0)
+    kw = dict(policy=linear_policy, env_config=CFG, policy_params=_params())
+    with pytest.raises(ValueError, match=r"\[B, H, W\]"):
+        difficulty.evaluate(jnp.zeros((32, 32)), key, **kw)
+    with pytest.raises(ValueError, match="NaN"):
+        difficulty.evaluate(flat_pair.at[0, 3, 3].set(jnp.nan), key, **kw)
+    with pytest.raises(ValueError, match=r"\[0, 1\]"):
+        difficulty.evaluate(flat_pair + 1.5, key, **kw)
+    with pytest.raises(ValueError, match=r"\[0, 1\]"):
+        difficulty.evaluate(flat_pair - 0.1, key, **kw)
+    with pytest.raises(ValueError, match="terrain_shape"):
+        difficulty.evaluate(jnp.zeros((2, 16, 16)), key, **kw)
+    with pytest.raises(ValueError, match="best"):
+        difficulty.evaluate(flat_pair, key, attempts=4, best=5, **kw)
+    with pytest.raises(ValueError, match="attempts"):
+        difficulty.evaluate(flat_pair, key, attempts=0, best=1, **kw)
+    with pytest.raises(ValueError, match="scale"):
+        difficulty.evaluate(flat_pair, key, scale=TerrainScale(0.1, 0.5), **kw)
+
+
+def test_nan_and_huge_actions_are_safe(flat_pair):
+    d = _run(flat_pair, _params(bias=float("nan")))
+    np.testing.assert_array_equal(np.asarray(d), 0.0)  # failed attempts count 0
+    fit = difficulty.evaluate(flat_pair, jax.random.PRNGKey(0), ATTEMPTS, BEST, policy=linear_policy,
+                              env_config=CFG, policy_params=_params(bias=float("nan")))
+    np.testing.assert_array_equal(np.asarray(fit), 0.0)
+    d = _run(flat_pair, _params(gain=1e6, bias=1e9))  # bang-bang torques
+    assert d.shape == (2, ATTEMPTS) and np.all(np.isfinite(np.asarray(d)))
+    assert np.all((np.asarray(d) >= 0) & (np.asarray(d) <= 1))
+
+
+def test_distances_deterministic_and_terrain_height_invariant(flat_pair):
+    """Flat ground at 0 m and at 0.5 m gives the same rollouts (spawn follows the terrain): the terrain is wired."""
+    low = np.asarray(_run(flat_pair, _params()))
+    again = np.asarray(_run(flat_pair, _params()))
+    np.testing.assert_array_equal(low, again)
+    high = np.asarray(_run(flat_pair + 1.0, _params()))
+    np.testing.assert_allclose(high, low, atol=2e-3)
+    assert np.all((low >= 0) & (low <= 1))
+    # the zero-torque walker collapses within 60 steps: it does not reach the far edge
+    assert np.all(low < 0.2)
+    other = np.asarray(_run(flat_pair, _params(), key=1))
+    assert not np.array_equal(other, low)  # random joint initialisations differ per key
+
+
+def test_chunked_matches_compiled_shape(flat_pair):
+    three = jnp.concatenate([flat_pair, flat_pair[:1]])
+    d = _run(three, _params(), chunk=2)  # 2 calls of the batch-2 compile, the last one padded
+    assert d.shape == (3, ATTEMPTS) and np.all(np.isfinite(np.asarray(d)))
+
+
+def test_default_policy_error_is_clear(flat_pair):
+    from jaxterrain.rl import BASE_POLICY_DIR
+
+    if (BASE_POLICY_DIR / "policy.msgpack").is_file():
+        pytest.skip("the base policy is shipped")
+    with pytest.raises(RuntimeError, match="policy="):
+        difficulty.evaluate(flat_pair, jax.random.PRNGKey(0), env_config=CFG)

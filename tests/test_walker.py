@@ -1,0 +1,208 @@
+"""Walker env on CPU: tiny 32 x 32 heightfields with 0.2 m cells (a 6.2 m square) so that MJX's hfield collision is
+cheap; ONE jit-compiled vmapped reset and step shared by every test (MJX compiles slowly on CPU)."""
+
+from __future__ import annotations
+
+import jax
+import jax.numpy as jnp
+import mujoco
+import numpy as np
+import pytest
+
+from jaxterrain.terrain import TerrainScale
+from jaxterrain.walker import (SOLVER_FAST, SOLVER_XML, WalkerConfig, WalkerEnv, build_model, flat_terrain,
+                               sample_heights, standing_offset)
+
+CFG = WalkerConfig(terrain_shape=(32, 32), scale=TerrainScale(cell_size=0.2, height=0.5))
+
+
+@pytest.fixture(scope="module")
+def env():
+    return WalkerEnv(CFG)
+
+
+# cheaper XLA CPU compiles (these tiny runs need no optimised code): ~35 % less compile CPU time
+FAST_COMPILE = {"xla_backend_optimization_level": 0, "xla_llvm_disable_expensive_passes": True}
+
+
+@pytest.fixture(scope="module")
+def fns(env):
+    """(reset, step): vmapped over envs, every env its own terrain; compiled once (ahead of time) for batch 3."""
+    terrains = _terrains(env)
+    keys = jax.random.split(jax.random.PRNGKey(0), 3)
+    reset = jax.jit(jax.vmap(env.reset)).lower(keys, terrains).compile(FAST_COMPILE)
+    state = reset(keys, terrains)
+    step = jax.jit(jax.vmap(env.step)).lower(state, jnp.zeros((3, env.action_size)), terrains).compile(FAST_COMPILE)
+    return reset, step
+
+
+def _terrains(env):
+    h, w = CFG.terrain_shape
+    step_terrain = np.full((h, w), 0.45, np.float32)
+    step_terrain[:, : w // 4] = 0.10  # low strip along the start edge (small x = small column index)
+    return jnp.stack([flat_terrain(CFG, 0.10), flat_terrain(CFG, 0.35), jnp.asarray(step_terrain)])
+
+
+@pytest.fixture(scope="module")
+def settled(env, fns):
+    """3 walkers (flat 0.10 m, flat 0.35 m, step terrain low at the start) after 20 zero-action steps."""
+    reset, step = fns
+    terrains = _terrains(env)
+    state0 = reset(jax.random.split(jax.random.PRNGKey(0), 3), terrains)
+    state = state0
+    for _ in range(20):
+        state = step(state, jnp.zeros((3, env.action_size)), terrains)
+    return terrains, state0, state
+
+
+def test_model_contacts_and_solver():
+    m = build_model((32, 32), CFG.scale, SOLVER_XML)
+    assert (m.hfield_nrow[0], m.hfield_ncol[0]) == (32, 32)
+    np.testing.assert_allclose(m.hfield_size[0], [3.1, 3.1, 0.5, 0.1])  # (W - 1) * 0.2 / 2
+    assert (m.opt.iterations, m.opt.ls_iterations) == (8, 50)
+    assert not m.opt.disableflags & mujoco.mjtDisableBit.mjDSBL_EULERDAMP
+    m = build_model((32, 32), CFG.scale, SOLVER_FAST)
+    assert (m.opt.iterations, m.opt.ls_iterations) == (1, 4)
+    assert m.opt.disableflags & mujoco.mjtDisableBit.mjDSBL_EULERDAMP
+    floor = m.geom("floor").id
+    touching = [m.geom(g).name for g in range(m.ngeom) if g != floor and m.geom_contype[g] & m.geom_conaffinity[floor]]
+    assert sorted(touching) == ["left_foot", "right_foot"]
+    assert m.geom_type[floor] == mujoco.mjtGeom.mjGEOM_HFIELD
+    # torso origin 1.4 m, foot sphere bottom 0.107 m in the XML pose
+    assert standing_offset(m) == pytest.approx(1.4 - 0.107, abs=2e-3)
+
+
+def test_sample_heights_bilinear():
+    rng = np.random.default_rng(0)
+    t = rng.uniform(0, 0.5, (5, 7)).astype(np.float32)
+    rx, ry = 3.0, 2.0  # column j at x = -3 + j, row i at y = -2 + i
+    xs = jnp.array([-3.0, 0.0, -2.5, 3.0, 10.0])
+    ys = jnp.array([-2.0, 1.0, -1.5, 2.0, 0.0])
+    got = np.asarray(sample_heights(jnp.asarray(t), xs, ys, rx, ry, 0.5))
+    mid = 0.25 * (t[0, 0] + t[0, 1] + t[1, 0] + t[1, 1])
+    np.testing.assert_allclose(got, [t[0, 0], t[3, 3], mid, t[4, 6], t[2, 6]], rtol=1e-6)
+    # clipped into [0, max_height] like the physics
+    assert float(sample_heights(jnp.full((5, 7), 0.9), jnp.zeros(()), jnp.zeros(()), rx, ry, 0.5)) == 0.5
+
+
+def test_reset_spawn(env, settled):
+    terrains, state0, _ = settled
+    assert state0.obs.shape == (3, env.observation_size) and env.observation_size == 45
+    qpos = np.asarray(state0.data.qpos)
+    np.testing.assert_allclose(qpos[:, 0], env.x_start)  # start edge
+    np.testing.assert_allclose(qpos[:, 1], 0.0)
+    np.testing.assert_allclose(np.asarray(state0.x_start), env.x_start)
+    # lowest foot sphere spawn_clearance above the terrain under the start patch
+    feet = np.asarray(state0.data.geom_xpos)[:, env._feet, 2] - env._foot_radius
+    np.testing.assert_allclose(feet.min(axis=1), np.array([0.10, 0.35, 0.10]) + CFG.spawn_clearance, atol=1e-4)
+    # obs[0] is the torso height above the terrain: ~1.29 m standing, same on every terrain
+    np.testing.assert_allclose(np.asarray(state0.obs[:, 0]), np.asarray(qpos[:, 2]) - [0.10, 0.35, 0.10], atol=1e-5)
+    assert np.all(np.abs(np.asarray(state0.obs[:, 0]) - 1.30) < 0.03)
+    assert np.all(np.asarray(state0.done) == 0) and np.all(np.asarray(state0.distance) == 0)
+
+
+def test_per_env_terrains_rest_heights(env, settled):
+    """Feet rest on each env's own terrain: sphere centres at terrain + radius (to ~1 mm), differences exact."""
+    _, _, state = settled
+    feet_z = np.asarray(state.data.geom_xpos)[:, env._feet, 2]  # [3, 2]
+    radius = env._foot_radius
+    np.testing.assert_allclose(feet_z - radius, np.broadcast_to([[0.10], [0.35], [0.10]], (3, 2)), atol=2e-3)
+    np.testing.assert_allclose(feet_z[1] - feet_z[0], 0.25, atol=2e-3)
+    # the step terrain (high at larger x) holds the walker at the low start strip: rows = y, columns = x
+    np.testing.assert_allclose(feet_z[2], feet_z[0], atol=2e-3)
+    assert np.all(np.asarray(state.done) == 0) and np.all(np.asarray(state.steps) == 20)
+
+
+def test_reset_step_deterministic(env, fns):
+    reset, step = fns
+    terrains = _terrains(env)
+    keys = jax.random.split(jax.random.PRNGKey(3), 3)
+    a = reset(keys, terrains)
+    b = reset(keys, terrains)
+    np.testing.assert_array_equal(np.asarray(a.data.qpos), np.asarray(b.data.qpos))
+    np.testing.assert_array_equal(np.asarray(a.obs), np.asarray(b.obs))
+    c = reset(jax.random.split(jax.random.PRNGKey(4), 3), terrains)
+    assert np.abs(np.asarray(a.data.qpos[:, 7:]) - np.asarray(c.data.qpos[:, 7:])).max() > 1e-3  # joint noise
+    assert np.abs(np.asarray(a.data.qpos[:, 7:]) - env._qpos0[7:]).max() <= CFG.joint_noise + 1e-6
+    action = jnp.tile(jnp.linspace(-1, 1, env.action_size), (3, 1))
+    s1, s2 = step(a, action, terrains), step(b, action, terrains)
+    np.testing.assert_array_equal(np.asarray(s1.data.qpos), np.asarray(s2.data.qpos))
+    np.testing.assert_array_equal(np.asarray(s1.reward), np.asarray(s2.reward))
+    # brax reward: 1.25 vx + 5 - 0.1 |0.4 a|^2
+    ctrl_cost = 0.1 * np.sum((0.4 * np.linspace(-1, 1, env.action_size)) ** 2)
+    vx = (np.asarray(s1.data.qpos[:, 0]) - np.asarray(a.data.qpos[:, 0])) / env.dt
+    np.testing.assert_allclose(np.asarray(s1.reward), 1.25 * vx + 5.0 - ctrl_cost, rtol=1e-4, atol=1e-4)
+
+
+def test_fall_terminates(env, fns, settled):
+    """With zero torques the humanoid collapses: done = 1, not a truncation, torso low, obs finite."""
+    _, step = fns
+    terrains, _, state = settled
+    done_at = np.full(3, -1)
+    for t in range(150):
+        state = step(state, jnp.zeros((3, env.action_size)), terrains)
+        d = np.asarray(state.done)
+        for i in range(3):
+            if d[i] and done_at[i] < 0:
+                done_at[i] = t
+                assert float(state.truncation[i]) == 0.0 and float(state.failed[i]) == 0.0
+                assert float(state.metrics["torso_height"][i]) <= CFG.healthy_z_range[0]
+        if np.all(done_at >= 0):
+            break
+    assert np.all(done_at >= 0), done_at
+    assert np.all(np.isfinite(np.asarray(state.obs)))
+
+
+def test_goal_time_limit_and_invalid(env, fns, settled):
+    _, step = fns
+    terrains, state0, _ = settled
+    zeros = jnp.zeros((3, env.action_size))
+    # far edge: distance 1, truncation (not a fall)
+    qpos = state0.data.qpos.at[:, 0].set(env.x_goal + 0.05).at[2, 2].add(0.35)  # env 2: onto the high part
+    s = step(state0._replace(data=state0.data.replace(qpos=qpos)), zeros, terrains)
+    np.testing.assert_array_equal(np.asarray(s.done), 1.0)
+    np.testing.assert_array_equal(np.asarray(s.truncation), 1.0)
+    np.testing.assert_allclose(np.asarray(s.distance), 1.0)
+    # time limit
+    s = step(state0._replace(steps=jnp.full(3, CFG.episode_length - 1, jnp.int32)), zeros, terrains)
+    np.testing.assert_array_equal(np.asarray(s.done), 1.0)
+    np.testing.assert_array_equal(np.asarray(s.truncation), 1.0)
+    s = step(state0._replace(steps=jnp.full(3, CFG.episode_length - 2, jnp.int32)), zeros, terrains)
+    np.testing.assert_array_equal(np.asarray(s.done), 0.0)
+    # NaN action in env 0, exploding velocity in env 1: failed, previous physics kept, all finite
+    action = zeros.at[0, 3].set(jnp.nan)
+    qvel = state0.data.qvel.at[1, 8].set(1e5)
+    s = step(state0._replace(data=state0.data.replace(qvel=qvel)), action, terrains)
+    np.testing.assert_array_equal(np.asarray(s.failed), [1.0, 1.0, 0.0])
+    np.testing.assert_array_equal(np.asarray(s.done), [1.0, 1.0, 0.0])
+    np.testing.assert_array_equal(np.asarray(s.reward[:2]), 0.0)
+    np.testing.assert_array_equal(np.asarray(s.data.qpos[0]), np.asarray(state0.data.qpos[0]))
+    for leaf in jax.tree.leaves(s):
+        if jnp.issubdtype(jnp.asarray(leaf).dtype, jnp.floating):
+            assert np.all(np.isfinite(np.asarray(leaf)))
+
+
+def test_config_validation():
+    with pytest.raises(ValueError, match="terrain_shape"):
+        WalkerEnv(WalkerConfig(terrain_shape=(2, 32)))
+    with pytest.raises(ValueError, match="healthy_z_range"):
+        WalkerEnv(CFG._replace(healthy_z_range=(1.0, 0.5)))
+    with pytest.raises(ValueError, match="track length"):
+        WalkerEnv(CFG._replace(scale=TerrainScale(cell_size=0.02, height=0.5)))
+
+
+def test_height_scan_observation(settled):
+    """Optional height scan: terrain heights on a grid ahead of the torso (heading frame), minus torso z."""
+    terrains, _, state = settled
+    env_scan = WalkerEnv(CFG._replace(height_scan=True))
+    nx, ny = CFG.scan_points
+    assert env_scan.observation_size == 45 + nx * ny
+    data = jax.tree.map(lambda a: a[2], state.data)  # the step terrain: 0.10 m up to x = -1.7 m, 0.45 m from -1.5 m
+    obs = np.asarray(env_scan._obs(data, terrains[2]))
+    assert obs.shape == (env_scan.observation_size,)
+    z = float(data.qpos[2])
+    scan = obs[45:].reshape(nx, ny)  # [along x, along y]; x from 0 to 1.4 m ahead of x ~ -2.6 m
+    np.testing.assert_allclose(scan[0], 0.10 - z, atol=1e-3)
+    np.testing.assert_allclose(scan[-1], 0.45 - z, atol=1e-3)
+    assert np.all(np.diff(scan[:, ny // 2]) >= -1e-6)  # the step rises ahead
+    np.testing.assert_allclose(obs[:45], np.asarray(state.obs[2]), atol=1e-6)
