@@ -1,0 +1,183 @@
+"""Checkpoints of a whole :class:`~jaxterrain.rl.ppo.TrainState` and export / loading of a deterministic policy.
+
+Checkpoint (``save_checkpoint``): one msgpack file (flax.serialization) mapping every leaf's tree path
+(``jax.tree_util.keystr``, e.g. ``.params['policy']['params']['mlp']['hidden_0']['kernel']``) to its array: params,
+Adam state, normaliser, episode counters, key, step counters and (by default) the batched env state, so that a
+resumed run is bit-identical to an uninterrupted one. Written atomically through :mod:`jaxterrain.io`.
+
+Policy (``save_policy``): a folder with ``policy.msgpack`` (``{"params": {"policy", "value"}, "normaliser"}``)
+and ``config.json`` (the :class:`PPOConfig`, observation and action sizes). ``load_policy()`` without a path
+loads the shipped base policy from ``jaxterrain/assets/base_policy/``.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from pathlib import Path
+from typing import Any, Callable, Optional
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+from flax import serialization
+
+from jaxterrain.io import atomic_write_bytes, atomic_write_text
+from jaxterrain.rl import networks as nets
+from jaxterrain.rl.config import PPOConfig
+
+CHECKPOINT_FORMAT = "jaxterrain.rl.checkpoint/1"
+POLICY_FORMAT = "jaxterrain.rl.policy/1"
+BASE_POLICY_DIR = Path(__file__).resolve().parent.parent / "assets" / "base_policy"
+
+
+def _is_key_array(x) -> bool:
+    return hasattr(x, "dtype") and jnp.issubdtype(x.dtype, jax.dtypes.prng_key)
+
+
+def save_checkpoint(path: str | os.PathLike, state: Any, include_env_state: bool = True,
+                    metadata: Optional[dict] = None) -> Path:
+    """Write ``state`` (a TrainState or any pytree of arrays) to ``path`` atomically.
+
+    ``include_env_state=False`` leaves out ``state.env_state`` (smaller; :func:`load_checkpoint` then keeps the
+    env state of ``like``). ``metadata``: a JSON-serialisable dict stored alongside (e.g. the config).
+    """
+    if not include_env_state and hasattr(state, "_replace"):
+        state = state._replace(env_state=None)
+    leaves = {}
+    for path_elems, leaf in jax.tree_util.tree_flatten_with_path(state)[0]:
+        name = jax.tree_util.keystr(path_elems)
+        if _is_key_array(leaf):
+            leaf = jax.random.key_data(leaf)
+        leaves[name] = np.asarray(jax.device_get(leaf))
+    payload = {
+        "format": CHECKPOINT_FORMAT,
+        "include_env_state": include_env_state,
+        "metadata": json.dumps(metadata or {}),
+        "leaves": leaves,
+    }
+    return atomic_write_bytes(path, serialization.msgpack_serialize(payload))
+
+
+def checkpoint_metadata(path: str | os.PathLike) -> dict:
+    """The ``metadata`` dict stored by :func:`save_checkpoint`."""
+    payload = serialization.msgpack_restore(Path(path).read_bytes())
+    return json.loads(payload.get("metadata", "{}"))
+
+
+def load_checkpoint(path: str | os.PathLike, like: Any) -> Any:
+    """Read a checkpoint into the structure of ``like`` (e.g. a fresh ``init(...)`` state of the same config).
+
+    Every leaf must be present with the same shape and dtype; otherwise ``ValueError`` names the leaf.
+    """
+    path = Path(path)
+    if not path.is_file():
+        raise FileNotFoundError(f"checkpoint not found: {path}")
+    payload = serialization.msgpack_restore(path.read_bytes())
+    if payload.get("format") != CHECKPOINT_FORMAT:
+        raise ValueError(f"{path}: not a {CHECKPOINT_FORMAT} file (format={payload.get('format')!r})")
+    stored = payload["leaves"]
+    keep_env = not payload["include_env_state"] and hasattr(like, "_replace")
+    target = like._replace(env_state=None) if keep_env else like
+    flat, treedef = jax.tree_util.tree_flatten_with_path(target)
+    out = []
+    for path_elems, leaf in flat:
+        name = jax.tree_util.keystr(path_elems)
+        if name not in stored:
+            raise ValueError(f"{path}: checkpoint has no leaf {name}; it was saved from a different config/env")
+        arr = np.asarray(stored[name])
+        if _is_key_array(leaf):
+            ref = jax.random.key_data(leaf)
+            if arr.shape != ref.shape:
+                raise ValueError(f"{path}: leaf {name} has shape {arr.shape}, expected {ref.shape}")
+            out.append(jax.random.wrap_key_data(jnp.asarray(arr), impl=jax.random.key_impl(leaf)))
+            continue
+        ref_shape, ref_dtype = np.shape(leaf), np.asarray(leaf).dtype if not hasattr(leaf, "dtype") else leaf.dtype
+        if arr.shape != tuple(ref_shape) or arr.dtype != ref_dtype:
+            raise ValueError(
+                f"{path}: leaf {name} is {arr.dtype}{list(arr.shape)}, expected {ref_dtype}{list(ref_shape)}")
+        out.append(jnp.asarray(arr))
+    extra = set(stored) - {jax.tree_util.keystr(p) for p, _ in flat}
+    if extra:
+        raise ValueError(f"{path}: checkpoint has leaves not in `like`: {sorted(extra)[:5]}")
+    restored = jax.tree_util.tree_unflatten(treedef, out)
+    if keep_env:
+        restored = restored._replace(env_state=like.env_state)
+    return restored
+
+
+# ----------------------------------------------------------------------------------------------------------------
+# Policy export
+# ----------------------------------------------------------------------------------------------------------------
+def save_policy(path: str | os.PathLike, params: Any, normaliser: nets.RunningStats, config: PPOConfig,
+                observation_size: int, action_size: int, extra: Optional[dict] = None) -> Path:
+    """Write ``path/policy.msgpack`` and ``path/config.json`` (atomically). ``extra`` is merged into config.json
+    (e.g. the env config). Returns the folder."""
+    path = Path(path)
+    blob = {
+        "format": POLICY_FORMAT,
+        "params": jax.tree_util.tree_map(lambda x: np.asarray(jax.device_get(x)), params),
+        "normaliser": {k: np.asarray(jax.device_get(v)) for k, v in normaliser._asdict().items()},
+    }
+    atomic_write_bytes(path / "policy.msgpack", serialization.msgpack_serialize(blob))
+    meta = {
+        "format": POLICY_FORMAT,
+        "observation_size": int(observation_size),
+        "action_size": int(action_size),
+        "ppo_config": config.to_json_dict(),
+    }
+    meta.update(extra or {})
+    atomic_write_text(path / "config.json", json.dumps(meta, indent=2, sort_keys=True) + "\n")
+    return path
+
+
+def _to_jnp(tree):
+    return jax.tree_util.tree_map(jnp.asarray, tree)
+
+
+def load_policy(path: str | os.PathLike | None = None) -> Callable[[jax.Array], jax.Array]:
+    """Load a policy saved by :func:`save_policy`; without ``path`` the shipped base policy
+    (``jaxterrain/assets/base_policy/``).
+
+    Returns ``policy(obs [..., O]) -> action [..., A]`` in [-1, 1], the deterministic (mean) action, a pure
+    function (jit / vmap it). Attributes: ``.params`` (``{"policy", "value"}``), ``.normaliser``, ``.config``
+    (:class:`PPOConfig`), ``.observation_size``, ``.action_size``, ``.meta`` (config.json), ``.path``.
+    """
+    folder = Path(path) if path is not None else BASE_POLICY_DIR
+    if folder.is_file():
+        folder = folder.parent
+    weights = folder / "policy.msgpack"
+    if not weights.is_file():
+        if path is None:
+            raise FileNotFoundError(
+                f"the base policy is not shipped yet ({weights} is missing); train it with "
+                "`python -m experiments train-base-policy --preset gpu --export-assets`")
+        raise FileNotFoundError(f"no policy.msgpack in {folder}")
+    meta = json.loads((folder / "config.json").read_text())
+    if meta.get("format") != POLICY_FORMAT:
+        raise ValueError(f"{folder}/config.json: not a {POLICY_FORMAT} policy (format={meta.get('format')!r})")
+    blob = serialization.msgpack_restore(weights.read_bytes())
+    config = PPOConfig.from_json_dict(meta["ppo_config"])
+    params = _to_jnp(blob["params"])
+    normaliser = nets.RunningStats(**_to_jnp(blob["normaliser"]))
+    action_size = int(meta["action_size"])
+
+    def policy(obs: jax.Array) -> jax.Array:
+        return nets.deterministic_action(config, action_size, params, normaliser, jnp.asarray(obs, jnp.float32))
+
+    policy.params, policy.normaliser, policy.config = params, normaliser, config
+    policy.observation_size, policy.action_size = int(meta["observation_size"]), action_size
+    policy.meta, policy.path = meta, folder
+    return policy
+
+
+def policy_fn(config: PPOConfig, action_size: int) -> Callable[[Any, jax.Array], jax.Array]:
+    """``f((params, normaliser), obs [..., O]) -> action [..., A]``: the deterministic policy with its parameters
+    as an argument, so new parameters (e.g. during a curriculum) do not re-compile a jitted caller
+    (``jaxterrain.difficulty.evaluate(..., policy=f, policy_params=(state.params, state.normaliser))``)."""
+
+    def f(policy_params, obs):
+        params, normaliser = policy_params
+        return nets.deterministic_action(config, action_size, params, normaliser, jnp.asarray(obs, jnp.float32))
+
+    return f

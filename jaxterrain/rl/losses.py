@@ -1,0 +1,79 @@
+"""GAE and the clipped PPO objective as small pure functions (hand-checkable; see tests/test_rl.py)."""
+
+from __future__ import annotations
+
+from typing import Optional
+
+import jax
+import jax.numpy as jnp
+
+
+def gae(rewards: jax.Array, values: jax.Array, dones: jax.Array, last_value: jax.Array, gamma: float,
+        lam: float, truncations: Optional[jax.Array] = None):
+    """Generalised advantage estimation over a time-major batch of segments.
+
+    Args:
+      rewards: [T, B] float32 reward of step t (already scaled).
+      values: [T, B] float32 V(s_t).
+      dones: [T, B] float32, 1.0 when the episode ended at step t (s_{t+1} is then a fresh episode's first state).
+      last_value: [B] float32 V(s_T), the bootstrap after the segment.
+      gamma, lam: discount and GAE lambda.
+      truncations: optional [T, B] float32, 1.0 when the end at step t was a time limit, not a terminal state.
+        Those steps get advantage 0 and target V(s_t) (brax's truncation mask: the true next state is lost to the
+        auto-reset, so the step is left out rather than bootstrapped from the wrong state).
+
+    Returns:
+      (advantages [T, B], targets [T, B]) with
+      ``delta_t = r_t + gamma (1 - term_t) V(s_{t+1}) - V(s_t)``, ``A_t = delta_t + gamma lam (1 - done_t) A_{t+1}``,
+      ``target_t = A_t + V(s_t)``; gradients are stopped.
+    """
+    if truncations is None:
+        truncations = jnp.zeros_like(dones)
+    keep = 1.0 - truncations
+    terminal = dones * keep
+    next_values = jnp.concatenate([values[1:], last_value[None]], axis=0)
+    deltas = (rewards + gamma * (1.0 - terminal) * next_values - values) * keep
+
+    def backward(acc, x):
+        delta, done = x
+        acc = delta + gamma * lam * (1.0 - done) * acc
+        return acc, acc
+
+    _, advantages = jax.lax.scan(backward, jnp.zeros_like(last_value), (deltas, dones), reverse=True)
+    targets = advantages + values
+    return jax.lax.stop_gradient(advantages), jax.lax.stop_gradient(targets)
+
+
+def ppo_loss(log_prob: jax.Array, old_log_prob: jax.Array, advantages: jax.Array, values: jax.Array,
+             targets: jax.Array, entropy: jax.Array, *, clip_eps: float, vf_coef: float, entropy_coef: float,
+             normalize_advantage: bool = True):
+    """Clipped PPO objective on a batch of any shape (all arrays the same shape, e.g. [T, B]).
+
+    ``loss = policy_loss + value_loss + entropy_loss`` with
+      ``ratio = exp(log_prob - old_log_prob)``, ``A`` the advantages (standardised over the batch,
+      ``(A - mean) / (std + 1e-8)``, when ``normalize_advantage``),
+      ``policy_loss = -mean(min(ratio A, clip(ratio, 1 - clip_eps, 1 + clip_eps) A))``,
+      ``value_loss = vf_coef * 0.5 * mean((targets - values)^2)`` (brax's scaling),
+      ``entropy_loss = -entropy_coef * mean(entropy)``.
+
+    Returns ``(loss [], aux)`` where aux holds the three terms, ``approx_kl = mean((ratio - 1) - log ratio)``
+    and ``clip_fraction = mean(|ratio - 1| > clip_eps)``.
+    """
+    if normalize_advantage:
+        advantages = (advantages - jnp.mean(advantages)) / (jnp.std(advantages) + 1e-8)
+    log_ratio = log_prob - old_log_prob
+    ratio = jnp.exp(log_ratio)
+    surrogate = jnp.minimum(ratio * advantages, jnp.clip(ratio, 1.0 - clip_eps, 1.0 + clip_eps) * advantages)
+    policy_loss = -jnp.mean(surrogate)
+    value_loss = vf_coef * 0.5 * jnp.mean(jnp.square(targets - values))
+    entropy_loss = -entropy_coef * jnp.mean(entropy)
+    loss = policy_loss + value_loss + entropy_loss
+    aux = {
+        "policy_loss": policy_loss,
+        "value_loss": value_loss,
+        "entropy_loss": entropy_loss,
+        "entropy": jnp.mean(entropy),
+        "approx_kl": jax.lax.stop_gradient(jnp.mean((ratio - 1.0) - log_ratio)),
+        "clip_fraction": jax.lax.stop_gradient(jnp.mean((jnp.abs(ratio - 1.0) > clip_eps).astype(jnp.float32))),
+    }
+    return loss, aux

@@ -1,0 +1,468 @@
+"""PPO training as pure functions of (state, key, terrains) - purejaxrl style, brax's recipe.
+
+The env is duck-typed (see :class:`EnvLike`): ``env.reset(key, terrain[H, W]) -> s``,
+``env.step(s, action[A], terrain[H, W]) -> s`` with ``s.obs [O]``, ``s.reward []``, ``s.done []`` float32, and
+optionally ``s.truncation []`` (1.0 when the end was a time limit) - the convention of
+``jaxterrain.walker.WalkerEnv``. Terrains are DATA: ``terrains`` is either ``[num_envs, H, W]`` (one per env) or
+``[H, W]`` (shared), passed on every call, so a curriculum can swap them between (or inside) jitted calls without
+re-compiling.
+
+Typical use::
+
+    state = rl.init(key, env, config, terrains)
+    state, metrics = rl.train(key, env, config, num_updates=100, terrains=terrains, state=state)
+
+    update = functools.partial(rl.update, env=env, config=config)    # pure: (state, key, terrains)
+    state, metrics = jax.jit(update)(state, key, terrains)
+"""
+
+from __future__ import annotations
+
+import functools
+import time
+from typing import Any, Callable, NamedTuple, Optional, Protocol
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import optax
+
+from jaxterrain.rl import networks as nets
+from jaxterrain.rl.config import PPOConfig, validate_config
+from jaxterrain.rl.losses import gae, ppo_loss
+
+
+class EnvLike(Protocol):
+    observation_size: int
+    action_size: int
+
+    def reset(self, key, terrain): ...
+
+    def step(self, state, action, terrain): ...
+
+
+class EpisodeStats(NamedTuple):
+    """Per-env episode bookkeeping, all [N]: running ``ret``/``length`` of the current episode (unscaled reward),
+    ``last_return``/``last_length`` of the most recent finished one, ``count`` of finished episodes."""
+
+    ret: jax.Array
+    length: jax.Array
+    last_return: jax.Array
+    last_length: jax.Array
+    count: jax.Array
+
+
+class TrainState(NamedTuple):
+    """Everything PPO carries between updates; a pytree (batch it for several seeds).
+
+    params: ``{"policy": ..., "value": ...}`` flax variables. opt_state: optax state. normaliser:
+    :class:`~jaxterrain.rl.networks.RunningStats`. env_state: the env's state batched over ``num_envs``.
+    episode: :class:`EpisodeStats`. key: [2] uint32, the stream :func:`run_updates` splits per update.
+    update_step: [] int32 updates done. env_steps: [] int32 env steps collected.
+    """
+
+    params: Any
+    opt_state: Any
+    normaliser: nets.RunningStats
+    env_state: Any
+    episode: EpisodeStats
+    key: jax.Array
+    update_step: jax.Array
+    env_steps: jax.Array
+
+
+class Transition(NamedTuple):
+    """One env step of all envs: obs [N, O] (raw), raw_action [N, A], log_prob [N], reward [N] (unscaled),
+    done [N], truncation [N]."""
+
+    obs: jax.Array
+    raw_action: jax.Array
+    log_prob: jax.Array
+    reward: jax.Array
+    done: jax.Array
+    truncation: jax.Array
+
+
+# ----------------------------------------------------------------------------------------------------------------
+# Helpers
+# ----------------------------------------------------------------------------------------------------------------
+def _raw_key(key: jax.Array) -> jax.Array:
+    if jnp.issubdtype(key.dtype, jax.dtypes.prng_key):
+        return jax.random.key_data(key)
+    return key
+
+
+def make_optimizer(config: PPOConfig) -> optax.GradientTransformation:
+    """Adam(learning_rate), after global-norm clipping when ``max_grad_norm`` is set."""
+    adam = optax.adam(config.learning_rate)
+    if config.max_grad_norm is None:
+        return adam
+    return optax.chain(optax.clip_by_global_norm(config.max_grad_norm), adam)
+
+
+def _terrain_axis(terrains: jax.Array, num_envs: int) -> Optional[int]:
+    """0 for per-env terrains [N, H, W], None for a shared [H, W]; ValueError otherwise (host-side: static shapes)."""
+    if terrains.ndim == 2:
+        return None
+    if terrains.ndim == 3:
+        if terrains.shape[0] != num_envs:
+            raise ValueError(
+                f"terrains: per-env terrains must have shape [num_envs={num_envs}, H, W], got {terrains.shape}"
+            )
+        return 0
+    raise ValueError(f"terrains must be [H, W] (shared) or [num_envs, H, W], got shape {terrains.shape}")
+
+
+def _batched_reset(env, key, terrains, num_envs):
+    axis = _terrain_axis(terrains, num_envs)
+    keys = jax.random.split(key, num_envs)
+    return jax.vmap(env.reset, in_axes=(0, axis))(keys, terrains)
+
+
+def _truncation(env_state) -> jax.Array:
+    trunc = getattr(env_state, "truncation", None)
+    if trunc is None:
+        info = getattr(env_state, "info", None)
+        if isinstance(info, dict):
+            trunc = info.get("truncation")
+    if trunc is None:
+        return jnp.zeros_like(env_state.done)
+    return jnp.asarray(trunc, jnp.float32)
+
+
+def _select(mask: jax.Array, on_true, on_false):
+    """Per-env ``where`` over two batched pytrees (mask [N])."""
+
+    def sel(a, b):
+        m = jnp.reshape(mask, mask.shape + (1,) * (a.ndim - mask.ndim))
+        return jnp.where(m, a, b)
+
+    return jax.tree_util.tree_map(sel, on_true, on_false)
+
+
+def _zero_episode(num_envs: int) -> EpisodeStats:
+    z = jnp.zeros((num_envs,), jnp.float32)
+    return EpisodeStats(z, z, z, z, z)
+
+
+# ----------------------------------------------------------------------------------------------------------------
+# init / reset
+# ----------------------------------------------------------------------------------------------------------------
+def init(key: jax.Array, env: EnvLike, config: PPOConfig, terrains: jax.Array, params: Any = None,
+         normaliser: Optional[nets.RunningStats] = None) -> TrainState:
+    """A fresh :class:`TrainState`: new (or given) params and normaliser, Adam state, ``num_envs`` reset envs.
+
+    Args:
+      key: PRNG key (raw [2] uint32 or typed).
+      env: duck-typed env (see module docstring).
+      config: :class:`PPOConfig` (validated here, ``ValueError`` on bad fields).
+      terrains: [num_envs, H, W] or [H, W] float32 heightfields in metres.
+      params: optional ``{"policy", "value"}`` params to continue from (e.g. ``load_policy().params``).
+      normaliser: optional :class:`RunningStats` matching ``params`` (e.g. ``load_policy().normaliser``).
+
+    Not jitted here (library style); for an MJX env wrap it: ``jax.jit(lambda k, t: init(k, env, config, t))``
+    (:func:`train` does).
+    """
+    validate_config(config)
+    key = _raw_key(key)
+    param_key, env_key, run_key = jax.random.split(key, 3)
+    del key
+    if params is None:
+        params = nets.init_params(param_key, config, env.observation_size, env.action_size)
+    if normaliser is None:
+        normaliser = nets.init_stats(env.observation_size)
+    env_state = _batched_reset(env, env_key, terrains, config.num_envs)
+    return TrainState(
+        params=params,
+        opt_state=make_optimizer(config).init(params),
+        normaliser=normaliser,
+        env_state=env_state,
+        episode=_zero_episode(config.num_envs),
+        key=run_key,
+        update_step=jnp.zeros((), jnp.int32),
+        env_steps=jnp.zeros((), jnp.int32),
+    )
+
+
+def reset_envs(state: TrainState, key: jax.Array, terrains: jax.Array, *, env: EnvLike,
+               config: PPOConfig) -> TrainState:
+    """Restart every env on ``terrains`` (e.g. after a curriculum switch) and clear running episode counters."""
+    env_state = _batched_reset(env, _raw_key(key), terrains, config.num_envs)
+    ep = state.episode
+    zero = jnp.zeros_like(ep.ret)
+    return state._replace(env_state=env_state, episode=ep._replace(ret=zero, length=zero))
+
+
+# ----------------------------------------------------------------------------------------------------------------
+# update = collect + GAE + epochs of minibatch SGD
+# ----------------------------------------------------------------------------------------------------------------
+def _collect(state: TrainState, key, terrains, env, config):
+    """``num_unrolls`` x ``unroll_length`` steps of all envs with auto-reset.
+
+    Returns (env_state, episode, data: Transition [K, T, N, ...], bootstrap_obs [K, N, O]).
+    Envs that finish reset into a pool of fresh ``env.reset`` states drawn once per update (one reset per env
+    per update instead of one per step). Non-finite observations end the episode (NaN-safety).
+    """
+    n, dist = config.num_envs, config.action_distribution
+    axis = _terrain_axis(terrains, n)
+    v_step = jax.vmap(env.step, in_axes=(0, 0, axis))
+    pool_key, unroll_key = jax.random.split(key)
+    del key
+    pool = _batched_reset(env, pool_key, terrains, n)
+
+    def env_step(carry, step_key):
+        env_state, ep = carry
+        obs = env_state.obs
+        loc, scale = nets.policy_apply(config, env.action_size, state.params, state.normaliser, obs)
+        raw = nets.sample_raw(step_key, loc, scale)
+        logp = nets.log_prob(dist, loc, scale, raw)
+        next_state = v_step(env_state, nets.postprocess(dist, raw), terrains)
+        finite = jnp.all(jnp.isfinite(next_state.obs), axis=-1)
+        reward = jnp.where(jnp.isfinite(next_state.reward), next_state.reward, 0.0).astype(jnp.float32)
+        done = jnp.maximum(next_state.done.astype(jnp.float32), 1.0 - finite.astype(jnp.float32))
+        trunc = _truncation(next_state) * finite
+        ret, length = ep.ret + reward, ep.length + 1.0
+        ended = done > 0
+        ep = EpisodeStats(
+            ret=jnp.where(ended, 0.0, ret),
+            length=jnp.where(ended, 0.0, length),
+            last_return=jnp.where(ended, ret, ep.last_return),
+            last_length=jnp.where(ended, length, ep.last_length),
+            count=ep.count + done,
+        )
+        next_state = _select(ended, pool, next_state)
+        return (next_state, ep), Transition(obs, raw, logp, reward, done, trunc)
+
+    def unroll(carry, unroll_key):
+        carry, data = jax.lax.scan(env_step, carry, jax.random.split(unroll_key, config.unroll_length))
+        return carry, (data, carry[0].obs)
+
+    (env_state, episode), (data, bootstrap_obs) = jax.lax.scan(
+        unroll, (state.env_state, state.episode), jax.random.split(unroll_key, config.num_unrolls))
+    return env_state, episode, data, bootstrap_obs
+
+
+def loss_fn(params, normaliser, batch: Transition, bootstrap_obs, key, *, config: PPOConfig, action_size: int):
+    """PPO loss on a minibatch of segments: ``batch`` fields [b, T, ...], ``bootstrap_obs`` [b, O].
+
+    GAE is recomputed with the current value network per minibatch (as brax). Returns ``(loss, aux)``.
+    """
+    batch = jax.tree_util.tree_map(lambda x: jnp.swapaxes(x, 0, 1), batch)  # [T, b, ...]
+    loc, scale = nets.policy_apply(config, action_size, params, normaliser, batch.obs)
+    values = nets.value_apply(config, params, normaliser, batch.obs)
+    last_value = nets.value_apply(config, params, normaliser, bootstrap_obs)
+    advantages, targets = gae(
+        batch.reward * config.reward_scaling, jax.lax.stop_gradient(values), batch.done,
+        jax.lax.stop_gradient(last_value), config.gamma, config.gae_lambda, batch.truncation)
+    logp = nets.log_prob(config.action_distribution, loc, scale, batch.raw_action)
+    ent = nets.entropy(config.action_distribution, key, loc, scale)
+    loss, aux = ppo_loss(logp, batch.log_prob, advantages, values, targets, ent, clip_eps=config.clip_eps,
+                         vf_coef=config.vf_coef, entropy_coef=config.entropy_coef,
+                         normalize_advantage=config.normalize_advantage)
+    aux = dict(aux, mean_std=jnp.mean(scale), value_target=jnp.mean(targets))
+    return loss, aux
+
+
+def update(state: TrainState, key: jax.Array, terrains: jax.Array, *, env: EnvLike,
+           config: PPOConfig):
+    """One PPO iteration: collect ``config.steps_per_update`` transitions, update the normaliser, then
+    ``update_epochs`` x ``num_minibatches`` Adam steps on the clipped objective.
+
+    A pure function of ``(state, key, terrains)`` (bind ``env``/``config`` with ``functools.partial``); jit it,
+    scan it, vmap it over seeds. ``terrains``: [num_envs, H, W] or [H, W] float32; new values of the same shape
+    do not re-compile. Returns ``(state, metrics)``, metrics a dict of [] float32 (losses averaged over all
+    minibatch steps; ``episode_return``: mean over envs of the last finished episode's return, unscaled, over envs
+    that finished one; ``episodes``: episodes finished during this update).
+    """
+    key = _raw_key(key)
+    collect_key, sgd_key = jax.random.split(key)
+    del key
+    env_state, episode, data, bootstrap_obs = _collect(state, collect_key, terrains, env, config)
+
+    normaliser = state.normaliser
+    if config.normalize_observations:
+        normaliser = nets.update_stats(normaliser, data.obs)
+
+    # [K, T, N, ...] -> segments [K * N, T, ...]; bootstrap [K, N, O] -> [K * N, O]
+    k, t, n = config.num_unrolls, config.unroll_length, config.num_envs
+    segments = jax.tree_util.tree_map(lambda x: jnp.reshape(jnp.swapaxes(x, 1, 2), (k * n, t) + x.shape[3:]), data)
+    boots = jnp.reshape(bootstrap_obs, (k * n, bootstrap_obs.shape[-1]))
+    optimizer = make_optimizer(config)
+    grad_fn = jax.value_and_grad(functools.partial(loss_fn, config=config, action_size=env.action_size),
+                                 has_aux=True)
+    m = config.num_minibatches
+
+    def minibatch_step(carry, mb):
+        params, opt_state = carry
+        batch, boot, mb_key = mb
+        (loss, aux), grads = grad_fn(params, normaliser, batch, boot, mb_key)
+        updates, opt_state = optimizer.update(grads, opt_state, params)
+        params = optax.apply_updates(params, updates)
+        return (params, opt_state), dict(aux, loss=loss, grad_norm=optax.global_norm(grads))
+
+    def epoch(carry, epoch_key):
+        perm_key, mb_key = jax.random.split(epoch_key)
+        perm = jax.random.permutation(perm_key, k * n)
+        shuffle = lambda x: jnp.reshape(x[perm], (m, -1) + x.shape[1:])
+        mbs = (jax.tree_util.tree_map(shuffle, segments), shuffle(boots), jax.random.split(mb_key, m))
+        return jax.lax.scan(minibatch_step, carry, mbs)
+
+    (params, opt_state), sgd_metrics = jax.lax.scan(
+        epoch, (state.params, state.opt_state), jax.random.split(sgd_key, config.update_epochs))
+
+    finished = episode.count > 0
+    metrics = {name: jnp.mean(v) for name, v in sgd_metrics.items()}
+    metrics.update(
+        episode_return=jnp.sum(jnp.where(finished, episode.last_return, 0.0)) / jnp.maximum(jnp.sum(finished), 1),
+        episode_length=jnp.sum(jnp.where(finished, episode.last_length, 0.0)) / jnp.maximum(jnp.sum(finished), 1),
+        episodes=jnp.sum(data.done),
+        reward=jnp.mean(data.reward),
+    )
+    new_state = TrainState(
+        params=params,
+        opt_state=opt_state,
+        normaliser=normaliser,
+        env_state=env_state,
+        episode=episode,
+        key=state.key,
+        update_step=state.update_step + 1,
+        env_steps=state.env_steps + config.steps_per_update,
+    )
+    metrics["env_steps"] = new_state.env_steps.astype(jnp.float32)
+    return new_state, metrics
+
+
+def run_updates(state: TrainState, terrains: jax.Array, *, env: EnvLike, config: PPOConfig, num_updates: int):
+    """``num_updates`` updates in one ``lax.scan``; each splits its key off ``state.key``. Pure (jit/vmap it).
+
+    Returns ``(state, metrics)`` with metrics [num_updates] per name.
+    """
+
+    def body(s, _):
+        next_key, update_key = jax.random.split(s.key)
+        return update(s._replace(key=next_key), update_key, terrains, env=env, config=config)
+
+    return jax.lax.scan(body, state, None, length=num_updates)
+
+
+def make_train(env: EnvLike, config: PPOConfig, num_updates: int):
+    """purejaxrl-style ``train_fn(key, terrains) -> (state, metrics [num_updates])``: init + updates, one pure
+    function of the key; ``jax.jit(jax.vmap(train_fn, in_axes=(0, None)))(keys, terrains)`` trains many seeds."""
+
+    def train_fn(key, terrains):
+        state = init(key, env, config, terrains)
+        return run_updates(state, terrains, env=env, config=config, num_updates=num_updates)
+
+    return train_fn
+
+
+# ----------------------------------------------------------------------------------------------------------------
+# Host-side driver: chunks of jitted scans, callback between chunks (progress, checkpoints)
+# ----------------------------------------------------------------------------------------------------------------
+def _build_chunk(env, config, num_updates, batched, terrain_seed_axis):
+    fn = functools.partial(run_updates, env=env, config=config, num_updates=num_updates)
+    if batched:
+        fn = jax.vmap(fn, in_axes=(0, terrain_seed_axis))
+    return jax.jit(fn)
+
+
+@functools.lru_cache(maxsize=32)
+def _cached_chunk(env, config, num_updates, batched, terrain_seed_axis):
+    return _build_chunk(env, config, num_updates, batched, terrain_seed_axis)
+
+
+def compiled_chunk(env, config, num_updates: int, batched: bool = False, terrain_seed_axis=None):
+    """The jitted ``(state, terrains) -> (state, metrics)`` running ``num_updates`` updates; cached per
+    (env, config, num_updates, batched) so repeated :func:`train` calls do not re-compile."""
+    try:
+        return _cached_chunk(env, config, num_updates, batched, terrain_seed_axis)
+    except TypeError:  # unhashable env
+        return _build_chunk(env, config, num_updates, batched, terrain_seed_axis)
+
+
+def _is_seed_batch(key) -> bool:
+    key = jnp.asarray(key) if not hasattr(key, "dtype") else key
+    if jnp.issubdtype(key.dtype, jax.dtypes.prng_key):
+        return key.ndim == 1
+    return key.ndim == 2
+
+
+def train(key: jax.Array, env: EnvLike, config: PPOConfig, num_updates: int, terrains: jax.Array,
+          state: Optional[TrainState] = None, callback: Optional[Callable[[TrainState, dict], Any]] = None,
+          updates_per_chunk: int = 10):
+    """Run ``num_updates`` PPO updates in jitted chunks of ``updates_per_chunk`` (a ``lax.scan`` each).
+
+    Args:
+      key: PRNG key; seeds :func:`init` when ``state`` is None (otherwise unused: the update keys come from
+        ``state.key``, so a resumed run continues the same stream). A batch of keys ([S, 2] raw or [S] typed)
+        trains S seeds at once under vmap; the returned state and metrics then lead with [S].
+      env, config: the env and :class:`PPOConfig`.
+      num_updates: updates to run (env steps = num_updates * config.steps_per_update).
+      terrains: [num_envs, H, W] or [H, W], shared by all seeds ([S, num_envs, H, W] gives each seed its own).
+      state: continue from this :class:`TrainState` (e.g. a loaded checkpoint).
+      callback: ``callback(state, metrics)`` on the host after every chunk, metrics a dict of numpy arrays
+        [chunk] (or [S, chunk]); use it for progress output and checkpoints.
+      updates_per_chunk: updates per jitted call (a last shorter chunk compiles once more).
+
+    Returns ``(state, metrics)``: the final state and a dict of numpy arrays [num_updates] ([S, num_updates]).
+    """
+    if not isinstance(num_updates, int) or num_updates < 0:
+        raise ValueError(f"num_updates must be an integer >= 0, got {num_updates!r}")
+    if not isinstance(updates_per_chunk, int) or updates_per_chunk < 1:
+        raise ValueError(f"updates_per_chunk must be an integer >= 1, got {updates_per_chunk!r}")
+    validate_config(config)
+    terrains = jnp.asarray(terrains, jnp.float32)
+    batched = _is_seed_batch(key) if state is None else state.update_step.ndim == 1
+    terrain_seed_axis = 0 if (batched and terrains.ndim == 4) else None
+    if state is None:
+        init_fn = lambda k, tr: init(k, env, config, tr)  # noqa: E731
+        if batched:
+            init_fn = jax.vmap(init_fn, in_axes=(0, terrain_seed_axis))
+        state = jax.jit(init_fn)(_raw_key(key) if not batched else key, terrains)
+    history = []
+    done = 0
+    while done < num_updates:
+        n = min(updates_per_chunk, num_updates - done)
+        chunk = compiled_chunk(env, config, n, batched, terrain_seed_axis)
+        state, metrics = chunk(state, terrains)
+        metrics = jax.tree_util.tree_map(np.asarray, metrics)
+        history.append(metrics)
+        done += n
+        if callback is not None:
+            callback(state, metrics)
+    if history:
+        axis = 1 if batched else 0
+        metrics = {name: np.concatenate([h[name] for h in history], axis=axis) for name in history[0]}
+    else:
+        metrics = {}
+    return state, metrics
+
+
+class Progress:
+    """A ``callback`` for :func:`train` printing env steps, steps/s and mean episode return after every chunk."""
+
+    def __init__(self, config: PPOConfig, print_fn=print):
+        self.config, self.print_fn = config, print_fn
+        self.t0 = self.t_last = time.perf_counter()
+        self.last_steps = None
+
+    def __call__(self, state: TrainState, metrics: dict) -> dict:
+        now = time.perf_counter()
+        steps = int(np.max(np.asarray(state.env_steps)))
+        prev = self.last_steps if self.last_steps is not None else steps - self.config.steps_per_update * int(
+            np.shape(metrics["loss"])[-1])
+        rate = (steps - prev) / max(now - self.t_last, 1e-9)
+        self.t_last, self.last_steps = now, steps
+        line = {
+            "env_steps": steps,
+            "steps_per_s": rate,
+            "episode_return": float(np.mean(np.asarray(metrics["episode_return"])[..., -1])),
+            "episode_length": float(np.mean(np.asarray(metrics["episode_length"])[..., -1])),
+            "loss": float(np.mean(np.asarray(metrics["loss"])[..., -1])),
+            "elapsed_s": now - self.t0,
+        }
+        self.print_fn(
+            f"steps {steps:>11,d}  {rate:>10,.0f} steps/s  return {line['episode_return']:9.3f}  "
+            f"len {line['episode_length']:7.1f}  loss {line['loss']:8.4f}  [{line['elapsed_s']:6.0f} s]",
+        )
+        return line
