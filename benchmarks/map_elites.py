@@ -1,0 +1,201 @@
+"""MAP-Elites throughput: our on-device loop (jaxterrain.archive.evolve) vs pyribs, and the paper-scale estimate.
+
+    python benchmarks/map_elites.py                 # CPU-sized defaults
+    python benchmarks/map_elites.py --preset gpu    # GPU machine: 256 x 256 terrains, large batches
+
+(a) Cheap fitness (``1 - mean slope``, experiments.common.slope_fitness): the same MAP-Elites (Perlin genomes, the
+    paper's mutation p = 0.35 / sigma = 10 % of range, uniform selection from filled cells, 50 x 50 grid over
+    roughness / TPI at window 30 / stride 2, Algorithm 1, 100 initial genomes) run
+      - by ``evolve`` on the default JAX device, at batch 20 (the paper's) and at a large batch;
+      - by pyribs (``ribs.archives.GridArchive`` + ``sample_elites`` + the same mutation in NumPy) on the CPU, its
+        evaluations (render + descriptors + Algorithm 1 + fitness) jitted by JAX on the CPU device.
+    pyribs is skipped with a message when ``import ribs`` fails (``pip install ribs``).
+(b) The real fitness (walker rollouts, ``attempts`` x ``best``) through ``archive.difficulty_fitness``: measured
+    evaluations/s and the estimated time of a paper-scale treatment (100 100 evaluations x 20 attempts). When the
+    base policy is not shipped yet, a fixed random linear policy stands in (its episodes end at other times than
+    the base policy's, so the estimate is provisional and says so).
+
+Compilation is excluded: every measured run is preceded by an identical warm-up run (the jitted functions are cached
+per functions + config). Prints a Markdown table; ``--json FILE`` also writes the numbers.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import platform
+import sys
+import time
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+PRESETS = {
+    # size, generations at batch 20, (big batch, its generations), pyribs generations, difficulty batch / gens
+    "cpu": dict(size=64, gens_small=20, big_batch=200, gens_big=5, ribs_gens=20, diff_batch=4, diff_gens=1,
+                attempts=20, best=5, window=30),
+    "gpu": dict(size=256, gens_small=200, big_batch=1000, gens_big=20, ribs_gens=50, diff_batch=1000, diff_gens=2,
+                attempts=20, best=5, window=30),
+}
+PAPER_EVALS = 100 + 5000 * 20
+
+
+def main(argv=None) -> int:
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument("--preset", choices=sorted(PRESETS), default="cpu")
+    p.add_argument("--skip-ribs", action="store_true")
+    p.add_argument("--skip-difficulty", action="store_true")
+    p.add_argument("--json", type=Path, default=None)
+    args = p.parse_args(argv)
+    cfg = PRESETS[args.preset]
+
+    import jax
+    import jax.numpy as jnp
+    import numpy as np
+
+    from experiments.common import slope_fitness
+    from jaxterrain import archive as A
+    from jaxterrain import features, generators
+
+    size, window = cfg["size"], cfg["window"]
+    gen = generators.get("perlin", size=size)
+    names = ("roughness", "tpi")
+
+    def descriptor_fn(hm):
+        return features.descriptors(hm, names=names, window=window, stride=2)
+
+    def traversable_fn(hm):
+        return features.is_traversable(hm)
+
+    device = jax.devices()[0]
+    rows = []
+    results = {"device": str(device), "platform": platform.platform(), "jax": jax.__version__, "preset": args.preset,
+               "size": size}
+    print(f"device: {device}  (jax {jax.__version__}), terrains {size} x {size}", flush=True)
+
+    def time_evolve(batch, gens, fitness_fn, label):
+        config = A.EvolveConfig(generations=gens, batch_size=batch, initial_population=100, bins=50,
+                                descriptors=names, window=window, checkpoint_every=gens, store_heightmaps=False)
+        run = lambda c: A.evolve(gen, descriptor_fn, c, jax.random.key(0), fitness_fn=fitness_fn,  # noqa: E731
+                                 progress=False, traversable_fn=traversable_fn)
+        run(config)  # warm-up: compiles init + one chunk of `gens` generations
+        t0 = time.perf_counter()
+        arch = run(config)
+        seconds = time.perf_counter() - t0
+        evals = 100 + gens * batch
+        row = dict(what=label, batch=batch, generations=gens, seconds=seconds, generations_per_s=gens / seconds,
+                   evaluations_per_s=evals / seconds, coverage=A.coverage(arch))
+        rows.append(row)
+        print(f"  {label}: {row['generations_per_s']:.3g} gen/s, {row['evaluations_per_s']:.3g} evals/s "
+              f"(coverage {row['coverage']:.1f}%)", flush=True)
+        return row
+
+    # (a) cheap fitness, our loop
+    print("(a) cheap fitness", flush=True)
+    time_evolve(20, cfg["gens_small"], slope_fitness, f"jaxterrain evolve on {device.platform}")
+    time_evolve(cfg["big_batch"], cfg["gens_big"], slope_fitness, f"jaxterrain evolve on {device.platform}")
+
+    # (a) pyribs on the CPU
+    if args.skip_ribs:
+        print("  pyribs: skipped (--skip-ribs)", flush=True)
+    else:
+        try:
+            import ribs
+            from ribs.archives import GridArchive
+        except ImportError as err:
+            print(f"  pyribs: skipped, not installed ({err}); `pip install ribs` to compare", flush=True)
+        else:
+            cpu = jax.devices("cpu")[0]
+            ranges = [A.DEFAULT_RANGES[n] for n in names]
+            lo, hi = np.asarray(gen.spec.lower), np.asarray(gen.spec.upper)
+            is_int = np.asarray(gen.spec.integer)
+
+            @jax.jit
+            def evaluate(genomes):
+                hm = jax.vmap(gen.render_one)(genomes)
+                fit = slope_fitness(hm)
+                return jnp.where(traversable_fn(hm), fit, -jnp.inf), descriptor_fn(hm)
+
+            def ribs_run(gens, batch, seed):
+                rng = np.random.default_rng(seed)
+                archive = GridArchive(solution_dim=len(lo), dims=(50, 50), ranges=ranges, seed=seed)
+                init = np.where(is_int, np.floor(lo + rng.random((100, len(lo))) * (hi - lo + 1)),
+                                lo + rng.random((100, len(lo))) * (hi - lo))
+                init = np.minimum(init, hi)
+
+                def ev(x):
+                    with jax.default_device(cpu):
+                        f, d = evaluate(jnp.asarray(x, jnp.float32))
+                    f, d = np.asarray(f), np.asarray(d)
+                    ok = np.isfinite(f)
+                    if ok.any():
+                        archive.add(x[ok], f[ok], np.clip(d[ok], [r[0] for r in ranges], [r[1] for r in ranges]))
+
+                ev(init)
+                for _ in range(gens):
+                    parents = archive.sample_elites(batch)["solution"]
+                    mask = rng.random(parents.shape) < 0.35
+                    child = np.clip(parents + mask * rng.normal(size=parents.shape) * 0.1 * (hi - lo), lo, hi)
+                    ev(np.where(is_int, np.round(child), child))
+                return archive
+
+            for batch, gens in ((20, cfg["ribs_gens"]), (cfg["big_batch"], max(2, cfg["gens_big"]))):
+                ribs_run(1, batch, 0)  # warm-up (compiles the evaluation for both batch shapes)
+                t0 = time.perf_counter()
+                archive = ribs_run(gens, batch, 1)
+                seconds = time.perf_counter() - t0
+                row = dict(what=f"pyribs {ribs.__version__} (CPU, eval jitted on CPU)", batch=batch,
+                           generations=gens, seconds=seconds, generations_per_s=gens / seconds,
+                           evaluations_per_s=(100 + gens * batch) / seconds,
+                           coverage=100.0 * len(archive) / 2500)
+                rows.append(row)
+                print(f"  pyribs batch {batch}: {row['generations_per_s']:.1f} gen/s, "
+                      f"{row['evaluations_per_s']:.0f} evals/s", flush=True)
+
+    # (b) real difficulty fitness
+    if args.skip_difficulty:
+        print("(b) difficulty: skipped (--skip-difficulty)", flush=True)
+    else:
+        print(f"(b) difficulty fitness ({cfg['attempts']} attempts, best {cfg['best']})", flush=True)
+        from jaxterrain import difficulty
+
+        note = "shipped base policy"
+        try:
+            difficulty.default_policy()
+            fitness = A.difficulty_fitness(size, cfg["attempts"], cfg["best"])
+        except RuntimeError as err:
+            note = f"STAND-IN random linear policy (base policy missing: {str(err)[:60]}...)"
+            from jaxterrain.terrain import TerrainScale
+            from jaxterrain.walker import WalkerConfig
+
+            env = difficulty.make_env(WalkerConfig(terrain_shape=(size, size), scale=TerrainScale()))
+            w = 0.1 * jax.random.normal(jax.random.key(42), (env.observation_size, env.action_size))
+
+            def policy(obs):
+                return jnp.tanh(obs @ w)
+
+            def fitness(hm, key):
+                d, _ = difficulty.batched_distances(env, policy, hm * TerrainScale().height, key, cfg["attempts"])
+                return difficulty.best_of(d, cfg["best"])
+
+        print(f"  policy: {note}", flush=True)
+        row = time_evolve(cfg["diff_batch"], cfg["diff_gens"], fitness, "jaxterrain evolve, difficulty fitness")
+        estimate = PAPER_EVALS / row["evaluations_per_s"]
+        results["difficulty_policy"] = note
+        results["paper_treatment_estimate_s"] = estimate
+        print(f"  estimated paper-scale treatment ({PAPER_EVALS} evaluations x {cfg['attempts']} attempts): "
+              f"{estimate / 60:.1f} min ({estimate / 3600:.2f} h) at batch {cfg['diff_batch']}", flush=True)
+
+    print("\n| what | batch | generations | gen/s | evals/s | coverage % |\n| --- | --- | --- | --- | --- | --- |")
+    for r in rows:
+        print(f"| {r['what']} | {r['batch']} | {r['generations']} | {r['generations_per_s']:.2f} | "
+              f"{r['evaluations_per_s']:.1f} | {r['coverage']:.1f} |")
+    results["rows"] = rows
+    if args.json:
+        args.json.parent.mkdir(parents=True, exist_ok=True)
+        args.json.write_text(json.dumps(results, indent=2) + "\n")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

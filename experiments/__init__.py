@@ -1,0 +1,1 @@
+"""Command-line experiments of jaxterrain: ``python -m experiments <command> [options]``."""

@@ -1,0 +1,41 @@
+"""``python -m experiments <command>``: every experiment of the paper, and the training jobs behind them.
+
+Each command lives in its own module of this package, which defines ``add_arguments(parser)`` and ``main(args)``;
+this file only maps command names to modules (imported lazily, so ``--help`` stays fast).
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import sys
+
+COMMANDS = {
+    "quickstart": ("experiments.quickstart", "small end-to-end run on CPU: terrains, descriptors, figures"),
+    "train-gan": ("experiments.train_gan", "train the DCGAN terrain generator on real DEM tiles"),
+    "train-base-policy": ("experiments.train_base_policy", "train the flat-ground base walker with PPO"),
+    "features": ("experiments.features", "Experiment 1a: correlations of features with difficulty"),
+    "evolve": ("experiments.evolve", "MAP-Elites archive for one generator and descriptor pair"),
+    "coverage": ("experiments.coverage", "Experiment 1b: archives of all generators, coverage table and figures"),
+}
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(prog="python -m experiments", description=__doc__.splitlines()[0])
+    sub = parser.add_subparsers(dest="command", required=True, metavar="command")
+    available = {}
+    for name, (module_name, help_text) in COMMANDS.items():
+        try:
+            module = importlib.import_module(module_name)
+        except ModuleNotFoundError as err:
+            if err.name == module_name:  # command not built yet
+                continue
+            raise
+        available[name] = module
+        module.add_arguments(sub.add_parser(name, help=help_text, description=help_text))
+    args = parser.parse_args(argv)
+    return int(available[args.command].main(args) or 0)
+
+
+if __name__ == "__main__":
+    sys.exit(main())

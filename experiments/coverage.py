@@ -1,0 +1,186 @@
+"""``python -m experiments coverage``: Experiment 1b (paper Table 1, Figures 5 and 6).
+
+Evolves one MAP-Elites archive per (descriptor pair, generator): the pairs TPI/TRI, roughness/TRI, roughness/TPI
+x the generators (default: diamond_square, perlin, worley, gan, cppn), then the combined archive of each pair
+(``jaxterrain.archive.combine``). A generator that cannot be built here (e.g. the GAN without trained weights) is
+reported as skipped and left out of the combined archive.
+
+Writes into the run folder:
+
+* ``config.json``; ``archives/<generator>__<d0>-<d1>/`` with ``archive.npz``, ``metrics.csv`` and the checkpoint
+  (a finished treatment is reused by ``--resume``); ``archives/combined__<d0>-<d1>.npz``;
+* ``coverage.csv`` (generator, pair, coverage %, QD score, max / mean fitness, rejected by Algorithm 1) and
+  ``coverage.md`` (Table 1: rows generators + Combined, columns the pairs; skipped generators listed);
+* ``coverage.png`` (Figure 5: bars per generator and pair) and ``archives.png`` (Figure 6: one fitness heatmap per
+  pair x generator, plus the combined archive).
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import io
+
+from experiments import common
+from experiments import evolve as evolve_cmd
+
+PAIRS = (("tri", "tpi"), ("tri", "roughness"), ("tpi", "roughness"))  # paper: TPI/TRI, roughness/TRI, roughness/TPI
+GENERATORS = ["diamond_square", "perlin", "worley", "gan", "cppn"]
+PAPER_NAMES = {"cppn": "CPPN", "gan": "GAN", "perlin": "Perlin Noise", "worley": "Worley Noise",
+               "diamond_square": "Diamond Square"}
+
+
+def _preset(base: str, **kw) -> dict:
+    cfg = {k: v for k, v in evolve_cmd.PRESETS[base].items() if k not in ("generator", "descriptors", "ranges")}
+    cfg.update(generators=list(GENERATORS), pairs=[list(p) for p in PAIRS], ranges=None)
+    cfg.update(kw)
+    return cfg
+
+
+PRESETS: dict[str, dict] = {
+    "paper": _preset("paper"),
+    "gpu": _preset("gpu"),
+    # ranges of the smoke preset: descriptors of 32 x 32 maps at window 8 (wider than the 256 x 256 defaults)
+    "smoke": _preset("smoke", generations=2, initial_population=12, batch_size=8,
+                     ranges={"tri": [0.0, 0.5], "tpi": [-0.02, 0.02], "roughness": [0.0, 1.0]}),
+}
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    common.add_run_arguments(parser, PRESETS, "smoke")
+    parser.add_argument("--generators", nargs="+", default=None, help=f"default: {' '.join(GENERATORS)}")
+    parser.add_argument("--generations", type=int, default=None)
+    parser.add_argument("--batch-size", type=int, default=None)
+    parser.add_argument("--size", type=int, default=None)
+    parser.add_argument("--bins", type=int, default=None)
+    parser.add_argument("--fitness", choices=["difficulty", "slope"], default=None)
+
+
+def overrides(args) -> dict:
+    return dict(generators=args.generators, generations=args.generations, batch_size=args.batch_size,
+                size=args.size, bins=args.bins, fitness=args.fitness)
+
+
+def pair_label(pair) -> str:
+    return f"{pair[0]}-{pair[1]}"
+
+
+def paper_pair_label(pair) -> str:
+    """The paper's column names: 'Roughness/TPI' = roughness on one axis, TPI on the other."""
+    nice = {"tri": "TRI", "tpi": "TPI", "roughness": "Roughness"}
+    return f"{nice.get(pair[1], pair[1])}/{nice.get(pair[0], pair[0])}"
+
+
+def markdown_table(cov: dict, generators: list[str], pairs, skipped: dict) -> str:
+    cols = [paper_pair_label(p) for p in pairs]
+    lines = ["| Terrain generator | " + " | ".join(cols) + " |", "| --- |" + " --- |" * len(cols)]
+    for g in generators + ["combined"]:
+        if g in skipped:
+            continue
+        name = "Combined" if g == "combined" else PAPER_NAMES.get(g, g)
+        cells = [f"{cov[(g, pair_label(p))]:.2f}%" if (g, pair_label(p)) in cov else "-" for p in pairs]
+        lines.append(f"| {name} | " + " | ".join(cells) + " |")
+    text = "\n".join(lines) + "\n"
+    if skipped:
+        text += "\nSkipped (not available here): " + "; ".join(f"{g} ({why})" for g, why in skipped.items()) + "\n"
+    return text
+
+
+def main(args) -> int:
+    import jax
+    import matplotlib
+    import numpy as np
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from jaxterrain import archive as A
+    from jaxterrain.io import atomic_write_text
+
+    folder, cfg = common.setup_run("coverage", args, PRESETS, "smoke", overrides(args))
+    clock = common.Clock(args.time_limit)
+    key = jax.random.key(int(cfg["seed"]))
+    size = int(cfg["size"])
+    pairs = [tuple(p) for p in cfg["pairs"]]
+    gens = list(cfg["generators"])
+    skipped = {}
+    for g in gens:
+        ok, why = common.generator_available(g, size)
+        if not ok:
+            skipped[g] = why
+            print(f"[{g}] skipped: {why}", flush=True)
+    available = [g for g in gens if g not in skipped]
+    archives: dict = {}
+    total = len(available) * len(pairs)
+    done = 0
+    try:
+        for pi, pair in enumerate(pairs):
+            for gi, g in enumerate(available):
+                ranges = cfg.get("ranges")
+                tcfg = dict(cfg, ranges=None if ranges is None else [ranges[pair[0]], ranges[pair[1]]])
+                done += 1
+                tkey = jax.random.fold_in(jax.random.fold_in(key, pi), gens.index(g))
+                archives[(g, pair_label(pair))] = evolve_cmd.run_treatment(
+                    tcfg, g, pair, folder / "archives" / f"{g}__{pair_label(pair)}", clock, tkey,
+                    label=f"({done}/{total}) ")
+    except common.TimeUp:
+        print(f"time limit reached; continue with: python -m experiments coverage --resume {folder}", flush=True)
+        return 3
+    rows = []
+    cov = {}
+    for pair in pairs:
+        members = [archives[(g, pair_label(pair))] for g in available]
+        if members:
+            comb = A.combine(members)
+            A.save(folder / "archives" / f"combined__{pair_label(pair)}.npz", comb)
+            archives[("combined", pair_label(pair))] = comb
+        for g in available + (["combined"] if members else []):
+            a = archives[(g, pair_label(pair))]
+            c = A.coverage(a)
+            cov[(g, pair_label(pair))] = c
+            f = a.fitness[a.filled]
+            rej = int(a.metrics["rejected"].sum()) if "rejected" in a.metrics else ""
+            rows.append([g, pair_label(pair), f"{c:.4f}", f"{A.qd_score(a):.4f}",
+                         f"{f.max():.4f}" if f.size else "", f"{f.mean():.4f}" if f.size else "", rej])
+    buf = io.StringIO()
+    w = csv.writer(buf)
+    w.writerow(["generator", "pair", "coverage_percent", "qd_score", "max_fitness", "mean_fitness", "rejected"])
+    w.writerows(rows)
+    w.writerows([[g, "", "skipped", why, "", "", ""] for g, why in skipped.items()])
+    atomic_write_text(folder / "coverage.csv", buf.getvalue())
+    table = markdown_table(cov, gens, pairs, skipped)
+    atomic_write_text(folder / "coverage.md", table)
+    print(table, flush=True)
+
+    # Figure 5: coverage bars
+    shown = available + (["combined"] if available else [])
+    fig, ax = plt.subplots(figsize=(7, 3.5))
+    width = 0.8 / max(len(pairs), 1)
+    x = np.arange(len(shown))
+    for k, pair in enumerate(pairs):
+        ax.bar(x + k * width, [cov.get((g, pair_label(pair)), 0.0) for g in shown], width,
+               label=paper_pair_label(pair))
+    ax.set_xticks(x + width * (len(pairs) - 1) / 2, [PAPER_NAMES.get(g, g.capitalize()) for g in shown],
+                  rotation=20, fontsize=8)
+    ax.set_ylabel("coverage (%)")
+    ax.legend(fontsize=8)
+    fig.tight_layout()
+    fig.savefig(folder / "coverage.png", dpi=150)
+    plt.close(fig)
+
+    # Figure 6: archive heatmaps, rows = pairs, columns = generators (+ combined)
+    fig, axes = plt.subplots(len(pairs), len(shown), figsize=(2.9 * len(shown) + 1, 2.6 * len(pairs)), squeeze=False,
+                             layout="constrained")
+    img = None
+    for i, pair in enumerate(pairs):
+        for j, g in enumerate(shown):
+            a = archives[(g, pair_label(pair))]
+            img = evolve_cmd.plot_archive(axes[i, j], a, f"{PAPER_NAMES.get(g, g)}: {A.coverage(a):.2f}%")
+    if img is not None:
+        fig.colorbar(img, ax=axes.ravel().tolist(), shrink=0.6, label="fitness (darker = fitter)")
+    for a in axes.ravel():
+        a.tick_params(labelsize=6)
+    fig.savefig(folder / "archives.png", dpi=130)
+    plt.close(fig)
+    print(f"done -> {folder}", flush=True)
+    return 0

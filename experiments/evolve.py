@@ -1,0 +1,177 @@
+"""``python -m experiments evolve``: one MAP-Elites archive for one generator and one descriptor pair.
+
+Presets (``--preset``):
+
+* ``paper``: the paper's treatment: 100 initial genomes + 5 000 generations x 20 offspring (100 100 evaluations),
+  fitness from the walker (20 attempts, best 5), 256 x 256 terrains, 50 x 50 cells.
+* ``gpu``: the same evaluation budget in larger batches (100 generations x 1 000 offspring), to fill a GPU.
+* ``smoke``: a tiny CPU run (32 x 32 terrains, 10 x 10 cells, cheap slope fitness), seconds.
+
+Writes into the run folder: ``config.json``, ``checkpoint/checkpoint.npz`` (every ``checkpoint_every`` generations),
+``archive.npz`` (``jaxterrain.archive.save`` format), ``metrics.csv`` (one row per generation) and ``archive.png``.
+Re-run with ``--config <run>/config.json``; continue a killed or time-limited run with ``--resume <run>``.
+
+Example (GPU machine, one 10-minute command at a time)::
+
+    python -m experiments evolve --preset gpu --generator perlin --descriptors roughness tpi \\
+        --out runs/evolve-perlin --time-limit 8
+    python -m experiments evolve --resume runs/evolve-perlin --time-limit 8     # until it says "done"
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+from pathlib import Path
+
+from experiments import common
+from experiments.common import slope_fitness  # noqa: F401  (re-exported for tests and benchmarks)
+
+PRESETS: dict[str, dict] = {
+    "paper": dict(generator="perlin", descriptors=["roughness", "tpi"], generations=5000, batch_size=20,
+                  initial_population=100, bins=50, size=256, window=30, stride=2, attempts=20, best=5,
+                  checkpoint_every=250, fitness="difficulty", robot_height=None, out_of_range="clip", ranges=None,
+                  store_heightmaps=True),
+    "gpu": dict(generator="perlin", descriptors=["roughness", "tpi"], generations=100, batch_size=1000,
+                initial_population=100, bins=50, size=256, window=30, stride=2, attempts=20, best=5,
+                checkpoint_every=5, fitness="difficulty", robot_height=None, out_of_range="clip", ranges=None,
+                store_heightmaps=True),
+    "smoke": dict(generator="perlin", descriptors=["roughness", "tpi"], generations=4, batch_size=8,
+                  initial_population=16, bins=10, size=32, window=8, stride=2, attempts=2, best=1,
+                  checkpoint_every=2, fitness="slope", robot_height=None, out_of_range="clip",
+                  ranges=[[0.0, 0.5], [-0.02, 0.02]], store_heightmaps=True),
+}
+
+
+def preset_config(name: str):
+    """The :class:`jaxterrain.archive.EvolveConfig` of a preset."""
+    return evolve_config(PRESETS[name])
+
+
+def evolve_config(cfg: dict):
+    from jaxterrain.archive import EvolveConfig
+
+    ranges = cfg.get("ranges")
+    return EvolveConfig(
+        generations=int(cfg["generations"]), batch_size=int(cfg["batch_size"]),
+        initial_population=int(cfg["initial_population"]), bins=int(cfg["bins"]),
+        descriptors=tuple(cfg["descriptors"]),
+        ranges=None if ranges is None else tuple(tuple(map(float, r)) for r in ranges),
+        window=int(cfg["window"]), stride=int(cfg["stride"]), attempts=int(cfg["attempts"]), best=int(cfg["best"]),
+        checkpoint_every=int(cfg["checkpoint_every"]), robot_height=cfg.get("robot_height"),
+        out_of_range=cfg.get("out_of_range", "clip"), store_heightmaps=bool(cfg.get("store_heightmaps", True)),
+    )
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    common.add_run_arguments(parser, PRESETS, "smoke")
+    parser.add_argument("--generator", default=None, help="registered generator name (default perlin)")
+    parser.add_argument("--descriptors", nargs=2, default=None, metavar=("D0", "D1"),
+                        help="descriptor pair, e.g. roughness tpi")
+    parser.add_argument("--generations", type=int, default=None)
+    parser.add_argument("--batch-size", type=int, default=None, help="offspring per generation")
+    parser.add_argument("--initial-population", type=int, default=None)
+    parser.add_argument("--bins", type=int, default=None, help="cells per descriptor")
+    parser.add_argument("--size", type=int, default=None, help="heightmap side in pixels")
+    parser.add_argument("--checkpoint-every", type=int, default=None)
+    parser.add_argument("--fitness", choices=["difficulty", "slope"], default=None)
+    parser.add_argument("--attempts", type=int, default=None)
+    parser.add_argument("--best", type=int, default=None)
+    parser.add_argument("--no-heightmaps", dest="store_heightmaps", action="store_const", const=False, default=None,
+                        help="do not store the elites' heightmaps in archive.npz (they can be re-rendered)")
+
+
+def overrides(args) -> dict:
+    return dict(generator=args.generator, descriptors=args.descriptors, generations=args.generations,
+                batch_size=args.batch_size, initial_population=args.initial_population, bins=args.bins,
+                size=args.size, checkpoint_every=args.checkpoint_every, fitness=args.fitness,
+                attempts=args.attempts, best=args.best, store_heightmaps=args.store_heightmaps)
+
+
+def run_treatment(cfg: dict, generator: str, descriptors, folder: Path, clock: common.Clock, key, label: str = ""):
+    """Evolve one archive into ``folder`` (checkpointed there); returns the Archive, or the saved one if done."""
+    from jaxterrain import archive as A
+
+    folder = Path(folder)
+    done_path = folder / "archive.npz"
+    if done_path.exists():
+        print(f"{label}{generator} {descriptors}: already done ({done_path})", flush=True)
+        return A.load(done_path)
+    config = evolve_config({**cfg, "descriptors": list(descriptors)})
+    fitness = common.fitness_function(cfg["fitness"], config.attempts, config.best, int(cfg["size"]))
+    printer = _printer(label + generator)
+
+    def progress(info):
+        printer(info)
+        clock.check()
+
+    arch = A.evolve(generator, None, config, key, fitness_fn=fitness, checkpoint_dir=folder / "checkpoint",
+                    progress=progress, generator_options={"size": int(cfg["size"])})
+    A.save(done_path, arch)
+    write_metrics_csv(folder / "metrics.csv", arch.metrics)
+    return arch
+
+
+def _printer(name):
+    def report(info):
+        if info["event"] == "resume":
+            print(f"[{name}] resuming at generation {info['generation']}", flush=True)
+            return
+        print(f"[{name}] gen {info['generation']}/{info['generations']}  coverage {info['coverage']:.2f}%  "
+              f"qd {info['qd_score']:.2f}  max {info['max_fitness']:.3f}  rejected {int(info['rejected_total'])}  "
+              f"{info['evaluations_per_s']:.1f} evals/s", flush=True)
+
+    return report
+
+
+def write_metrics_csv(path: Path, metrics: dict) -> None:
+    import io
+
+    from jaxterrain.io import atomic_write_text
+
+    names = sorted(metrics)
+    buf = io.StringIO()
+    w = csv.writer(buf)
+    w.writerow(["generation", *names])
+    for g in range(len(metrics[names[0]]) if names else 0):
+        w.writerow([g, *(f"{float(metrics[n][g]):.6g}" for n in names)])
+    atomic_write_text(path, buf.getvalue())
+
+
+def plot_archive(ax, arch, title: str = ""):
+    """Draw an archive's fitness grid on a matplotlib axis (darker = fitter, like the paper's Figure 6)."""
+    from jaxterrain import archive as A
+
+    (lo0, hi0), (lo1, hi1) = arch.config.ranges
+    img = ax.imshow(A.grid(arch), origin="lower", extent=(lo0, hi0, lo1, hi1), aspect="auto",
+                    cmap="viridis_r", vmin=0.0, vmax=1.0, interpolation="nearest")
+    ax.set_xlabel(arch.config.descriptors[0])
+    ax.set_ylabel(arch.config.descriptors[1])
+    ax.set_title(title or f"{'+'.join(arch.generator_names)}: {A.coverage(arch):.2f}%", fontsize=8)
+    return img
+
+
+def main(args) -> int:
+    import jax
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from jaxterrain import archive as A
+
+    folder, cfg = common.setup_run("evolve", args, PRESETS, "smoke", overrides(args))
+    clock = common.Clock(args.time_limit)
+    try:
+        arch = run_treatment(cfg, cfg["generator"], cfg["descriptors"], folder, clock, jax.random.key(cfg["seed"]))
+    except common.TimeUp:
+        print(f"time limit reached; continue with: python -m experiments evolve --resume {folder}", flush=True)
+        return 3
+    fig, ax = plt.subplots(figsize=(4, 3.5))
+    fig.colorbar(plot_archive(ax, arch), ax=ax, label="fitness")
+    fig.tight_layout()
+    fig.savefig(folder / "archive.png", dpi=120)
+    plt.close(fig)
+    print(f"done: coverage {A.coverage(arch):.2f}%  qd {A.qd_score(arch):.2f}  "
+          f"rejected by Algorithm 1: {int(arch.metrics['rejected'].sum())}  -> {folder}", flush=True)
+    return 0

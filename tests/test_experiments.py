@@ -1,0 +1,94 @@
+"""Smoke paths of the experiment commands ``evolve``, ``features`` and ``coverage`` (CPU, tiny sizes)."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from experiments import common
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def _have(module):
+    try:
+        __import__(module)
+        return True
+    except Exception:
+        return False
+
+
+needs_stack = pytest.mark.skipif(
+    not (_have("jaxterrain.generators.perlin") and _have("jaxterrain.features")),
+    reason="generators or features not available",
+)
+
+
+def cli(*argv):
+    from experiments.__main__ import main
+
+    return main(list(argv))
+
+
+def test_slope_fitness_values():
+    flat = np.zeros((1, 8, 8), np.float32)
+    ramp = np.tile(np.arange(8, dtype=np.float32) * 0.04 / 0.5 * 0.5, (8, 1))[None]  # rise 0.5 * run -> slope .5
+    f = np.asarray(common.slope_fitness(np.concatenate([flat, ramp])))
+    np.testing.assert_allclose(f, [1.0, 1.0 - 0.5 * 0.5], atol=1e-6)  # (|dx| + |dy|) / 2 = (0.5 + 0) / 2
+
+
+@needs_stack
+def test_evolve_smoke_config_and_resume(tmp_path):
+    from jaxterrain import archive as A
+
+    out = tmp_path / "ev"
+    assert cli("evolve", "--preset", "smoke", "--generations", "2", "--out", str(out)) == 0
+    cfg = json.loads((out / "config.json").read_text())
+    assert cfg["generations"] == 2 and cfg["preset"] == "smoke" and cfg["command"] == "evolve"
+    arch = A.load(out / "archive.npz")
+    assert arch.metrics["coverage"].shape == (3,) and A.coverage(arch) > 0
+    rows = (out / "metrics.csv").read_text().splitlines()
+    assert rows[0].startswith("generation,") and len(rows) == 4
+    assert (out / "archive.png").stat().st_size > 0
+    # --config re-runs the same settings: same seed -> same archive
+    out2 = tmp_path / "ev2"
+    assert cli("evolve", "--config", str(out / "config.json"), "--out", str(out2)) == 0
+    np.testing.assert_array_equal(A.load(out2 / "archive.npz").fitness, arch.fitness)
+    # --resume of a finished run reuses its archive
+    assert cli("evolve", "--resume", str(out)) == 0
+
+
+@needs_stack
+def test_features_smoke(tmp_path):
+    out = tmp_path / "f"
+    assert cli("features", "--preset", "smoke", "--generators", "perlin", "--out", str(out)) == 0
+    lines = (out / "correlations.csv").read_text().splitlines()
+    assert lines[0] == "generator,feature_a,feature_b,r"
+    r = {(a, b): float(v) for g, a, b, v in (line.split(",") for line in lines[1:])}
+    assert r[("difficulty", "difficulty")] == pytest.approx(1.0)
+    assert r[("tri_5", "difficulty")] == pytest.approx(r[("difficulty", "tri_5")])
+    assert (out / "correlations.png").exists() and (out / "correlation_perlin.png").exists()
+
+
+@needs_stack
+@pytest.mark.slow
+def test_coverage_smoke_skips_unavailable(tmp_path):
+    out = tmp_path / "c"
+    assert cli("coverage", "--preset", "smoke", "--generators", "perlin", "no_such_generator", "--out", str(out)) == 0
+    md = (out / "coverage.md").read_text()
+    assert "Perlin Noise" in md and "Combined" in md and "no_such_generator" in md and "Skipped" in md
+    csv_rows = (out / "coverage.csv").read_text().splitlines()
+    assert any(row.startswith("no_such_generator,,skipped") for row in csv_rows)
+    assert (out / "coverage.png").exists() and (out / "archives.png").exists()
+
+
+def test_help_lists_commands():
+    res = subprocess.run([sys.executable, "-m", "experiments", "--help"], cwd=ROOT, capture_output=True, text=True)
+    assert res.returncode == 0
+    for name in ("evolve", "features", "coverage"):
+        assert name in res.stdout
