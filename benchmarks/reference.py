@@ -125,5 +125,6 @@ FEATURES = {"tri": tri, "tpi": tpi, "roughness": roughness}
 
 
 def descriptors(h: np.ndarray, names=("tri", "tpi", "roughness"), k: int = 30, s: int = 2) -> np.ndarray:
-    """Mean of each feature map of one heightmap [H, W] -> [len(names)]."""
-    return np.array([FEATURES[n](h, k, s).mean() for n in names])
+    """Descriptors of one heightmap [H, W] -> [len(names)]: the mean of each feature map (of |TPI| for "tpi")."""
+    return np.array([np.abs(FEATURES[n](h, k, s)).mean() if n == "tpi" else FEATURES[n](h, k, s).mean()
+                     for n in names])

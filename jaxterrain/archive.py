@@ -98,18 +98,17 @@ CHECKPOINT_NAME = "checkpoint.npz"
 METRIC_NAMES = ("coverage", "qd_score", "max_fitness", "mean_fitness", "rejected", "out_of_range", "nan", "inserted")
 
 # Grid ranges per descriptor name, shared by every generator (window 30, stride 2, 256 x 256 heightmaps in [0, 1]).
-# How they were chosen (2026-11-21, `python -m experiments features --calibrate` does the same): 32 random genomes
-# plus 32 twice-mutated ones of each available generator (cppn, diamond_square, perlin, worley; the GAN had no
-# weights yet) were rendered at 256 x 256 and described with window 30 / stride 2 (all of them passed Algorithm 1
-# at the default robot height). Each range is [0.5th, 99.5th] percentile of the pooled values, rounded outwards
-# to 2 significant digits, with 0 as the lower end of the non-negative TRI and roughness. Measured pooled
-# percentiles [0.5, 99.5]: tri [0.00046, 0.166], tpi [-0.0055, 0.0034] (TPI's map mean is signed and small: it is
-# a weighted sum of heights whose weights sum to ~0), roughness [0.0024, 0.750].
+# How they were chosen (2026-11-21; `python -m experiments features --calibrate` does the same): 32 random genomes
+# plus 32 twice-mutated ones of each generator were rendered at 256 x 256 and described with window 30 / stride 2.
+# Each range is [0.5th, 99.5th] percentile of the pooled values, rounded outwards to 2 significant digits, with 0 as
+# the lower end of these non-negative descriptors. Pooled percentiles [0.5, 99.5]: without the GAN (cppn,
+# diamond_square, perlin, worley) tri [0.00046, 0.166], roughness [0.0024, 0.750]; with the GAN (all five)
+# tri [0.00015, 0.152], tpi (mean |TPI|) [0.00001, 0.110], roughness [0.0007, 0.630].
 # So nearly every terrain falls inside the grid and the 50 bins are not spent on values no generator reaches.
 # Re-measure after changing a feature definition or the generators; other windows need ``config.ranges``.
 DEFAULT_RANGES: dict[str, tuple[float, float]] = {
     "tri": (0.0, 0.17),
-    "tpi": (-0.0055, 0.0035),
+    "tpi": (0.0, 0.12),
     "roughness": (0.0, 0.76),
 }
 

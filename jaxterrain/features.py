@@ -36,9 +36,12 @@ How it is computed (the fast path is exact; only float32 summation order differs
   899 * 114^2 = 11.7 M at 256^2, k = 30, s = 2 (measured on one H100, jax 0.11.2: ~230 000 terrains/s for
   ``("tri", "tpi", "roughness")`` together, ~255 000 for TRI alone, batch 4096). Batches above 2**29 elements are
   processed in chunks (see ``_MAX_CHUNK_ELEMENTS``).
-- TPI is linear: ``tpi = z * k^2 / (k^2 - 1) - boxsum / (k^2 - 1)`` with a separable box sum; its descriptor is a
-  fixed weighted sum of the heightmap (each pixel weighted by how many windows contain it), one multiply-add per
-  pixel.
+- TPI is linear: ``tpi = z * k^2 / (k^2 - 1) - boxsum / (k^2 - 1)`` with a separable box sum. The ``tpi``
+  descriptor is the mean ABSOLUTE TPI: the mean of the signed map is ~0 on any terrain (it is the map's mean minus
+  the mean of its box-filtered copy, up to border effects), so it could not rank terrains; the paper found TPI the
+  descriptor best correlated with difficulty, which only a magnitude can be. The signed mean stays available as
+  ``tpi_signed``: a fixed weighted sum of the heightmap (each pixel weighted by how many windows contain it), one
+  multiply-add per pixel.
 - Roughness: separable ``lax.reduce_window`` max of z and of -z (rows, then columns).
 
 :func:`reference_maps` is a plain NumPy implementation over explicit windows, kept as ground truth for tests and as
@@ -310,7 +313,7 @@ def _tpi_weights(shape, window: int, stride: int) -> np.ndarray:
     return ((centre * (n + 1) - covered) / (n * count)).astype(np.float32)
 
 
-_BUILTIN = ("tri", "tri_riley", "tpi", "roughness")
+_BUILTIN = ("tri", "tri_riley", "tpi", "tpi_signed", "roughness")
 
 
 def _builtin_descriptors(h: jax.Array, names: Sequence[str], window: int, stride: int) -> dict[str, jax.Array]:
@@ -323,6 +326,8 @@ def _builtin_descriptors(h: jax.Array, names: Sequence[str], window: int, stride
         elif name == "tri_riley":
             out[name] = jnp.mean(_tri_core(h, window, stride, _RILEY, v), axis=(1, 2))
         elif name == "tpi":
+            out[name] = jnp.mean(jnp.abs(_tpi_core(h, window, stride)), axis=(1, 2))
+        elif name == "tpi_signed":
             w = jnp.asarray(_tpi_weights(h.shape, window, stride))
             out[name] = jnp.sum(h * w, axis=(1, 2))
         elif name == "roughness":
@@ -404,7 +409,7 @@ def unregister_descriptor(name: str) -> None:
 
 
 def descriptor_names() -> tuple[str, ...]:
-    """Names accepted by :func:`descriptors`: the built-ins ``tri`` (Wilson), ``tri_riley``, ``tpi``,
+    """Names accepted by :func:`descriptors`: the built-ins ``tri`` (Wilson), ``tri_riley``, ``tpi`` (mean |TPI|), ``tpi_signed``,
     ``roughness``, then registered ones in registration order."""
     return tuple(_REGISTRY)
 

@@ -51,9 +51,10 @@ def test_hand_computed_5x5_window3():
     np.testing.assert_allclose(F.tpi(H5, 3, 2), TPI5[::2, ::2], atol=1e-6)
     np.testing.assert_allclose(F.roughness(H5, 3, 2), ROUGH5[::2, ::2], atol=1e-6)
     # Descriptors are the map means: TRI (1 + 3/8 + 17/8 + 1/2 + 3/4 + 1/4 + 3 + 3/8 + 0) / 9 = 8.375 / 9,
-    # TPI (1 - 3/8 + 11/8 - 1/2 - 3/4 - 1/4 + 3 - 3/8 + 0) / 9 = 3.125 / 9, roughness 22 / 9.
-    d = F.descriptors(H5, ("tri", "tpi", "roughness"), window=3, stride=1)
-    np.testing.assert_allclose(d, [8.375 / 9, 3.125 / 9, 22 / 9], rtol=1e-6)
+    # TPI (the mean of |TPI|) (1 + 3/8 + 11/8 + 1/2 + 3/4 + 1/4 + 3 + 3/8 + 0) / 9 = 7.625 / 9,
+    # signed TPI (1 - 3/8 + 11/8 - 1/2 - 3/4 - 1/4 + 3 - 3/8 + 0) / 9 = 3.125 / 9, roughness 22 / 9.
+    d = F.descriptors(H5, ("tri", "tpi", "tpi_signed", "roughness"), window=3, stride=1)
+    np.testing.assert_allclose(d, [8.375 / 9, 7.625 / 9, 3.125 / 9, 22 / 9], rtol=1e-6)
 
 
 def test_even_window_centre_is_k_over_2():
@@ -101,15 +102,16 @@ def test_maps_equal_numpy_reference(window, stride):
 def test_fast_window30_descriptors_equal_reference():
     # The paper's setting (k = 30, s = 2) on small maps, odd and even sizes (the polyphase split pads odd ones).
     rng = np.random.default_rng(3)
-    names = ("tri", "tpi", "roughness", "tri_riley")
+    names = ("tri", "tpi", "roughness", "tri_riley", "tpi_signed")
     f = jax.jit(F.descriptors, static_argnames=("names", "window", "stride"))
     fmap = jax.jit(F.tri, static_argnames=("window", "stride", "algorithm"))
     for shape in [(3, 36, 41), (2, 40, 34)]:
         h = rng.random(shape).astype(np.float32) ** 2
         ref = F.reference_maps(h, 30, 2)
         got = np.asarray(f(h, names=names, window=30, stride=2))
-        assert got.shape == (shape[0], 4)
-        want = np.stack([ref[n].mean(axis=(1, 2)) for n in names], axis=-1)
+        assert got.shape == (shape[0], 5)
+        maps = {**ref, "tpi": np.abs(ref["tpi"]), "tpi_signed": ref["tpi"]}  # the "tpi" descriptor is mean |TPI|
+        want = np.stack([maps[n].mean(axis=(1, 2)) for n in names], axis=-1)
         np.testing.assert_allclose(got, want, rtol=1e-5, atol=1e-6)
     # The per-pixel TRI map (same offset sum) also matches.
     np.testing.assert_allclose(fmap(h, window=30, stride=2), ref["tri"], atol=1e-6)
@@ -159,7 +161,7 @@ def test_descriptor_registry_takes_any_callable():
             h, names=("tpi", "test_mean_height"), window=3, stride=1
         )
         np.testing.assert_allclose(d[:, 1], h.mean(axis=(1, 2)), rtol=1e-6)
-        np.testing.assert_allclose(d[:, 0], np.asarray(F.tpi(h)).mean(axis=(1, 2)), atol=1e-6)
+        np.testing.assert_allclose(d[:, 0], np.abs(np.asarray(F.tpi(h))).mean(axis=(1, 2)), atol=1e-6)
         with pytest.raises(ValueError, match="already registered"):
             F.register_descriptor("test_mean_height", mean_height)
         F.register_descriptor("test_bad_shape", lambda h: h[:, 0, :], overwrite=True)
@@ -170,7 +172,7 @@ def test_descriptor_registry_takes_any_callable():
         F.unregister_descriptor("test_bad_shape")
     with pytest.raises(ValueError, match="built-in"):
         F.register_descriptor("tri", mean_height)
-    with pytest.raises(ValueError, match=r"valid names: \('tri', 'tri_riley', 'tpi', 'roughness'\)"):
+    with pytest.raises(ValueError, match=r"valid names: \('tri', 'tri_riley', 'tpi', 'tpi_signed', 'roughness'\)"):
         F.descriptors(H5, ("tri", "slope"), window=3)
 
 

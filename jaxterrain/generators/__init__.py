@@ -57,14 +57,7 @@ def get(name: str, **options) -> Generator:
 
 
 # Built-in generators register themselves on import.
-from jaxterrain.generators import diamond_square, perlin, worley  # noqa: E402,F401
-
-for _optional in ("cppn", "gan"):
-    try:
-        __import__(f"jaxterrain.generators.{_optional}")
-    except ModuleNotFoundError as err:  # pragma: no cover - only while a module is being written
-        if err.name != f"jaxterrain.generators.{_optional}":
-            raise
+from jaxterrain.generators import cppn, diamond_square, gan, perlin, worley  # noqa: E402,F401
 
 __all__ = [
     "Generator",
