@@ -16,6 +16,7 @@ COMMANDS = {
     "train-base-policy": ("experiments.train_base_policy", "train the flat-ground base walker with PPO"),
     "features": ("experiments.features", "Experiment 1a: correlations of features with difficulty"),
     "evolve": ("experiments.evolve", "MAP-Elites archive for one generator and descriptor pair"),
+    "difficulty-spread": ("experiments.difficulty_spread", "fitness spread of random terrains per generator and height scale"),
     "coverage": ("experiments.coverage", "Experiment 1b: archives of all generators, coverage table and figures"),
 }
 
