@@ -7,8 +7,13 @@ A heightmap is a float array ``[H, W]`` (``[B, H, W]`` for batches), generators 
   between its first and last sample (10.24 m counting each pixel as a 4 cm cell). Chosen so that a humanoid's foot
   (brax humanoid: sphere of radius 0.075 m) covers a few cells - MJX's hfield collision cost grows with the number
   of cells under a geom - and so that Algorithm 1's 26-pixel window is ~1 m (26 * 0.04 = 1.04 m), about one step.
-- ``height`` (default 0.5 m): metres for heightmap value 1.0 (value 0 is z = 0). Provisional: the walker issue
-  calibrates it against the base policy.
+- ``height`` (default 1.0 m): metres for heightmap value 1.0 (value 0 is z = 0). Calibrated against the shipped
+  base policy (``python -m experiments difficulty-spread --heights 0.25 0.5 1.0 --n 12``, 2026-11-21, CPU; table in
+  docs/calibration.md): the share of random terrains whose fitness falls in [0.1, 0.9], averaged over the five
+  generators, was 27 % at 0.25 m, 55 % at 0.5 m and 72 % at 1.0 m. At 1.0 m, Perlin, GAN, diamond-square and Worley
+  terrains all spread (medians 0.15, 0.18, 0.67, 0.70); random CPPN genomes are smooth at any height scale (their
+  hard terrains come from evolution). At 1.0 m Algorithm 1 (threshold = humanoid height / 3 = 0.52 m within a
+  1.04 m window) can reject terrains; at 0.5 m it never could.
 
 Both are configurable and must be > 0.
 
@@ -49,7 +54,7 @@ _PNG_MAX = 65535
 
 class _TerrainScaleFields(NamedTuple):
     cell_size: float = 0.04
-    height: float = 0.5
+    height: float = 1.0
 
 
 def _check_positive(name: str, value) -> None:
@@ -70,7 +75,7 @@ class TerrainScale(_TerrainScaleFields):
 
     __slots__ = ()
 
-    def __new__(cls, cell_size: float = 0.04, height: float = 0.5):
+    def __new__(cls, cell_size: float = 0.04, height: float = 1.0):
         _check_positive("cell_size", cell_size)
         _check_positive("height", height)
         return super().__new__(cls, cell_size, height)

@@ -37,7 +37,8 @@ def cli(*argv):
 
 def test_slope_fitness_values():
     flat = np.zeros((1, 8, 8), np.float32)
-    ramp = np.tile(np.arange(8, dtype=np.float32) * 0.04 / 0.5 * 0.5, (8, 1))[None]  # rise 0.5 * run -> slope .5
+    # rise 0.5 * run -> slope 0.5, at the default scale (0.04 m per pixel, 1.0 m for height 1.0)
+    ramp = np.tile(np.arange(8, dtype=np.float32) * 0.04 * 0.5 / 1.0, (8, 1))[None]
     f = np.asarray(common.slope_fitness(np.concatenate([flat, ramp])))
     np.testing.assert_allclose(f, [1.0, 1.0 - 0.5 * 0.5], atol=1e-6)  # (|dx| + |dy|) / 2 = (0.5 + 0) / 2
 

@@ -228,8 +228,9 @@ def test_algorithm1_step_of_known_height():
     assert ok.dtype == bool and ok.tolist() == [True, False, True, False, True]
     # A taller metre scale makes the same map impassable: 0.79 * 1.0 m > 0.4 m.
     assert not bool(F.is_traversable(step(0.79), robot_height=robot_height, scale=TerrainScale(height=1.0)))
-    # A 0.79 step is fine for the default humanoid (1.57 / 3 = 0.523 m > 0.395 m) at the default scale.
-    assert F.HUMANOID_HEIGHT == pytest.approx(1.57) and bool(F.is_traversable(step(0.79)))
+    # At the default scale (1.0 m): a 0.5 step (0.5 m) passes the default humanoid (1.57 / 3 = 0.523 m), 0.55 fails.
+    assert F.HUMANOID_HEIGHT == pytest.approx(1.57) and bool(F.is_traversable(step(0.5)))
+    assert not bool(F.is_traversable(step(0.55)))
     # Every valid window is checked, including the last row of windows (the paper's loop stops one short).
     h = np.zeros((60, 60), np.float32)
     h[-1, 3] = 0.9

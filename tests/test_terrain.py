@@ -8,7 +8,7 @@ from jaxterrain import terrain as T
 
 def test_terrain_scale_defaults_and_validation():
     s = T.TerrainScale()
-    assert (s.cell_size, s.height) == (0.04, 0.5)
+    assert (s.cell_size, s.height) == (0.04, 1.0)
     assert T.TerrainScale(0.02, 2.0) == (0.02, 2.0)
     for bad in (0.0, -0.1, float("nan"), float("inf")):
         with pytest.raises(ValueError, match="cell_size"):
@@ -19,7 +19,7 @@ def test_terrain_scale_defaults_and_validation():
         T.to_metres(np.zeros((2, 2)), scale=(0.04, 0.5))
     h = np.array([[0.0, 0.25], [0.5, 1.0]], np.float32)
     np.testing.assert_allclose(T.to_metres(h, T.TerrainScale(height=0.8)), [[0.0, 0.2], [0.4, 0.8]], rtol=1e-7)
-    np.testing.assert_allclose(T.to_metres(np.stack([h, h])), 0.5 * np.stack([h, h]), rtol=1e-7)
+    np.testing.assert_allclose(T.to_metres(np.stack([h, h])), 1.0 * np.stack([h, h]), rtol=1e-7)  # default 1.0 m
 
 
 def test_terrain_scale_is_a_pytree():
@@ -35,7 +35,7 @@ def test_terrain_scale_is_a_pytree():
 
 def test_hfield_size():
     # 256 samples 0.04 m apart span 255 * 0.04 = 10.2 m -> radius 5.1; elevation = metres per heightmap unit.
-    assert T.hfield_size((256, 256)) == pytest.approx((5.1, 5.1, 0.5, 0.1))
+    assert T.hfield_size((256, 256)) == pytest.approx((5.1, 5.1, 1.0, 0.1))
     # [B, H, W] shapes and non-square maps: radius_x follows the columns (W), radius_y the rows (H).
     assert T.hfield_size((8, 11, 21), T.TerrainScale(0.1, 2.0), base=0.3) == pytest.approx((1.0, 0.5, 2.0, 0.3))
     with pytest.raises(ValueError, match="shape"):
@@ -104,6 +104,9 @@ def test_mjcf_flat_map(tmp_path):
     mujoco = pytest.importorskip("mujoco")
     h = np.full((6, 6), 0.3, np.float32)
     m = mujoco.MjModel.from_xml_path(str(T.save_mjcf(tmp_path / "flat.xml", h)))
+    heights = m.hfield_data.reshape(6, 6) * m.hfield_size[0][2] + m.geom_pos[m.geom("terrain").id][2]
+    np.testing.assert_allclose(heights, 0.3 * T.TerrainScale().height, atol=1e-6)
+    m = mujoco.MjModel.from_xml_path(str(T.save_mjcf(tmp_path / "flat2.xml", h, T.TerrainScale(height=0.5))))
     heights = m.hfield_data.reshape(6, 6) * m.hfield_size[0][2] + m.geom_pos[m.geom("terrain").id][2]
     np.testing.assert_allclose(heights, 0.15, atol=1e-6)
     with pytest.raises(ValueError, match="finite"):

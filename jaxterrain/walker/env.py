@@ -11,8 +11,8 @@ nothing about the terrain is baked into a closure, so a curriculum can switch te
 
 Physical choices (all in :class:`WalkerConfig`):
 
-- Scale: ``terrain_shape`` samples at ``scale`` (default 256 x 256 at 0.04 m = a 10.24 m square, heights up to
-  0.5 m). Heights outside ``[0, scale.height]`` metres are clipped, for the physics and for the samples alike.
+- Scale: ``terrain_shape`` samples at ``scale`` (default 256 x 256 at 0.04 m = a 10.2 m square, heights up to
+  1.0 m). Heights outside ``[0, scale.height]`` metres are clipped, for the physics and for the samples alike.
 - Spawn: torso at ``x_start = -radius_x + start_margin``, ``y = 0``, facing +x, joints at the XML pose plus uniform
   noise of ``joint_noise`` rad (clipped into the joint ranges) and joint velocities with noise ``qvel_noise``
   rad/s; the body is lowered so that its lowest foot sphere sits ``spawn_clearance`` above the highest terrain
