@@ -96,10 +96,12 @@ def test_chunked_matches_compiled_shape(flat_pair):
     assert d.shape == (3, ATTEMPTS) and np.all(np.isfinite(np.asarray(d)))
 
 
-def test_default_policy_error_is_clear(flat_pair):
-    from jaxterrain.rl import BASE_POLICY_DIR
-
-    if (BASE_POLICY_DIR / "policy.msgpack").is_file():
-        pytest.skip("the base policy is shipped")
-    with pytest.raises(RuntimeError, match="policy="):
-        difficulty.evaluate(flat_pair, jax.random.PRNGKey(0), env_config=CFG)
+def test_shipped_base_policy_walks_across_flat_ground():
+    """The shipped policy (the default of evaluate) crosses a flat 6.2 m map; standing still does not."""
+    cfg = CFG._replace(episode_length=300)  # 4.5 s: the policy walks ~2.9 m/s, the track is 5.2 m
+    flat = jnp.zeros((1, 32, 32))
+    fitness = difficulty.evaluate(flat, jax.random.PRNGKey(0), attempts=ATTEMPTS, best=BEST, env_config=cfg)
+    assert float(fitness[0]) >= 0.9
+    still = difficulty.evaluate(flat, jax.random.PRNGKey(0), attempts=ATTEMPTS, best=BEST, env_config=cfg,
+                                policy=linear_policy, policy_params=_params())
+    assert float(still[0]) < 0.2
