@@ -67,6 +67,20 @@ def write_config(folder: Path, config: dict) -> Path:
     return atomic_write_text(Path(folder) / CONFIG_NAME, json.dumps(config, indent=2, sort_keys=True) + "\n")
 
 
+def save_figure(fig, path: str | Path, dpi: int = 120) -> Path:
+    """Write a matplotlib figure as PNG atomically (never a half-written file), then close it."""
+    import io
+
+    import matplotlib.pyplot as plt
+
+    from jaxterrain.io import atomic_write_bytes
+
+    buf = io.BytesIO()
+    fig.savefig(buf, format="png", dpi=dpi)
+    plt.close(fig)
+    return atomic_write_bytes(path, buf.getvalue())
+
+
 def setup_run(command: str, args: argparse.Namespace, presets: dict[str, dict], default_preset: str,
               overrides: dict[str, Any]) -> tuple[Path, dict]:
     """Resolve the settings and the run folder; write the config there. Returns ``(folder, config)``.

@@ -165,8 +165,7 @@ def main(args) -> int:
     ax.set_ylabel("coverage (%)")
     ax.legend(fontsize=8)
     fig.tight_layout()
-    fig.savefig(folder / "coverage.png", dpi=150)
-    plt.close(fig)
+    common.save_figure(fig, folder / "coverage.png", dpi=150)
 
     # Figure 6: archive heatmaps, rows = pairs, columns = generators (+ combined)
     fig, axes = plt.subplots(len(pairs), len(shown), figsize=(2.9 * len(shown) + 1, 2.6 * len(pairs)), squeeze=False,
@@ -180,7 +179,6 @@ def main(args) -> int:
         fig.colorbar(img, ax=axes.ravel().tolist(), shrink=0.6, label="fitness (darker = fitter)")
     for a in axes.ravel():
         a.tick_params(labelsize=6)
-    fig.savefig(folder / "archives.png", dpi=130)
-    plt.close(fig)
+    common.save_figure(fig, folder / "archives.png", dpi=130)
     print(f"done -> {folder}", flush=True)
     return 0

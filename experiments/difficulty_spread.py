@@ -39,9 +39,9 @@ def main(args: argparse.Namespace) -> int:
     import matplotlib.pyplot as plt
     import numpy as np
 
-    from experiments.common import timestamp, write_config
+    from experiments.common import save_figure, timestamp, write_config
     from jaxterrain import difficulty, generators
-    from jaxterrain.io import atomic_write_bytes, atomic_write_text
+    from jaxterrain.io import atomic_write_text
     from jaxterrain.terrain import TerrainScale
 
     if args.n < 1:
@@ -98,9 +98,6 @@ def main(args: argparse.Namespace) -> int:
         ax.set_title(f"height scale {height:.2f} m"), ax.set_xlabel("fitness")
     axes[0, 0].legend(fontsize=7)
     fig.tight_layout()
-    buf = io.BytesIO()
-    fig.savefig(buf, format="png", dpi=80)
-    plt.close(fig)
-    atomic_write_bytes(run / "spread.png", buf.getvalue())
+    save_figure(fig, run / "spread.png", dpi=80)
     print(f"wrote {run}")
     return 0

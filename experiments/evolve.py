@@ -170,8 +170,7 @@ def main(args) -> int:
     fig, ax = plt.subplots(figsize=(4, 3.5))
     fig.colorbar(plot_archive(ax, arch), ax=ax, label="fitness")
     fig.tight_layout()
-    fig.savefig(folder / "archive.png", dpi=120)
-    plt.close(fig)
+    common.save_figure(fig, folder / "archive.png", dpi=120)
     print(f"done: coverage {A.coverage(arch):.2f}%  qd {A.qd_score(arch):.2f}  "
           f"rejected by Algorithm 1: {int(arch.metrics['rejected'].sum())}  -> {folder}", flush=True)
     return 0
