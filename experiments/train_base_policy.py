@@ -24,6 +24,8 @@ all 20 (bar for shipping: >= 0.9 and >= 0.7). ``--export-assets`` copies the pol
 from __future__ import annotations
 
 import argparse
+from pathlib import Path
+from typing import Any, NamedTuple
 
 PRESETS = ("smoke", "gpu")
 
@@ -119,23 +121,49 @@ def evaluate_flat(env, policy, terrain, key, attempts: int = 20, best: int = 5, 
             "best_mean": float(np.mean(top)), "all_mean": float(np.mean(dist))}
 
 
-def main(args: argparse.Namespace) -> int:
-    import datetime
-    import json
-    import math
-    import shutil
-    import sys
-    import time
-    from pathlib import Path
+class RunSettings(NamedTuple):
+    """The resolved settings of one run: the preset's defaults overridden by the command line."""
 
-    t_start = time.perf_counter()
-    import jax
-    import jax.numpy as jnp
-    import numpy as np
+    env_config: Any  # jaxterrain.walker.WalkerConfig
+    ppo_config: Any  # jaxterrain.rl.PPOConfig
+    env_steps: int  # total env steps asked for
+    num_updates: int  # PPO updates that reach env_steps
+    time_budget: float | None  # seconds of wall time for this process (None: no budget)
+    updates_per_chunk: int  # PPO updates per jitted chunk = per checkpoint
+
+
+class RunFolder(NamedTuple):
+    """Where a run lives and how it was started."""
+
+    path: Path  # the run folder (--out)
+    checkpoint: Path  # path / "checkpoint.msgpack"
+    command: str  # this process's command line
+    config: dict  # what path / "config.json" holds
+
+
+class TrainOrigin(NamedTuple):
+    """Who trained the checkpoint: the devices (``platform:kind``, in order) and the commit of the first process."""
+
+    devices: list[str]
+    commit: str
+
+
+class TrainOutcome(NamedTuple):
+    """The result of :func:`train_with_checkpoints`: the last state and whether the time budget stopped it."""
+
+    state: Any  # jaxterrain.rl training state
+    stopped: bool
+
+
+class _Stop(Exception):
+    """Raised from the chunk callback to stop training before the time budget is overrun."""
+
+
+def resolve_settings(args: argparse.Namespace) -> RunSettings:
+    """The preset of ``--preset`` with the command-line overrides, checked (SystemExit names the bad option)."""
+    import math
 
     from jaxterrain import rl
-    from jaxterrain.io import atomic_write_text
-    from jaxterrain.walker import WalkerEnv
 
     env_cfg, ppo_cfg, default_steps, default_budget, default_chunk = presets()[args.preset]
     if args.num_envs is not None:
@@ -153,6 +181,23 @@ def main(args: argparse.Namespace) -> int:
     if not 1 <= args.eval_best <= args.eval_attempts:
         raise SystemExit("--eval-best must be in [1, --eval-attempts]")
     num_updates = math.ceil(env_steps / ppo_cfg.steps_per_update)
+    return RunSettings(env_cfg, ppo_cfg, env_steps, num_updates, budget, upc)
+
+
+def _command_line() -> str:
+    """This process's command as ``python -m experiments train-base-policy ...``."""
+    import sys
+
+    return "python -m experiments train-base-policy " + " ".join(sys.argv[2:] if sys.argv[1:2] == [
+        "train-base-policy"] else sys.argv[1:])
+
+
+def prepare_run_folder(args: argparse.Namespace, settings: RunSettings) -> RunFolder:
+    """Create the run folder and write its ``config.json``; on ``--resume`` check the checkpoint and config."""
+    import datetime
+    import json
+
+    from jaxterrain.io import atomic_write_text
 
     stamp = datetime.datetime.now(datetime.timezone.utc).strftime("%Y%m%d-%H%M%S")
     run = Path(args.out or f"runs/train-base-policy-{args.preset}-{stamp}")
@@ -160,12 +205,12 @@ def main(args: argparse.Namespace) -> int:
     if args.resume and not ckpt_path.is_file():
         raise SystemExit(f"--resume: no checkpoint at {ckpt_path}")
     run.mkdir(parents=True, exist_ok=True)
-    command = "python -m experiments train-base-policy " + " ".join(sys.argv[2:] if sys.argv[1:2] == [
-        "train-base-policy"] else sys.argv[1:])
+    command = _command_line()
     run_config = {
-        "preset": args.preset, "seed": args.seed, "env_steps": env_steps, "num_updates": num_updates,
-        "updates_per_chunk": upc, "time_budget_s": budget, "walker_config": _to_jsonable(env_cfg),
-        "ppo_config": ppo_cfg.to_json_dict(), "command": command,
+        "preset": args.preset, "seed": args.seed, "env_steps": settings.env_steps,
+        "num_updates": settings.num_updates, "updates_per_chunk": settings.updates_per_chunk,
+        "time_budget_s": settings.time_budget, "walker_config": _to_jsonable(settings.env_config),
+        "ppo_config": settings.ppo_config.to_json_dict(), "command": command,
     }
     if args.resume and (run / "config.json").is_file():
         old = json.loads((run / "config.json").read_text())
@@ -175,136 +220,274 @@ def main(args: argparse.Namespace) -> int:
         run_config["command"] = old.get("command", command)  # the command that started the run
         run_config["resumed_with"] = list(old.get("resumed_with", [])) + [command]
     atomic_write_text(run / "config.json", json.dumps(run_config, indent=2) + "\n")
+    return RunFolder(run, ckpt_path, command, run_config)
+
+
+def _device_name() -> str:
+    """``platform:device_kind`` of the first JAX device."""
+    import jax
 
     device = jax.devices()[0]
-    device_name = f"{device.platform}:{device.device_kind}"
-    print(f"train-base-policy: preset {args.preset}, device {device.platform}:{device.device_kind}, "
-          f"{ppo_cfg.num_envs} envs, {ppo_cfg.steps_per_update:,d} steps/update, target {num_updates} updates "
-          f"({num_updates * ppo_cfg.steps_per_update:,d} env steps), run {run}", flush=True)
+    return f"{device.platform}:{device.device_kind}"
 
-    env = WalkerEnv(env_cfg)
-    terrain = jnp.zeros(tuple(env_cfg.terrain_shape), jnp.float32)
-    key = jax.random.PRNGKey(args.seed)
+
+def init_or_resume(key, env, ppo_cfg, terrain, ckpt_path: Path, resume: bool):
+    """A fresh PPO training state (``rl.init``), or with ``resume`` the one at ``ckpt_path``.
+
+    A checkpoint without the env state resumes with freshly reset envs, so its running episode sums are zeroed.
+    """
+    import jax
+    import jax.numpy as jnp
+
+    from jaxterrain import rl
+
     state = jax.jit(lambda k, t: rl.init(k, env, ppo_cfg, t))(key, terrain)
-    if args.resume:
+    if resume:
         state = rl.load_checkpoint(ckpt_path, like=state)
         meta = rl.checkpoint_metadata(ckpt_path)
         if not meta.get("include_env_state", False):  # envs were freshly reset: drop the running episode sums
             zero = jnp.zeros_like(state.episode.ret)
             state = state._replace(episode=state.episode._replace(ret=zero, length=zero))
         print(f"resumed at update {int(state.update_step)}, {int(state.env_steps):,d} env steps", flush=True)
+    return state
+
+
+def training_origin(ckpt_path: Path, resume: bool, state, num_updates: int, device_name: str) -> TrainOrigin:
+    """The checkpoint's devices and commit (from its metadata on ``resume``), plus this device if it will train."""
+    from jaxterrain import rl
 
     train_devices = []  # devices that trained this run (a resumed run may add one)
     train_commit = _git_commit()
-    if args.resume:
+    if resume:
         old_meta = rl.checkpoint_metadata(ckpt_path)
         train_devices = list(old_meta.get("train_devices", []))
         train_commit = old_meta.get("train_commit", train_commit)
     if int(state.update_step) < num_updates and device_name not in train_devices:
         train_devices.append(device_name)
-    progress = rl.Progress(ppo_cfg, print_fn=lambda s: print(s, flush=True))
-    chunk_times = []
+    return TrainOrigin(train_devices, train_commit)
 
-    class _Stop(Exception):
-        pass
 
-    last = {"state": state, "t": time.perf_counter()}
+class _ChunkCallback:
+    """``rl.train``'s per-chunk callback: prints and logs progress, checkpoints, and stops before the budget.
 
-    def on_chunk(s, metrics):
-        line = progress(s, metrics)
-        rl.save_checkpoint(ckpt_path, s, include_env_state=args.checkpoint_env_state,
+    ``last_state`` is the state of the last completed chunk (what a budget stop leaves).
+    """
+
+    def __init__(self, args, settings: RunSettings, run: RunFolder, origin: TrainOrigin, state, t_start: float):
+        import time
+
+        from jaxterrain import rl
+
+        self.args, self.settings, self.run, self.origin, self.t_start = args, settings, run, origin, t_start
+        self.progress = rl.Progress(settings.ppo_config, print_fn=lambda s: print(s, flush=True))
+        self.chunk_times: list[float] = []
+        self.last_state, self.last_t = state, time.perf_counter()
+
+    def __call__(self, s, metrics) -> None:
+        import json
+        import time
+
+        from jaxterrain import rl
+
+        args = self.args
+        line = self.progress(s, metrics)
+        rl.save_checkpoint(self.run.checkpoint, s, include_env_state=args.checkpoint_env_state,
                            metadata={"include_env_state": args.checkpoint_env_state, "preset": args.preset,
-                                     "train_devices": train_devices, "train_commit": train_commit,
-                                     "command": command})
-        with open(run / "progress.jsonl", "a") as f:
+                                     "train_devices": self.origin.devices, "train_commit": self.origin.commit,
+                                     "command": self.run.command})
+        with open(self.run.path / "progress.jsonl", "a") as f:
             f.write(json.dumps(line) + "\n")
         now = time.perf_counter()
-        chunk_times.append(now - last["t"])
-        last["state"], last["t"] = s, now
-        if budget is not None:
-            typical = min(chunk_times[-3:]) if len(chunk_times) > 1 else chunk_times[-1] * 0.5
-            eval_reserve = 0 if args.skip_eval else 60.0
-            if now - t_start + typical * 1.1 + eval_reserve > budget and int(s.update_step) < num_updates:
-                raise _Stop
+        self.chunk_times.append(now - self.last_t)
+        self.last_state, self.last_t = s, now
+        if self._over_budget(now, int(s.update_step)):
+            raise _Stop
 
-    remaining = num_updates - int(state.update_step)
-    stopped = False
-    if remaining > 0:
-        try:
-            state, _ = rl.train(key, env, ppo_cfg, remaining, terrain, state=state, callback=on_chunk,
-                                updates_per_chunk=upc)
-        except _Stop:
-            state, stopped = last["state"], True
-    steps_done = int(state.env_steps)
-    train_s = time.perf_counter() - t_start
-    policy_dir = run / "policy"
-    walker_json = _to_jsonable(env_cfg)
-    rl.save_policy(policy_dir, state.params, state.normaliser, ppo_cfg, env.observation_size, env.action_size,
-                   extra={"walker_config": walker_json, "env_steps": steps_done,
-                          "updates": int(state.update_step)})
-    if stopped:
-        tokens, again = command.split(), []
-        while tokens:
-            tok = tokens.pop(0)
-            if tok == "--out" and tokens:
-                tokens.pop(0)
-            elif tok != "--resume" and not tok.startswith("--out="):
-                again.append(tok)
-        print(f"time budget reached at {steps_done:,d} / {num_updates * ppo_cfg.steps_per_update:,d} env steps "
-              f"({train_s:.0f} s); continue with: {' '.join(again)} --out {run} --resume", flush=True)
-        return 0
-    print(f"training done: {steps_done:,d} env steps in {train_s:.0f} s", flush=True)
-    if args.skip_eval:
-        return 0
+    def _over_budget(self, now: float, update_step: int) -> bool:
+        """Would one more chunk (plus the evaluation's reserve) overrun the time budget?"""
+        budget, times = self.settings.time_budget, self.chunk_times
+        if budget is None:
+            return False
+        typical = min(times[-3:]) if len(times) > 1 else times[-1] * 0.5
+        eval_reserve = 0 if self.args.skip_eval else 60.0
+        return now - self.t_start + typical * 1.1 + eval_reserve > budget and update_step < self.settings.num_updates
+
+
+def train_with_checkpoints(key, env, terrain, state, args, settings: RunSettings, run: RunFolder,
+                           origin: TrainOrigin, t_start: float) -> TrainOutcome:
+    """Train the remaining updates in chunks, checkpointing after each, stopping early before the budget."""
+    from jaxterrain import rl
+
+    callback = _ChunkCallback(args, settings, run, origin, state, t_start)
+    remaining = settings.num_updates - int(state.update_step)
+    if remaining <= 0:
+        return TrainOutcome(state, False)
+    try:
+        state, _ = rl.train(key, env, settings.ppo_config, remaining, terrain, state=state, callback=callback,
+                            updates_per_chunk=settings.updates_per_chunk)
+    except _Stop:
+        return TrainOutcome(callback.last_state, True)
+    return TrainOutcome(state, False)
+
+
+def save_run_policy(policy_dir: Path, state, settings: RunSettings, env) -> None:
+    """Write the policy (``rl.save_policy``) with the walker config and training progress."""
+    from jaxterrain import rl
+
+    rl.save_policy(policy_dir, state.params, state.normaliser, settings.ppo_config, env.observation_size,
+                   env.action_size, extra={"walker_config": _to_jsonable(settings.env_config),
+                                           "env_steps": int(state.env_steps), "updates": int(state.update_step)})
+
+
+def resume_command(command: str, run: Path) -> str:
+    """``command`` without its ``--out`` / ``--resume``, plus ``--out run --resume``: how to continue the run."""
+    tokens, again = command.split(), []
+    while tokens:
+        tok = tokens.pop(0)
+        if tok == "--out" and tokens:
+            tokens.pop(0)
+        elif tok != "--resume" and not tok.startswith("--out="):
+            again.append(tok)
+    return f"{' '.join(again)} --out {run} --resume"
+
+
+def evaluate_policy(policy_dir: Path, env, env_cfg, terrain, seed: int, attempts: int, best: int,
+                    steps_done: int) -> dict:
+    """``eval.json``'s content: flat-ground normalised distances of the deterministic policy in ``policy_dir``
+    (``jaxterrain.difficulty``'s metric, else :func:`evaluate_flat`), their means and the bar verdict."""
+    import time
+
+    import jax
+    import jax.numpy as jnp
+    import numpy as np
+
+    from jaxterrain import rl
 
     policy = rl.load_policy(policy_dir)
-    eval_key = jax.random.PRNGKey(args.seed + 1_000_003)
+    eval_key = jax.random.PRNGKey(seed + 1_000_003)
     t_eval = time.perf_counter()
     try:  # the project's official metric (jaxterrain.difficulty), same env config
         from jaxterrain import difficulty
 
         dist = np.asarray(difficulty.rollout_distances(
-            jnp.zeros((1,) + tuple(env_cfg.terrain_shape), jnp.float32), eval_key, attempts=args.eval_attempts,
+            jnp.zeros((1,) + tuple(env_cfg.terrain_shape), jnp.float32), eval_key, attempts=attempts,
             policy=policy, scale=env_cfg.scale, env_config=env_cfg)[0])
-        top = np.sort(dist)[::-1][:args.eval_best]
-        result = {"attempts": args.eval_attempts, "best": args.eval_best, "distances": [float(d) for d in dist],
+        top = np.sort(dist)[::-1][:best]
+        result = {"attempts": attempts, "best": best, "distances": [float(d) for d in dist],
                   "best_mean": float(np.mean(top)), "all_mean": float(np.mean(dist)),
                   "method": "jaxterrain.difficulty.rollout_distances"}
     except ImportError as err:
         print(f"jaxterrain.difficulty unavailable ({err}); evaluating with the env directly", flush=True)
-        result = evaluate_flat(env, policy, terrain, eval_key, args.eval_attempts, args.eval_best)
+        result = evaluate_flat(env, policy, terrain, eval_key, attempts, best)
         result["method"] = "experiments.train_base_policy.evaluate_flat (env directly)"
     result.update(env_steps=steps_done, eval_s=time.perf_counter() - t_eval,
                   passes_bar=bool(result["best_mean"] >= 0.9 and result["all_mean"] >= 0.7))
-    atomic_write_text(run / "eval.json", json.dumps(result, indent=2) + "\n")
-    print(f"flat-ground normalised distance: best-{args.eval_best} mean {result['best_mean']:.3f}, "
-          f"all-{args.eval_attempts} mean {result['all_mean']:.3f} (bar 0.9 / 0.7: "
-          f"{'pass' if result['passes_bar'] else 'FAIL'})", flush=True)
+    return result
 
+
+def _bar_verdict(result: dict) -> str:
+    return "pass" if result["passes_bar"] else "FAIL"
+
+
+def write_eval(run: Path, result: dict) -> None:
+    """Write ``result`` (see :func:`evaluate_policy`) to ``run/eval.json`` and print its summary."""
+    import json
+
+    from jaxterrain.io import atomic_write_text
+
+    atomic_write_text(run / "eval.json", json.dumps(result, indent=2) + "\n")
+    print(f"flat-ground normalised distance: best-{result['best']} mean {result['best_mean']:.3f}, "
+          f"all-{result['attempts']} mean {result['all_mean']:.3f} (bar 0.9 / 0.7: {_bar_verdict(result)})",
+          flush=True)
+
+
+def build_provenance(args, run: RunFolder, state, origin: TrainOrigin, device_name: str, result: dict) -> dict:
+    """What ``PROVENANCE.md`` and the exported ``config.json`` record about the run and its evaluation."""
+    import datetime
+
+    import jax
+
+    return {
+        "command": run.config["command"], "resumed_with": run.config.get("resumed_with", []),
+        "preset": args.preset, "seed": args.seed, "env_steps": int(state.env_steps),
+        "updates": int(state.update_step), "commit": origin.commit, "export_commit": _git_commit(),
+        "device": ", ".join(origin.devices) or "unknown", "eval_device": device_name, "jax": jax.__version__,
+        "date": datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds"),
+        "eval": {k: result[k] for k in ("best_mean", "all_mean", "attempts", "best", "passes_bar")},
+    }
+
+
+def provenance_markdown(provenance: dict, result: dict) -> str:
+    """The text of ``PROVENANCE.md``."""
+    md = ["# Base policy provenance", "",
+          "Flat-ground PPO walker (`jaxterrain.rl`, brax's MJX-humanoid recipe) for `jaxterrain.walker`.",
+          "Load it with `jaxterrain.rl.load_policy()`.", ""]
+    md += [f"- {k}: `{v}`" for k, v in provenance.items() if k != "eval"]
+    md += ["", f"Evaluation on flat ground ({result['attempts']} attempts, deterministic mean action): "
+               f"best-{result['best']} mean normalised distance {result['best_mean']:.3f}, "
+               f"all-{result['attempts']} mean {result['all_mean']:.3f} (bar 0.9 / 0.7: {_bar_verdict(result)}).",
+           "", "PPO and walker configs: `config.json` in this folder."]
+    return "\n".join(md) + "\n"
+
+
+def export_policy_assets(dest: Path, run: Path, state, settings: RunSettings, env, provenance: dict,
+                         result: dict) -> None:
+    """Write the policy, ``eval.json`` and ``PROVENANCE.md`` to ``dest`` (world-readable package data)."""
+    import shutil
+
+    from jaxterrain import rl
+    from jaxterrain.io import atomic_write_text
+
+    rl.save_policy(dest, state.params, state.normaliser, settings.ppo_config, env.observation_size,
+                   env.action_size, extra={"walker_config": _to_jsonable(settings.env_config),
+                                           "provenance": provenance})
+    shutil.copyfile(run / "eval.json", dest / "eval.json")
+    atomic_write_text(dest / "PROVENANCE.md", provenance_markdown(provenance, result))
+    for name in ("policy.msgpack", "config.json", "eval.json", "PROVENANCE.md"):
+        (dest / name).chmod(0o644)  # atomic writes create 0600 files; package data must be readable
+    print(f"exported the base policy to {dest}", flush=True)
+
+
+def main(args: argparse.Namespace) -> int:
+    """Resolve, train (checkpointed, budgeted, resumable), save the policy, evaluate it, optionally export it."""
+    import time
+
+    t_start = time.perf_counter()
+    import jax
+    import jax.numpy as jnp
+
+    from jaxterrain import rl
+    from jaxterrain.walker import WalkerEnv
+
+    settings = resolve_settings(args)
+    run = prepare_run_folder(args, settings)
+    device_name = _device_name()
+    ppo_cfg, total_steps = settings.ppo_config, settings.num_updates * settings.ppo_config.steps_per_update
+    print(f"train-base-policy: preset {args.preset}, device {device_name}, {ppo_cfg.num_envs} envs, "
+          f"{ppo_cfg.steps_per_update:,d} steps/update, target {settings.num_updates} updates "
+          f"({total_steps:,d} env steps), run {run.path}", flush=True)
+
+    env = WalkerEnv(settings.env_config)
+    terrain = jnp.zeros(tuple(settings.env_config.terrain_shape), jnp.float32)  # flat ground
+    key = jax.random.PRNGKey(args.seed)
+    state = init_or_resume(key, env, ppo_cfg, terrain, run.checkpoint, args.resume)
+    origin = training_origin(run.checkpoint, args.resume, state, settings.num_updates, device_name)
+    outcome = train_with_checkpoints(key, env, terrain, state, args, settings, run, origin, t_start)
+    state, steps_done, train_s = outcome.state, int(outcome.state.env_steps), time.perf_counter() - t_start
+    save_run_policy(run.path / "policy", state, settings, env)
+    if outcome.stopped:
+        print(f"time budget reached at {steps_done:,d} / {total_steps:,d} env steps ({train_s:.0f} s); "
+              f"continue with: {resume_command(run.command, run.path)}", flush=True)
+        return 0
+    print(f"training done: {steps_done:,d} env steps in {train_s:.0f} s", flush=True)
+    if args.skip_eval:
+        return 0
+
+    result = evaluate_policy(run.path / "policy", env, settings.env_config, terrain, args.seed,
+                             args.eval_attempts, args.eval_best, steps_done)
+    write_eval(run.path, result)
     if args.export_assets:
         dest = Path(args.assets_dir) if args.assets_dir else rl.BASE_POLICY_DIR
-        provenance = {
-            "command": run_config["command"], "resumed_with": run_config.get("resumed_with", []),
-            "preset": args.preset, "seed": args.seed, "env_steps": steps_done,
-            "updates": int(state.update_step), "commit": train_commit, "export_commit": _git_commit(),
-            "device": ", ".join(train_devices) or "unknown", "eval_device": device_name, "jax": jax.__version__,
-            "date": datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds"),
-            "eval": {k: result[k] for k in ("best_mean", "all_mean", "attempts", "best", "passes_bar")},
-        }
-        rl.save_policy(dest, state.params, state.normaliser, ppo_cfg, env.observation_size, env.action_size,
-                       extra={"walker_config": walker_json, "provenance": provenance})
-        shutil.copyfile(run / "eval.json", dest / "eval.json")
-        md = ["# Base policy provenance", "",
-              "Flat-ground PPO walker (`jaxterrain.rl`, brax's MJX-humanoid recipe) for `jaxterrain.walker`.",
-              "Load it with `jaxterrain.rl.load_policy()`.", ""]
-        md += [f"- {k}: `{v}`" for k, v in provenance.items() if k != "eval"]
-        md += ["", f"Evaluation on flat ground ({result['attempts']} attempts, deterministic mean action): "
-                   f"best-{result['best']} mean normalised distance {result['best_mean']:.3f}, "
-                   f"all-{result['attempts']} mean {result['all_mean']:.3f} (bar 0.9 / 0.7: "
-                   f"{'pass' if result['passes_bar'] else 'FAIL'}).", "",
-               "PPO and walker configs: `config.json` in this folder."]
-        atomic_write_text(dest / "PROVENANCE.md", "\n".join(md) + "\n")
-        for name in ("policy.msgpack", "config.json", "eval.json", "PROVENANCE.md"):
-            (dest / name).chmod(0o644)  # atomic writes create 0600 files; package data must be readable
-        print(f"exported the base policy to {dest}", flush=True)
+        provenance = build_provenance(args, run, state, origin, device_name, result)
+        export_policy_assets(dest, run.path, state, settings, env, provenance, result)
     return 0

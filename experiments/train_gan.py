@@ -447,33 +447,66 @@ def _resolve(args) -> dict:
     return preset
 
 
-def main(args: argparse.Namespace) -> int:
-    import jax
-    import numpy as np
+class TrainingData(NamedTuple):
+    """The DEM tiles a run trains on (``tiles``: ``jaxterrain.dem.DemTiles``), how many, and a one-line description."""
 
-    from jaxterrain import dem
-    from jaxterrain.generators.gan import ASSET_DIR, GanConfig, load_generator, save_generator
-    from jaxterrain.io import atomic_write_text
+    tiles: Any
+    num_tiles: int
+    description: str
 
-    preset = _resolve(args)
-    config = GanConfig(size=preset["size"], channels=tuple(preset["channels"]),
-                       disc_channels=tuple(preset["disc_channels"])).check()
+
+class TrainOutcome(NamedTuple):
+    """The result of :func:`train`: the final state, the wall time of the loop (s) and the last logged metrics."""
+
+    state: TrainState
+    wall: float
+    last_metrics: dict[str, float] | None
+
+
+def make_config(preset: dict):
+    """The checked ``GanConfig`` of the resolved ``preset`` (see :func:`_resolve`)."""
+    from jaxterrain.generators.gan import GanConfig
+
+    return GanConfig(size=preset["size"], channels=tuple(preset["channels"]),
+                     disc_channels=tuple(preset["disc_channels"])).check()
+
+
+def prepare_run_dir(args) -> Path:
+    """The run folder (``--out`` or ``runs/train-gan-<UTC time>``), created; ``--resume`` needs ``--out``."""
     run_dir = Path(args.out or f"runs/train-gan-{time.strftime('%Y%m%d-%H%M%S', time.gmtime())}")
     if args.resume and not args.out:
         raise ValueError("--resume needs --out RUN_DIR (the run to continue)")
     run_dir.mkdir(parents=True, exist_ok=True)
-    dems = dem.load_dems(args.data, min(dem.DEFAULT_SCALES))
-    tiles = dem.stack_tiles([z for _, z in dems])
-    data_desc = (f"{'matplotlib sample DEMs' if args.data is None else args.data}: "
-                 + ", ".join(f"{n} ({z.shape[0]} x {z.shape[1]})" for n, z in dems))
-    print(f"train-gan: {run_dir}  device {_device()}  data {len(dems)} tiles", flush=True)
+    return run_dir
 
-    if args.quality_only:
-        cfg, variables = load_generator(args.quality_only)
-        report = quality_check(jax.random.PRNGKey(args.seed + 1), cfg, variables, tiles, max(args.quality_samples, 8))
-        atomic_write_text(run_dir / "quality.json", json.dumps(report, indent=2) + "\n")
-        print(json.dumps(report["mean_w1"]), "gan_closer_than_perlin:", report["gan_closer_than_perlin"])
-        return 0
+
+def load_training_data(data: str | None) -> TrainingData:
+    """Load the DEM tiles of ``--data`` (default: matplotlib's sample DEMs) and stack them for the device."""
+    from jaxterrain import dem
+
+    dems = dem.load_dems(data, min(dem.DEFAULT_SCALES))
+    tiles = dem.stack_tiles([z for _, z in dems])
+    description = (f"{'matplotlib sample DEMs' if data is None else data}: "
+                   + ", ".join(f"{n} ({z.shape[0]} x {z.shape[1]})" for n, z in dems))
+    return TrainingData(tiles, len(dems), description)
+
+
+def run_quality_only(args, run_dir: Path, tiles) -> None:
+    """``--quality-only WEIGHTS``: write the :func:`quality_check` of those weights to ``run_dir/quality.json``."""
+    import jax
+
+    from jaxterrain.generators.gan import load_generator
+    from jaxterrain.io import atomic_write_text
+
+    cfg, variables = load_generator(args.quality_only)
+    report = quality_check(jax.random.PRNGKey(args.seed + 1), cfg, variables, tiles, max(args.quality_samples, 8))
+    atomic_write_text(run_dir / "quality.json", json.dumps(report, indent=2) + "\n")
+    print(json.dumps(report["mean_w1"]), "gan_closer_than_perlin:", report["gan_closer_than_perlin"])
+
+
+def write_run_json(args, run_dir: Path, preset: dict, config, data_desc: str) -> None:
+    """Write ``run.json`` (argv, resolved options, config); on ``--resume`` first check the config is the same."""
+    from jaxterrain.io import atomic_write_text
 
     run_json = run_dir / "run.json"
     if args.resume and run_json.exists():
@@ -485,6 +518,11 @@ def main(args: argparse.Namespace) -> int:
         k: v for k, v in preset.items() if k not in ("channels", "disc_channels")} | {"lr": args.lr, "r1": args.r1,
         "seed": args.seed, "data": data_desc}, "config": config.to_json()}, indent=2) + "\n")
 
+
+def init_or_resume(args, run_dir: Path, config) -> TrainState:
+    """A fresh :class:`TrainState` from ``--seed``, or with ``--resume`` the latest checkpoint in ``run_dir``."""
+    import jax
+
     state = init_state(jax.random.PRNGKey(args.seed), config, args.lr)
     if args.resume:
         ckpt = latest_checkpoint(run_dir)
@@ -493,6 +531,39 @@ def main(args: argparse.Namespace) -> int:
         else:
             state = restore_checkpoint(ckpt, state)
             print(f"resumed from {ckpt} at step {int(state.step)}", flush=True)
+    return state
+
+
+def _progress_bar(args, start: int):
+    """A tqdm bar over the steps still to train, or None (``--no-progress``, nothing to train, or no tqdm)."""
+    if args.no_progress or start >= args.steps:
+        return None
+    try:
+        from tqdm import tqdm
+
+        return tqdm(total=args.steps, initial=start, desc="train-gan", mininterval=2.0, file=sys.stdout)
+    except ImportError:
+        return None
+
+
+def _log_metrics(say, log_path: Path, step: int, total: int, start: int, t0: float, metrics) -> dict[str, float]:
+    """Print and append to ``log.jsonl`` one log line for ``step``; raise on non-finite losses. The host metrics."""
+    import numpy as np
+
+    m = {k: float(v) for k, v in metrics.items()}
+    rate = (step - start) / max(time.time() - t0, 1e-9)
+    line = f"step {step}/{total}  " + "  ".join(f"{k} {v:.4f}" for k, v in m.items()) + f"  {rate:.1f} steps/s"
+    say(line)
+    with open(log_path, "a") as f:
+        f.write(json.dumps({"step": step, "time": time.time() - t0, **m}) + "\n")
+    if not all(np.isfinite(list(m.values()))):
+        raise FloatingPointError(f"train-gan: non-finite losses at step {step}: {m}")
+    return m
+
+
+def train(args, run_dir: Path, config, state: TrainState, tiles) -> TrainOutcome:
+    """Train from ``state.step`` to ``--steps``: log lines, sample grids and checkpoints at their intervals."""
+    import jax
 
     step_fn = _jitted_step(config, args.batch_size, float(args.lr), float(args.r1), jax.default_backend() != "cpu")
     sample_fn, real_fn = _jitted_samples(config)
@@ -500,32 +571,15 @@ def main(args: argparse.Namespace) -> int:
         save_grid(run_dir / "samples" / "real.png", real_fn(jax.random.PRNGKey(7), tiles))
 
     start = int(state.step)
-    bar = None
-    if not args.no_progress and start < args.steps:
-        try:
-            from tqdm import tqdm
-
-            bar = tqdm(total=args.steps, initial=start, desc="train-gan", mininterval=2.0, file=sys.stdout)
-        except ImportError:
-            bar = None
+    bar = _progress_bar(args, start)
     say = bar.write if bar is not None else (lambda s: print(s, flush=True))
-    t0, metrics, last = time.time(), None, None
-    log_path = run_dir / "log.jsonl"
+    t0, last = time.time(), None
     for step in range(start + 1, args.steps + 1):
         state, metrics = step_fn(state, tiles)
         if bar is not None:
             bar.update(1)
         if step % args.log_every == 0 or step == args.steps:
-            m = {k: float(v) for k, v in metrics.items()}
-            last = m
-            rate = (step - start) / max(time.time() - t0, 1e-9)
-            line = f"step {step}/{args.steps}  " + "  ".join(f"{k} {v:.4f}" for k, v in m.items()) + \
-                f"  {rate:.1f} steps/s"
-            say(line)
-            with open(log_path, "a") as f:
-                f.write(json.dumps({"step": step, "time": time.time() - t0, **m}) + "\n")
-            if not all(np.isfinite(list(m.values()))):
-                raise FloatingPointError(f"train-gan: non-finite losses at step {step}: {m}")
+            last = _log_metrics(say, run_dir / "log.jsonl", step, args.steps, start, t0, metrics)
         if step % args.sample_every == 0 or step == args.steps:
             save_grid(run_dir / "samples" / f"step_{step:08d}.png", sample_fn(state.g_params, state.g_stats))
         if step % args.ckpt_every == 0 or step == args.steps:
@@ -535,20 +589,50 @@ def main(args: argparse.Namespace) -> int:
     wall = time.time() - t0
     if start < args.steps:
         say(f"trained {args.steps - start} steps in {wall:.1f} s")
+    return TrainOutcome(state, wall, last)
 
-    variables = {"params": state.g_params, "batch_stats": state.g_stats}
+
+def run_quality(args, run_dir: Path, config, variables, tiles) -> dict | None:
+    """The :func:`quality_check` of the trained generator, written to ``quality.json`` (None if skipped)."""
+    import jax
+
+    from jaxterrain.io import atomic_write_text
+
+    if args.quality_samples <= 0:
+        return None
+    try:
+        quality = quality_check(jax.random.PRNGKey(args.seed + 1), config, variables, tiles, args.quality_samples)
+    except ImportError as err:
+        print(f"quality check skipped: {err}", flush=True)
+        return None
+    atomic_write_text(run_dir / "quality.json", json.dumps(quality, indent=2) + "\n")
+    print(f"quality (mean W1 to training patches, lower = closer): {json.dumps(quality['mean_w1'])}  "
+          f"gan_closer_than_perlin: {quality['gan_closer_than_perlin']}", flush=True)
+    return quality
+
+
+def main(args: argparse.Namespace) -> int:
+    """Resolve the options, load the data, train (or resume), save ``final/``, check quality, optionally export."""
+    from jaxterrain.generators.gan import ASSET_DIR, save_generator
+
+    preset = _resolve(args)
+    config = make_config(preset)
+    run_dir = prepare_run_dir(args)
+    data = load_training_data(args.data)
+    print(f"train-gan: {run_dir}  device {_device()}  data {data.num_tiles} tiles", flush=True)
+    if args.quality_only:
+        run_quality_only(args, run_dir, data.tiles)
+        return 0
+
+    write_run_json(args, run_dir, preset, config, data.description)
+    state = init_or_resume(args, run_dir, config)
+    outcome = train(args, run_dir, config, state, data.tiles)
+    variables = {"params": outcome.state.g_params, "batch_stats": outcome.state.g_stats}
     save_generator(run_dir / "final", config, variables)
-    quality = None
-    if args.quality_samples > 0:
-        try:
-            quality = quality_check(jax.random.PRNGKey(args.seed + 1), config, variables, tiles, args.quality_samples)
-            atomic_write_text(run_dir / "quality.json", json.dumps(quality, indent=2) + "\n")
-            print(f"quality (mean W1 to training patches, lower = closer): {json.dumps(quality['mean_w1'])}  "
-                  f"gan_closer_than_perlin: {quality['gan_closer_than_perlin']}", flush=True)
-        except ImportError as err:
-            print(f"quality check skipped: {err}", flush=True)
+    quality = run_quality(args, run_dir, config, variables, data.tiles)
     if args.export_assets:
-        text = provenance_text(args, config, data_desc, int(state.step), wall, quality, last)
+        text = provenance_text(args, config, data.description, int(outcome.state.step), outcome.wall, quality,
+                               outcome.last_metrics)
         out = export_assets(run_dir, ASSET_DIR, text)
         print(f"exported the generator to {out}", flush=True)
     print(f"done: {run_dir / 'final'}", flush=True)
