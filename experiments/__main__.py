@@ -1,7 +1,8 @@
 """``python -m experiments <command>``: every experiment of the paper, and the training jobs behind them.
 
 Each command lives in its own module of this package, which defines ``add_arguments(parser)`` and ``main(args)``;
-this file only maps command names to modules (imported lazily, so ``--help`` stays fast).
+this file only maps command names to modules. Command modules import jax and the library inside ``main`` only, so
+``--help`` stays fast.
 """
 
 from __future__ import annotations
