@@ -10,7 +10,7 @@ generator update per step, batches of random DEM patches cut, augmented and norm
 jit-compiled step (``jaxterrain.dem.random_patches``); latents from N(0, 1) truncated to [-3, 3] (the genome range).
 R1 penalty on real data (``--r1``, lazily every 8 steps; on in the gpu preset: without it the
 discriminator wins after ~3000 steps and the samples lose relief). The run folder gets ``run.json`` (arguments), ``log.jsonl``,
-``samples/step_XXXXXXXX.png`` (a fixed-latent grid, plus ``real.png``), ``checkpoints/`` (params + optimiser states +
+``samples/step_<8-digit step>.png`` (a fixed-latent grid, plus ``real.png``), ``checkpoints/`` (params + optimiser states +
 step + key, written atomically; the 3 latest kept), ``final/`` (``generator.msgpack`` + ``config.json``, loadable with
 ``generators.get("gan", weights="<run>/final")``) and ``quality.json`` (see :func:`quality_check`).
 ``--export-assets`` copies ``final/`` into ``jaxterrain/assets/gan/`` with ``PROVENANCE.md`` and a sample grid.
@@ -202,7 +202,7 @@ def make_train_step(config, batch_size: int, lr: float = 2e-4, r1: float = 0.0, 
 
 
 def save_checkpoint(run_dir: Path, state: TrainState, keep: int = 3) -> Path:
-    """Write ``checkpoints/ckpt_XXXXXXXX.msgpack`` atomically; keep the ``keep`` latest."""
+    """Write ``checkpoints/ckpt_<8-digit step>.msgpack`` atomically; keep the ``keep`` latest."""
     import jax
     import numpy as np
     from flax import serialization

@@ -318,15 +318,6 @@ def test_config_validation():
     assert A.config_from_dict(A.config_to_dict(cfg)) == cfg
 
 
-def _have(module):
-    try:
-        __import__(module)
-        return True
-    except Exception:
-        return False
-
-
-@pytest.mark.skipif(not _have("jaxterrain.generators.cppn"), reason="cppn generator not available")
 def test_cppn_pytree_genomes_round_trip(tmp_path):
     from jaxterrain import generators
 
@@ -347,7 +338,6 @@ def test_cppn_pytree_genomes_round_trip(tmp_path):
 
 
 @pytest.mark.slow
-@pytest.mark.skipif(not _have("jaxterrain.generators.cppn"), reason="cppn generator not available")
 def test_cppn_evolve(tmp_path):
     from jaxterrain import generators
 
@@ -367,8 +357,6 @@ def test_cppn_evolve(tmp_path):
     _assert_same(arch, A.load(A.save(tmp_path / "cppn.npz", arch)))
 
 
-@pytest.mark.skipif(not (_have("jaxterrain.generators.perlin") and _have("jaxterrain.features")),
-                    reason="perlin generator or features not available")
 def test_evolve_smoke_preset_end_to_end(tmp_path):
     """The experiment's smoke preset with the real generator, descriptors and Algorithm 1, cheap fitness."""
     from experiments import evolve as ev

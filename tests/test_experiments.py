@@ -15,20 +15,6 @@ from experiments import common
 ROOT = Path(__file__).resolve().parents[1]
 
 
-def _have(module):
-    try:
-        __import__(module)
-        return True
-    except Exception:
-        return False
-
-
-needs_stack = pytest.mark.skipif(
-    not (_have("jaxterrain.generators.perlin") and _have("jaxterrain.features")),
-    reason="generators or features not available",
-)
-
-
 def cli(*argv):
     from experiments.__main__ import main
 
@@ -43,7 +29,6 @@ def test_slope_fitness_values():
     np.testing.assert_allclose(f, [1.0, 1.0 - 0.5 * 0.5], atol=1e-6)  # (|dx| + |dy|) / 2 = (0.5 + 0) / 2
 
 
-@needs_stack
 def test_evolve_smoke_config_and_resume(tmp_path):
     from jaxterrain import archive as A
 
@@ -64,7 +49,6 @@ def test_evolve_smoke_config_and_resume(tmp_path):
     assert cli("evolve", "--resume", str(out)) == 0
 
 
-@needs_stack
 def test_features_smoke(tmp_path):
     out = tmp_path / "f"
     assert cli("features", "--preset", "smoke", "--generators", "perlin", "--out", str(out)) == 0
@@ -76,7 +60,6 @@ def test_features_smoke(tmp_path):
     assert (out / "correlations.png").exists() and (out / "correlation_perlin.png").exists()
 
 
-@needs_stack
 @pytest.mark.slow
 def test_coverage_smoke_skips_unavailable(tmp_path):
     out = tmp_path / "c"
