@@ -73,7 +73,7 @@ def test_npy_round_trip_exact(tmp_path):
 
 @pytest.mark.parametrize("inline", [False, True])
 def test_mjcf_loads_in_mujoco_with_matching_heights(tmp_path, inline):
-    mujoco = pytest.importorskip("mujoco")
+    import mujoco  # a runtime dependency: fail, never skip, if it is missing
     rng = np.random.default_rng(2)
     h = (0.2 + 0.6 * rng.random((12, 15))).astype(np.float32)  # min > 0: exercises the re-normalisation offset
     scale = T.TerrainScale(cell_size=0.1, height=2.0)
@@ -101,7 +101,7 @@ def test_mjcf_loads_in_mujoco_with_matching_heights(tmp_path, inline):
 
 
 def test_mjcf_flat_map(tmp_path):
-    mujoco = pytest.importorskip("mujoco")
+    import mujoco  # a runtime dependency: fail, never skip, if it is missing
     h = np.full((6, 6), 0.3, np.float32)
     m = mujoco.MjModel.from_xml_path(str(T.save_mjcf(tmp_path / "flat.xml", h)))
     heights = m.hfield_data.reshape(6, 6) * m.hfield_size[0][2] + m.geom_pos[m.geom("terrain").id][2]
