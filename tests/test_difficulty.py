@@ -94,6 +94,12 @@ def test_chunked_matches_compiled_shape(flat_pair):
     three = jnp.concatenate([flat_pair, flat_pair[:1]])
     d = _run(three, _params(), chunk=2)  # 2 calls of the batch-2 compile, the last one padded
     assert d.shape == (3, ATTEMPTS) and np.all(np.isfinite(np.asarray(d)))
+    # Chunk i is the unchunked call on its terrains with the i-th split key; padding does not change real rows.
+    keys = jax.random.split(jax.random.PRNGKey(0), 2)
+    run = lambda h, k: difficulty.rollout_distances(h, k, ATTEMPTS, policy=linear_policy,  # noqa: E731
+                                                    env_config=CFG, policy_params=_params())
+    np.testing.assert_array_equal(d[:2], run(three[:2], keys[0]))
+    np.testing.assert_array_equal(d[2], run(jnp.stack([three[2], three[2]]), keys[1])[0])
 
 
 def test_shipped_base_policy_walks_across_flat_ground():
