@@ -38,7 +38,13 @@ def add_run_arguments(parser: argparse.ArgumentParser, presets: dict[str, dict],
 
 
 def timestamp() -> str:
-    return _dt.datetime.now().strftime("%Y%m%d-%H%M%S")
+    """UTC time as ``YYYYmmdd-HHMMSS``, the suffix of default run folders."""
+    return _dt.datetime.now(_dt.timezone.utc).strftime("%Y%m%d-%H%M%S")
+
+
+def run_folder(name: str, out: str | Path | None = None) -> Path:
+    """``out``, or the default run folder ``runs/<name>-<UTC time>``; not created here."""
+    return Path(out) if out else Path("runs") / f"{name}-{timestamp()}"
 
 
 def latest_run(command: str, root: Path = Path("runs")) -> Path:
@@ -111,7 +117,7 @@ def setup_run(command: str, args: argparse.Namespace, presets: dict[str, dict], 
     unknown = set(config) - set(presets[default_preset]) - {"preset", "seed", "command"}
     if unknown:
         raise SystemExit(f"unknown config key(s) {sorted(unknown)}; known: {sorted(presets[default_preset])}")
-    folder = args.out or Path("runs") / f"{command}-{timestamp()}"
+    folder = run_folder(command, args.out)
     folder.mkdir(parents=True, exist_ok=True)
     config["command"] = command
     write_config(folder, config)

@@ -30,8 +30,6 @@ def main(args: argparse.Namespace) -> int:
     import csv
     import io
     import time
-    from pathlib import Path
-
     import jax
     import matplotlib
 
@@ -39,7 +37,7 @@ def main(args: argparse.Namespace) -> int:
     import matplotlib.pyplot as plt
     import numpy as np
 
-    from experiments.common import save_figure, timestamp, write_config
+    from experiments.common import run_folder, save_figure, write_config
     from jaxterrain import difficulty, generators
     from jaxterrain.io import atomic_write_text
     from jaxterrain.terrain import TerrainScale
@@ -48,7 +46,7 @@ def main(args: argparse.Namespace) -> int:
         raise SystemExit("--n must be >= 1")
     if any(h <= 0 for h in args.heights):
         raise SystemExit("--heights must all be > 0 (metres)")
-    run = Path(args.out or f"runs/difficulty-spread-{timestamp()}")
+    run = run_folder("difficulty-spread", args.out)
     run.mkdir(parents=True, exist_ok=True)
     write_config(run, {**vars(args), "command": "difficulty-spread"})
 

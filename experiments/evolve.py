@@ -25,7 +25,6 @@ import csv
 from pathlib import Path
 
 from experiments import common
-from experiments.common import slope_fitness  # noqa: F401  (re-exported for tests and benchmarks)
 
 PRESETS: dict[str, dict] = {
     "paper": dict(generator="perlin", descriptors=["roughness", "tpi"], generations=5000, batch_size=20,
@@ -99,7 +98,7 @@ def run_treatment(cfg: dict, generator: str, descriptors, folder: Path, clock: c
         return A.load(done_path)
     config = evolve_config({**cfg, "descriptors": list(descriptors)})
     fitness = common.fitness_function(cfg["fitness"], config.attempts, config.best, int(cfg["size"]))
-    printer = _printer(label + generator)
+    printer = A.progress_printer(label + generator)
 
     def progress(info):
         printer(info)
@@ -110,18 +109,6 @@ def run_treatment(cfg: dict, generator: str, descriptors, folder: Path, clock: c
     A.save(done_path, arch)
     write_metrics_csv(folder / "metrics.csv", arch.metrics)
     return arch
-
-
-def _printer(name):
-    def report(info):
-        if info["event"] == "resume":
-            print(f"[{name}] resuming at generation {info['generation']}", flush=True)
-            return
-        print(f"[{name}] gen {info['generation']}/{info['generations']}  coverage {info['coverage']:.2f}%  "
-              f"qd {info['qd_score']:.2f}  max {info['max_fitness']:.3f}  rejected {int(info['rejected_total'])}  "
-              f"{info['evaluations_per_s']:.1f} evals/s", flush=True)
-
-    return report
 
 
 def write_metrics_csv(path: Path, metrics: dict) -> None:

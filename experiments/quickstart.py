@@ -117,11 +117,9 @@ def summary_markdown(samples: dict[str, Sample], skipped: dict[str, str], args: 
 
 
 def main(args: argparse.Namespace) -> int:
-    from pathlib import Path
-
     import jax
 
-    from experiments.common import timestamp, write_config
+    from experiments.common import run_folder, write_config
     from jaxterrain import generators
     from jaxterrain.io import atomic_write_text
 
@@ -129,7 +127,7 @@ def main(args: argparse.Namespace) -> int:
         raise SystemExit("--n must be >= 1")
     if not 32 <= args.size <= 1024:
         raise SystemExit("--size must be in [32, 1024]")
-    run = Path(args.out or f"runs/quickstart-{timestamp()}")
+    run = run_folder("quickstart", args.out)
     run.mkdir(parents=True, exist_ok=True)
     write_config(run, vars(args))
 

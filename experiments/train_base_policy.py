@@ -194,13 +194,13 @@ def _command_line() -> str:
 
 def prepare_run_folder(args: argparse.Namespace, settings: RunSettings) -> RunFolder:
     """Create the run folder and write its ``config.json``; on ``--resume`` check the checkpoint and config."""
-    import datetime
     import json
 
     from jaxterrain.io import atomic_write_text
 
-    stamp = datetime.datetime.now(datetime.timezone.utc).strftime("%Y%m%d-%H%M%S")
-    run = Path(args.out or f"runs/train-base-policy-{args.preset}-{stamp}")
+    from experiments.common import run_folder
+
+    run = run_folder(f"train-base-policy-{args.preset}", args.out)
     ckpt_path = run / "checkpoint.msgpack"
     if args.resume and not ckpt_path.is_file():
         raise SystemExit(f"--resume: no checkpoint at {ckpt_path}")

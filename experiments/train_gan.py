@@ -21,8 +21,6 @@ from __future__ import annotations
 import argparse
 import functools
 import json
-import os
-import shutil
 import subprocess
 import sys
 import time
@@ -473,7 +471,9 @@ def make_config(preset: dict):
 
 def prepare_run_dir(args) -> Path:
     """The run folder (``--out`` or ``runs/train-gan-<UTC time>``), created; ``--resume`` needs ``--out``."""
-    run_dir = Path(args.out or f"runs/train-gan-{time.strftime('%Y%m%d-%H%M%S', time.gmtime())}")
+    from experiments.common import run_folder
+
+    run_dir = run_folder("train-gan", args.out)
     if args.resume and not args.out:
         raise ValueError("--resume needs --out RUN_DIR (the run to continue)")
     run_dir.mkdir(parents=True, exist_ok=True)

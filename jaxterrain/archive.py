@@ -547,11 +547,8 @@ def _line(done, total, history, seconds, evaluations):
     }
 
 
-def _reporter(progress, name):
-    if callable(progress):
-        return progress
-    if not progress:
-        return lambda info: None
+def progress_printer(name: str):
+    """The default progress callback of :func:`evolve`: one line per chunk, prefixed by ``[name]``."""
 
     def report(info):
         if info["event"] == "resume":
@@ -565,6 +562,12 @@ def _reporter(progress, name):
         )
 
     return report
+
+
+def _reporter(progress, name):
+    if callable(progress):
+        return progress
+    return progress_printer(name) if progress else (lambda info: None)
 
 
 def _to_archive(generator, repertoire, config, history) -> Archive:

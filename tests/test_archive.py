@@ -359,13 +359,14 @@ def test_cppn_evolve(tmp_path):
 
 def test_evolve_smoke_preset_end_to_end(tmp_path):
     """The experiment's smoke preset with the real generator, descriptors and Algorithm 1, cheap fitness."""
+    from experiments import common
     from experiments import evolve as ev
 
     cfg = ev.preset_config("smoke")
     arch = A.evolve("perlin", ("roughness", "tpi"), cfg._replace(generations=2), jax.random.key(0),
-                    fitness_fn=ev.slope_fitness, checkpoint_dir=tmp_path, progress=False,
+                    fitness_fn=common.slope_fitness, checkpoint_dir=tmp_path, progress=False,
                     generator_options={"size": 32})
     assert arch.fitness.shape == (cfg.bins**2,) and A.coverage(arch) > 0
     f = arch.fitness[arch.filled]
     assert np.all((f >= 0) & (f <= 1))
-    np.testing.assert_allclose(f, ev.slope_fitness(jnp.asarray(A.heightmaps(arch)[arch.filled]), None), atol=1e-3)
+    np.testing.assert_allclose(f, common.slope_fitness(jnp.asarray(A.heightmaps(arch)[arch.filled]), None), atol=1e-3)
