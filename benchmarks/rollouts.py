@@ -49,6 +49,7 @@ from common import block, environment, markdown_table, write_json  # noqa: E402
 from jaxterrain import difficulty  # noqa: E402
 from jaxterrain.terrain import TerrainScale  # noqa: E402
 from jaxterrain.walker import SOLVER_FAST, SOLVER_XML, WalkerConfig, WalkerEnv  # noqa: E402
+from jaxterrain.walker.model import SolverOptions  # noqa: E402
 
 
 def log(*a):
@@ -199,11 +200,12 @@ def bench_c_rollout(env, terrains_m_bank, qpos0, nroll, nstep, threads):
             "nstep": nstep, "nan_fraction": float(np.mean(~np.all(np.isfinite(state[:, -1]), axis=1)))}
 
 
-def bench_difficulty(cfg, policy, heightmaps, attempts, repeats):
+def bench_difficulty(cfg, policy, heightmaps, attempts, repeats, slots=None):
     """Wall time of ``difficulty.evaluate`` (host validation + the one compiled batched rollout + best-5), after a
-    first call that compiles; the episode lengths (env steps simulated) come from that first call."""
+    first call that compiles; the episode lengths (env steps simulated) come from that first call. ``slots``: the
+    rollout pool size (None = every rollout at once)."""
     b = heightmaps.shape[0]
-    fn = difficulty._compiled(cfg, attempts, policy, False)  # the function evaluate() calls (same cache entry)
+    fn = difficulty._compiled(cfg, attempts, policy, False, slots)  # the function evaluate() calls (same cache entry)
     t0 = time.perf_counter()
     dist, length = block(fn(heightmaps * cfg.scale.height, jax.random.PRNGKey(7), None))
     first = time.perf_counter() - t0
@@ -212,19 +214,29 @@ def bench_difficulty(cfg, policy, heightmaps, attempts, repeats):
     for r in range(repeats):
         t0 = time.perf_counter()
         fit = block(difficulty.evaluate(heightmaps, jax.random.PRNGKey(8 + r), attempts, 5, policy=policy,
-                                        env_config=cfg))
+                                        env_config=cfg, slots=slots))
         times.append(time.perf_counter() - t0)
-    return {"terrains": b, "attempts": attempts, "seconds": min(times), "first_call_s": first,
+    return {"terrains": b, "attempts": attempts, "slots": slots, "seconds": min(times), "first_call_s": first,
             "loop_iterations": int(length.max()), "mean_episode_steps": float(length.mean()),
             "env_steps": int(length.sum()), "fitness_mean": float(jnp.mean(fit)), "fitness_min": float(jnp.min(fit)),
             "fitness_max": float(jnp.max(fit)), "distance_mean": float(jnp.mean(dist))}
 
 
-def solver_check(cfg, policy, n_terrains=8, attempts=20):
-    """Flat-ground walking of the policy under our (fast) and the XML's solver options: best-5 and all-20 means."""
+def parse_solver(text: str) -> tuple[str, SolverOptions]:
+    """``"fast"``, ``"xml"`` or ``"ITERATIONS,LS_ITERATIONS,EULERDAMP"`` (e.g. ``"4,16,0"``) -> (name, Newton options)."""
+    named = {"fast": SOLVER_FAST, "xml": SOLVER_XML}
+    if text in named:
+        return text, named[text]
+    it, ls, ed = (int(v) for v in text.split(","))
+    return f"newton {it}/{ls}{' eulerdamp' if ed else ''}", SolverOptions("newton", it, ls, bool(ed))
+
+
+def solver_check(cfg, policy, solvers=(("fast", SOLVER_FAST), ("xml", SOLVER_XML)), n_terrains=8, attempts=20):
+    """Flat-ground walking of the policy under each of ``solvers`` ((name, SolverOptions) pairs; default ours and
+    the XML's): best-5 and all-20 means of the normalised distance."""
     out = {}
     flat = jnp.zeros((n_terrains,) + tuple(cfg.terrain_shape), jnp.float32)
-    for name, solver in (("fast", SOLVER_FAST), ("xml", SOLVER_XML)):
+    for name, solver in solvers:
         c = cfg._replace(solver=solver)
         d = np.asarray(block(difficulty.rollout_distances(flat, jax.random.PRNGKey(5), attempts, policy=policy,
                                                           env_config=c)))
@@ -247,6 +259,11 @@ def main(argv=None):
     p.add_argument("--c-rollouts", type=int, default=1024)
     p.add_argument("--c-steps", type=int, default=500, help="physics steps per C rollout")
     p.add_argument("--eval-batches", default="20,4096", help="terrains per difficulty.evaluate timing")
+    p.add_argument("--eval-slots", default="none", help="comma list of rollout pool sizes per eval batch ('none': "
+                   "all rollouts at once)")
+    p.add_argument("--raw-solvers", default="xml;fast", help="';' list of solvers for raw MJX: xml, fast or "
+                   "ITERATIONS,LS_ITERATIONS,EULERDAMP")
+    p.add_argument("--check-solvers", default="fast;xml", help="';' list of solvers for the flat-ground check")
     p.add_argument("--skip", default="", help="comma list of parts to skip: ours,raw,c,eval,solver")
     args = p.parse_args(argv)
     skip = set(filter(None, args.skip.split(",")))
@@ -287,7 +304,11 @@ def main(argv=None):
             log(rows[-1])
             save()
     if "raw" not in skip:
-        for name, e in (("raw_mjx_xml", env_xml), ("raw_mjx_fast", env)):
+        for text in filter(None, args.raw_solvers.split(";")):
+            sname, solver = parse_solver(text)
+            name = f"raw_mjx_{sname}" if text in ("xml", "fast") else f"raw_mjx {sname}"
+            e = WalkerEnv(cfg._replace(solver=solver))
+            result.setdefault(name, [])
             for b in [int(v) for v in args.raw_batch_sizes.split(",") if v]:
                 try:
                     r = bench_raw_mjx(e, per_env(b), args.env_steps * cfg.n_frames, args.repeats)
@@ -312,19 +333,22 @@ def main(argv=None):
             log(rows[-1])
             save()
     if "eval" not in skip:
-        for b in [int(v) for v in args.eval_batches.split(",") if v]:
+        pools = [None if v == "none" else int(v) for v in args.eval_slots.split(",") if v]
+        for b, slots in [(b, n) for b in (int(v) for v in args.eval_batches.split(",") if v) for n in pools]:
+            if slots is not None and slots >= b * 20:
+                continue
             hm = jnp.tile(bank, (-(-b // args.bank), 1, 1))[:b]
-            r = bench_difficulty(cfg, policy, hm, 20, args.repeats if b <= 512 else 1)
+            r = bench_difficulty(cfg, policy, hm, 20, args.repeats if b <= 512 else 1, slots)
             result["difficulty"].append(r)
-            rows.append({"what": f"difficulty.evaluate {b} terrains x 20 attempts", "batch": b * 20,
-                         "seconds": r["seconds"], "compile+1st s": r["first_call_s"],
+            rows.append({"what": f"difficulty.evaluate {b} terrains x 20 attempts, slots {slots or 'all'}",
+                         "batch": b * 20, "seconds": r["seconds"], "compile+1st s": r["first_call_s"],
                          "M steps/s": r["env_steps"] * cfg.n_frames / r["seconds"] / 1e6,
-                         "note": f"{r['env_steps']} env steps, loop {r['loop_iterations']}, "
+                         "note": f"{r['env_steps']} env steps, longest {r['loop_iterations']}, "
                                  f"fitness mean {r['fitness_mean']:.3f}"})
             log(rows[-1])
             save()
     if "solver" not in skip:
-        r = solver_check(cfg, policy)
+        r = solver_check(cfg, policy, [parse_solver(t) for t in args.check_solvers.split(";") if t])
         result["solver_check"] = r
         for name, v in r.items():
             rows.append({"what": f"flat ground, {name} solver: normalised distance best-5 / all-20",

@@ -406,12 +406,14 @@ def _default_fns(generator, descriptors, config, fitness_fn, traversable_fn):
 
 
 @functools.lru_cache(maxsize=8)
-def difficulty_fitness(size: int, attempts: int = 20, best: int = 5, scale=None) -> FitnessFn:
+def difficulty_fitness(size: int, attempts: int = 20, best: int = 5, scale=None,
+                       slots: int | None = None) -> FitnessFn:
     """The paper's fitness as a pure function for use inside jit / scan: ``(heightmaps[B, size, size], key) -> [B]``.
 
     Same computation as ``difficulty.evaluate`` (shipped base policy, ``attempts`` rollouts per terrain, mean of the
     ``best`` distances) through its pure ``batched_distances`` / ``best_of``; the env and policy are built here, on
-    the host, once (cached per arguments; ``scale`` must then be hashable, e.g. a ``TerrainScale``).
+    the host, once (cached per arguments; ``scale`` must then be hashable, e.g. a ``TerrainScale``). ``slots``: env
+    slots fed from a queue of the ``B x attempts`` rollouts (see ``difficulty.batched_distances``; None = all at once).
     """
     from jaxterrain import difficulty
     from jaxterrain.terrain import TerrainScale
@@ -423,7 +425,7 @@ def difficulty_fitness(size: int, attempts: int = 20, best: int = 5, scale=None)
 
     def fitness(heightmaps, key):
         terrains = jnp.asarray(heightmaps, jnp.float32) * jnp.float32(scale.height)
-        distances, _ = difficulty.batched_distances(env, policy, terrains, key, attempts)
+        distances, _ = difficulty.batched_distances(env, policy, terrains, key, attempts, slots=slots)
         return difficulty.best_of(distances, best)
 
     return fitness

@@ -21,7 +21,7 @@ cached jit-compiled function. Inside your own jit (e.g. a QDax scoring function)
 from __future__ import annotations
 
 import functools
-from typing import Any, Callable, Optional
+from typing import Any, Callable, NamedTuple, Optional
 
 import jax
 import jax.numpy as jnp
@@ -43,18 +43,34 @@ def best_of(distances: jax.Array, best: int) -> jax.Array:
 
 
 def batched_distances(env: WalkerEnv, policy: Callable, terrains: jax.Array, key: jax.Array, attempts: int,
-                      policy_params: Any = None) -> tuple[jax.Array, jax.Array]:
+                      policy_params: Any = None, slots: Optional[int] = None,
+                      refill_every: int = 8) -> tuple[jax.Array, jax.Array]:
     """Roll out ``attempts`` episodes on each of ``terrains`` [B, H, W] (metres) until all have ended.
 
     ``policy(obs)`` (or ``policy(policy_params, obs)`` when ``policy_params`` is not None) maps one observation
     [O] to one action [A]. Returns ``(distances [B, attempts] float32 in [0, 1], steps [B, attempts] int32)``:
     the normalised distance at each rollout's end (0 where the rollout failed: invalid physics / action) and its
     length in env steps.
+
+    ``slots=None`` (or ``>= B * attempts``) runs every rollout at once until the longest has ended: a rollout that
+    ended early keeps its slot idle until then. With ``slots=S`` the ``B * attempts`` rollouts are jobs queued on
+    ``S`` env slots: every ``refill_every`` env steps the slots whose episode ended take the next jobs (in job
+    order, terrain-major). The rollouts are the same (same keys, terrains and policy) up to the floating-point
+    effects of another batch size, which the walker's chaotic dynamics can grow into a different outcome of a single
+    rollout: fitness is then the same in distribution, not bit for bit (a given ``slots`` is deterministic). Pooling
+    saves the slot-steps that ended rollouts would idle, worth it when episode lengths vary a lot, at the cost of a
+    smaller batch.
     """
     b = terrains.shape[0]
+    jobs = b * attempts
     reset_keys = jax.random.split(key, (b, attempts))
     del key
     act = (lambda obs: policy(obs)) if policy_params is None else (lambda obs: policy(policy_params, obs))
+    if slots is not None and slots < jobs:
+        if not refill_every >= 1:
+            raise ValueError(f"refill_every must be >= 1, got {refill_every}")
+        return _pooled_distances(env, act, terrains, reset_keys.reshape(jobs, *reset_keys.shape[2:]), attempts,
+                                 int(slots), int(refill_every))
     reset = jax.vmap(jax.vmap(env.reset, in_axes=(0, None)), in_axes=(0, 0))
     step = jax.vmap(jax.vmap(env.step, in_axes=(0, 0, None)), in_axes=(0, 0, 0))
     act = jax.vmap(jax.vmap(act))
@@ -80,6 +96,69 @@ def batched_distances(env: WalkerEnv, policy: Callable, terrains: jax.Array, key
 
     _, _, _, final, length = jax.lax.while_loop(cond, body, (jnp.int32(0), state, ended, final, length))
     return final, length
+
+
+class _Pool(NamedTuple):
+    """Loop carry of :func:`_pooled_distances` (S slots, J jobs)."""
+
+    state: Any  # WalkerState with leading [S]
+    terrain: jax.Array  # [S, H, W] metres, the terrain of each slot's job
+    job: jax.Array  # [S] int32, the job in the slot (J when none)
+    active: jax.Array  # [S] bool, the slot's episode has not ended yet
+    next_job: jax.Array  # [] int32, first job not started yet
+    distance: jax.Array  # [J] float32 results
+    length: jax.Array  # [J] int32 results
+
+
+def _pooled_distances(env, act, terrains, keys, attempts: int, slots: int, refill_every: int):
+    """:func:`batched_distances` with ``slots`` env slots fed from a queue of ``J = B * attempts`` jobs.
+
+    ``keys`` [J] (job ``j`` is attempt ``j % attempts`` on terrain ``j // attempts``). An outer ``while_loop``
+    (until no slot is active and no job waits) runs ``refill_every`` env steps (a ``fori_loop``; a slot's result is
+    written when its episode ends) and then refills the ended slots (a ``cond``, skipped when nothing changes).
+    """
+    jobs = keys.shape[0]
+    reset = jax.vmap(env.reset)
+    step = jax.vmap(env.step)
+    act = jax.vmap(act)
+
+    def start(job):  # [S] job ids (J = none) -> (state, terrain) of their first step
+        j = jnp.minimum(job, jobs - 1)
+        terrain = terrains[j // attempts]
+        return reset(keys[j], terrain), terrain
+
+    def run_steps(p: _Pool) -> _Pool:
+        def one(_, p: _Pool) -> _Pool:
+            state = step(p.state, act(p.state.obs), p.terrain)
+            ended = p.active & (state.done > 0)
+            where = jnp.where(ended, p.job, jobs)  # out of range -> dropped
+            distance = p.distance.at[where].set(jnp.where(state.failed > 0, 0.0, state.distance), mode="drop")
+            length = p.length.at[where].set(state.steps, mode="drop")
+            return p._replace(state=state, active=p.active & ~ended, distance=distance, length=length)
+
+        return jax.lax.fori_loop(0, refill_every, one, p)
+
+    def refill(p: _Pool) -> _Pool:
+        free = ~p.active
+        new_job = p.next_job + jnp.cumsum(free, dtype=jnp.int32) - 1
+        take = free & (new_job < jobs)
+        state, terrain = start(jnp.where(take, new_job, jobs))
+        pick = lambda new, old: jnp.where(take.reshape((-1,) + (1,) * (new.ndim - 1)), new, old)  # noqa: E731
+        return p._replace(state=jax.tree.map(pick, state, p.state), terrain=pick(terrain, p.terrain),
+                          job=jnp.where(take, new_job, jnp.where(p.active, p.job, jobs)), active=p.active | take,
+                          next_job=p.next_job + jnp.sum(take, dtype=jnp.int32))
+
+    def body(p: _Pool) -> _Pool:
+        p = run_steps(p)
+        can_start = jnp.any(~p.active) & (p.next_job < jobs)
+        return jax.lax.cond(can_start, refill, lambda p: p, p)
+
+    job0 = jnp.arange(slots, dtype=jnp.int32)
+    state, terrain = start(job0)
+    pool = _Pool(state=state, terrain=terrain, job=job0, active=jnp.ones(slots, bool), next_job=jnp.int32(slots),
+                 distance=jnp.zeros(jobs, jnp.float32), length=jnp.zeros(jobs, jnp.int32))
+    pool = jax.lax.while_loop(lambda p: jnp.any(p.active), body, pool)
+    return pool.distance.reshape(-1, attempts), pool.length.reshape(-1, attempts)
 
 
 # ----------------------------------------------------------------------------------------------------------------
@@ -123,11 +202,11 @@ def default_policy() -> Callable:
 
 
 @functools.lru_cache(maxsize=32)
-def _compiled(config: WalkerConfig, attempts: int, policy: Callable, with_params: bool):
+def _compiled(config: WalkerConfig, attempts: int, policy: Callable, with_params: bool, slots: Optional[int] = None):
     env = make_env(config)
 
     def run(terrains_m, key, params):
-        return batched_distances(env, policy, terrains_m, key, attempts, params if with_params else None)
+        return batched_distances(env, policy, terrains_m, key, attempts, params if with_params else None, slots)
 
     return jax.jit(run)
 
@@ -161,18 +240,23 @@ def _resolve(heightmaps, attempts: int, policy, scale, env_config):
 
 def rollout_distances(heightmaps, key: jax.Array, attempts: int = 20, policy: Optional[Callable] = None,
                       scale: Optional[TerrainScale] = None, env_config: Optional[WalkerConfig] = None,
-                      policy_params: Any = None, chunk: Optional[int] = None) -> jax.Array:
+                      policy_params: Any = None, chunk: Optional[int] = None,
+                      slots: Optional[int] = None) -> jax.Array:
     """Normalised distances ``[B, attempts]`` float32 in [0, 1] of the policy on ``heightmaps`` [B, H, W] in [0, 1].
 
     Heightmaps become metres by ``scale`` (default :class:`~jaxterrain.terrain.TerrainScale`); the env is
     ``env_config`` (default ``WalkerConfig(terrain_shape=(H, W), scale=scale)``). All ``B x attempts`` rollouts are
     one jit-compiled batched call (cached per config / attempts / policy); ``chunk`` (terrains per call) splits
-    very large batches to bound device memory. Failed rollouts (invalid physics, NaN action) count 0.
+    very large batches to bound device memory; ``slots`` (env slots fed from a queue of the rollouts, see
+    :func:`batched_distances`) saves the slot-steps that ended rollouts would idle. Failed rollouts (invalid
+    physics, NaN action) count 0.
     """
     terrains_m, env_config, policy = _resolve(heightmaps, attempts, policy, scale, env_config)
     if chunk is not None and (not isinstance(chunk, int) or chunk < 1):
         raise ValueError(f"chunk must be an int >= 1 or None, got {chunk!r}")
-    fn = _compiled(env_config, attempts, policy, policy_params is not None)
+    if slots is not None and (not isinstance(slots, int) or slots < 1):
+        raise ValueError(f"slots must be an int >= 1 or None, got {slots!r}")
+    fn = _compiled(env_config, attempts, policy, policy_params is not None, slots)
     b = terrains_m.shape[0]
     if chunk is None or chunk >= b:
         return fn(terrains_m, key, policy_params)[0]
@@ -190,10 +274,10 @@ def rollout_distances(heightmaps, key: jax.Array, attempts: int = 20, policy: Op
 
 def evaluate(heightmaps, key: jax.Array, attempts: int = 20, best: int = 5, policy: Optional[Callable] = None,
              scale: Optional[TerrainScale] = None, env_config: Optional[WalkerConfig] = None,
-             policy_params: Any = None, chunk: Optional[int] = None) -> jax.Array:
+             policy_params: Any = None, chunk: Optional[int] = None, slots: Optional[int] = None) -> jax.Array:
     """Fitness ``[B]`` float32 in [0, 1] of ``heightmaps`` [B, H, W] (values in [0, 1]): the mean of the ``best``
     largest of ``attempts`` normalised distances (see :func:`rollout_distances`). Difficulty = 1 - fitness."""
     if not isinstance(best, int) or not 1 <= best <= (attempts if isinstance(attempts, int) else best):
         raise ValueError(f"best must be an int in [1, attempts={attempts}], got {best!r}")
-    d = rollout_distances(heightmaps, key, attempts, policy, scale, env_config, policy_params, chunk)
+    d = rollout_distances(heightmaps, key, attempts, policy, scale, env_config, policy_params, chunk, slots)
     return best_of(d, best)

@@ -102,6 +102,25 @@ def test_chunked_matches_compiled_shape(flat_pair):
     np.testing.assert_array_equal(d[2], run(jnp.stack([three[2], three[2]]), keys[1])[0])
 
 
+def test_pooled_slots_give_the_same_rollouts(flat_pair):
+    """3 env slots fed from the queue of 2 x 4 rollouts (refills after episodes of different lengths) give each
+    rollout's distance and length as the all-at-once call does."""
+    bumpy = jnp.asarray(np.random.default_rng(0).random((32, 32)), jnp.float32) * 0.6
+    terrains = jnp.stack([flat_pair[0], bumpy])
+    params = _params(gain=0.8, bias=0.05)
+    key = jax.random.PRNGKey(3)
+    run = lambda slots: difficulty._compiled(CFG, ATTEMPTS, linear_policy, True, slots)(  # noqa: E731
+        terrains * SCALE.height, key, params)
+    d_all, n_all = run(None)  # the compile the other tests use
+    d_pool, n_pool = run(3)
+    assert len(set(np.asarray(n_all).ravel().tolist())) > 1  # the episodes really end at different steps
+    np.testing.assert_array_equal(np.asarray(n_pool), np.asarray(n_all))
+    np.testing.assert_allclose(np.asarray(d_pool), np.asarray(d_all), atol=1e-5)
+    with pytest.raises(ValueError, match="slots"):
+        difficulty.rollout_distances(terrains, key, ATTEMPTS, policy=linear_policy, env_config=CFG,
+                                     policy_params=params, slots=0)
+
+
 def test_shipped_base_policy_walks_across_flat_ground():
     """The shipped policy (the default of evaluate) crosses a flat 6.2 m map; standing still does not."""
     cfg = CFG._replace(episode_length=300)  # 4.5 s: the policy walks ~2.9 m/s, the track is 5.2 m

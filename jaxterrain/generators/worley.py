@@ -23,9 +23,9 @@ Rendering (``render_one(genome[3]) -> [size, size]`` float32 in [0, 1]):
 * Distances are separable: ``d2[i, j, p] = (i - y_p)^2 + (j - x_p)^2``, so the ``[size, 400]`` row and column terms
   are computed once and the full ``[size, size, 400]`` tensor is never stored.
 
-Selection of the D-th smallest, ``select`` option of the factory (``DEFAULT_SELECT`` = ``"sort"``):
+Selection of the D-th smallest, ``select`` option of the factory (``DEFAULT_SELECT`` = ``"bracket"``):
 
-* ``"sort"`` (default, the reference): materialise ``d2`` block by block (``_ROW_BLOCK`` = 16 rows, ``lax.map``)
+* ``"sort"`` (the exact reference): materialise ``d2`` block by block (``_ROW_BLOCK`` = 16 rows, ``lax.map``)
   and take element ``D`` of ``jnp.sort(d2)[..., :101]`` (a one-hot sum, no gather). Exact. Memory:
   ``16 x size x 400`` floats per genome per block (6.5 MB; under ``vmap`` the block is shared by the whole batch, so
   B = 1024 needs ~6.7 GB).
@@ -33,7 +33,7 @@ Selection of the D-th smallest, ``select`` option of the factory (``DEFAULT_SELE
   ``count(d2 < t) <= D``; non-negative floats order like their int32 bit patterns, so ``t`` is found exactly by
   setting its 31 bits greedily from the top, one ``count`` reduction over the 400 points per bit. Exact (same
   value as "sort" up to the last bit of a squared distance, where XLA may fuse a multiply-add differently).
-* ``"bracket"``: ``F_D`` is 1-Lipschitz in the pixel position, so an exact coarse grid brackets every pixel:
+* ``"bracket"`` (default): ``F_D`` is 1-Lipschitz in the pixel position, so an exact coarse grid brackets every pixel:
   (1) "bisect" on every ``_COARSE_STEP`` = 8th pixel (33 x 33 at 256: 1/60 of the pixels, 31 counts);
   (2) per pixel ``L = max_c(F_c - |p - c|)``, ``U = min_c(F_c + |p - c|)`` over the 4 corners of its coarse
   cell (width <= 2 x 4 sqrt 2 = 11.3 px, ~3 px typical), +-``_MARGIN`` = 2e-3 px for float rounding; (3)
@@ -78,6 +78,9 @@ Measured, one H100 (jax 0.11.2, 256 x 256, random genomes, ``jit(vmap(render_one
 untied ``"bisect"`` ~120 maps/s with a ~70 s compile. On the shared 2-core CPU (jax 0.10.2, B = 4, noisy):
 "sort" 0.43 maps/s, untied "bisect" ~4-5, "bisect" 2.8, "bracket" 6.3 (with the flat reduction and the CPU tree
 rewriter off: "bisect" 16, "bracket" 30). ``benchmarks/worley_variants.py`` times the variants on any device.
+Measured with the fused loops, one H200, 2026-11-21, commit 950a827 (``worley_variants.py --variants sort bracket
+bracket:major --batch 256 1024``): "sort" 1,028 maps/s, "bracket" 3,956 maps/s at B = 1024 (3.85x), max |difference|
+5.1e-4 px (3.9e-6 on the [0, 1] map), so "bracket" is the default.
 Ceiling: at ~3e13 simple ops/s (H100 FP32 lanes) "bracket" is ~20,000 maps/s if compute-bound; XLA's generic
 reduction emitter reloads ``dy2`` and ``dx2`` from L1 for every pair, so expect a few thousand. The 100,000 maps/s
 target (~10 ops per pair in total) needs fewer pairs, i.e. a hand-written kernel with per-tile candidate lists
@@ -98,7 +101,7 @@ from jaxterrain.generators.base import Generator, spec, vector_generator
 MAX_POINTS = 400
 MAX_INDEX = 100
 SELECT_OPTIONS = ("bracket", "bisect", "sort")
-DEFAULT_SELECT = "sort"
+DEFAULT_SELECT = "bracket"  # 3.9x "sort" on an H200 (3,956 vs 1,028 maps/s), within 5.1e-4 px of it
 _ROW_BLOCK = 16  # rows of the map per sort call in the "sort" method (bounds memory: block x size x 400)
 _SORT_OP = "sort"  # or "top_k" (lax.top_k, k = 101): same result, ~6 % slower on an H100
 _COARSE_STEP = 8  # "bracket": pixel spacing of the exact coarse grid
@@ -350,8 +353,8 @@ def check_d(genomes: np.ndarray) -> None:
 def worley(size: int = 256, select: str = DEFAULT_SELECT) -> Generator:
     """Worley noise generator producing ``[B, size, size]`` float32 maps in [0, 1]; see the module docstring.
 
-    ``select``: ``"sort"`` (default, exact), ``"bisect"`` (exact) or ``"bracket"`` (|error| < ``TOLERANCE`` = 1e-3
-    px, ~2x fewer passes than "bisect"), how the D-th smallest distance is found; see the module docstring.
+    ``select``: ``"bracket"`` (default; |error| < ``TOLERANCE`` = 1e-3 px, ~2x fewer passes than "bisect"),
+    ``"sort"`` (exact, 3.9x slower on an H200) or ``"bisect"`` (exact), how the D-th smallest distance is found; see the module docstring.
     """
     size = int(size)
     if size < 1:
