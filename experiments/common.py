@@ -161,15 +161,15 @@ def slope_fitness(heightmaps, key=None):
     return 1.0 - jnp.clip((dx + dy) / 2.0, 0.0, 1.0)
 
 
-def fitness_function(name: str, attempts: int, best: int, size: int):
+def fitness_function(name: str, attempts: int, best: int, size: int, slots: int | None = None):
     """Traceable ``(heightmaps[B, size, size], key) -> [B]``: ``"difficulty"`` (the walker's base policy, pure
-    version of ``difficulty.evaluate``) or ``"slope"`` (cheap, :func:`slope_fitness`)."""
+    version of ``difficulty.evaluate``; ``slots``: its rollout pool) or ``"slope"`` (cheap, :func:`slope_fitness`)."""
     if name == "slope":
         return slope_fitness
     if name == "difficulty":
         from jaxterrain.archive import difficulty_fitness
 
-        return difficulty_fitness(size, attempts, best)
+        return difficulty_fitness(size, attempts, best, slots=slots)
     raise SystemExit(f"unknown fitness {name!r}; choose difficulty or slope")
 
 

@@ -131,6 +131,9 @@ class EvolveConfig(NamedTuple):
       traversable_window: Algorithm 1's window (approx. step length, paper: 26 pixels).
       out_of_range: "clip" (into the edge cells) or "reject" (never inserted); see the module docstring.
       store_heightmaps: render the elites at the end and keep their heightmaps (uint16) in the archive.
+      rollout_slots: env slots of the difficulty fitness's rollout pool (``difficulty.batched_distances``), or
+        None to run each generation's ``batch_size x attempts`` rollouts all at once. A speed knob only (same
+        rollouts, statistically the same fitness), so a run may resume with another value.
     """
 
     generations: int = 5000
@@ -148,6 +151,7 @@ class EvolveConfig(NamedTuple):
     traversable_window: int = 26
     out_of_range: str = "clip"
     store_heightmaps: bool = True
+    rollout_slots: int | None = None
 
 
 class Archive(NamedTuple):
@@ -204,6 +208,8 @@ def resolve_config(config: EvolveConfig) -> EvolveConfig:
         raise ValueError(f"EvolveConfig.descriptors must be two different descriptor names; got {names!r}")
     if config.out_of_range not in ("clip", "reject"):
         raise ValueError(f"EvolveConfig.out_of_range must be 'clip' or 'reject'; got {config.out_of_range!r}")
+    if config.rollout_slots is not None:
+        positive("rollout_slots", config.rollout_slots)
     if config.robot_height is not None and not config.robot_height > 0:
         raise ValueError(f"EvolveConfig.robot_height must be > 0 metres or None; got {config.robot_height!r}")
     if config.ranges is None:
@@ -401,7 +407,7 @@ def _default_fns(generator, descriptors, config, fitness_fn, traversable_fn):
     if traversable_fn is None:
         traversable_fn = _traversable_fn(config.robot_height, config.traversable_window)
     if fitness_fn is None:
-        fitness_fn = difficulty_fitness(generator.size, config.attempts, config.best)
+        fitness_fn = difficulty_fitness(generator.size, config.attempts, config.best, slots=config.rollout_slots)
     return _Fns(generator.sample, generator.mutate, generator.render_one, descriptor_fn, traversable_fn, fitness_fn)
 
 
@@ -903,8 +909,8 @@ def load(path: str | os.PathLike) -> Archive:
 
 def _resume_signature(config: EvolveConfig) -> dict:
     d = config_to_dict(config)
-    d.pop("generations")
-    d.pop("checkpoint_every")
+    for speed_only in ("generations", "checkpoint_every", "rollout_slots"):
+        d.pop(speed_only)
     return d
 
 
