@@ -108,7 +108,8 @@ def run_treatment(cfg: dict, generator: str, descriptors, folder: Path, clock: c
 
     def progress(info):
         printer(info)
-        clock.check()
+        if info.get("generation", 0) < info.get("generations", 0):  # the last chunk goes on to save the archive
+            clock.check()
 
     arch = A.evolve(generator, None, config, key, fitness_fn=fitness, checkpoint_dir=folder / "checkpoint",
                     progress=progress, generator_options={"size": int(cfg["size"])})

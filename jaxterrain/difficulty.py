@@ -43,8 +43,8 @@ def best_of(distances: jax.Array, best: int) -> jax.Array:
 
 
 def batched_distances(env: WalkerEnv, policy: Callable, terrains: jax.Array, key: jax.Array, attempts: int,
-                      policy_params: Any = None, slots: Optional[int] = None,
-                      refill_every: int = 8) -> tuple[jax.Array, jax.Array]:
+                      policy_params: Any = None, slots: Optional[int] = None, refill_every: int = 8,
+                      needed: Optional[jax.Array] = None) -> tuple[jax.Array, jax.Array]:
     """Roll out ``attempts`` episodes on each of ``terrains`` [B, H, W] (metres) until all have ended.
 
     ``policy(obs)`` (or ``policy(policy_params, obs)`` when ``policy_params`` is not None) maps one observation
@@ -60,24 +60,29 @@ def batched_distances(env: WalkerEnv, policy: Callable, terrains: jax.Array, key
     rollout: fitness is then the same in distribution, not bit for bit (a given ``slots`` is deterministic). Pooling
     saves the slot-steps that ended rollouts would idle, worth it when episode lengths vary a lot, at the cost of a
     smaller batch.
+
+    ``needed`` [B] bool (optional): terrains whose distances are wanted; the others get distance 0 and length 0.
+    With ``slots`` their rollouts are never started (MAP-Elites passes Algorithm 1's verdict: a rejected terrain
+    never enters the archive, so walking it is wasted); without, they run but end the loop no later.
     """
     b = terrains.shape[0]
     jobs = b * attempts
     reset_keys = jax.random.split(key, (b, attempts))
     del key
     act = (lambda obs: policy(obs)) if policy_params is None else (lambda obs: policy(policy_params, obs))
+    needed = jnp.ones(b, bool) if needed is None else jnp.asarray(needed, bool).reshape(b)
     if slots is not None and slots < jobs:
         if not refill_every >= 1:
             raise ValueError(f"refill_every must be >= 1, got {refill_every}")
         return _pooled_distances(env, act, terrains, reset_keys.reshape(jobs, *reset_keys.shape[2:]), attempts,
-                                 int(slots), int(refill_every))
+                                 int(slots), int(refill_every), jnp.repeat(needed, attempts))
     reset = jax.vmap(jax.vmap(env.reset, in_axes=(0, None)), in_axes=(0, 0))
     step = jax.vmap(jax.vmap(env.step, in_axes=(0, 0, None)), in_axes=(0, 0, 0))
     act = jax.vmap(jax.vmap(act))
     horizon = env.config.episode_length
 
     state = reset(reset_keys, terrains)
-    ended = jnp.zeros((b, attempts), bool)
+    ended = jnp.broadcast_to(~needed[:, None], (b, attempts))
     final = jnp.zeros((b, attempts), jnp.float32)
     length = jnp.zeros((b, attempts), jnp.int32)
 
@@ -105,19 +110,22 @@ class _Pool(NamedTuple):
     terrain: jax.Array  # [S, H, W] metres, the terrain of each slot's job
     job: jax.Array  # [S] int32, the job in the slot (J when none)
     active: jax.Array  # [S] bool, the slot's episode has not ended yet
-    next_job: jax.Array  # [] int32, first job not started yet
+    next_job: jax.Array  # [] int32, queue position of the first job not started yet
     distance: jax.Array  # [J] float32 results
     length: jax.Array  # [J] int32 results
 
 
-def _pooled_distances(env, act, terrains, keys, attempts: int, slots: int, refill_every: int):
-    """:func:`batched_distances` with ``slots`` env slots fed from a queue of ``J = B * attempts`` jobs.
+def _pooled_distances(env, act, terrains, keys, attempts: int, slots: int, refill_every: int, needed):
+    """:func:`batched_distances` with ``slots`` env slots fed from a queue of the needed of ``J = B * attempts`` jobs.
 
-    ``keys`` [J] (job ``j`` is attempt ``j % attempts`` on terrain ``j // attempts``). An outer ``while_loop``
+    ``keys`` [J] (job ``j`` is attempt ``j % attempts`` on terrain ``j // attempts``); ``needed`` [J] bool: the
+    queue holds the needed jobs in job order (a stable argsort), the others are never started. An outer ``while_loop``
     (until no slot is active and no job waits) runs ``refill_every`` env steps (a ``fori_loop``; a slot's result is
     written when its episode ends) and then refills the ended slots (a ``cond``, skipped when nothing changes).
     """
     jobs = keys.shape[0]
+    queue = jnp.argsort(~needed, stable=True).astype(jnp.int32)  # needed jobs first, in job order
+    queued = jnp.sum(needed, dtype=jnp.int32)
     reset = jax.vmap(env.reset)
     step = jax.vmap(env.step)
     act = jax.vmap(act)
@@ -140,9 +148,10 @@ def _pooled_distances(env, act, terrains, keys, attempts: int, slots: int, refil
 
     def refill(p: _Pool) -> _Pool:
         free = ~p.active
-        new_job = p.next_job + jnp.cumsum(free, dtype=jnp.int32) - 1
-        take = free & (new_job < jobs)
-        state, terrain = start(jnp.where(take, new_job, jobs))
+        position = p.next_job + jnp.cumsum(free, dtype=jnp.int32) - 1
+        take = free & (position < queued)
+        new_job = jnp.where(take, queue[jnp.minimum(position, jobs - 1)], jobs)
+        state, terrain = start(new_job)
         pick = lambda new, old: jnp.where(take.reshape((-1,) + (1,) * (new.ndim - 1)), new, old)  # noqa: E731
         return p._replace(state=jax.tree.map(pick, state, p.state), terrain=pick(terrain, p.terrain),
                           job=jnp.where(take, new_job, jnp.where(p.active, p.job, jobs)), active=p.active | take,
@@ -150,12 +159,14 @@ def _pooled_distances(env, act, terrains, keys, attempts: int, slots: int, refil
 
     def body(p: _Pool) -> _Pool:
         p = run_steps(p)
-        can_start = jnp.any(~p.active) & (p.next_job < jobs)
+        can_start = jnp.any(~p.active) & (p.next_job < queued)
         return jax.lax.cond(can_start, refill, lambda p: p, p)
 
-    job0 = jnp.arange(slots, dtype=jnp.int32)
+    position0 = jnp.arange(slots, dtype=jnp.int32)
+    take0 = position0 < queued
+    job0 = jnp.where(take0, queue[position0], jobs)
     state, terrain = start(job0)
-    pool = _Pool(state=state, terrain=terrain, job=job0, active=jnp.ones(slots, bool), next_job=jnp.int32(slots),
+    pool = _Pool(state=state, terrain=terrain, job=job0, active=take0, next_job=jnp.minimum(jnp.int32(slots), queued),
                  distance=jnp.zeros(jobs, jnp.float32), length=jnp.zeros(jobs, jnp.int32))
     pool = jax.lax.while_loop(lambda p: jnp.any(p.active), body, pool)
     return pool.distance.reshape(-1, attempts), pool.length.reshape(-1, attempts)

@@ -150,6 +150,28 @@ def test_algorithm1_rejections_counted_and_never_inserted():
     assert arch.metrics["rejected"].shape == (9,)
 
 
+def test_fitness_is_told_which_offspring_can_enter():
+    """A fitness with a ``needed`` keyword gets Algorithm 1's verdict (and, with out_of_range="reject", the range
+    check): here it returns NaN for the terrains it was told it need not score, and none of them is needed."""
+
+    def trav(hm):
+        return desc(hm)[:, 0] <= 0.3
+
+    seen = []
+
+    def lazy_fitness(hm, key, needed=None):
+        seen.append(needed is not None)
+        return jnp.where(needed, fitness(hm, key), jnp.nan)
+
+    cfg = CFG._replace(generations=4, initial_population=40)
+    arch = A.evolve(make_gen(), desc, cfg, jax.random.key(3), fitness_fn=lazy_fitness, traversable_fn=trav,
+                    progress=False)
+    assert seen and all(seen)
+    assert arch.metrics["rejected"].sum() > 0 and arch.metrics["nan"].sum() == 0
+    reference = run(cfg, key=3, traversable_fn=trav)
+    np.testing.assert_array_equal(arch.fitness, reference.fitness)
+
+
 def test_offspring_come_from_the_generators_mutate():
     arch = run(CFG._replace(generations=10))
     counts = arch.genomes[0][arch.filled][:, 2]
@@ -311,6 +333,8 @@ def test_config_validation():
         A.resolve_config(CFG._replace(out_of_range="wrap"))
     with pytest.raises(ValueError, match="no default range"):
         A.resolve_config(CFG._replace(ranges=None))
+    with pytest.raises(ValueError, match="rollout_slots"):
+        A.resolve_config(CFG._replace(rollout_slots=0))
     with pytest.raises(ValueError, match="hi > lo"):
         A.resolve_config(CFG._replace(ranges=((1.0, 0.0), (0.0, 1.0))))
     cfg = A.resolve_config(A.EvolveConfig(descriptors=("tpi", "tri")))

@@ -103,19 +103,22 @@ def test_chunked_matches_compiled_shape(flat_pair):
 
 
 def test_pooled_slots_give_the_same_rollouts(flat_pair):
-    """3 env slots fed from the queue of 2 x 4 rollouts (refills after episodes of different lengths) give each
-    rollout's distance and length as the all-at-once call does."""
+    """3 env slots fed from the queue of the needed rollouts (refills after episodes of different lengths) give each
+    rollout's distance and length as the all-at-once call does; terrains not needed are never walked (0, 0)."""
     bumpy = jnp.asarray(np.random.default_rng(0).random((32, 32)), jnp.float32) * 0.6
-    terrains = jnp.stack([flat_pair[0], bumpy])
+    terrains = jnp.stack([flat_pair[0], bumpy]) * SCALE.height
     params = _params(gain=0.8, bias=0.05)
     key = jax.random.PRNGKey(3)
-    run = lambda slots: difficulty._compiled(CFG, ATTEMPTS, linear_policy, True, slots)(  # noqa: E731
-        terrains * SCALE.height, key, params)
-    d_all, n_all = run(None)  # the compile the other tests use
-    d_pool, n_pool = run(3)
-    assert len(set(np.asarray(n_all).ravel().tolist())) > 1  # the episodes really end at different steps
-    np.testing.assert_array_equal(np.asarray(n_pool), np.asarray(n_all))
-    np.testing.assert_allclose(np.asarray(d_pool), np.asarray(d_all), atol=1e-5)
+    d_all, n_all = difficulty._compiled(CFG, ATTEMPTS, linear_policy, True, None)(terrains, key, params)  # shared
+    env = difficulty.make_env(CFG)
+    pooled = jax.jit(lambda t, k, p, needed: difficulty.batched_distances(
+        env, linear_policy, t, k, ATTEMPTS, p, slots=3, needed=needed))
+    d_pool, n_pool = pooled(terrains, key, params, jnp.array([False, True]))
+    assert len(set(np.asarray(n_all[1]).tolist())) > 1  # the episodes really end at different steps
+    np.testing.assert_array_equal(np.asarray(n_pool[1]), np.asarray(n_all[1]))
+    np.testing.assert_allclose(np.asarray(d_pool[1]), np.asarray(d_all[1]), atol=1e-5)
+    np.testing.assert_array_equal(np.asarray(n_pool[0]), 0)
+    np.testing.assert_array_equal(np.asarray(d_pool[0]), 0.0)
     with pytest.raises(ValueError, match="slots"):
         difficulty.rollout_distances(terrains, key, ATTEMPTS, policy=linear_policy, env_config=CFG,
                                      policy_params=params, slots=0)

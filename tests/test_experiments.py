@@ -49,6 +49,21 @@ def test_evolve_smoke_config_and_resume(tmp_path):
     assert cli("evolve", "--resume", str(out)) == 0
 
 
+def test_evolve_time_limit_stops_at_checkpoints_and_resumes_to_the_same_archive(tmp_path):
+    """--time-limit 0 stops after every chunk (exit 3) except the last, which saves the archive; resuming chunk by
+    chunk ends with the archive of an uninterrupted run."""
+    from jaxterrain import archive as A
+
+    args = ["--preset", "smoke", "--generations", "4", "--checkpoint-every", "2"]
+    assert cli("evolve", *args, "--out", str(tmp_path / "whole")) == 0
+    out = tmp_path / "cut"
+    codes = [cli("evolve", *args, "--out", str(out), "--time-limit", "0")]
+    while codes[-1] == 3 and len(codes) < 5:
+        codes.append(cli("evolve", "--resume", str(out), "--time-limit", "0"))
+    assert codes == [3, 3, 0]  # cut after generation 0 and after 2; the chunk ending at 4 (the last) saves
+    np.testing.assert_array_equal(A.load(out / "archive.npz").fitness, A.load(tmp_path / "whole" / "archive.npz").fitness)
+
+
 def test_features_smoke(tmp_path):
     out = tmp_path / "f"
     assert cli("features", "--preset", "smoke", "--generators", "perlin", "--out", str(out)) == 0
