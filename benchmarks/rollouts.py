@@ -49,7 +49,8 @@ from common import block, environment, markdown_table, write_json  # noqa: E402
 from jaxterrain import difficulty  # noqa: E402
 from jaxterrain.terrain import TerrainScale  # noqa: E402
 from jaxterrain.walker import SOLVER_FAST, SOLVER_XML, WalkerConfig, WalkerEnv  # noqa: E402
-from jaxterrain.walker.model import SolverOptions  # noqa: E402
+from jaxterrain.walker.model import SolverOptions, solver_label  # noqa: E402
+from jaxterrain.walker.model import parse_solver as walker_parse_solver  # noqa: E402
 
 
 def log(*a):
@@ -223,12 +224,9 @@ def bench_difficulty(cfg, policy, heightmaps, attempts, repeats, slots=None):
 
 
 def parse_solver(text: str) -> tuple[str, SolverOptions]:
-    """``"fast"``, ``"xml"`` or ``"ITERATIONS,LS_ITERATIONS,EULERDAMP"`` (e.g. ``"4,16,0"``) -> (name, Newton options)."""
-    named = {"fast": SOLVER_FAST, "xml": SOLVER_XML}
-    if text in named:
-        return text, named[text]
-    it, ls, ed = (int(v) for v in text.split(","))
-    return f"newton {it}/{ls}{' eulerdamp' if ed else ''}", SolverOptions("newton", it, ls, bool(ed))
+    """``"fast"``, ``"xml"`` or ``"ITERATIONS,LS_ITERATIONS,EULERDAMP"`` -> (label, options); see walker.parse_solver."""
+    solver = walker_parse_solver(text)
+    return (text if text in ("fast", "xml") else solver_label(solver)), solver
 
 
 def solver_check(cfg, policy, solvers=(("fast", SOLVER_FAST), ("xml", SOLVER_XML)), n_terrains=8, attempts=20):

@@ -43,6 +43,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--updates-per-chunk", type=int, default=None,
                         help="PPO updates per jitted chunk = per checkpoint (default: smoke 2, gpu 10)")
     parser.add_argument("--num-envs", type=int, default=None, help="override PPOConfig.num_envs")
+    parser.add_argument("--solver", default=None,
+                        help="walker contact solver: fast (default: Newton 1 iteration / 4 line-search), xml, or "
+                             "ITERATIONS,LS_ITERATIONS,EULERDAMP such as 4,16,0; recorded with the policy, and "
+                             "difficulty.evaluate then walks it under the same options")
     parser.add_argument("--checkpoint-env-state", action="store_true",
                         help="also checkpoint the batched env state (bit-exact resume; large for the gpu preset)")
     parser.add_argument("--eval-attempts", type=int, default=20)
@@ -166,6 +170,13 @@ def resolve_settings(args: argparse.Namespace) -> RunSettings:
     from jaxterrain import rl
 
     env_cfg, ppo_cfg, default_steps, default_budget, default_chunk = presets()[args.preset]
+    if args.solver is not None:
+        from jaxterrain.walker import parse_solver
+
+        try:
+            env_cfg = env_cfg._replace(solver=parse_solver(args.solver))
+        except ValueError as err:
+            raise SystemExit(f"--solver: {err}") from None
     if args.num_envs is not None:
         if args.num_envs < 1:
             raise SystemExit("--num-envs must be >= 1")

@@ -441,11 +441,10 @@ def difficulty_fitness(size: int, attempts: int = 20, best: int = 5, scale=None,
     """
     from jaxterrain import difficulty
     from jaxterrain.terrain import TerrainScale
-    from jaxterrain.walker import WalkerConfig
 
     scale = TerrainScale() if scale is None else scale
-    env = difficulty.make_env(WalkerConfig(terrain_shape=(int(size), int(size)), scale=scale))
     policy = difficulty.default_policy()
+    env = difficulty.make_env(difficulty.default_env_config((int(size), int(size)), scale, policy))
 
     def fitness(heightmaps, key, needed=None):
         terrains = jnp.asarray(heightmaps, jnp.float32) * jnp.float32(scale.height)

@@ -11,7 +11,9 @@ rollout has ended (fall, far edge or ``env_config.episode_length``). A rollout's
 
 ``policy`` is deterministic: ``policy(obs [O]) -> action [A]`` in [-1, 1]; or, with ``policy_params`` given,
 ``policy(policy_params, obs)`` - then new parameters do not re-compile (the curriculum's PPO can pass its own).
-Without ``policy`` the shipped base policy (``jaxterrain.rl.load_policy()``) is used.
+Without ``policy`` the shipped base policy (``jaxterrain.rl.load_policy()``) is used. Without ``env_config`` the env
+is ``WalkerConfig(terrain_shape, scale)`` with the contact-solver options that the policy records it was trained with
+(:func:`default_env_config`).
 
 :func:`evaluate` and :func:`rollout_distances` are host-level entry points: they validate on the host and call a
 cached jit-compiled function. Inside your own jit (e.g. a QDax scoring function) use the pure
@@ -27,10 +29,10 @@ import jax
 import jax.numpy as jnp
 
 from jaxterrain.terrain import TerrainScale, validate_scale
-from jaxterrain.walker import WalkerConfig, WalkerEnv
+from jaxterrain.walker import SolverOptions, WalkerConfig, WalkerEnv
 
 __all__ = ["evaluate", "rollout_distances", "batched_distances", "best_of", "validate_heightmaps",
-           "default_policy", "make_env"]
+           "default_policy", "default_env_config", "policy_solver", "make_env"]
 
 
 # ----------------------------------------------------------------------------------------------------------------
@@ -222,24 +224,39 @@ def _compiled(config: WalkerConfig, attempts: int, policy: Callable, with_params
     return jax.jit(run)
 
 
+def policy_solver(policy: Callable) -> Optional[SolverOptions]:
+    """The solver options a policy was trained with, when it records them (``policy.meta["walker_config"]
+    ["solver"]``, as :func:`jaxterrain.rl.load_policy` policies do), else None. A policy walks as trained only
+    under the same contact solver (benchmarks/RESULTS.md), so the default env of :func:`evaluate` uses them."""
+    solver = ((getattr(policy, "meta", None) or {}).get("walker_config") or {}).get("solver")
+    return None if solver is None else SolverOptions(**solver)
+
+
+def default_env_config(shape: tuple[int, int], scale: TerrainScale, policy: Callable) -> WalkerConfig:
+    """``WalkerConfig(terrain_shape=shape, scale=scale)`` with the policy's own solver options when it records them."""
+    solver = policy_solver(policy)
+    config = WalkerConfig(terrain_shape=tuple(shape), scale=scale)
+    return config if solver is None else config._replace(solver=solver)
+
+
 def _resolve(heightmaps, attempts: int, policy, scale, env_config):
     if not isinstance(attempts, int) or attempts < 1:
         raise ValueError(f"attempts must be an int >= 1, got {attempts!r}")
     h = validate_heightmaps(heightmaps)
     shape = tuple(h.shape[1:])
+    if policy is None:
+        policy = default_policy()
+    if not callable(policy):
+        raise ValueError(f"policy must be callable (obs) -> action, got {type(policy).__name__}")
     if env_config is None:
         scale = validate_scale(TerrainScale() if scale is None else scale)
-        env_config = WalkerConfig(terrain_shape=shape, scale=scale)
+        env_config = default_env_config(shape, scale, policy)
     else:
         if tuple(env_config.terrain_shape) != shape:
             raise ValueError(f"heightmaps are {shape} but env_config.terrain_shape is "
                              f"{tuple(env_config.terrain_shape)}")
         if scale is not None and tuple(scale) != tuple(env_config.scale):
             raise ValueError(f"scale {scale} differs from env_config.scale {env_config.scale}; pass one of them")
-    if policy is None:
-        policy = default_policy()
-    if not callable(policy):
-        raise ValueError(f"policy must be callable (obs) -> action, got {type(policy).__name__}")
     obs_size = getattr(policy, "observation_size", None)
     env = make_env(env_config)
     if obs_size is not None and int(obs_size) != env.observation_size:

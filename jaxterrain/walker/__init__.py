@@ -17,6 +17,8 @@ from jaxterrain.walker.model import (
     build_spec,
     humanoid_xml,
     metres_to_hfield,
+    parse_solver,
+    solver_label,
     standing_offset,
 )
 
@@ -34,5 +36,7 @@ __all__ = [
     "build_spec",
     "humanoid_xml",
     "metres_to_hfield",
+    "parse_solver",
+    "solver_label",
     "standing_offset",
 ]

@@ -49,6 +49,28 @@ SOLVER_XML = SolverOptions("newton", 8, 50, True)
 _SOLVERS = {"newton": mujoco.mjtSolver.mjSOL_NEWTON, "cg": mujoco.mjtSolver.mjSOL_CG}
 
 
+def parse_solver(text: str) -> SolverOptions:
+    """Solver options from text: ``"fast"`` (:data:`SOLVER_FAST`), ``"xml"`` (:data:`SOLVER_XML`) or
+    ``"ITERATIONS,LS_ITERATIONS,EULERDAMP"`` for Newton (e.g. ``"4,16,0"``). Raises ``ValueError``."""
+    named = {"fast": SOLVER_FAST, "xml": SOLVER_XML}
+    if text in named:
+        return named[text]
+    parts = text.split(",")
+    try:
+        it, ls, ed = (int(v) for v in parts)
+    except ValueError:
+        raise ValueError(f"solver must be 'fast', 'xml' or 'ITERATIONS,LS_ITERATIONS,EULERDAMP' "
+                         f"(e.g. '4,16,0'), got {text!r}") from None
+    if it < 1 or ls < 1 or ed not in (0, 1):
+        raise ValueError(f"solver {text!r}: iterations and ls_iterations must be >= 1 and EULERDAMP 0 or 1")
+    return SolverOptions("newton", it, ls, bool(ed))
+
+
+def solver_label(solver: SolverOptions) -> str:
+    """Short text of solver options, e.g. ``"newton 4/16"`` or ``"newton 8/50 eulerdamp"``."""
+    return f"{solver.solver} {solver.iterations}/{solver.ls_iterations}{' eulerdamp' if solver.eulerdamp else ''}"
+
+
 def humanoid_xml() -> str:
     """The text of brax's ``envs/assets/humanoid.xml`` from the installed brax package."""
     import importlib.util
