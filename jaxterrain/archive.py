@@ -635,7 +635,9 @@ def render_elites(generator, genomes, filled: np.ndarray, batch: int = 64) -> np
 def heightmaps(archive: Archive) -> np.ndarray:
     """The elites' heightmaps as float32 [cells, H, W] in [0, 1] (zeros for empty cells)."""
     if archive.heightmaps is None:
-        raise ValueError("this archive carries no heightmaps (EvolveConfig.store_heightmaps was False)")
+        raise ValueError("this archive carries no heightmaps (EvolveConfig.store_heightmaps was False); render "
+                         "generator i's elites with render_elites(generators.get(archive.generator_names[i]), "
+                         "archive.genomes[i], archive.source == i)")
     return archive.heightmaps.astype(np.float32) / 65535.0
 
 
