@@ -48,9 +48,8 @@ from mujoco import mjx  # noqa: E402
 from common import block, environment, markdown_table, write_json  # noqa: E402
 from jaxterrain import difficulty  # noqa: E402
 from jaxterrain.terrain import TerrainScale  # noqa: E402
-from jaxterrain.walker import SOLVER_FAST, SOLVER_XML, WalkerConfig, WalkerEnv  # noqa: E402
-from jaxterrain.walker.model import SolverOptions, solver_label  # noqa: E402
-from jaxterrain.walker.model import parse_solver as walker_parse_solver  # noqa: E402
+from jaxterrain import walker  # noqa: E402
+from jaxterrain.walker import SOLVER_FAST, SOLVER_XML, SolverOptions, WalkerConfig, WalkerEnv  # noqa: E402
 
 
 def log(*a):
@@ -225,8 +224,8 @@ def bench_difficulty(cfg, policy, heightmaps, attempts, repeats, slots=None):
 
 def parse_solver(text: str) -> tuple[str, SolverOptions]:
     """``"fast"``, ``"xml"`` or ``"ITERATIONS,LS_ITERATIONS,EULERDAMP"`` -> (label, options); see walker.parse_solver."""
-    solver = walker_parse_solver(text)
-    return (text if text in ("fast", "xml") else solver_label(solver)), solver
+    solver = walker.parse_solver(text)
+    return (text if text in ("fast", "xml") else walker.solver_label(solver)), solver
 
 
 def solver_check(cfg, policy, solvers=(("fast", SOLVER_FAST), ("xml", SOLVER_XML)), n_terrains=8, attempts=20):

@@ -279,11 +279,10 @@ def rollout_distances(heightmaps, key: jax.Array, attempts: int = 20, policy: Op
     :func:`batched_distances`) saves the slot-steps that ended rollouts would idle. Failed rollouts (invalid
     physics, NaN action) count 0.
     """
+    for name, value in (("chunk", chunk), ("slots", slots)):  # cheap checks before the env is built
+        if value is not None and (not isinstance(value, int) or value < 1):
+            raise ValueError(f"{name} must be an int >= 1 or None, got {value!r}")
     terrains_m, env_config, policy = _resolve(heightmaps, attempts, policy, scale, env_config)
-    if chunk is not None and (not isinstance(chunk, int) or chunk < 1):
-        raise ValueError(f"chunk must be an int >= 1 or None, got {chunk!r}")
-    if slots is not None and (not isinstance(slots, int) or slots < 1):
-        raise ValueError(f"slots must be an int >= 1 or None, got {slots!r}")
     fn = _compiled(env_config, attempts, policy, policy_params is not None, slots)
     b = terrains_m.shape[0]
     if chunk is None or chunk >= b:
