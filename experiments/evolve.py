@@ -4,8 +4,11 @@ Presets (``--preset``):
 
 * ``paper``: the paper's treatment: 100 initial genomes + 5 000 generations x 20 offspring (100 100 evaluations),
   fitness from the walker (20 attempts, best 5), 256 x 256 terrains, 50 x 50 cells.
-* ``gpu``: the same evaluation budget in larger batches (100 generations x 1 000 offspring), to fill a GPU; the
-  20 000 rollouts of a generation run on a pool of 8 192 env slots (``rollout_slots``), 1.8x faster on an H200.
+* ``gpu``: the same evaluation budget in larger batches (25 generations x 4 000 offspring), to fill a GPU; the
+  80 000 rollouts of a generation run on a pool of 16 384 env slots (``rollout_slots``). A generation lasts as long
+  as its longest walk (about 380 env steps), so a GPU needs thousands of terrains per generation to stay busy: on
+  one H100, 1 000 offspring per generation gave 135 terrains/s at best (4 096 slots; 117 at 8 192, 91 at 16 384),
+  which is 12.3 min for the budget (``benchmarks/RESULTS.md``).
 * ``smoke``: a tiny CPU run (32 x 32 terrains, 10 x 10 cells, cheap slope fitness), seconds.
 
 Writes into the run folder: ``config.json``, ``checkpoint/checkpoint.npz`` (every ``checkpoint_every`` generations),
@@ -32,10 +35,10 @@ PRESETS: dict[str, dict] = {
                   initial_population=100, bins=50, size=256, window=30, stride=2, attempts=20, best=5,
                   checkpoint_every=250, fitness="difficulty", robot_height=None, out_of_range="clip", ranges=None,
                   store_heightmaps=True, rollout_slots=None),
-    "gpu": dict(generator="perlin", descriptors=["roughness", "tpi"], generations=100, batch_size=1000,
+    "gpu": dict(generator="perlin", descriptors=["roughness", "tpi"], generations=25, batch_size=4000,
                 initial_population=100, bins=50, size=256, window=30, stride=2, attempts=20, best=5,
                 checkpoint_every=5, fitness="difficulty", robot_height=None, out_of_range="clip", ranges=None,
-                store_heightmaps=True, rollout_slots=8192),
+                store_heightmaps=True, rollout_slots=16384),
     "smoke": dict(generator="perlin", descriptors=["roughness", "tpi"], generations=4, batch_size=8,
                   initial_population=16, bins=10, size=32, window=8, stride=2, attempts=2, best=1,
                   checkpoint_every=2, fitness="slope", robot_height=None, out_of_range="clip",
@@ -79,7 +82,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--attempts", type=int, default=None)
     parser.add_argument("--best", type=int, default=None)
     parser.add_argument("--rollout-slots", type=int, default=None,
-                        help="env slots of the difficulty rollout pool (speed only; gpu preset: 8192)")
+                        help="env slots of the difficulty rollout pool (speed only; gpu preset: 16384)")
     parser.add_argument("--no-heightmaps", dest="store_heightmaps", action="store_const", const=False, default=None,
                         help="do not store the elites' heightmaps in archive.npz (they can be re-rendered)")
 
