@@ -2,19 +2,20 @@
 
 Measures, in one run (every figure after a warm-up / compile, device work waited for with block_until_ready):
 
-1. ours: physics steps/s of the batched walker (``jaxterrain.walker.WalkerEnv``, its default = fast solver
-   options) with the policy in the loop (obs -> policy MLP -> env.step, auto-reset on done), every env its own
-   256 x 256 terrain, at several batch sizes;
+1. ours: physics steps/s of the batched walker (``jaxterrain.walker.WalkerEnv``, its default solver
+   options ``SOLVER_SOUND``: Newton 4 / 16, no Euler damping) with the policy in the loop (obs -> policy MLP ->
+   env.step, auto-reset on done), every env its own 256 x 256 terrain, at several batch sizes;
 2. (a) raw MJX with the XML's solver options (Newton, iterations 8, ls_iterations 50, Euler damping) and random
-   actions on the same terrains, plus raw MJX with our fast options (the policy/env overhead is the difference);
+   actions on the same terrains, plus raw MJX with our options (the policy/env overhead is the difference) and
+   any others (``--raw-solvers``, e.g. ``fast``: brax's Newton 1 / 4);
 3. (b) MuJoCo C ``mujoco.rollout`` with ``--threads`` threads on the same model and terrains, random controls
    (both solver settings);
 4. ``difficulty`` timings: one paper generation (20 terrains x 20 attempts) via ``difficulty.evaluate`` and
    4096 terrains x 20 attempts (the compiled batched rollout), with the number of env steps actually simulated
    (the rollout loop stops when every attempt has ended);
 5. solver check: the policy's flat-ground normalised distance (best 5 / all 20 of 20 attempts on 8 flat terrains)
-   under our fast solver options and under the XML's - with the shipped base policy this is the evidence that the
-   fast settings keep the walking sound.
+   under our solver options and under the XML's converged ones - with the shipped base policy this is the evidence
+   that our settings keep the walking sound.
 
 The policy is the shipped base policy when ``jaxterrain.rl.load_policy()`` finds it, else an MLP of the PPO config's
 size with random parameters (said in the output). Terrains: Perlin terrains from ``jaxterrain.generators`` (a bank
@@ -49,7 +50,7 @@ from common import block, environment, markdown_table, write_json  # noqa: E402
 from jaxterrain import difficulty  # noqa: E402
 from jaxterrain.terrain import TerrainScale  # noqa: E402
 from jaxterrain import walker  # noqa: E402
-from jaxterrain.walker import SOLVER_FAST, SOLVER_XML, SolverOptions, WalkerConfig, WalkerEnv  # noqa: E402
+from jaxterrain.walker import SOLVER_SOUND, SOLVER_XML, SolverOptions, WalkerConfig, WalkerEnv  # noqa: E402
 
 
 def log(*a):
@@ -223,12 +224,13 @@ def bench_difficulty(cfg, policy, heightmaps, attempts, repeats, slots=None):
 
 
 def parse_solver(text: str) -> tuple[str, SolverOptions]:
-    """``"fast"``, ``"xml"`` or ``"ITERATIONS,LS_ITERATIONS,EULERDAMP"`` -> (label, options); see walker.parse_solver."""
+    """``"sound"``, ``"fast"``, ``"xml"`` or ``"ITERATIONS,LS_ITERATIONS,EULERDAMP"`` -> (label, options); see
+    walker.parse_solver."""
     solver = walker.parse_solver(text)
-    return (text if text in ("fast", "xml") else walker.solver_label(solver)), solver
+    return (text if text in ("sound", "fast", "xml") else walker.solver_label(solver)), solver
 
 
-def solver_check(cfg, policy, solvers=(("fast", SOLVER_FAST), ("xml", SOLVER_XML)), n_terrains=8, attempts=20):
+def solver_check(cfg, policy, solvers=(("sound", SOLVER_SOUND), ("xml", SOLVER_XML)), n_terrains=8, attempts=20):
     """Flat-ground walking of the policy under each of ``solvers`` ((name, SolverOptions) pairs; default ours and
     the XML's): best-5 and all-20 means of the normalised distance."""
     out = {}
@@ -246,7 +248,7 @@ def main(argv=None):
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--out", default=None, help="JSON result path")
     p.add_argument("--batch-sizes", default="8192,32768", help="ours: envs per batch")
-    p.add_argument("--raw-batch-sizes", default="32768", help="raw MJX (XML and fast solver): envs per batch")
+    p.add_argument("--raw-batch-sizes", default="32768", help="raw MJX (every --raw-solvers): envs per batch")
     p.add_argument("--env-steps", type=int, default=100, help="env steps per timed call (x5 physics steps)")
     p.add_argument("--repeats", type=int, default=2)
     p.add_argument("--size", type=int, default=256, help="terrain samples per side")
@@ -258,9 +260,9 @@ def main(argv=None):
     p.add_argument("--eval-batches", default="20,4096", help="terrains per difficulty.evaluate timing")
     p.add_argument("--eval-slots", default="none", help="comma list of rollout pool sizes per eval batch ('none': "
                    "all rollouts at once)")
-    p.add_argument("--raw-solvers", default="xml;fast", help="';' list of solvers for raw MJX: xml, fast or "
+    p.add_argument("--raw-solvers", default="xml;sound", help="';' list of solvers for raw MJX: xml, sound, fast or "
                    "ITERATIONS,LS_ITERATIONS,EULERDAMP")
-    p.add_argument("--check-solvers", default="fast;xml", help="';' list of solvers for the flat-ground check")
+    p.add_argument("--check-solvers", default="sound;xml", help="';' list of solvers for the flat-ground check")
     p.add_argument("--skip", default="", help="comma list of parts to skip: ours,raw,c,eval,solver")
     args = p.parse_args(argv)
     skip = set(filter(None, args.skip.split(",")))
@@ -275,11 +277,11 @@ def main(argv=None):
     log("policy:", policy_desc)
     bank = terrain_bank(jax.random.PRNGKey(11), args.bank, args.size)
     bank_m = bank * scale.height
-    rows, result = [], {"environment": env_info, "policy": policy_desc, "solver_ours": SOLVER_FAST._asdict(),
+    rows, result = [], {"environment": env_info, "policy": policy_desc, "solver_ours": cfg.solver._asdict(),
                         "solver_xml": SOLVER_XML._asdict(), "terrain": {"shape": [args.size, args.size],
                                                                          "scale": scale._asdict(),
                                                                          "distinct": args.bank},
-                        "ours": [], "raw_mjx_xml": [], "raw_mjx_fast": [], "mujoco_c": [], "difficulty": []}
+                        "ours": [], "raw_mjx_xml": [], "raw_mjx_sound": [], "mujoco_c": [], "difficulty": []}
 
     def per_env(b):
         return jnp.tile(bank_m, (-(-b // args.bank), 1, 1))[:b]
@@ -296,14 +298,15 @@ def main(argv=None):
                 break
             r["batch"] = b
             result["ours"].append(r)
-            rows.append({"what": "ours: walker + policy, fast solver", "batch": b, "M steps/s": r["steps_per_s"] / 1e6,
+            rows.append({"what": f"ours: walker + policy, {walker.solver_label(cfg.solver)}", "batch": b,
+                         "M steps/s": r["steps_per_s"] / 1e6,
                          "compile+1st s": r["first_call_s"]})
             log(rows[-1])
             save()
     if "raw" not in skip:
         for text in filter(None, args.raw_solvers.split(";")):
             sname, solver = parse_solver(text)
-            name = f"raw_mjx_{sname}" if text in ("xml", "fast") else f"raw_mjx {sname}"
+            name = f"raw_mjx_{sname}" if text in ("xml", "sound", "fast") else f"raw_mjx {sname}"
             e = WalkerEnv(cfg._replace(solver=solver))
             result.setdefault(name, [])
             for b in [int(v) for v in args.raw_batch_sizes.split(",") if v]:
@@ -321,7 +324,7 @@ def main(argv=None):
     if "c" not in skip:
         qpos0 = np.asarray(jax.jit(jax.vmap(env.reset))(jax.random.split(jax.random.PRNGKey(1), args.bank),
                                                          bank_m).data.qpos)
-        for name, e in (("xml", env_xml), ("fast", env)):
+        for name, e in (("xml", env_xml), ("ours", env)):
             r = bench_c_rollout(e, bank_m, qpos0, args.c_rollouts, args.c_steps, args.threads)
             r["solver"] = name
             result["mujoco_c"].append(r)

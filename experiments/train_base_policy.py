@@ -10,8 +10,10 @@ Presets:
   flat hfield, 1000-step episodes), 410 updates = 50.4 M env steps (``--env-steps``), stopping early if
   ``--time-budget`` seconds (default 480) would be overrun. A checkpoint is written after every chunk of 10
   updates: a run stopped by its budget or killed continues with ``--resume --out SAME_DIR``.
-  Measured on one H200 (2026-11-21): compile ~20 s, ~315 k env steps/s, 50 M env steps in 218 s, evaluation 26 s,
-  the whole device command (wheel install included) 247 s; best-5 / all-20 flat distance 1.00 / 0.93.
+  Measured on one H100 (2026-11-21) under the default solver (``SOLVER_SOUND``, Newton 4 / 16): ~140 k env
+  steps/s, 50.4 M env steps in about 6.5 min over two commands (the first stopped by its budget at 46.7 M);
+  best-5 / all-20 flat distance 1.00 / 0.98. Under ``--solver fast`` (brax's Newton 1 / 4) an H200 did ~315 k env
+  steps/s, 50 M in 218 s, but that policy walks only under the fast solver (``jaxterrain.walker.SOLVER_SOUND``).
 
 Writes into ``--out RUN_DIR``: ``config.json`` (preset, options, env and PPO config), ``checkpoint.msgpack``,
 ``progress.jsonl`` (one line per chunk), ``policy/`` (``policy.msgpack`` + ``config.json``, loadable with
@@ -44,8 +46,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="PPO updates per jitted chunk = per checkpoint (default: smoke 2, gpu 10)")
     parser.add_argument("--num-envs", type=int, default=None, help="override PPOConfig.num_envs")
     parser.add_argument("--solver", default=None,
-                        help="walker contact solver: fast (default: Newton 1 iteration / 4 line-search), xml, or "
-                             "ITERATIONS,LS_ITERATIONS,EULERDAMP such as 4,16,0; recorded with the policy, and "
+                        help="walker contact solver: sound (default: Newton 4 iterations / 16 line-search), fast, "
+                             "xml, or ITERATIONS,LS_ITERATIONS,EULERDAMP such as 4,16,0; recorded with the policy, and "
                              "difficulty.evaluate then walks it under the same options")
     parser.add_argument("--checkpoint-env-state", action="store_true",
                         help="also checkpoint the batched env state (bit-exact resume; large for the gpu preset)")

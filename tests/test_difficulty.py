@@ -135,9 +135,10 @@ def test_shipped_base_policy_walks_across_flat_ground():
     assert float(still[0]) < 0.2
 
 def test_default_env_uses_the_policys_solver():
-    from jaxterrain.walker import SOLVER_FAST, SOLVER_XML, SolverOptions, parse_solver
+    from jaxterrain.walker import SOLVER_FAST, SOLVER_SOUND, SOLVER_XML, SolverOptions, parse_solver
 
     assert parse_solver("fast") == SOLVER_FAST and parse_solver("xml") == SOLVER_XML
+    assert parse_solver("sound") == SOLVER_SOUND == SolverOptions("newton", 4, 16, False)
     assert parse_solver("4,16,0") == SolverOptions("newton", 4, 16, False)
     for bad in ("4,16", "a,b,c", "0,4,0", "4,16,2"):
         with pytest.raises(ValueError, match="solver"):
@@ -147,10 +148,10 @@ def test_default_env_uses_the_policys_solver():
         return jnp.zeros(17)
 
     assert difficulty.policy_solver(policy) is None
-    assert difficulty.default_env_config((32, 32), SCALE, policy).solver == SOLVER_FAST
-    policy.meta = {"walker_config": {"solver": SolverOptions("newton", 4, 16, False)._asdict()}}
+    assert difficulty.default_env_config((32, 32), SCALE, policy).solver == SOLVER_SOUND
+    policy.meta = {"walker_config": {"solver": SolverOptions("newton", 2, 8, False)._asdict()}}
     cfg = difficulty.default_env_config((32, 32), SCALE, policy)
-    assert cfg.solver == SolverOptions("newton", 4, 16, False)
-    assert cfg._replace(solver=SOLVER_FAST) == WalkerConfig(terrain_shape=(32, 32), scale=SCALE)
+    assert cfg.solver == SolverOptions("newton", 2, 8, False)
+    assert cfg._replace(solver=SOLVER_SOUND) == WalkerConfig(terrain_shape=(32, 32), scale=SCALE)
     # the shipped base policy records the solver it was trained with
-    assert difficulty.policy_solver(difficulty.default_policy()) == SOLVER_FAST
+    assert difficulty.policy_solver(difficulty.default_policy()) == SOLVER_SOUND

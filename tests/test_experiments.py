@@ -97,12 +97,12 @@ def test_train_base_policy_solver_option():
     import argparse
 
     from experiments import train_base_policy as tbp
-    from jaxterrain.walker import SOLVER_FAST, SolverOptions
+    from jaxterrain.walker import SOLVER_SOUND, SolverOptions
 
     parser = argparse.ArgumentParser()
     tbp.add_arguments(parser)
-    settings = tbp.resolve_settings(parser.parse_args(["--preset", "smoke", "--solver", "4,16,0"]))
-    assert settings.env_config.solver == SolverOptions("newton", 4, 16, False)
-    assert tbp.resolve_settings(parser.parse_args(["--preset", "smoke"])).env_config.solver == SOLVER_FAST
+    settings = tbp.resolve_settings(parser.parse_args(["--preset", "smoke", "--solver", "2,8,0"]))
+    assert settings.env_config.solver == SolverOptions("newton", 2, 8, False)
+    assert tbp.resolve_settings(parser.parse_args(["--preset", "smoke"])).env_config.solver == SOLVER_SOUND
     with pytest.raises(SystemExit, match="--solver"):
         tbp.resolve_settings(parser.parse_args(["--preset", "smoke", "--solver", "4,16"]))

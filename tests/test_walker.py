@@ -10,8 +10,8 @@ import numpy as np
 import pytest
 
 from jaxterrain.terrain import TerrainScale
-from jaxterrain.walker import (SOLVER_FAST, SOLVER_XML, WalkerConfig, WalkerEnv, build_model, flat_terrain,
-                               sample_heights, standing_offset)
+from jaxterrain.walker import (SOLVER_FAST, SOLVER_SOUND, SOLVER_XML, WalkerConfig, WalkerEnv, build_model,
+                               flat_terrain, sample_heights, standing_offset)
 
 CFG = WalkerConfig(terrain_shape=(32, 32), scale=TerrainScale(cell_size=0.2, height=0.5))
 
@@ -63,6 +63,9 @@ def test_model_contacts_and_solver():
     assert not m.opt.disableflags & mujoco.mjtDisableBit.mjDSBL_EULERDAMP
     m = build_model((32, 32), CFG.scale, SOLVER_FAST)
     assert (m.opt.iterations, m.opt.ls_iterations) == (1, 4)
+    assert m.opt.disableflags & mujoco.mjtDisableBit.mjDSBL_EULERDAMP
+    m = build_model((32, 32), CFG.scale)  # the default: SOLVER_SOUND
+    assert (m.opt.iterations, m.opt.ls_iterations) == (4, 16) and CFG.solver == SOLVER_SOUND
     assert m.opt.disableflags & mujoco.mjtDisableBit.mjDSBL_EULERDAMP
     floor = m.geom("floor").id
     touching = [m.geom(g).name for g in range(m.ngeom) if g != floor and m.geom_contype[g] & m.geom_conaffinity[floor]]

@@ -10,6 +10,7 @@
 from jaxterrain.walker.env import WalkerConfig, WalkerEnv, WalkerState, flat_terrain, sample_heights
 from jaxterrain.walker.model import (
     SOLVER_FAST,
+    SOLVER_SOUND,
     SOLVER_XML,
     SolverOptions,
     TerrainScale,
@@ -29,6 +30,7 @@ __all__ = [
     "flat_terrain",
     "sample_heights",
     "SOLVER_FAST",
+    "SOLVER_SOUND",
     "SOLVER_XML",
     "SolverOptions",
     "TerrainScale",
