@@ -48,9 +48,15 @@ def main(argv=None) -> int:
     p.add_argument("--skip-difficulty", action="store_true")
     p.add_argument("--rollout-slots", default="none,8192",
                    help="comma list of difficulty rollout pool sizes to time ('none': every rollout at once)")
+    p.add_argument("--rollout-order", default="smooth", help="comma list of pool queue orders to time: smooth "
+                   "(smoothest terrains' rollouts first, the default of difficulty_fitness) and / or job")
+    p.add_argument("--diff-batch", type=int, default=None, help="offspring per generation with the difficulty "
+                   "fitness (default: the preset's; the evolve gpu preset uses 4000)")
     p.add_argument("--json", type=Path, default=None)
     args = p.parse_args(argv)
-    cfg = PRESETS[args.preset]
+    cfg = dict(PRESETS[args.preset])
+    if args.diff_batch is not None:
+        cfg["diff_batch"] = args.diff_batch
 
     import jax
     import jax.numpy as jnp
@@ -166,7 +172,10 @@ def main(argv=None) -> int:
         pools = [None if v == "none" else int(v) for v in args.rollout_slots.split(",") if v]
         try:
             difficulty.default_policy()
-            fitnesses = {n: A.difficulty_fitness(size, cfg["attempts"], cfg["best"], slots=n) for n in pools}
+            orders = [v for v in args.rollout_order.split(",") if v]
+            fitnesses = {(n, o): A.difficulty_fitness(size, cfg["attempts"], cfg["best"], slots=n,
+                                                      smooth_first=o == "smooth")
+                         for n in pools for o in (orders if n is not None else ["job"])}
         except RuntimeError as err:
             note = f"STAND-IN random linear policy (base policy missing: {str(err)[:60]}...)"
             from jaxterrain.terrain import TerrainScale
@@ -182,20 +191,21 @@ def main(argv=None) -> int:
                 d, _ = difficulty.batched_distances(env, policy, hm * TerrainScale().height, key, cfg["attempts"])
                 return difficulty.best_of(d, cfg["best"])
 
-            fitnesses = {None: fitness}
+            fitnesses = {(None, "job"): fitness}
 
         print(f"  policy: {note}", flush=True)
         results["difficulty_policy"] = note
         results["paper_treatment_estimate_s"] = {}
-        for slots, fitness in fitnesses.items():
+        for (slots, order), fitness in fitnesses.items():
             # with a pool, the fitness skips the rollouts of terrains that Algorithm 1 rejects (needed=)
+            label = f"slots {slots or 'all'}" + (f", {order} order" if slots is not None else "")
             row = time_evolve(cfg["diff_batch"], cfg["diff_gens"], fitness,
-                              f"jaxterrain evolve, difficulty fitness, rollout slots {slots or 'all'}")
+                              f"jaxterrain evolve, difficulty fitness, rollout {label}")
             estimate = PAPER_EVALS / row["evaluations_per_s"]
-            results["paper_treatment_estimate_s"][str(slots)] = estimate
+            results["paper_treatment_estimate_s"][label] = estimate
             print(f"  estimated paper-scale treatment ({PAPER_EVALS} evaluations x {cfg['attempts']} attempts): "
-                  f"{estimate / 60:.1f} min ({estimate / 3600:.2f} h) at batch {cfg['diff_batch']}, "
-                  f"slots {slots or 'all'}", flush=True)
+                  f"{estimate / 60:.1f} min ({estimate / 3600:.2f} h) at batch {cfg['diff_batch']}, {label}",
+                  flush=True)
 
     print("\n| what | batch | generations | gen/s | evals/s | coverage % |\n| --- | --- | --- | --- | --- | --- |")
     for r in rows:

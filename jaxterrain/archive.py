@@ -431,13 +431,14 @@ def _default_fns(generator, descriptors, config, fitness_fn, traversable_fn):
 
 @functools.lru_cache(maxsize=8)
 def difficulty_fitness(size: int, attempts: int = 20, best: int = 5, scale=None,
-                       slots: int | None = None) -> FitnessFn:
+                       slots: int | None = None, smooth_first: bool = True) -> FitnessFn:
     """The paper's fitness as a pure function for use inside jit / scan: ``(heightmaps[B, size, size], key) -> [B]``.
 
     Same computation as ``difficulty.evaluate`` (shipped base policy, ``attempts`` rollouts per terrain, mean of the
     ``best`` distances) through its pure ``batched_distances`` / ``best_of``; the env and policy are built here, on
     the host, once (cached per arguments; ``scale`` must then be hashable, e.g. a ``TerrainScale``). ``slots``: env
-    slots fed from a queue of the ``B x attempts`` rollouts (see ``difficulty.batched_distances``; None = all at once).
+    slots fed from a queue of the ``B x attempts`` rollouts (see ``difficulty.batched_distances``; None = all at once);
+    ``smooth_first``: the queue starts the smoothest terrains' rollouts, the longest, first (speed only).
     """
     from jaxterrain import difficulty
     from jaxterrain.terrain import TerrainScale
@@ -448,7 +449,9 @@ def difficulty_fitness(size: int, attempts: int = 20, best: int = 5, scale=None,
 
     def fitness(heightmaps, key, needed=None):
         terrains = jnp.asarray(heightmaps, jnp.float32) * jnp.float32(scale.height)
-        distances, _ = difficulty.batched_distances(env, policy, terrains, key, attempts, slots=slots, needed=needed)
+        priority = difficulty.smoothness_priority(terrains) if slots is not None and smooth_first else None
+        distances, _ = difficulty.batched_distances(env, policy, terrains, key, attempts, slots=slots, needed=needed,
+                                                    priority=priority)
         return difficulty.best_of(distances, best)
 
     return fitness

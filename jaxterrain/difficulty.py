@@ -46,7 +46,8 @@ def best_of(distances: jax.Array, best: int) -> jax.Array:
 
 def batched_distances(env: WalkerEnv, policy: Callable, terrains: jax.Array, key: jax.Array, attempts: int,
                       policy_params: Any = None, slots: Optional[int] = None, refill_every: int = 8,
-                      needed: Optional[jax.Array] = None) -> tuple[jax.Array, jax.Array]:
+                      needed: Optional[jax.Array] = None,
+                      priority: Optional[jax.Array] = None) -> tuple[jax.Array, jax.Array]:
     """Roll out ``attempts`` episodes on each of ``terrains`` [B, H, W] (metres) until all have ended.
 
     ``policy(obs)`` (or ``policy(policy_params, obs)`` when ``policy_params`` is not None) maps one observation
@@ -66,6 +67,11 @@ def batched_distances(env: WalkerEnv, policy: Callable, terrains: jax.Array, key
     ``needed`` [B] bool (optional): terrains whose distances are wanted; the others get distance 0 and length 0.
     With ``slots`` their rollouts are never started (MAP-Elites passes Algorithm 1's verdict: a rejected terrain
     never enters the archive, so walking it is wasted); without, they run but end the loop no later.
+
+    ``priority`` [B] float (optional, only with ``slots``): the queue takes the rollouts of higher-priority terrains
+    first (ties in job order). The loop lasts until the last-started rollout ends, so starting the long rollouts
+    first shortens it (longest-first scheduling): :func:`smoothness_priority` ranks terrains the walker is likely
+    to walk far (smooth ones) first. The results do not depend on the order, only the time does.
     """
     b = terrains.shape[0]
     jobs = b * attempts
@@ -76,8 +82,10 @@ def batched_distances(env: WalkerEnv, policy: Callable, terrains: jax.Array, key
     if slots is not None and slots < jobs:
         if not refill_every >= 1:
             raise ValueError(f"refill_every must be >= 1, got {refill_every}")
+        queue, queued = job_queue(jnp.repeat(needed, attempts),
+                                  None if priority is None else jnp.repeat(jnp.asarray(priority).reshape(b), attempts))
         return _pooled_distances(env, act, terrains, reset_keys.reshape(jobs, *reset_keys.shape[2:]), attempts,
-                                 int(slots), int(refill_every), jnp.repeat(needed, attempts))
+                                 int(slots), int(refill_every), queue, queued)
     reset = jax.vmap(jax.vmap(env.reset, in_axes=(0, None)), in_axes=(0, 0))
     step = jax.vmap(jax.vmap(env.step, in_axes=(0, 0, None)), in_axes=(0, 0, 0))
     act = jax.vmap(jax.vmap(act))
@@ -117,17 +125,43 @@ class _Pool(NamedTuple):
     length: jax.Array  # [J] int32 results
 
 
-def _pooled_distances(env, act, terrains, keys, attempts: int, slots: int, refill_every: int, needed):
-    """:func:`batched_distances` with ``slots`` env slots fed from a queue of the needed of ``J = B * attempts`` jobs.
+def job_queue(needed: jax.Array, priority: Optional[jax.Array] = None) -> tuple[jax.Array, jax.Array]:
+    """The order in which a rollout pool starts ``J`` jobs: ``(queue [J] int32, queued [] int32)``.
 
-    ``keys`` [J] (job ``j`` is attempt ``j % attempts`` on terrain ``j // attempts``); ``needed`` [J] bool: the
-    queue holds the needed jobs in job order (a stable argsort), the others are never started. An outer ``while_loop``
+    ``needed`` [J] bool; ``priority`` [J] float or None. ``queue[:queued]`` are the needed jobs, highest priority
+    first, ties (and ``priority=None``) in job order; the rest of ``queue`` are the jobs never started. NaN
+    priority counts as lowest.
+    """
+    needed = jnp.asarray(needed, bool)
+    if priority is None:
+        queue = jnp.argsort(~needed, stable=True)
+    else:
+        p = jnp.nan_to_num(jnp.asarray(priority, jnp.float32), nan=-jnp.inf)
+        queue = jnp.lexsort((-p, ~needed))  # primary key last: needed first, then descending priority (stable)
+    return queue.astype(jnp.int32), jnp.sum(needed, dtype=jnp.int32)
+
+
+def smoothness_priority(terrains: jax.Array) -> jax.Array:
+    """``[B, H, W]`` -> ``[B]`` float32: minus the mean absolute height step between neighbouring cells.
+
+    A cheap guess at which terrains the walker will walk longest (smooth ones), to start their rollouts first
+    (``batched_distances(priority=...)``); only the speed of a pooled evaluation depends on it.
+    """
+    t = jnp.asarray(terrains, jnp.float32)
+    dx = jnp.mean(jnp.abs(jnp.diff(t, axis=-1)), axis=(-2, -1))
+    dy = jnp.mean(jnp.abs(jnp.diff(t, axis=-2)), axis=(-2, -1))
+    return -(dx + dy)
+
+
+def _pooled_distances(env, act, terrains, keys, attempts: int, slots: int, refill_every: int, queue, queued):
+    """:func:`batched_distances` with ``slots`` env slots fed from a queue of ``J = B * attempts`` jobs.
+
+    ``keys`` [J] (job ``j`` is attempt ``j % attempts`` on terrain ``j // attempts``); ``queue`` [J] / ``queued``
+    from :func:`job_queue`: jobs ``queue[:queued]`` are started in that order, the others never. An outer ``while_loop``
     (until no slot is active and no job waits) runs ``refill_every`` env steps (a ``fori_loop``; a slot's result is
     written when its episode ends) and then refills the ended slots (a ``cond``, skipped when nothing changes).
     """
     jobs = keys.shape[0]
-    queue = jnp.argsort(~needed, stable=True).astype(jnp.int32)  # needed jobs first, in job order
-    queued = jnp.sum(needed, dtype=jnp.int32)
     reset = jax.vmap(env.reset)
     step = jax.vmap(env.step)
     act = jax.vmap(act)
@@ -214,12 +248,21 @@ def default_policy() -> Callable:
                            "pass policy= explicitly") from err
 
 
+def _compiled(config: WalkerConfig, attempts: int, policy: Callable, with_params: bool, slots: Optional[int] = None,
+              smooth_first: bool = True):
+    """The jitted ``(terrains_m, key, params) -> (distances, lengths)``, cached per normalised arguments."""
+    smooth_first = bool(smooth_first) and slots is not None
+    return _compiled_cached(config, attempts, policy, with_params, slots, smooth_first)
+
+
 @functools.lru_cache(maxsize=32)
-def _compiled(config: WalkerConfig, attempts: int, policy: Callable, with_params: bool, slots: Optional[int] = None):
+def _compiled_cached(config, attempts, policy, with_params, slots, smooth_first):
     env = make_env(config)
 
     def run(terrains_m, key, params):
-        return batched_distances(env, policy, terrains_m, key, attempts, params if with_params else None, slots)
+        priority = smoothness_priority(terrains_m) if smooth_first else None
+        return batched_distances(env, policy, terrains_m, key, attempts, params if with_params else None, slots,
+                                 priority=priority)
 
     return jax.jit(run)
 
@@ -269,21 +312,22 @@ def _resolve(heightmaps, attempts: int, policy, scale, env_config):
 def rollout_distances(heightmaps, key: jax.Array, attempts: int = 20, policy: Optional[Callable] = None,
                       scale: Optional[TerrainScale] = None, env_config: Optional[WalkerConfig] = None,
                       policy_params: Any = None, chunk: Optional[int] = None,
-                      slots: Optional[int] = None) -> jax.Array:
+                      slots: Optional[int] = None, smooth_first: bool = True) -> jax.Array:
     """Normalised distances ``[B, attempts]`` float32 in [0, 1] of the policy on ``heightmaps`` [B, H, W] in [0, 1].
 
     Heightmaps become metres by ``scale`` (default :class:`~jaxterrain.terrain.TerrainScale`); the env is
     ``env_config`` (default ``WalkerConfig(terrain_shape=(H, W), scale=scale)``). All ``B x attempts`` rollouts are
     one jit-compiled batched call (cached per config / attempts / policy); ``chunk`` (terrains per call) splits
     very large batches to bound device memory; ``slots`` (env slots fed from a queue of the rollouts, see
-    :func:`batched_distances`) saves the slot-steps that ended rollouts would idle. Failed rollouts (invalid
-    physics, NaN action) count 0.
+    :func:`batched_distances`) saves the slot-steps that ended rollouts would idle, and with ``smooth_first`` the
+    pool starts the rollouts of the smoothest terrains first (:func:`smoothness_priority`; speed only). Failed
+    rollouts (invalid physics, NaN action) count 0.
     """
     for name, value in (("chunk", chunk), ("slots", slots)):  # cheap checks before the env is built
         if value is not None and (not isinstance(value, int) or value < 1):
             raise ValueError(f"{name} must be an int >= 1 or None, got {value!r}")
     terrains_m, env_config, policy = _resolve(heightmaps, attempts, policy, scale, env_config)
-    fn = _compiled(env_config, attempts, policy, policy_params is not None, slots)
+    fn = _compiled(env_config, attempts, policy, policy_params is not None, slots, bool(smooth_first))
     b = terrains_m.shape[0]
     if chunk is None or chunk >= b:
         return fn(terrains_m, key, policy_params)[0]
@@ -301,10 +345,12 @@ def rollout_distances(heightmaps, key: jax.Array, attempts: int = 20, policy: Op
 
 def evaluate(heightmaps, key: jax.Array, attempts: int = 20, best: int = 5, policy: Optional[Callable] = None,
              scale: Optional[TerrainScale] = None, env_config: Optional[WalkerConfig] = None,
-             policy_params: Any = None, chunk: Optional[int] = None, slots: Optional[int] = None) -> jax.Array:
+             policy_params: Any = None, chunk: Optional[int] = None, slots: Optional[int] = None,
+             smooth_first: bool = True) -> jax.Array:
     """Fitness ``[B]`` float32 in [0, 1] of ``heightmaps`` [B, H, W] (values in [0, 1]): the mean of the ``best``
     largest of ``attempts`` normalised distances (see :func:`rollout_distances`). Difficulty = 1 - fitness."""
     if not isinstance(best, int) or not 1 <= best <= (attempts if isinstance(attempts, int) else best):
         raise ValueError(f"best must be an int in [1, attempts={attempts}], got {best!r}")
-    d = rollout_distances(heightmaps, key, attempts, policy, scale, env_config, policy_params, chunk, slots)
+    d = rollout_distances(heightmaps, key, attempts, policy, scale, env_config, policy_params, chunk, slots,
+                          smooth_first)
     return best_of(d, best)

@@ -111,17 +111,37 @@ def test_pooled_slots_give_the_same_rollouts(flat_pair):
     key = jax.random.PRNGKey(3)
     d_all, n_all = difficulty._compiled(CFG, ATTEMPTS, linear_policy, True, None)(terrains, key, params)  # shared
     env = difficulty.make_env(CFG)
-    pooled = jax.jit(lambda t, k, p, needed: difficulty.batched_distances(
-        env, linear_policy, t, k, ATTEMPTS, p, slots=3, needed=needed))
-    d_pool, n_pool = pooled(terrains, key, params, jnp.array([False, True]))
+    pooled = jax.jit(lambda t, k, p, needed, priority: difficulty.batched_distances(
+        env, linear_policy, t, k, ATTEMPTS, p, slots=3, needed=needed, priority=priority))
+    d_pool, n_pool = pooled(terrains, key, params, jnp.array([False, True]), jnp.zeros(2))
     assert len(set(np.asarray(n_all[1]).tolist())) > 1  # the episodes really end at different steps
     np.testing.assert_array_equal(np.asarray(n_pool[1]), np.asarray(n_all[1]))
     np.testing.assert_allclose(np.asarray(d_pool[1]), np.asarray(d_all[1]), atol=1e-5)
     np.testing.assert_array_equal(np.asarray(n_pool[0]), 0)
     np.testing.assert_array_equal(np.asarray(d_pool[0]), 0.0)
+    # both terrains walked, in two queue orders (terrain 1 first, then terrain 0 first): same rollouts either way
+    both = jnp.array([True, True])
+    d1, n1 = pooled(terrains, key, params, both, jnp.array([0.0, 1.0]))
+    d0, n0 = pooled(terrains, key, params, both, difficulty.smoothness_priority(terrains))  # flat first
+    for d, n in ((d1, n1), (d0, n0)):
+        np.testing.assert_array_equal(np.asarray(n), np.asarray(n_all))
+        np.testing.assert_allclose(np.asarray(d), np.asarray(d_all), atol=1e-5)
     with pytest.raises(ValueError, match="slots"):
         difficulty.rollout_distances(terrains, key, ATTEMPTS, policy=linear_policy, env_config=CFG,
                                      policy_params=params, slots=0)
+
+
+def test_job_queue_and_smoothness_priority():
+    """The pool's queue: needed jobs first, higher priority first, ties in job order, NaN priority last among the
+    needed; smoother terrains get higher priority."""
+    needed = jnp.array([True, True, False, True, True, True])
+    queue, queued = difficulty.job_queue(needed, jnp.array([0.0, 2.0, 5.0, 2.0, jnp.nan, -1.0]))
+    assert queue.tolist() == [1, 3, 0, 5, 4, 2] and int(queued) == 5
+    queue, queued = difficulty.job_queue(needed)
+    assert queue.tolist() == [0, 1, 3, 4, 5, 2] and int(queued) == 5
+    ramp = jnp.broadcast_to(jnp.linspace(0.0, 1.0, 8), (8, 8))
+    p = difficulty.smoothness_priority(jnp.stack([jnp.zeros((8, 8)), ramp, 2.0 * ramp]))
+    np.testing.assert_allclose(np.asarray(p), [0.0, -1.0 / 7.0, -2.0 / 7.0], rtol=1e-6)
 
 
 def test_shipped_base_policy_walks_across_flat_ground():
