@@ -8,7 +8,9 @@ Presets (``--preset``):
   80 000 rollouts of a generation run on a pool of 16 384 env slots (``rollout_slots``). A generation lasts as long
   as its longest walk (about 380 env steps), so a GPU needs thousands of terrains per generation to stay busy: on
   one H100, 1 000 offspring per generation gave 135 terrains/s at best (4 096 slots; 117 at 8 192, 91 at 16 384),
-  which is 12.3 min for the budget (``benchmarks/RESULTS.md``).
+  which is 12.3 min for the budget; 25 x 4 000 took 9 min 37 s (``benchmarks/RESULTS.md``). Both were measured with
+  the previous base policy under ``SOLVER_FAST``; the default ``SOLVER_SOUND`` costs ~2.2x the physics per step, so
+  expect two 10-minute commands (``--time-limit`` then ``--resume``).
 * ``smoke``: a tiny CPU run (32 x 32 terrains, 10 x 10 cells, cheap slope fitness), seconds.
 
 Writes into the run folder: ``config.json``, ``checkpoint/checkpoint.npz`` (every ``checkpoint_every`` generations),
