@@ -1,11 +1,14 @@
 """``python -m experiments quickstart``: a small end-to-end run on CPU.
 
 Samples terrains from every available generator, renders them, computes the paper's descriptors (TRI, TPI,
-roughness at window 30, stride 2) and Algorithm 1, and writes into a new run folder:
+roughness at window 30, stride 2) and Algorithm 1, walks the first ``--walk`` terrains of each generator with the
+shipped base policy (``difficulty.evaluate``: ``--attempts`` walks each, fitness = mean of the best ``--best``), and
+writes into a new run folder:
 
 - ``terrains.png``     a grid of sample terrains, one row per generator
-- ``descriptors.csv``  generator, genome index, tri, tpi, roughness, traversable
+- ``descriptors.csv``  generator, genome index, tri, tpi, roughness, traversable, fitness (empty if not walked)
 - ``descriptors.png``  the descriptor pairs of Experiment 1, one colour per generator
+- ``difficulty.png``   difficulty (1 - fitness) against each descriptor, with Pearson r (Experiment 1a in small)
 - ``summary.md``       per-generator means and timings
 - ``config.json``      the options of this run
 """
@@ -21,6 +24,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--size", type=int, default=256, help="heightmap side in pixels (32..1024)")
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--generators", nargs="*", default=None, help="default: every generator that loads")
+    parser.add_argument("--walk", type=int, default=4,
+                        help="terrains per generator walked by the base policy (0: none)")
+    parser.add_argument("--attempts", type=int, default=8, help="walks per terrain (the paper: 20)")
+    parser.add_argument("--best", type=int, default=2, help="fitness = mean of the best this many walks (paper: 5)")
     parser.add_argument("--out", default=None, help="run folder (default runs/quickstart-<time>)")
 
 
@@ -28,12 +35,14 @@ NAMES = ("tri", "tpi", "roughness")
 
 
 class Sample(NamedTuple):
-    """One generator's share of the quickstart: maps [n, S, S], descriptors [n, 3], traversable [n], render s."""
+    """One generator's share of the quickstart: maps [n, S, S], descriptors [n, 3], traversable [n], render s,
+    fitness [k] of the first k <= n terrains (None when not walked)."""
 
     maps: Any
     descriptors: Any
     traversable: Any
     render_s: float
+    fitness: Any = None
 
 
 def sample_generator(gen, key, n: int, size: int) -> Sample:
@@ -90,29 +99,81 @@ def plot_descriptor_pairs(samples: dict[str, Sample], path) -> None:
     save_figure(fig, path, dpi=80)
 
 
+def walk(samples: dict[str, Sample], k: int, attempts: int, best: int, key) -> tuple[dict[str, Sample], float]:
+    """Fitness of the first ``k`` terrains of every sample in ONE batched ``difficulty.evaluate`` call (one compile).
+
+    Returns the samples with ``fitness`` set and the seconds taken (compile included).
+    """
+    import time
+
+    import numpy as np
+
+    from jaxterrain import difficulty
+
+    counts = {name: min(k, len(s.maps)) for name, s in samples.items()}
+    maps = np.concatenate([s.maps[:counts[name]] for name, s in samples.items()])
+    t0 = time.perf_counter()
+    fitness = np.asarray(difficulty.evaluate(maps, key, attempts=attempts, best=best))
+    seconds = time.perf_counter() - t0
+    out, start = {}, 0
+    for name, s in samples.items():
+        out[name] = s._replace(fitness=fitness[start:start + counts[name]])
+        start += counts[name]
+    return out, seconds
+
+
+def plot_difficulty(samples: dict[str, Sample], path) -> None:
+    """Difficulty (1 - fitness) of the walked terrains against each descriptor, Pearson r over all of them."""
+    import matplotlib.pyplot as plt
+    import numpy as np
+
+    from experiments.common import save_figure
+
+    walked = {name: s for name, s in samples.items() if s.fitness is not None and len(s.fitness)}
+    difficulty = np.concatenate([1.0 - s.fitness for s in walked.values()])
+    fig, axes = plt.subplots(1, 3, figsize=(12, 4))
+    for i, (ax, d) in enumerate(zip(axes, NAMES)):
+        x = np.concatenate([s.descriptors[:len(s.fitness), i] for s in walked.values()])
+        for name, s in walked.items():
+            ax.scatter(s.descriptors[:len(s.fitness), i], 1.0 - s.fitness, s=14, label=name)
+        r = np.corrcoef(x, difficulty)[0, 1] if len(x) > 2 and np.std(x) > 0 and np.std(difficulty) > 0 else np.nan
+        ax.set_xlabel(d), ax.set_ylabel("difficulty (1 - fitness)"), ax.set_ylim(-0.05, 1.05)
+        ax.set_title(f"Pearson r = {r:.2f} (n = {len(x)})", fontsize=9)
+    axes[0].legend(fontsize=7)
+    fig.tight_layout()
+    save_figure(fig, path, dpi=80)
+
+
 def descriptors_csv(samples: dict[str, Sample]) -> str:
     import csv
     import io
 
     out = io.StringIO()
     w = csv.writer(out)
-    w.writerow(["generator", "index", *NAMES, "traversable"])
+    w.writerow(["generator", "index", *NAMES, "traversable", "fitness"])
     for name, s in samples.items():
+        fitness = [] if s.fitness is None else s.fitness
         for i, row in enumerate(s.descriptors):
-            w.writerow([name, i, *(f"{v:.6g}" for v in row), int(s.traversable[i])])
+            w.writerow([name, i, *(f"{v:.6g}" for v in row), int(s.traversable[i]),
+                        f"{fitness[i]:.4f}" if i < len(fitness) else ""])
     return out.getvalue()
 
 
-def summary_markdown(samples: dict[str, Sample], skipped: dict[str, str], args: argparse.Namespace) -> str:
+def summary_markdown(samples: dict[str, Sample], skipped: dict[str, str], args: argparse.Namespace,
+                     walk_note: str = "") -> str:
     lines = [f"# quickstart ({args.n} terrains per generator, {args.size} x {args.size}, seed {args.seed})", "",
-             "| generator | mean TRI | mean TPI | mean roughness | traversable | render time (s, incl. compile) |",
-             "|---|---|---|---|---|---|"]
+             "| generator | mean TRI | mean TPI | mean roughness | traversable | mean fitness (walked) | "
+             "render time (s, incl. compile) |",
+             "|---|---|---|---|---|---|---|"]
     for name, s in samples.items():
         m = s.descriptors.mean(0)
-        lines.append(f"| {name} | {m[0]:.4g} | {m[1]:.4g} | {m[2]:.4g} | {s.traversable.mean():.0%} | "
+        fit = "-" if s.fitness is None else f"{s.fitness.mean():.3f} ({len(s.fitness)})"
+        lines.append(f"| {name} | {m[0]:.4g} | {m[1]:.4g} | {m[2]:.4g} | {s.traversable.mean():.0%} | {fit} | "
                      f"{s.render_s:.2f} |")
-    lines += [f"| {name} | skipped: {why} | | | | |" for name, why in skipped.items()]
-    lines += ["", "Files: terrains.png, descriptors.png, descriptors.csv, config.json.", ""]
+    lines += [f"| {name} | skipped: {why} | | | | | |" for name, why in skipped.items()]
+    walked = any(s.fitness is not None for s in samples.values())
+    files = "terrains.png, descriptors.png, descriptors.csv" + (", difficulty.png" if walked else "")
+    lines += ["", walk_note, "", f"Files: {files}, config.json.", ""]
     return "\n".join(lines)
 
 
@@ -127,6 +188,10 @@ def main(args: argparse.Namespace) -> int:
         raise SystemExit("--n must be >= 1")
     if not 32 <= args.size <= 1024:
         raise SystemExit("--size must be in [32, 1024]")
+    if args.walk < 0:
+        raise SystemExit(f"--walk must be >= 0, got {args.walk}")
+    if args.attempts < 1 or not 1 <= args.best <= args.attempts:
+        raise SystemExit(f"--attempts must be >= 1 and --best in [1, attempts], got {args.attempts} / {args.best}")
     run = run_folder("quickstart", args.out)
     run.mkdir(parents=True, exist_ok=True)
     write_config(run, vars(args))
@@ -147,9 +212,26 @@ def main(args: argparse.Namespace) -> int:
     if not samples:
         raise SystemExit("no generator could be loaded")
 
+    walk_note = "Not walked (--walk 0)."
+    if args.walk > 0:
+        try:
+            samples, seconds = walk(samples, args.walk, args.attempts, args.best, jax.random.fold_in(key, 1))
+        except RuntimeError as err:  # the base policy is not shipped
+            walk_note = f"Not walked: {str(err).splitlines()[0]}"
+            print(walk_note, flush=True)
+        else:
+            from jaxterrain import difficulty, walker
+
+            solver = walker.solver_label(difficulty.policy_solver(difficulty.default_policy()) or walker.SOLVER_SOUND)
+            walk_note = (f"Fitness: the shipped base policy ({solver}) walked the first {args.walk} terrains of "
+                         f"each generator {args.attempts} times; fitness = mean normalised distance of the best "
+                         f"{args.best}, difficulty = 1 - fitness ({seconds:.1f} s incl. compile).")
+            print(f"walked {sum(len(s.fitness) for s in samples.values())} terrains x {args.attempts} attempts in "
+                  f"{seconds:.1f} s (incl. compile)", flush=True)
+            plot_difficulty(samples, run / "difficulty.png")
     plot_terrains(samples, run / "terrains.png")
     plot_descriptor_pairs(samples, run / "descriptors.png")
     atomic_write_text(run / "descriptors.csv", descriptors_csv(samples))
-    atomic_write_text(run / "summary.md", summary_markdown(samples, skipped, args))
+    atomic_write_text(run / "summary.md", summary_markdown(samples, skipped, args, walk_note))
     print(f"wrote {run}")
     return 0

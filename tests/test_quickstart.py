@@ -3,15 +3,16 @@
 import csv
 
 import numpy as np
+import pytest
 
 from experiments.__main__ import main
 
 
 def test_quickstart_writes_figures_and_tables(tmp_path):
     out = tmp_path / "run"
-    assert main(["quickstart", "--n", "4", "--size", "64", "--out", str(out),
-                 "--generators", "perlin", "diamond_square", "worley"]) == 0
-    for name in ("terrains.png", "descriptors.png", "descriptors.csv", "summary.md", "config.json"):
+    assert main(["quickstart", "--n", "4", "--size", "64", "--out", str(out), "--walk", "2", "--attempts", "2",
+                 "--best", "1", "--generators", "perlin", "diamond_square", "worley"]) == 0
+    for name in ("terrains.png", "descriptors.png", "difficulty.png", "descriptors.csv", "summary.md", "config.json"):
         assert (out / name).stat().st_size > 0, name
     assert (out / "terrains.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     rows = list(csv.DictReader((out / "descriptors.csv").open()))
@@ -22,3 +23,16 @@ def test_quickstart_writes_figures_and_tables(tmp_path):
     assert np.all(tri > 0) and np.all(rough >= tri) and np.all(rough <= 1)
     summary = (out / "summary.md").read_text()
     assert "| perlin |" in summary and "| worley |" in summary
+    # the first 2 terrains of each generator were walked by the base policy: fitness in [0, 1], the rest empty
+    fitness = [r["fitness"] for r in rows]
+    assert all(f == "" for i, f in enumerate(fitness) if i % 4 >= 2)
+    walked = np.array([float(f) for i, f in enumerate(fitness) if i % 4 < 2])
+    assert walked.shape == (6,) and np.all((walked >= 0) & (walked <= 1))
+    assert "Fitness: the shipped base policy" in summary and "difficulty.png" in summary
+
+
+def test_quickstart_rejects_bad_walk_options(tmp_path):
+    for bad in (["--walk", "-1"], ["--attempts", "0"], ["--attempts", "2", "--best", "3"]):
+        with pytest.raises(SystemExit, match="--walk|--attempts"):
+            main(["quickstart", "--out", str(tmp_path / "never"), *bad])
+    assert not (tmp_path / "never").exists()
