@@ -18,6 +18,10 @@ is ``WalkerConfig(terrain_shape, scale)`` with the contact-solver options that t
 :func:`evaluate` and :func:`rollout_distances` are host-level entry points: they validate on the host and call a
 cached jit-compiled function. Inside your own jit (e.g. a QDax scoring function) use the pure
 :func:`batched_distances` / :func:`best_of`.
+
+With ``slots=S`` the rollouts are jobs queued on ``S`` env slots that refill as episodes end, instead of all at once
+(:func:`batched_distances`); the queue starts the smoothest terrains first (:func:`smoothness_priority`,
+:func:`job_queue`), which shortens the tail in which the last long rollouts run on an otherwise idle pool.
 """
 
 from __future__ import annotations
@@ -31,8 +35,8 @@ import jax.numpy as jnp
 from jaxterrain.terrain import TerrainScale, validate_scale
 from jaxterrain.walker import SolverOptions, WalkerConfig, WalkerEnv
 
-__all__ = ["evaluate", "rollout_distances", "batched_distances", "best_of", "validate_heightmaps",
-           "default_policy", "default_env_config", "policy_solver", "make_env"]
+__all__ = ["evaluate", "rollout_distances", "batched_distances", "best_of", "job_queue", "smoothness_priority",
+           "validate_heightmaps", "default_policy", "default_env_config", "policy_solver", "make_env"]
 
 
 # ----------------------------------------------------------------------------------------------------------------
