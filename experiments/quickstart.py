@@ -221,8 +221,11 @@ def main(args: argparse.Namespace) -> int:
             print(walk_note, flush=True)
         else:
             from jaxterrain import difficulty, walker
+            from jaxterrain.terrain import TerrainScale
 
-            solver = walker.solver_label(difficulty.policy_solver(difficulty.default_policy()) or walker.SOLVER_SOUND)
+            env_config = difficulty.default_env_config((args.size, args.size), TerrainScale(),
+                                                       difficulty.default_policy())  # what evaluate walked under
+            solver = walker.solver_label(env_config.solver)
             walk_note = (f"Fitness: the shipped base policy ({solver}) walked the first {args.walk} terrains of "
                          f"each generator {args.attempts} times; fitness = mean normalised distance of the best "
                          f"{args.best}, difficulty = 1 - fitness ({seconds:.1f} s incl. compile).")
