@@ -13,6 +13,18 @@ Writes into the run folder:
   ``coverage.md`` (Table 1: rows generators + Combined, columns the pairs; skipped generators listed);
 * ``coverage.png`` (Figure 5: bars per generator and pair) and ``archives.png`` (Figure 6: one fitness heatmap per
   pair x generator, plus the combined archive).
+
+Presets: ``paper`` and ``gpu`` (the paper's budget per treatment, see ``experiments/evolve.py``), ``gpu-short`` (a
+tenth of it: all 15 treatments in about 15 x 3 GPU-minutes) and ``smoke`` (CPU, seconds).
+
+Several GPUs: the treatments are independent, so run one process per GPU on the same run folder, each with
+``--shard I/N`` (it takes the treatments ``t % N == I`` of the fixed order of :func:`treatments`; every treatment
+keeps the key it has in an unsharded run, so the archives do not depend on N), then write the tables::
+
+    for i in 0 1 2 3; do
+      CUDA_VISIBLE_DEVICES=$i python -m experiments coverage --preset gpu-short --out runs/cov --shard $i/4 &
+    done; wait
+    python -m experiments coverage --resume runs/cov      # reuses the finished archives, writes the tables
 """
 
 from __future__ import annotations
@@ -40,6 +52,7 @@ def _preset(base: str, **kw) -> dict:
 PRESETS: dict[str, dict] = {
     "paper": _preset("paper"),
     "gpu": _preset("gpu"),
+    "gpu-short": _preset("gpu-short"),
     # ranges of the smoke preset: descriptors of 32 x 32 maps at window 8 (wider than the 256 x 256 defaults)
     "smoke": _preset("smoke", generations=2, initial_population=12, batch_size=8,
                      ranges={"tri": [0.0, 0.5], "tpi": [-0.02, 0.02], "roughness": [0.0, 1.0]}),
@@ -54,6 +67,26 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--size", type=int, default=None)
     parser.add_argument("--bins", type=int, default=None)
     parser.add_argument("--fitness", choices=["difficulty", "slope"], default=None)
+    parser.add_argument("--shard", type=parse_shard, default=None, metavar="I/N",
+                        help="run only the treatments t with t %% N == I (one process per GPU, all with the same "
+                             "--out; see the module docstring); then --resume without --shard writes the tables")
+
+
+def parse_shard(text: str) -> tuple[int, int]:
+    """``"I/N"`` -> ``(I, N)`` with ``0 <= I < N``; anything else is an argparse error naming ``--shard``."""
+    try:
+        i, n = (int(v) for v in text.split("/"))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"--shard must be I/N (two integers), got {text!r}") from None
+    if not (n >= 1 and 0 <= i < n):
+        raise argparse.ArgumentTypeError(f"--shard I/N needs N >= 1 and 0 <= I < N, got {text!r}")
+    return i, n
+
+
+def treatments(pairs, generators) -> list[tuple[int, tuple, str]]:
+    """Every (descriptor pair, generator) of a run in its fixed order: ``[(index, pair, generator)]``. Shards take
+    ``index % N == I``; the order (pairs outer) never depends on the sharding, nor does any treatment's key."""
+    return [(k, pair, g) for k, (pair, g) in enumerate((p, g) for p in pairs for g in generators)]
 
 
 def overrides(args) -> dict:
@@ -111,21 +144,26 @@ def main(args) -> int:
             print(f"[{g}] skipped: {why}", flush=True)
     available = [g for g in gens if g not in skipped]
     archives: dict = {}
-    total = len(available) * len(pairs)
-    done = 0
+    todo = treatments(pairs, available)
+    shard_i, shard_n = args.shard or (0, 1)
+    mine = [t for t in todo if t[0] % shard_n == shard_i]
+    resume_hint = f"python -m experiments coverage --resume {folder}"
     try:
-        for pi, pair in enumerate(pairs):
-            for gi, g in enumerate(available):
-                ranges = cfg.get("ranges")
-                tcfg = dict(cfg, ranges=None if ranges is None else [ranges[pair[0]], ranges[pair[1]]])
-                done += 1
-                tkey = jax.random.fold_in(jax.random.fold_in(key, pi), gens.index(g))
-                archives[(g, pair_label(pair))] = evolve_cmd.run_treatment(
-                    tcfg, g, pair, folder / "archives" / f"{g}__{pair_label(pair)}", clock, tkey,
-                    label=f"({done}/{total}) ")
+        for n, (k, pair, g) in enumerate(mine, 1):
+            ranges = cfg.get("ranges")
+            tcfg = dict(cfg, ranges=None if ranges is None else [ranges[pair[0]], ranges[pair[1]]])
+            tkey = jax.random.fold_in(jax.random.fold_in(key, pairs.index(pair)), gens.index(g))
+            archives[(g, pair_label(pair))] = evolve_cmd.run_treatment(
+                tcfg, g, pair, folder / "archives" / f"{g}__{pair_label(pair)}", clock, tkey,
+                label=f"({n}/{len(mine)}{'' if args.shard is None else f' of shard {shard_i}/{shard_n}'}) ")
     except common.TimeUp:
-        print(f"time limit reached; continue with: python -m experiments coverage --resume {folder}", flush=True)
+        shard = "" if args.shard is None else f" --shard {shard_i}/{shard_n}"
+        print(f"time limit reached; continue with: {resume_hint}{shard}", flush=True)
         return 3
+    if args.shard is not None:
+        print(f"shard {shard_i}/{shard_n} done ({len(mine)} of {len(todo)} treatments); once every shard is done, "
+              f"write the tables with: {resume_hint}", flush=True)
+        return 0
     rows = []
     cov = {}
     for pair in pairs:

@@ -5,12 +5,16 @@ Presets (``--preset``):
 * ``paper``: the paper's treatment: 100 initial genomes + 5 000 generations x 20 offspring (100 100 evaluations),
   fitness from the walker (20 attempts, best 5), 256 x 256 terrains, 50 x 50 cells.
 * ``gpu``: the same evaluation budget in larger batches (25 generations x 4 000 offspring), to fill a GPU; the
-  80 000 rollouts of a generation run on a pool of 16 384 env slots (``rollout_slots``). A generation lasts as long
+  80 000 rollouts of a generation run on a pool of 16 384 env slots (``rollout_slots``); a checkpoint after every
+  generation (tens of seconds), so ``--time-limit`` stops close to its limit. A generation lasts as long
   as its longest walk (about 380 env steps), so a GPU needs thousands of terrains per generation to stay busy: on
   one H100, 1 000 offspring per generation gave 135 terrains/s at best (4 096 slots; 117 at 8 192, 91 at 16 384),
   which is 12.3 min for the budget; 25 x 4 000 took 9 min 37 s (``benchmarks/RESULTS.md``). Both were measured with
   the previous base policy under ``SOLVER_FAST``; the default ``SOLVER_SOUND`` costs ~2.2x the physics per step, so
   expect two 10-minute commands (``--time-limit`` then ``--resume``).
+* ``gpu-short``: a tenth of that budget (100 + 5 generations x 2 000 offspring = 10 100 terrains, a checkpoint
+  every generation, a pool of 8 192 slots, no elite heightmaps kept): one treatment in a few minutes, so that
+  ``python -m experiments coverage --preset gpu-short`` gives all of Table 1 within a session's GPU time.
 * ``smoke``: a tiny CPU run (32 x 32 terrains, 10 x 10 cells, cheap slope fitness), seconds.
 
 Writes into the run folder: ``config.json``, ``checkpoint/checkpoint.npz`` (every ``checkpoint_every`` generations),
@@ -39,8 +43,12 @@ PRESETS: dict[str, dict] = {
                   store_heightmaps=True, rollout_slots=None),
     "gpu": dict(generator="perlin", descriptors=["roughness", "tpi"], generations=25, batch_size=4000,
                 initial_population=100, bins=50, size=256, window=30, stride=2, attempts=20, best=5,
-                checkpoint_every=5, fitness="difficulty", robot_height=None, out_of_range="clip", ranges=None,
+                checkpoint_every=1, fitness="difficulty", robot_height=None, out_of_range="clip", ranges=None,
                 store_heightmaps=True, rollout_slots=16384),
+    "gpu-short": dict(generator="perlin", descriptors=["roughness", "tpi"], generations=5, batch_size=2000,
+                      initial_population=100, bins=50, size=256, window=30, stride=2, attempts=20, best=5,
+                      checkpoint_every=1, fitness="difficulty", robot_height=None, out_of_range="clip", ranges=None,
+                      store_heightmaps=False, rollout_slots=8192),
     "smoke": dict(generator="perlin", descriptors=["roughness", "tpi"], generations=4, batch_size=8,
                   initial_population=16, bins=10, size=32, window=8, stride=2, attempts=2, best=1,
                   checkpoint_every=2, fitness="slope", robot_height=None, out_of_range="clip",

@@ -270,6 +270,11 @@ def centroids_for(config: EvolveConfig) -> jax.Array:
 # ----------------------------------------------------------------------------------------------------------------
 
 
+RENDER_CHUNK = 1024
+"""Terrains rendered at once inside a generation (``lax.map`` over chunks of ``vmap``): bounds the generators'
+temporaries (the GAN at batch 4 096 asks XLA for ~139 GiB) at larger GPU batches; below it, it is one ``vmap``."""
+
+
 class _Fns(NamedTuple):
     sample: Callable
     mutate: Callable
@@ -282,7 +287,7 @@ class _Fns(NamedTuple):
 def _evaluate(fns: _Fns, config: EvolveConfig, genomes, key):
     """Render and score a batch. Returns (fitness for insertion [B], raw descriptors [B, 2], cell descriptors
     [B, 2], counts dict)."""
-    heightmaps = jax.vmap(fns.render_one)(genomes)
+    heightmaps = jax.lax.map(fns.render_one, genomes, batch_size=RENDER_CHUNK)
     raw = jnp.asarray(fns.descriptors(heightmaps), jnp.float32)
     traversable = jnp.asarray(fns.traversable(heightmaps), bool)
     lo = jnp.asarray([r[0] for r in config.ranges], jnp.float32)

@@ -86,6 +86,53 @@ def test_coverage_smoke_skips_unavailable(tmp_path):
     assert (out / "coverage.png").exists() and (out / "archives.png").exists()
 
 
+def test_coverage_shards_partition_the_treatments_and_resume_writes_the_tables(tmp_path, monkeypatch):
+    """--shard I/N runs the treatments t % N == I with the keys of an unsharded run; --resume then reuses every
+    archive and writes the same tables. The treatment itself is faked (a hand-made archive derived from its key)."""
+    import jax
+
+    from experiments import coverage
+    from experiments import evolve as evolve_cmd
+    from jaxterrain import archive as A
+
+    calls = []
+
+    def fake_treatment(cfg, generator, descriptors, folder, clock, key, label=""):
+        done = folder / "archive.npz"
+        if done.exists():
+            return A.load(done)
+        calls.append((folder.name, tuple(np.asarray(jax.random.key_data(key)).ravel())))
+        config = A.resolve_config(evolve_cmd.evolve_config({**cfg, "descriptors": list(descriptors)}))
+        rng = np.random.default_rng(calls[-1][1])
+        fit = np.where(rng.random(config.bins**2) < 0.3, rng.random(config.bins**2), -np.inf).astype(np.float32)
+        filled = np.isfinite(fit)
+        arch = A.Archive((np.zeros((fit.size, 3), np.float32),), (generator,), np.where(filled, 0, -1).astype(np.int32),
+                         fit, np.zeros((fit.size, 2), np.float32), np.asarray(A.centroids_for(config)), None, config,
+                         {"rejected": np.float32([1.0, 2.0])})
+        return A.load(A.save(done, arch))
+
+    monkeypatch.setattr(evolve_cmd, "run_treatment", fake_treatment)
+    base = ["coverage", "--preset", "smoke", "--generators", "perlin", "diamond_square"]
+    assert cli(*base, "--out", str(tmp_path / "whole")) == 0
+    whole = dict(calls)
+    assert len(whole) == 6
+    calls.clear()
+    out = tmp_path / "sharded"
+    assert cli(*base, "--out", str(out), "--shard", "1/4") == 0
+    assert [name for name, _ in calls] == ["diamond_square__tri-tpi", "diamond_square__tpi-roughness"]  # t = 1, 5
+    assert not (out / "coverage.csv").exists()  # a shard writes no tables
+    for i in (0, 2, 3):
+        assert cli(*base, "--out", str(out), "--shard", f"{i}/4") == 0
+    assert sorted(calls) == sorted(whole.items())  # each treatment once, with its unsharded key
+    assert cli("coverage", "--resume", str(out)) == 0 and len(calls) == 6  # reuses all six
+    assert (out / "coverage.csv").read_text() == (tmp_path / "whole" / "coverage.csv").read_text()
+    assert (out / "coverage.md").read_text() == (tmp_path / "whole" / "coverage.md").read_text()
+    for bad in ("4/4", "1", "a/b", "0/0"):
+        with pytest.raises(SystemExit):
+            cli(*base, "--out", str(tmp_path / "bad"), "--shard", bad)
+    assert coverage.parse_shard("2/3") == (2, 3)
+
+
 def test_help_lists_commands():
     res = subprocess.run([sys.executable, "-m", "experiments", "--help"], cwd=ROOT, capture_output=True, text=True)
     assert res.returncode == 0
