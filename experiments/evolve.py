@@ -9,9 +9,9 @@ Presets (``--preset``):
   generation (tens of seconds), so ``--time-limit`` stops close to its limit. A generation lasts as long
   as its longest walk (about 380 env steps), so a GPU needs thousands of terrains per generation to stay busy: on
   one H100, 1 000 offspring per generation gave 135 terrains/s at best (4 096 slots; 117 at 8 192, 91 at 16 384),
-  which is 12.3 min for the budget; 25 x 4 000 took 9 min 37 s (``benchmarks/RESULTS.md``). Both were measured with
-  the previous base policy under ``SOLVER_FAST``; the default ``SOLVER_SOUND`` costs ~2.2x the physics per step, so
-  expect two 10-minute commands (``--time-limit`` then ``--resume``).
+  which is 12.3 min for the budget; 25 x 4 000 took 9 min 37 s (``benchmarks/RESULTS.md``), both with the previous
+  base policy under ``SOLVER_FAST``. Under the default ``SOLVER_SOUND`` the preset took 13.2 min on an H200 (150-160
+  terrains/s), so it needs two 10-minute commands (``--time-limit`` then ``--resume``).
 * ``gpu-short``: a tenth of that budget (100 + 5 generations x 2 000 offspring = 10 100 terrains, a checkpoint
   every generation, a pool of 8 192 slots, no elite heightmaps kept): one treatment in a few minutes, so that
   ``python -m experiments coverage --preset gpu-short`` gives all of Table 1 within a session's GPU time.
