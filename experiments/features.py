@@ -10,6 +10,9 @@ Writes into the run folder: ``config.json``, ``values_<generator>.csv`` (one row
 (generator, feature_a, feature_b, r), ``correlation_<generator>.png`` (heatmaps like Figure 4) and
 ``correlations.png`` (both side by side), plus with ``--calibrate`` ``ranges.json``: the [0.5, 99.5] percentile of
 each descriptor over all generators at the archive window (the recipe of ``jaxterrain.archive.DEFAULT_RANGES``).
+
+Long runs: ``values_<generator>.partial.npz`` holds the rows measured so far (saved after every batch);
+``--time-limit MIN`` stops between batches and ``--resume RUN`` continues from there with the same values.
 """
 
 from __future__ import annotations
@@ -18,6 +21,7 @@ import argparse
 import csv
 import io
 import json
+from pathlib import Path
 
 from experiments import common
 
@@ -66,22 +70,36 @@ def terrain_set(gen, key, samples: int, steps: int):
     return jax.tree.map(lambda *xs: jax.numpy.concatenate(xs), *out)
 
 
-def measure(gen, genomes, cfg: dict, key, fitness_fn, progress=print) -> dict[str, "np.ndarray"]:  # noqa: F821
-    """Columns ``{name: [N]}``: ``<feature>_<window>`` for every feature and window, extras, fitness, difficulty."""
+def measure(gen, genomes, cfg: dict, key, fitness_fn, progress=print, checkpoint: Path | None = None,
+            clock: common.Clock | None = None) -> dict[str, "np.ndarray"]:  # noqa: F821
+    """Columns ``{name: [N]}``: ``<feature>_<window>`` for every feature and window, extras, fitness, difficulty.
+
+    The terrains are measured in batches of ``cfg["batch"]``; batch ``s`` walks with key ``fold_in(key, s)``. With
+    ``checkpoint`` (an ``.npz`` path) the columns so far are saved after every batch and a saved file is continued
+    from, so a killed or time-limited run (``clock``: raises :class:`common.TimeUp` between batches) resumes with
+    the same values.
+    """
     import jax
     import numpy as np
 
     from jaxterrain import features
+    from jaxterrain.io import atomic_save_npz
 
     n = jax.tree.leaves(genomes)[0].shape[0]
     batch = int(cfg["batch"])
     windows = [int(w) for w in cfg["windows"]]
     calib = [int(cfg["calibrate_window"])] if cfg.get("calibrate") else []
     cols: dict[str, list] = {}
+    start = 0
+    if checkpoint is not None and checkpoint.exists():
+        with np.load(checkpoint) as saved:
+            start = int(saved["_measured"])
+            cols = {k: [saved[k]] for k in saved.files if k != "_measured"}
+        progress(f"  [{gen.name}] continuing after {start}/{n} terrains ({checkpoint})")
     render = jax.jit(jax.vmap(gen.render_one))
     desc = jax.jit(features.descriptors, static_argnames=("names", "window", "stride"))
     trav = jax.jit(features.is_traversable)
-    for s in range(0, n, batch):
+    for s in range(start, n, batch):
         part = jax.tree.map(lambda x: x[s : s + batch], genomes)
         hm = render(part)
         for w in sorted(set(windows + calib)):
@@ -95,6 +113,11 @@ def measure(gen, genomes, cfg: dict, key, fitness_fn, progress=print) -> dict[st
         cols.setdefault("fitness", []).append(fit)
         progress(f"  [{gen.name}] {min(s + batch, n)}/{n} terrains measured")
         del hm
+        if checkpoint is not None:
+            atomic_save_npz(checkpoint, _measured=np.int64(min(s + batch, n)),
+                            **{k: np.concatenate(v) for k, v in cols.items()})
+        if clock is not None and s + batch < n:
+            clock.check()
     out = {k: np.concatenate(v).astype(np.float64) for k, v in cols.items()}
     out["difficulty"] = 1.0 - out["fitness"]
     return out
@@ -142,6 +165,7 @@ def main(args) -> int:
     from jaxterrain.io import atomic_write_text
 
     folder, cfg = common.setup_run("features", args, PRESETS, "smoke", overrides(args))
+    clock = common.Clock(args.time_limit)
     key = jax.random.key(int(cfg["seed"]))
     size = int(cfg["size"])
     windows = [int(w) for w in cfg["windows"]]
@@ -162,10 +186,19 @@ def main(args) -> int:
         else:
             gen = generators.get(name, size=size)
             genomes = terrain_set(gen, jax.random.fold_in(key, 2 * gi), int(cfg["samples"]), int(cfg["mutation_steps"]))
-            values = measure(gen, genomes, cfg, jax.random.fold_in(key, 2 * gi + 1), fitness_fn,
-                             progress=lambda m: print(m, flush=True))
+            partial = folder / f"values_{name}.partial.npz"
+            try:
+                if results:
+                    clock.check()  # between generators too
+                values = measure(gen, genomes, cfg, jax.random.fold_in(key, 2 * gi + 1), fitness_fn,
+                                 progress=lambda m: print(m, flush=True), checkpoint=partial, clock=clock)
+            except common.TimeUp:
+                print(f"time limit reached; continue with: python -m experiments features --resume {folder}",
+                      flush=True)
+                return 3
             cols = list(values)
             atomic_write_text(values_path, _csv_text(cols, zip(*[[f"{v:.8g}" for v in values[c]] for c in cols])))
+            partial.unlink(missing_ok=True)
         results[name] = values
         if cfg.get("calibrate"):
             w = int(cfg["calibrate_window"])

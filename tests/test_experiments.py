@@ -75,6 +75,18 @@ def test_features_smoke(tmp_path):
     assert (out / "correlations.png").exists() and (out / "correlation_perlin.png").exists()
 
 
+def test_features_time_limit_stops_between_batches_and_resumes_to_the_same_values(tmp_path):
+    args = ["features", "--preset", "smoke", "--generators", "perlin", "--samples", "12", "--mutation-steps", "1",
+            "--windows", "5"]
+    assert cli(*args, "--out", str(tmp_path / "whole")) == 0
+    out = tmp_path / "cut"
+    assert cli(*args, "--out", str(out), "--time-limit", "0") == 3  # after the first of two batches of 12 terrains
+    assert (out / "values_perlin.partial.npz").exists() and not (out / "values_perlin.csv").exists()
+    assert cli("features", "--resume", str(out)) == 0
+    assert not (out / "values_perlin.partial.npz").exists()
+    assert (out / "values_perlin.csv").read_text() == (tmp_path / "whole" / "values_perlin.csv").read_text()
+
+
 @pytest.mark.slow
 def test_coverage_smoke_skips_unavailable(tmp_path):
     out = tmp_path / "c"

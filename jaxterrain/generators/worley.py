@@ -86,7 +86,12 @@ reduction emitter reloads ``dy2`` and ``dx2`` from L1 for every pair, so expect 
 target (~10 ops per pair in total) needs fewer pairs, i.e. a hand-written kernel with per-tile candidate lists
 (only points whose distance range over the tile meets the tile's bracket; ~60 of 400 at N = 400, D = 100) and
 register-blocked pixels; with shapes static across a vmapped batch the list length has to be capped, and an
-overflow needs a fallback.
+overflow needs a fallback. Exactness of such a list: with a tile's bracket ``[Lt, Ut]`` (min of ``L``, max of ``U``
+over its pixels), a point farther than ``Ut`` from the whole tile is never among the first D + 1, and a point
+nearer than ``Lt`` to all of it is always among the first D; so ``F_D`` is the ``(D - inside)``-th smallest over the
+remaining candidates, exactly. The cap can be checked offline once and for all: the genome space is finite (101
+integer seeds x N in [2, 400] x D in [0, N / 4], about 2.1 M genomes per map size), and the per-tile candidate
+count needs only the exact coarse grid (about 1/60 of a map's work), so every genome can be enumerated offline.
 """
 
 from __future__ import annotations
