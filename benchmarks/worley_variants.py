@@ -4,9 +4,12 @@
         [--size 256] [--repeats 5] [--chunk 0] [--hlo-dir DIR] [--out result.json]
 
 A variant is ``select[:option...]`` with options ``major`` (points on the major axis of the count reductions,
-``_POINTS_AXIS = "major"``), ``flat`` (one reduced dim of 400 instead of 16 x 25, ``_POINT_GROUPS``), ``groups=AxB`` (another grouping),
+``_POINTS_AXIS = "major"``), ``flat`` (one reduced dim of 400 instead of 16 x 25, ``_POINT_GROUPS``), ``groups=AxB``
+(another grouping),
 ``untied`` (no optimisation barrier in the loops: the pre-fix code, where XLA hoists
-the [B, H, W, 400] distance tensor out of the loop), ``step=K`` (coarse step of "bracket"), ``tol=X`` (pixels).
+the [B, H, W, 400] distance tensor out of the loop), ``step=K`` (coarse step of "bracket" / "tiled"), ``tol=X``
+(pixels), and for "tiled" ``tile=K`` (tile side) and ``cap=AxB`` (candidate slots per tile as reduced dims,
+``_CAP_GROUPS``; e.g. ``cap=96`` flat).
 For each variant and batch size: ``jit(vmap(render_one))`` over fresh genomes (or ``lax.map`` over chunks of
 ``--chunk`` genomes when > 0), compile time (lower + compile), XLA's temp memory (``memory_analysis``; the ratio
 ``temp/d2`` to one [B, H, W, 400] float32 tensor shows whether the distances are materialised: >= 1 means yes), and
@@ -39,10 +42,10 @@ from jaxterrain.generators import worley as wm  # noqa: E402
 
 @contextlib.contextmanager
 def variant_settings(variant: str):
-    """Parse ``select[:opt...]``; temporarily set the module knobs it names. Yields (select, kwargs of _kth_bracket)."""
+    """Parse ``select[:opt...]``; temporarily set the module knobs it names. Yields the select name."""
     select, *opts = variant.split(":")
-    saved = (wm._POINTS_AXIS, wm._tie, wm._KTH["bracket"], wm._POINT_GROUPS)
-    bracket_kw = {}
+    saved = (wm._POINTS_AXIS, wm._tie, dict(wm._KTH), wm._POINT_GROUPS, wm._CAP_GROUPS)
+    method_kw = {}
     try:
         for o in opts:
             if o == "major":
@@ -54,17 +57,23 @@ def variant_settings(variant: str):
             elif o == "untied":
                 wm._tie = lambda arrays, carry: arrays
             elif o.startswith("step="):
-                bracket_kw["step"] = int(o[5:])
+                method_kw["step"] = int(o[5:])
             elif o.startswith("tol="):
-                bracket_kw["tol"] = float(o[4:])
+                method_kw["tol"] = float(o[4:])
+            elif o.startswith("tile="):
+                method_kw["tile"] = int(o[5:])
+            elif o.startswith("cap="):
+                wm._CAP_GROUPS = tuple(int(v) for v in o[4:].split("x"))
             else:
                 raise ValueError(f"unknown option {o!r} in variant {variant!r}")
-        if bracket_kw:
-            base = saved[2]
-            wm._KTH["bracket"] = lambda dy2, dx2, d: base(dy2, dx2, d, **bracket_kw)
+        if method_kw:
+            base = saved[2][select]
+            wm._KTH[select] = lambda dy2, dx2, d: base(dy2, dx2, d, **method_kw)
         yield select
     finally:
-        wm._POINTS_AXIS, wm._tie, wm._KTH["bracket"], wm._POINT_GROUPS = saved
+        wm._POINTS_AXIS, wm._tie, kth, wm._POINT_GROUPS, wm._CAP_GROUPS = saved
+        wm._KTH.clear()
+        wm._KTH.update(kth)
 
 
 def batched_fn(select: str, size: int, chunk: int, distance: bool = False):

@@ -353,10 +353,10 @@ def _worley_reference(genome, size):
     return np.sqrt(np.sort(d2.astype(np.float32), axis=-1)[..., d])
 
 
-@pytest.mark.parametrize("select", ["bisect", "sort", "bracket"])
+@pytest.mark.parametrize("select", ["bisect", "sort", "bracket", "tiled"])
 def test_worley_exact_against_numpy_sort(select):
-    # "bracket" is exact except within TOLERANCE (1e-3 px) of a near-tie between two different distances.
-    atol = worley_mod.TOLERANCE if select == "bracket" else 0.0
+    # "bracket" / "tiled" are exact except within TOLERANCE (1e-3 px) of a near-tie between two different distances.
+    atol = worley_mod.TOLERANCE if select in ("bracket", "tiled") else 0.0
     for genome in ([3, 50, 12], [7, 400, 100], [1, 2, 0], [100, 9, 2]):
         got = np.asarray(_worley_distance(jnp.array(genome, jnp.float32), SIZE, select))
         # Exact selection; the last bit of a squared distance may differ from numpy's where XLA fuses the
@@ -380,10 +380,10 @@ def _check_fast(got_d2, ref_d2, select):
         assert (err <= 1e-6 * np.maximum(ref, 1.0)).mean() > 0.99  # exact but for near-ties
 
 
-_kth_jit = {s: jax.jit(worley_mod._KTH[s]) for s in ("bisect", "bracket")}
+_kth_jit = {s: jax.jit(worley_mod._KTH[s]) for s in ("bisect", "bracket", "tiled")}
 
 
-@pytest.mark.parametrize("select", ["bisect", "bracket"])
+@pytest.mark.parametrize("select", ["bisect", "bracket", "tiled"])
 def test_worley_fast_select_matches_sort_with_ties(select):
     # Point sets built directly (the seeded points are all distinct): duplicated points (D-th value repeated),
     # integer points on the pixel grid (many exact distance ties and zero distances), N = 2 and N = 400, with
@@ -408,7 +408,7 @@ def test_worley_fast_select_matches_sort_with_ties(select):
         _check_fast(got, _kth_reference(dy2, dx2, d), select)
 
 
-@pytest.mark.parametrize("select", ["bisect", "bracket"])
+@pytest.mark.parametrize("select", ["bisect", "bracket", "tiled"])
 def test_worley_fast_select_matches_sort_random_genomes(select):
     gen = _gen("worley")
     genomes = np.asarray(jax.jit(gen.sample, static_argnums=1)(jax.random.PRNGKey(5), 6))
@@ -423,6 +423,28 @@ def test_worley_fast_select_matches_sort_random_genomes(select):
     assert np.abs(maps - ref_maps).max() < 1e-4 and (maps.max(axis=(1, 2)) == 1.0).all()
 
 
+def test_worley_tiled_equals_bracket_and_falls_back_on_overflow(monkeypatch):
+    """"tiled" is "bracket" over per-tile candidate lists: the same values, bit for bit. With 8 slots per tile, the
+    maps of many points overflow their lists and are redone by "bracket" inside the same vmapped call."""
+    genomes = jnp.asarray([[3, 400, 100], [7, 3, 0], [11, 400, 0], [42, 200, 50], [5, 2, 0]], jnp.float32)
+
+    def run(select):
+        return np.asarray(jax.jit(jax.vmap(lambda g: worley_mod.worley_distance(g, SIZE, select)))(genomes))
+
+    bracket = run("bracket")
+    np.testing.assert_array_equal(run("tiled"), bracket)
+    monkeypatch.setattr(worley_mod, "_CAP_GROUPS", (8,))
+
+    def overflow(g):
+        dy2, dx2 = worley_mod._separable_d2(g, SIZE)
+        lo, hi, _ = worley_mod._bracket_bounds(dy2, dx2, jnp.round(g[2]))
+        return worley_mod._tile_candidates(dy2, dx2, lo, hi, worley_mod._TILE, 8)[3]
+
+    flags = np.asarray(jax.vmap(overflow)(genomes))
+    assert flags.any() and not flags.all(), flags  # a mixed batch: both paths are exercised
+    np.testing.assert_array_equal(run("tiled"), bracket)
+
+
 def test_worley_bracket_structure():
     assert worley_mod.bracket_iterations(256) == 14 and worley_mod.bracket_iterations(64) == 14
     assert 2 * 4 * math.sqrt(2) / 2**14 < worley_mod.TOLERANCE  # the final bracket is narrower than TOLERANCE
@@ -431,7 +453,7 @@ def test_worley_bracket_structure():
     # The loop must not carry a hoisted [B, H, W, 400] distance tensor (XLA's loop-invariant code motion did, which
     # made each trip re-read it from memory): no while loop in the optimised HLO carries an f32 [4, 64, 64, ...]
     # distance tensor (the points are grouped as 16 x 25 in the reductions).
-    for select in ("bisect", "bracket"):
+    for select in ("bisect", "bracket", "tiled"):
         fn = jax.jit(jax.vmap(lambda g, s=select: worley_mod.worley_distance(g, SIZE, s)))
         hlo = fn.lower(jnp.zeros((4, 3), jnp.float32)).compile().as_text()
         loops = [line for line in hlo.splitlines() if " while(" in line]
