@@ -1,6 +1,6 @@
 """Worley maps per second of each ``select`` variant at 256 x 256, with compile times, memory and accuracy vs "sort".
 
-    python benchmarks/worley_variants.py [--variants sort bisect bracket bracket:major] [--batch 256 1024 4096]
+    python benchmarks/worley_variants.py [--variants sort bisect bracket tiled] [--batch 256 1024 4096]
         [--size 256] [--repeats 5] [--chunk 0] [--hlo-dir DIR] [--out result.json]
 
 A variant is ``select[:option...]`` with options ``major`` (points on the major axis of the count reductions,
@@ -158,7 +158,7 @@ def is_oom(e: Exception) -> bool:
 
 def main() -> None:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    p.add_argument("--variants", nargs="*", default=["sort", "bisect", "bracket", "bracket:major"])
+    p.add_argument("--variants", nargs="*", default=["sort", "bisect", "bracket", "tiled"])
     p.add_argument("--batch", nargs="*", type=int, default=[256, 1024, 4096])
     p.add_argument("--size", type=int, default=256)
     p.add_argument("--repeats", type=int, default=5)
