@@ -25,6 +25,10 @@ keeps the key it has in an unsharded run, so the archives do not depend on N), t
       CUDA_VISIBLE_DEVICES=$i python -m experiments coverage --preset gpu-short --out runs/cov --shard $i/4 &
     done; wait
     python -m experiments coverage --resume runs/cov      # reuses the finished archives, writes the tables
+
+Treatments differ in cost (CPPN's easy terrains walk longest), so for an even load give each process one treatment
+at a time: ``--shard t/T`` with T the number of treatments (15 by default) runs treatment t alone; a small queue
+that hands the next t to whichever GPU is free kept 4 GPUs busy for Table 1 (``docs/results/README.md``).
 """
 
 from __future__ import annotations
