@@ -227,7 +227,7 @@ def parse_solver(text: str) -> tuple[str, SolverOptions]:
     """``"sound"``, ``"fast"``, ``"xml"`` or ``"ITERATIONS,LS_ITERATIONS,EULERDAMP"`` -> (label, options); see
     walker.parse_solver."""
     solver = walker.parse_solver(text)
-    return (text if text in ("sound", "fast", "xml") else walker.solver_label(solver)), solver
+    return (text if text in walker.NAMED_SOLVERS else walker.solver_label(solver)), solver
 
 
 def solver_check(cfg, policy, solvers=(("sound", SOLVER_SOUND), ("xml", SOLVER_XML)), n_terrains=8, attempts=20):
@@ -306,7 +306,7 @@ def main(argv=None):
     if "raw" not in skip:
         for text in filter(None, args.raw_solvers.split(";")):
             sname, solver = parse_solver(text)
-            name = f"raw_mjx_{sname}" if text in ("xml", "sound", "fast") else f"raw_mjx {sname}"
+            name = f"raw_mjx_{sname}" if text in walker.NAMED_SOLVERS else f"raw_mjx {sname}"
             e = WalkerEnv(cfg._replace(solver=solver))
             result.setdefault(name, [])
             for b in [int(v) for v in args.raw_batch_sizes.split(",") if v]:

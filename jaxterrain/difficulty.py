@@ -331,7 +331,7 @@ def rollout_distances(heightmaps, key: jax.Array, attempts: int = 20, policy: Op
         if value is not None and (not isinstance(value, int) or value < 1):
             raise ValueError(f"{name} must be an int >= 1 or None, got {value!r}")
     terrains_m, env_config, policy = _resolve(heightmaps, attempts, policy, scale, env_config)
-    fn = _compiled(env_config, attempts, policy, policy_params is not None, slots, bool(smooth_first))
+    fn = _compiled(env_config, attempts, policy, policy_params is not None, slots, smooth_first)
     b = terrains_m.shape[0]
     if chunk is None or chunk >= b:
         return fn(terrains_m, key, policy_params)[0]

@@ -314,7 +314,11 @@ def _kth_bracket(dy2: jax.Array, dx2: jax.Array, d: jax.Array, step: int = _COAR
     bounds = _bracket_bounds(dy2, dx2, d, step, tol)
     if bounds is None:
         return _kth_bisect(dy2, dx2, d)
-    lo, hi, n_iter = bounds
+    return _bisect_all_points(dy2, dx2, *bounds, d)
+
+
+def _bisect_all_points(dy2: jax.Array, dx2: jax.Array, lo: jax.Array, hi: jax.Array, n_iter: int, d: jax.Array):
+    """Steps 3-4 of "bracket" over all 400 points, from the bounds of :func:`_bracket_bounds`. [H, W]."""
     return _bisect_and_snap(_layout(dy2, dx2), lambda t, t2: _count_less(*t, t2),
                             lambda t, t2: _min_at_least(*t, t2), lo, hi, d.astype(jnp.int32), n_iter)
 
@@ -395,7 +399,8 @@ def _kth_tiled(dy2: jax.Array, dx2: jax.Array, d: jax.Array, step: int = _COARSE
     can be its pixels' D-th nearest (:func:`_tile_candidates`), and the D-th smallest over all points is the
     ``(D - inside)``-th over the candidates, exactly; steps 3-4 run over ``cap`` candidates instead of 400 (4.2x
     fewer point-pixel pairs at the defaults), so the result equals "bracket"'s up to float rounding. If a tile
-    has more than ``cap`` candidates the map is redone by "bracket" in a ``while_loop`` that runs 0 or 1 times:
+    has more than ``cap`` candidates the map's steps 3-4 are redone over all points (as "bracket", from the same
+    bounds) in a ``while_loop`` that runs 0 or 1 times:
     under ``vmap`` it runs once for the whole batch if any map overflowed, and not at all otherwise.
     """
     h, w = dy2.shape[0], dx2.shape[0]
@@ -416,7 +421,7 @@ def _kth_tiled(dy2: jax.Array, dx2: jax.Array, d: jax.Array, step: int = _COARSE
     d2 = d2.transpose(0, 2, 1, 3).reshape(h, w)
 
     def redo(carry):  # the inputs are tied to the carry, or XLA hoists the whole fallback out of the loop
-        return False, _kth_bracket(*_tie((dy2, dx2, d), carry), step, tol)
+        return False, _bisect_all_points(*_tie((dy2, dx2, lo, hi), carry), n_iter, d)
 
     return jax.lax.while_loop(lambda carry: carry[0], redo, (overflow, d2))[1]
 

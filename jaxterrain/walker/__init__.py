@@ -9,6 +9,7 @@
 
 from jaxterrain.walker.env import WalkerConfig, WalkerEnv, WalkerState, flat_terrain, sample_heights
 from jaxterrain.walker.model import (
+    NAMED_SOLVERS,
     SOLVER_FAST,
     SOLVER_SOUND,
     SOLVER_XML,
@@ -29,6 +30,7 @@ __all__ = [
     "WalkerState",
     "flat_terrain",
     "sample_heights",
+    "NAMED_SOLVERS",
     "SOLVER_FAST",
     "SOLVER_SOUND",
     "SOLVER_XML",

@@ -55,13 +55,16 @@ SOLVER_XML = SolverOptions("newton", 8, 50, True)
 _SOLVERS = {"newton": mujoco.mjtSolver.mjSOL_NEWTON, "cg": mujoco.mjtSolver.mjSOL_CG}
 
 
+NAMED_SOLVERS = {"sound": SOLVER_SOUND, "fast": SOLVER_FAST, "xml": SOLVER_XML}
+"""The solver options :func:`parse_solver` knows by name."""
+
+
 def parse_solver(text: str) -> SolverOptions:
     """Solver options from text: ``"sound"`` (:data:`SOLVER_SOUND`), ``"fast"`` (:data:`SOLVER_FAST`), ``"xml"``
     (:data:`SOLVER_XML`) or ``"ITERATIONS,LS_ITERATIONS,EULERDAMP"`` for Newton (e.g. ``"4,16,0"``). Raises
     ``ValueError``."""
-    named = {"sound": SOLVER_SOUND, "fast": SOLVER_FAST, "xml": SOLVER_XML}
-    if text in named:
-        return named[text]
+    if text in NAMED_SOLVERS:
+        return NAMED_SOLVERS[text]
     parts = text.split(",")
     try:
         it, ls, ed = (int(v) for v in parts)
