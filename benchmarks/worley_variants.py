@@ -9,7 +9,9 @@ A variant is ``select[:option...]`` with options ``major`` (points on the major 
 ``untied`` (no optimisation barrier in the loops: the pre-fix code, where XLA hoists
 the [B, H, W, 400] distance tensor out of the loop), ``step=K`` (coarse step of "bracket" / "tiled"), ``tol=X``
 (pixels), and for "tiled" ``tile=K`` (tile side) and ``cap=AxB`` (candidate slots per tile as reduced dims,
-``_CAP_GROUPS``; e.g. ``cap=96`` flat).
+``_CAP_GROUPS``; e.g. ``cap=96`` flat), and for "pallas" ``warps=K`` (warps per kernel program), ``topk=K`` (bisect until at most K
+candidates per pixel bracket, then keep their sorted values) and ``pipe=K`` (Triton ``num_stages``).
+``--stages`` also times the prefixes of "tiled" and "pallas" (coarse grid + bounds; + candidate lists).
 For each variant and batch size: ``jit(vmap(render_one))`` over fresh genomes (or ``lax.map`` over chunks of
 ``--chunk`` genomes when > 0), compile time (lower + compile), XLA's temp memory (``memory_analysis``; the ratio
 ``temp/d2`` to one [B, H, W, 400] float32 tensor shows whether the distances are materialised: >= 1 means yes), and
@@ -37,6 +39,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 import common  # noqa: E402
 
 from jaxterrain.generators import get  # noqa: E402
+from jaxterrain.generators import _worley_pallas  # noqa: E402
 from jaxterrain.generators import worley as wm  # noqa: E402
 
 
@@ -44,7 +47,8 @@ from jaxterrain.generators import worley as wm  # noqa: E402
 def variant_settings(variant: str):
     """Parse ``select[:opt...]``; temporarily set the module knobs it names. Yields the select name."""
     select, *opts = variant.split(":")
-    saved = (wm._POINTS_AXIS, wm._tie, dict(wm._KTH), wm._POINT_GROUPS, wm._CAP_GROUPS)
+    saved = (wm._POINTS_AXIS, wm._tie, dict(wm._KTH), wm._POINT_GROUPS, wm._CAP_GROUPS,
+             _worley_pallas.NUM_WARPS, _worley_pallas.TOP_K, _worley_pallas.NUM_STAGES)
     method_kw = {}
     try:
         for o in opts:
@@ -64,6 +68,12 @@ def variant_settings(variant: str):
                 method_kw["tile"] = int(o[5:])
             elif o.startswith("cap="):
                 wm._CAP_GROUPS = tuple(int(v) for v in o[4:].split("x"))
+            elif o.startswith("warps="):
+                _worley_pallas.NUM_WARPS = int(o[6:])
+            elif o.startswith("topk="):
+                _worley_pallas.TOP_K = int(o[5:])
+            elif o.startswith("pipe="):
+                _worley_pallas.NUM_STAGES = int(o[5:])
             else:
                 raise ValueError(f"unknown option {o!r} in variant {variant!r}")
         if method_kw:
@@ -71,7 +81,8 @@ def variant_settings(variant: str):
             wm._KTH[select] = lambda dy2, dx2, d: base(dy2, dx2, d, **method_kw)
         yield select
     finally:
-        wm._POINTS_AXIS, wm._tie, kth, wm._POINT_GROUPS, wm._CAP_GROUPS = saved
+        (wm._POINTS_AXIS, wm._tie, kth, wm._POINT_GROUPS, wm._CAP_GROUPS, _worley_pallas.NUM_WARPS,
+         _worley_pallas.TOP_K, _worley_pallas.NUM_STAGES) = saved
         wm._KTH.clear()
         wm._KTH.update(kth)
 
@@ -124,6 +135,42 @@ def while_body_summary(hlo: str) -> str:
     return "; ".join(out)
 
 
+def stage_fns(select: str, size: int, step: int = wm._COARSE_STEP, tile: int = wm._TILE) -> dict:
+    """Prefixes of "tiled" / "pallas" per genome: the coarse grid and bounds, then the candidate lists too."""
+    pallas = select == "pallas"
+
+    def bounds(g):
+        dy2, dx2 = wm._separable_d2(g, size)
+        d = jnp.round(g[2])
+        coarse = None
+        if pallas:
+            n_points = jnp.sum(jnp.isfinite(dx2[0]), dtype=jnp.int32)
+            coarse = lambda y, x, d: _worley_pallas.kth_all_points(y, x, n_points, d, 2.0 * size, tile)  # noqa
+        lo, hi, _ = wm._bracket_bounds(dy2, dx2, d, step, wm.TOLERANCE, coarse)
+        return dy2, dx2, lo, hi
+
+    def lists(g):
+        dy2, dx2, lo, hi = bounds(g)
+        return wm._tile_lists(dy2, dx2, lo, hi, tile, int(np.prod(wm._CAP_GROUPS)), pallas)
+
+    return {"bounds": lambda g: bounds(g)[2:], "bounds+lists": lists}
+
+
+def time_stages(variant: str, size: int, batch: int, repeats: int) -> list[dict]:
+    """Time the prefixes of :func:`stage_fns` (the rest of the render is the difference to the full row)."""
+    gen = get("worley", size=size)
+    sets = [jax.device_put(gen.sample(k, batch)) for k in jax.random.split(jax.random.PRNGKey(0), 3)]
+    rows = []
+    kw = dict(o.split("=") for o in variant.split(":")[1:] if o.startswith(("step=", "tile=")))
+    with variant_settings(variant) as select:
+        for name, fn in stage_fns(select, size, **{k: int(v) for k, v in kw.items()}).items():
+            compiled = jax.jit(jax.vmap(fn)).lower(sets[0]).compile()
+            t = common.median_time(compiled, sets, repeats=repeats)
+            rows.append({"variant": f"{variant} [{name}]", "batch": batch, "size": size, "time_s": t,
+                         "maps_per_s": batch / t})
+    return rows
+
+
 def time_variant(variant: str, size: int, batch: int, repeats: int, chunk: int, hlo_dir: str | None) -> dict:
     gen = get("worley", size=size)
     keys = jax.random.split(jax.random.PRNGKey(0), 3)
@@ -165,6 +212,8 @@ def main() -> None:
     p.add_argument("--chunk", type=int, default=0, help="> 0: lax.map over chunks of this many genomes")
     p.add_argument("--accuracy-random", type=int, default=10, help="random genomes in the accuracy batch")
     p.add_argument("--skip-accuracy", action="store_true")
+    p.add_argument("--stages", action="store_true",
+                   help="also time the prefixes of tiled / pallas: coarse grid + bounds, then + candidate lists")
     p.add_argument("--hlo-dir", default=None)
     p.add_argument("--out", default=None)
     args = p.parse_args()
@@ -185,6 +234,11 @@ def main() -> None:
             rows.append(r)
             print(common.markdown_table([r], ["variant", "batch", "maps_per_s", "time_s", "compile_s", "temp_GB",
                                               "temp/d2", "loop_bodies", "skipped"]).splitlines()[-1], flush=True)
+            if args.stages and v.split(":")[0] in ("tiled", "pallas") and "skipped" not in r:
+                for st in time_stages(v, args.size, b, args.repeats):
+                    rows.append(st)
+                    print(common.markdown_table([st], ["variant", "batch", "maps_per_s", "time_s"]).splitlines()[-1],
+                          flush=True)
         if not args.skip_accuracy and v.split(":")[0] != "sort":
             a = {"variant": v, **accuracy(v, args.size, args.accuracy_random)}
             acc.append(a)

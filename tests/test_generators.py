@@ -353,7 +353,7 @@ def _worley_reference(genome, size):
     return np.sqrt(np.sort(d2.astype(np.float32), axis=-1)[..., d])
 
 
-@pytest.mark.parametrize("select", ["bisect", "sort", "bracket", "tiled"])
+@pytest.mark.parametrize("select", ["bisect", "sort", "bracket", "tiled", "pallas"])
 def test_worley_exact_against_numpy_sort(select):
     # "bracket" / "tiled" are exact except within TOLERANCE (1e-3 px) of a near-tie between two different distances.
     atol = worley_mod.TOLERANCE if select in ("bracket", "tiled") else 0.0
@@ -372,7 +372,9 @@ def _kth_reference(dy2, dx2, d):
 
 def _check_fast(got_d2, ref_d2, select):
     got, ref = np.sqrt(np.asarray(got_d2, np.float64)), np.sqrt(ref_d2.astype(np.float64))
-    if select == "bisect":
+    if select == "pallas":  # returns the D-th value itself, computed as the reference does: bit for bit
+        np.testing.assert_array_equal(np.asarray(got_d2), ref_d2)
+    elif select == "bisect":
         np.testing.assert_allclose(got, ref, rtol=3e-7, atol=0)
     else:
         err = np.abs(got - ref)
@@ -380,10 +382,10 @@ def _check_fast(got_d2, ref_d2, select):
         assert (err <= 1e-6 * np.maximum(ref, 1.0)).mean() > 0.99  # exact but for near-ties
 
 
-_kth_jit = {s: jax.jit(worley_mod._KTH[s]) for s in ("bisect", "bracket", "tiled")}
+_kth_jit = {s: jax.jit(worley_mod._KTH[s]) for s in ("bisect", "bracket", "tiled", "pallas")}
 
 
-@pytest.mark.parametrize("select", ["bisect", "bracket", "tiled"])
+@pytest.mark.parametrize("select", ["bisect", "bracket", "tiled", "pallas"])
 def test_worley_fast_select_matches_sort_with_ties(select):
     # Point sets built directly (the seeded points are all distinct): duplicated points (D-th value repeated),
     # integer points on the pixel grid (many exact distance ties and zero distances), N = 2 and N = 400, with
@@ -438,11 +440,48 @@ def test_worley_tiled_equals_bracket_and_falls_back_on_overflow(monkeypatch):
     def overflow(g):
         dy2, dx2 = worley_mod._separable_d2(g, SIZE)
         lo, hi, _ = worley_mod._bracket_bounds(dy2, dx2, jnp.round(g[2]))
-        return worley_mod._tile_candidates(dy2, dx2, lo, hi, worley_mod._TILE, 8)[3]
+        return worley_mod._tile_lists(dy2, dx2, lo, hi, worley_mod._TILE, 8)[3]
 
     flags = np.asarray(jax.vmap(overflow)(genomes))
     assert flags.any() and not flags.all(), flags  # a mixed batch: both paths are exercised
     np.testing.assert_array_equal(run("tiled"), bracket)
+
+
+def test_worley_pallas_equals_sort_bit_for_bit(monkeypatch):
+    """"pallas" (Pallas's interpreter on CPU) returns the D-th squared distance itself: equal to "sort" bit for bit,
+    over random genomes, D = 0, D = N / 4, N = 2 and N = 400, in a batch whose dense maps overflow their tile lists
+    at 64 x 64 and are redone by the same kernel over all points; its candidate lists equal the XLA ones."""
+    gen = _gen("worley")
+    rnd = np.asarray(jax.jit(gen.sample, static_argnums=1)(jax.random.PRNGKey(9), 4))
+    genomes = jnp.asarray(np.concatenate([[[3, 400, 100], [7, 3, 0], [11, 400, 0], [5, 2, 0], [8, 60, 15]], rnd]),
+                          jnp.float32)
+
+    def run(select):
+        return np.asarray(jax.jit(jax.vmap(lambda g: worley_mod.worley_distance(g, SIZE, select)))(genomes))
+
+    np.testing.assert_array_equal(run("pallas"), run("sort"))
+
+    def lists(g, pallas):
+        dy2, dx2 = worley_mod._separable_d2(g, SIZE)
+        lo, hi, _ = worley_mod._bracket_bounds(dy2, dx2, jnp.round(g[2]))
+        return worley_mod._tile_lists(dy2, dx2, lo, hi, worley_mod._TILE, 96, pallas)
+
+    xla, ker = (jax.vmap(lambda g, p=p: lists(g, p))(genomes) for p in (False, True))
+    flags = np.asarray(xla[3])
+    assert flags.any() and not flags.all(), flags  # a mixed batch: the fallback and the lists are both exercised
+    for a, b in zip(xla[1:], ker[1:]):  # n_cand, inside, overflow
+        np.testing.assert_array_equal(np.asarray(a), np.asarray(b))
+    used = np.arange(96) < np.minimum(np.asarray(xla[1]), 96)[..., None]
+    np.testing.assert_array_equal(np.asarray(xla[0])[used], np.asarray(ker[0])[used])
+    # With one bisection-free slot the kernel must still be exact (more bisections, then the same selection).
+    monkeypatch.setattr(worley_mod._worley_pallas, "TOP_K", 1)
+    np.testing.assert_array_equal(run("pallas"), run("sort"))
+
+
+def test_worley_auto_select():
+    assert worley_mod.DEFAULT_SELECT == "auto"
+    want = "pallas" if jax.default_backend() == "gpu" else "bracket"
+    assert worley_mod.resolve_select("auto") == want and worley_mod.resolve_select("tiled") == "tiled"
 
 
 def test_worley_bracket_structure():

@@ -109,13 +109,13 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from jaxterrain.generators import register
+from jaxterrain.generators import _worley_pallas, register
 from jaxterrain.generators.base import Generator, spec, vector_generator
 
 MAX_POINTS = 400
 MAX_INDEX = 100
-SELECT_OPTIONS = ("bracket", "tiled", "bisect", "sort")
-DEFAULT_SELECT = "bracket"  # 3.9x "sort" on an H200 (3,956 vs 1,028 maps/s), within 5.1e-4 px of it
+SELECT_OPTIONS = ("auto", "pallas", "bracket", "tiled", "bisect", "sort")
+DEFAULT_SELECT = "auto"  # "pallas" on a GPU (exact; 25x "bracket" on an H200), "bracket" elsewhere
 _ROW_BLOCK = 16  # rows of the map per sort call in the "sort" method (bounds memory: block x size x 400)
 _SORT_OP = "sort"  # or "top_k" (lax.top_k, k = 101): same result, ~6 % slower on an H100
 _COARSE_STEP = 8  # "bracket": pixel spacing of the exact coarse grid
@@ -248,7 +248,7 @@ def bracket_iterations(size: int = 256, step: int = _COARSE_STEP, tol: float = T
 
 
 def _bracket_bounds(dy2: jax.Array, dx2: jax.Array, d: jax.Array, step: int = _COARSE_STEP,
-                    tol: float = TOLERANCE):
+                    tol: float = TOLERANCE, coarse=None):
     """Steps 1-2 of "bracket": per-pixel ``L <= F_D <= U`` (pixels, ``[H, W]`` each, widened by ``_MARGIN``) from
     the exact ``F_D`` on the coarse grid, and the bisection steps to width ``tol``; None if the map is too small."""
     h, w = dy2.shape[0], dx2.shape[0]
@@ -256,7 +256,7 @@ def _bracket_bounds(dy2: jax.Array, dx2: jax.Array, d: jax.Array, step: int = _C
     gx, kx, ax, bx = _corner_setup(w, step)
     if len(gy) < 2 or len(gx) < 2:
         return None
-    fc = jnp.sqrt(_kth_bisect(dy2[gy], dx2[gx], d))  # [ny, nx] exact coarse F_D
+    fc = jnp.sqrt((coarse or _kth_bisect)(dy2[gy], dx2[gx], d))  # [ny, nx] exact coarse F_D
     lo = jnp.full((h, w), -jnp.inf)
     hi = jnp.full((h, w), jnp.inf)
     for cy, oy in ((0, ay), (1, by)):
@@ -330,8 +330,9 @@ _CAP_GROUPS = (3, 32)  # "tiled": 96 candidate slots per tile, as [3, 32] (reduc
 # (falling with N); 72 over 400 random genomes. More than 96 sends the map (and its batch) through "bracket" once.
 
 
-def _tile_candidates(dy2: jax.Array, dx2: jax.Array, lo: jax.Array, hi: jax.Array, tile: int, cap: int):
-    """Per-tile candidate lists of the "tiled" method.
+def _tile_lists(dy2: jax.Array, dx2: jax.Array, lo: jax.Array, hi: jax.Array, tile: int, cap: int,
+                pallas: bool = False):
+    """Per-tile candidate lists of the "tiled" method, as point indices.
 
     A tile's bracket is ``[Lt, Ut]`` = [min L, max U] over its pixels. A point whose squared distance to every
     pixel of the tile is < ``Lt^2`` is nearer than ``F_D`` everywhere in it ("inside", counted); one whose squared
@@ -339,9 +340,10 @@ def _tile_candidates(dy2: jax.Array, dx2: jax.Array, lo: jax.Array, hi: jax.Arra
     extremes over the tile are exact: ``max_(i, j) (dy2[i] + dx2[j]) = max dy2 + max dx2`` in float too, since a
     float sum is monotonic in each term.
 
-    Returns ``rows [ty, tx, tile, cap]``, ``cols [ty, tx, tile, cap]`` (the separable terms of the candidates,
-    +inf in unused slots), ``inside [ty, tx]`` int32 and ``overflow`` (a scalar bool: some tile had more than
-    ``cap`` candidates, so the lists are incomplete).
+    Returns ``idx [ty, tx, cap]`` int32 (candidate ``k`` of a tile in slot ``k``, in point order; 0 in unused
+    slots), ``n_cand [ty, tx]`` int32 (may exceed ``cap``), ``inside [ty, tx]`` int32 and ``overflow`` (a scalar
+    bool: some tile had more than ``cap`` candidates, so the lists are incomplete). With ``pallas`` the lists are
+    built by a kernel (``_worley_pallas.tile_lists``; unused slots then hold anything).
     """
     p = dy2.shape[-1]
     ty, tx = dy2.shape[0] // tile, dx2.shape[0] // tile
@@ -349,6 +351,10 @@ def _tile_candidates(dy2: jax.Array, dx2: jax.Array, lo: jax.Array, hi: jax.Arra
     c = dx2.reshape(tx, tile, p)
     lt = lo.reshape(ty, tile, tx, tile).min(axis=(1, 3))
     ut = hi.reshape(ty, tile, tx, tile).max(axis=(1, 3))
+    if pallas:
+        idx, n_cand, inside = _worley_pallas.tile_lists(r.min(axis=1), r.max(axis=1), c.min(axis=1), c.max(axis=1),
+                                                        lt * lt, ut * ut, cap)
+        return idx, n_cand, inside, jnp.any(n_cand > cap)
     dmin2 = r.min(axis=1)[:, None, :] + c.min(axis=1)[None, :, :]  # [ty, tx, P]
     dmax2 = r.max(axis=1)[:, None, :] + c.max(axis=1)[None, :, :]
     inside = dmax2 < (lt * lt)[..., None]
@@ -359,13 +365,22 @@ def _tile_candidates(dy2: jax.Array, dx2: jax.Array, lo: jax.Array, hi: jax.Arra
     idx = jnp.zeros((ty, tx, cap), jnp.int32).at[
         jnp.arange(ty)[:, None, None], jnp.arange(tx)[None, :, None], slot].set(
         jnp.broadcast_to(jnp.arange(p, dtype=jnp.int32), slot.shape), mode="drop")  # [ty, tx, cap]
+    return idx, n_cand, jnp.sum(inside, axis=-1, dtype=jnp.int32), jnp.any(n_cand > cap)
+
+
+def _tile_terms(dy2: jax.Array, dx2: jax.Array, idx: jax.Array, n_cand: jax.Array, tile: int):
+    """The separable terms of each tile's candidates: ``rows``, ``cols`` ``[ty, tx, tile, cap]`` (+inf in unused
+    slots), gathered from ``dy2`` [H, P], ``dx2`` [W, P] by the lists of :func:`_tile_lists`."""
+    ty, tx, cap = idx.shape
+    r = dy2.reshape(ty, tile, -1)
+    c = dx2.reshape(tx, tile, -1)
     valid = (jnp.arange(cap) < n_cand[..., None])[:, :, None, :]
     iy = jnp.arange(ty)[:, None, None, None]
     ix = jnp.arange(tx)[None, :, None, None]
     k = jnp.arange(tile)[None, None, :, None]
     rows = jnp.where(valid, r[iy, k, idx[:, :, None, :]], jnp.inf)
     cols = jnp.where(valid, c[ix, k, idx[:, :, None, :]], jnp.inf)
-    return rows, cols, jnp.sum(inside, axis=-1, dtype=jnp.int32), jnp.any(n_cand > cap)
+    return rows, cols
 
 
 def _tile_d2(terms):
@@ -391,39 +406,60 @@ def _tile_min_at_least(terms, t2):
 
 
 def _kth_tiled(dy2: jax.Array, dx2: jax.Array, d: jax.Array, step: int = _COARSE_STEP, tol: float = TOLERANCE,
-               tile: int = _TILE) -> jax.Array:
+               tile: int = _TILE, pallas: bool = False) -> jax.Array:
     """"bracket" with per-tile candidate lists: the same bounds, bisection and snap, over at most ``cap`` points
     (``cap`` = 96, the product of ``_CAP_GROUPS``).
 
     Steps 1-2 of "bracket" give every pixel ``[L, U]``. Each ``tile x tile`` tile then keeps only the points that
-    can be its pixels' D-th nearest (:func:`_tile_candidates`), and the D-th smallest over all points is the
+    can be its pixels' D-th nearest (:func:`_tile_lists`), and the D-th smallest over all points is the
     ``(D - inside)``-th over the candidates, exactly; steps 3-4 run over ``cap`` candidates instead of 400 (4.2x
-    fewer point-pixel pairs at the defaults), so the result equals "bracket"'s up to float rounding. If a tile
-    has more than ``cap`` candidates the map's steps 3-4 are redone over all points (as "bracket", from the same
-    bounds) in a ``while_loop`` that runs 0 or 1 times:
+    fewer point-pixel pairs at the defaults), so the result equals "bracket"'s up to float rounding. With
+    ``pallas`` steps 3-4 are one Pallas kernel that loops over each tile's own candidates only
+    (``_worley_pallas``). If a tile has more than ``cap`` candidates the map's steps 3-4 are redone over all
+    points (as "bracket", from the same bounds) in a ``while_loop`` that runs 0 or 1 times:
     under ``vmap`` it runs once for the whole batch if any map overflowed, and not at all otherwise.
     """
     h, w = dy2.shape[0], dx2.shape[0]
     cap = int(np.prod(_CAP_GROUPS))
-    bounds = _bracket_bounds(dy2, dx2, d, step, tol)
+    coarse = None
+    if pallas:  # the exact coarse grid by the same kernel, over all N points (same values as "bisect")
+        n_points = jnp.sum(jnp.isfinite(dx2[0]), dtype=jnp.int32)
+        coarse = lambda y, x, d: _worley_pallas.kth_all_points(y, x, n_points, d, float(h + w), tile)  # noqa: E731
+    bounds = _bracket_bounds(dy2, dx2, d, step, tol, coarse)
     if bounds is None or h % tile or w % tile:
         return _kth_bracket(dy2, dx2, d, step, tol)
     lo, hi, n_iter = bounds
     d = d.astype(jnp.int32)
-    rows, cols, inside, overflow = _tile_candidates(dy2, dx2, lo, hi, tile, cap)
-    ty, tx = h // tile, w // tile
+    idx, n_cand, inside, overflow = _tile_lists(dy2, dx2, lo, hi, tile, cap, pallas)
+    rank = d - inside  # the target rank among a tile's candidates (>= 0: inside < D + 1)
+    if pallas:
+        d2 = _worley_pallas.bisect_and_snap(dy2, dx2, idx, jnp.minimum(n_cand, cap), rank, lo, hi, tile)
+    else:
+        ty, tx = h // tile, w // tile
 
-    def tiles(x):  # [H, W] -> [ty, tx, tile, tile]
-        return x.reshape(ty, tile, tx, tile).transpose(0, 2, 1, 3)
+        def tiles(x):  # [H, W] -> [ty, tx, tile, tile]
+            return x.reshape(ty, tile, tx, tile).transpose(0, 2, 1, 3)
 
-    rank = (d - inside)[:, :, None, None]  # the target rank among the candidates (>= 0: inside < D + 1)
-    d2 = _bisect_and_snap((rows, cols), _tile_count_less, _tile_min_at_least, tiles(lo), tiles(hi), rank, n_iter)
-    d2 = d2.transpose(0, 2, 1, 3).reshape(h, w)
+        terms = _tile_terms(dy2, dx2, idx, n_cand, tile)
+        d2 = _bisect_and_snap(terms, _tile_count_less, _tile_min_at_least, tiles(lo), tiles(hi),
+                              rank[:, :, None, None], n_iter)
+        d2 = d2.transpose(0, 2, 1, 3).reshape(h, w)
 
     def redo(carry):  # the inputs are tied to the carry, or XLA hoists the whole fallback out of the loop
-        return False, _bisect_all_points(*_tie((dy2, dx2, lo, hi), carry), n_iter, d)
+        dy2_, dx2_, lo_, hi_ = _tie((dy2, dx2, lo, hi), carry)
+        if not pallas:
+            return False, _bisect_all_points(dy2_, dx2_, lo_, hi_, n_iter, d)
+        p = dy2.shape[-1]  # every point is a candidate of every tile (masked ones are at +inf)
+        every = jnp.broadcast_to(jnp.arange(p, dtype=jnp.int32), (h // tile, w // tile, p))
+        full = jnp.full((h // tile, w // tile), p, jnp.int32)
+        return False, _worley_pallas.bisect_and_snap(dy2_, dx2_, every, full, full * 0 + d, lo_, hi_, tile)
 
     return jax.lax.while_loop(lambda carry: carry[0], redo, (overflow, d2))[1]
+
+
+def _kth_pallas(dy2: jax.Array, dx2: jax.Array, d: jax.Array, **kw) -> jax.Array:
+    """"tiled" with steps 3-4 as a Pallas kernel (Triton on a GPU; Pallas's interpreter elsewhere, slow)."""
+    return _kth_tiled(dy2, dx2, d, pallas=True, **kw)
 
 
 def _kth_sort(dy2: jax.Array, dx2: jax.Array, d: jax.Array) -> jax.Array:
@@ -445,7 +481,16 @@ def _kth_sort(dy2: jax.Array, dx2: jax.Array, d: jax.Array) -> jax.Array:
     return jax.lax.map(rows, dy2p).reshape(-1, w)[:h]
 
 
-_KTH = {"bracket": _kth_bracket, "tiled": _kth_tiled, "bisect": _kth_bisect, "sort": _kth_sort}
+_KTH = {"pallas": _kth_pallas, "bracket": _kth_bracket, "tiled": _kth_tiled, "bisect": _kth_bisect,
+        "sort": _kth_sort}
+
+
+def resolve_select(select: str) -> str:
+    """``"auto"`` -> ``"pallas"`` on a GPU (a Triton kernel), ``"bracket"`` elsewhere (Pallas only interprets
+    there: 2.2 maps/s against 7.0 on the 2-core CPU); any other option unchanged."""
+    if select != "auto":
+        return select
+    return "pallas" if jax.default_backend() == "gpu" else "bracket"
 
 
 def worley_distance(genome: jax.Array, size: int = 256, select: str = DEFAULT_SELECT) -> jax.Array:
@@ -453,7 +498,7 @@ def worley_distance(genome: jax.Array, size: int = 256, select: str = DEFAULT_SE
     genome = jnp.asarray(genome, jnp.float32)
     dy2, dx2 = _separable_d2(genome, size)
     d = jnp.round(genome[2])
-    return jnp.sqrt(_KTH[select](dy2, dx2, d))
+    return jnp.sqrt(_KTH[resolve_select(select)](dy2, dx2, d))
 
 
 def render_worley(genome: jax.Array, size: int = 256, select: str = DEFAULT_SELECT) -> jax.Array:
@@ -487,9 +532,10 @@ def check_d(genomes: np.ndarray) -> None:
 def worley(size: int = 256, select: str = DEFAULT_SELECT) -> Generator:
     """Worley noise generator producing ``[B, size, size]`` float32 maps in [0, 1]; see the module docstring.
 
-    ``select``: how the D-th smallest distance is found, see the module docstring: ``"bracket"`` (default;
-    |error| < ``TOLERANCE`` = 1e-3 px, ~2x fewer passes than "bisect"), ``"tiled"`` (the same values over per-tile
-    candidate lists), ``"sort"`` (exact, 3.9x slower on an H200) or ``"bisect"`` (exact).
+    ``select``: how the D-th smallest distance is found, see the module docstring: ``"auto"`` (default:
+    ``"pallas"`` on a GPU, ``"bracket"`` elsewhere), ``"pallas"`` (exact; per-tile candidate lists in a Pallas
+    kernel), ``"bracket"`` (|error| < ``TOLERANCE`` = 1e-3 px), ``"tiled"`` (the same values as "bracket" over
+    per-tile candidate lists), ``"sort"`` (exact, the reference) or ``"bisect"`` (exact).
     """
     size = int(size)
     if size < 1:
