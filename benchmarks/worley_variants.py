@@ -9,8 +9,9 @@ A variant is ``select[:option...]`` with options ``major`` (points on the major 
 ``untied`` (no optimisation barrier in the loops: the pre-fix code, where XLA hoists
 the [B, H, W, 400] distance tensor out of the loop), ``step=K`` (coarse step of "bracket" / "tiled"), ``tol=X``
 (pixels), and for "tiled" ``tile=K`` (tile side) and ``cap=AxB`` (candidate slots per tile as reduced dims,
-``_CAP_GROUPS``; e.g. ``cap=96`` flat), and for "pallas" ``warps=K`` (warps per kernel program), ``topk=K`` (bisect until at most K
-candidates per pixel bracket, then keep their sorted values) and ``pipe=K`` (Triton ``num_stages``).
+``_CAP_GROUPS``; e.g. ``cap=96`` flat), and for "pallas" ``warps=K`` (warps per kernel program), ``topk=K``
+(bisect until at most K candidates per pixel bracket, then keep their sorted values) and ``pipe=K`` (Triton
+``num_stages``).
 ``--stages`` also times the prefixes of "tiled" and "pallas" (coarse grid + bounds; + candidate lists).
 For each variant and batch size: ``jit(vmap(render_one))`` over fresh genomes (or ``lax.map`` over chunks of
 ``--chunk`` genomes when > 0), compile time (lower + compile), XLA's temp memory (``memory_analysis``; the ratio

@@ -118,8 +118,9 @@ def kth_all_points(dy2: jax.Array, dx2: jax.Array, n_points: jax.Array, d: jax.A
     """Exact D-th smallest squared distance per pixel over the first ``n_points`` points, ``[H, W]`` float32.
 
     The kernel above with every pixel's bracket ``[0, bound]`` (``bound`` in pixels, beyond any distance to a
-    valid point) and every tile's list the first ``n_points`` points (``dy2`` [H, P], ``dx2`` [W, P]; the map is padded to whole tiles). Used
-    for the coarse grid of "pallas", where it replaces the 31-pass bit search over all 400 points.
+    valid point) and every tile's list the first ``n_points`` points (``dy2`` [H, P], ``dx2`` [W, P]; the map is
+    padded to whole tiles). Used for the coarse grid of "pallas", where it replaces the 31-pass bit search over
+    all 400 points.
     """
     h, w = dy2.shape[0], dx2.shape[0]
     hp, wp = -(-h // tile) * tile, -(-w // tile) * tile
