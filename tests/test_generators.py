@@ -478,10 +478,13 @@ def test_worley_pallas_equals_sort_bit_for_bit(monkeypatch):
     np.testing.assert_array_equal(run("pallas"), run("sort"))
 
 
-def test_worley_auto_select():
+def test_worley_auto_select_is_bracket_off_gpu():
     assert worley_mod.DEFAULT_SELECT == "auto"
-    want = "pallas" if jax.default_backend() == "gpu" else "bracket"
-    assert worley_mod.resolve_select("auto") == want and worley_mod.resolve_select("tiled") == "tiled"
+    genomes = jnp.asarray([[3, 400, 100], [7, 30, 5]], jnp.float32)
+    cpu = jax.devices("cpu")[0]
+    got = {s: np.asarray(jax.jit(jax.vmap(lambda g, s=s: worley_mod.worley_distance(g, SIZE, s)))(
+        jax.device_put(genomes, cpu))) for s in ("auto", "bracket")}
+    np.testing.assert_array_equal(got["auto"], got["bracket"])
 
 
 def test_worley_bracket_structure():

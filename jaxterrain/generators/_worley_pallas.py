@@ -7,7 +7,7 @@ a tile with 12 candidates costs 12 iterations even when another tile has 80 (the
 separable terms, the same bisection midpoints and the same snap threshold), so the two agree bit for bit where both
 are exact in float (checked on CPU, where the kernel runs in Pallas's interpreter).
 
-On a GPU the kernel is lowered through Triton; elsewhere it runs in Pallas's interpreter (slow: for tests).
+On a CUDA GPU the kernels are lowered through Triton; elsewhere they run in Pallas's interpreter (slow: for tests).
 """
 
 from __future__ import annotations
@@ -90,6 +90,23 @@ def _kernel(dy2t_ref, dx2t_ref, idx_ref, n_ref, rank_ref, lo_ref, hi_ref, out_re
     out_ref[rs, cs] = out
 
 
+def _call(kernel, out_shape, name: str, grid: int, num_warps: int, *args):
+    """``pallas_call`` lowered through Triton on a CUDA device and run by Pallas's interpreter on any other,
+    chosen when the computation is lowered for its platform (``lax.platform_dependent``), so one jitted function
+    works on both, whatever the default backend."""
+
+    def call(interpret: bool):
+        params = None
+        if not interpret:
+            from jax.experimental.pallas import triton as plgpu
+
+            params = plgpu.CompilerParams(num_warps=num_warps, num_stages=NUM_STAGES)
+        return pl.pallas_call(kernel, out_shape=out_shape, grid=(grid,), interpret=interpret,
+                              compiler_params=params, name=name)
+
+    return jax.lax.platform_dependent(*args, cuda=call(False), default=call(True))
+
+
 def bisect_and_snap(dy2: jax.Array, dx2: jax.Array, idx: jax.Array, n_cand: jax.Array, rank: jax.Array,
                     lo: jax.Array, hi: jax.Array, tile: int, max_iter: int = MAX_ITER) -> jax.Array:
     """Squared ``F_D`` per pixel, ``[H, W]`` float32, over per-tile candidate lists (one map; vmap for a batch).
@@ -101,16 +118,10 @@ def bisect_and_snap(dy2: jax.Array, dx2: jax.Array, idx: jax.Array, n_cand: jax.
     h, w = dy2.shape[0], dx2.shape[0]
     ty, tx, cap = idx.shape
     kernel = functools.partial(_kernel, tile=tile, n_tx=tx, max_iter=max_iter, top_k=TOP_K)
-    on_gpu = jax.default_backend() == "gpu"
-    params = None
-    if on_gpu:
-        from jax.experimental.pallas import triton as plgpu
-
-        params = plgpu.CompilerParams(num_warps=NUM_WARPS, num_stages=NUM_STAGES)
-    call = pl.pallas_call(kernel, out_shape=jax.ShapeDtypeStruct((h, w), jnp.float32), grid=(ty * tx,),
-                          interpret=not on_gpu, compiler_params=params, name="worley_tiles")
-    return call(dy2.T, dx2.T, idx.reshape(ty * tx, cap), n_cand.reshape(-1), rank.reshape(-1).astype(jnp.int32),
-                lo.astype(jnp.float32), hi.astype(jnp.float32))
+    out_shape = jax.ShapeDtypeStruct((h, w), jnp.float32)
+    return _call(kernel, out_shape, "worley_tiles", ty * tx, NUM_WARPS, dy2.T, dx2.T, idx.reshape(ty * tx, cap),
+                 n_cand.reshape(-1), rank.reshape(-1).astype(jnp.int32), lo.astype(jnp.float32),
+                 hi.astype(jnp.float32))
 
 
 def kth_all_points(dy2: jax.Array, dx2: jax.Array, n_points: jax.Array, d: jax.Array, bound: float,
@@ -172,15 +183,8 @@ def tile_lists(rmin: jax.Array, rmax: jax.Array, cmin: jax.Array, cmax: jax.Arra
     pad = ((0, 0), (0, -p % LIST_CHUNK))  # padded points: +inf, neither inside nor candidates
     rmin, rmax, cmin, cmax = (jnp.pad(a, pad, constant_values=jnp.inf) for a in (rmin, rmax, cmin, cmax))
     kernel = functools.partial(_lists_kernel, n_tx=tx, cap=cap, chunk=LIST_CHUNK)
-    on_gpu = jax.default_backend() == "gpu"
-    params = None
-    if on_gpu:
-        from jax.experimental.pallas import triton as plgpu
-
-        params = plgpu.CompilerParams(num_warps=1, num_stages=1)
     shapes = (jax.ShapeDtypeStruct((ty * tx, cap + 1), jnp.int32), jax.ShapeDtypeStruct((ty * tx,), jnp.int32),
               jax.ShapeDtypeStruct((ty * tx,), jnp.int32))
-    call = pl.pallas_call(kernel, out_shape=shapes, grid=(ty * tx,), interpret=not on_gpu, compiler_params=params,
-                          name="worley_lists")
-    idx, n_cand, inside = call(rmin, rmax, cmin, cmax, lt2.reshape(-1), ut2.reshape(-1))
+    idx, n_cand, inside = _call(kernel, shapes, "worley_lists", ty * tx, 1, rmin, rmax, cmin, cmax,
+                                lt2.reshape(-1), ut2.reshape(-1))
     return idx[:, :cap].reshape(ty, tx, cap), n_cand.reshape(ty, tx), inside.reshape(ty, tx)
