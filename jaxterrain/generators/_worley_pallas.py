@@ -1,13 +1,18 @@
-"""Steps 3-4 of Worley's "tiled" selection as one Pallas kernel (``select="pallas"``, see ``worley.py``).
+"""Worley's ``select="pallas"`` (see ``worley.py``): two Pallas kernels over per-tile candidate lists.
 
-One kernel program per ``tile x tile`` tile of one map. It holds the tile's pixels in registers and loops over
-that tile's own candidate points only: the loop bound is the tile's candidate count, not the list's capacity, so
-a tile with 12 candidates costs 12 iterations even when another tile has 80 (the XLA version pays the capacity,
-96, everywhere). The arithmetic is the XLA version's, operation for operation (``d2 = dy2 + dx2`` from the same
-separable terms, the same bisection midpoints and the same snap threshold), so the two agree bit for bit where both
-are exact in float (checked on CPU, where the kernel runs in Pallas's interpreter).
+* :func:`select_kth`, the selection. One program per ``tile x tile`` tile of one map holds the tile's pixels
+  in registers and loops over that tile's own candidates only: the loop bound is the tile's candidate count, not
+  the list's capacity, so a tile with 12 candidates costs 12 iterations even when another has 80 (the XLA
+  "tiled" pays the capacity, 96, everywhere). It counts ``c_lo = count(d2 < L^2)`` and ``c_hi = count(d2 < U^2)``,
+  bisects the whole tile until no pixel has more than ``TOP_K`` candidates in its bracket, then keeps each pixel's
+  ``TOP_K`` smallest ``d2 >= L^2`` in sorted registers and returns element ``rank - c_lo``: one of the points'
+  squared distances itself, computed as ``dy2 + dx2`` from the same separable terms as "sort", so the two agree
+  bit for bit.
+* :func:`kth_all_points`, the same kernel over all points with the bracket [0, bound]: the exact coarse grid.
+* :func:`tile_lists`, the candidate lists (the same values as ``worley._tile_lists``'s XLA version).
 
 On a CUDA GPU the kernels are lowered through Triton; elsewhere they run in Pallas's interpreter (slow: for tests).
+The choice is made when the computation is lowered (``lax.platform_dependent``), not by the default backend.
 """
 
 from __future__ import annotations
@@ -107,7 +112,7 @@ def _call(kernel, out_shape, name: str, grid: int, num_warps: int, *args):
     return jax.lax.platform_dependent(*args, cuda=call(False), default=call(True))
 
 
-def bisect_and_snap(dy2: jax.Array, dx2: jax.Array, idx: jax.Array, n_cand: jax.Array, rank: jax.Array,
+def select_kth(dy2: jax.Array, dx2: jax.Array, idx: jax.Array, n_cand: jax.Array, rank: jax.Array,
                     lo: jax.Array, hi: jax.Array, tile: int, max_iter: int = MAX_ITER) -> jax.Array:
     """Squared ``F_D`` per pixel, ``[H, W]`` float32, over per-tile candidate lists (one map; vmap for a batch).
 
@@ -143,7 +148,7 @@ def kth_all_points(dy2: jax.Array, dx2: jax.Array, n_points: jax.Array, d: jax.A
     rank = jnp.full((ty, tx), d, jnp.int32)
     lo = jnp.zeros((hp, wp), jnp.float32)
     hi = jnp.full((hp, wp), bound, jnp.float32)
-    return bisect_and_snap(dy2, dx2, every, n, rank, lo, hi, tile)[:h, :w]
+    return select_kth(dy2, dx2, every, n, rank, lo, hi, tile)[:h, :w]
 
 
 LIST_CHUNK = 32  # points per loop iteration of the list kernel

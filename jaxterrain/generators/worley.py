@@ -23,7 +23,25 @@ Rendering (``render_one(genome[3]) -> [size, size]`` float32 in [0, 1]):
 * Distances are separable: ``d2[i, j, p] = (i - y_p)^2 + (j - x_p)^2``, so the ``[size, 400]`` row and column terms
   are computed once and the full ``[size, size, 400]`` tensor is never stored.
 
-Selection of the D-th smallest, ``select`` option of the factory (``DEFAULT_SELECT`` = ``"bracket"``):
+Selection of the D-th smallest, ``select`` option of the factory. ``DEFAULT_SELECT`` is ``"auto"``: ``"pallas"``
+where the computation is lowered for a CUDA GPU and ``"bracket"`` on any other platform (``lax.platform_dependent``).
+So a CPU map can differ from a GPU map of the same genome by less than ``TOLERANCE``; on one backend the same genome
+always gives the same map, bit for bit.
+
+* ``"pallas"`` (the default on a GPU; exact): the "tiled" method below with its three stages as Pallas kernels
+  (``_worley_pallas``), each program one 8 x 8 tile in registers. (1) The coarse grid by the selection kernel over
+  every tile's first N points with the bracket [0, 2 x size]. (2) The candidate lists by a list kernel. (3) The
+  selection kernel over the tile's own candidates, whose loops run to that tile's candidate count (mean 16-40,
+  max 83, at 256 x 256), not to a capacity. It first counts ``c_lo = count(d2 < L^2)`` and
+  ``c_hi = count(d2 < U^2)``. Then it bisects the whole tile until no pixel has more than ``TOP_K`` = 4
+  candidates in its bracket, about 2-4 steps where a 1-candidate bracket took 7-10, since a tile waits for its
+  slowest pixel. A last pass keeps each pixel's 4 smallest ``d2 >= L^2`` in sorted registers; exactly ``c_lo``
+  values lie below, so ``F_D^2`` is element ``rank - c_lo``. The result is a point's squared distance itself,
+  equal to "sort" bit for bit. This holds on the CPU (Pallas's interpreter), with ties, duplicate points and the
+  overflow fallback; on an H200 the difference was 0 on 16 test maps.
+  H200, 2026-11-21, commit 4a588d5: 110,217 maps/s at B = 4096 (108,769 in ``benchmarks/generators.py``), 28x
+  "bracket" (3,924) in the same run. On the 2-core CPU Pallas only interprets: 2.2 maps/s, against "bracket" 7.0
+  and "tiled" 15.
 
 * ``"sort"`` (the exact reference): materialise ``d2`` block by block (``_ROW_BLOCK`` = 16 rows, ``lax.map``)
   and take element ``D`` of ``jnp.sort(d2)[..., :101]`` (a one-hot sum, no gather). Exact. Memory:
@@ -33,7 +51,7 @@ Selection of the D-th smallest, ``select`` option of the factory (``DEFAULT_SELE
   ``count(d2 < t) <= D``; non-negative floats order like their int32 bit patterns, so ``t`` is found exactly by
   setting its 31 bits greedily from the top, one ``count`` reduction over the 400 points per bit. Exact (same
   value as "sort" up to the last bit of a squared distance, where XLA may fuse a multiply-add differently).
-* ``"bracket"`` (default): ``F_D`` is 1-Lipschitz in the pixel position, so an exact coarse grid brackets every pixel:
+* ``"bracket"`` (the default off a GPU): ``F_D`` is 1-Lipschitz in the pixel position, so an exact coarse grid brackets every pixel:
   (1) "bisect" on every ``_COARSE_STEP`` = 8th pixel (33 x 33 at 256: 1/60 of the pixels, 31 counts);
   (2) per pixel ``L = max_c(F_c - |p - c|)``, ``U = min_c(F_c + |p - c|)`` over the 4 corners of its coarse
   cell (width <= 2 x 4 sqrt 2 = 11.3 px, ~3 px typical), +-``_MARGIN`` = 2e-3 px for float rounding; (3)
@@ -49,9 +67,11 @@ Selection of the D-th smallest, ``select`` option of the factory (``DEFAULT_SELE
   then keeps only the points that can be the D-th nearest of one of its pixels (at most 96 slots, ``_CAP_GROUPS``;
   the rest are counted or dropped exactly, see the end of this docstring), and steps 3-4 run over those: 4.2x
   fewer point-pixel pairs. Same values as "bracket" (bit for bit in the tests). A tile with more than 96
-  candidates (none seen at 256 x 256, max 82) sends its batch through "bracket" once, so the result never
-  depends on the cap. On the 2-core CPU (256 x 256, B = 4, same run): "tiled" 9.9 maps/s, "bracket" 5.8 (1.7x).
-  Not yet timed on a GPU, so not the default.
+  candidates (none seen at 256 x 256, max 83) sends its batch through "bracket" once, so the result never
+  depends on the cap ("pallas" redoes it by its kernel over all points instead). On the 2-core CPU (256 x 256,
+  B = 4, same run): "tiled" 9.9 maps/s, "bracket" 5.8 (1.7x). H200: 6,592 maps/s at B = 1024, against "bracket"
+  3,916 (1.7x) and "pallas" 55,949 (its first version) in one session: XLA pays the 96 slots everywhere and
+  materialises the gathered terms (9.3 GB at B = 1024).
 
 Loop structure (all count-based methods): each trip is ONE fused XLA reduction over the points,
 ``sum_p((dy2[i, p] + dx2[j, p]) < t[i, j])`` (or an int32 ``min_p`` over the float bit patterns for the snap), whose
@@ -89,13 +109,13 @@ untied ``"bisect"`` ~120 maps/s with a ~70 s compile. On the shared 2-core CPU (
 rewriter off: "bisect" 16, "bracket" 30). ``benchmarks/worley_variants.py`` times the variants on any device.
 Measured with the fused loops, one H200, 2026-11-21, commit 950a827 (``worley_variants.py --variants sort bracket
 bracket:major --batch 256 1024``): "sort" 1,028 maps/s, "bracket" 3,956 maps/s at B = 1024 (3.85x), max |difference|
-5.1e-4 px (3.9e-6 on the [0, 1] map), so "bracket" is the default.
+5.1e-4 px (3.9e-6 on the [0, 1] map), so "bracket" was the default until "pallas".
 Ceiling: at ~3e13 simple ops/s (H100 FP32 lanes) "bracket" is ~20,000 maps/s if compute-bound; XLA's generic
 reduction emitter reloads ``dy2`` and ``dx2`` from L1 for every pair, so expect a few thousand. The 100,000 maps/s
-target (~10 ops per pair in total) needs fewer pairs, i.e. a hand-written kernel with per-tile candidate lists
-(only points whose distance range over the tile meets the tile's bracket; ~60 of 400 at N = 400, D = 100) and
-register-blocked pixels; with shapes static across a vmapped batch the list length has to be capped, and an
-overflow needs a fallback. Exactness of such a list: with a tile's bracket ``[Lt, Ut]`` (min of ``L``, max of ``U``
+target needed fewer pairs: "pallas", per-tile candidate lists in a hand-written kernel (only points whose distance
+range over the tile meets the tile's bracket; 16-40 of 400 on average) with register-blocked pixels. Where the
+time goes in "pallas" (H200, B = 4096, ``worley_variants.py --stages``): points, coarse grid and brackets 28 %,
+lists 28 %, selection 44 %. Exactness of such a list: with a tile's bracket ``[Lt, Ut]`` (min of ``L``, max of ``U``
 over its pixels), a point farther than ``Ut`` from the whole tile is never among the first D + 1, and a point
 nearer than ``Lt`` to all of it is always among the first D; so ``F_D`` is the ``(D - inside)``-th smallest over the
 remaining candidates, exactly. The cap can be checked offline once and for all: the genome space is finite (101
@@ -433,7 +453,7 @@ def _kth_tiled(dy2: jax.Array, dx2: jax.Array, d: jax.Array, step: int = _COARSE
     idx, n_cand, inside, overflow = _tile_lists(dy2, dx2, lo, hi, tile, cap, pallas)
     rank = d - inside  # the target rank among a tile's candidates (>= 0: inside < D + 1)
     if pallas:
-        d2 = _worley_pallas.bisect_and_snap(dy2, dx2, idx, jnp.minimum(n_cand, cap), rank, lo, hi, tile)
+        d2 = _worley_pallas.select_kth(dy2, dx2, idx, jnp.minimum(n_cand, cap), rank, lo, hi, tile)
     else:
         ty, tx = h // tile, w // tile
 
@@ -449,10 +469,10 @@ def _kth_tiled(dy2: jax.Array, dx2: jax.Array, d: jax.Array, step: int = _COARSE
         dy2_, dx2_, lo_, hi_ = _tie((dy2, dx2, lo, hi), carry)
         if not pallas:
             return False, _bisect_all_points(dy2_, dx2_, lo_, hi_, n_iter, d)
-        p = dy2.shape[-1]  # every point is a candidate of every tile (masked ones are at +inf)
-        every = jnp.broadcast_to(jnp.arange(p, dtype=jnp.int32), (h // tile, w // tile, p))
-        full = jnp.full((h // tile, w // tile), p, jnp.int32)
-        return False, _worley_pallas.bisect_and_snap(dy2_, dx2_, every, full, full * 0 + d, lo_, hi_, tile)
+        p, tiles = dy2.shape[-1], (h // tile, w // tile)  # every point is a candidate of every tile (masked: +inf)
+        every = jnp.broadcast_to(jnp.arange(p, dtype=jnp.int32), tiles + (p,))
+        return False, _worley_pallas.select_kth(dy2_, dx2_, every, jnp.full(tiles, p, jnp.int32),
+                                                jnp.full(tiles, d, jnp.int32), lo_, hi_, tile)
 
     return jax.lax.while_loop(lambda carry: carry[0], redo, (overflow, d2))[1]
 
