@@ -51,8 +51,8 @@ always gives the same map, bit for bit.
   ``count(d2 < t) <= D``; non-negative floats order like their int32 bit patterns, so ``t`` is found exactly by
   setting its 31 bits greedily from the top, one ``count`` reduction over the 400 points per bit. Exact (same
   value as "sort" up to the last bit of a squared distance, where XLA may fuse a multiply-add differently).
-* ``"bracket"`` (the default off a GPU): ``F_D`` is 1-Lipschitz in the pixel position, so an exact coarse grid brackets every pixel:
-  (1) "bisect" on every ``_COARSE_STEP`` = 8th pixel (33 x 33 at 256: 1/60 of the pixels, 31 counts);
+* ``"bracket"`` (the default off a GPU): ``F_D`` is 1-Lipschitz in the pixel position, so an exact coarse grid
+  brackets every pixel: (1) "bisect" on every ``_COARSE_STEP`` = 8th pixel (33 x 33 at 256: 1/60 of the pixels, 31 counts);
   (2) per pixel ``L = max_c(F_c - |p - c|)``, ``U = min_c(F_c + |p - c|)`` over the 4 corners of its coarse
   cell (width <= 2 x 4 sqrt 2 = 11.3 px, ~3 px typical), +-``_MARGIN`` = 2e-3 px for float rounding; (3)
   ``bracket_iterations(size)`` = 14 bisection steps on the distance (one count each) to a width < ``TOLERANCE``
