@@ -10,8 +10,8 @@ A variant is ``select[:option...]`` with options ``major`` (points on the major 
 the [B, H, W, 400] distance tensor out of the loop), ``step=K`` (coarse step of "bracket" / "tiled"), ``tol=X``
 (pixels), and for "tiled" ``tile=K`` (tile side) and ``cap=AxB`` (candidate slots per tile as reduced dims,
 ``_CAP_GROUPS``; e.g. ``cap=96`` flat), and for "pallas" ``warps=K`` (warps per kernel program), ``topk=K``
-(bisect until at most K candidates per pixel bracket, then keep their sorted values) and ``pipe=K`` (Triton
-``num_stages``).
+(bisect until at most K candidates per pixel bracket, then keep their sorted values), ``pipe=K`` (Triton
+``num_stages``) and ``fused`` / ``unfused`` (lists and selection in one kernel or two).
 ``--stages`` also times the prefixes of "tiled" and "pallas" (coarse grid + bounds; + candidate lists).
 For each variant and batch size: ``jit(vmap(render_one))`` over fresh genomes (or ``lax.map`` over chunks of
 ``--chunk`` genomes when > 0), compile time (lower + compile), XLA's temp memory (``memory_analysis``; the ratio
@@ -49,7 +49,7 @@ def variant_settings(variant: str):
     """Parse ``select[:opt...]``; temporarily set the module knobs it names. Yields the select name."""
     select, *opts = variant.split(":")
     saved = (wm._POINTS_AXIS, wm._tie, dict(wm._KTH), wm._POINT_GROUPS, wm._CAP_GROUPS,
-             _worley_pallas.NUM_WARPS, _worley_pallas.TOP_K, _worley_pallas.NUM_STAGES)
+             _worley_pallas.NUM_WARPS, _worley_pallas.TOP_K, _worley_pallas.NUM_STAGES, _worley_pallas.FUSED)
     method_kw = {}
     try:
         for o in opts:
@@ -75,6 +75,8 @@ def variant_settings(variant: str):
                 _worley_pallas.TOP_K = int(o[5:])
             elif o.startswith("pipe="):
                 _worley_pallas.NUM_STAGES = int(o[5:])
+            elif o in ("fused", "unfused"):
+                _worley_pallas.FUSED = o == "fused"
             else:
                 raise ValueError(f"unknown option {o!r} in variant {variant!r}")
         if method_kw:
@@ -83,7 +85,7 @@ def variant_settings(variant: str):
         yield select
     finally:
         (wm._POINTS_AXIS, wm._tie, kth, wm._POINT_GROUPS, wm._CAP_GROUPS, _worley_pallas.NUM_WARPS,
-         _worley_pallas.TOP_K, _worley_pallas.NUM_STAGES) = saved
+         _worley_pallas.TOP_K, _worley_pallas.NUM_STAGES, _worley_pallas.FUSED) = saved
         wm._KTH.clear()
         wm._KTH.update(kth)
 

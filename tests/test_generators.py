@@ -473,8 +473,10 @@ def test_worley_pallas_equals_sort_bit_for_bit(monkeypatch):
         np.testing.assert_array_equal(np.asarray(a), np.asarray(b))
     used = np.arange(96) < np.minimum(np.asarray(xla[1]), 96)[..., None]
     np.testing.assert_array_equal(np.asarray(xla[0])[used], np.asarray(ker[0])[used])
-    # With one bisection-free slot the kernel must still be exact (more bisections, then the same selection).
+    # With one sorted slot the kernel must still be exact (more bisections, then the same selection); this run
+    # also takes the two-kernel path (lists, then selection) instead of the fused one.
     monkeypatch.setattr(worley_mod._worley_pallas, "TOP_K", 1)
+    monkeypatch.setattr(worley_mod._worley_pallas, "FUSED", not worley_mod._worley_pallas.FUSED)
     np.testing.assert_array_equal(run("pallas"), run("sort"))
 
 

@@ -10,6 +10,8 @@
   bit for bit.
 * :func:`kth_all_points`, the same kernel over all points with the bracket [0, bound]: the exact coarse grid.
 * :func:`tile_lists`, the candidate lists (the same values as ``worley._tile_lists``'s XLA version).
+* :func:`select_kth_fused` (the default, ``FUSED``): lists and selection in one program, the list written to
+  global memory and read back after a barrier.
 
 On a CUDA GPU the kernels are lowered through Triton; elsewhere they run in Pallas's interpreter (slow: for tests).
 The choice is made when the computation is lowered (``lax.platform_dependent``), not by the default backend.
@@ -27,6 +29,7 @@ MAX_ITER = 40  # bisections at most; a float interval stops shrinking after ~30
 TOP_K = 4  # bisect until at most this many candidates lie in a pixel's bracket, then keep their sorted values
 NUM_WARPS = 1  # a 8 x 8 tile is 64 pixels: 2 per thread of one warp
 NUM_STAGES = 1  # Triton software pipelining of the candidate loops
+FUSED = True  # lists and selection in one kernel (select_kth_fused): 1.04-1.07x two kernels on an H200
 
 
 def _insert(top, v):
@@ -37,24 +40,15 @@ def _insert(top, v):
     return tuple(out)
 
 
-def _kernel(dy2t_ref, dx2t_ref, idx_ref, n_ref, rank_ref, lo_ref, hi_ref, out_ref, *, tile: int, n_tx: int,
-            max_iter: int, top_k: int):
-    t = pl.program_id(0)
-    rs = pl.ds((t // n_tx) * tile, tile)
-    cs = pl.ds((t % n_tx) * tile, tile)
-    n = n_ref[t]
-    rank = rank_ref[t]
-    zeros = jnp.zeros((tile, tile), jnp.int32)
-
-    def d2_of(k):  # [tile, tile] squared distances of candidate k to the tile's pixels
-        p = idx_ref[t, k]
-        return dy2t_ref[p, rs][:, None] + dx2t_ref[p, cs][None, :]
+def _select(d2_of, n, rank, lo, hi, *, max_iter: int, top_k: int):
+    """The selection of one tile: ``rank``-th smallest of ``d2_of(k)``, ``k < n``, per pixel, exactly. ``lo``,
+    ``hi`` [tile, tile]: each pixel's bracket in pixels."""
+    zeros = jnp.zeros(lo.shape, jnp.int32)
 
     def count_less(t2):
         return jax.lax.fori_loop(0, n, lambda k, c: c + (d2_of(k) < t2).astype(jnp.int32), zeros)
 
     # The bracket in squared pixels, with the counts at both ends: c_lo = count(d2 < lo2) <= rank < c_hi.
-    lo, hi = lo_ref[rs, cs], hi_ref[rs, cs]
     lo2, hi2 = lo * lo, hi * hi
 
     def count_both(k, c):
@@ -86,34 +80,51 @@ def _kernel(dy2t_ref, dx2t_ref, idx_ref, n_ref, rank_ref, lo_ref, hi_ref, out_re
         d2 = d2_of(k)
         return _insert(top, jnp.where(d2 >= lo2, d2, jnp.inf))
 
-    inf = jnp.full((tile, tile), jnp.inf, jnp.float32)
-    top = jax.lax.fori_loop(0, n, keep_smallest, (inf,) * top_k)
+    top = jax.lax.fori_loop(0, n, keep_smallest, (jnp.full(lo.shape, jnp.inf, jnp.float32),) * top_k)
     r = jnp.minimum(rank - c_lo, top_k - 1)
     out = top[0]
     for i in range(1, top_k):
         out = jnp.where(r == i, top[i], out)
-    out_ref[rs, cs] = out
+    return out
 
 
-def _call(kernel, out_shape, name: str, grid: int, num_warps: int, *args):
+def _tile_view(t, n_tx: int, tile: int):
+    """Program ``t``'s tile: its row and column slices of the map."""
+    return pl.ds((t // n_tx) * tile, tile), pl.ds((t % n_tx) * tile, tile)
+
+
+def _kernel(dy2t_ref, dx2t_ref, idx_ref, n_ref, rank_ref, lo_ref, hi_ref, out_ref, *, tile: int, n_tx: int,
+            **select_kw):
+    t = pl.program_id(0)
+    rs, cs = _tile_view(t, n_tx, tile)
+
+    def d2_of(k):  # [tile, tile] squared distances of candidate k to the tile's pixels
+        p = idx_ref[t, k]
+        return dy2t_ref[p, rs][:, None] + dx2t_ref[p, cs][None, :]
+
+    out_ref[rs, cs] = _select(d2_of, n_ref[t], rank_ref[t], lo_ref[rs, cs], hi_ref[rs, cs], **select_kw)
+
+
+def _call(kernel, out_shape, name: str, grid: int, num_warps: int, *args, pass_interpret: bool = False):
     """``pallas_call`` lowered through Triton on a CUDA device and run by Pallas's interpreter on any other,
     chosen when the computation is lowered for its platform (``lax.platform_dependent``), so one jitted function
-    works on both, whatever the default backend."""
+    works on both, whatever the default backend. ``pass_interpret``: call ``kernel`` with ``interpret=``."""
 
     def call(interpret: bool):
+        k = functools.partial(kernel, interpret=interpret) if pass_interpret else kernel
         params = None
         if not interpret:
             from jax.experimental.pallas import triton as plgpu
 
             params = plgpu.CompilerParams(num_warps=num_warps, num_stages=NUM_STAGES)
-        return pl.pallas_call(kernel, out_shape=out_shape, grid=(grid,), interpret=interpret,
+        return pl.pallas_call(k, out_shape=out_shape, grid=(grid,), interpret=interpret,
                               compiler_params=params, name=name)
 
     return jax.lax.platform_dependent(*args, cuda=call(False), default=call(True))
 
 
 def select_kth(dy2: jax.Array, dx2: jax.Array, idx: jax.Array, n_cand: jax.Array, rank: jax.Array,
-                    lo: jax.Array, hi: jax.Array, tile: int, max_iter: int = MAX_ITER) -> jax.Array:
+               lo: jax.Array, hi: jax.Array, tile: int, max_iter: int = MAX_ITER) -> jax.Array:
     """Squared ``F_D`` per pixel, ``[H, W]`` float32, over per-tile candidate lists (one map; vmap for a batch).
 
     ``dy2`` [H, P], ``dx2`` [W, P]: the separable squared-distance terms; ``idx`` [ty, tx, cap] int32: candidate
@@ -154,11 +165,8 @@ def kth_all_points(dy2: jax.Array, dx2: jax.Array, n_points: jax.Array, d: jax.A
 LIST_CHUNK = 32  # points per loop iteration of the list kernel
 
 
-def _lists_kernel(rmin_ref, rmax_ref, cmin_ref, cmax_ref, lt2_ref, ut2_ref, idx_ref, n_ref, inside_ref, *,
-                  n_tx: int, cap: int, chunk: int):
-    t = pl.program_id(0)
-    ty, tx = t // n_tx, t % n_tx
-    lt2, ut2 = lt2_ref[t], ut2_ref[t]
+def _build_list(t, ty, tx, rmin_ref, rmax_ref, cmin_ref, cmax_ref, lt2, ut2, idx_ref, *, cap: int, chunk: int):
+    """Write tile ``t``'s candidates to ``idx_ref[t, :cap]`` in point order; return (count, inside) int32."""
 
     def body(j, carry):
         count, inside = carry
@@ -170,9 +178,43 @@ def _lists_kernel(rmin_ref, rmax_ref, cmin_ref, cmax_ref, lt2_ref, ut2_ref, idx_
         idx_ref[t, jnp.where(cand, jnp.minimum(slot, cap), cap)] = j * chunk + jnp.arange(chunk, dtype=jnp.int32)
         return count + jnp.sum(cand.astype(jnp.int32)), inside + jnp.sum(is_in.astype(jnp.int32))
 
-    count, inside = jax.lax.fori_loop(0, rmin_ref.shape[1] // chunk, body, (jnp.int32(0), jnp.int32(0)))
+    return jax.lax.fori_loop(0, rmin_ref.shape[1] // chunk, body, (jnp.int32(0), jnp.int32(0)))
+
+
+def _lists_kernel(rmin_ref, rmax_ref, cmin_ref, cmax_ref, lt2_ref, ut2_ref, idx_ref, n_ref, inside_ref, *,
+                  n_tx: int, cap: int, chunk: int):
+    t = pl.program_id(0)
+    n_ref[t], inside_ref[t] = _build_list(t, t // n_tx, t % n_tx, rmin_ref, rmax_ref, cmin_ref, cmax_ref,
+                                          lt2_ref[t], ut2_ref[t], idx_ref, cap=cap, chunk=chunk)
+
+
+def _fused_kernel(dy2t_ref, dx2t_ref, rmin_ref, rmax_ref, cmin_ref, cmax_ref, lt2_ref, ut2_ref, d_ref, lo_ref,
+                  hi_ref, out_ref, idx_ref, n_ref, *, tile: int, n_tx: int, cap: int, chunk: int, interpret: bool,
+                  **select_kw):
+    """Lists and selection in one program: the list goes to ``idx_ref`` (global memory) and is read back after a
+    barrier, which makes the warp's stores visible to all its threads."""
+    t = pl.program_id(0)
+    rs, cs = _tile_view(t, n_tx, tile)
+    count, inside = _build_list(t, t // n_tx, t % n_tx, rmin_ref, rmax_ref, cmin_ref, cmax_ref, lt2_ref[t],
+                                ut2_ref[t], idx_ref, cap=cap, chunk=chunk)
     n_ref[t] = count
-    inside_ref[t] = inside
+    if not interpret:
+        from jax.experimental.pallas import triton as plgpu
+
+        plgpu.debug_barrier()
+
+    def d2_of(k):
+        p = idx_ref[t, k]
+        return dy2t_ref[p, rs][:, None] + dx2t_ref[p, cs][None, :]
+
+    out_ref[rs, cs] = _select(d2_of, jnp.minimum(count, cap), d_ref[0] - inside, lo_ref[rs, cs], hi_ref[rs, cs],
+                              **select_kw)
+
+
+def _padded(*arrays):
+    """Pad the point axis of ``[.., P]`` arrays to whole list chunks with +inf (neither inside nor candidates)."""
+    pad = ((0, 0), (0, -arrays[0].shape[1] % LIST_CHUNK))
+    return tuple(jnp.pad(a, pad, constant_values=jnp.inf) for a in arrays)
 
 
 def tile_lists(rmin: jax.Array, rmax: jax.Array, cmin: jax.Array, cmax: jax.Array, lt2: jax.Array, ut2: jax.Array,
@@ -184,12 +226,29 @@ def tile_lists(rmin: jax.Array, rmax: jax.Array, cmin: jax.Array, cmax: jax.Arra
     int32 (slots past ``n_cand`` hold anything), ``n_cand`` and ``inside`` ``[ty, tx]`` int32, the same values as
     the XLA version.
     """
-    (ty, p), tx = rmin.shape, cmin.shape[0]
-    pad = ((0, 0), (0, -p % LIST_CHUNK))  # padded points: +inf, neither inside nor candidates
-    rmin, rmax, cmin, cmax = (jnp.pad(a, pad, constant_values=jnp.inf) for a in (rmin, rmax, cmin, cmax))
+    ty, tx = rmin.shape[0], cmin.shape[0]
     kernel = functools.partial(_lists_kernel, n_tx=tx, cap=cap, chunk=LIST_CHUNK)
     shapes = (jax.ShapeDtypeStruct((ty * tx, cap + 1), jnp.int32), jax.ShapeDtypeStruct((ty * tx,), jnp.int32),
               jax.ShapeDtypeStruct((ty * tx,), jnp.int32))
-    idx, n_cand, inside = _call(kernel, shapes, "worley_lists", ty * tx, 1, rmin, rmax, cmin, cmax,
+    idx, n_cand, inside = _call(kernel, shapes, "worley_lists", ty * tx, 1, *_padded(rmin, rmax, cmin, cmax),
                                 lt2.reshape(-1), ut2.reshape(-1))
     return idx[:, :cap].reshape(ty, tx, cap), n_cand.reshape(ty, tx), inside.reshape(ty, tx)
+
+
+def select_kth_fused(dy2: jax.Array, dx2: jax.Array, extremes, d: jax.Array, lo: jax.Array, hi: jax.Array,
+                     tile: int, cap: int, max_iter: int = MAX_ITER):
+    """:func:`tile_lists` and :func:`select_kth` in one kernel. ``extremes`` = ``(rmin, rmax, cmin, cmax, lt2,
+    ut2)`` as for :func:`tile_lists`; ``d`` the map's D. Returns the squared ``F_D`` ``[H, W]`` and ``n_cand``
+    ``[ty, tx]`` (where it exceeds ``cap`` that tile's result is incomplete: the caller redoes the map)."""
+    h, w = dy2.shape[0], dx2.shape[0]
+    rmin, rmax, cmin, cmax, lt2, ut2 = extremes
+    ty, tx = rmin.shape[0], cmin.shape[0]
+    kernel = functools.partial(_fused_kernel, tile=tile, n_tx=tx, cap=cap, chunk=LIST_CHUNK, max_iter=max_iter,
+                               top_k=TOP_K)
+    shapes = (jax.ShapeDtypeStruct((h, w), jnp.float32), jax.ShapeDtypeStruct((ty * tx, cap + 1), jnp.int32),
+              jax.ShapeDtypeStruct((ty * tx,), jnp.int32))
+    d2, _, n_cand = _call(kernel, shapes, "worley_fused", ty * tx, NUM_WARPS, dy2.T, dx2.T,
+                          *_padded(rmin, rmax, cmin, cmax), lt2.reshape(-1), ut2.reshape(-1),
+                          jnp.reshape(d, (1,)).astype(jnp.int32), lo.astype(jnp.float32), hi.astype(jnp.float32),
+                          pass_interpret=True)
+    return d2, n_cand.reshape(ty, tx)

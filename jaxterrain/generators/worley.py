@@ -350,6 +350,17 @@ _CAP_GROUPS = (3, 32)  # "tiled": 96 candidate slots per tile, as [3, 32] (reduc
 # (falling with N); 72 over 400 random genomes. More than 96 sends the map (and its batch) through "bracket" once.
 
 
+def _tile_extremes(dy2: jax.Array, dx2: jax.Array, lo: jax.Array, hi: jax.Array, tile: int):
+    """Per tile row / column the min and max of the separable terms (``rmin``, ``rmax`` [ty, P]; ``cmin``,
+    ``cmax`` [tx, P]) and per tile the squared bracket ``lt2``, ``ut2`` [ty, tx] (min L^2 and max U^2)."""
+    ty, tx, p = dy2.shape[0] // tile, dx2.shape[0] // tile, dy2.shape[-1]
+    r = dy2.reshape(ty, tile, p)
+    c = dx2.reshape(tx, tile, p)
+    lt = lo.reshape(ty, tile, tx, tile).min(axis=(1, 3))
+    ut = hi.reshape(ty, tile, tx, tile).max(axis=(1, 3))
+    return r.min(axis=1), r.max(axis=1), c.min(axis=1), c.max(axis=1), lt * lt, ut * ut
+
+
 def _tile_lists(dy2: jax.Array, dx2: jax.Array, lo: jax.Array, hi: jax.Array, tile: int, cap: int,
                 pallas: bool = False):
     """Per-tile candidate lists of the "tiled" method, as point indices.
@@ -365,20 +376,16 @@ def _tile_lists(dy2: jax.Array, dx2: jax.Array, lo: jax.Array, hi: jax.Array, ti
     bool: some tile had more than ``cap`` candidates, so the lists are incomplete). With ``pallas`` the lists are
     built by a kernel (``_worley_pallas.tile_lists``; unused slots then hold anything).
     """
-    p = dy2.shape[-1]
-    ty, tx = dy2.shape[0] // tile, dx2.shape[0] // tile
-    r = dy2.reshape(ty, tile, p)
-    c = dx2.reshape(tx, tile, p)
-    lt = lo.reshape(ty, tile, tx, tile).min(axis=(1, 3))
-    ut = hi.reshape(ty, tile, tx, tile).max(axis=(1, 3))
+    ext = _tile_extremes(dy2, dx2, lo, hi, tile)
     if pallas:
-        idx, n_cand, inside = _worley_pallas.tile_lists(r.min(axis=1), r.max(axis=1), c.min(axis=1), c.max(axis=1),
-                                                        lt * lt, ut * ut, cap)
+        idx, n_cand, inside = _worley_pallas.tile_lists(*ext, cap)
         return idx, n_cand, inside, jnp.any(n_cand > cap)
-    dmin2 = r.min(axis=1)[:, None, :] + c.min(axis=1)[None, :, :]  # [ty, tx, P]
-    dmax2 = r.max(axis=1)[:, None, :] + c.max(axis=1)[None, :, :]
-    inside = dmax2 < (lt * lt)[..., None]
-    cand = (dmin2 <= (ut * ut)[..., None]) & ~inside  # a masked point has dmin2 = inf: never a candidate
+    rmin, rmax, cmin, cmax, lt2, ut2 = ext
+    p, (ty, tx) = dy2.shape[-1], lt2.shape
+    dmin2 = rmin[:, None, :] + cmin[None, :, :]  # [ty, tx, P]
+    dmax2 = rmax[:, None, :] + cmax[None, :, :]
+    inside = dmax2 < lt2[..., None]
+    cand = (dmin2 <= ut2[..., None]) & ~inside  # a masked point has dmin2 = inf: never a candidate
     n_cand = jnp.sum(cand, axis=-1, dtype=jnp.int32)
     # Compaction without a sort: candidate number k of a tile goes to slot k (slots past ``cap`` are dropped).
     slot = jnp.where(cand, jnp.cumsum(cand, axis=-1, dtype=jnp.int32) - 1, cap)
@@ -450,11 +457,16 @@ def _kth_tiled(dy2: jax.Array, dx2: jax.Array, d: jax.Array, step: int = _COARSE
         return _kth_bracket(dy2, dx2, d, step, tol)
     lo, hi, n_iter = bounds
     d = d.astype(jnp.int32)
-    idx, n_cand, inside, overflow = _tile_lists(dy2, dx2, lo, hi, tile, cap, pallas)
-    rank = d - inside  # the target rank among a tile's candidates (>= 0: inside < D + 1)
-    if pallas:
-        d2 = _worley_pallas.select_kth(dy2, dx2, idx, jnp.minimum(n_cand, cap), rank, lo, hi, tile)
+    if pallas and _worley_pallas.FUSED:
+        d2, n_cand = _worley_pallas.select_kth_fused(dy2, dx2, _tile_extremes(dy2, dx2, lo, hi, tile), d, lo, hi,
+                                                     tile, cap)
+        overflow = jnp.any(n_cand > cap)
+    elif pallas:
+        idx, n_cand, inside, overflow = _tile_lists(dy2, dx2, lo, hi, tile, cap, pallas)
+        d2 = _worley_pallas.select_kth(dy2, dx2, idx, jnp.minimum(n_cand, cap), d - inside, lo, hi, tile)
     else:
+        idx, n_cand, inside, overflow = _tile_lists(dy2, dx2, lo, hi, tile, cap)
+        rank = d - inside  # the target rank among a tile's candidates (>= 0: inside < D + 1)
         ty, tx = h // tile, w // tile
 
         def tiles(x):  # [H, W] -> [ty, tx, tile, tile]
