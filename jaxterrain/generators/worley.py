@@ -30,18 +30,18 @@ always gives the same map, bit for bit.
 
 * ``"pallas"`` (the default on a GPU; exact): the "tiled" method below with its three stages as Pallas kernels
   (``_worley_pallas``), each program one 8 x 8 tile in registers. (1) The coarse grid by the selection kernel over
-  every tile's first N points with the bracket [0, 2 x size]. (2) The candidate lists by a list kernel. (3) The
-  selection kernel over the tile's own candidates, whose loops run to that tile's candidate count (mean 16-40,
-  max 83, at 256 x 256), not to a capacity. It first counts ``c_lo = count(d2 < L^2)`` and
-  ``c_hi = count(d2 < U^2)``. Then it bisects the whole tile until no pixel has more than ``TOP_K`` = 4
-  candidates in its bracket, about 2-4 steps where a 1-candidate bracket took 7-10, since a tile waits for its
-  slowest pixel. A last pass keeps each pixel's 4 smallest ``d2 >= L^2`` in sorted registers; exactly ``c_lo``
-  values lie below, so ``F_D^2`` is element ``rank - c_lo``. The result is a point's squared distance itself,
-  equal to "sort" bit for bit. This holds on the CPU (Pallas's interpreter), with ties, duplicate points and the
-  overflow fallback; on an H200 the difference was 0 on 16 test maps.
-  H200, 2026-11-21, commit 4a588d5: 110,217 maps/s at B = 4096 (108,769 in ``benchmarks/generators.py``), 28x
-  "bracket" (3,924) in the same run. On the 2-core CPU Pallas only interprets: 2.2 maps/s, against "bracket" 7.0
-  and "tiled" 15.
+  every tile's first N points with the bracket [0, 2 x size]. (2) The candidate lists and (3) the selection, in one
+  kernel (``_worley_pallas.FUSED``; two kernels otherwise). The selection runs over the tile's own candidates, whose
+  loops run to that tile's candidate count (mean 16-40, max 83, at 256 x 256), not to a capacity. It first counts
+  ``c_lo = count(d2 < L^2)`` and ``c_hi = count(d2 < U^2)``. Then it bisects the whole tile until no pixel has more
+  than ``TOP_K`` = 4 candidates in its bracket, about 2-4 steps where a 1-candidate bracket took 7-10, since a tile
+  waits for its slowest pixel. A last pass keeps each pixel's 4 smallest ``d2 >= L^2`` in sorted registers; exactly
+  ``c_lo`` values lie below, so ``F_D^2`` is element ``rank - c_lo``. The result is a point's squared distance
+  itself, equal to "sort" bit for bit. This holds on the CPU (Pallas's interpreter), with ties, duplicate points and
+  the overflow fallback; on an H200 the difference was 0 on 16 test maps.
+  2026-11-21, commit b6ed910, B = 4096: 118,085 maps/s on an H200 (117,697 in ``benchmarks/generators.py``), 30x
+  "bracket" (3,918) in the same run; 111,892 on an H100, 29x. On the 2-core CPU Pallas only interprets: 2.2
+  maps/s, against "bracket" 7.0 and "tiled" 15.
 
 * ``"sort"`` (the exact reference): materialise ``d2`` block by block (``_ROW_BLOCK`` = 16 rows, ``lax.map``)
   and take element ``D`` of ``jnp.sort(d2)[..., :101]`` (a one-hot sum, no gather). Exact. Memory:
@@ -52,8 +52,8 @@ always gives the same map, bit for bit.
   setting its 31 bits greedily from the top, one ``count`` reduction over the 400 points per bit. Exact (same
   value as "sort" up to the last bit of a squared distance, where XLA may fuse a multiply-add differently).
 * ``"bracket"`` (the default off a GPU): ``F_D`` is 1-Lipschitz in the pixel position, so an exact coarse grid
-  brackets every pixel: (1) "bisect" on every ``_COARSE_STEP`` = 8th pixel (33 x 33 at 256: 1/60 of the pixels, 31 counts);
-  (2) per pixel ``L = max_c(F_c - |p - c|)``, ``U = min_c(F_c + |p - c|)`` over the 4 corners of its coarse
+  brackets every pixel: (1) "bisect" on every ``_COARSE_STEP`` = 8th pixel (33 x 33 at 256: 1/60 of the pixels, 31
+  counts); (2) per pixel ``L = max_c(F_c - |p - c|)``, ``U = min_c(F_c + |p - c|)`` over the 4 corners of its coarse
   cell (width <= 2 x 4 sqrt 2 = 11.3 px, ~3 px typical), +-``_MARGIN`` = 2e-3 px for float rounding; (3)
   ``bracket_iterations(size)`` = 14 bisection steps on the distance (one count each) to a width < ``TOLERANCE``
   = 1e-3 px; (4) a snap ``min{d2 : d2 >= L^2}`` (one min reduction, as one more loop trip). The snap returns
@@ -113,14 +113,14 @@ bracket:major --batch 256 1024``): "sort" 1,028 maps/s, "bracket" 3,956 maps/s a
 Ceiling: at ~3e13 simple ops/s (H100 FP32 lanes) "bracket" is ~20,000 maps/s if compute-bound; XLA's generic
 reduction emitter reloads ``dy2`` and ``dx2`` from L1 for every pair, so expect a few thousand. The 100,000 maps/s
 target needed fewer pairs: "pallas", per-tile candidate lists in a hand-written kernel (only points whose distance
-range over the tile meets the tile's bracket; 16-40 of 400 on average) with register-blocked pixels. Where the
-time goes in "pallas" (H200, B = 4096, ``worley_variants.py --stages``): points, coarse grid and brackets 28 %,
-lists 28 %, selection 44 %. Exactness of such a list: with a tile's bracket ``[Lt, Ut]`` (min of ``L``, max of ``U``
-over its pixels), a point farther than ``Ut`` from the whole tile is never among the first D + 1, and a point
-nearer than ``Lt`` to all of it is always among the first D; so ``F_D`` is the ``(D - inside)``-th smallest over the
+range over the tile meets the tile's bracket; 16-40 of 400 on average) with register-blocked pixels. Where the time
+goes in "pallas" (H200, B = 4096, ``worley_variants.py --stages``): points, coarse grid and brackets 31 %, the fused
+lists and selection 69 %. Exactness of such a list: with a tile's bracket ``[Lt, Ut]`` (min of ``L``, max of ``U``
+over its pixels), a point farther than ``Ut`` from the whole tile is never among the first D + 1, and a point nearer
+than ``Lt`` to all of it is always among the first D; so ``F_D`` is the ``(D - inside)``-th smallest over the
 remaining candidates, exactly. The cap can be checked offline once and for all: the genome space is finite (101
-integer seeds x N in [2, 400] x D in [0, N / 4], about 2.1 M genomes per map size), and the per-tile candidate
-count needs only the exact coarse grid (about 1/60 of a map's work), so every genome can be enumerated offline.
+integer seeds x N in [2, 400] x D in [0, N / 4], about 2.1 M genomes per map size), and the per-tile candidate count
+needs only the exact coarse grid (about 1/60 of a map's work), so every genome can be enumerated offline.
 """
 
 from __future__ import annotations
