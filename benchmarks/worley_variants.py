@@ -46,7 +46,8 @@ from jaxterrain.generators import worley as wm  # noqa: E402
 
 @contextlib.contextmanager
 def variant_settings(variant: str):
-    """Parse ``select[:opt...]``; temporarily set the module knobs it names. Yields the select name."""
+    """Parse ``select[:opt...]``; temporarily set the module knobs it names. Yields the select name and the
+    method's keyword options (``step``, ``tol``, ``tile``)."""
     select, *opts = variant.split(":")
     saved = (wm._POINTS_AXIS, wm._tie, dict(wm._KTH), wm._POINT_GROUPS, wm._CAP_GROUPS,
              _worley_pallas.NUM_WARPS, _worley_pallas.TOP_K, _worley_pallas.NUM_STAGES, _worley_pallas.FUSED)
@@ -82,7 +83,7 @@ def variant_settings(variant: str):
         if method_kw:
             base = saved[2][select]
             wm._KTH[select] = lambda dy2, dx2, d: base(dy2, dx2, d, **method_kw)
-        yield select
+        yield select, method_kw
     finally:
         (wm._POINTS_AXIS, wm._tie, kth, wm._POINT_GROUPS, wm._CAP_GROUPS, _worley_pallas.NUM_WARPS,
          _worley_pallas.TOP_K, _worley_pallas.NUM_STAGES, _worley_pallas.FUSED) = saved
@@ -115,7 +116,7 @@ def accuracy(variant: str, size: int, n_random: int) -> dict:
     genomes = jnp.asarray(edge_genomes(n_random))
     ref_d = np.asarray(batched_fn("sort", size, 0, distance=True)(genomes))
     ref_m = np.asarray(batched_fn("sort", size, 0)(genomes))
-    with variant_settings(variant) as select:
+    with variant_settings(variant) as (select, _):
         got_d = np.asarray(batched_fn(select, size, 0, distance=True)(genomes))
         got_m = np.asarray(batched_fn(select, size, 0)(genomes))
     err = np.abs(got_d - ref_d)
@@ -138,23 +139,18 @@ def while_body_summary(hlo: str) -> str:
     return "; ".join(out)
 
 
-def stage_fns(select: str, size: int, step: int = wm._COARSE_STEP, tile: int = wm._TILE) -> dict:
+def stage_fns(select: str, size: int, step: int = wm._COARSE_STEP, tol: float = wm.TOLERANCE,
+              tile: int = wm._TILE) -> dict:
     """Prefixes of "tiled" / "pallas" per genome: the coarse grid and bounds, then the candidate lists too."""
     pallas = select == "pallas"
 
     def bounds(g):
         dy2, dx2 = wm._separable_d2(g, size)
-        d = jnp.round(g[2])
-        coarse = None
-        if pallas:
-            n_points = jnp.sum(jnp.isfinite(dx2[0]), dtype=jnp.int32)
-            coarse = lambda y, x, d: _worley_pallas.kth_all_points(y, x, n_points, d, 2.0 * size, tile)  # noqa
-        lo, hi, _ = wm._bracket_bounds(dy2, dx2, d, step, wm.TOLERANCE, coarse)
+        lo, hi, _ = wm._tiled_bounds(dy2, dx2, jnp.round(g[2]), step, tol, tile, pallas)
         return dy2, dx2, lo, hi
 
     def lists(g):
-        dy2, dx2, lo, hi = bounds(g)
-        return wm._tile_lists(dy2, dx2, lo, hi, tile, int(np.prod(wm._CAP_GROUPS)), pallas)
+        return wm._tile_lists(*bounds(g), tile, int(np.prod(wm._CAP_GROUPS)), pallas)
 
     return {"bounds": lambda g: bounds(g)[2:], "bounds+lists": lists}
 
@@ -164,9 +160,8 @@ def time_stages(variant: str, size: int, batch: int, repeats: int) -> list[dict]
     gen = get("worley", size=size)
     sets = [jax.device_put(gen.sample(k, batch)) for k in jax.random.split(jax.random.PRNGKey(0), 3)]
     rows = []
-    kw = dict(o.split("=") for o in variant.split(":")[1:] if o.startswith(("step=", "tile=")))
-    with variant_settings(variant) as select:
-        for name, fn in stage_fns(select, size, **{k: int(v) for k, v in kw.items()}).items():
+    with variant_settings(variant) as (select, kw):
+        for name, fn in stage_fns(select, size, **kw).items():
             compiled = jax.jit(jax.vmap(fn)).lower(sets[0]).compile()
             t = common.median_time(compiled, sets, repeats=repeats)
             rows.append({"variant": f"{variant} [{name}]", "batch": batch, "size": size, "time_s": t,
@@ -179,7 +174,7 @@ def time_variant(variant: str, size: int, batch: int, repeats: int, chunk: int, 
     keys = jax.random.split(jax.random.PRNGKey(0), 3)
     sets = [jax.device_put(gen.sample(k, batch)) for k in keys]
     row = {"variant": variant, "batch": batch, "size": size, "chunk": chunk}
-    with variant_settings(variant) as select:
+    with variant_settings(variant) as (select, _):
         fn = batched_fn(select, size, chunk)
         t0 = time.perf_counter()
         compiled = fn.lower(sets[0]).compile()

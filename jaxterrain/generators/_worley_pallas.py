@@ -1,4 +1,4 @@
-"""Worley's ``select="pallas"`` (see ``worley.py``): two Pallas kernels over per-tile candidate lists.
+"""Worley's ``select="pallas"`` (see ``worley.py``): Pallas kernels over per-tile candidate lists.
 
 * :func:`select_kth`, the selection. One program per ``tile x tile`` tile of one map holds the tile's pixels
   in registers and loops over that tile's own candidates only: the loop bound is the tile's candidate count, not
@@ -8,7 +8,8 @@
   ``TOP_K`` smallest ``d2 >= L^2`` in sorted registers and returns element ``rank - c_lo``: one of the points'
   squared distances itself, computed as ``dy2 + dx2`` from the same separable terms as "sort", so the two agree
   bit for bit.
-* :func:`kth_all_points`, the same kernel over all points with the bracket [0, bound]: the exact coarse grid.
+* :func:`select_all_points`, the same kernel with every point a candidate of every tile (the overflow fallback),
+  and :func:`kth_all_points`, that with the bracket [0, bound]: the exact coarse grid.
 * :func:`tile_lists`, the candidate lists (the same values as ``worley._tile_lists``'s XLA version).
 * :func:`select_kth_fused` (the default, ``FUSED``): lists and selection in one program, the list written to
   global memory and read back after a barrier.
@@ -93,16 +94,22 @@ def _tile_view(t, n_tx: int, tile: int):
     return pl.ds((t // n_tx) * tile, tile), pl.ds((t % n_tx) * tile, tile)
 
 
+def _candidates(dy2t_ref, dx2t_ref, idx_ref, t, rs, cs):
+    """``d2_of(k)``: the [tile, tile] squared distances of tile ``t``'s candidate ``k`` to its pixels."""
+
+    def d2_of(k):
+        p = idx_ref[t, k]
+        return dy2t_ref[p, rs][:, None] + dx2t_ref[p, cs][None, :]
+
+    return d2_of
+
+
 def _kernel(dy2t_ref, dx2t_ref, idx_ref, n_ref, rank_ref, lo_ref, hi_ref, out_ref, *, tile: int, n_tx: int,
             **select_kw):
     t = pl.program_id(0)
     rs, cs = _tile_view(t, n_tx, tile)
-
-    def d2_of(k):  # [tile, tile] squared distances of candidate k to the tile's pixels
-        p = idx_ref[t, k]
-        return dy2t_ref[p, rs][:, None] + dx2t_ref[p, cs][None, :]
-
-    out_ref[rs, cs] = _select(d2_of, n_ref[t], rank_ref[t], lo_ref[rs, cs], hi_ref[rs, cs], **select_kw)
+    out_ref[rs, cs] = _select(_candidates(dy2t_ref, dx2t_ref, idx_ref, t, rs, cs), n_ref[t], rank_ref[t],
+                              lo_ref[rs, cs], hi_ref[rs, cs], **select_kw)
 
 
 def _call(kernel, out_shape, name: str, grid: int, num_warps: int, *args, pass_interpret: bool = False):
@@ -140,26 +147,31 @@ def select_kth(dy2: jax.Array, dx2: jax.Array, idx: jax.Array, n_cand: jax.Array
                  hi.astype(jnp.float32))
 
 
+def select_all_points(dy2: jax.Array, dx2: jax.Array, n_points: jax.Array, d: jax.Array, lo: jax.Array,
+                      hi: jax.Array, tile: int) -> jax.Array:
+    """:func:`select_kth` with every tile's list the first ``n_points`` points (``rank`` = ``d``): exact for any
+    bracket ``lo <= F_D <= hi``. ``H`` and ``W`` must be multiples of ``tile``."""
+    ty, tx, p = dy2.shape[0] // tile, dx2.shape[0] // tile, dy2.shape[1]
+    every = jnp.broadcast_to(jnp.arange(p, dtype=jnp.int32), (ty, tx, p))
+    return select_kth(dy2, dx2, every, jnp.full((ty, tx), n_points, jnp.int32), jnp.full((ty, tx), d, jnp.int32),
+                      lo, hi, tile)
+
+
 def kth_all_points(dy2: jax.Array, dx2: jax.Array, n_points: jax.Array, d: jax.Array, bound: float,
                    tile: int) -> jax.Array:
     """Exact D-th smallest squared distance per pixel over the first ``n_points`` points, ``[H, W]`` float32.
 
-    The kernel above with every pixel's bracket ``[0, bound]`` (``bound`` in pixels, beyond any distance to a
-    valid point) and every tile's list the first ``n_points`` points (``dy2`` [H, P], ``dx2`` [W, P]; the map is
-    padded to whole tiles). Used for the coarse grid of "pallas", where it replaces the 31-pass bit search over
-    all 400 points.
+    :func:`select_all_points` with every pixel's bracket ``[0, bound]`` (``bound`` in pixels, beyond any distance
+    to a valid point; ``dy2`` [H, P], ``dx2`` [W, P]; the map is padded to whole tiles). Used for the coarse grid of
+    "pallas", where it replaces the 31-pass bit search over all 400 points.
     """
     h, w = dy2.shape[0], dx2.shape[0]
     hp, wp = -(-h // tile) * tile, -(-w // tile) * tile
     dy2 = jnp.pad(dy2, ((0, hp - h), (0, 0)))
     dx2 = jnp.pad(dx2, ((0, wp - w), (0, 0)))
-    ty, tx, p = hp // tile, wp // tile, dy2.shape[1]
-    every = jnp.broadcast_to(jnp.arange(p, dtype=jnp.int32), (ty, tx, p))
-    n = jnp.full((ty, tx), n_points, jnp.int32)
-    rank = jnp.full((ty, tx), d, jnp.int32)
     lo = jnp.zeros((hp, wp), jnp.float32)
     hi = jnp.full((hp, wp), bound, jnp.float32)
-    return select_kth(dy2, dx2, every, n, rank, lo, hi, tile)[:h, :w]
+    return select_all_points(dy2, dx2, n_points, d, lo, hi, tile)[:h, :w]
 
 
 LIST_CHUNK = 32  # points per loop iteration of the list kernel
@@ -203,12 +215,8 @@ def _fused_kernel(dy2t_ref, dx2t_ref, rmin_ref, rmax_ref, cmin_ref, cmax_ref, lt
 
         plgpu.debug_barrier()
 
-    def d2_of(k):
-        p = idx_ref[t, k]
-        return dy2t_ref[p, rs][:, None] + dx2t_ref[p, cs][None, :]
-
-    out_ref[rs, cs] = _select(d2_of, jnp.minimum(count, cap), d_ref[0] - inside, lo_ref[rs, cs], hi_ref[rs, cs],
-                              **select_kw)
+    out_ref[rs, cs] = _select(_candidates(dy2t_ref, dx2t_ref, idx_ref, t, rs, cs), jnp.minimum(count, cap),
+                              d_ref[0] - inside, lo_ref[rs, cs], hi_ref[rs, cs], **select_kw)
 
 
 def _padded(*arrays):

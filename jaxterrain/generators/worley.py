@@ -432,6 +432,17 @@ def _tile_min_at_least(terms, t2):
     return jax.lax.bitcast_convert_type(jnp.min(jnp.where(d2 >= expand(t2), bits, big), axis=axis), jnp.float32)
 
 
+def _tiled_bounds(dy2: jax.Array, dx2: jax.Array, d: jax.Array, step: int, tol: float, tile: int, pallas: bool):
+    """:func:`_bracket_bounds`, with the exact coarse grid by the Pallas kernel over all N points when ``pallas``
+    (the same values as "bisect")."""
+    coarse = None
+    if pallas:
+        n_points = jnp.sum(jnp.isfinite(dx2[0]), dtype=jnp.int32)
+        bound = float(dy2.shape[0] + dx2.shape[0])  # pixels, beyond any distance in the map
+        coarse = lambda y, x, d: _worley_pallas.kth_all_points(y, x, n_points, d, bound, tile)  # noqa: E731
+    return _bracket_bounds(dy2, dx2, d, step, tol, coarse)
+
+
 def _kth_tiled(dy2: jax.Array, dx2: jax.Array, d: jax.Array, step: int = _COARSE_STEP, tol: float = TOLERANCE,
                tile: int = _TILE, pallas: bool = False) -> jax.Array:
     """"bracket" with per-tile candidate lists: the same bounds, bisection and snap, over at most ``cap`` points
@@ -441,18 +452,15 @@ def _kth_tiled(dy2: jax.Array, dx2: jax.Array, d: jax.Array, step: int = _COARSE
     can be its pixels' D-th nearest (:func:`_tile_lists`), and the D-th smallest over all points is the
     ``(D - inside)``-th over the candidates, exactly; steps 3-4 run over ``cap`` candidates instead of 400 (4.2x
     fewer point-pixel pairs at the defaults), so the result equals "bracket"'s up to float rounding. With
-    ``pallas`` steps 3-4 are one Pallas kernel that loops over each tile's own candidates only
-    (``_worley_pallas``). If a tile has more than ``cap`` candidates the map's steps 3-4 are redone over all
-    points (as "bracket", from the same bounds) in a ``while_loop`` that runs 0 or 1 times:
+    ``pallas`` the coarse grid, the lists and steps 3-4 are Pallas kernels that loop over each tile's own
+    candidates only, and the result is exact (``_worley_pallas``). If a tile has more than ``cap`` candidates the
+    map's steps 3-4 are redone over all points (by "bracket", or by the kernel with ``pallas``), from the same
+    bounds, in a ``while_loop`` that runs 0 or 1 times:
     under ``vmap`` it runs once for the whole batch if any map overflowed, and not at all otherwise.
     """
     h, w = dy2.shape[0], dx2.shape[0]
     cap = int(np.prod(_CAP_GROUPS))
-    coarse = None
-    if pallas:  # the exact coarse grid by the same kernel, over all N points (same values as "bisect")
-        n_points = jnp.sum(jnp.isfinite(dx2[0]), dtype=jnp.int32)
-        coarse = lambda y, x, d: _worley_pallas.kth_all_points(y, x, n_points, d, float(h + w), tile)  # noqa: E731
-    bounds = _bracket_bounds(dy2, dx2, d, step, tol, coarse)
+    bounds = _tiled_bounds(dy2, dx2, d, step, tol, tile, pallas)
     if bounds is None or h % tile or w % tile:
         return _kth_bracket(dy2, dx2, d, step, tol)
     lo, hi, n_iter = bounds
@@ -481,10 +489,8 @@ def _kth_tiled(dy2: jax.Array, dx2: jax.Array, d: jax.Array, step: int = _COARSE
         dy2_, dx2_, lo_, hi_ = _tie((dy2, dx2, lo, hi), carry)
         if not pallas:
             return False, _bisect_all_points(dy2_, dx2_, lo_, hi_, n_iter, d)
-        p, tiles = dy2.shape[-1], (h // tile, w // tile)  # every point is a candidate of every tile (masked: +inf)
-        every = jnp.broadcast_to(jnp.arange(p, dtype=jnp.int32), tiles + (p,))
-        return False, _worley_pallas.select_kth(dy2_, dx2_, every, jnp.full(tiles, p, jnp.int32),
-                                                jnp.full(tiles, d, jnp.int32), lo_, hi_, tile)
+        # Every point a candidate of every tile (the masked ones are at +inf).
+        return False, _worley_pallas.select_all_points(dy2_, dx2_, dy2.shape[-1], d, lo_, hi_, tile)
 
     return jax.lax.while_loop(lambda carry: carry[0], redo, (overflow, d2))[1]
 
