@@ -1,0 +1,103 @@
+"""The one host loop: chunks, checkpoints (one format, typed keys), resume equals uninterrupted, time limit, logs."""
+
+from __future__ import annotations
+
+import csv
+from typing import NamedTuple
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+from jaxterrain import driver
+
+
+class State(NamedTuple):
+    key: jax.Array
+    total: jax.Array
+    params: dict
+
+
+def make_state(seed=0):
+    return State(jax.random.key(seed), jnp.zeros((), jnp.float32), {"w": jnp.arange(3, dtype=jnp.float32)})
+
+
+@jax.jit
+def _scan(state, steps):
+    def body(s, t):
+        k = jax.random.fold_in(s.key, t)
+        x = jax.random.uniform(k)
+        return s._replace(total=s.total + x, params={"w": s.params["w"] * 0.5 + x}), {"x": x, "t": t}
+
+    return jax.lax.scan(body, state, steps)
+
+
+def chunk(state, start, stop):
+    return _scan(state, jnp.arange(start, stop))
+
+
+def test_resume_equals_uninterrupted(tmp_path):
+    full, done, hist = driver.run_chunks(chunk, make_state(), total=10, every=3, progress=False)
+    assert done == 10 and hist["t"] == list(range(10))
+    run = tmp_path / "run"
+    part, done_a, _ = driver.run_chunks(chunk, make_state(), total=4, every=3, run_dir=run, progress=False,
+                                        meta={"seed": 0})
+    assert done_a == 4
+    state, done_b, history, meta = driver.restore(run, like=make_state())
+    assert done_b == 4 and meta == {"seed": 0} and history["t"] == [0, 1, 2, 3]
+    assert jnp.issubdtype(state.key.dtype, jax.dtypes.prng_key)
+    resumed, done_c, hist_c = driver.run_chunks(chunk, state, total=10, every=3, start=done_b, history=history,
+                                                run_dir=run, progress=False)
+    assert done_c == 10
+    np.testing.assert_array_equal(np.asarray(resumed.params["w"]), np.asarray(full.params["w"]))
+    assert float(resumed.total) == float(full.total)
+    assert hist_c["x"] == hist["x"]
+    rows = list(csv.reader((run / driver.METRICS_NAME).open()))
+    assert rows[0] == ["step", "t", "x"] and len(rows) == 11 and rows[-1][0] == "10"
+    assert float(rows[3][2]) == hist["x"][2]
+    assert any((run / "tb").iterdir())
+
+
+def test_time_limit_stops_after_a_chunk(tmp_path):
+    calls = []
+
+    def slow(state, start, stop):
+        calls.append((start, stop))
+        import time
+
+        time.sleep(0.05)
+        return chunk(state, start, stop)
+
+    _, done, hist = driver.run_chunks(slow, make_state(), total=100, every=2, time_limit_s=0.01,
+                                      run_dir=tmp_path, progress=False)
+    assert done == 2 and calls == [(0, 2)] and len(hist["x"]) == 2
+    assert driver.restore(tmp_path, make_state())[1] == 2
+
+
+def test_progress_callable_and_batched_metrics():
+    seen = []
+
+    def batched(state, start, stop):
+        n = stop - start
+        return state, {"m": jnp.stack([jnp.arange(n, dtype=jnp.float32), 2 + jnp.arange(n, dtype=jnp.float32)])}
+
+    _, _, hist = driver.run_chunks(batched, make_state(), total=3, every=2, progress=seen.append)
+    assert hist["m"] == [1.0, 2.0, 1.0]  # mean over the leading (trial) axis
+    assert [s["done"] for s in seen] == [2, 3]
+
+
+def test_bad_checkpoints_name_the_file_and_leaf(tmp_path):
+    path = tmp_path / "c.npz"
+    driver.save_checkpoint(path, make_state(), done=1)
+    other = make_state()._replace(params={"w": jnp.zeros(4)})
+    with pytest.raises(ValueError, match=r"leaf .*'w'.*\(3,\)"):
+        driver.load_checkpoint(path, other)
+    with pytest.raises(ValueError, match="no leaf"):
+        driver.load_checkpoint(path, {"other": jnp.zeros(1)})
+    path.write_bytes(path.read_bytes()[:100])
+    with pytest.raises(ValueError, match="c.npz.*not readable"):
+        driver.load_checkpoint(path, make_state())
+    with pytest.raises(ValueError, match="every must be an integer >= 1"):
+        driver.run_chunks(chunk, make_state(), total=3, every=0)
+    assert driver.restore(tmp_path / "none", make_state()) is None
