@@ -14,7 +14,9 @@ of ``every`` steps the driver
 * writes ``run_dir/checkpoint.npz`` atomically (:func:`save_checkpoint`: the state pytree, ``done``, the history and
   a JSON ``meta`` dict), so a killed run loses at most one chunk; ``restore`` + ``run_chunks(start=done,
   history=history)`` continues it, and when the chunk function depends only on ``(state, start, stop)`` the result
-  is the same as an uninterrupted run's;
+  is the same as an uninterrupted run's. The checkpoint before it is kept as ``checkpoint.prev.npz`` until the new
+  one is complete, so a latest checkpoint damaged after the fact still leaves one to resume from (``restore`` says
+  how);
 * rewrites ``run_dir/metrics.csv`` (one row per step) atomically and appends the chunk's scalars to TensorBoard
   event files in ``run_dir/tb`` (tensorboardX);
 * moves a tqdm progress bar (ETA, steps per second, the ``key_metric``'s latest value);
@@ -35,6 +37,7 @@ import io
 import json
 import math
 import os
+import shutil
 import sys
 import time
 import zipfile
@@ -53,6 +56,7 @@ __all__ = ["CHECKPOINT_NAME", "METRICS_NAME", "MetricLog", "load_checkpoint", "r
 FORMAT = "jaxterrain-checkpoint"
 VERSION = 1
 CHECKPOINT_NAME = "checkpoint.npz"
+PREVIOUS_NAME = "checkpoint.prev.npz"
 METRICS_NAME = "metrics.csv"
 ChunkFn = Callable[[Any, int, int], tuple[Any, dict]]
 
@@ -131,9 +135,41 @@ def load_checkpoint(path: str | os.PathLike, like: Any) -> tuple[Any, int, dict,
 
 
 def restore(run_dir: str | os.PathLike, like: Any) -> Optional[tuple[Any, int, dict, dict]]:
-    """:func:`load_checkpoint` of ``run_dir/checkpoint.npz``, or None when the folder holds no checkpoint."""
+    """:func:`load_checkpoint` of ``run_dir/checkpoint.npz``, or None when the folder holds no checkpoint.
+
+    A damaged latest checkpoint raises ``ValueError`` naming it and, when ``checkpoint.prev.npz`` (one chunk
+    earlier) exists, saying to move that one into its place to resume from it."""
     path = Path(run_dir) / CHECKPOINT_NAME
-    return load_checkpoint(path, like) if path.exists() else None
+    if not path.exists():
+        return None
+    try:
+        return load_checkpoint(path, like)
+    except ValueError as err:
+        previous = Path(run_dir) / PREVIOUS_NAME
+        if previous.exists():
+            raise ValueError(f"{err}. The checkpoint one chunk earlier is kept: to resume from it, run "
+                             f"`mv {previous} {path}` and resume again") from err
+        raise
+
+
+def _checkpoint(run_dir: Path, state, done: int, history: dict, meta: Optional[dict]) -> None:
+    """Write ``checkpoint.npz`` and keep the one it replaces as ``checkpoint.prev.npz``.
+
+    The new checkpoint is complete (written to a temporary file and fsynced) before anything is renamed, the old
+    one is linked to ``checkpoint.prev.npz`` first, and the new one then replaces it with one ``os.replace``: a kill
+    at any moment leaves ``checkpoint.npz`` readable (the old or the new one)."""
+    tmp = run_dir / f".{CHECKPOINT_NAME}.next"
+    save_checkpoint(tmp, state, done=done, history=history, meta=meta)
+    latest = run_dir / CHECKPOINT_NAME
+    if latest.exists():
+        prev_tmp = run_dir / f".{PREVIOUS_NAME}.next"
+        prev_tmp.unlink(missing_ok=True)
+        try:
+            os.link(latest, prev_tmp)
+        except OSError:  # a file system without hard links
+            shutil.copyfile(latest, prev_tmp)
+        os.replace(prev_tmp, run_dir / PREVIOUS_NAME)
+    os.replace(tmp, latest)
 
 
 # ----------------------------------------------------------------------------------------------------------------
@@ -244,7 +280,7 @@ def run_chunks(chunk_fn: ChunkFn, state: Any, *, total: int, every: int, start: 
             _extend(history, metrics, stop - done)
             seconds = time.perf_counter() - t1
             if run_dir is not None:
-                save_checkpoint(Path(run_dir) / CHECKPOINT_NAME, state, done=stop, history=history, meta=meta)
+                _checkpoint(Path(run_dir), state, stop, history, meta)
                 log.write(history, done, stop)
             info = {"done": stop, "total": total, "seconds": seconds, "steps_per_s": (stop - done) / max(seconds, 1e-9),
                     **{k: v[-1] for k, v in history.items() if v}}

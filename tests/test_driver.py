@@ -101,3 +101,62 @@ def test_bad_checkpoints_name_the_file_and_leaf(tmp_path):
     with pytest.raises(ValueError, match="every must be an integer >= 1"):
         driver.run_chunks(chunk, make_state(), total=3, every=0)
     assert driver.restore(tmp_path / "none", make_state()) is None
+
+
+_KILL_SCRIPT = """
+import sys, time
+import jax, jax.numpy as jnp
+sys.path.insert(0, {tests!r})
+from test_driver import chunk, make_state
+from jaxterrain import driver
+
+def slow(state, start, stop):
+    time.sleep(0.02)
+    return chunk(state, start, stop)
+
+restored = driver.restore({run!r}, make_state())
+state, done, history = (make_state(), 0, None) if restored is None else restored[:3]
+print("start", done, flush=True)
+driver.run_chunks(slow, state, total=400, every=1, start=done, history=history, run_dir={run!r}, progress=False)
+print("finished", flush=True)
+"""
+
+
+def test_sigkill_at_any_moment_resumes_to_the_same_result(tmp_path):
+    """SIGKILL the run repeatedly at arbitrary moments (often inside a checkpoint write); every restart resumes
+    from a readable checkpoint and the final state equals an uninterrupted run's."""
+    import os
+    import signal
+    import subprocess
+    import sys
+    import time
+    from pathlib import Path
+
+    run = tmp_path / "run"
+    script = tmp_path / "run.py"
+    script.write_text(_KILL_SCRIPT.format(tests=str(Path(__file__).parent), run=str(run)))
+    env = dict(os.environ, JAX_PLATFORMS="cpu")
+    kills = 0
+    for delay in (2.5, 2.7, 2.9, 3.1):
+        proc = subprocess.Popen([sys.executable, str(script)], env=env, stdout=subprocess.PIPE, text=True)
+        time.sleep(delay)
+        if proc.poll() is None:
+            proc.send_signal(signal.SIGKILL)
+            kills += 1
+        proc.wait()
+    out = subprocess.run([sys.executable, str(script)], env=env, capture_output=True, text=True, timeout=300)
+    assert "finished" in out.stdout, out.stderr[-2000:]
+    assert kills >= 1
+    state, done, history, _ = driver.restore(run, make_state())
+    full, _, full_hist = driver.run_chunks(chunk, make_state(), total=400, every=1, progress=False)
+    assert done == 400 and history["x"] == full_hist["x"]
+    np.testing.assert_array_equal(np.asarray(state.params["w"]), np.asarray(full.params["w"]))
+
+
+def test_damaged_latest_checkpoint_names_the_previous_one(tmp_path):
+    driver.run_chunks(chunk, make_state(), total=3, every=1, run_dir=tmp_path, progress=False)
+    assert driver.load_checkpoint(tmp_path / driver.PREVIOUS_NAME, make_state())[1] == 2
+    latest = tmp_path / driver.CHECKPOINT_NAME
+    latest.write_bytes(latest.read_bytes()[:-200])
+    with pytest.raises(ValueError, match=r"checkpoint.npz.*mv .*checkpoint.prev.npz"):
+        driver.restore(tmp_path, make_state())
