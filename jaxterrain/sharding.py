@@ -1,0 +1,126 @@
+"""Batches over devices with JAX's own runtime: a mesh of every visible device, padding, and row-parallel maps.
+
+    mesh = sharding.make_mesh()                                  # all visible devices (all hosts), axis "batch"
+    f = sharding.map_rows(per_row_batch_fn, mesh)                # rows split over devices, padded, unpadded again
+    out = f(terrains, keys)                                      # same values as per_row_batch_fn(terrains, keys)
+
+A batch whose length does not divide over the devices is PADDED with copies of its last row to the next multiple
+(the copies compute real, finite values) and the padding is cut off the result: never an error. A function that
+treats every row independently (its row ``i`` depends only on row ``i`` of each input, e.g. keys derived per row
+before the call) then gives the same values sharded and unsharded, bit for bit on CPU.
+
+Several hosts: call :func:`initialize` first in every process (one process per host, each seeing its local
+devices); ``make_mesh()`` then spans all hosts' devices and the same programs run unchanged.
+"""
+
+from __future__ import annotations
+
+import os
+from typing import Any, Callable, Optional, Sequence
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+from jax.sharding import Mesh, NamedSharding, PartitionSpec as P
+
+__all__ = ["AXIS", "initialize", "make_mesh", "map_rows", "pad_rows", "padded_length", "replicate", "shard_rows"]
+
+AXIS = "batch"
+
+
+def initialize(coordinator: Optional[str] = None, num_processes: Optional[int] = None,
+               process_id: Optional[int] = None) -> None:
+    """Join a multi-process (multi-host) run through ``jax.distributed.initialize``.
+
+    Arguments default to the environment variables ``JAXTERRAIN_COORDINATOR`` (``host:port`` of process 0),
+    ``JAXTERRAIN_NUM_PROCESSES`` and ``JAXTERRAIN_PROCESS_ID``; when none is set and no argument is given this
+    does nothing (one process). Launch example, two hosts::
+
+        # on host A (process 0) and host B (process 1), the same command but the id:
+        JAXTERRAIN_COORDINATOR=hostA:1234 JAXTERRAIN_NUM_PROCESSES=2 JAXTERRAIN_PROCESS_ID=0 python -m experiments ...
+    """
+    coordinator = coordinator or os.environ.get("JAXTERRAIN_COORDINATOR")
+    if num_processes is None and "JAXTERRAIN_NUM_PROCESSES" in os.environ:
+        num_processes = int(os.environ["JAXTERRAIN_NUM_PROCESSES"])
+    if process_id is None and "JAXTERRAIN_PROCESS_ID" in os.environ:
+        process_id = int(os.environ["JAXTERRAIN_PROCESS_ID"])
+    if coordinator is None and num_processes is None and process_id is None:
+        return
+    if coordinator is None or num_processes is None or process_id is None:
+        raise ValueError("initialize: give the coordinator address, num_processes and process_id together "
+                         f"(got {coordinator!r}, {num_processes!r}, {process_id!r})")
+    if not 0 <= process_id < num_processes:
+        raise ValueError(f"initialize: process_id must be in [0, num_processes={num_processes}); got {process_id}")
+    jax.distributed.initialize(coordinator_address=coordinator, num_processes=num_processes, process_id=process_id)
+
+
+def make_mesh(num_devices: Optional[int] = None, devices: Optional[Sequence[Any]] = None) -> Mesh:
+    """A 1-D :class:`~jax.sharding.Mesh` with axis ``"batch"`` over ``devices`` (default: every visible device of
+    every process) or the first ``num_devices`` of them. ``ValueError`` if more are asked for than exist."""
+    devices = list(jax.devices() if devices is None else devices)
+    if num_devices is not None:
+        if not isinstance(num_devices, int) or not 1 <= num_devices <= len(devices):
+            raise ValueError(f"num_devices must be an integer in [1, {len(devices)}] (visible devices); "
+                             f"got {num_devices!r}")
+        devices = devices[:num_devices]
+    return Mesh(np.asarray(devices), (AXIS,))
+
+
+def padded_length(n: int, mesh: Mesh) -> int:
+    """The smallest multiple of the mesh's device count that is >= ``n`` (and >= 1)."""
+    d = mesh.devices.size
+    return max(1, -(-int(n) // d)) * d
+
+
+def pad_rows(tree: Any, length: int) -> Any:
+    """Pad every leaf's leading axis to ``length`` with copies of its last row (finite, like real rows)."""
+
+    def pad(x):
+        x = jnp.asarray(x)
+        extra = length - x.shape[0]
+        if extra < 0:
+            raise ValueError(f"pad_rows: a leaf has {x.shape[0]} rows, more than length={length}")
+        if extra == 0:
+            return x
+        return jnp.concatenate([x, jnp.repeat(x[-1:], extra, axis=0)], axis=0)
+
+    return jax.tree.map(pad, tree)
+
+
+def shard_rows(tree: Any, mesh: Mesh) -> tuple[Any, jax.Array]:
+    """Pad ``tree``'s leading axis (:func:`padded_length`) and place it split over the mesh.
+
+    Returns ``(tree, mask)``: ``mask`` [padded] bool is True for real rows (sharded like the rows)."""
+    n = jax.tree.leaves(tree)[0].shape[0]
+    length = padded_length(n, mesh)
+    spec = NamedSharding(mesh, P(AXIS))
+    tree = jax.device_put(pad_rows(tree, length), spec)
+    mask = jax.device_put(jnp.arange(length) < n, spec)
+    return tree, mask
+
+
+def replicate(tree: Any, mesh: Mesh) -> Any:
+    """Place every leaf of ``tree`` whole on every device of the mesh."""
+    return jax.device_put(tree, NamedSharding(mesh, P()))
+
+
+def map_rows(fn: Callable, mesh: Mesh, replicated: tuple[int, ...] = ()) -> Callable:
+    """``fn(*args)`` with the rows (leading axis) of every argument split over the mesh's devices.
+
+    ``fn`` maps batched arguments to a batched result (a pytree of arrays whose leading axis is the rows) and must
+    treat rows independently; arguments whose positions are in ``replicated`` (e.g. policy parameters) are passed
+    whole to every device. The returned function pads the rows to a multiple of the device count, runs ``fn`` on
+    each device's rows under ``jax.shard_map`` inside one ``jit``, and returns the real rows only.
+    """
+    replicated = frozenset(replicated)
+
+    def run(*args):
+        rows = [a for i, a in enumerate(args) if i not in replicated]
+        n = jax.tree.leaves(rows)[0].shape[0]
+        length = padded_length(n, mesh)
+        specs = tuple(P() if i in replicated else P(AXIS) for i in range(len(args)))
+        padded = tuple(a if i in replicated else pad_rows(a, length) for i, a in enumerate(args))
+        out = jax.shard_map(fn, mesh=mesh, in_specs=specs, out_specs=P(AXIS), check_vma=False)(*padded)
+        return jax.tree.map(lambda x: x[:n], out)
+
+    return jax.jit(run)

@@ -1,0 +1,51 @@
+"""Rows over devices: 4 forced CPU devices in a subprocess (XLA_FLAGS must precede jax's start)."""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+import textwrap
+
+import pytest
+
+from jaxterrain import sharding as S
+
+_SCRIPT = textwrap.dedent("""
+    import jax, jax.numpy as jnp, numpy as np
+    from jaxterrain import sharding as S
+    assert len(jax.devices()) == 4, jax.devices()
+    mesh = S.make_mesh()
+    def f(x, k, w):
+        return {"y": jnp.sin(x).sum(-1) * w + jax.vmap(jax.random.uniform)(k)}
+    for n in (1, 4, 7, 9):  # uneven batches are padded, never an error
+        x = jnp.arange(n * 3, dtype=jnp.float32).reshape(n, 3)
+        keys = jax.random.split(jax.random.key(0), n)
+        got = S.map_rows(f, mesh, replicated=(2,))(x, keys, jnp.float32(2.0))["y"]
+        want = f(x, keys, 2.0)["y"]
+        assert got.shape == (n,) and np.array_equal(np.asarray(got), np.asarray(want)), (n, got, want)
+    t, m = S.shard_rows(jnp.ones((7, 2)), mesh)
+    assert t.shape == (8, 2) and np.asarray(m).tolist() == [True] * 7 + [False]
+    assert S.padded_length(9, mesh) == 12 and S.make_mesh(2).devices.size == 2
+    print("ok")
+""")
+
+
+def run_on_devices(script: str, devices: int = 4, timeout: int = 300) -> str:
+    env = dict(os.environ, XLA_FLAGS=f"--xla_force_host_platform_device_count={devices}", JAX_PLATFORMS="cpu")
+    out = subprocess.run([sys.executable, "-c", script], env=env, capture_output=True, text=True, timeout=timeout)
+    assert out.returncode == 0, out.stderr[-3000:]
+    return out.stdout
+
+
+def test_map_rows_equals_unsharded_and_pads_uneven_batches():
+    assert run_on_devices(_SCRIPT).strip().endswith("ok")
+
+
+def test_bad_device_counts_and_initialize_arguments():
+    with pytest.raises(ValueError, match="num_devices must be an integer in"):
+        S.make_mesh(0)
+    with pytest.raises(ValueError, match="together"):
+        S.initialize(coordinator="localhost:1234")
+    with pytest.raises(ValueError, match="process_id must be in"):
+        S.initialize("localhost:1234", 2, 5)
