@@ -51,6 +51,7 @@ def initialize(coordinator: Optional[str] = None, num_processes: Optional[int] =
                          f"(got {coordinator!r}, {num_processes!r}, {process_id!r})")
     if not 0 <= process_id < num_processes:
         raise ValueError(f"initialize: process_id must be in [0, num_processes={num_processes}); got {process_id}")
+    jax.config.update("jax_cpu_collectives_implementation", "gloo")  # CPU processes reach each other (GPUs: NCCL)
     jax.distributed.initialize(coordinator_address=coordinator, num_processes=num_processes, process_id=process_id)
 
 

@@ -49,3 +49,38 @@ def test_bad_device_counts_and_initialize_arguments():
         S.initialize(coordinator="localhost:1234")
     with pytest.raises(ValueError, match="process_id must be in"):
         S.initialize("localhost:1234", 2, 5)
+
+
+_PROCESS_SCRIPT = textwrap.dedent("""
+    import sys
+    import jax, jax.numpy as jnp, numpy as np
+    from jax.experimental import multihost_utils
+    from jaxterrain import sharding as S
+    S.initialize(sys.argv[1], 2, int(sys.argv[2]))
+    assert jax.process_count() == 2 and len(jax.devices()) == 4 and len(jax.local_devices()) == 2
+    mesh = S.make_mesh()
+    def f(x, k, w):
+        return {"y": jnp.sin(x).sum(-1) * w + jax.vmap(jax.random.uniform)(k)}
+    x = jnp.arange(21, dtype=jnp.float32).reshape(7, 3)
+    keys = jax.random.split(jax.random.key(0), 7)
+    got = multihost_utils.process_allgather(S.map_rows(f, mesh, replicated=(2,))(x, keys, jnp.float32(2.0))["y"],
+                                            tiled=True)
+    assert np.array_equal(np.asarray(got), np.asarray(f(x, keys, 2.0)["y"])), got
+    print("ok", jax.process_index())
+""")
+
+
+def test_two_processes_through_jax_distributed_equal_one():
+    """Two processes on this machine, 2 forced CPU devices each, joined on a localhost coordinator."""
+    import socket
+
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    env = dict(os.environ, XLA_FLAGS="--xla_force_host_platform_device_count=2", JAX_PLATFORMS="cpu")
+    procs = [subprocess.Popen([sys.executable, "-c", _PROCESS_SCRIPT, f"127.0.0.1:{port}", str(i)], env=env,
+                              stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True) for i in range(2)]
+    outs = [p.communicate(timeout=240) for p in procs]
+    for p, (out, err) in zip(procs, outs):
+        assert p.returncode == 0, err[-3000:]
+    assert sorted(o.split()[-1] for o, _ in outs) == ["0", "1"]
