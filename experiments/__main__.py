@@ -22,6 +22,7 @@ COMMANDS = {
     "gradient": ("experiments.gradient", "difficulty gradient of archives: fitness against distance from cell (0, 0)"),
     "learn": ("experiments.learn", "Experiment 2, one treatment: PPO from the base policy on a curriculum over an archive"),
     "curriculum": ("experiments.curriculum", "Experiment 2: every treatment, Figure 7 and Table 2"),
+    "train-traversability": ("experiments.train_traversability", "train the learned traversability patch classifier on base-policy walks"),
 }
 
 
