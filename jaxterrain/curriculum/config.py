@@ -1,0 +1,220 @@
+"""The curriculum's one typed config: every number of the paper's Experiment 2 and every choice it leaves open.
+
+The paper (Howard et al. 2022, section 4.2) fixes: PPO from the base policy, at most 30 000 epochs, training in
+chunks of 40 epochs, an evaluation after every chunk, a terrain is finished at 90 % of the maximum fitness or after
+100 evaluations, the IT&E GP (rho 0.4, kappa 0.05, noise 0.001, Matern kernel, prior = the archive's fitness),
+terrains predicted easier than the one just trained are removed, the run ends when no terrain is left, and the
+"hardest terrain traversed" is the Euclidean distance of its cell from (0, 0). Where it is silent we chose:
+
+``gp_evaluation = "final"`` - which evaluation enters the GP. One observation per finished terrain: the evaluation
+  that finished it (the policy as it leaves the terrain, which is the policy the next choice is made for). IT&E adds
+  one observation per trial too. Adding every chunk's evaluation would put up to 100 observations of a changing
+  policy at the SAME point (a stale, nearly singular kernel matrix). ``"best"`` adds the best evaluation instead.
+
+``num_envs = 500, unroll_length = 10, num_unrolls = 8, num_minibatches = 8, update_epochs = 8, learning_rate =
+  3e-4`` - PPO for fine-tuning, with all envs on the one current terrain. The paper used SpinningUp's PPO defaults
+  (one env, 4 000 steps per epoch); we keep the recipe the base policy was trained with (brax's MJX humanoid PPO: its
+  networks, normaliser, clipping, discount, learning rate), so that its value net and normaliser carry over, and size
+  one update as 10 epochs (500 x 10 x 8 = 40 000 env steps; 4 updates per 40-epoch chunk, 64 Adam steps per update:
+  about brax's ratio of Adam steps to env steps). 500 envs make each env walk 320 steps per chunk, longer than one
+  traversal (about 210 steps at the base policy's 2.9 m/s), so the first chunk on a new terrain already sees whole
+  walks; 10 trials x 500 envs fill a GPU. Adam's state starts fresh (none is shipped with the base policy).
+
+``max_fitness = 1.0`` - "maximum fitness" is the maximum of the normalised distance (the far edge), so the threshold
+  is fitness >= 0.9. (IT&E's own stop rule compares with the GP's maximum mean; that is a different quantity.)
+
+``removal_margin = 0.05, removal_ties = "nearer"`` - the removal rule. After a terrain T is finished, an available
+  terrain x is removed when the updated GP predicts it clearly easier, ``mu(x) > mu(T) + margin``; terrains within
+  the margin of T (``|mu(x) - mu(T)| <= margin``) are ties, removed only when their cell is no further from the
+  origin than T's (the map's own difficulty breaks the tie); T itself is always removed. Why: the base policy's
+  fitness saturates at 1.0 on many cells, and one evaluation of T reads a little below its prior (0.98 for a prior
+  of 1.0 is evaluation noise). The literal rule (``margin 0, ties "remove"``) would then remove every other cell
+  at 1.0 as "easier" and empty the map after the first terrain; within the margin, the descriptors decide.
+  ``"keep"`` keeps all ties, ``"remove"`` removes all ties (the literal "at least as easy").
+
+``credit = "threshold"`` - a terrain counts as traversed (for the hardest-terrain record) only when an evaluation on
+  it reached the threshold; one left after 100 evaluations without reaching it is not credited. ``"finished"``
+  credits every finished terrain.
+
+``distance_origin = "origin"`` - the hardest terrain is measured from cell (0, 0), as the paper's Figure 7 caption
+  and its "feature distance from (0, 0)" say: ``TerrainBank.distance = hypot(b0 + 1, b1 + 1)`` in cells (70.71 at
+  the far corner of 50 x 50). Its Table 2 text says "distance from the top-right corner"; ``"top_right"`` reads that
+  as ``70.71 - hypot(bins - b0, bins - b1)`` (0 at (0, 0), 69.3 in the top-right cell) for comparison.
+
+Ties in the choice of the next terrain (equal scores) go to the terrain nearest the origin, then the lowest index.
+The first terrain of the map curriculum is the argmax of the prior (no observation yet: the UCB is the prior + kappa).
+
+Baselines share everything but the ``selector``: ``"roughness"`` (standard CL, the paper's Figure 7b: the terrains
+sorted by descriptor 0 (roughness) ascending, every ``roughness_stride``-th one, in order, each finished by the same
+threshold / 100-evaluation rule) and ``"random"`` (uniformly random among the available terrains, each removed after
+it is finished, no GP).
+"""
+
+from __future__ import annotations
+
+import math
+from typing import NamedTuple, Optional
+
+__all__ = ["CurriculumConfig", "validate_config", "SELECTORS"]
+
+SELECTORS = ("map", "roughness", "random")
+GP_EVALUATIONS = ("final", "best")
+REMOVAL_TIES = ("nearer", "keep", "remove")
+CREDITS = ("threshold", "finished")
+DISTANCE_ORIGINS = ("origin", "top_right")
+
+
+class CurriculumConfig(NamedTuple):
+    """Static settings of one curriculum treatment (hashable; changing one re-compiles). Defaults: the paper, plus
+    the choices of the module docstring.
+
+    Fields:
+      selector: ``map`` (IT&E GP + UCB + removal), ``roughness`` (standard CL) or ``random``.
+      epochs_per_chunk: epochs trained between two evaluations (paper: 40).
+      steps_per_epoch: env steps per epoch (SpinningUp's epoch: 4 000).
+      max_epochs: the run stops after this many epochs (paper: 30 000).
+      threshold: a terrain is learnt at fitness >= threshold x max_fitness, in (0, 1] (paper: 0.9).
+      max_fitness: the maximum fitness (the normalised distance's 1.0), > 0.
+      max_evals: evaluations (chunks) spent on one terrain before it is left anyway (paper: 100).
+      attempts, best: the difficulty protocol of each evaluation: mean of the ``best`` of ``attempts`` walks.
+      kappa: UCB exploration weight (IT&E: 0.05).
+      rho, sigma_f, noise: GP length scale, signal variance, observation noise (IT&E: 0.4, 1, 0.001).
+      gp_evaluation: ``final`` or ``best`` evaluation of a finished terrain enters the GP.
+      removal_margin: fitness margin of the removal rule (>= 0).
+      removal_ties: ``nearer``, ``keep`` or ``remove``: terrains predicted within the margin of the one just
+        trained.
+      credit: ``threshold`` or ``finished``: which terrains count for the hardest-terrain record.
+      distance_origin: ``origin`` or ``top_right``: how a cell's hardness (distance) is measured.
+      roughness_stride: the roughness baseline trains every ``roughness_stride``-th terrain (paper: 5).
+      max_observations: GP observation slots ``M``; None = ``min(N terrains, max chunks)``, which can never fill up
+        (one observation per finished terrain, each terrain finished at most once).
+      num_envs, unroll_length, num_unrolls, num_minibatches, update_epochs, learning_rate: PPO for fine-tuning
+        (the base policy's recipe otherwise); ``num_envs x unroll_length x num_unrolls`` must divide a chunk's env
+        steps.
+    """
+
+    selector: str = "map"
+    epochs_per_chunk: int = 40
+    steps_per_epoch: int = 4000
+    max_epochs: int = 30000
+    threshold: float = 0.9
+    max_fitness: float = 1.0
+    max_evals: int = 100
+    attempts: int = 20
+    best: int = 5
+    kappa: float = 0.05
+    rho: float = 0.4
+    sigma_f: float = 1.0
+    noise: float = 0.001
+    gp_evaluation: str = "final"
+    removal_margin: float = 0.05
+    removal_ties: str = "nearer"
+    credit: str = "threshold"
+    distance_origin: str = "origin"
+    roughness_stride: int = 5
+    max_observations: Optional[int] = None
+    num_envs: int = 500
+    unroll_length: int = 10
+    num_unrolls: int = 8
+    num_minibatches: int = 8
+    update_epochs: int = 8
+    learning_rate: float = 3e-4
+
+    @property
+    def max_chunks(self) -> int:
+        """Chunks of ``epochs_per_chunk`` until ``max_epochs`` (the length of the history buffers)."""
+        return -(-self.max_epochs // self.epochs_per_chunk)
+
+    @property
+    def steps_per_chunk(self) -> int:
+        """Env steps trained per chunk."""
+        return self.epochs_per_chunk * self.steps_per_epoch
+
+    @property
+    def steps_per_update(self) -> int:
+        """Env steps of one PPO update."""
+        return self.num_envs * self.unroll_length * self.num_unrolls
+
+    @property
+    def updates_per_chunk(self) -> int:
+        """PPO updates per chunk."""
+        return self.steps_per_chunk // self.steps_per_update
+
+    def observation_slots(self, num_terrains: int) -> int:
+        """``M``, the GP's padded observation count for a bank of ``num_terrains``."""
+        if self.max_observations is not None:
+            return int(self.max_observations)
+        return max(1, min(int(num_terrains), self.max_chunks))
+
+    def ppo_config(self, base):
+        """The fine-tuning :class:`jaxterrain.rl.PPOConfig`: ``base`` (the base policy's) with this config's sizes."""
+        return base._replace(num_envs=self.num_envs, unroll_length=self.unroll_length, num_unrolls=self.num_unrolls,
+                             num_minibatches=self.num_minibatches, update_epochs=self.update_epochs,
+                             learning_rate=self.learning_rate)
+
+    def to_json_dict(self) -> dict:
+        return dict(self._asdict())
+
+    @classmethod
+    def from_json_dict(cls, d: dict) -> "CurriculumConfig":
+        unknown = set(d) - set(cls._fields)
+        if unknown:
+            raise ValueError(f"CurriculumConfig: unknown fields {sorted(unknown)}")
+        return cls(**d)
+
+
+def _int_at_least(config, name: str, lo: int) -> None:
+    v = getattr(config, name)
+    if not isinstance(v, int) or isinstance(v, bool) or v < lo:
+        raise ValueError(f"CurriculumConfig.{name} must be an integer >= {lo}, got {v!r}")
+
+
+def _float_in(config, name: str, lo: float, hi: Optional[float], lo_open: bool, hi_open: bool = False) -> None:
+    v = getattr(config, name)
+    try:
+        f = float(v)
+    except (TypeError, ValueError):
+        raise ValueError(f"CurriculumConfig.{name} must be a number, got {v!r}") from None
+    ok = math.isfinite(f) and (f > lo if lo_open else f >= lo) and (hi is None or (f < hi if hi_open else f <= hi))
+    if not ok:
+        left, right = "(" if lo_open else "[", ")" if (hi is None or hi_open) else "]"
+        raise ValueError(f"CurriculumConfig.{name} must be in {left}{lo}, {'inf' if hi is None else hi}{right}, "
+                         f"got {v!r}")
+
+
+def _choice(config, name: str, options: tuple) -> None:
+    v = getattr(config, name)
+    if v not in options:
+        raise ValueError(f"CurriculumConfig.{name} must be one of {options}, got {v!r}")
+
+
+def validate_config(config: CurriculumConfig) -> CurriculumConfig:
+    """Raise ``ValueError`` naming the first bad field and its allowed range; return ``config`` unchanged."""
+    _choice(config, "selector", SELECTORS)
+    for name in ("epochs_per_chunk", "steps_per_epoch", "max_epochs", "max_evals", "attempts", "best",
+                 "roughness_stride", "num_envs", "unroll_length", "num_unrolls", "num_minibatches", "update_epochs"):
+        _int_at_least(config, name, 1)
+    if config.best > config.attempts:
+        raise ValueError(f"CurriculumConfig.best must be <= attempts ({config.attempts}), got {config.best}")
+    _float_in(config, "threshold", 0.0, 1.0, lo_open=True)
+    _float_in(config, "max_fitness", 0.0, None, lo_open=True)
+    _float_in(config, "kappa", 0.0, None, lo_open=False)
+    _float_in(config, "rho", 0.0, None, lo_open=True)
+    _float_in(config, "sigma_f", 0.0, None, lo_open=True)
+    _float_in(config, "noise", 0.0, None, lo_open=True)
+    _float_in(config, "removal_margin", 0.0, None, lo_open=False)
+    _float_in(config, "learning_rate", 0.0, None, lo_open=True)
+    _choice(config, "gp_evaluation", GP_EVALUATIONS)
+    _choice(config, "removal_ties", REMOVAL_TIES)
+    _choice(config, "credit", CREDITS)
+    _choice(config, "distance_origin", DISTANCE_ORIGINS)
+    if config.max_observations is not None:
+        _int_at_least(config, "max_observations", 1)
+    if config.steps_per_chunk % config.steps_per_update:
+        raise ValueError(
+            f"CurriculumConfig.num_envs x unroll_length x num_unrolls ({config.steps_per_update}) must divide "
+            f"epochs_per_chunk x steps_per_epoch ({config.steps_per_chunk})")
+    if (config.num_envs * config.num_unrolls) % config.num_minibatches:
+        raise ValueError(f"CurriculumConfig.num_minibatches ({config.num_minibatches}) must divide num_envs x "
+                         f"num_unrolls ({config.num_envs * config.num_unrolls})")
+    return config

@@ -1,0 +1,294 @@
+"""The map-based curriculum (and its baselines) as one state pytree and pure functions over it.
+
+    harness = Harness(train=..., evaluate=..., reset=...)               # injected pure functions (see Harness)
+    state = init(key, bank, policy_state, config=config, harness=harness)
+    state = step(state, key, bank, config=config, harness=harness)      # one chunk: train, evaluate, update, switch
+
+    states = init_trials(keys [T], bank, policy_state, config=..., harness=...)    # T trials, leading axis [T]
+    run = make_runner(config, harness)                                   # jitted; re-use it (one compile)
+    states = run(states, bank, num_chunks)                               # up to num_chunks chunks of every trial
+
+One chunk (:func:`step`) trains the policy on the current terrain for ``epochs_per_chunk`` epochs
+(``harness.train``), evaluates it there (``harness.evaluate``), records epoch / terrain / evaluation / hardest
+terrain traversed in the history buffers, and when the terrain is finished (threshold reached or ``max_evals``
+evaluations spent) adds one observation to the GP, removes terrains (the selector's rule), picks the next terrain
+and resets the envs on it (``harness.reset``). Everything is data (indices and masks, ``jnp.where``): the same code
+runs under ``vmap`` over trials, a trial that is done keeps its state unchanged, and nothing re-compiles when the
+terrain changes (the terrain is an index into the bank). Decisions and their reasons: :mod:`.config`.
+"""
+
+from __future__ import annotations
+
+import functools
+from typing import Any, Callable, NamedTuple, Optional
+
+import jax
+import jax.numpy as jnp
+
+from jaxterrain.bank import MAX_DISTANCE_50, TerrainBank
+from jaxterrain.curriculum import gp
+from jaxterrain.curriculum.config import CurriculumConfig
+
+__all__ = ["Harness", "History", "State", "init", "step", "init_trials", "run_trials", "make_runner",
+           "terrain_hardness", "roughness_sequence", "select", "removal_mask", "gp_params"]
+
+GRID_BINS = 50  # the paper's 50 x 50 grid (``distance_origin="top_right"``)
+
+
+class Harness(NamedTuple):
+    """The pure functions a curriculum drives (fakes in tests, PPO and the walker in :mod:`.walker`).
+
+    train: ``(policy_state, key, terrain [H, W]) -> policy_state``, one chunk of training on one terrain.
+    evaluate: ``(policy_state, key, terrain [H, W]) -> fitness []`` float32 in [0, 1].
+    reset: ``(policy_state, key, terrain [H, W]) -> policy_state``, restart the envs on a new terrain (None: the
+      state is kept as it is).
+    """
+
+    train: Callable
+    evaluate: Callable
+    reset: Optional[Callable] = None
+
+
+class History(NamedTuple):
+    """Per-chunk records, fixed length ``C = config.max_chunks``; entries after the last chunk hold -1 / NaN.
+
+    epoch: [C] int32 epochs done after the chunk. terrain: [C] int32 bank index trained in the chunk.
+    evaluation: [C] float32 fitness of the updated policy on it. hardest: [C] float32 hardest terrain traversed so
+    far (distance in cells, 0 before any).
+    """
+
+    epoch: jax.Array
+    terrain: jax.Array
+    evaluation: jax.Array
+    hardest: jax.Array
+
+
+class State(NamedTuple):
+    """One trial's curriculum (a pytree; :func:`init_trials` adds a leading trial axis to every leaf).
+
+    policy: the harness's policy state (``jaxterrain.rl.TrainState`` with the walker). key: [2] uint32, the trial's
+    key (chunk ``c`` uses ``fold_in(key, c)``, so a resumed run continues the same stream). obs_index: [M] int32
+    bank index of each GP observation (-1 = empty slot). obs_y: [M] float32 observed fitness. obs_count: [] int32.
+    available: [N] bool terrains still on offer. terrain: [] int32 current terrain. terrain_evals: [] int32
+    evaluations spent on it. terrain_best: [] float32 its best evaluation so far. chunk, epoch, env_steps: [] int32
+    counters. hardest: [] float32 hardest terrain traversed (distance, cells). done: [] bool. history: History.
+    """
+
+    policy: Any
+    key: jax.Array
+    obs_index: jax.Array
+    obs_y: jax.Array
+    obs_count: jax.Array
+    available: jax.Array
+    terrain: jax.Array
+    terrain_evals: jax.Array
+    terrain_best: jax.Array
+    chunk: jax.Array
+    epoch: jax.Array
+    env_steps: jax.Array
+    hardest: jax.Array
+    done: jax.Array
+    history: History
+
+
+# ----------------------------------------------------------------------------------------------------------------
+# Pure helpers
+# ----------------------------------------------------------------------------------------------------------------
+def gp_params(config: CurriculumConfig) -> gp.GPParams:
+    return gp.GPParams(rho=config.rho, sigma_f=config.sigma_f, noise=config.noise)
+
+
+def terrain_hardness(bank: TerrainBank, origin: str = "origin") -> jax.Array:
+    """``[N]`` float32 hardness of each terrain in cells: ``bank.distance`` (from cell (0, 0)) for ``"origin"``,
+    ``70.71 - hypot(50 - b0, 50 - b1)`` for ``"top_right"`` (see :mod:`.config`)."""
+    if origin == "origin":
+        return jnp.asarray(bank.distance, jnp.float32)
+    b = jnp.asarray(bank.bins, jnp.float32)
+    return MAX_DISTANCE_50 - jnp.hypot(GRID_BINS - b[:, 0], GRID_BINS - b[:, 1])
+
+
+def roughness_sequence(bank: TerrainBank, stride: int) -> tuple[jax.Array, jax.Array]:
+    """Standard CL's terrains: ``(rank [N] int32, member [N] bool)``. ``rank`` is each terrain's position in the
+    order of increasing descriptor 0 (roughness; ties by index); ``member`` marks every ``stride``-th of that order
+    (positions 0, stride, 2 stride, ...)."""
+    order = jnp.argsort(jnp.asarray(bank.descriptors)[:, 0], stable=True)
+    rank = jnp.zeros(order.shape[0], jnp.int32).at[order].set(jnp.arange(order.shape[0], dtype=jnp.int32))
+    return rank, (rank % stride) == 0
+
+
+def select(score: jax.Array, available: jax.Array, hardness: jax.Array) -> jax.Array:
+    """``[] int32``: the available terrain of highest ``score`` [N]; ties to the smallest ``hardness``, then the lowest
+    index. 0 when none is available (check ``available.any()``)."""
+    s = jnp.where(available, jnp.nan_to_num(score, nan=-jnp.inf), -jnp.inf)
+    cand = available & (s == jnp.max(s))
+    return jnp.argmin(jnp.where(cand, hardness, jnp.inf)).astype(jnp.int32)
+
+
+def removal_mask(mean: jax.Array, trained: jax.Array, hardness: jax.Array, margin: float, ties: str) -> jax.Array:
+    """``[N] bool``: terrains the map curriculum removes after finishing terrain ``trained`` ([] int32).
+
+    ``mean`` [N] is the updated GP's posterior mean. Removed: ``trained`` itself; terrains predicted clearly easier,
+    ``mean > mean[trained] + margin``; and of the ties (``|mean - mean[trained]| <= margin``) none (``"keep"``),
+    all (``"remove"``) or those no further from the origin (``hardness <= hardness[trained]``, ``"nearer"``).
+    """
+    mu_t = mean[trained]
+    tie = jnp.abs(mean - mu_t) <= margin
+    if ties == "nearer":
+        tie = tie & (hardness <= hardness[trained])
+    elif ties == "keep":
+        tie = jnp.zeros_like(tie)
+    elif ties != "remove":
+        raise ValueError(f"removal_ties must be nearer, keep or remove, got {ties!r}")
+    return (mean > mu_t + margin) | tie | (jnp.arange(mean.shape[0]) == trained)
+
+
+def _posterior(bank: TerrainBank, obs_index, obs_y, config: CurriculumConfig):
+    mask = obs_index >= 0
+    idx = jnp.maximum(obs_index, 0)
+    return gp.posterior(bank.points[idx], obs_y, mask, bank.fitness[idx], bank.points, bank.fitness,
+                        gp_params(config))
+
+
+def _where_tree(pred, on_true, on_false):
+    return jax.tree.map(lambda a, b: jnp.where(pred, a, b), on_true, on_false)
+
+
+def _raw(key):
+    return jax.random.key_data(key) if jnp.issubdtype(key.dtype, jax.dtypes.prng_key) else key
+
+
+def _typed(key):
+    return key if jnp.issubdtype(key.dtype, jax.dtypes.prng_key) else jax.random.wrap_key_data(key)
+
+
+# ----------------------------------------------------------------------------------------------------------------
+# init / step
+# ----------------------------------------------------------------------------------------------------------------
+def _initial(bank: TerrainBank, config: CurriculumConfig, key) -> tuple[jax.Array, jax.Array]:
+    """``(available [N] bool, score [N])`` before any training."""
+    n = bank.fitness.shape[0]
+    if config.selector == "roughness":
+        rank, member = roughness_sequence(bank, config.roughness_stride)
+        return member, -rank.astype(jnp.float32)
+    if config.selector == "random":
+        return jnp.ones(n, bool), jax.random.uniform(key, (n,))
+    return jnp.ones(n, bool), gp.ucb(bank.fitness, jnp.full((n,), config.sigma_f, jnp.float32), config.kappa)
+
+
+def init(key: jax.Array, bank: TerrainBank, policy: Any, *, config: CurriculumConfig, harness: Harness) -> State:
+    """A trial at its start: every terrain of the selector available, the first one chosen (map: the prior's
+    argmax), the envs of ``policy`` reset on it (``harness.reset``). ``policy``: the starting policy state (the
+    base policy's params and normaliser in an ``rl.TrainState``). Pure; vmap over ``key`` for trials."""
+    key = _typed(key)
+    trial_key, select_key, reset_key = jax.random.split(key, 3)
+    del key
+    n = bank.fitness.shape[0]
+    m, c = config.observation_slots(n), config.max_chunks
+    available, score = _initial(bank, config, select_key)
+    first = select(score, available, terrain_hardness(bank, config.distance_origin))
+    if harness.reset is not None:
+        policy = harness.reset(policy, reset_key, bank.heightmaps[first])
+    zi, zf = jnp.zeros((), jnp.int32), jnp.zeros((), jnp.float32)
+    history = History(epoch=jnp.full((c,), -1, jnp.int32), terrain=jnp.full((c,), -1, jnp.int32),
+                      evaluation=jnp.full((c,), jnp.nan, jnp.float32), hardest=jnp.full((c,), jnp.nan, jnp.float32))
+    return State(policy=policy, key=_raw(trial_key), obs_index=jnp.full((m,), -1, jnp.int32),
+                 obs_y=jnp.zeros((m,), jnp.float32), obs_count=zi, available=available, terrain=first,
+                 terrain_evals=zi, terrain_best=jnp.full((), -jnp.inf, jnp.float32), chunk=zi, epoch=zi,
+                 env_steps=zi, hardest=zf, done=~jnp.any(available), history=history)
+
+
+def _next_terrain(state: State, bank: TerrainBank, config: CurriculumConfig, key, trained, finished, obs_index, obs_y,
+                  hardness):
+    """After the GP update: ``(available [N], next terrain [])``; unchanged unless ``finished``."""
+    n = bank.fitness.shape[0]
+    used = jnp.arange(n) == trained
+    if config.selector == "map":
+        mean, var = _posterior(bank, obs_index, obs_y, config)
+        remove = removal_mask(mean, trained, hardness, config.removal_margin, config.removal_ties)
+        score = gp.ucb(mean, var, config.kappa)
+    elif config.selector == "roughness":
+        remove, score = used, -roughness_sequence(bank, config.roughness_stride)[0].astype(jnp.float32)
+    else:
+        remove, score = used, jax.random.uniform(key, (n,))
+    available = jnp.where(finished, state.available & ~remove, state.available)
+    return available, select(score, available, hardness)
+
+
+def step(state: State, key: jax.Array, bank: TerrainBank, *, config: CurriculumConfig, harness: Harness) -> State:
+    """One chunk of one trial (pure; see the module docstring). A trial that is ``done`` is returned unchanged."""
+    train_key, eval_key, select_key, reset_key = jax.random.split(_typed(key), 4)
+    del key
+    hardness = terrain_hardness(bank, config.distance_origin)
+    t = state.terrain
+    terrain = bank.heightmaps[t]
+    policy = harness.train(state.policy, train_key, terrain)
+    fitness = jnp.asarray(harness.evaluate(policy, eval_key, terrain), jnp.float32).reshape(())
+    evals = state.terrain_evals + 1
+    best = jnp.maximum(state.terrain_best, fitness)
+    reached = fitness >= config.threshold * config.max_fitness
+    finished = reached | (evals >= config.max_evals)
+    credited = finished if config.credit == "finished" else reached
+    hardest = jnp.where(credited, jnp.maximum(state.hardest, hardness[t]), state.hardest)
+    epoch = state.epoch + config.epochs_per_chunk
+
+    slot = jnp.where(finished, state.obs_count, state.obs_index.shape[0])  # out of range -> dropped
+    y = fitness if config.gp_evaluation == "final" else best
+    obs_index = state.obs_index.at[slot].set(t, mode="drop")
+    obs_y = state.obs_y.at[slot].set(y, mode="drop")
+    available, nxt = _next_terrain(state, bank, config, select_key, t, finished, obs_index, obs_y, hardness)
+    switch = finished & jnp.any(available)
+    if harness.reset is not None:
+        policy = _where_tree(switch, harness.reset(policy, reset_key, bank.heightmaps[nxt]), policy)
+    done = (finished & ~jnp.any(available)) | (epoch >= config.max_epochs)
+
+    c = state.chunk
+    h = state.history
+    history = History(epoch=h.epoch.at[c].set(epoch, mode="drop"), terrain=h.terrain.at[c].set(t, mode="drop"),
+                      evaluation=h.evaluation.at[c].set(fitness, mode="drop"),
+                      hardest=h.hardest.at[c].set(hardest, mode="drop"))
+    new = State(policy=policy, key=state.key, obs_index=obs_index, obs_y=obs_y,
+                obs_count=state.obs_count + finished.astype(jnp.int32), available=available,
+                terrain=jnp.where(switch, nxt, t), terrain_evals=jnp.where(finished, 0, evals),
+                terrain_best=jnp.where(finished, -jnp.inf, best), chunk=c + 1, epoch=epoch,
+                env_steps=state.env_steps + config.steps_per_chunk, hardest=hardest, done=done, history=history)
+    return _where_tree(state.done, state, new)
+
+
+def _chunk(state: State, bank: TerrainBank, config: CurriculumConfig, harness: Harness) -> State:
+    """:func:`step` with the trial's own key for this chunk, ``fold_in(state.key, state.chunk)``."""
+    return step(state, jax.random.fold_in(_typed(state.key), state.chunk), bank, config=config, harness=harness)
+
+
+# ----------------------------------------------------------------------------------------------------------------
+# Many trials at once
+# ----------------------------------------------------------------------------------------------------------------
+def init_trials(keys: jax.Array, bank: TerrainBank, policy: Any, *, config: CurriculumConfig,
+                harness: Harness) -> State:
+    """:func:`init` vmapped over ``keys`` [T] (typed or raw [T, 2]); the bank and starting policy are shared."""
+    fn = functools.partial(init, config=config, harness=harness)
+    return jax.vmap(fn, in_axes=(0, None, None))(keys, bank, policy)
+
+
+def run_trials(states: State, bank: TerrainBank, num_chunks: jax.Array, *, config: CurriculumConfig,
+               harness: Harness) -> State:
+    """Up to ``num_chunks`` chunks of every trial ([T]-batched ``states``), all trials in one vmapped step per
+    chunk; stops early once every trial is done. ``num_chunks`` may be traced (no re-compile per value). Pure."""
+    chunk = jax.vmap(functools.partial(_chunk, config=config, harness=harness), in_axes=(0, None))
+
+    def cond(carry):
+        i, s = carry
+        return (i < num_chunks) & ~jnp.all(s.done)
+
+    def body(carry):
+        i, s = carry
+        return i + 1, chunk(s, bank)
+
+    return jax.lax.while_loop(cond, body, (jnp.zeros((), jnp.int32), states))[1]
+
+
+def make_runner(config: CurriculumConfig, harness: Harness) -> Callable[[State, TerrainBank, Any], State]:
+    """The jitted ``(states [T], bank, num_chunks) -> states`` of :func:`run_trials` (``states`` donated). Build it
+    once per (config, harness) and call it per block of chunks: neither terrain switches nor the block length
+    re-compile it (a new trial count, a new bank shape does)."""
+    fn = functools.partial(run_trials, config=config, harness=harness)
+    return jax.jit(lambda s, b, n: fn(s, b, jnp.asarray(n, jnp.int32)), donate_argnums=(0,))

@@ -1,0 +1,354 @@
+"""jaxterrain.curriculum: the IT&E GP against NumPy, UCB choice and removal rule, the whole loop on toy banks with a
+fake deterministic harness (terrain order, stop conditions, hardest record), the roughness baseline, Table 2
+extraction, resume, vmapped trials, no re-trace on terrain switches, and the ``learn`` command end to end."""
+
+from __future__ import annotations
+
+import json
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+from jaxterrain import driver
+from jaxterrain.bank import TerrainBank, cell_distance
+from jaxterrain import curriculum as C
+from jaxterrain.curriculum import gp
+
+
+# ---------------------------------------------------------------------------------------------------------------
+# Toy banks and a fake harness
+# ---------------------------------------------------------------------------------------------------------------
+def toy_bank(fitness_grid: np.ndarray, descriptor0=None) -> TerrainBank:
+    """A bank of every cell of a B x B grid: ``fitness_grid[b1, b0]`` is the prior; each terrain is a constant
+    2 x 2 map holding its difficulty ``1 - prior``; points = bins / (B - 1)."""
+    b = fitness_grid.shape[0]
+    b0, b1 = np.meshgrid(np.arange(b), np.arange(b))
+    bins = np.stack([b0.ravel(), b1.ravel()], -1).astype(np.int32)  # cell order b1 * B + b0
+    fitness = fitness_grid.ravel().astype(np.float32)
+    points = (bins / max(b - 1, 1)).astype(np.float32)
+    desc = points.copy() if descriptor0 is None else np.stack([descriptor0, points[:, 1]], -1).astype(np.float32)
+    maps = np.broadcast_to((1.0 - fitness)[:, None, None], (fitness.size, 2, 2)).astype(np.float32)
+    return TerrainBank(jnp.asarray(maps), jnp.asarray(fitness), jnp.asarray(desc), jnp.asarray(points),
+                       jnp.asarray(bins), jnp.asarray(cell_distance(bins)), jnp.arange(fitness.size, dtype=jnp.int32),
+                       jnp.zeros(fitness.size, jnp.int32))
+
+
+TRACES = {"train": 0}
+
+
+def fake_harness(gain: float = 0.1) -> C.Harness:
+    """Policy state {"skill", "resets"}: each chunk adds ``gain`` to the skill; fitness on a terrain of difficulty d
+    is ``clip(1 - d + skill, 0, 1)`` (deterministic, keys ignored); a reset counts."""
+
+    def train(policy, key, terrain):
+        TRACES["train"] += 1
+        return {"skill": policy["skill"] + gain, "resets": policy["resets"]}
+
+    def evaluate(policy, key, terrain):
+        return jnp.clip(1.0 - jnp.mean(terrain) + policy["skill"], 0.0, 1.0)
+
+    def reset(policy, key, terrain):
+        return {"skill": policy["skill"], "resets": policy["resets"] + 1}
+
+    return C.Harness(train, evaluate, reset)
+
+
+START = {"skill": jnp.zeros((), jnp.float32), "resets": jnp.zeros((), jnp.int32)}
+
+
+def run_one(bank, config, harness, chunks, key=0):
+    states = C.init_trials(jax.random.split(jax.random.key(key), 1), bank, START, config=config, harness=harness)
+    return jax.tree.map(lambda x: x[0], C.make_runner(config, harness)(states, bank, chunks))
+
+
+def tree_equal(a, b) -> bool:
+    la, lb = jax.tree.leaves(a), jax.tree.leaves(b)
+    return len(la) == len(lb) and all(np.array_equal(np.asarray(x), np.asarray(y), equal_nan=True)
+                                      for x, y in zip(la, lb))
+
+
+def small(selector="map", **kw) -> C.CurriculumConfig:
+    base = dict(selector=selector, epochs_per_chunk=1, steps_per_epoch=8, max_epochs=40, max_evals=3,
+                num_envs=2, unroll_length=2, num_unrolls=2, num_minibatches=1)
+    return C.validate_config(C.CurriculumConfig(**{**base, **kw}))
+
+
+# ---------------------------------------------------------------------------------------------------------------
+# GP
+# ---------------------------------------------------------------------------------------------------------------
+def numpy_posterior(x, y, prior_obs, cells, prior, rho=0.4, sigma_f=1.0, noise=1e-3):
+    def k(a, b):
+        d = np.sqrt(((a[:, None] - b[None]) ** 2).sum(-1))
+        r = np.sqrt(5) * d / rho
+        return sigma_f * (1 + r + r * r / 3) * np.exp(-r)
+
+    kk = k(x, x) + noise * np.eye(len(x))
+    ks = k(cells, x)
+    mean = prior + ks @ np.linalg.solve(kk, y - prior_obs)
+    var = sigma_f - np.einsum("nm,nm->n", ks, np.linalg.solve(kk, ks.T).T)
+    return mean, var
+
+
+def test_gp_posterior_matches_numpy_on_the_unmasked_observations():
+    rng = np.random.default_rng(0)
+    m, n = 8, 30
+    obs_x, cells = rng.uniform(size=(m, 2)), rng.uniform(size=(n, 2))
+    obs_y, obs_prior, prior = rng.uniform(size=m), rng.uniform(size=m), rng.uniform(size=n)
+    mask = np.array([1, 0, 1, 1, 0, 0, 1, 1], bool)
+    obs_x[~mask] = 123.0  # padding values must not matter
+    params = gp.GPParams(rho=0.4, sigma_f=1.0, noise=1e-3)
+    posterior = jax.jit(gp.posterior)
+    f32 = lambda a: jnp.asarray(a, jnp.float32)  # noqa: E731
+    mean, var = posterior(f32(obs_x), f32(obs_y), jnp.asarray(mask), f32(obs_prior), f32(cells), f32(prior), params)
+    ref_mean, ref_var = numpy_posterior(obs_x[mask], obs_y[mask], obs_prior[mask], cells, prior)
+    np.testing.assert_allclose(np.asarray(mean), ref_mean, atol=2e-4)
+    np.testing.assert_allclose(np.asarray(var), np.maximum(ref_var, 0), atol=2e-4)
+    # at an observed point the mean is (almost) the observation and the variance about the noise
+    at_obs = posterior(f32(obs_x), f32(obs_y), jnp.asarray(mask), f32(obs_prior), f32(obs_x[mask]),
+                          f32(obs_prior[mask]), params)
+    np.testing.assert_allclose(np.asarray(at_obs[0]), obs_y[mask], atol=5e-3)
+    assert np.all(np.asarray(at_obs[1]) < 2e-3)
+    # no observation: the prior, variance sigma_f
+    mean0, var0 = posterior(f32(obs_x), f32(obs_y), jnp.zeros(m, bool), f32(obs_prior), f32(cells), f32(prior),
+                            params)
+    np.testing.assert_allclose(np.asarray(mean0), prior, rtol=1e-6)
+    np.testing.assert_allclose(np.asarray(var0), 1.0)
+    np.testing.assert_allclose(np.asarray(gp.ucb(jnp.array([0.5, 0.7]), jnp.array([4.0, 0.0]), 0.05)), [0.6, 0.7])
+
+
+# ---------------------------------------------------------------------------------------------------------------
+# UCB choice and the removal rule (3 x 3)
+# ---------------------------------------------------------------------------------------------------------------
+GRID3 = np.array([[1.0, 0.9, 0.7],   # row b1 = 0: b0 = 0, 1, 2
+                  [0.9, 0.8, 0.5],
+                  [0.7, 0.5, 0.2]], np.float32)
+
+
+def test_select_ties_go_to_the_nearest_then_the_lowest_index():
+    hardness = jnp.array([3.0, 1.0, 2.0, 1.0])
+    assert int(C.select(jnp.array([0.5, 0.9, 0.9, 0.9]), jnp.ones(4, bool), hardness)) == 1
+    assert int(C.select(jnp.array([0.5, 0.9, 0.9, 0.9]), jnp.array([1, 0, 1, 1], bool), hardness)) == 3
+    assert int(C.select(jnp.array([0.5, 0.9, 0.95, 0.9]), jnp.ones(4, bool), hardness)) == 2
+    assert int(C.select(jnp.array([0.5, jnp.nan, 0.1, 0.9]), jnp.array([1, 1, 1, 0], bool), hardness)) == 0
+
+
+def test_removal_rule_margin_and_ties_on_a_3x3_map():
+    bank = toy_bank(GRID3)
+    hardness = C.terrain_hardness(bank)
+    mean = jnp.asarray([1.0, 0.9, 0.7, 0.9, 0.8, 0.5, 0.7, 0.5, 0.2])
+    trained = 4  # cell (1, 1), predicted 0.8, distance hypot(2, 2)
+    rm = lambda margin, ties: np.asarray(C.removal_mask(mean, trained, hardness, margin, ties))  # noqa: E731
+    # margin 0.05: clearly easier = mean > 0.85 -> cells 0, 1, 3; no other tie; itself always
+    np.testing.assert_array_equal(np.flatnonzero(rm(0.05, "nearer")), [0, 1, 3, 4])
+    # margin 0.15: clearly easier > 0.95 -> 0; ties |mean - 0.8| <= 0.15: 1, 3 (nearer), 2, 6 (0.7, hypot(3, 1) =
+    # 3.16 > 2.83: further, kept under "nearer")
+    np.testing.assert_array_equal(np.flatnonzero(rm(0.15, "nearer")), [0, 1, 3, 4])
+    np.testing.assert_array_equal(np.flatnonzero(rm(0.15, "remove")), [0, 1, 2, 3, 4, 6])
+    np.testing.assert_array_equal(np.flatnonzero(rm(0.15, "keep")), [0, 4])
+    # the literal rule (margin 0, ties removed) = every terrain predicted at least as easy
+    np.testing.assert_array_equal(np.flatnonzero(rm(0.0, "remove")), np.flatnonzero(np.asarray(mean) >= 0.8))
+
+
+def test_map_step_adds_the_observation_removes_and_picks_the_ucb_argmax():
+    """First pick = prior argmax (cell (0, 0)); the fake evaluation there is 0.95 (< its prior 1.0): the GP
+    observation, the removal and the next pick equal a NumPy computation."""
+    bank = toy_bank(GRID3)
+    config = small(threshold=0.9)
+    harness = fake_harness(gain=-0.05)  # the policy gets a little worse: evaluation 1.0 - 0 - 0.05 = 0.95
+    state = C.init(jax.random.key(0), bank, START, config=config, harness=harness)
+    assert int(state.terrain) == 0 and bool(state.available.all())
+    state = jax.jit(lambda s, k: C.step(s, k, bank, config=config, harness=harness))(state, jax.random.key(1))
+    assert int(state.obs_count) == 1 and int(state.obs_index[0]) == 0
+    np.testing.assert_allclose(float(state.obs_y[0]), 0.95, atol=1e-6)
+    pts, prior = np.asarray(bank.points, np.float64), GRID3.ravel().astype(np.float64)
+    mean, var = numpy_posterior(pts[:1], np.array([0.95]), prior[:1], pts, prior)
+    hard = np.asarray(bank.distance)
+    removed = (mean > mean[0] + 0.05) | ((np.abs(mean - mean[0]) <= 0.05) & (hard <= hard[0]))
+    removed[0] = True
+    np.testing.assert_array_equal(np.asarray(state.available), ~removed)
+    score = np.where(removed, -np.inf, mean + 0.05 * np.sqrt(np.maximum(var, 0)))
+    best = np.flatnonzero(np.isclose(score, score.max(), atol=1e-6))
+    expected = best[np.argmin(hard[best])]
+    assert int(state.terrain) == expected == 1  # (1, 0) and (0, 1) tie: same distance, lower index
+    assert int(state.policy["resets"]) == 2  # init's reset + the switch
+    assert float(state.hardest) == pytest.approx(float(hard[0]))  # 0.95 >= 0.9: credited
+
+
+# ---------------------------------------------------------------------------------------------------------------
+# The whole loop with a fake harness
+# ---------------------------------------------------------------------------------------------------------------
+def reference_map_run(bank, config, gain, chunks):
+    """A host-side NumPy re-implementation of the map curriculum with the fake harness: (terrains, evaluations,
+    hardest) per chunk and whether it ended for lack of terrains."""
+    pts, prior = np.asarray(bank.points, np.float64), np.asarray(bank.fitness, np.float64)
+    hard, diff = np.asarray(bank.distance, np.float64), 1.0 - prior
+    avail = np.ones(prior.size, bool)
+    pick = lambda score: min(np.flatnonzero(avail & np.isclose(score, np.max(score[avail]), atol=1e-6)),  # noqa
+                             key=lambda i: (hard[i], i))
+    cur, skill, evals, hardest, obs_i, obs_y, out = pick(prior + config.kappa), 0.0, 0, 0.0, [], [], []
+    for _ in range(chunks):
+        skill += gain
+        fit = float(np.clip(1.0 - diff[cur] + skill, 0, 1))
+        evals += 1
+        reached = fit >= config.threshold
+        hardest = max(hardest, hard[cur]) if reached else hardest
+        out.append((cur, fit, hardest))
+        if not (reached or evals >= config.max_evals):
+            continue
+        obs_i.append(cur)
+        obs_y.append(fit)
+        mean, var = numpy_posterior(pts[obs_i], np.array(obs_y), prior[obs_i], pts, prior)
+        tie = np.abs(mean - mean[cur]) <= config.removal_margin
+        avail &= ~((mean > mean[cur] + config.removal_margin) | (tie & (hard <= hard[cur])))
+        avail[cur], evals = False, 0
+        if not avail.any():
+            return out, True
+        cur = pick(mean + config.kappa * np.sqrt(np.maximum(var, 0)))
+    return out, False
+
+
+def toy_grid(b=5):
+    b0, b1 = np.meshgrid(np.arange(b), np.arange(b))
+    return np.clip(1.0 - 0.12 * np.hypot(b0, b1) - 0.03 * b0, 0.0, 1.0).astype(np.float32)
+
+
+def test_map_loop_matches_a_numpy_reference_and_stops_when_no_terrain_is_left():
+    bank = toy_bank(toy_grid())
+    config = small(max_epochs=200, max_evals=4)
+    state = run_one(bank, config, fake_harness(0.08), 200)
+    ref, emptied = reference_map_run(bank, config, 0.08, 200)
+    assert emptied and bool(state.done)
+    n = len(ref)
+    assert int(state.chunk) == n < config.max_chunks  # ended by the empty map, not by max_epochs
+    h = state.history
+    np.testing.assert_array_equal(np.asarray(h.terrain[:n]), [r[0] for r in ref])
+    np.testing.assert_allclose(np.asarray(h.evaluation[:n]), [r[1] for r in ref], atol=1e-5)
+    np.testing.assert_allclose(np.asarray(h.hardest[:n]), [r[2] for r in ref], atol=1e-5)
+    np.testing.assert_array_equal(np.asarray(h.epoch[:n]), np.arange(1, n + 1))
+    assert np.all(np.asarray(h.terrain[n:]) == -1) and np.all(np.isnan(np.asarray(h.hardest[n:])))
+    assert len(set(r[0] for r in ref)) > 2  # it went somewhere
+    assert np.all(np.diff(np.asarray(h.hardest[:n])) >= 0)
+
+
+def test_max_evals_and_max_epochs_stop_and_an_unreached_terrain_is_not_credited():
+    bank = toy_bank(np.array([[0.5, 0.4], [0.4, 0.3]], np.float32))  # nothing is learnt (gain 0)
+    config = small(max_epochs=7, max_evals=3)
+    state = run_one(bank, config, fake_harness(0.0), 100)
+    h = state.history
+    assert bool(state.done) and int(state.chunk) == 7 == config.max_chunks and int(state.epoch) == 7
+    terrains = np.asarray(h.terrain)
+    assert len(set(terrains[:3])) == 1 and terrains[3] != terrains[0]  # left after 3 evaluations
+    assert float(state.hardest) == 0.0 and np.all(np.asarray(h.hardest) == 0.0)  # never credited
+    # crediting every finished terrain instead
+    state = run_one(bank, config._replace(credit="finished"), fake_harness(0.0), 100)
+    assert float(state.history.hardest[2]) == pytest.approx(float(bank.distance[int(terrains[0])]))
+
+
+def test_roughness_baseline_trains_every_fifth_terrain_in_roughness_order():
+    rng = np.random.default_rng(3)
+    rough = rng.permutation(16).astype(np.float32)  # descriptor 0 of the 16 terrains of a 4 x 4 grid
+    bank = toy_bank(np.full((4, 4), 0.95, np.float32), descriptor0=rough)
+    config = small("roughness")
+    state = run_one(bank, config, fake_harness(0.0), 50)  # 0.95 - 0.05 difficulty: every terrain at once
+    expected = np.argsort(rough, stable=True)[::5]
+    assert bool(state.done) and int(state.chunk) == len(expected) == 4
+    np.testing.assert_array_equal(np.asarray(state.history.terrain[:4]), expected)
+    np.testing.assert_allclose(float(state.hardest), float(np.max(np.asarray(bank.distance)[expected])))
+
+
+def test_random_baseline_uses_every_terrain_once():
+    bank = toy_bank(np.full((3, 3), 0.95, np.float32))
+    state = run_one(bank, small("random"), fake_harness(0.0), 50, key=4)
+    seq = np.asarray(state.history.terrain[:int(state.chunk)])
+    assert int(state.chunk) == 9 and sorted(seq) == list(range(9)) and not np.all(seq == np.arange(9))
+
+
+# ---------------------------------------------------------------------------------------------------------------
+# Trials, resume, re-tracing
+# ---------------------------------------------------------------------------------------------------------------
+def test_vmapped_trials_equal_trials_run_one_by_one():
+    bank = toy_bank(toy_grid(4))
+    config, harness = small("random", max_evals=2), fake_harness(0.05)
+    keys = jax.random.split(jax.random.key(7), 3)
+    batched = C.make_runner(config, harness)(C.init_trials(keys, bank, START, config=config, harness=harness),
+                                             bank, 40)
+    run_single = C.make_runner(config, harness)  # one compile for the three single-trial runs
+    for t in range(3):
+        one = run_single(C.init_trials(keys[t:t + 1], bank, START, config=config,
+                                                           harness=harness), bank, 40)
+        assert tree_equal(jax.tree.map(lambda x: x[t], batched), jax.tree.map(lambda x: x[0], one))
+    assert not np.array_equal(np.asarray(batched.history.terrain[0]), np.asarray(batched.history.terrain[1]))
+
+
+def test_resume_from_a_checkpoint_equals_an_uninterrupted_run(tmp_path):
+    bank = toy_bank(toy_grid(4))
+    config, harness = small("map", max_evals=2, max_epochs=30), fake_harness(0.05)
+    run = C.make_runner(config, harness)
+    init = lambda: C.init_trials(jax.random.split(jax.random.key(1), 2), bank, START, config=config,  # noqa
+                                 harness=harness)
+    whole = run(init(), bank, 12)
+
+    def chunk(s, a, b):
+        s = run(s, bank, b - a)
+        return s, {"hardest": jnp.full((b - a,), jnp.mean(s.hardest))}
+
+    driver.run_chunks(chunk, init(), total=12, every=5, run_dir=tmp_path, progress=False, time_limit_s=1e-9)
+    restored, done, history, _ = driver.restore(tmp_path, like=init())
+    assert done == 5
+    state, done, _ = driver.run_chunks(chunk, restored, total=12, every=5, start=done, history=history,
+                                       run_dir=tmp_path, progress=False)
+    assert done == 12 and tree_equal(state, whole)
+
+
+def test_no_retrace_when_the_terrain_changes():
+    bank = toy_bank(toy_grid(4))
+    config, harness = small("map", max_evals=2), fake_harness(0.05)
+    run = C.make_runner(config, harness)
+    states = C.init_trials(jax.random.split(jax.random.key(0), 2), bank, START, config=config, harness=harness)
+    TRACES["train"] = 0
+    seen = set()
+    for block in (3, 4, 5):
+        states = run(states, bank, block)
+        seen |= set(np.asarray(states.terrain).tolist())
+    assert len(seen) >= 3 and TRACES["train"] == 1
+
+
+# ---------------------------------------------------------------------------------------------------------------
+# Table 2 / Figure 7
+# ---------------------------------------------------------------------------------------------------------------
+def test_milestones_and_curves_from_hand_made_histories():
+    d = 70.71
+    epoch = np.array([[40, 80, 120, 160], [40, 80, -1, -1]])
+    hardest = np.array([[0.06 * d, 0.06 * d, 0.21 * d, 0.21 * d], [0.0, 0.11 * d, np.nan, np.nan]])
+    first = C.first_epochs(epoch, hardest)
+    np.testing.assert_array_equal(first[0, :4], [40, 120, 120, 120])
+    assert np.isnan(first[0, 4:]).all()
+    np.testing.assert_array_equal(first[1, :2], [80, 80])
+    assert np.isnan(first[1, 2:]).all()
+    mean, reached = C.milestone_summary(first)
+    np.testing.assert_allclose(mean[:4], [60, 100, 120, 120])
+    np.testing.assert_array_equal(reached[:5], [2, 2, 1, 1, 0])
+    cells = [C.format_milestone(m, r, 2) for m, r in zip(mean, reached)]
+    assert cells[:5] == ["60", "100", "120 (1/2)", "120 (1/2)", "-"]
+    grid, mean_c, se = C.hardest_curve(epoch, hardest)
+    np.testing.assert_array_equal(grid, [0, 40, 80, 120, 160])
+    trial1 = np.array([0, 0, 0.11 * d, 0.11 * d, 0.11 * d])  # carried forward after its end
+    trial0 = np.array([0, 0.06 * d, 0.06 * d, 0.21 * d, 0.21 * d])
+    np.testing.assert_allclose(mean_c, (trial0 + trial1) / 2)
+    np.testing.assert_allclose(se, np.abs(trial0 - trial1) / 2)  # std(ddof 1) / sqrt(2) of two values
+    runs = C.terrain_runs([3, 3, 5, -1], [0.2, 0.95, 0.5, np.nan])
+    assert [(r["terrain"], r["chunks"], r["final_evaluation"]) for r in runs] == [(3, 2, 0.95), (5, 1, 0.5)]
+
+
+def test_config_validation_names_the_field():
+    with pytest.raises(ValueError, match="threshold"):
+        C.validate_config(C.CurriculumConfig(threshold=1.5))
+    with pytest.raises(ValueError, match="threshold"):
+        C.validate_config(C.CurriculumConfig(threshold=0.0))
+    with pytest.raises(ValueError, match="selector"):
+        C.validate_config(C.CurriculumConfig(selector="easy"))
+    with pytest.raises(ValueError, match="must divide"):
+        C.validate_config(C.CurriculumConfig(num_envs=3000))
+    assert C.validate_config(C.CurriculumConfig()).updates_per_chunk == 4
