@@ -40,7 +40,13 @@ def main(argv: list[str] | None = None) -> int:
         available[name] = module
         module.add_arguments(sub.add_parser(name, help=help_text, description=help_text))
     args = parser.parse_args(argv)
-    return int(available[args.command].main(args) or 0)
+    from experiments.common import UsageError, check_args
+
+    try:  # bad flag values: one line naming the flag, exit status 2 (as argparse), before any JAX work
+        check_args(args.command, args)
+        return int(available[args.command].main(args) or 0)
+    except UsageError as err:
+        parser.exit(2, f"{parser.prog} {args.command}: error: {err}\n")
 
 
 if __name__ == "__main__":

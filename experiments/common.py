@@ -16,12 +16,121 @@ from __future__ import annotations
 import argparse
 import datetime as _dt
 import json
+import math
 import sys
 import time
 from pathlib import Path
 from typing import Any
 
 CONFIG_NAME = "config.json"
+
+
+class UsageError(ValueError):
+    """A bad command-line value or run folder, found before any JAX work; ``python -m experiments`` prints it as one
+    line ``... <command>: error: <message>`` and exits with status 2 (as argparse does)."""
+
+
+# Option values every command shares by name (argparse dest = config key): the smallest value, and the kind.
+# Any command (also a new one) that names an option like this gets the check for free, before ``main`` runs.
+_INT_MIN = {
+    **dict.fromkeys(("n", "size", "samples", "generations", "batch_size", "initial_population", "bins", "attempts",
+                     "best", "checkpoint_every", "rollout_slots", "steps", "sample_every", "ckpt_every", "log_every",
+                     "updates_per_chunk", "num_envs", "eval_attempts", "eval_best", "batch", "stride",
+                     "calibrate_window"), 1),
+    **dict.fromkeys(("window", "windows"), 2),
+    **dict.fromkeys(("mutation_steps", "walk", "quality_samples"), 0),
+}
+_FLOAT_POSITIVE = ("time_limit", "time_budget", "env_steps", "lr", "heights", "robot_height")
+_FLOAT_NONNEGATIVE = ("r1",)
+_AT_MOST = (("best", "attempts"), ("eval_best", "eval_attempts"))  # (key, bound): key <= bound
+
+
+def flag(key: str) -> str:
+    """The command-line flag of a config key / argparse dest: ``batch_size`` -> ``--batch-size``."""
+    return "--" + key.replace("_", "-")
+
+
+def _bad(where: str, what: str, value: Any) -> UsageError:
+    return UsageError(f"{where} must be {what}; got {value!r}")
+
+
+def check_values(values: dict, where=flag) -> None:
+    """Check option values by name (see ``_INT_MIN`` and friends; unknown names and ``None`` pass).
+
+    ``where(key)`` names a value in the message (default: its flag). Generator names are checked against the
+    registry (importing the library, running nothing). Descriptor names are not: a command may register its own
+    (e.g. a learned model) before it needs them. Raises :class:`UsageError`."""
+    for key, value in values.items():
+        if value is None:
+            continue
+        items = value if isinstance(value, (list, tuple)) else [value]
+        # Numbers only: a string (e.g. ``--slots auto``) is the command's to parse.
+        numbers = [v for v in items if isinstance(v, (int, float)) and not isinstance(v, bool)]
+        if key in _INT_MIN:
+            low = _INT_MIN[key]
+            for v in numbers:
+                if not (math.isfinite(v) and v == int(v) and v >= low):
+                    raise _bad(where(key), f"{'integers' if isinstance(value, list) else 'an integer'} >= {low}", value)
+        elif key in _FLOAT_POSITIVE or key in _FLOAT_NONNEGATIVE:
+            positive = key in _FLOAT_POSITIVE
+            for v in numbers:
+                if not math.isfinite(v) or (v <= 0 if positive else v < 0):
+                    raise _bad(where(key), f"{'finite numbers' if isinstance(value, list) else 'a finite number'} "
+                                           f"{'> 0' if positive else '>= 0'}", value)
+        elif key in ("generator", "generators") and items:
+            from jaxterrain import generators
+
+            for v in items:
+                if v not in generators.names():
+                    raise UsageError(f"{where(key)}: unknown generator {v!r}; choose from {', '.join(generators.names())}")
+    for key, bound in _AT_MOST:
+        v, b = values.get(key), values.get(bound)
+        if isinstance(v, int) and isinstance(b, int) and not isinstance(v, bool) and v > b:
+            raise UsageError(f"{where(key)} must be <= {where(bound)} ({b}); got {v}")
+
+
+def check_out(out: Any, where: str = "--out") -> None:
+    """A run folder given by the user must be a folder or not exist yet (its parents: folders or missing)."""
+    if out is None:
+        return
+    path = Path(out)
+    for p in (path, *path.parents):
+        if p.exists() and not p.is_dir():
+            what = "is a file" if p == path else f"lies under {p}, which is a file"
+            raise UsageError(f"{where} {str(path)!r} {what}; give a new or existing run folder")
+
+
+def check_resume(command: str, resume: Any) -> None:
+    """``--resume FOLDER`` must hold a ``config.json`` written by ``command``."""
+    if not isinstance(resume, (str, Path)) or resume == "latest":
+        return  # a flag (store_true) or the newest run (``latest_run`` checks it)
+    folder = Path(resume)
+    if not folder.is_dir():
+        raise UsageError(f"--resume {str(folder)!r} is not a run folder (no such directory)")
+    config_path = folder / CONFIG_NAME
+    if not config_path.is_file():
+        raise UsageError(f"--resume {str(folder)!r} is not a run folder: it has no {CONFIG_NAME}")
+    try:
+        saved = json.loads(config_path.read_text())
+    except (OSError, ValueError) as err:
+        raise UsageError(f"--resume {str(folder)!r}: cannot read {config_path} ({err})") from None
+    other = saved.get("command") if isinstance(saved, dict) else None
+    if other is not None and other != command:
+        raise UsageError(f"--resume {str(folder)!r} is a run of {other!r}, not of {command!r}")
+
+
+def check_args(command: str, args: argparse.Namespace) -> None:
+    """Check a parsed command line before the command runs (``python -m experiments`` calls this): numbers by
+    option name (sizes, counts >= 1, ...), generator names, ``--out`` (not a file), ``--resume`` (a run folder of
+    this command), ``--config`` and ``--data`` (exist). Raises :class:`UsageError` naming the flag."""
+    values = vars(args)
+    check_values(values)
+    check_out(values.get("out"))
+    check_resume(command, values.get("resume"))
+    for key in ("config", "data", "quality_only"):
+        path = values.get(key)
+        if isinstance(path, (str, Path)) and not Path(path).exists():
+            raise UsageError(f"{flag(key)} {str(path)!r}: no such file or folder")
 
 
 def add_run_arguments(parser: argparse.ArgumentParser, presets: dict[str, dict], default_preset: str) -> None:
@@ -94,6 +203,7 @@ def setup_run(command: str, args: argparse.Namespace, presets: dict[str, dict], 
     ``overrides`` maps config keys to the values given on the command line (``None`` = not given).
     """
     if args.resume is not None:
+        check_resume(command, args.resume)
         folder = latest_run(command) if args.resume == "latest" else Path(args.resume)
         config = load_config(folder)
         given = {k: v for k, v in overrides.items() if v is not None}
@@ -117,6 +227,11 @@ def setup_run(command: str, args: argparse.Namespace, presets: dict[str, dict], 
     unknown = set(config) - set(presets[default_preset]) - {"preset", "seed", "command"}
     if unknown:
         raise SystemExit(f"unknown config key(s) {sorted(unknown)}; known: {sorted(presets[default_preset])}")
+    given = {k for k, v in overrides.items() if v is not None}
+    source = f"preset {config.get('preset')!r}:" if args.config is None else f"{args.config}: key"
+    check_values(config, lambda k: flag(k) if k in given or (k == "seed" and args.seed is not None)
+                 else f"{source} {k!r}")
+    check_out(args.out)
     folder = run_folder(command, args.out)
     folder.mkdir(parents=True, exist_ok=True)
     config["command"] = command
