@@ -115,8 +115,7 @@ def run_treatment(cfg: dict, generator: str, descriptors, folder: Path, clock: c
         print(f"{label}{generator} {descriptors}: already done ({done_path})", flush=True)
         return A.load(done_path)
     config = evolve_config({**cfg, "descriptors": list(descriptors)})
-    fitness = common.fitness_function(cfg["fitness"], config.attempts, config.best, int(cfg["size"]),
-                                      config.rollout_slots)
+    fitness = fitness_fn(cfg["fitness"])
     printer = A.progress_printer(label + generator)
 
     def progress(info):
@@ -129,6 +128,19 @@ def run_treatment(cfg: dict, generator: str, descriptors, folder: Path, clock: c
     A.save(done_path, arch)
     write_metrics_csv(folder / "metrics.csv", arch.metrics)
     return arch
+
+
+def fitness_fn(name: str):
+    """The fitness of ``--fitness NAME`` in the contract ``(heightmaps, key, needed) -> [B]``: None for
+    ``"difficulty"`` (``archive.evolve`` then builds the walker fitness from the config: attempts, best, rollout
+    slots and the ONE scale that Algorithm 1 uses too), the slope fitness for ``"slope"``."""
+    from jaxterrain import scoring
+
+    if name == "difficulty":
+        return None
+    if name == "slope":
+        return scoring.ignore_needed(common.slope_fitness)
+    raise SystemExit(f"unknown fitness {name!r}; choose difficulty or slope")
 
 
 def write_metrics_csv(path: Path, metrics: dict) -> None:

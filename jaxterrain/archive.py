@@ -1,4 +1,4 @@
-"""MAP-Elites terrain archives (paper section 3.3), batched on device through QDax.
+"""MAP-Elites terrain archives (paper section 3.3): the host :class:`Archive`, its file format, and the drivers.
 
     >>> from jaxterrain import archive
     >>> config = archive.EvolveConfig(generations=5000, batch_size=20, descriptors=("roughness", "tpi"))
@@ -6,33 +6,20 @@
     >>> archive.coverage(arch)                      # percent of the 50 x 50 cells filled
     >>> archive.save("perlin.npz", arch); arch = archive.load("perlin.npz")
     >>> both = archive.combine([arch_perlin, arch_cppn])   # cell by cell, highest fitness wins
+    >>> bank = archive.to_device(arch, scale)       # jaxterrain.bank.TerrainBank, the elites on device
+    >>> ok = archive.check_cells(arch)              # [cells] bool: each elite's genome re-derives its own cell
 
-The loop
---------
-Generation 0 evaluates ``initial_population`` random genomes (``generator.sample``); every later generation draws
-``batch_size`` parents uniformly (with replacement) from the filled cells, mutates them with ``generator.mutate``,
-renders them, computes the two descriptors and the fitness, and inserts them into a QDax ``MapElitesRepertoire``
-over a ``bins x bins`` grid of ``compute_euclidean_centroids``. Replacement is ordinary MAP-Elites (the paper keeps
-the LOWEST-difficulty terrain, i.e. the HIGHEST fitness): the best offspring per cell enters only when strictly
-better than the elite. Before insertion the fitness of an offspring is set to ``-inf`` (so it never enters) when
+The pipeline: :mod:`jaxterrain.scoring` (render, descriptors, Algorithm 1, fitness; QDax's scoring contract),
+:mod:`jaxterrain.map_elites` (the pure state, ``init`` / ``step``, the one-winner-per-cell insertion, several
+treatments at once), :mod:`jaxterrain.evolution` (the host drivers ``evolve`` / ``evolve_many``, re-exported here),
+and this module (the host archive).
 
-* it fails Algorithm 1 (``features.is_traversable``): counted in the ``rejected`` metric;
-* its fitness is NaN (counted in ``nan``, among the offspring that passed the other checks);
-* a descriptor is out of range and ``config.out_of_range == "reject"`` (counted in ``out_of_range`` either way).
-
-Those offspring need no fitness: a fitness function that takes ``needed=`` is told which are left (the walker's
-rollout pool then never starts their rollouts; 21 % of the offspring of a GPU-preset Perlin run were rejected).
-
-No selection emitter from QDax is used (``MixingEmitter`` reuses one key for two splits; see NOTES.md): selection,
-mutation and evaluation are written here, and the repertoire is QDax's. The whole loop runs on device:
-``lax.scan`` over generations, one ``jit`` per chunk of ``checkpoint_every`` generations, with a checkpoint between
-chunks.
-
-Keys
-----
-Generation ``g`` (0 = initial population) uses ``fold_in(key, g)`` split into selection / mutation / evaluation
-keys. Nothing else is random, so the archive after generation ``g`` depends only on ``(key, config, g)`` and not on
-how the run was chunked or interrupted: a resumed run ends with exactly the archive of an uninterrupted one.
+The loop (see :mod:`jaxterrain.map_elites`): generation 0 evaluates ``initial_population`` random genomes; every
+later generation mutates ``batch_size`` parents drawn uniformly from the filled cells. Replacement is ordinary
+MAP-Elites (the paper keeps the LOWEST-difficulty terrain, i.e. the HIGHEST fitness): one offspring per cell (the
+fittest, the lowest batch index among ties) enters when strictly better than the elite. An offspring never enters
+when it fails Algorithm 1 (``rejected`` metric), its fitness is NaN (``nan``), or a descriptor is out of range with
+``out_of_range="reject"`` (``out_of_range`` counts them either way).
 
 Descriptor ranges
 -----------------
@@ -75,13 +62,10 @@ One uncompressed ``.npz`` (written atomically) with these members:
 
 from __future__ import annotations
 
-import functools
 import importlib
-import inspect
 import json
 import math
 import os
-import time
 import zipfile
 from pathlib import Path
 from typing import Any, Callable, NamedTuple, Sequence
@@ -90,16 +74,15 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from jaxterrain.map_elites import METRIC_NAMES
+from jaxterrain.terrain import TerrainScale, validate_scale
+
 PRNGKey = jax.Array
-FitnessFn = Callable[[jax.Array, PRNGKey], jax.Array]
+FitnessFn = Callable[[jax.Array, PRNGKey, jax.Array], jax.Array]
+"""``(heightmaps [B, H, W], key, needed [B] bool) -> [B]``; see :mod:`jaxterrain.scoring`."""
 
 FORMAT = "jaxterrain-archive"
 VERSION = 1
-CHECKPOINT_FORMAT = "jaxterrain-map-elites-checkpoint"
-CHECKPOINT_VERSION = 1
-CHECKPOINT_NAME = "checkpoint.npz"
-
-METRIC_NAMES = ("coverage", "qd_score", "max_fitness", "mean_fitness", "rejected", "out_of_range", "nan", "inserted")
 
 # Grid ranges per descriptor name, shared by every generator (window 30, stride 2, 256 x 256 heightmaps in [0, 1]).
 # How they were chosen (2026-11-21; `python -m experiments features --calibrate` does the same): 32 random genomes
@@ -129,15 +112,22 @@ class EvolveConfig(NamedTuple):
       ranges: ``((lo, hi), (lo, hi))`` grid ranges of the two descriptors, or None for :data:`DEFAULT_RANGES`.
       window, stride: descriptor kernel size and stride (paper: 30 and 2).
       attempts, best: walker attempts per terrain and how many of the best are averaged (paper: 20 and 5).
-      checkpoint_every: generations per jitted chunk (and between checkpoints when a checkpoint folder is given).
+      checkpoint_every: RUN SETTING: generations per jitted chunk (and between checkpoints when a checkpoint folder
+        is given); does not change the archive.
       robot_height: robot height in metres for Algorithm 1 (threshold robot_height / 3); None: the features
         module's default.
       traversable_window: Algorithm 1's window (approx. step length, paper: 26 pixels).
       out_of_range: "clip" (into the edge cells) or "reject" (never inserted); see the module docstring.
-      store_heightmaps: render the elites at the end and keep their heightmaps (uint16) in the archive.
-      rollout_slots: env slots of the difficulty fitness's rollout pool (``difficulty.batched_distances``), or
-        None to run each generation's ``batch_size x attempts`` rollouts all at once. A speed knob only (same
-        rollouts, statistically the same fitness), so a run may resume with another value.
+      store_heightmaps: RUN SETTING: render the elites at the end and keep their heightmaps (uint16) in the archive.
+      rollout_slots: RUN SETTING: env slots of the difficulty fitness's rollout pool
+        (``difficulty.batched_distances``), or None to run each generation's ``batch_size x attempts`` rollouts all
+        at once. A speed knob only (same rollouts, statistically the same fitness), so a run may resume with
+        another value.
+      scale: the ONE :class:`~jaxterrain.terrain.TerrainScale` (metres per pixel and per heightmap unit) of both
+        Algorithm 1 and the walker fitness (default ``TerrainScale()``: 0.04 m, 1.0 m).
+
+    The run settings (and ``generations``) stay here so that config files and archive headers keep one shape; they
+    are the host driver's, not the algorithm's.
     """
 
     generations: int = 5000
@@ -156,6 +146,7 @@ class EvolveConfig(NamedTuple):
     out_of_range: str = "clip"
     store_heightmaps: bool = True
     rollout_slots: int | None = None
+    scale: TerrainScale = TerrainScale()
 
 
 class Archive(NamedTuple):
@@ -216,6 +207,15 @@ def resolve_config(config: EvolveConfig) -> EvolveConfig:
         positive("rollout_slots", config.rollout_slots)
     if config.robot_height is not None and not config.robot_height > 0:
         raise ValueError(f"EvolveConfig.robot_height must be > 0 metres or None; got {config.robot_height!r}")
+    scale = config.scale
+    if isinstance(scale, dict):
+        scale = TerrainScale(**scale)
+    elif not isinstance(scale, TerrainScale) and isinstance(scale, (tuple, list)):
+        scale = TerrainScale(*scale)
+    try:
+        scale = validate_scale(scale)
+    except ValueError as err:
+        raise ValueError(f"EvolveConfig.scale: {err}") from err
     if config.ranges is None:
         missing = [n for n in names if n not in DEFAULT_RANGES]
         if missing:
@@ -229,7 +229,7 @@ def resolve_config(config: EvolveConfig) -> EvolveConfig:
     ranges = tuple((float(lo), float(hi)) for lo, hi in ranges)
     if len(ranges) != 2 or any(not (math.isfinite(lo) and math.isfinite(hi) and hi > lo) for lo, hi in ranges):
         raise ValueError(f"EvolveConfig.ranges must be two finite (lo, hi) pairs with hi > lo; got {config.ranges!r}")
-    return config._replace(descriptors=names, ranges=ranges)
+    return config._replace(descriptors=names, ranges=ranges, scale=scale)
 
 
 def config_to_dict(config: EvolveConfig) -> dict:
@@ -237,6 +237,7 @@ def config_to_dict(config: EvolveConfig) -> dict:
     d = config._asdict()
     d["descriptors"] = list(config.descriptors)
     d["ranges"] = None if config.ranges is None else [list(r) for r in config.ranges]
+    d["scale"] = {"cell_size": float(config.scale.cell_size), "height": float(config.scale.height)}
     return d
 
 
@@ -250,6 +251,8 @@ def config_from_dict(d: dict) -> EvolveConfig:
         d["descriptors"] = tuple(d["descriptors"])
     if d.get("ranges") is not None:
         d["ranges"] = tuple(tuple(float(v) for v in r) for r in d["ranges"])
+    if isinstance(d.get("scale"), dict):  # absent in files written before the field existed: the default scale
+        d["scale"] = TerrainScale(**d["scale"])
     return EvolveConfig(**d)
 
 
@@ -265,366 +268,6 @@ def centroids_for(config: EvolveConfig) -> jax.Array:
     return compute_euclidean_centroids((config.bins, config.bins), minval=[lo0, lo1], maxval=[hi0, hi1])
 
 
-# ----------------------------------------------------------------------------------------------------------------
-# One MAP-Elites generation (pure functions; the caller jits / scans)
-# ----------------------------------------------------------------------------------------------------------------
-
-
-RENDER_CHUNK = 1024
-"""Terrains rendered at once inside a generation (``lax.map`` over chunks of ``vmap``): bounds the generators'
-temporaries (the GAN at batch 4 096 asks XLA for ~139 GiB) at larger GPU batches; below it, it is one ``vmap``."""
-
-
-class _Fns(NamedTuple):
-    sample: Callable
-    mutate: Callable
-    render_one: Callable  # genome -> [H, W] (vmapped here)
-    descriptors: Callable  # heightmaps[B, H, W] -> [B, 2]
-    traversable: Callable  # heightmaps[B, H, W] -> [B] bool
-    fitness: FitnessFn  # (heightmaps[B, H, W], key) -> [B]
-
-
-def _evaluate(fns: _Fns, config: EvolveConfig, genomes, key):
-    """Render and score a batch. Returns (fitness for insertion [B], raw descriptors [B, 2], cell descriptors
-    [B, 2], counts dict)."""
-    heightmaps = jax.lax.map(fns.render_one, genomes, batch_size=RENDER_CHUNK)
-    raw = jnp.asarray(fns.descriptors(heightmaps), jnp.float32)
-    traversable = jnp.asarray(fns.traversable(heightmaps), bool)
-    lo = jnp.asarray([r[0] for r in config.ranges], jnp.float32)
-    hi = jnp.asarray([r[1] for r in config.ranges], jnp.float32)
-    finite_desc = jnp.all(jnp.isfinite(raw), axis=-1)
-    outside = jnp.any((raw < lo) | (raw > hi), axis=-1) | ~finite_desc
-    eligible = traversable & finite_desc  # could enter the archive, so their fitness is needed
-    if config.out_of_range == "reject":
-        eligible = eligible & ~outside
-    if _takes_needed(fns.fitness):
-        fitness = fns.fitness(heightmaps, key, needed=eligible)
-    else:
-        fitness = fns.fitness(heightmaps, key)
-    fitness = jnp.asarray(fitness, jnp.float32).reshape(-1)
-    nan = jnp.isnan(fitness) & eligible  # the others' fitness was not needed
-    keep = eligible & ~nan
-    insert_fitness = jnp.where(keep, fitness, -jnp.inf)
-    cell_desc = jnp.clip(jnp.where(jnp.isfinite(raw), raw, lo), lo, hi)
-    counts = {
-        "rejected": jnp.sum(~traversable).astype(jnp.float32),
-        "out_of_range": jnp.sum(outside).astype(jnp.float32),
-        "nan": jnp.sum(nan).astype(jnp.float32),
-    }
-    return insert_fitness, raw, cell_desc, counts
-
-
-def _takes_needed(fitness_fn) -> bool:
-    """Whether a fitness function accepts ``needed=`` ([B] bool: the terrains whose fitness can matter), the hint
-    that lets :func:`difficulty_fitness` skip the rollouts of terrains that Algorithm 1 rejected."""
-    try:
-        return "needed" in inspect.signature(fitness_fn).parameters
-    except (TypeError, ValueError):
-        return False
-
-
-def _insert(repertoire, genomes, raw, cell_desc, fitness):
-    """QDax insertion of a scored batch; raw descriptors are kept in ``extra_scores['raw']``."""
-    before = repertoire.fitnesses
-    repertoire = repertoire.add(genomes, cell_desc, fitness, {"raw": raw})
-    inserted = jnp.sum(repertoire.fitnesses != before).astype(jnp.float32)
-    return repertoire, inserted
-
-
-def _metrics(repertoire, counts, inserted):
-    fit = repertoire.fitnesses.reshape(-1)
-    filled = fit > -jnp.inf
-    n = jnp.sum(filled)
-    safe = jnp.where(filled, fit, 0.0)
-    return {
-        "coverage": 100.0 * jnp.mean(filled.astype(jnp.float32)),
-        "qd_score": jnp.sum(safe),
-        "max_fitness": jnp.where(n > 0, jnp.max(fit), jnp.nan),
-        "mean_fitness": jnp.where(n > 0, jnp.sum(safe) / jnp.maximum(n, 1), jnp.nan),
-        "inserted": inserted,
-        **counts,
-    }
-
-
-def _generation_keys(key: PRNGKey, generation):
-    gen_key = jax.random.fold_in(key, generation)
-    return jax.random.split(gen_key, 3)  # selection, mutation, evaluation
-
-
-def init_repertoire(fns: _Fns, config: EvolveConfig, centroids: jax.Array, key: PRNGKey):
-    """Generation 0: ``initial_population`` random genomes into an empty repertoire. Returns (repertoire, metrics)."""
-    from qdax.core.containers.mapelites_repertoire import MapElitesRepertoire
-
-    sample_key, _, eval_key = _generation_keys(key, 0)
-    genomes = fns.sample(sample_key, config.initial_population)
-    fitness, raw, cell_desc, counts = _evaluate(fns, config, genomes, eval_key)
-    empty = MapElitesRepertoire.init_default(
-        genotype=jax.tree.map(lambda x: x[0], genomes),
-        centroids=centroids,
-        one_extra_score={"raw": raw[0]},
-        keys_extra_scores=("raw",),
-    )
-    repertoire, inserted = _insert(empty, genomes, raw, cell_desc, fitness)
-    return repertoire, _metrics(repertoire, counts, inserted)
-
-
-def generation_step(fns: _Fns, config: EvolveConfig, key: PRNGKey, repertoire, generation):
-    """One generation ``generation >= 1``: uniform parents from filled cells, mutate, evaluate, insert.
-
-    When the archive is empty (every initial terrain rejected) the offspring are fresh random genomes instead.
-    Returns (repertoire, metrics dict of scalars).
-    """
-    select_key, mutate_key, eval_key = _generation_keys(key, generation)
-    fit = repertoire.fitnesses.reshape(-1)
-    filled = fit > -jnp.inf
-    any_filled = jnp.any(filled)
-    p = jnp.where(any_filled, filled.astype(jnp.float32), 1.0)
-    p = p / jnp.sum(p)
-    idx = jax.random.choice(select_key, fit.shape[0], (config.batch_size,), replace=True, p=p)
-    parents = jax.tree.map(lambda x: x[idx], repertoire.genotypes)
-    offspring = jax.lax.cond(
-        any_filled,
-        lambda: fns.mutate(mutate_key, parents),
-        lambda: jax.tree.map(lambda f, p: f.astype(p.dtype), fns.sample(select_key, config.batch_size), parents),
-    )
-    fitness, raw, cell_desc, counts = _evaluate(fns, config, offspring, eval_key)
-    repertoire, inserted = _insert(repertoire, offspring, raw, cell_desc, fitness)
-    return repertoire, _metrics(repertoire, counts, inserted)
-
-
-# ----------------------------------------------------------------------------------------------------------------
-# evolve
-# ----------------------------------------------------------------------------------------------------------------
-
-
-@functools.lru_cache(maxsize=32)
-def _descriptor_fn(names: tuple[str, ...], window: int, stride: int):
-    from jaxterrain import features
-
-    def descriptor_fn(heightmaps):
-        return features.descriptors(heightmaps, names=names, window=window, stride=stride)
-
-    return descriptor_fn
-
-
-@functools.lru_cache(maxsize=32)
-def _traversable_fn(robot_height: float | None, window: int):
-    from jaxterrain import features
-
-    kwargs = {"window": window}
-    if robot_height is not None:
-        kwargs["robot_height"] = robot_height
-
-    def traversable_fn(heightmaps):
-        return features.is_traversable(heightmaps, **kwargs)
-
-    return traversable_fn
-
-
-def _default_fns(generator, descriptors, config, fitness_fn, traversable_fn):
-    # The default functions are cached per settings so that repeated runs in one process reuse compiled chunks.
-    if callable(descriptors):
-        descriptor_fn = descriptors
-    else:
-        descriptor_fn = _descriptor_fn(tuple(config.descriptors), config.window, config.stride)
-    if traversable_fn is None:
-        traversable_fn = _traversable_fn(config.robot_height, config.traversable_window)
-    if fitness_fn is None:
-        fitness_fn = difficulty_fitness(generator.size, config.attempts, config.best, slots=config.rollout_slots)
-    return _Fns(generator.sample, generator.mutate, generator.render_one, descriptor_fn, traversable_fn, fitness_fn)
-
-
-@functools.lru_cache(maxsize=8)
-def difficulty_fitness(size: int, attempts: int = 20, best: int = 5, scale=None,
-                       slots: int | None = None, smooth_first: bool = True) -> FitnessFn:
-    """The paper's fitness as a pure function for use inside jit / scan: ``(heightmaps[B, size, size], key) -> [B]``.
-
-    Same computation as ``difficulty.evaluate`` (shipped base policy, ``attempts`` rollouts per terrain, mean of the
-    ``best`` distances) through its pure ``batched_distances`` / ``best_of``; the env and policy are built here, on
-    the host, once (cached per arguments; ``scale`` must then be hashable, e.g. a ``TerrainScale``). ``slots``: env
-    slots fed from a queue of the ``B x attempts`` rollouts (see ``difficulty.batched_distances``; None = all at once);
-    ``smooth_first``: the queue starts the smoothest terrains' rollouts, the longest, first (speed only).
-    """
-    from jaxterrain import difficulty
-    from jaxterrain.terrain import TerrainScale
-
-    scale = TerrainScale() if scale is None else scale
-    policy = difficulty.default_policy()
-    env = difficulty.make_env(difficulty.default_env_config((int(size), int(size)), scale, policy))
-
-    def fitness(heightmaps, key, needed=None):
-        terrains = jnp.asarray(heightmaps, jnp.float32) * jnp.float32(scale.height)
-        priority = difficulty.smoothness_priority(terrains) if slots is not None and smooth_first else None
-        distances, _ = difficulty.batched_distances(env, policy, terrains, key, attempts, slots=slots, needed=needed,
-                                                    priority=priority)
-        return difficulty.best_of(distances, best)
-
-    return fitness
-
-
-def _key_data(key) -> np.ndarray:
-    if jnp.issubdtype(key.dtype, jax.dtypes.prng_key):
-        return np.asarray(jax.random.key_data(key))
-    return np.asarray(key)
-
-
-def evolve(
-    generator,
-    descriptors,
-    config: EvolveConfig,
-    key: PRNGKey,
-    fitness_fn: FitnessFn | None = None,
-    checkpoint_dir: str | os.PathLike | None = None,
-    progress: bool | Callable[[dict], None] = True,
-    traversable_fn: Callable[[jax.Array], jax.Array] | None = None,
-    generator_options: dict | None = None,
-) -> Archive:
-    """Run MAP-Elites for one generator and one descriptor pair; returns the final :class:`Archive`.
-
-    Args:
-      generator: a ``Generator`` (see generators/base.py) or a registered generator name.
-      descriptors: None (use ``config.descriptors``), a pair of descriptor names (replaces ``config.descriptors``),
-        or a callable ``heightmaps[B, H, W] -> [B, 2]`` (e.g. a learned descriptor; ``config.descriptors`` then only
-        names it and ``config.ranges`` must be given unless the names have defaults).
-      config: :class:`EvolveConfig`.
-      key: PRNG key; generation ``g`` uses ``fold_in(key, g)``.
-      fitness_fn: ``(heightmaps[B, H, W] float32, key) -> fitness[B]``, traceable (it runs inside the scan; higher
-        = easier; NaN never enters); default :func:`difficulty_fitness` (``difficulty.evaluate``'s computation with
-        ``config.attempts`` / ``config.best``). A fitness function with a ``needed`` keyword gets ``needed=[B] bool``,
-        the offspring that can enter the archive (Algorithm 1 passed, descriptors usable), and may skip the rest:
-        :func:`difficulty_fitness` does not walk them when ``config.rollout_slots`` is set.
-      checkpoint_dir: folder for ``checkpoint.npz``, written atomically after every chunk of
-        ``config.checkpoint_every`` generations. When it already holds a checkpoint of the same run (same generator,
-        key and config except ``generations``) the run continues from it.
-      progress: True prints one line per chunk; a callable receives a dict per chunk instead; False is silent.
-      traversable_fn: ``heightmaps[B, H, W] -> [B] bool`` replacing Algorithm 1 (default ``features.is_traversable``
-        with ``config.robot_height`` and ``config.traversable_window``).
-      generator_options: options for ``generators.get`` when ``generator`` is a name (e.g. ``{"size": 64}``).
-    """
-    if isinstance(generator, str):
-        from jaxterrain import generators as _generators
-
-        generator = _generators.get(generator, **(generator_options or {}))
-    if descriptors is not None and not callable(descriptors):
-        config = config._replace(descriptors=tuple(descriptors))
-    config = resolve_config(config)
-    fns = _default_fns(generator, descriptors, config, fitness_fn, traversable_fn)
-    centroids = centroids_for(config)
-    report = _reporter(progress, generator.name)
-
-    ckpt_path = None if checkpoint_dir is None else Path(checkpoint_dir) / CHECKPOINT_NAME
-    state = None
-    if ckpt_path is not None and ckpt_path.exists():
-        state = _load_checkpoint(ckpt_path, generator.name, config, key)
-        report({"event": "resume", "generation": state[1]})
-    t0 = time.perf_counter()
-    if state is None:
-        repertoire, metrics0 = _compiled_init(fns, _step_config(config))(key, centroids)
-        history = {k: [float(v)] for k, v in jax.device_get(metrics0).items()}
-        done = 0
-        if ckpt_path is not None:
-            _save_checkpoint(ckpt_path, generator.name, config, key, repertoire, done, history)
-        report(_line(0, config.generations, history, time.perf_counter() - t0, config.initial_population))
-    else:
-        repertoire, done, history = state
-
-    chunk = _chunk_runner(fns, _step_config(config))
-    while done < config.generations:
-        stop = min(done + config.checkpoint_every, config.generations)
-        t1 = time.perf_counter()
-        repertoire, metrics = chunk(key, repertoire, jnp.arange(done, stop))
-        metrics = jax.device_get(metrics)
-        for name, values in metrics.items():
-            history.setdefault(name, []).extend(float(v) for v in np.asarray(values))
-        done = stop
-        if ckpt_path is not None:
-            _save_checkpoint(ckpt_path, generator.name, config, key, repertoire, done, history)
-        report(_line(done, config.generations, history, time.perf_counter() - t1,
-                     len(np.asarray(metrics["coverage"])) * config.batch_size))
-    return _to_archive(generator, repertoire, config, history)
-
-
-def _step_config(config: EvolveConfig) -> EvolveConfig:
-    """The config with the fields that do not change one generation's computation normalised (cache key)."""
-    return config._replace(generations=0, checkpoint_every=1, store_heightmaps=False)
-
-
-@functools.lru_cache(maxsize=8)
-def _compiled_init(fns: _Fns, config: EvolveConfig):
-    return jax.jit(lambda key, centroids: init_repertoire(fns, config, centroids, key))
-
-
-@functools.lru_cache(maxsize=8)
-def _chunk_runner(fns: _Fns, config: EvolveConfig):
-    """jit of a scan over an explicit array of generation numbers (compiles once per chunk length).
-
-    Cached per (functions, config): repeated runs with the same functions (tests, benchmarks) compile once.
-    """
-
-    def run(key, repertoire, generations):
-        def body(rep, generation):
-            return generation_step(fns, config, key, rep, generation)
-
-        return jax.lax.scan(body, repertoire, generations)
-
-    return jax.jit(run)
-
-
-def _line(done, total, history, seconds, evaluations):
-    return {
-        "event": "chunk",
-        "generation": done,
-        "generations": total,
-        "seconds": seconds,
-        "evaluations_per_s": evaluations / max(seconds, 1e-9),
-        **{k: v[-1] for k, v in history.items()},
-        "rejected_total": float(np.sum(history.get("rejected", [0.0]))),
-    }
-
-
-def progress_printer(name: str):
-    """The default progress callback of :func:`evolve`: one line per chunk, prefixed by ``[name]``."""
-
-    def report(info):
-        if info["event"] == "resume":
-            print(f"[{name}] resuming from checkpoint at generation {info['generation']}", flush=True)
-            return
-        print(
-            f"[{name}] gen {info['generation']}/{info['generations']}  coverage {info['coverage']:.2f}%  "
-            f"qd {info['qd_score']:.2f}  max {info['max_fitness']:.3f}  mean {info['mean_fitness']:.3f}  "
-            f"rejected {int(info['rejected_total'])}  {info['evaluations_per_s']:.1f} evals/s",
-            flush=True,
-        )
-
-    return report
-
-
-def _reporter(progress, name):
-    if callable(progress):
-        return progress
-    return progress_printer(name) if progress else (lambda info: None)
-
-
-def _to_archive(generator, repertoire, config, history) -> Archive:
-    fitness = np.asarray(repertoire.fitnesses, np.float32).reshape(-1)
-    filled = fitness > -np.inf
-    genomes = jax.tree.map(np.asarray, repertoire.genotypes)
-    heightmaps = None
-    if config.store_heightmaps:
-        heightmaps = render_elites(generator, genomes, filled)
-    return Archive(
-        genomes=(genomes,),
-        generator_names=(generator.name,),
-        source=np.where(filled, 0, -1).astype(np.int32),
-        fitness=fitness,
-        descriptors=np.asarray(repertoire.extra_scores["raw"], np.float32),
-        centroids=np.asarray(repertoire.centroids, np.float32),
-        heightmaps=heightmaps,
-        config=config,
-        metrics={k: np.asarray(v, np.float32) for k, v in history.items()},
-    )
-
-
 def render_elites(generator, genomes, filled: np.ndarray, batch: int = 64) -> np.ndarray:
     """Heightmaps ``[cells, H, W]`` uint16 (height * 65535) of the filled cells (zeros elsewhere)."""
     cells = filled.shape[0]
@@ -638,6 +281,72 @@ def render_elites(generator, genomes, filled: np.ndarray, batch: int = 64) -> np
         maps = np.asarray(render(jax.tree.map(lambda x: jnp.asarray(x[pad]), genomes)))[: len(part)]
         out[part] = np.round(np.clip(maps, 0.0, 1.0) * 65535.0).astype(np.uint16)
     return out
+
+
+def rederive_cells(archive: Archive, generator_options: dict | None = None, batch: int = 64, gens: dict | None = None,
+                   descriptor_fn=None):
+    """Re-render every elite from its STORED genome and re-derive its cell, as insertion would.
+
+    Each filled cell's genome is rendered by its own generator (``gens[name]`` if given, else
+    ``generators.get(name, **generator_options)``), described with the archive's config (``descriptor_fn``
+    ``[B, H, W] -> [B, 2]`` if given, else ``features.descriptors`` with ``config.descriptors``, ``window``,
+    ``stride``), clipped into the ranges as for insertion, and assigned to the nearest centroid (QDax's
+    ``get_cells_indices``).
+
+    Returns:
+      ``(cells [cells] int32, raw [cells, 2] float32)``: the re-derived cell of each elite (-1 for an empty cell)
+      and its recomputed raw descriptors (NaN for an empty cell).
+    """
+    from qdax.core.containers.mapelites_repertoire import get_cells_indices
+
+    from jaxterrain import features, generators
+
+    if int(batch) != batch or batch < 1:
+        raise ValueError(f"batch must be an integer >= 1; got {batch!r}")
+    config = archive.config
+    if descriptor_fn is None:
+        names, window, stride = tuple(config.descriptors), config.window, config.stride
+
+        def descriptor_fn(maps):
+            return features.descriptors(maps, names=names, window=window, stride=stride)
+
+    n_cells = archive.fitness.shape[0]
+    cells = np.full(n_cells, -1, np.int32)
+    raw = np.full((n_cells, 2), np.nan, np.float32)
+    lo = jnp.asarray([r[0] for r in config.ranges], jnp.float32)
+    hi = jnp.asarray([r[1] for r in config.ranges], jnp.float32)
+    centroids = jnp.asarray(archive.centroids)
+
+    def derive_fn(render_one):
+        def derive(genomes):
+            d = jnp.asarray(descriptor_fn(jax.vmap(render_one)(genomes)), jnp.float32)
+            return get_cells_indices(jnp.clip(jnp.where(jnp.isfinite(d), d, lo), lo, hi), centroids), d
+
+        return jax.jit(derive)
+
+    for g, name in enumerate(archive.generator_names):
+        idx = np.flatnonzero(archive.source == g)
+        if idx.size == 0:
+            continue
+        gen = gens[name] if gens is not None and name in gens else generators.get(name, **(generator_options or {}))
+        fn = derive_fn(gen.render_one)
+        for s in range(0, idx.size, batch):
+            part = idx[s:s + batch]
+            pad = np.concatenate([part, np.repeat(part[-1:], batch - part.size)])  # one compiled shape
+            c, d = fn(jax.tree.map(lambda x: jnp.asarray(x[pad]), archive.genomes[g]))
+            cells[part] = np.asarray(c)[:part.size]
+            raw[part] = np.asarray(d)[:part.size]
+    return cells, raw
+
+
+def check_cells(archive: Archive, generator_options: dict | None = None, batch: int = 64, gens: dict | None = None,
+                descriptor_fn=None) -> np.ndarray:
+    """``[cells]`` bool: True where the stored elite re-derives to its own cell (:func:`rederive_cells`, same
+    arguments); empty cells are True. A False marks an elite whose genome renders to a terrain of another cell (e.g.
+    a genome mixed from several offspring by the tie bug of QDax 0.5.0's ``MapElitesRepertoire.add``; see
+    ``docs/results/insertion_bug.md``)."""
+    cells, _ = rederive_cells(archive, generator_options, batch, gens, descriptor_fn)
+    return (archive.source < 0) | (cells == np.arange(cells.shape[0]))
 
 
 def heightmaps(archive: Archive) -> np.ndarray:
@@ -677,6 +386,14 @@ def grid(archive: Archive, values: np.ndarray | None = None) -> np.ndarray:
     v = archive.fitness if values is None else np.asarray(values)
     v = np.where(archive.source >= 0, v, np.nan).astype(np.float32)
     return v.reshape(bins, bins)
+
+
+def to_device(archive: Archive, scale: TerrainScale | None = None):
+    """The archive's filled cells on device: :func:`jaxterrain.bank.from_archive` (a ``TerrainBank``, heightmaps in
+    metres). ``scale`` defaults to the archive's own ``config.scale``, the scale its fitness was measured at."""
+    from jaxterrain.bank import from_archive
+
+    return from_archive(archive, archive.config.scale if scale is None else scale)
 
 
 # ----------------------------------------------------------------------------------------------------------------
@@ -931,75 +648,10 @@ def load(path: str | os.PathLike) -> Archive:
     return Archive(tuple(genomes), names, source, fitness, descriptors, centroids, maps, config, metrics)
 
 
-# ----------------------------------------------------------------------------------------------------------------
-# Checkpoints (one run's repertoire + progress; same npz conventions)
-# ----------------------------------------------------------------------------------------------------------------
-
-
-def _resume_signature(config: EvolveConfig) -> dict:
-    d = config_to_dict(config)
-    for speed_only in ("generations", "checkpoint_every", "rollout_slots"):
-        d.pop(speed_only)
-    return d
-
-
-def _save_checkpoint(path: Path, name: str, config, key, repertoire, generation: int, history: dict) -> None:
-    from jaxterrain.io import atomic_save_npz
-
-    leaves: list = []
-    tree = _flatten(jax.tree.map(np.asarray, repertoire.genotypes), leaves)
-    header = {
-        "format": CHECKPOINT_FORMAT,
-        "version": CHECKPOINT_VERSION,
-        "generator": name,
-        "generation": int(generation),
-        "config": config_to_dict(config),
-        "genomes": tree,
-        "metrics": sorted(history),
-    }
-    arrays = {f"genome_{k}": leaf for k, leaf in enumerate(leaves)}
-    arrays.update(
-        header=np.frombuffer(json.dumps(header).encode("utf-8"), np.uint8),
-        key=_key_data(key),
-        fitnesses=np.asarray(repertoire.fitnesses),
-        descriptors=np.asarray(repertoire.descriptors),
-        centroids=np.asarray(repertoire.centroids),
-        raw=np.asarray(repertoire.extra_scores["raw"]),
-        **{f"metric_{k}": np.asarray(v, np.float64) for k, v in history.items()},
-    )
-    atomic_save_npz(path, **arrays)
-
-
-def _load_checkpoint(path: Path, name: str, config: EvolveConfig, key):
-    from qdax.core.containers.mapelites_repertoire import MapElitesRepertoire
-
-    header, m = _open_npz(path, "checkpoint")
-    if header.get("format") != CHECKPOINT_FORMAT or header.get("version") != CHECKPOINT_VERSION:
-        raise ValueError(f"{str(path)!r} is not a jaxterrain MAP-Elites checkpoint of version {CHECKPOINT_VERSION}")
-    if header["generator"] != name:
-        raise ValueError(f"checkpoint {str(path)!r} is of generator {header['generator']!r}, not {name!r}")
-    saved = resolve_config(config_from_dict(header["config"]))
-    if _resume_signature(saved) != _resume_signature(config):
-        raise ValueError(
-            f"checkpoint {str(path)!r} was made with another config: {_resume_signature(saved)} != "
-            f"{_resume_signature(config)}; use another checkpoint folder"
-        )
-    if not np.array_equal(m["key"], _key_data(key)):
-        raise ValueError(f"checkpoint {str(path)!r} was made with another PRNG key; use the same key to resume")
-    generation = int(header["generation"])
-    if generation > config.generations:
-        raise ValueError(
-            f"checkpoint {str(path)!r} is at generation {generation}, beyond config.generations={config.generations}"
-        )
-    leaves = [m[f"genome_{k}"] for k in range(_count_leaves(header["genomes"]))]
-    genotypes = jax.tree.map(jnp.asarray, _unflatten(header["genomes"], leaves))
-    repertoire = MapElitesRepertoire(
-        genotypes=genotypes,
-        fitnesses=jnp.asarray(m["fitnesses"]),
-        descriptors=jnp.asarray(m["descriptors"]),
-        centroids=jnp.asarray(m["centroids"]),
-        extra_scores={"raw": jnp.asarray(m["raw"])},
-        keys_extra_scores=("raw",),
-    )
-    history = {k: [float(v) for v in m[f"metric_{k}"]] for k in header["metrics"]}
-    return repertoire, generation, history
+# The host drivers live in jaxterrain.evolution (imported last: it uses this module's names).
+from jaxterrain.evolution import (  # noqa: E402
+    difficulty_fitness,
+    evolve,
+    evolve_many,
+    progress_printer,
+)

@@ -14,6 +14,9 @@ import numpy as np
 import pytest
 
 from jaxterrain import archive as A
+from jaxterrain import evolution as E
+from jaxterrain import map_elites as ME
+from jaxterrain import scoring as S
 
 
 class FakeGen(NamedTuple):
@@ -65,6 +68,10 @@ def fitness(hm, key):
     return 1.0 - desc(hm).mean(-1)
 
 
+FITNESS = S.ignore_needed(fitness)
+CACHE: dict = {}  # compiled programs shared by the runs of these tests
+
+
 def always(hm):
     return jnp.ones(hm.shape[0], bool)
 
@@ -75,30 +82,36 @@ CFG = A.EvolveConfig(generations=6, batch_size=8, initial_population=10, bins=4,
 
 def run(cfg=CFG, key=0, gen=None, **kw):
     kw.setdefault("traversable_fn", always)
-    return A.evolve(gen or make_gen(), desc, cfg, jax.random.key(key), fitness_fn=fitness, progress=False, **kw)
+    kw.setdefault("compile_cache", CACHE)
+    return A.evolve(gen or make_gen(), desc, cfg, jax.random.key(key), fitness_fn=FITNESS, progress=False, **kw)
 
 
-def fixed_fns(genomes, fit, trav):
-    """_Fns whose evaluation returns given values (descriptors = genome a, b)."""
+def fixed_problem(genomes, fit, trav, cfg):
+    """(scoring, emitter) whose evaluation returns given values (descriptors = genome a, b)."""
     gen = make_gen()
-    return A._Fns(lambda k, n: genomes, gen.mutate, gen.render_one, desc, lambda hm: jnp.asarray(trav),
-                  lambda hm, k: jnp.asarray(fit, jnp.float32))
+    scoring = S.Scoring(gen.render_one, desc, lambda hm: jnp.asarray(trav),
+                        S.ignore_needed(lambda hm, k: jnp.asarray(fit, jnp.float32)), S.task_for(cfg))
+    return scoring, ME.Emitter(lambda k, n: genomes, gen.mutate, len(genomes), len(genomes))
+
+
+def init_rep(cfg, genomes, fit, trav):
+    scoring, emitter = fixed_problem(jnp.asarray(genomes, jnp.float32), fit, trav, cfg)
+    state, metrics = jax.jit(lambda k: ME.init(k, scoring, emitter, A.centroids_for(cfg)))(jax.random.key(0))
+    return state.repertoire, metrics
 
 
 def insert(rep, cfg, genomes, fit, trav=None):
     genomes = jnp.asarray(genomes, jnp.float32)
     trav = np.ones(len(genomes), bool) if trav is None else trav
-    fns = fixed_fns(genomes, fit, trav)
-    f, raw, cell, counts = A._evaluate(fns, cfg, genomes, jax.random.key(0))
-    return jax.jit(A._insert)(rep, genomes, raw, cell, f)[0], counts
+    scoring, _ = fixed_problem(genomes, fit, trav, cfg)
+    f, cell, extras = scoring(genomes, jax.random.key(0))
+    return jax.jit(ME.insert)(rep, genomes, cell, f, extras["raw"])[0], extras
 
 
 def test_exact_insertion_better_replaces_worse_and_nan_do_not():
     cfg = A.resolve_config(CFG._replace(bins=2))
-    cents = A.centroids_for(cfg)
     # cells of a 2 x 2 grid over [0, 1]^2: cell = 2 * (b >= .5) + (a >= .5)
-    fns = fixed_fns(jnp.asarray([[0.1, 0.1, 0.0], [0.9, 0.1, 0.0]]), [0.5, 0.4], [True, True])
-    rep, metrics = jax.jit(A.init_repertoire, static_argnums=(0, 1))(fns, cfg, cents, jax.random.key(0))
+    rep, metrics = init_rep(cfg, [[0.1, 0.1, 0.0], [0.9, 0.1, 0.0]], [0.5, 0.4], [True, True])
     np.testing.assert_array_equal(np.asarray(rep.fitnesses)[:, 0], np.float32([0.5, 0.4, -np.inf, -np.inf]))
     assert float(metrics["coverage"]) == 50.0 and float(metrics["qd_score"]) == pytest.approx(0.9)
     # better (0.7) replaces cell 0, worse (0.3) does not touch cell 1, NaN never enters cell 2 nor blocks cell 3's
@@ -120,8 +133,7 @@ def test_exact_insertion_better_replaces_worse_and_nan_do_not():
 
 def test_out_of_range_clip_and_reject():
     cfg = A.resolve_config(CFG._replace(bins=2, ranges=((0.0, 0.5), (0.0, 0.5))))
-    init = jax.jit(A.init_repertoire, static_argnums=(0, 1))
-    rep0, _ = init(fixed_fns(jnp.asarray([[0.1, 0.1, 0.0]]), [0.1], [True]), cfg, A.centroids_for(cfg), jax.random.key(0))
+    rep0, _ = init_rep(cfg, [[0.1, 0.1, 0.0]], [0.1], [True])
     rep, counts = insert(rep0, cfg, [[0.9, 0.1, 1.0]], [0.5])  # a = 0.9 > 0.5: clipped into the a-edge cell 1
     assert float(counts["out_of_range"]) == 1
     assert np.asarray(rep.fitnesses)[1, 0] == 0.5
@@ -165,7 +177,7 @@ def test_fitness_is_told_which_offspring_can_enter():
 
     cfg = CFG._replace(generations=4, initial_population=40)
     arch = A.evolve(make_gen(), desc, cfg, jax.random.key(3), fitness_fn=lazy_fitness, traversable_fn=trav,
-                    progress=False)
+                    progress=False, compile_cache=CACHE)
     assert seen and all(seen)
     assert arch.metrics["rejected"].sum() > 0 and arch.metrics["nan"].sum() == 0
     reference = run(cfg, key=3, traversable_fn=trav)
@@ -219,7 +231,7 @@ def test_resume_equals_uninterrupted(tmp_path, monkeypatch):
     full = run()
     # a run killed after its second checkpoint (generation 2) ...
     calls = []
-    real_save = A._save_checkpoint
+    real_save = E._save_checkpoint
 
     def dying_save(*args, **kw):
         real_save(*args, **kw)
@@ -227,10 +239,10 @@ def test_resume_equals_uninterrupted(tmp_path, monkeypatch):
         if len(calls) == 2:
             raise KeyboardInterrupt
 
-    monkeypatch.setattr(A, "_save_checkpoint", dying_save)
+    monkeypatch.setattr(E, "_save_checkpoint", dying_save)
     with pytest.raises(KeyboardInterrupt):
         run(checkpoint_dir=tmp_path)
-    monkeypatch.setattr(A, "_save_checkpoint", real_save)
+    monkeypatch.setattr(E, "_save_checkpoint", real_save)
     # ... resumes with another chunking and ends bit-equal to the uninterrupted run
     resumed = run(CFG._replace(checkpoint_every=3), checkpoint_dir=tmp_path)
     _assert_same(full, resumed)
@@ -375,7 +387,8 @@ def test_cppn_evolve(tmp_path):
 
     cfg = A.EvolveConfig(generations=4, batch_size=4, initial_population=6, bins=3, ranges=((0, 1), (0, 0.5)),
                          checkpoint_every=2, descriptors=("mean", "std"))
-    arch = A.evolve(gen, d2, cfg, jax.random.key(0), fitness_fn=cheap, traversable_fn=always, progress=False)
+    arch = A.evolve(gen, d2, cfg, jax.random.key(0), fitness_fn=S.ignore_needed(cheap), traversable_fn=always,
+                    progress=False)
     assert type(arch.genomes[0]).__name__ == "CPPNGenome"
     assert A.coverage(arch) > 0
     _assert_same(arch, A.load(A.save(tmp_path / "cppn.npz", arch)))
@@ -388,7 +401,7 @@ def test_evolve_smoke_preset_end_to_end(tmp_path):
 
     cfg = ev.preset_config("smoke")
     arch = A.evolve("perlin", ("roughness", "tpi"), cfg._replace(generations=2), jax.random.key(0),
-                    fitness_fn=common.slope_fitness, checkpoint_dir=tmp_path, progress=False,
+                    fitness_fn=S.ignore_needed(common.slope_fitness), checkpoint_dir=tmp_path, progress=False,
                     generator_options={"size": 32})
     assert arch.fitness.shape == (cfg.bins**2,) and A.coverage(arch) > 0
     f = arch.fitness[arch.filled]

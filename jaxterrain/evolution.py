@@ -1,0 +1,494 @@
+"""Host drivers of MAP-Elites: :func:`evolve` (one treatment) and :func:`evolve_many` (several at once).
+
+Both build a :class:`jaxterrain.scoring.Scoring` and a :class:`jaxterrain.map_elites.Emitter` from a generator,
+descriptor names and an :class:`~jaxterrain.archive.EvolveConfig` (whose ONE ``scale`` feeds Algorithm 1 and the
+walker fitness), run :mod:`jaxterrain.map_elites` in jitted ``lax.scan`` chunks of ``config.checkpoint_every``
+generations, and return host :class:`~jaxterrain.archive.Archive` s. Re-exported by :mod:`jaxterrain.archive`.
+
+Compiled programs: a run compiles its init and one chunk per chunk length. Pass ``compile_cache={}`` (any dict the
+caller owns) to reuse them across runs of the same problem; nothing is cached behind the caller's back.
+"""
+
+from __future__ import annotations
+
+import functools
+import json
+import os
+import time
+from pathlib import Path
+from typing import Callable, NamedTuple, Sequence
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from jaxterrain import archive as A
+from jaxterrain import map_elites as ME
+from jaxterrain import scoring as S
+
+CHECKPOINT_FORMAT = "jaxterrain-map-elites-checkpoint"
+CHECKPOINT_VERSION = 1
+CHECKPOINT_NAME = "checkpoint.npz"
+
+
+# ----------------------------------------------------------------------------------------------------------------
+# The problem: scoring + emitter from a generator and a config
+# ----------------------------------------------------------------------------------------------------------------
+
+
+@functools.lru_cache(maxsize=64)
+def descriptor_fn(names: Sequence[str], window: int, stride: int) -> Callable:
+    """``heightmaps [B, H, W] -> [B, len(names)]``: ``features.descriptors`` with these settings (one function
+    object per settings VALUES, so compiled programs built on it can be looked up by value)."""
+    from jaxterrain import features
+
+    names = tuple(names)
+
+    def describe(heightmaps):
+        return features.descriptors(heightmaps, names=names, window=window, stride=stride)
+
+    return describe
+
+
+def traversable_fn(config: A.EvolveConfig) -> Callable:
+    """``heightmaps [B, H, W] -> [B] bool``: Algorithm 1 with the config's robot height, window and scale (one
+    function object per those VALUES)."""
+    return _traversable_fn(config.robot_height, config.traversable_window, config.scale)
+
+
+@functools.lru_cache(maxsize=64)
+def _traversable_fn(robot_height, window, scale) -> Callable:
+    from jaxterrain import features
+
+    kwargs = {"window": window, "scale": scale}
+    if robot_height is not None:
+        kwargs["robot_height"] = robot_height
+
+    def traversable(heightmaps):
+        return features.is_traversable(heightmaps, **kwargs)
+
+    return traversable
+
+
+@functools.lru_cache(maxsize=8)
+def difficulty_fitness(size: int, attempts: int = 20, best: int = 5, scale=None,
+                       slots: int | None = None, smooth_first: bool = True) -> A.FitnessFn:
+    """The paper's fitness as a pure ``(heightmaps [B, size, size], key, needed [B] bool) -> [B]``.
+
+    Same computation as ``difficulty.evaluate`` (shipped base policy, ``attempts`` rollouts per terrain, mean of the
+    ``best`` distances) through its pure ``batched_distances`` / ``best_of``. Cached per argument VALUES (``scale``
+    a ``TerrainScale``; default ``TerrainScale()``). ``slots``: env slots fed from a queue of the ``B x attempts``
+    rollouts (None = all at once; rollouts of terrains not ``needed`` are not started); ``smooth_first``: the queue
+    starts the smoothest terrains' rollouts first (speed only).
+    """
+    from jaxterrain import difficulty
+    from jaxterrain.terrain import TerrainScale
+
+    scale = TerrainScale() if scale is None else scale
+    policy = difficulty.default_policy()
+    env = difficulty.make_env(difficulty.default_env_config((int(size), int(size)), scale, policy))
+
+    def fitness(heightmaps, key, needed=None):
+        terrains = jnp.asarray(heightmaps, jnp.float32) * jnp.float32(scale.height)
+        priority = difficulty.smoothness_priority(terrains) if slots is not None and smooth_first else None
+        distances, _ = difficulty.batched_distances(env, policy, terrains, key, attempts, slots=slots, needed=needed,
+                                                    priority=priority)
+        return difficulty.best_of(distances, best)
+
+    return fitness
+
+
+def default_fitness(size: int, config: A.EvolveConfig) -> A.FitnessFn:
+    """The walker fitness of a config: :func:`difficulty_fitness` at the config's attempts, best, scale, slots."""
+    return difficulty_fitness(int(size), config.attempts, config.best, config.scale, config.rollout_slots)
+
+
+def problem(generator, descriptors, config: A.EvolveConfig, fitness_fn=None, traversable=None, names=None):
+    """``(scoring, emitter)`` of one generator under a resolved config.
+
+    Args:
+      generator: a ``Generator``.
+      descriptors: None (``config.descriptors`` through ``features.descriptors``) or a callable
+        ``heightmaps [B, H, W] -> [B, D]``.
+      config: a resolved :class:`~jaxterrain.archive.EvolveConfig`.
+      fitness_fn: ``(heightmaps, key, needed) -> [B]`` or None for :func:`default_fitness`.
+      traversable: ``heightmaps -> [B] bool`` or None for :func:`traversable_fn` (Algorithm 1 at ``config.scale``).
+      names: with ``descriptors`` None, the descriptor set to compute (default ``config.descriptors``); the grid
+        pair is then ``config.descriptors``' positions in it.
+    """
+    pair = (0, 1)
+    if descriptors is None:
+        names = tuple(config.descriptors) if names is None else tuple(names)
+        pair = tuple(names.index(n) for n in config.descriptors)
+        descriptors = descriptor_fn(names, int(config.window), int(config.stride))
+    fitness_fn = default_fitness(generator.size, config) if fitness_fn is None else fitness_fn
+    traversable = traversable_fn(config) if traversable is None else traversable
+    scoring = S.make_scoring_fn(generator, descriptors, traversable, fitness_fn, config, pair)
+    emitter = ME.Emitter(generator.sample, generator.mutate, int(config.batch_size), int(config.initial_population))
+    return scoring, emitter
+
+
+def _compiled(cache: dict | None, key, build):
+    if cache is None:
+        return build()
+    if key not in cache:
+        cache[key] = build()
+    return cache[key]
+
+
+def _programs(scoring: S.Scoring, emitter: ME.Emitter, cache: dict | None):
+    """Jitted ``init(key, centroids, task)`` and ``chunk(state, key, n) -> (state, metrics [n])``."""
+    fns = (scoring.render_one, scoring.descriptor_fn, scoring.traversable_fn, scoring.fitness_fn, emitter)
+
+    def build_init():
+        return jax.jit(lambda key, centroids, task: ME.init(key, scoring, emitter, centroids, task))
+
+    def build_chunk():
+        def chunk(state, key, n):
+            return jax.lax.scan(lambda s, _: ME.step(s, key, scoring, emitter), state, None, length=n)
+
+        return jax.jit(chunk, static_argnums=2)
+
+    return _compiled(cache, ("init",) + fns, build_init), _compiled(cache, ("chunk",) + fns, build_chunk)
+
+
+# ----------------------------------------------------------------------------------------------------------------
+# evolve
+# ----------------------------------------------------------------------------------------------------------------
+
+
+def evolve(
+    generator,
+    descriptors,
+    config: A.EvolveConfig,
+    key: jax.Array,
+    fitness_fn: A.FitnessFn | None = None,
+    checkpoint_dir: str | os.PathLike | None = None,
+    progress: bool | Callable[[dict], None] = True,
+    traversable_fn: Callable[[jax.Array], jax.Array] | None = None,
+    generator_options: dict | None = None,
+    compile_cache: dict | None = None,
+) -> A.Archive:
+    """Run MAP-Elites for one generator and one descriptor pair; returns the final :class:`~jaxterrain.archive.Archive`.
+
+    Args:
+      generator: a ``Generator`` (see generators/base.py) or a registered generator name.
+      descriptors: None (use ``config.descriptors``), a pair of descriptor names (replaces ``config.descriptors``),
+        or a callable ``heightmaps [B, H, W] -> [B, 2]`` (e.g. a learned descriptor; ``config.descriptors`` then only
+        names it and ``config.ranges`` must be given unless the names have defaults).
+      config: :class:`~jaxterrain.archive.EvolveConfig`.
+      key: PRNG key (see :mod:`jaxterrain.map_elites` for how generations use it).
+      fitness_fn: ``(heightmaps [B, H, W] float32, key, needed [B] bool) -> fitness [B]``, traceable (higher =
+        easier; NaN never enters); ``needed`` marks the offspring that can enter the archive, the others' fitness
+        is ignored and may be skipped. Wrap a ``(heightmaps, key)`` function with
+        ``jaxterrain.scoring.ignore_needed``. Default: :func:`difficulty_fitness` at the config's attempts, best,
+        scale and rollout slots.
+      checkpoint_dir: folder for ``checkpoint.npz``, written atomically after every chunk of
+        ``config.checkpoint_every`` generations. When it already holds a checkpoint of the same run (same generator,
+        key and config except the run settings and ``generations``) the run continues from it.
+      progress: True prints one line per chunk; a callable receives a dict per chunk instead; False is silent.
+      traversable_fn: ``heightmaps [B, H, W] -> [B] bool`` replacing Algorithm 1 (default ``features.is_traversable``
+        with ``config.robot_height``, ``config.traversable_window`` and ``config.scale``).
+      generator_options: options for ``generators.get`` when ``generator`` is a name (e.g. ``{"size": 64}``).
+      compile_cache: a dict owned by the caller to keep compiled programs in across runs of the same problem.
+    """
+    if isinstance(generator, str):
+        from jaxterrain import generators as _generators
+
+        generator = _generators.get(generator, **(generator_options or {}))
+    if descriptors is not None and not callable(descriptors):
+        config = config._replace(descriptors=tuple(descriptors))
+        descriptors = None
+    config = A.resolve_config(config)
+    scoring, emitter = problem(generator, descriptors, config, fitness_fn, traversable_fn)
+    init, chunk = _programs(scoring, emitter, compile_cache)
+    report = _reporter(progress, generator.name)
+
+    ckpt_path = None if checkpoint_dir is None else Path(checkpoint_dir) / CHECKPOINT_NAME
+    restored = None
+    if ckpt_path is not None and ckpt_path.exists():
+        restored = _load_checkpoint(ckpt_path, generator.name, config, key)
+        report({"event": "resume", "generation": restored[1]})
+    t0 = time.perf_counter()
+    if restored is None:
+        state, metrics0 = init(key, A.centroids_for(config), scoring.task)
+        history = {k: [float(v)] for k, v in jax.device_get(metrics0).items()}
+        if ckpt_path is not None:
+            _save_checkpoint(ckpt_path, generator.name, config, key, state.repertoire, 0, history)
+        report(_line(0, config.generations, history, time.perf_counter() - t0, config.initial_population))
+    else:
+        repertoire, done, history = restored
+        state = ME.MapElitesState(repertoire, jnp.asarray(done, jnp.int32), scoring.task)
+    done = int(state.generation)
+    while done < config.generations:
+        stop = min(done + config.checkpoint_every, config.generations)
+        t1 = time.perf_counter()
+        state, metrics = chunk(state, key, stop - done)
+        for name, values in jax.device_get(metrics).items():
+            history.setdefault(name, []).extend(float(v) for v in np.asarray(values))
+        evaluations = (stop - done) * config.batch_size
+        done = stop
+        if ckpt_path is not None:
+            _save_checkpoint(ckpt_path, generator.name, config, key, state.repertoire, done, history)
+        report(_line(done, config.generations, history, time.perf_counter() - t1, evaluations))
+    return to_archive(generator, state.repertoire, config, history)
+
+
+class Treatment(NamedTuple):
+    """One treatment of :func:`evolve_many`: a generator name, a descriptor pair and the treatment's run key."""
+
+    generator: str
+    descriptors: tuple[str, str]
+    key: jax.Array
+
+
+def _stack(trees):
+    return jax.tree.map(lambda *xs: jnp.stack(xs), *trees)
+
+
+def evolve_many(
+    treatments: Sequence[Treatment],
+    config: A.EvolveConfig,
+    key: jax.Array,
+    fitness_fn: A.FitnessFn | None = None,
+    progress: bool | Callable[[dict], None] = True,
+    traversable_fn: Callable[[jax.Array], jax.Array] | None = None,
+    generator_options: dict | None = None,
+    ranges: dict | None = None,
+    compile_cache: dict | None = None,
+) -> list[A.Archive]:
+    """Evolve several treatments at once: one jitted generation steps them all (:func:`map_elites.multi_step`).
+
+    Treatments of one generator form a batch (``vmap``; their descriptor pairs are indices into one descriptor
+    set, the union of every treatment's names); the offspring heightmaps of all generators are scored by ONE
+    fitness call per generation (e.g. 5 generators x 3 pairs x 20 = 300 terrains). Each treatment selects and
+    mutates with its own key exactly as :func:`evolve` does; the fitness of generation ``g``'s offspring uses
+    ``fold_in(key, g)``, so with a stochastic fitness (the walker) the archives are statistically, not bit-wise,
+    those of separate runs.
+
+    Args:
+      treatments: :class:`Treatment` s (generator names, pairs, keys); every generator renders the same size.
+      config: shared settings (``config.descriptors`` / ``config.ranges`` are replaced per treatment).
+      key: the key of the shared fitness calls.
+      fitness_fn: ``(heightmaps, key, needed) -> [B]``; default :func:`default_fitness` of ``config``.
+      progress: True prints one line per chunk; a callable receives a dict per chunk; False is silent.
+      traversable_fn: replaces Algorithm 1 (default: :func:`traversable_fn` of ``config``).
+      generator_options: options for ``generators.get`` (e.g. ``{"size": 64}``).
+      ranges: ``{descriptor name: (lo, hi)}``, default :data:`~jaxterrain.archive.DEFAULT_RANGES`.
+      compile_cache: a caller-owned dict to keep compiled programs in.
+
+    Returns:
+      one :class:`~jaxterrain.archive.Archive` per treatment, in order. No checkpoints yet: a killed run restarts.
+    """
+    from jaxterrain import generators as _generators
+
+    treatments = [Treatment(t[0], tuple(t[1]), t[2]) for t in treatments]
+    if not treatments:
+        raise ValueError("evolve_many: treatments must be a non-empty sequence of (generator, (d0, d1), key)")
+    names = tuple(dict.fromkeys(n for t in treatments for n in t.descriptors))
+    gens = {t.generator: _generators.get(t.generator, **(generator_options or {})) for t in treatments}
+    sizes = {g.size for g in gens.values()}
+    if len(sizes) != 1:
+        raise ValueError(f"evolve_many: every generator must render one size; got {sorted(sizes)}")
+    configs = []
+    for t in treatments:
+        r = None if ranges is None else tuple(tuple(ranges[n]) for n in t.descriptors)
+        configs.append(A.resolve_config(config._replace(descriptors=t.descriptors, ranges=r)))
+    config = configs[0]
+    fitness = default_fitness(sizes.pop(), config) if fitness_fn is None else fitness_fn
+    groups = {}
+    for i, t in enumerate(treatments):
+        groups.setdefault(t.generator, []).append(i)
+    scorings, emitters, states, keys, history = [], [], [], [], [dict() for _ in treatments]
+    for name, members in groups.items():
+        scoring, emitter = problem(gens[name], None, config, fitness, traversable_fn, names=names)
+        init, _ = _programs(scoring, emitter, compile_cache)
+        group_states = []
+        for i in members:
+            pair = tuple(names.index(n) for n in configs[i].descriptors)
+            state, m0 = init(treatments[i].key, A.centroids_for(configs[i]), S.task_for(configs[i], pair))
+            group_states.append(state)
+            history[i] = {k: [float(v)] for k, v in jax.device_get(m0).items()}
+        scorings.append(scoring)
+        emitters.append(emitter)
+        states.append(_stack(group_states))
+        keys.append(jnp.stack([treatments[i].key for i in members]))
+    fns = tuple((s.render_one, s.descriptor_fn, s.traversable_fn) for s in scorings)
+    chunk = _compiled(compile_cache, ("many", fns, tuple(emitters), fitness),
+                      lambda: _many_chunk(tuple(scorings), tuple(emitters), fitness))
+    report = _reporter(progress, "many") if callable(progress) or not progress else _many_printer(len(treatments))
+    done = 0
+    while done < config.generations:
+        stop = min(done + config.checkpoint_every, config.generations)
+        t1 = time.perf_counter()
+        states, metrics = chunk(states, keys, key, stop - done)
+        for members, m in zip(groups.values(), jax.device_get(metrics)):
+            for j, i in enumerate(members):
+                for k, v in m.items():
+                    history[i].setdefault(k, []).extend(float(x) for x in np.asarray(v)[:, j])
+        evaluations = (stop - done) * config.batch_size * len(treatments)
+        done = stop
+        report({"event": "chunk", "generation": done, "generations": config.generations,
+                "seconds": time.perf_counter() - t1,
+                "evaluations_per_s": evaluations / max(time.perf_counter() - t1, 1e-9),
+                "coverage": [h["coverage"][-1] for h in history]})
+    out = [None] * len(treatments)
+    for (name, members), group_state in zip(groups.items(), states):
+        for j, i in enumerate(members):
+            repertoire = jax.tree.map(lambda x, j=j: x[j], group_state.repertoire)
+            out[i] = to_archive(gens[name], repertoire, configs[i], history[i])
+    return out
+
+
+def _many_chunk(scorings, emitters, fitness):
+    def chunk(states, keys, key, n):
+        def body(st, _):
+            fitness_key = jax.random.fold_in(key, st[0].generation[0])
+            return ME.multi_step(st, keys, fitness_key, scorings, emitters, fitness)
+
+        return jax.lax.scan(body, states, None, length=n)
+
+    return jax.jit(chunk, static_argnums=3)
+
+
+def _many_printer(count: int):
+    def report(info):
+        cov = np.asarray(info["coverage"])
+        print(f"[{count} treatments] gen {info['generation']}/{info['generations']}  coverage min {cov.min():.2f}% "
+              f"mean {cov.mean():.2f}% max {cov.max():.2f}%  {info['evaluations_per_s']:.1f} evals/s", flush=True)
+
+    return report
+
+
+def to_archive(generator, repertoire, config: A.EvolveConfig, history: dict) -> A.Archive:
+    """Host :class:`~jaxterrain.archive.Archive` of one repertoire (elites rendered when ``store_heightmaps``)."""
+    fitness = np.asarray(repertoire.fitnesses, np.float32).reshape(-1)
+    filled = fitness > -np.inf
+    genomes = jax.tree.map(np.asarray, repertoire.genotypes)
+    maps = A.render_elites(generator, genomes, filled) if config.store_heightmaps else None
+    return A.Archive(
+        genomes=(genomes,),
+        generator_names=(generator.name,),
+        source=np.where(filled, 0, -1).astype(np.int32),
+        fitness=fitness,
+        descriptors=np.asarray(repertoire.extra_scores["raw"], np.float32),
+        centroids=np.asarray(repertoire.centroids, np.float32),
+        heightmaps=maps,
+        config=config,
+        metrics={k: np.asarray(v, np.float32) for k, v in history.items()},
+    )
+
+
+def _line(done, total, history, seconds, evaluations):
+    return {
+        "event": "chunk",
+        "generation": done,
+        "generations": total,
+        "seconds": seconds,
+        "evaluations_per_s": evaluations / max(seconds, 1e-9),
+        **{k: v[-1] for k, v in history.items()},
+        "rejected_total": float(np.sum(history.get("rejected", [0.0]))),
+    }
+
+
+def progress_printer(name: str):
+    """The default progress callback of :func:`evolve`: one line per chunk, prefixed by ``[name]``."""
+
+    def report(info):
+        if info["event"] == "resume":
+            print(f"[{name}] resuming from checkpoint at generation {info['generation']}", flush=True)
+            return
+        print(
+            f"[{name}] gen {info['generation']}/{info['generations']}  coverage {info['coverage']:.2f}%  "
+            f"qd {info['qd_score']:.2f}  max {info['max_fitness']:.3f}  mean {info['mean_fitness']:.3f}  "
+            f"rejected {int(info['rejected_total'])}  {info['evaluations_per_s']:.1f} evals/s",
+            flush=True,
+        )
+
+    return report
+
+
+def _reporter(progress, name):
+    if callable(progress):
+        return progress
+    return progress_printer(name) if progress else (lambda info: None)
+
+
+def _key_data(key) -> np.ndarray:
+    if jnp.issubdtype(key.dtype, jax.dtypes.prng_key):
+        return np.asarray(jax.random.key_data(key))
+    return np.asarray(key)
+
+
+# ----------------------------------------------------------------------------------------------------------------
+# Checkpoints (one run's repertoire + progress; same npz conventions)
+# ----------------------------------------------------------------------------------------------------------------
+
+
+def _resume_signature(config: A.EvolveConfig) -> dict:
+    d = A.config_to_dict(config)
+    for speed_only in ("generations", "checkpoint_every", "rollout_slots"):
+        d.pop(speed_only)
+    return d
+
+
+def _save_checkpoint(path: Path, name: str, config, key, repertoire, generation: int, history: dict) -> None:
+    from jaxterrain.io import atomic_save_npz
+
+    leaves: list = []
+    tree = A._flatten(jax.tree.map(np.asarray, repertoire.genotypes), leaves)
+    header = {
+        "format": CHECKPOINT_FORMAT,
+        "version": CHECKPOINT_VERSION,
+        "generator": name,
+        "generation": int(generation),
+        "config": A.config_to_dict(config),
+        "genomes": tree,
+        "metrics": sorted(history),
+    }
+    arrays = {f"genome_{k}": leaf for k, leaf in enumerate(leaves)}
+    arrays.update(
+        header=np.frombuffer(json.dumps(header).encode("utf-8"), np.uint8),
+        key=_key_data(key),
+        fitnesses=np.asarray(repertoire.fitnesses),
+        descriptors=np.asarray(repertoire.descriptors),
+        centroids=np.asarray(repertoire.centroids),
+        raw=np.asarray(repertoire.extra_scores["raw"]),
+        **{f"metric_{k}": np.asarray(v, np.float64) for k, v in history.items()},
+    )
+    atomic_save_npz(path, **arrays)
+
+
+def _load_checkpoint(path: Path, name: str, config: A.EvolveConfig, key):
+    from qdax.core.containers.mapelites_repertoire import MapElitesRepertoire
+
+    header, m = A._open_npz(path, "checkpoint")
+    if header.get("format") != CHECKPOINT_FORMAT or header.get("version") != CHECKPOINT_VERSION:
+        raise ValueError(f"{str(path)!r} is not a jaxterrain MAP-Elites checkpoint of version {CHECKPOINT_VERSION}")
+    if header["generator"] != name:
+        raise ValueError(f"checkpoint {str(path)!r} is of generator {header['generator']!r}, not {name!r}")
+    saved = A.resolve_config(A.config_from_dict(header["config"]))
+    if _resume_signature(saved) != _resume_signature(config):
+        raise ValueError(
+            f"checkpoint {str(path)!r} was made with another config: {_resume_signature(saved)} != "
+            f"{_resume_signature(config)}; use another checkpoint folder"
+        )
+    if not np.array_equal(m["key"], _key_data(key)):
+        raise ValueError(f"checkpoint {str(path)!r} was made with another PRNG key; use the same key to resume")
+    generation = int(header["generation"])
+    if generation > config.generations:
+        raise ValueError(
+            f"checkpoint {str(path)!r} is at generation {generation}, beyond config.generations={config.generations}"
+        )
+    leaves = [m[f"genome_{k}"] for k in range(A._count_leaves(header["genomes"]))]
+    genotypes = jax.tree.map(jnp.asarray, A._unflatten(header["genomes"], leaves))
+    repertoire = MapElitesRepertoire(
+        genotypes=genotypes,
+        fitnesses=jnp.asarray(m["fitnesses"]),
+        descriptors=jnp.asarray(m["descriptors"]),
+        centroids=jnp.asarray(m["centroids"]),
+        extra_scores={"raw": jnp.asarray(m["raw"])},
+        keys_extra_scores=("raw",),
+    )
+    history = {k: [float(v) for v in m[f"metric_{k}"]] for k in header["metrics"]}
+    return repertoire, generation, history
