@@ -12,14 +12,15 @@ R1 penalty on real data (``--r1``, lazily every 8 steps; on in the gpu preset: w
 discriminator wins after ~3000 steps and the samples lose relief). The run folder gets ``run.json`` (arguments), ``log.jsonl``,
 ``samples/step_<8-digit step>.png`` (a fixed-latent grid, plus ``real.png``), ``checkpoints/`` (params + optimiser states +
 step + key, written atomically; the 3 latest kept), ``final/`` (``generator.msgpack`` + ``config.json``, loadable with
-``generators.get("gan", weights="<run>/final")``) and ``quality.json`` (see :func:`quality_check`).
+``generators.get("gan", weights="<run>/final")``) and ``quality.json`` (see
+:func:`jaxterrain.generators.gan_train.quality_check`). The training state, step, checkpoints and quality check are
+library code in :mod:`jaxterrain.generators.gan_train`; this module only wires them to the command line.
 ``--export-assets`` copies ``final/`` into ``jaxterrain/assets/gan/`` with ``PROVENANCE.md`` and a sample grid.
 """
 
 from __future__ import annotations
 
 import argparse
-import functools
 import json
 import subprocess
 import sys
@@ -63,174 +64,6 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 # ----------------------------------------------------------------------------------------------------------------
-# Training state and step (pure functions; the command below only wires them up)
-# ----------------------------------------------------------------------------------------------------------------
-
-
-R1_EVERY = 8  # lazy R1 regularisation interval
-
-
-class TrainState(NamedTuple):
-    """Everything a checkpoint holds. ``key`` is a raw uint32[2] key; ``step`` an int32 scalar."""
-
-    step: Any
-    key: Any
-    g_params: Any
-    g_stats: Any
-    d_params: Any
-    g_opt: Any
-    d_opt: Any
-
-
-def make_optimizer(lr: float = 2e-4):
-    import optax
-
-    return optax.adam(lr, b1=0.5, b2=0.999)
-
-
-def init_state(key, config, lr: float = 2e-4) -> TrainState:
-    """A fresh :class:`TrainState` for the ``GanConfig`` ``config`` (``key``: a raw uint32[2] PRNG key)."""
-    import jax.numpy as jnp
-    import numpy as np
-
-    from jaxterrain.generators.gan import init_variables
-
-    gv, dv = init_variables(key, config)
-    # the run's raw uint32[2] key, derived on the host (no compilation)
-    bits = np.random.default_rng(np.asarray(key).astype(np.uint64).tolist() + [1]).integers(0, 2**32, 2, np.uint32)
-    opt = make_optimizer(lr)
-    return TrainState(
-        jnp.zeros((), jnp.int32), jnp.asarray(bits), gv["params"], gv["batch_stats"], dv["params"],
-        opt.init(gv["params"]), opt.init(dv["params"]),
-    )
-
-
-@functools.lru_cache(maxsize=8)
-def _jitted_step(config, batch_size: int, lr: float, r1: float, donate: bool):
-    """One jit-compiled train step per setting, reused across runs in one process (tests, resume)."""
-    import jax
-
-    return jax.jit(make_train_step(config, batch_size, lr, r1), donate_argnums=(0,) if donate else ())
-
-
-@functools.lru_cache(maxsize=8)
-def _jitted_samples(config, n: int = 16):
-    """``(params, batch_stats) -> [n, size, size]`` for a fixed set of latents, and the real-patch grid function."""
-    import jax
-
-    from jaxterrain import dem
-    from jaxterrain.generators.gan import make_modules, sample_latents
-
-    gen, _ = make_modules(config)
-    z = sample_latents(jax.random.PRNGKey(12345), n, config.latent)
-    fake = jax.jit(lambda p, s: gen.apply({"params": p, "batch_stats": s}, z, train=False))
-    real = jax.jit(lambda k, tiles: dem.random_patches(k, tiles, n, config.size))
-    return fake, real
-
-
-def make_train_step(config, batch_size: int, lr: float = 2e-4, r1: float = 0.0, scales=None):
-    """``train_step(state, tiles) -> (state, metrics)``: one discriminator and one generator Adam update.
-
-    Pure (jit it); the real batch ``[batch_size, size, size]`` is cut from ``tiles`` inside. Metrics: ``d_loss``,
-    ``g_loss``, ``d_real`` / ``d_fake`` (mean discriminator probabilities), ``r1``.
-    """
-    import jax
-    import jax.numpy as jnp
-    import optax
-
-    from jaxterrain import dem
-    from jaxterrain.generators.gan import make_modules, sample_latents
-
-    gen, disc = make_modules(config)
-    opt = make_optimizer(lr)
-    scales = tuple(scales or dem.DEFAULT_SCALES)
-
-    def train_step(state: TrainState, tiles: dem.DemTiles):
-        key, data_key, z_key, z2_key = jax.random.split(state.key, 4)
-        real = dem.random_patches(data_key, tiles, batch_size, config.size, scales)
-        z = sample_latents(z_key, batch_size, config.latent)
-        fake, _ = gen.apply(
-            {"params": state.g_params, "batch_stats": state.g_stats}, z, train=True, mutable=["batch_stats"]
-        )
-        fake = jax.lax.stop_gradient(fake)
-
-        def d_loss_fn(dp):
-            d = lambda x: disc.apply({"params": dp}, x)  # noqa: E731
-            lr_, lf = d(real), d(fake)
-            loss = jax.nn.softplus(-lr_).mean() + jax.nn.softplus(lf).mean()
-            penalty = jnp.zeros(())
-            if r1 > 0:  # lazy R1 (StyleGAN2): every R1_EVERY steps, weighted by R1_EVERY
-
-                def r1_penalty():
-                    g = jax.grad(lambda x: d(x).sum())(real)
-                    return jnp.mean(jnp.sum(g**2, axis=(1, 2)))
-
-                penalty = jax.lax.cond(state.step % R1_EVERY == 0, r1_penalty, lambda: jnp.zeros(()))
-            total = loss + 0.5 * r1 * R1_EVERY * penalty
-            return total, (loss, jax.nn.sigmoid(lr_).mean(), jax.nn.sigmoid(lf).mean(), penalty)
-
-        (_, (d_loss, d_real, d_fake, penalty)), d_grads = jax.value_and_grad(d_loss_fn, has_aux=True)(state.d_params)
-        d_updates, d_opt = opt.update(d_grads, state.d_opt, state.d_params)
-        d_params = optax.apply_updates(state.d_params, d_updates)
-
-        z2 = sample_latents(z2_key, batch_size, config.latent)
-
-        def g_loss_fn(gp):
-            out, new = gen.apply(
-                {"params": gp, "batch_stats": state.g_stats}, z2, train=True, mutable=["batch_stats"]
-            )
-            lf = disc.apply({"params": d_params}, out)
-            return jax.nn.softplus(-lf).mean(), new["batch_stats"]
-
-        (g_loss, g_stats), g_grads = jax.value_and_grad(g_loss_fn, has_aux=True)(state.g_params)
-        g_updates, g_opt = opt.update(g_grads, state.g_opt, state.g_params)
-        g_params = optax.apply_updates(state.g_params, g_updates)
-        new_state = TrainState(
-            state.step + 1, key, g_params, g_stats, d_params, g_opt, d_opt
-        )
-        metrics = dict(d_loss=d_loss, g_loss=g_loss, d_real=d_real, d_fake=d_fake, r1=penalty)
-        return new_state, metrics
-
-    return train_step
-
-
-# ----------------------------------------------------------------------------------------------------------------
-# Checkpoints
-# ----------------------------------------------------------------------------------------------------------------
-
-
-def save_checkpoint(run_dir: Path, state: TrainState, keep: int = 3) -> Path:
-    """Write ``checkpoints/ckpt_<8-digit step>.msgpack`` atomically; keep the ``keep`` latest."""
-    import jax
-    import numpy as np
-    from flax import serialization
-
-    from jaxterrain.io import atomic_write_bytes
-
-    host = jax.tree_util.tree_map(np.asarray, state)
-    step = int(host.step)
-    path = atomic_write_bytes(run_dir / "checkpoints" / f"ckpt_{step:08d}.msgpack", serialization.to_bytes(host))
-    for old in sorted((run_dir / "checkpoints").glob("ckpt_*.msgpack"))[:-keep]:
-        old.unlink()
-    return path
-
-
-def latest_checkpoint(run_dir: Path) -> Path | None:
-    ckpts = sorted((Path(run_dir) / "checkpoints").glob("ckpt_*.msgpack"))
-    return ckpts[-1] if ckpts else None
-
-
-def restore_checkpoint(path: Path, template: TrainState) -> TrainState:
-    """The :class:`TrainState` stored at ``path`` (``template`` gives the structure, e.g. :func:`init_state`)."""
-    import jax.numpy as jnp
-    import jax
-    from flax import serialization
-
-    restored = serialization.from_bytes(template, Path(path).read_bytes())
-    return jax.tree_util.tree_map(jnp.asarray, restored)
-
-
-# ----------------------------------------------------------------------------------------------------------------
 # Samples and quality
 # ----------------------------------------------------------------------------------------------------------------
 
@@ -256,80 +89,6 @@ def save_grid(path: Path, maps, cols: int = 4) -> Path:
     buf = io.BytesIO()
     Image.fromarray(grid).save(buf, format="PNG")
     return atomic_write_bytes(path, buf.getvalue())
-
-
-def wasserstein1(a, b):
-    """Per-column Wasserstein-1 distance between the empirical distributions of ``a[N, D]`` and ``b[M, D]``. [D]."""
-    import numpy as np
-
-    a, b = np.sort(np.asarray(a, np.float64), 0), np.sort(np.asarray(b, np.float64), 0)
-    q = np.linspace(0.0, 1.0, 1001)[1:-1]
-    qa, qb = np.quantile(a, q, axis=0), np.quantile(b, q, axis=0)
-    return np.mean(np.abs(qa - qb), axis=0)
-
-
-def _render_batches(fn, inputs, chunk: int = 128):
-    import numpy as np
-
-    return np.concatenate([np.asarray(fn(inputs[i: i + chunk])) for i in range(0, len(inputs), chunk)])
-
-
-def quality_check(key, config, variables, tiles, n: int = 512, names=("tri", "tpi", "roughness"), descriptors=None):
-    """Do GAN samples resemble the training patches more than Perlin terrains do?
-
-    Draws ``n`` GAN terrains (truncated-normal latents), ``2 n`` training patches (``real`` and an independent
-    ``real_b``) and ``n`` Perlin terrains (uniform genomes), all ``[n, size, size]`` in [0, 1]; computes
-    ``descriptors`` (default ``jaxterrain.features.descriptors``, window 30, stride 2) and, per feature, the
-    Wasserstein-1 distance to ``real`` divided by the standard deviation of ``real`` (so features are comparable).
-    ``real_b`` gives the sampling-noise floor. Returns a JSON-able dict with ``w1`` per set and feature, their
-    means, and ``gan_closer_than_perlin``.
-    """
-    import jax
-    import numpy as np
-
-    from jaxterrain import dem
-    from jaxterrain.generators.gan import make_modules, sample_latents
-
-    if descriptors is None:
-        from jaxterrain.features import descriptors
-    gen, _ = make_modules(config)
-    k_z, k_real, k_real_b, k_perlin = jax.random.split(key, 4)
-    del key
-    g_fn = jax.jit(lambda z: gen.apply(variables, z, train=False))
-    sets = {"gan": _render_batches(g_fn, sample_latents(k_z, n, config.latent))}
-    patch_fn = jax.jit(lambda k: dem.random_patches(k, tiles, min(n, 128), config.size))
-    for name, k in (("real", k_real), ("real_b", k_real_b)):
-        ks = jax.random.split(k, -(-n // min(n, 128)))
-        sets[name] = np.concatenate([np.asarray(patch_fn(kk)) for kk in ks])[:n]
-    perlin_error = None
-    try:
-        from jaxterrain import generators
-
-        perlin = generators.get("perlin", size=config.size)
-        genomes = perlin.sample(k_perlin, n)
-        sets["perlin"] = _render_batches(perlin.render, genomes)
-    except Exception as err:  # noqa: BLE001 - the check still reports the GAN part
-        perlin_error = f"{type(err).__name__}: {err}"
-    feats = {}
-    for name, maps in sets.items():
-        feats[name] = _render_batches(lambda m: descriptors(m, names=tuple(names), window=30, stride=2), maps, 64)
-    scale = np.std(feats["real"], axis=0) + 1e-12
-    report: dict[str, Any] = {"n": int(n), "size": int(config.size), "features": list(names), "window": 30,
-                              "stride": 2, "distance": "Wasserstein-1 per feature / std of real patches' feature",
-                              "feature_mean": {}, "feature_std": {}, "w1": {}, "mean_w1": {}}
-    for name, f in feats.items():
-        report["feature_mean"][name] = [float(x) for x in np.mean(f, 0)]
-        report["feature_std"][name] = [float(x) for x in np.std(f, 0)]
-        if name != "real":
-            w = wasserstein1(f, feats["real"]) / scale
-            report["w1"][name] = {feat: float(x) for feat, x in zip(names, w)}
-            report["mean_w1"][name] = float(np.mean(w))
-    if "perlin" in report["mean_w1"]:
-        report["gan_closer_than_perlin"] = bool(report["mean_w1"]["gan"] < report["mean_w1"]["perlin"])
-    else:
-        report["gan_closer_than_perlin"] = None
-        report["perlin_error"] = perlin_error
-    return report
 
 
 # ----------------------------------------------------------------------------------------------------------------
@@ -380,6 +139,7 @@ def provenance_text(args, config, data_desc, state_step, wall, quality, metrics)
     import jax
     import optax
 
+    from jaxterrain.generators import gan_train
     from jaxterrain.generators.gan import generator_flops
 
     q = "not run"
@@ -391,9 +151,9 @@ def provenance_text(args, config, data_desc, state_step, wall, quality, metrics)
 - Command: `python -m experiments {' '.join(sys.argv[1:]) if sys.argv[1:] else 'train-gan'}`
   (`{' '.join(sys.argv)}`)
 - Preset: {args.preset}; steps: {state_step}; batch size: {args.batch_size}; Adam lr {args.lr}, b1 0.5, b2 0.999;
-  loss: non-saturating GAN; R1 weight: {args.r1} (lazy, every {R1_EVERY} steps); seed: {args.seed}
+  loss: non-saturating GAN; R1 weight: {args.r1} (lazy, every {gan_train.R1_EVERY} steps); seed: {args.seed}
 - Architecture (`config.json`): {json.dumps(config.to_json())}
-  - generator parameters: {state_params(config)} ; FLOPs per sample: {generator_flops(config) / 1e6:.1f} M
+  - generator parameters: {gan_train.generator_params(config)} ; FLOPs per sample: {generator_flops(config) / 1e6:.1f} M
 - Data: {data_desc}
   - patches: random crops of {list(_scales())} cells (those that fit in the tile), resampled to {config.size} x
     {config.size}, random flips and 90-degree rotations, each patch min-max normalised to [0, 1].
@@ -411,17 +171,6 @@ def _scales():
     from jaxterrain import dem
 
     return dem.DEFAULT_SCALES
-
-
-def state_params(config) -> int:
-    import jax
-    import jax.numpy as jnp
-
-    from jaxterrain.generators.gan import count_params, make_modules
-
-    gen, _ = make_modules(config)
-    shapes = jax.eval_shape(lambda: gen.init(jax.random.PRNGKey(0), jnp.zeros((1, config.latent)), train=False))
-    return count_params(jax.tree_util.tree_map(lambda s: jnp.zeros(s.shape), shapes["params"]))
 
 
 # ----------------------------------------------------------------------------------------------------------------
@@ -456,7 +205,7 @@ class TrainingData(NamedTuple):
 class TrainOutcome(NamedTuple):
     """The result of :func:`train`: the final state, the wall time of the loop (s) and the last logged metrics."""
 
-    state: TrainState
+    state: Any  # jaxterrain.generators.gan_train.GanTrainState
     wall: float
     last_metrics: dict[str, float] | None
 
@@ -495,11 +244,13 @@ def run_quality_only(args, run_dir: Path, tiles) -> None:
     """``--quality-only WEIGHTS``: write the :func:`quality_check` of those weights to ``run_dir/quality.json``."""
     import jax
 
+    from jaxterrain.generators import gan_train
     from jaxterrain.generators.gan import load_generator
     from jaxterrain.io import atomic_write_text
 
     cfg, variables = load_generator(args.quality_only)
-    report = quality_check(jax.random.PRNGKey(args.seed + 1), cfg, variables, tiles, max(args.quality_samples, 8))
+    report = gan_train.quality_check(jax.random.PRNGKey(args.seed + 1), cfg, variables, tiles,
+                                     max(args.quality_samples, 8))
     atomic_write_text(run_dir / "quality.json", json.dumps(report, indent=2) + "\n")
     print(json.dumps(report["mean_w1"]), "gan_closer_than_perlin:", report["gan_closer_than_perlin"])
 
@@ -519,17 +270,20 @@ def write_run_json(args, run_dir: Path, preset: dict, config, data_desc: str) ->
         "seed": args.seed, "data": data_desc}, "config": config.to_json()}, indent=2) + "\n")
 
 
-def init_or_resume(args, run_dir: Path, config) -> TrainState:
-    """A fresh :class:`TrainState` from ``--seed``, or with ``--resume`` the latest checkpoint in ``run_dir``."""
+def init_or_resume(args, run_dir: Path, config) -> gan_train.GanTrainState:
+    """A fresh :class:`~jaxterrain.generators.gan_train.GanTrainState` from ``--seed``, or with ``--resume``
+    the latest checkpoint in ``run_dir``."""
     import jax
 
-    state = init_state(jax.random.PRNGKey(args.seed), config, args.lr)
+    from jaxterrain.generators import gan_train
+
+    state = gan_train.init_state(jax.random.PRNGKey(args.seed), config, args.lr)
     if args.resume:
-        ckpt = latest_checkpoint(run_dir)
+        ckpt = gan_train.latest_checkpoint(run_dir)
         if ckpt is None:
             print(f"--resume: no checkpoint in {run_dir}/checkpoints; starting from scratch", flush=True)
         else:
-            state = restore_checkpoint(ckpt, state)
+            state = gan_train.restore_checkpoint(ckpt, state)
             print(f"resumed from {ckpt} at step {int(state.step)}", flush=True)
     return state
 
@@ -561,12 +315,15 @@ def _log_metrics(say, log_path: Path, step: int, total: int, start: int, t0: flo
     return m
 
 
-def train(args, run_dir: Path, config, state: TrainState, tiles) -> TrainOutcome:
+def train(args, run_dir: Path, config, state: gan_train.GanTrainState, tiles) -> TrainOutcome:
     """Train from ``state.step`` to ``--steps``: log lines, sample grids and checkpoints at their intervals."""
     import jax
 
-    step_fn = _jitted_step(config, args.batch_size, float(args.lr), float(args.r1), jax.default_backend() != "cpu")
-    sample_fn, real_fn = _jitted_samples(config)
+    from jaxterrain.generators import gan_train
+
+    step_fn = gan_train.jitted_step(config, args.batch_size, float(args.lr), float(args.r1),
+                                    jax.default_backend() != "cpu")
+    sample_fn, real_fn = gan_train.jitted_samples(config)
     if not (run_dir / "samples" / "real.png").exists():
         save_grid(run_dir / "samples" / "real.png", real_fn(jax.random.PRNGKey(7), tiles))
 
@@ -583,7 +340,7 @@ def train(args, run_dir: Path, config, state: TrainState, tiles) -> TrainOutcome
         if step % args.sample_every == 0 or step == args.steps:
             save_grid(run_dir / "samples" / f"step_{step:08d}.png", sample_fn(state.g_params, state.g_stats))
         if step % args.ckpt_every == 0 or step == args.steps:
-            save_checkpoint(run_dir, state)
+            gan_train.save_checkpoint(run_dir, state)
     if bar is not None:
         bar.close()
     wall = time.time() - t0
@@ -596,12 +353,15 @@ def run_quality(args, run_dir: Path, config, variables, tiles) -> dict | None:
     """The :func:`quality_check` of the trained generator, written to ``quality.json`` (None if skipped)."""
     import jax
 
+    from jaxterrain.generators import gan_train
+
     from jaxterrain.io import atomic_write_text
 
     if args.quality_samples <= 0:
         return None
     try:
-        quality = quality_check(jax.random.PRNGKey(args.seed + 1), config, variables, tiles, args.quality_samples)
+        quality = gan_train.quality_check(jax.random.PRNGKey(args.seed + 1), config, variables, tiles,
+                                          args.quality_samples)
     except ImportError as err:
         print(f"quality check skipped: {err}", flush=True)
         return None

@@ -195,18 +195,19 @@ def test_train_checkpoint_resume_bit_equal(tmp_path, monkeypatch):
     from flax import serialization
 
     from experiments import train_gan
+    from jaxterrain.generators import gan_train
 
     # a tiny architecture so the test compiles fast; the command itself is unchanged
     monkeypatch.setitem(train_gan.PRESETS, "smoke", dict(
         train_gan.PRESETS["smoke"], channels=(16, 8, 4), disc_channels=(8, 16)))
     assert train_gan.main(_args(tmp_path / "a", 2)) == 0
     assert train_gan.main(_args(tmp_path / "b", 1)) == 0
-    assert train_gan.latest_checkpoint(tmp_path / "b").name == "ckpt_00000001.msgpack"
+    assert gan_train.latest_checkpoint(tmp_path / "b").name == "ckpt_00000001.msgpack"
     assert train_gan.main(_args(tmp_path / "b", 2, resume=True)) == 0
     a = (tmp_path / "a" / "final" / "generator.msgpack").read_bytes()
     b = (tmp_path / "b" / "final" / "generator.msgpack").read_bytes()
     assert a == b  # bit-equal generator after resume
-    ca, cb = (train_gan.latest_checkpoint(tmp_path / r).read_bytes() for r in ("a", "b"))
+    ca, cb = (gan_train.latest_checkpoint(tmp_path / r).read_bytes() for r in ("a", "b"))
     assert ca == cb  # and bit-equal discriminator, optimiser states, step and key
     state = serialization.msgpack_restore(ca)
     assert int(state["step"]) == 2
@@ -225,17 +226,17 @@ def test_train_checkpoint_resume_bit_equal(tmp_path, monkeypatch):
 
 
 def test_wasserstein_and_quality_report(tiny_weights):
-    from experiments import train_gan
+    from jaxterrain.generators import gan_train
 
     a = np.arange(100.0)[:, None]
-    np.testing.assert_allclose(train_gan.wasserstein1(a, a + 2.0), [2.0], atol=1e-9)
+    np.testing.assert_allclose(gan_train.wasserstein1(a, a + 2.0), [2.0], atol=1e-9)
 
     def fake_descriptors(maps, names, window, stride):  # a local stand-in with the same signature
         return jnp.stack([maps.std(axis=(1, 2)), maps.mean(axis=(1, 2)), maps.max(axis=(1, 2))], -1)
 
     cfg, variables = G.load_generator(tiny_weights)
     tiles = dem.stack_tiles([_ramp(100, 120) + np.random.default_rng(0).normal(size=(100, 120))])
-    report = train_gan.quality_check(jax.random.PRNGKey(0), cfg, variables, tiles, n=16,
+    report = gan_train.quality_check(jax.random.PRNGKey(0), cfg, variables, tiles, n=16,
                                      descriptors=fake_descriptors)
     assert set(report["w1"]) >= {"gan", "real_b"}
     assert report["mean_w1"]["real_b"] < report["mean_w1"]["gan"]  # an untrained GAN is far from the data
