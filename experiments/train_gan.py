@@ -3,19 +3,23 @@
     python -m experiments train-gan --preset smoke                 # seconds on CPU, 64 x 64, checks the pipeline
     python -m experiments train-gan --preset gpu --export-assets   # the shipped weights: 256 x 256 on one H100
     python -m experiments train-gan --data my_tiles/ --steps 20000 # your own GeoTIFF / .npy / .npz DEM tiles
-    python -m experiments train-gan --out runs/x --resume          # continue from the latest checkpoint of runs/x
+    python -m experiments train-gan --resume runs/x                # continue run x from its checkpoint
 
-Training: standard non-saturating GAN loss, Adam(2e-4, b1=0.5) for both networks, one discriminator and one
-generator update per step, batches of random DEM patches cut, augmented and normalised on the device inside the
-jit-compiled step (``jaxterrain.dem.random_patches``); latents from N(0, 1) truncated to [-3, 3] (the genome range).
-R1 penalty on real data (``--r1``, lazily every 8 steps; on in the gpu preset: without it the
-discriminator wins after ~3000 steps and the samples lose relief). The run folder gets ``run.json`` (arguments), ``log.jsonl``,
-``samples/step_<8-digit step>.png`` (a fixed-latent grid, plus ``real.png``), ``checkpoints/`` (params + optimiser states +
-step + key, written atomically; the 3 latest kept), ``final/`` (``generator.msgpack`` + ``config.json``, loadable with
-``generators.get("gan", weights="<run>/final")``) and ``quality.json`` (see
-:func:`jaxterrain.generators.gan_train.quality_check`). The training state, step, checkpoints and quality check are
-library code in :mod:`jaxterrain.generators.gan_train`; this module only wires them to the command line.
-``--export-assets`` copies ``final/`` into ``jaxterrain/assets/gan/`` with ``PROVENANCE.md`` and a sample grid.
+Training (:mod:`jaxterrain.generators.gan_train`, library code; this module only wires it to the command line):
+the non-saturating GAN loss, Adam(2e-4, b1=0.5) for both networks, one discriminator and one generator update per
+step on random DEM patches cut, augmented and normalised on the device (``jaxterrain.dem.random_patches``);
+latents from N(0, 1) truncated to [-3, 3] (the genome range). R1 penalty on real data (``--r1``, lazily every 8
+steps; on in the gpu preset: without it the discriminator wins after ~3000 steps and the samples lose relief).
+
+The loop is ``jaxterrain.driver.run_chunks``, as in ``evolve``: every ``--ckpt-every`` steps it writes
+``checkpoint.npz`` (params, batch statistics, optimiser states, step and key; the previous one kept as
+``checkpoint.prev.npz``), ``metrics.csv`` and TensorBoard events (``tb/``); ``--time-limit MIN`` stops after a
+checkpoint and ``--resume FOLDER`` continues the run bit-identically. The run folder also gets ``config.json``
+(command, arguments, config), ``log.jsonl`` (every ``--log-every`` steps), ``samples/step_<8-digit step>.png`` (a
+fixed-latent grid, plus ``real.png``), ``final/`` (``generator.msgpack`` + ``config.json``, loadable with
+``generators.get("gan", weights="<run>/final")``) and ``quality.json``
+(:func:`jaxterrain.generators.gan_train.quality_check`). ``--export-assets`` copies ``final/`` into
+``jaxterrain/assets/gan/`` with ``PROVENANCE.md`` and a sample grid.
 """
 
 from __future__ import annotations
@@ -49,7 +53,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--size", type=int, help="heightmap side; must fit the preset's architecture")
     parser.add_argument("--data", help="folder / file of DEM tiles (.tif .tiff .npy .npz); default: matplotlib DEMs")
     parser.add_argument("--out", help="run folder (default runs/train-gan-<timestamp>)")
-    parser.add_argument("--resume", action="store_true", help="continue from the latest checkpoint in --out")
+    parser.add_argument("--resume", nargs="?", const="latest", default=None, metavar="FOLDER",
+                        help="continue the run in FOLDER from its checkpoint (default: --out, else the newest "
+                             "runs/train-gan-*)")
+    parser.add_argument("--time-limit", type=float, default=None, metavar="MIN",
+                        help="stop cleanly after about MIN minutes (after a checkpoint); continue with --resume")
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--lr", type=float, default=2e-4, help="Adam learning rate of both networks (2e-4)")
     parser.add_argument("--r1", type=float, help="R1 penalty weight on real data, applied lazily every 8 steps "
@@ -203,9 +211,11 @@ class TrainingData(NamedTuple):
 
 
 class TrainOutcome(NamedTuple):
-    """The result of :func:`train`: the final state, the wall time of the loop (s) and the last logged metrics."""
+    """The result of :func:`train`: the state, the steps done (< ``--steps`` after a time-limit stop), the wall
+    time of the loop (s) and the last step's metrics."""
 
     state: Any  # jaxterrain.generators.gan_train.GanTrainState
+    done: int
     wall: float
     last_metrics: dict[str, float] | None
 
@@ -219,12 +229,18 @@ def make_config(preset: dict):
 
 
 def prepare_run_dir(args) -> Path:
-    """The run folder (``--out`` or ``runs/train-gan-<UTC time>``), created; ``--resume`` needs ``--out``."""
-    from experiments.common import run_folder
+    """The run folder, created: ``--resume FOLDER``; ``--resume`` alone: ``--out``, else the newest
+    ``runs/train-gan-*``; otherwise ``--out`` or ``runs/train-gan-<UTC time>``."""
+    from experiments.common import latest_run, run_folder
 
-    run_dir = run_folder("train-gan", args.out)
-    if args.resume and not args.out:
-        raise ValueError("--resume needs --out RUN_DIR (the run to continue)")
+    if args.resume not in (None, "latest"):
+        run_dir = Path(args.resume)
+        if args.out is not None and Path(args.out) != run_dir:
+            raise ValueError(f"--resume {run_dir} and --out {args.out} name different runs; give one of them")
+    elif args.resume == "latest":
+        run_dir = Path(args.out) if args.out is not None else latest_run("train-gan")
+    else:
+        run_dir = run_folder("train-gan", args.out)
     run_dir.mkdir(parents=True, exist_ok=True)
     return run_dir
 
@@ -256,48 +272,41 @@ def run_quality_only(args, run_dir: Path, tiles) -> None:
 
 
 def write_run_json(args, run_dir: Path, preset: dict, config, data_desc: str) -> None:
-    """Write ``run.json`` (argv, resolved options, config); on ``--resume`` first check the config is the same."""
+    """Write ``config.json`` (command, argv, resolved options, config); on ``--resume`` first check that the
+    config is the one the run was trained with."""
     from jaxterrain.io import atomic_write_text
 
-    run_json = run_dir / "run.json"
+    run_json = run_dir / "config.json"
     if args.resume and run_json.exists():
         saved = json.loads(run_json.read_text())
         if saved.get("config") != config.to_json():
             raise ValueError(f"--resume: {run_dir} was trained with config {saved.get('config')}, "
                              f"not {config.to_json()}; use the same --preset/--size")
-    atomic_write_text(run_json, json.dumps({"argv": sys.argv, "preset": args.preset, "resolved": {
-        k: v for k, v in preset.items() if k not in ("channels", "disc_channels")} | {"lr": args.lr, "r1": args.r1,
-        "seed": args.seed, "data": data_desc}, "config": config.to_json()}, indent=2) + "\n")
+    atomic_write_text(run_json, json.dumps({"command": "train-gan", "argv": sys.argv, "preset": args.preset,
+                                            "resolved": {k: v for k, v in preset.items()
+                                                         if k not in ("channels", "disc_channels")}
+                                            | {"lr": args.lr, "r1": args.r1, "seed": args.seed, "data": data_desc},
+                                            "config": config.to_json()}, indent=2) + "\n")
 
 
-def init_or_resume(args, run_dir: Path, config) -> gan_train.GanTrainState:
-    """A fresh :class:`~jaxterrain.generators.gan_train.GanTrainState` from ``--seed``, or with ``--resume``
-    the latest checkpoint in ``run_dir``."""
+def init_or_resume(args, run_dir: Path, config) -> tuple[Any, int, dict | None]:
+    """``(state, steps done, metric history)``: a fresh ``GanTrainState`` from ``--seed`` and 0 steps, or with
+    ``--resume`` the run's ``checkpoint.npz`` (``jaxterrain.driver`` format)."""
     import jax
 
+    from jaxterrain import driver
     from jaxterrain.generators import gan_train
 
     state = gan_train.init_state(jax.random.PRNGKey(args.seed), config, args.lr)
-    if args.resume:
-        ckpt = gan_train.latest_checkpoint(run_dir)
-        if ckpt is None:
-            print(f"--resume: no checkpoint in {run_dir}/checkpoints; starting from scratch", flush=True)
-        else:
-            state = gan_train.restore_checkpoint(ckpt, state)
-            print(f"resumed from {ckpt} at step {int(state.step)}", flush=True)
-    return state
-
-
-def _progress_bar(args, start: int):
-    """A tqdm bar over the steps still to train, or None (``--no-progress``, nothing to train, or no tqdm)."""
-    if args.no_progress or start >= args.steps:
-        return None
-    try:
-        from tqdm import tqdm
-
-        return tqdm(total=args.steps, initial=start, desc="train-gan", mininterval=2.0, file=sys.stdout)
-    except ImportError:
-        return None
+    if not args.resume:
+        return state, 0, None
+    restored = driver.restore(run_dir, like=state)
+    if restored is None:
+        print(f"--resume: no checkpoint in {run_dir}; starting from scratch", flush=True)
+        return state, 0, None
+    state, done, history, _ = restored
+    print(f"resumed from {run_dir / driver.CHECKPOINT_NAME} at step {done}", flush=True)
+    return state, done, history
 
 
 def _log_metrics(say, log_path: Path, step: int, total: int, start: int, t0: float, metrics) -> dict[str, float]:
@@ -315,38 +324,66 @@ def _log_metrics(say, log_path: Path, step: int, total: int, start: int, t0: flo
     return m
 
 
-def train(args, run_dir: Path, config, state: gan_train.GanTrainState, tiles) -> TrainOutcome:
-    """Train from ``state.step`` to ``--steps``: log lines, sample grids and checkpoints at their intervals."""
+def _say(line: str) -> None:
+    """Print ``line`` above the driver's progress bar (tqdm.write), or plainly."""
+    try:
+        from tqdm.auto import tqdm
+
+        tqdm.write(line, file=sys.stdout)
+    except ImportError:  # pragma: no cover
+        print(line, flush=True)
+
+
+def make_chunk(args, run_dir: Path, config, tiles, start: int):
+    """The ``jaxterrain.driver`` chunk ``(state, a, b) -> (state, metrics [b - a])``: steps ``a + 1 .. b`` of the
+    jitted train step, with log lines and sample grids at their intervals (``start``: where this process began)."""
     import jax
+    import jax.numpy as jnp
 
     from jaxterrain.generators import gan_train
 
     step_fn = gan_train.jitted_step(config, args.batch_size, float(args.lr), float(args.r1),
                                     jax.default_backend() != "cpu")
-    sample_fn, real_fn = gan_train.jitted_samples(config)
+    sample_fn, _ = gan_train.jitted_samples(config)
+    t0 = time.time()
+
+    def chunk(state, a: int, b: int):
+        steps = []
+        for step in range(a + 1, b + 1):
+            state, metrics = step_fn(state, tiles)
+            steps.append(metrics)
+            if step % args.log_every == 0 or step == args.steps:
+                _log_metrics(_say, run_dir / "log.jsonl", step, args.steps, start, t0, metrics)
+            if step % args.sample_every == 0 or step == args.steps:
+                save_grid(run_dir / "samples" / f"step_{step:08d}.png", sample_fn(state.g_params, state.g_stats))
+        return state, {k: jnp.stack([m[k] for m in steps]) for k in steps[0]}
+
+    return chunk
+
+
+def train(args, run_dir: Path, config, tiles) -> TrainOutcome:
+    """Train (or resume) to ``--steps`` through ``jaxterrain.driver.run_chunks``: a checkpoint (``checkpoint.npz``),
+    ``metrics.csv`` and TensorBoard events every ``--ckpt-every`` steps; stops early after ``--time-limit``."""
+    import jax
+
+    from jaxterrain import driver
+    from jaxterrain.generators import gan_train
+
+    state, start, history = init_or_resume(args, run_dir, config)
+    _, real_fn = gan_train.jitted_samples(config)
     if not (run_dir / "samples" / "real.png").exists():
         save_grid(run_dir / "samples" / "real.png", real_fn(jax.random.PRNGKey(7), tiles))
-
-    start = int(state.step)
-    bar = _progress_bar(args, start)
-    say = bar.write if bar is not None else (lambda s: print(s, flush=True))
-    t0, last = time.time(), None
-    for step in range(start + 1, args.steps + 1):
-        state, metrics = step_fn(state, tiles)
-        if bar is not None:
-            bar.update(1)
-        if step % args.log_every == 0 or step == args.steps:
-            last = _log_metrics(say, run_dir / "log.jsonl", step, args.steps, start, t0, metrics)
-        if step % args.sample_every == 0 or step == args.steps:
-            save_grid(run_dir / "samples" / f"step_{step:08d}.png", sample_fn(state.g_params, state.g_stats))
-        if step % args.ckpt_every == 0 or step == args.steps:
-            gan_train.save_checkpoint(run_dir, state)
-    if bar is not None:
-        bar.close()
+    t0 = time.time()
+    state, done, history = driver.run_chunks(
+        make_chunk(args, run_dir, config, tiles, start), state, total=args.steps, every=args.ckpt_every,
+        start=start, history=history, run_dir=run_dir, key_metric="g_loss",
+        time_limit_s=args.time_limit * 60.0 if args.time_limit else None, progress=not args.no_progress,
+        desc="train-gan", meta={"command": "train-gan", "config": config.to_json()})
     wall = time.time() - t0
-    if start < args.steps:
-        say(f"trained {args.steps - start} steps in {wall:.1f} s")
-    return TrainOutcome(state, wall, last)
+    if start < done:
+        _say(f"trained {done - start} steps in {wall:.1f} s")
+    last = {k: v[-1] for k, v in history.items() if v} or None
+    return TrainOutcome(state, done, wall, last)
 
 
 def run_quality(args, run_dir: Path, config, variables, tiles) -> dict | None:
@@ -385,8 +422,11 @@ def main(args: argparse.Namespace) -> int:
         return 0
 
     write_run_json(args, run_dir, preset, config, data.description)
-    state = init_or_resume(args, run_dir, config)
-    outcome = train(args, run_dir, config, state, data.tiles)
+    outcome = train(args, run_dir, config, data.tiles)
+    if outcome.done < args.steps:
+        print(f"time limit reached at step {outcome.done} of {args.steps}; continue with: "
+              f"python -m experiments train-gan --resume {run_dir} (and the same options)", flush=True)
+        return 0
     variables = {"params": outcome.state.g_params, "batch_stats": outcome.state.g_stats}
     save_generator(run_dir / "final", config, variables)
     quality = run_quality(args, run_dir, config, variables, data.tiles)

@@ -180,49 +180,78 @@ def test_matplotlib_dem_patches():
 # ---------------------------------------------------------------------------------------------------------------
 
 
-def _args(out, steps, resume=False):
+def _args(out, steps, resume=False, extra=()):
     from experiments import train_gan
 
     parser = argparse.ArgumentParser()
     train_gan.add_arguments(parser)
     argv = ["--preset", "smoke", "--size", "32", "--batch-size", "2", "--steps", str(steps), "--out", str(out),
             "--ckpt-every", "1", "--sample-every", "1", "--log-every", "1", "--quality-samples", "0",
-            "--no-progress"]
+            "--no-progress", *extra]
     return parser.parse_args(argv + (["--resume"] if resume else []))
 
 
 def test_train_checkpoint_resume_bit_equal(tmp_path, monkeypatch):
-    from flax import serialization
-
     from experiments import train_gan
+    from jaxterrain import driver
     from jaxterrain.generators import gan_train
 
     # a tiny architecture so the test compiles fast; the command itself is unchanged
     monkeypatch.setitem(train_gan.PRESETS, "smoke", dict(
         train_gan.PRESETS["smoke"], channels=(16, 8, 4), disc_channels=(8, 16)))
-    assert train_gan.main(_args(tmp_path / "a", 2)) == 0
+    cfg = G.GanConfig(size=32, channels=(16, 8, 4), disc_channels=(8, 16))
+    like = gan_train.init_state(jax.random.PRNGKey(0), cfg)
+    assert train_gan.main(_args(tmp_path / "a", 3)) == 0
     assert train_gan.main(_args(tmp_path / "b", 1)) == 0
-    assert gan_train.latest_checkpoint(tmp_path / "b").name == "ckpt_00000001.msgpack"
+    assert driver.restore(tmp_path / "b", like)[1] == 1
+    # --resume FOLDER (the evolve convention) continues run b; the flag with --out means the same
+    parser = argparse.ArgumentParser()
+    train_gan.add_arguments(parser)
     assert train_gan.main(_args(tmp_path / "b", 2, resume=True)) == 0
+    assert train_gan.main(parser.parse_args(
+        ["--preset", "smoke", "--size", "32", "--batch-size", "2", "--steps", "3", "--ckpt-every", "1",
+         "--sample-every", "1", "--log-every", "1", "--quality-samples", "0", "--no-progress",
+         "--resume", str(tmp_path / "b")])) == 0
     a = (tmp_path / "a" / "final" / "generator.msgpack").read_bytes()
     b = (tmp_path / "b" / "final" / "generator.msgpack").read_bytes()
     assert a == b  # bit-equal generator after resume
-    ca, cb = (gan_train.latest_checkpoint(tmp_path / r).read_bytes() for r in ("a", "b"))
-    assert ca == cb  # and bit-equal discriminator, optimiser states, step and key
-    state = serialization.msgpack_restore(ca)
-    assert int(state["step"]) == 2
-    fresh, _ = G.init_variables(jax.random.PRNGKey(0), G.GanConfig(size=32, channels=(16, 8, 4),
-                                                                       disc_channels=(8, 16)))
+    (sa, da, ha, _), (sb, db, hb, meta) = (driver.restore(tmp_path / r, like) for r in ("a", "b"))
+    leaves_a, leaves_b = jax.tree_util.tree_leaves(sa), jax.tree_util.tree_leaves(sb)
+    assert len(leaves_a) == len(leaves_b) == len(jax.tree_util.tree_leaves(like))
+    for x, y in zip(leaves_a, leaves_b):  # bit-equal discriminator, optimiser states, step and key
+        assert np.asarray(x).dtype == np.asarray(y).dtype and np.array_equal(np.asarray(x), np.asarray(y))
+    assert da == db == 3 and int(sa.step) == 3 and ha == hb and len(ha["d_loss"]) == 3
+    assert meta["command"] == "train-gan" and meta["config"] == cfg.to_json()
     moved = [float(np.abs(np.asarray(x) - np.asarray(y)).max()) for x, y in zip(
-        jax.tree_util.tree_leaves(state["g_params"]), jax.tree_util.tree_leaves(fresh["params"]))]
+        jax.tree_util.tree_leaves(sa.g_params), jax.tree_util.tree_leaves(like.g_params))]
     assert max(moved) > 0  # training changed the generator
-    assert (tmp_path / "a" / "samples" / "step_00000002.png").is_file()
+    assert (tmp_path / "a" / "samples" / "step_00000003.png").is_file()
     assert (tmp_path / "a" / "samples" / "real.png").is_file()
     log = [json.loads(line) for line in (tmp_path / "a" / "log.jsonl").read_text().splitlines()]
-    assert [r["step"] for r in log] == [1, 2] and all(np.isfinite(r["d_loss"]) for r in log)
+    assert [r["step"] for r in log] == [1, 2, 3] and all(np.isfinite(r["d_loss"]) for r in log)
+    np.testing.assert_allclose([r["d_loss"] for r in log], ha["d_loss"], rtol=1e-6)
+    rows = (tmp_path / "b" / "metrics.csv").read_text().splitlines()
+    assert rows[0].startswith("step,") and [r.split(",")[0] for r in rows[1:]] == ["1", "2", "3"]
     # the final folder loads as a generator
     gen = G.gan(size=32, weights=tmp_path / "a" / "final")
     assert gen.render(gen.sample(jax.random.PRNGKey(0), 2)).shape == (2, 32, 32)
+
+
+def test_train_time_limit_stops_after_a_checkpoint(tmp_path, monkeypatch):
+    from experiments import train_gan
+    from jaxterrain import driver
+    from jaxterrain.generators import gan_train
+
+    monkeypatch.setitem(train_gan.PRESETS, "smoke", dict(
+        train_gan.PRESETS["smoke"], channels=(16, 8, 4), disc_channels=(8, 16)))
+    like = gan_train.init_state(jax.random.PRNGKey(0), G.GanConfig(size=32, channels=(16, 8, 4),
+                                                                     disc_channels=(8, 16)))
+    # a limit of 0.6 ms: the run stops after its first chunk, with a checkpoint and no final/ folder
+    assert train_gan.main(_args(tmp_path / "c", 3, extra=["--time-limit", "0.00001"])) == 0
+    assert driver.restore(tmp_path / "c", like)[1] == 1
+    assert not (tmp_path / "c" / "final").exists()
+    with pytest.raises(ValueError, match="different runs"):
+        train_gan.prepare_run_dir(argparse.Namespace(resume=str(tmp_path / "c"), out=str(tmp_path / "d")))
 
 
 def test_wasserstein_and_quality_report(tiny_weights):

@@ -1,4 +1,4 @@
-"""Training the DCGAN of :mod:`jaxterrain.generators.gan`: its state, the R1-regularised step, checkpoints and the
+"""Training the DCGAN of :mod:`jaxterrain.generators.gan`: its state, the R1-regularised step and the
 quality check. ``python -m experiments train-gan`` is the command around these functions.
 
     state = init_state(jax.random.PRNGKey(0), config)              # GanTrainState (a pytree)
@@ -9,13 +9,13 @@ quality check. ``python -m experiments train-gan`` is the command around these f
 Training: the non-saturating GAN loss, Adam(lr, b1=0.5, b2=0.999) for both networks, one discriminator and one
 generator update per step, batches of random DEM patches cut, augmented and normalised on the device inside the
 step (``jaxterrain.dem.random_patches``), latents from N(0, 1) truncated to [-3, 3] (the genome range), and an
-optional R1 penalty on real data applied lazily every :data:`R1_EVERY` steps (StyleGAN2).
+optional R1 penalty on real data applied lazily every :data:`R1_EVERY` steps (StyleGAN2). The state is a plain
+pytree: checkpoint it with ``jaxterrain.driver`` (``python -m experiments train-gan`` runs its loop there).
 """
 
 from __future__ import annotations
 
 import functools
-from pathlib import Path
 from typing import Any, Callable, NamedTuple
 
 import jax
@@ -27,8 +27,7 @@ from jaxterrain import dem
 from jaxterrain.generators.gan import GanConfig, count_params, init_variables, make_modules, sample_latents
 
 __all__ = ["R1_EVERY", "GanTrainState", "gan_optimizer", "init_state", "make_train_step", "jitted_step",
-           "jitted_samples", "save_checkpoint", "latest_checkpoint", "restore_checkpoint", "wasserstein1",
-           "quality_check", "generator_params"]
+           "jitted_samples", "wasserstein1", "quality_check", "generator_params"]
 
 R1_EVERY = 8  # lazy R1 regularisation interval
 
@@ -158,39 +157,6 @@ def generator_params(config: GanConfig) -> int:
     gen, _ = make_modules(config)
     shapes = jax.eval_shape(lambda: gen.init(jax.random.PRNGKey(0), jnp.zeros((1, config.latent)), train=False))
     return count_params(shapes["params"])
-
-
-# ----------------------------------------------------------------------------------------------------------------
-# Checkpoints
-# ----------------------------------------------------------------------------------------------------------------
-def save_checkpoint(run_dir: str | Path, state: GanTrainState, keep: int = 3) -> Path:
-    """Write ``run_dir/checkpoints/ckpt_<8-digit step>.msgpack`` (flax ``to_bytes``) atomically; keep the
-    ``keep`` latest."""
-    from flax import serialization
-
-    from jaxterrain.io import atomic_write_bytes
-
-    run_dir = Path(run_dir)
-    host = jax.tree_util.tree_map(np.asarray, state)
-    step = int(host.step)
-    path = atomic_write_bytes(run_dir / "checkpoints" / f"ckpt_{step:08d}.msgpack", serialization.to_bytes(host))
-    for old in sorted((run_dir / "checkpoints").glob("ckpt_*.msgpack"))[:-keep]:
-        old.unlink()
-    return path
-
-
-def latest_checkpoint(run_dir: str | Path) -> Path | None:
-    """The newest ``checkpoints/ckpt_*.msgpack`` of ``run_dir``, or None."""
-    ckpts = sorted((Path(run_dir) / "checkpoints").glob("ckpt_*.msgpack"))
-    return ckpts[-1] if ckpts else None
-
-
-def restore_checkpoint(path: str | Path, template: GanTrainState) -> GanTrainState:
-    """The :class:`GanTrainState` stored at ``path`` (``template`` gives the structure, e.g. :func:`init_state`)."""
-    from flax import serialization
-
-    restored = serialization.from_bytes(template, Path(path).read_bytes())
-    return jax.tree_util.tree_map(jnp.asarray, restored)
 
 
 # ----------------------------------------------------------------------------------------------------------------
