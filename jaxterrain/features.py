@@ -60,7 +60,9 @@ from jax import lax
 from jaxterrain.terrain import TerrainScale, validate_scale
 
 __all__ = [
+    "HEIGHT_RANGE",
     "HUMANOID_HEIGHT",
+    "check_heights",
     "tri",
     "tpi",
     "roughness",
@@ -90,12 +92,51 @@ _UNROLL: bool | None = None  # force the TRI offset-sum strategy (see _offset_su
 
 def _as_batch(heightmaps) -> tuple[jax.Array, bool]:
     """``[B, H, W]`` or ``[H, W]`` -> (``[B, H, W]`` float32, was_single)."""
-    h = jnp.asarray(heightmaps)
+    try:
+        h = jnp.asarray(heightmaps)
+    except (TypeError, ValueError) as err:
+        raise ValueError(f"heightmaps must be a real-valued array [B, H, W] or [H, W]; got "
+                         f"{type(heightmaps).__name__} ({err})") from None
+    if h.dtype.kind not in "biuf":
+        raise ValueError(f"heightmaps must be a real-valued array [B, H, W] or [H, W]; got dtype {h.dtype}")
     if h.ndim == 2:
         return h[None].astype(jnp.float32), True
     if h.ndim != 3:
         raise ValueError(f"heightmaps must have shape [B, H, W] or [H, W]; got shape {tuple(h.shape)}")
     return h.astype(jnp.float32), False
+
+
+HEIGHT_RANGE = (0.0, 1.0)
+"""Heights accepted by :func:`descriptors` and :func:`is_traversable`: heightmap units in [0, 1] (generators' range;
+metres come from a :class:`~jaxterrain.terrain.TerrainScale`)."""
+
+
+@jax.jit
+def _value_stats(h: jax.Array):
+    """Per map of ``[B, H, W]``: (any NaN, min, max) ignoring NaN; three ``[B]`` arrays, one pass on device."""
+    nan = jnp.any(jnp.isnan(h), axis=(1, 2))
+    lo = jnp.min(jnp.where(jnp.isnan(h), jnp.inf, h), axis=(1, 2))
+    hi = jnp.max(jnp.where(jnp.isnan(h), -jnp.inf, h), axis=(1, 2))
+    return nan, lo, hi
+
+
+def check_heights(h: jax.Array, single: bool = False) -> None:
+    """Host-side check of concrete heightmaps ``[B, H, W]``: every value finite and in [0, 1], else a ``ValueError``
+    naming ``heightmaps``, the first bad map and the allowed range. Skipped for traced values (inside jit / vmap /
+    scan: MAP-Elites computes features inside ``lax.scan``) and for empty batches."""
+    if isinstance(h, jax.core.Tracer) or h.size == 0:
+        return
+    nan, lo, hi = (np.asarray(a) for a in _value_stats(h))
+    lo_r, hi_r = HEIGHT_RANGE
+    where = (lambda i: "") if single else (lambda i: f" (map {i})")
+    if nan.any():
+        i = int(np.argmax(nan))
+        raise ValueError(f"heightmaps{where(i)} hold NaN; heights must be finite, in [{lo_r:g}, {hi_r:g}]")
+    bad = ~((lo >= lo_r) & (hi <= hi_r))  # -inf / +inf land here too
+    if bad.any():
+        i = int(np.argmax(bad))
+        raise ValueError(f"heightmaps{where(i)} hold values in [{lo[i]:g}, {hi[i]:g}]; heights must be in "
+                         f"[{lo_r:g}, {hi_r:g}] (heightmap units: scale to metres with a TerrainScale)")
 
 
 def _check_int(name: str, value, low: int, high: int | None) -> int:
@@ -110,6 +151,8 @@ def _check_int(name: str, value, low: int, high: int | None) -> int:
 
 def _check_window(shape, window, stride) -> tuple[int, int]:
     h, w = int(shape[-2]), int(shape[-1])
+    if min(h, w) < 2:
+        raise ValueError(f"heightmaps of {h} x {w} pixels are too small: every window needs at least 2 x 2")
     window = _check_int("window", window, 2, min(h, w))
     stride = _check_int("stride", stride, 1, None)
     return window, stride
@@ -424,7 +467,8 @@ def descriptors(
     ``static_argnames=("names", "window", "stride")`` (``names`` as a tuple).
 
     Args:
-      heightmaps: ``[B, H, W]`` (or ``[H, W]``) float heightmaps.
+      heightmaps: ``[B, H, W]`` (or ``[H, W]``) float heightmaps in [0, 1]; concrete input holding NaN or values
+        outside [0, 1] raises ``ValueError`` (not checked under jit, where values are unknown).
       names: descriptor names, see :func:`descriptor_names`.
       window, stride: as in :func:`tri`; only used by windowed descriptors.
 
@@ -440,6 +484,7 @@ def descriptors(
     if unknown:
         raise ValueError(f"unknown descriptor name(s) {unknown}; valid names: {descriptor_names()}")
     h, single = _as_batch(heightmaps)
+    check_heights(h, single)
     if any(_REGISTRY[n].windowed for n in names):
         window, stride = _check_window(h.shape, window, stride)
     builtin = _chunked_builtin_descriptors(h, [n for n in dict.fromkeys(names) if n in _BUILTIN], window, stride)
@@ -483,7 +528,8 @@ def is_traversable(
     VALID window (``rows - k + 1`` of them), so a step in the last ``k`` rows is not missed.
 
     Args:
-      heightmaps: ``[B, H, W]`` (or ``[H, W]``) heightmaps in heightmap units (``[0, 1]`` for generators).
+      heightmaps: ``[B, H, W]`` (or ``[H, W]``) heightmaps in heightmap units, in [0, 1]; concrete input holding NaN
+        or values outside [0, 1] raises ``ValueError`` (not checked under jit).
       robot_height: metres, > 0. Default :data:`HUMANOID_HEIGHT` (brax humanoid, 1.57 m).
       window: k, 2 <= k <= min(H, W); paper 26 ("approx. step length of robot"; 1.04 m at the default scale).
       scale: :class:`jaxterrain.terrain.TerrainScale` giving metres per heightmap unit.
@@ -494,7 +540,9 @@ def is_traversable(
     if isinstance(robot_height, (int, float, np.number)) and not (np.isfinite(robot_height) and robot_height > 0):
         raise ValueError(f"robot_height must be a finite number of metres > 0; got {robot_height!r}")
     validate_scale(scale)
-    rng = max_window_range(heightmaps, window)
+    h, single = _as_batch(heightmaps)
+    check_heights(h, single)
+    rng = max_window_range(h[0] if single else h, window)
     return rng * scale.height <= robot_height / 3.0
 
 

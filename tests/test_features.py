@@ -53,8 +53,9 @@ def test_hand_computed_5x5_window3():
     # Descriptors are the map means: TRI (1 + 3/8 + 17/8 + 1/2 + 3/4 + 1/4 + 3 + 3/8 + 0) / 9 = 8.375 / 9,
     # TPI (the mean of |TPI|) (1 + 3/8 + 11/8 + 1/2 + 3/4 + 1/4 + 3 + 3/8 + 0) / 9 = 7.625 / 9,
     # signed TPI (1 - 3/8 + 11/8 - 1/2 - 3/4 - 1/4 + 3 - 3/8 + 0) / 9 = 3.125 / 9, roughness 22 / 9.
-    d = F.descriptors(H5, ("tri", "tpi", "tpi_signed", "roughness"), window=3, stride=1)
-    np.testing.assert_allclose(d, [8.375 / 9, 7.625 / 9, 3.125 / 9, 22 / 9], rtol=1e-6)
+    # Descriptors take heights in [0, 1]: H5 / 5, whose features are those of H5 / 5 (all are linear in h).
+    d = F.descriptors(H5 / 5, ("tri", "tpi", "tpi_signed", "roughness"), window=3, stride=1)
+    np.testing.assert_allclose(d, np.array([8.375 / 9, 7.625 / 9, 3.125 / 9, 22 / 9]) / 5, rtol=1e-6)
 
 
 def test_even_window_centre_is_k_over_2():

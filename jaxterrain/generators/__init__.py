@@ -15,9 +15,13 @@ import functools
 from typing import Callable
 
 from jaxterrain.generators.base import (
+    RENDER_CHUNK,
     Generator,
     GenomeSpec,
+    check_count,
     check_vector_genomes,
+    checked,
+    chunked_render,
     gaussian_mutation,
     spec,
     uniform_genomes,
@@ -46,11 +50,14 @@ def names() -> tuple[str, ...]:
 
 @functools.lru_cache(maxsize=None)
 def _cached(name: str, options: tuple) -> Generator:
-    return _FACTORIES[name](**dict(options))
+    return checked(_FACTORIES[name](**dict(options)))
 
 
 def get(name: str, **options) -> Generator:
-    """The generator registered as ``name``, built with ``options`` (e.g. ``size=64``); cached per options."""
+    """The generator registered as ``name``, built with ``options`` (e.g. ``size=64``); cached per options.
+
+    Its ``sample`` rejects a count that is not an integer >= 1 and its ``mutate`` checks concrete genomes (as
+    ``validate`` does), also for a factory that does not check them itself (:func:`base.checked`)."""
     if name not in _FACTORIES:
         raise ValueError(f"unknown generator {name!r}; choose one of {', '.join(names())}")
     return _cached(name, tuple(sorted(options.items())))
@@ -60,9 +67,13 @@ def get(name: str, **options) -> Generator:
 from jaxterrain.generators import cppn, diamond_square, gan, perlin, worley  # noqa: E402,F401
 
 __all__ = [
+    "RENDER_CHUNK",
     "Generator",
     "GenomeSpec",
+    "check_count",
     "check_vector_genomes",
+    "checked",
+    "chunked_render",
     "gaussian_mutation",
     "get",
     "names",

@@ -7,9 +7,15 @@ A generator is an immutable bundle of pure functions (the optax / evosax shape):
     children = gen.mutate(key, genomes)          # [8, G] float32, same bounds
     maps = gen.render(genomes)                   # [8, 256, 256] float32 in [0, 1]
 
-``render`` checks concrete genomes on the host (shape, NaN, gene ranges) and raises a ``ValueError`` that names
-the gene and its range; under ``jit`` / ``vmap`` (traced values) it skips the value checks and only renders.
-``render_one`` is the raw, unchecked ``genome -> [H, W]`` function for use inside your own transformations.
+``render`` and ``mutate`` check concrete genomes on the host (shape, NaN / inf, gene ranges) and raise a
+``ValueError`` that names the gene (or genome field) and its range; under ``jit`` / ``vmap`` / ``scan`` (traced
+values) they skip the value checks and only compute. ``sample(key, n)`` raises a ``ValueError`` naming ``n`` unless it
+is an integer >= 1. ``render_one`` is the raw, unchecked ``genome -> [H, W]`` function for use inside your own
+transformations.
+
+Memory: ``render`` evaluates batches larger than the generator's render chunk (:data:`RENDER_CHUNK` maps, less for
+generators with large per-map temporaries) as ``lax.map`` over chunks of that many maps, so its temporary memory is
+that of one chunk at any batch size, and only the ``[B, H, W]`` output grows with the batch.
 
 Vector genomes (Perlin, diamond-square, Worley, GAN) are float32 arrays ``[B, G]`` described by a
 :class:`GenomeSpec`; integer genes are stored as whole floats. Genomes of other generators (CPPN) are pytrees whose
@@ -20,12 +26,17 @@ from __future__ import annotations
 
 from typing import Any, Callable, NamedTuple
 
+import operator
+
 import jax
 import jax.numpy as jnp
 import numpy as np
 
 Genome = Any  # an array [B, G] or a pytree of arrays with leading axis B
 PRNGKey = jax.Array
+
+RENDER_CHUNK = 1024
+"""Maps rendered per step of ``render``'s ``lax.map`` (the archive's chunk too): bounds render's temporaries."""
 
 
 class GenomeSpec(NamedTuple):
@@ -92,6 +103,61 @@ def is_traced(tree: Any) -> bool:
     return any(isinstance(leaf, jax.core.Tracer) for leaf in jax.tree_util.tree_leaves(tree))
 
 
+def check_count(n: Any, name: str, what: str = "n") -> int:
+    """``n`` as a Python int >= 1, or ``ValueError`` naming ``what`` (sample sizes: ints, numpy ints; no bool or
+    float)."""
+    try:
+        if isinstance(n, (bool, np.bool_)):
+            raise TypeError
+        value = operator.index(n)
+    except TypeError:
+        raise ValueError(f"{name}: {what} is {n!r} ({type(n).__name__}); it must be an integer >= 1") from None
+    if value < 1:
+        raise ValueError(f"{name}: {what} is {value}; it must be an integer >= 1")
+    return value
+
+
+def chunked_render(render_one: Callable[[Genome], jax.Array], chunk: int = RENDER_CHUNK) -> Callable[[Genome], jax.Array]:
+    """``jit`` of ``genomes[B, ...] -> maps[B, H, W]``: ``vmap(render_one)`` for ``B <= chunk``, else ``lax.map`` over
+    chunks of ``chunk`` genomes (the last, partial chunk vmapped on its own), so the temporaries are those of one
+    chunk whatever ``B``. Genomes may be a pytree with leading axis ``B``."""
+    chunk = check_count(chunk, "render", "chunk")
+
+    def render_batch(genomes: Genome) -> jax.Array:
+        b = jax.tree_util.tree_leaves(genomes)[0].shape[0]
+        if b <= chunk:
+            return jax.vmap(render_one)(genomes)
+        return jax.lax.map(render_one, genomes, batch_size=chunk)
+
+    return jax.jit(render_batch)
+
+
+def _mark(fn: Callable) -> Callable:
+    fn.__jaxterrain_checked__ = True
+    return fn
+
+
+def checked(gen: "Generator") -> "Generator":
+    """``gen`` with its public ``sample`` / ``mutate`` checking their input when they do not already (the registry
+    applies this to every generator it builds, so a factory that swaps in its own ``sample`` is covered too)."""
+    sample, mutate = gen.sample, gen.mutate
+    if not getattr(sample, "__jaxterrain_checked__", False):
+
+        @_mark
+        def sample(key: PRNGKey, n: int, _sample=gen.sample, _name=gen.name):
+            return _sample(key, check_count(n, _name))
+
+    if not getattr(mutate, "__jaxterrain_checked__", False):
+
+        @_mark
+        def mutate(key: PRNGKey, genomes: Genome, _mutate=gen.mutate, _validate=gen.validate):
+            if not is_traced(genomes):
+                _validate(genomes)
+            return _mutate(key, genomes)
+
+    return gen._replace(sample=sample, mutate=mutate)
+
+
 # ----------------------------------------------------------------------------------------------------------------
 # Vector genomes
 # ----------------------------------------------------------------------------------------------------------------
@@ -127,7 +193,15 @@ def check_vector_genomes(genomes: Any, gspec: GenomeSpec, name: str) -> np.ndarr
     Raises ``ValueError`` for a wrong shape, a non-finite gene, a gene out of its range or a fractional
     integer gene, naming the gene, the genome index and the allowed range.
     """
-    g = np.asarray(genomes, dtype=np.float64)
+    try:
+        raw = np.asarray(genomes)
+    except (TypeError, ValueError) as err:  # ragged nesting, unconvertible objects
+        raise ValueError(f"{name}: genomes must be a float array [B, {gspec.size}]; got {type(genomes).__name__} "
+                         f"({err})") from None
+    if raw.dtype.kind not in "iuf":
+        raise ValueError(f"{name}: genomes must be a real-valued array (float32) [B, {gspec.size}]; got dtype "
+                         f"{raw.dtype}")
+    g = raw.astype(np.float64)
     if g.ndim not in (1, 2) or g.shape[-1] != gspec.size:
         raise ValueError(
             f"{name}: genomes must have shape [B, {gspec.size}] or [{gspec.size}] "
@@ -164,6 +238,7 @@ def vector_generator(
     mutation_sigma: float = 0.1,
     repair: Callable[[jax.Array], jax.Array] | None = None,
     extra_check: Callable[[np.ndarray], None] | None = None,
+    render_chunk: int = RENDER_CHUNK,
 ) -> Generator:
     """Assemble a :class:`Generator` for a vector genome from its unbatched ``render_one(genome[G]) -> [H, W]``.
 
@@ -171,20 +246,26 @@ def vector_generator(
       repair: optional ``genomes[B, G] -> genomes[B, G]`` applied after sampling and mutation to enforce
         constraints between genes (e.g. Worley's D <= N / 4).
       extra_check: optional host-side check of concrete genomes ``[B, G]`` float64 for such constraints.
+      render_chunk: ``render`` evaluates larger batches in ``lax.map`` chunks of this many maps (bounded memory).
     """
     repair = repair or (lambda g: g)
-    batched = jax.jit(jax.vmap(render_one))
+    batched = chunked_render(render_one, render_chunk)
+    mutate_jit = jax.jit(lambda key, g: repair(gaussian_mutation(key, g, gspec, mutation_prob, mutation_sigma)))
 
+    @_mark
     def sample(key: PRNGKey, n: int) -> jax.Array:
-        return repair(uniform_genomes(key, n, gspec))
-
-    def mutate(key: PRNGKey, genomes: jax.Array) -> jax.Array:
-        return repair(gaussian_mutation(key, genomes, gspec, mutation_prob, mutation_sigma))
+        return repair(uniform_genomes(key, check_count(n, name), gspec))
 
     def validate(genomes: Any) -> None:
         g = check_vector_genomes(genomes, gspec, name)
         if extra_check is not None:
             extra_check(g)
+
+    @_mark
+    def mutate(key: PRNGKey, genomes: jax.Array) -> jax.Array:
+        if not is_traced(genomes):
+            validate(genomes)
+        return mutate_jit(key, jnp.asarray(genomes, jnp.float32))
 
     def render(genomes: Any) -> jax.Array:
         if not is_traced(genomes):

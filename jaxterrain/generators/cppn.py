@@ -60,7 +60,15 @@ import jax.numpy as jnp
 import numpy as np
 
 from jaxterrain.generators import register
-from jaxterrain.generators.base import Generator, PRNGKey, is_traced
+from jaxterrain.generators.base import (
+    RENDER_CHUNK,
+    Generator,
+    PRNGKey,
+    _mark,
+    check_count,
+    chunked_render,
+    is_traced,
+)
 
 ACTIVATIONS: tuple[str, ...] = ("identity", "sine", "cosine", "gaussian", "sigmoid", "tanh", "abs", "square")
 """Activation ids (Picbreeder's smooth set, plus abs and square as in Enhanced POET):
@@ -548,6 +556,13 @@ def _check_config(config: CPPNConfig) -> None:
 # ----------------------------------------------------------------------------------------------------------------
 
 
+def render_chunk(max_nodes: int) -> int:
+    """Maps per ``lax.map`` step of ``render``: 16384 / N rounded down to a power of two, at most
+    :data:`RENDER_CHUNK` (512 at N = 32). On a GPU, XLA keeps about N values per pixel (~15 MB per 256 x 256 map at
+    N = 32: 60 GiB at B = 4096 before chunking), so a chunk stays near 8 GiB at any N and any batch size."""
+    return max(1, min(RENDER_CHUNK, 2 ** int(math.floor(math.log2(16384 / max_nodes)))))
+
+
 @register("cppn")
 def cppn(size: int = 256, max_nodes: int = 32, max_connections: int = 128, config: CPPNConfig = CPPNConfig()
          ) -> Generator:
@@ -572,28 +587,36 @@ def cppn(size: int = 256, max_nodes: int = 32, max_connections: int = 128, confi
     def render_one(genome: CPPNGenome) -> jax.Array:
         return height(evaluate(genome, coordinates(size)))
 
-    batched = jax.jit(jax.vmap(render_one))
+    batched = chunked_render(render_one, render_chunk(max_nodes))
 
-    def mutate(key: PRNGKey, genomes: CPPNGenome) -> CPPNGenome:
+    def mutate_raw(key: PRNGKey, genomes: CPPNGenome) -> CPPNGenome:
         if genomes.node_used.ndim == 1:
             return mutate_one(key, genomes, config)
         keys = jax.random.split(key, genomes.node_used.shape[0])
         return jax.vmap(mutate_one, in_axes=(0, 0, None))(keys, genomes, config)
 
-    def sample(key: PRNGKey, n: int) -> CPPNGenome:
-        if int(n) != n or n < 1:
-            raise ValueError(f"cppn: n is {n}; it must be an integer >= 1")
-        init_key, mut_key = jax.random.split(key)
-        del key
-        genomes = minimal_genomes(init_key, int(n), max_nodes, max_connections, config)
-        if config.init_mutations == 0:
-            return genomes
-        return jax.lax.fori_loop(
-            0, int(config.init_mutations), lambda i, g: mutate(jax.random.fold_in(mut_key, i), g), genomes
-        )
+    mutate_jit = jax.jit(mutate_raw)
 
     def validate(genomes: Any) -> None:
         check_genomes(genomes, max_nodes, max_connections, config.weight_limit)
+
+    @_mark
+    def mutate(key: PRNGKey, genomes: CPPNGenome) -> CPPNGenome:
+        if not is_traced(genomes):
+            validate(genomes)
+        return mutate_jit(key, CPPNGenome(*genomes))
+
+    @_mark
+    def sample(key: PRNGKey, n: int) -> CPPNGenome:
+        n = check_count(n, "cppn")
+        init_key, mut_key = jax.random.split(key)
+        del key
+        genomes = minimal_genomes(init_key, n, max_nodes, max_connections, config)
+        if config.init_mutations == 0:
+            return genomes
+        return jax.lax.fori_loop(
+            0, int(config.init_mutations), lambda i, g: mutate_raw(jax.random.fold_in(mut_key, i), g), genomes
+        )
 
     def render(genomes: CPPNGenome) -> jax.Array:
         if not is_traced(genomes):
@@ -622,6 +645,7 @@ __all__ = [
     "mutate_one",
     "node_kinds",
     "reachability",
+    "render_chunk",
     "topological_order",
     "weight_matrix",
 ]
