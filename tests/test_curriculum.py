@@ -172,7 +172,7 @@ def test_map_step_adds_the_observation_removes_and_picks_the_ucb_argmax():
     best = np.flatnonzero(np.isclose(score, score.max(), atol=1e-6))
     expected = best[np.argmin(hard[best])]
     assert int(state.terrain) == expected == 1  # (1, 0) and (0, 1) tie: same distance, lower index
-    assert int(state.policy["resets"]) == 2  # init's reset + the switch
+    assert int(state.policy["resets"]) == 1 and bool(state.restart)  # reset before the chunk; due on the switch
     assert float(state.hardest) == pytest.approx(float(hard[0]))  # 0.95 >= 0.9: credited
 
 

@@ -12,7 +12,8 @@ One chunk (:func:`step`) trains the policy on the current terrain for ``epochs_p
 (``harness.train``), evaluates it there (``harness.evaluate``), records epoch / terrain / evaluation / hardest
 terrain traversed in the history buffers, and when the terrain is finished (threshold reached or ``max_evals``
 evaluations spent) adds one observation to the GP, removes terrains (the selector's rule), picks the next terrain
-and resets the envs on it (``harness.reset``). Everything is data (indices and masks, ``jnp.where``): the same code
+and marks the envs for a restart on it (``restart``: ``harness.reset`` runs at the start of the next chunk, the
+one place a reset is compiled). Everything is data (indices and masks, ``jnp.where``): the same code
 runs under ``vmap`` over trials, a trial that is done keeps its state unchanged, and nothing re-compiles when the
 terrain changes (the terrain is an index into the bank). Decisions and their reasons: :mod:`.config`.
 """
@@ -71,7 +72,10 @@ class State(NamedTuple):
     bank index of each GP observation (-1 = empty slot). obs_y: [M] float32 observed fitness. obs_count: [] int32.
     available: [N] bool terrains still on offer. terrain: [] int32 current terrain. terrain_evals: [] int32
     evaluations spent on it. terrain_best: [] float32 its best evaluation so far. chunk, epoch, env_steps: [] int32
-    counters. hardest: [] float32 hardest terrain traversed (distance, cells). done: [] bool. history: History.
+    counters. hardest: [] float32 hardest terrain traversed (distance, cells). done: [] bool. restart: [] bool, the
+    envs restart on the current terrain (``harness.reset``) before the next chunk trains (set by :func:`init` and on
+    a terrain switch; set it yourself to restart them, e.g. after restoring a state saved without env states).
+    history: History.
     """
 
     policy: Any
@@ -88,6 +92,7 @@ class State(NamedTuple):
     env_steps: jax.Array
     hardest: jax.Array
     done: jax.Array
+    restart: jax.Array
     history: History
 
 
@@ -177,24 +182,23 @@ def _initial(bank: TerrainBank, config: CurriculumConfig, key) -> tuple[jax.Arra
 
 def init(key: jax.Array, bank: TerrainBank, policy: Any, *, config: CurriculumConfig, harness: Harness) -> State:
     """A trial at its start: every terrain of the selector available, the first one chosen (map: the prior's
-    argmax), the envs of ``policy`` reset on it (``harness.reset``). ``policy``: the starting policy state (the
-    base policy's params and normaliser in an ``rl.TrainState``). Pure; vmap over ``key`` for trials."""
+    argmax), its envs due for a restart on it (the first :func:`step` calls ``harness.reset``). ``policy``: the
+    starting policy state (the base policy's params and normaliser in an ``rl.TrainState``; its env state only
+    gives the structure). Pure; vmap over ``key`` for trials."""
     key = _typed(key)
-    trial_key, select_key, reset_key = jax.random.split(key, 3)
+    trial_key, select_key = jax.random.split(key)
     del key
     n = bank.fitness.shape[0]
     m, c = config.observation_slots(n), config.max_chunks
     available, score = _initial(bank, config, select_key)
     first = select(score, available, terrain_hardness(bank, config.distance_origin))
-    if harness.reset is not None:
-        policy = harness.reset(policy, reset_key, bank.heightmaps[first])
     zi, zf = jnp.zeros((), jnp.int32), jnp.zeros((), jnp.float32)
     history = History(epoch=jnp.full((c,), -1, jnp.int32), terrain=jnp.full((c,), -1, jnp.int32),
                       evaluation=jnp.full((c,), jnp.nan, jnp.float32), hardest=jnp.full((c,), jnp.nan, jnp.float32))
     return State(policy=policy, key=_raw(trial_key), obs_index=jnp.full((m,), -1, jnp.int32),
                  obs_y=jnp.zeros((m,), jnp.float32), obs_count=zi, available=available, terrain=first,
                  terrain_evals=zi, terrain_best=jnp.full((), -jnp.inf, jnp.float32), chunk=zi, epoch=zi,
-                 env_steps=zi, hardest=zf, done=~jnp.any(available), history=history)
+                 env_steps=zi, hardest=zf, done=~jnp.any(available), restart=jnp.ones((), bool), history=history)
 
 
 def _next_terrain(state: State, bank: TerrainBank, config: CurriculumConfig, key, trained, finished, obs_index, obs_y,
@@ -221,7 +225,10 @@ def step(state: State, key: jax.Array, bank: TerrainBank, *, config: CurriculumC
     hardness = terrain_hardness(bank, config.distance_origin)
     t = state.terrain
     terrain = bank.heightmaps[t]
-    policy = harness.train(state.policy, train_key, terrain)
+    policy = state.policy
+    if harness.reset is not None:
+        policy = _where_tree(state.restart, harness.reset(policy, reset_key, terrain), policy)
+    policy = harness.train(policy, train_key, terrain)
     fitness = jnp.asarray(harness.evaluate(policy, eval_key, terrain), jnp.float32).reshape(())
     evals = state.terrain_evals + 1
     best = jnp.maximum(state.terrain_best, fitness)
@@ -237,8 +244,6 @@ def step(state: State, key: jax.Array, bank: TerrainBank, *, config: CurriculumC
     obs_y = state.obs_y.at[slot].set(y, mode="drop")
     available, nxt = _next_terrain(state, bank, config, select_key, t, finished, obs_index, obs_y, hardness)
     switch = finished & jnp.any(available)
-    if harness.reset is not None:
-        policy = _where_tree(switch, harness.reset(policy, reset_key, bank.heightmaps[nxt]), policy)
     done = (finished & ~jnp.any(available)) | (epoch >= config.max_epochs)
 
     c = state.chunk
@@ -250,7 +255,8 @@ def step(state: State, key: jax.Array, bank: TerrainBank, *, config: CurriculumC
                 obs_count=state.obs_count + finished.astype(jnp.int32), available=available,
                 terrain=jnp.where(switch, nxt, t), terrain_evals=jnp.where(finished, 0, evals),
                 terrain_best=jnp.where(finished, -jnp.inf, best), chunk=c + 1, epoch=epoch,
-                env_steps=state.env_steps + config.steps_per_chunk, hardest=hardest, done=done, history=history)
+                env_steps=state.env_steps + config.steps_per_chunk, hardest=hardest, done=done, restart=switch,
+                history=history)
     return _where_tree(state.done, state, new)
 
 

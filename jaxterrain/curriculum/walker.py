@@ -5,7 +5,7 @@
     check_policy(policy, env)                                    # ValueError naming the file on a mismatch
     ppo = config.ppo_config(policy.config)                       # fine-tuning PPO (CurriculumConfig.ppo_config)
     harness = walker_harness(env, ppo, config)
-    start = start_state(key, env, ppo, policy, bank.heightmaps[0])   # params, value net and normaliser of the policy
+    start = start_state(env, ppo, policy, bank.heightmaps.shape[1:])   # the policy's params, value net, normaliser
 
 ``harness.train`` runs ``config.updates_per_chunk`` PPO updates (``rl.run_updates``, one chunk =
 ``epochs_per_chunk x steps_per_epoch`` env steps) with all ``num_envs`` envs on the current terrain;
@@ -93,11 +93,16 @@ def walker_harness(env, ppo: rl.PPOConfig, config: CurriculumConfig) -> Harness:
     return Harness(train=train, evaluate=evaluate, reset=reset)
 
 
-def start_state(key: jax.Array, env, ppo: rl.PPOConfig, policy, terrain: jax.Array) -> rl.TrainState:
-    """The starting ``rl.TrainState``: the policy's params (policy AND value net) and normaliser, a fresh Adam
-    state, ``ppo.num_envs`` envs reset on ``terrain`` [H, W] (the curriculum resets them on its first terrain)."""
-    fn = jax.jit(lambda k, t, p, n: rl.init(k, env, ppo, t, params=p, normaliser=n))
-    return fn(key, terrain, policy.params, policy.normaliser)
+def start_state(env, ppo: rl.PPOConfig, policy, shape: tuple[int, int]) -> rl.TrainState:
+    """The starting ``rl.TrainState``: the policy's params (policy AND value net) and normaliser, a fresh Adam state,
+    and zeros for the ``ppo.num_envs`` env states (only their structure counts: the curriculum restarts the envs on
+    its first terrain before training). Traces the env once (``jax.eval_shape``); compiles nothing."""
+    like = jax.eval_shape(lambda k, t: rl.init(k, env, ppo, t), jax.random.key(0),
+                          jax.ShapeDtypeStruct(tuple(shape), jnp.float32))
+    zeros = jax.tree.map(lambda x: jnp.zeros(x.shape, x.dtype), like)
+    params = jax.tree.map(jnp.asarray, policy.params)
+    return zeros._replace(params=params, normaliser=policy.normaliser,
+                          opt_state=rl.make_optimizer(ppo).init(params))
 
 
 def load_policy(path: Optional[str | Path]) -> Any:
