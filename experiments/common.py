@@ -101,21 +101,22 @@ def check_out(out: Any, where: str = "--out") -> None:
 
 
 def check_resume(command: str, resume: Any) -> None:
-    """``--resume FOLDER`` must hold a ``config.json`` written by ``command``."""
+    """``--resume FOLDER`` must not be a file, nor a run folder whose ``config.json`` names another command (a
+    folder without one is the command's to judge: some start a fresh run there)."""
     if not isinstance(resume, (str, Path)) or resume == "latest":
         return  # a flag (store_true) or the newest run (``latest_run`` checks it)
     folder = Path(resume)
-    if not folder.is_dir():
-        raise UsageError(f"--resume {str(folder)!r} is not a run folder (no such directory)")
+    if folder.exists() and not folder.is_dir():
+        raise UsageError(f"--resume {str(folder)!r} is a file; give a run folder")
     config_path = folder / CONFIG_NAME
     if not config_path.is_file():
-        raise UsageError(f"--resume {str(folder)!r} is not a run folder: it has no {CONFIG_NAME}")
+        return
     try:
         saved = json.loads(config_path.read_text())
     except (OSError, ValueError) as err:
         raise UsageError(f"--resume {str(folder)!r}: cannot read {config_path} ({err})") from None
     other = saved.get("command") if isinstance(saved, dict) else None
-    if other is not None and other != command:
+    if isinstance(other, str) and other != command:
         raise UsageError(f"--resume {str(folder)!r} is a run of {other!r}, not of {command!r}")
 
 
