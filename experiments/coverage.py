@@ -15,7 +15,13 @@ Writes into the run folder:
   pair x generator, plus the combined archive).
 
 Presets: ``paper`` and ``gpu`` (the paper's budget per treatment, see ``experiments/evolve.py``), ``gpu-short`` (a
-tenth of it: all 15 treatments in about 15 x 3 GPU-minutes) and ``smoke`` (CPU, seconds).
+tenth of it: all 15 treatments in about 15 x 3 GPU-minutes), ``paper-batched`` (the paper's 5 000 generations x 20
+per treatment with every treatment at once: ``--batched``, below) and ``smoke`` (CPU, seconds).
+
+``--batched`` evolves all treatments in one process at once (``jaxterrain.archive.evolve_many``): one jitted
+generation mutates every treatment's 20 offspring and scores all 15 x 20 = 300 terrains with ONE walker call, so the
+paper's deep lineages (5 000 mutations) cost 5 000 batched generations instead of 15 x 5 000 latency-bound ones. Its
+checkpoint (all treatments) is ``batched/checkpoint.npz``; ``--resume`` continues it.
 
 Several GPUs: the treatments are independent, so run one process per GPU on the same run folder, each with
 ``--shard I/N`` (it takes the treatments ``t % N == I`` of the fixed order of :func:`treatments`; every treatment
@@ -54,11 +60,14 @@ def _preset(base: str, **kw) -> dict:
 
 
 PRESETS: dict[str, dict] = {
-    "paper": _preset("paper"),
-    "gpu": _preset("gpu"),
-    "gpu-short": _preset("gpu-short"),
+    "paper": _preset("paper", batched=False),
+    # the paper's protocol (5 000 generations x 20 per treatment), every treatment at once: 15 x 20 = 300 terrains
+    # per generation, scored by one fitness call (jaxterrain.archive.evolve_many); a checkpoint every 50 generations
+    "paper-batched": _preset("paper", batched=True, checkpoint_every=50),
+    "gpu": _preset("gpu", batched=False),
+    "gpu-short": _preset("gpu-short", batched=False),
     # ranges of the smoke preset: descriptors of 32 x 32 maps at window 8 (wider than the 256 x 256 defaults)
-    "smoke": _preset("smoke", generations=2, initial_population=12, batch_size=8,
+    "smoke": _preset("smoke", generations=2, initial_population=12, batch_size=8, batched=False,
                      ranges={"tri": [0.0, 0.5], "tpi": [-0.02, 0.02], "roughness": [0.0, 1.0]}),
 }
 
@@ -71,6 +80,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--size", type=int, default=None)
     parser.add_argument("--bins", type=int, default=None)
     parser.add_argument("--fitness", choices=["difficulty", "slope"], default=None)
+    parser.add_argument("--batched", action="store_const", const=True, default=None,
+                        help="evolve every treatment at once (one jitted generation, one fitness call on all "
+                             "treatments' offspring; jaxterrain.archive.evolve_many); not with --shard")
     parser.add_argument("--shard", type=parse_shard, default=None, metavar="I/N",
                         help="run only the treatments t with t %% N == I (one process per GPU, all with the same "
                              "--out; see the module docstring); then --resume without --shard writes the tables")
@@ -95,7 +107,7 @@ def treatments(pairs, generators) -> list[tuple[int, tuple, str]]:
 
 def overrides(args) -> dict:
     return dict(generators=args.generators, generations=args.generations, batch_size=args.batch_size,
-                size=args.size, bins=args.bins, fitness=args.fitness)
+                size=args.size, bins=args.bins, fitness=args.fitness, batched=args.batched)
 
 
 def pair_label(pair) -> str:
@@ -121,6 +133,44 @@ def markdown_table(cov: dict, generators: list[str], pairs, skipped: dict) -> st
     if skipped:
         text += "\nSkipped (not available here): " + "; ".join(f"{g} ({why})" for g, why in skipped.items()) + "\n"
     return text
+
+
+def run_batched(cfg: dict, todo, pairs, gens, folder, clock, key) -> dict:
+    """Every treatment of ``todo`` at once (``archive.evolve_many``), checkpointed in ``folder/batched``; each
+    treatment keeps the key it has in an unbatched run. Returns ``{(generator, pair label): Archive}``; finished
+    archives are written where :func:`experiments.evolve.run_treatment` writes them (and reused)."""
+    import jax
+
+    from jaxterrain import archive as A
+
+    def place(pair, g):
+        return folder / "archives" / f"{g}__{pair_label(pair)}"
+
+    if all((place(pair, g) / "archive.npz").exists() for _, pair, g in todo):
+        print("batched: every treatment already done", flush=True)
+        return {(g, pair_label(pair)): A.load(place(pair, g) / "archive.npz") for _, pair, g in todo}
+    treatments = [A.Treatment(g, tuple(pair), jax.random.fold_in(jax.random.fold_in(key, pairs.index(pair)),
+                                                                 gens.index(g))) for _, pair, g in todo]
+    config = evolve_cmd.evolve_config({**cfg, "descriptors": list(todo[0][1]), "ranges": None})
+
+    def progress(info):
+        cov = info["coverage"]
+        print(f"[{len(cov)} treatments] gen {info['generation']}/{info['generations']}  coverage min "
+              f"{min(cov):.2f}% mean {sum(cov) / len(cov):.2f}% max {max(cov):.2f}%  "
+              f"{info['evaluations_per_s']:.1f} evals/s", flush=True)
+        if info["generation"] < info["generations"]:
+            clock.check()
+
+    out = A.evolve_many(treatments, config, jax.random.fold_in(key, 2**31 - 1),
+                        fitness_fn=evolve_cmd.fitness_fn(cfg["fitness"]), checkpoint_dir=folder / "batched",
+                        progress=progress, generator_options={"size": int(cfg["size"])}, ranges=cfg.get("ranges"))
+    result = {}
+    for (_, pair, g), arch in zip(todo, out):
+        place(pair, g).mkdir(parents=True, exist_ok=True)
+        A.save(place(pair, g) / "archive.npz", arch)
+        evolve_cmd.write_metrics_csv(place(pair, g) / "metrics.csv", arch.metrics)
+        result[(g, pair_label(pair))] = arch
+    return result
 
 
 def main(args) -> int:
@@ -152,8 +202,12 @@ def main(args) -> int:
     shard_i, shard_n = args.shard or (0, 1)
     mine = [t for t in todo if t[0] % shard_n == shard_i]
     resume_hint = f"python -m experiments coverage --resume {folder}"
+    if cfg.get("batched") and args.shard is not None:
+        raise SystemExit("--batched runs every treatment in one process; it cannot be combined with --shard")
     try:
-        for n, (k, pair, g) in enumerate(mine, 1):
+        if cfg.get("batched"):
+            archives.update(run_batched(cfg, todo, pairs, gens, folder, clock, key))
+        for n, (k, pair, g) in enumerate([] if cfg.get("batched") else mine, 1):
             ranges = cfg.get("ranges")
             tcfg = dict(cfg, ranges=None if ranges is None else [ranges[pair[0]], ranges[pair[1]]])
             tkey = jax.random.fold_in(jax.random.fold_in(key, pairs.index(pair)), gens.index(g))

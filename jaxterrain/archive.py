@@ -650,6 +650,7 @@ def load(path: str | os.PathLike) -> Archive:
 
 # The host drivers live in jaxterrain.evolution (imported last: it uses this module's names).
 from jaxterrain.evolution import (  # noqa: E402
+    Treatment,
     difficulty_fitness,
     evolve,
     evolve_many,

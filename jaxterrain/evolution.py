@@ -5,14 +5,14 @@ descriptor names and an :class:`~jaxterrain.archive.EvolveConfig` (whose ONE ``s
 walker fitness), run :mod:`jaxterrain.map_elites` in jitted ``lax.scan`` chunks of ``config.checkpoint_every``
 generations, and return host :class:`~jaxterrain.archive.Archive` s. Re-exported by :mod:`jaxterrain.archive`.
 
-Compiled programs: a run compiles its init and one chunk per chunk length. Pass ``compile_cache={}`` (any dict the
+The loop and the checkpoints are :func:`jaxterrain.driver.run_chunks`'s. Compiled programs: a run compiles its
+init and one chunk per chunk length. Pass ``compile_cache={}`` (any dict the
 caller owns) to reuse them across runs of the same problem; nothing is cached behind the caller's back.
 """
 
 from __future__ import annotations
 
 import functools
-import json
 import os
 import time
 from pathlib import Path
@@ -23,12 +23,11 @@ import jax.numpy as jnp
 import numpy as np
 
 from jaxterrain import archive as A
+from jaxterrain import driver
 from jaxterrain import map_elites as ME
 from jaxterrain import scoring as S
 
-CHECKPOINT_FORMAT = "jaxterrain-map-elites-checkpoint"
-CHECKPOINT_VERSION = 1
-CHECKPOINT_NAME = "checkpoint.npz"
+CHECKPOINT_NAME = driver.CHECKPOINT_NAME
 
 
 # ----------------------------------------------------------------------------------------------------------------
@@ -70,23 +69,29 @@ def _traversable_fn(robot_height, window, scale) -> Callable:
     return traversable
 
 
-@functools.lru_cache(maxsize=8)
 def difficulty_fitness(size: int, attempts: int = 20, best: int = 5, scale=None,
                        slots: int | None = None, smooth_first: bool = True) -> A.FitnessFn:
-    """The paper's fitness as a pure ``(heightmaps [B, size, size], key, needed [B] bool) -> [B]``.
+    """The paper's fitness as a pure ``(heightmaps [B, size, size], key, needed [B] bool) -> [B]``: an alias of
+    ``difficulty.fitness_fn(size, Protocol(attempts, best), scale, slots, smooth_first)`` (the shipped base policy,
+    ``attempts`` rollouts per terrain, mean of the ``best`` distances; cached there per argument values).
+    ``slots``: env slots of a rollout pool (None = all at once; terrains not ``needed`` are never walked);
+    ``smooth_first``: the pool starts the smoothest terrains' rollouts first (speed only)."""
+    from jaxterrain import difficulty
 
-    Same computation as ``difficulty.evaluate`` (shipped base policy, ``attempts`` rollouts per terrain, mean of the
-    ``best`` distances) through its pure ``batched_distances`` / ``best_of``. Cached per argument VALUES (``scale``
-    a ``TerrainScale``; default ``TerrainScale()``). ``slots``: env slots fed from a queue of the ``B x attempts``
-    rollouts (None = all at once; rollouts of terrains not ``needed`` are not started); ``smooth_first``: the queue
-    starts the smoothest terrains' rollouts first (speed only).
-    """
+    if hasattr(difficulty, "fitness_fn"):
+        return difficulty.fitness_fn(int(size), difficulty.Protocol(attempts, best), scale, slots, smooth_first)
+    return _difficulty_fitness(int(size), attempts, best, scale, slots, smooth_first)
+
+
+@functools.lru_cache(maxsize=8)
+def _difficulty_fitness(size, attempts, best, scale, slots, smooth_first):
+    """The same computation for a ``difficulty`` module without ``fitness_fn`` (before that factory landed)."""
     from jaxterrain import difficulty
     from jaxterrain.terrain import TerrainScale
 
     scale = TerrainScale() if scale is None else scale
     policy = difficulty.default_policy()
-    env = difficulty.make_env(difficulty.default_env_config((int(size), int(size)), scale, policy))
+    env = difficulty.make_env(difficulty.default_env_config((size, size), scale, policy))
 
     def fitness(heightmaps, key, needed=None):
         terrains = jnp.asarray(heightmaps, jnp.float32) * jnp.float32(scale.height)
@@ -183,10 +188,14 @@ def evolve(
         is ignored and may be skipped. Wrap a ``(heightmaps, key)`` function with
         ``jaxterrain.scoring.ignore_needed``. Default: :func:`difficulty_fitness` at the config's attempts, best,
         scale and rollout slots.
-      checkpoint_dir: folder for ``checkpoint.npz``, written atomically after every chunk of
-        ``config.checkpoint_every`` generations. When it already holds a checkpoint of the same run (same generator,
-        key and config except the run settings and ``generations``) the run continues from it.
-      progress: True prints one line per chunk; a callable receives a dict per chunk instead; False is silent.
+      checkpoint_dir: run folder of ``jaxterrain.driver``: ``checkpoint.npz`` (driver format: the
+        :class:`~jaxterrain.map_elites.MapElitesState`, the history, and the run's generator / key / config in its
+        meta) after generation 0 and after every chunk of ``config.checkpoint_every`` generations, ``metrics.csv``
+        and ``tb/``. When it already holds a checkpoint of the same run (same generator, key and config except the
+        run settings and ``generations``) the run continues from it, to the archive of an uninterrupted run.
+      progress: True shows the driver's progress bar (ETA, coverage); a callable receives a dict per chunk instead
+        (``event``, ``generation``, ``generations``, ``seconds``, ``evaluations_per_s``, the latest metrics,
+        ``rejected_total``; :func:`progress_printer` prints them); False is silent.
       traversable_fn: ``heightmaps [B, H, W] -> [B] bool`` replacing Algorithm 1 (default ``features.is_traversable``
         with ``config.robot_height``, ``config.traversable_window`` and ``config.scale``).
       generator_options: options for ``generators.get`` when ``generator`` is a name (e.g. ``{"size": 64}``).
@@ -202,35 +211,44 @@ def evolve(
     config = A.resolve_config(config)
     scoring, emitter = problem(generator, descriptors, config, fitness_fn, traversable_fn)
     init, chunk = _programs(scoring, emitter, compile_cache)
-    report = _reporter(progress, generator.name)
-
-    ckpt_path = None if checkpoint_dir is None else Path(checkpoint_dir) / CHECKPOINT_NAME
+    meta = {"generator": generator.name, "config": _resume_signature(config), "key": _key_data(key).tolist()}
+    run_dir = None if checkpoint_dir is None else Path(checkpoint_dir)
     restored = None
-    if ckpt_path is not None and ckpt_path.exists():
-        restored = _load_checkpoint(ckpt_path, generator.name, config, key)
-        report({"event": "resume", "generation": restored[1]})
-    t0 = time.perf_counter()
+    if run_dir is not None:
+        restored = driver.restore(run_dir, like=_template(key, scoring, emitter, config))
+        if restored is not None:
+            _check_meta(run_dir, restored[3], meta, restored[1], config.generations)
+    report = _progress(progress, generator.name, config)
     if restored is None:
+        t0 = time.perf_counter()
         state, metrics0 = init(key, A.centroids_for(config), scoring.task)
         history = {k: [float(v)] for k, v in jax.device_get(metrics0).items()}
-        if ckpt_path is not None:
-            _save_checkpoint(ckpt_path, generator.name, config, key, state.repertoire, 0, history)
-        report(_line(0, config.generations, history, time.perf_counter() - t0, config.initial_population))
+        if run_dir is not None:
+            run_dir.mkdir(parents=True, exist_ok=True)
+            driver.save_checkpoint(run_dir / driver.CHECKPOINT_NAME, state, done=0, history=history, meta=meta)
+        if callable(report):
+            report(_line(0, config.generations, history, time.perf_counter() - t0, config.initial_population))
     else:
-        repertoire, done, history = restored
-        state = ME.MapElitesState(repertoire, jnp.asarray(done, jnp.int32), scoring.task)
-    done = int(state.generation)
-    while done < config.generations:
-        stop = min(done + config.checkpoint_every, config.generations)
-        t1 = time.perf_counter()
-        state, metrics = chunk(state, key, stop - done)
+        state, done, history, _ = restored
+        if callable(report):
+            report({"event": "resume", "generation": done})
+
+    seen = {k: list(v) for k, v in history.items()}  # for the per-chunk lines (the driver keeps its own copy)
+
+    def chunk_fn(state, start, stop):
+        state, metrics = chunk(state, key, stop - start)
         for name, values in jax.device_get(metrics).items():
-            history.setdefault(name, []).extend(float(v) for v in np.asarray(values))
-        evaluations = (stop - done) * config.batch_size
-        done = stop
-        if ckpt_path is not None:
-            _save_checkpoint(ckpt_path, generator.name, config, key, state.repertoire, done, history)
-        report(_line(done, config.generations, history, time.perf_counter() - t1, evaluations))
+            seen.setdefault(name, []).extend(float(v) for v in np.asarray(values))
+        return state, metrics
+
+    def on_chunk(info):
+        evaluations = round(info["steps_per_s"] * info["seconds"]) * config.batch_size
+        report(_line(info["done"], config.generations, seen, info["seconds"], evaluations))
+
+    state, done, history = driver.run_chunks(
+        chunk_fn, state, total=config.generations, every=config.checkpoint_every, start=int(state.generation),
+        history=history, run_dir=run_dir, key_metric="coverage", progress=on_chunk if callable(report) else report,
+        desc=generator.name, unit="gen", meta=meta)
     return to_archive(generator, state.repertoire, config, history)
 
 
@@ -251,6 +269,7 @@ def evolve_many(
     config: A.EvolveConfig,
     key: jax.Array,
     fitness_fn: A.FitnessFn | None = None,
+    checkpoint_dir: str | os.PathLike | None = None,
     progress: bool | Callable[[dict], None] = True,
     traversable_fn: Callable[[jax.Array], jax.Array] | None = None,
     generator_options: dict | None = None,
@@ -262,23 +281,27 @@ def evolve_many(
     Treatments of one generator form a batch (``vmap``; their descriptor pairs are indices into one descriptor
     set, the union of every treatment's names); the offspring heightmaps of all generators are scored by ONE
     fitness call per generation (e.g. 5 generators x 3 pairs x 20 = 300 terrains). Each treatment selects and
-    mutates with its own key exactly as :func:`evolve` does; the fitness of generation ``g``'s offspring uses
-    ``fold_in(key, g)``, so with a stochastic fitness (the walker) the archives are statistically, not bit-wise,
-    those of separate runs.
+    mutates with its own key exactly as :func:`evolve` does; the fitness of the offspring of the step after
+    generation ``g`` uses ``fold_in(key, g)``, so with a stochastic fitness (the walker) the archives are
+    statistically, not bit-wise, those of separate runs (and descriptors computed as part of a larger set may differ
+    from a pair's in the last float bits).
 
     Args:
-      treatments: :class:`Treatment` s (generator names, pairs, keys); every generator renders the same size.
+      treatments: :class:`Treatment` s (generator name, descriptor pair, run key); all generators render one size.
       config: shared settings (``config.descriptors`` / ``config.ranges`` are replaced per treatment).
       key: the key of the shared fitness calls.
       fitness_fn: ``(heightmaps, key, needed) -> [B]``; default :func:`default_fitness` of ``config``.
-      progress: True prints one line per chunk; a callable receives a dict per chunk; False is silent.
+      checkpoint_dir: folder of the run's ``checkpoint.npz`` (all treatments), ``metrics.csv`` (columns
+        ``<metric>/<treatment index>``) and ``tb/``; a checkpoint of the same run there is resumed.
+      progress: True for the driver's progress bar; a callable receives a dict per chunk (``generation``,
+        ``generations``, ``seconds``, ``evaluations_per_s``, ``coverage``: list per treatment); False is silent.
       traversable_fn: replaces Algorithm 1 (default: :func:`traversable_fn` of ``config``).
       generator_options: options for ``generators.get`` (e.g. ``{"size": 64}``).
       ranges: ``{descriptor name: (lo, hi)}``, default :data:`~jaxterrain.archive.DEFAULT_RANGES`.
       compile_cache: a caller-owned dict to keep compiled programs in.
 
     Returns:
-      one :class:`~jaxterrain.archive.Archive` per treatment, in order. No checkpoints yet: a killed run restarts.
+      one :class:`~jaxterrain.archive.Archive` per treatment, in order.
     """
     from jaxterrain import generators as _generators
 
@@ -296,47 +319,81 @@ def evolve_many(
         configs.append(A.resolve_config(config._replace(descriptors=t.descriptors, ranges=r)))
     config = configs[0]
     fitness = default_fitness(sizes.pop(), config) if fitness_fn is None else fitness_fn
-    groups = {}
+    groups, scorings, emitters, states, keys, history = _init_many(treatments, configs, names, gens, fitness,
+                                                                   traversable_fn, compile_cache)
+    history["coverage"] = [float(np.mean([history[f"coverage/{i}"][0] for i in range(len(treatments))]))]
+    meta = {"treatments": [[t.generator, list(t.descriptors), _key_data(t.key).tolist()] for t in treatments],
+            "config": _resume_signature(config._replace(descriptors=("-", "-"), ranges=((0, 1), (0, 1)))),
+            "key": _key_data(key).tolist(), "ranges": ranges and {k: list(v) for k, v in ranges.items()}}
+    run_dir = None if checkpoint_dir is None else Path(checkpoint_dir)
+    done = 0
+    if run_dir is not None:
+        restored = driver.restore(run_dir, like=states)
+        if restored is not None:
+            _check_meta(run_dir, restored[3], meta, restored[1], config.generations)
+            states, done, history, _ = restored
+        else:
+            run_dir.mkdir(parents=True, exist_ok=True)
+            driver.save_checkpoint(run_dir / driver.CHECKPOINT_NAME, states, done=0, history=history, meta=meta)
+    fns = tuple((s.render_one, s.descriptor_fn, s.traversable_fn) for s in scorings)
+    chunk = _compiled(compile_cache, ("many", fns, tuple(emitters), fitness),
+                      lambda: _many_chunk(tuple(scorings), tuple(emitters), fitness))
+    order = [i for members in groups.values() for i in members]
+
+    def chunk_fn(states, start, stop):
+        states, metrics = chunk(states, keys, key, stop - start)
+        out = {}
+        for members, m in zip(groups.values(), metrics):
+            for j, i in enumerate(members):
+                out.update({f"{k}/{i}": v[:, j] for k, v in m.items()})
+        out["coverage"] = jnp.mean(jnp.stack([out[f"coverage/{i}"] for i in order]), axis=0)
+        return states, out
+
+    def on_chunk(info):
+        progress({"event": "chunk", "generation": info["done"], "generations": config.generations,
+                  "seconds": info["seconds"],
+                  "evaluations_per_s": info["steps_per_s"] * config.batch_size * len(treatments),
+                  "coverage": [info[f"coverage/{i}"] for i in range(len(treatments))]})
+
+    states, done, history = driver.run_chunks(
+        chunk_fn, states, total=config.generations, every=config.checkpoint_every, start=done, history=history,
+        run_dir=run_dir, key_metric="coverage", progress=on_chunk if callable(progress) else bool(progress),
+        desc=f"{len(treatments)} treatments", unit="gen", meta=meta)
+    return _many_archives(states, groups, gens, configs, history)
+
+
+def _init_many(treatments, configs, names, gens, fitness, traversable, cache):
+    """Generation 0 of every treatment, grouped by generator: ``(groups {name: [treatment index]}, scorings,
+    emitters, stacked states per group, stacked keys per group, history {"<metric>/<index>": [value]})``."""
+    groups: dict[str, list[int]] = {}
     for i, t in enumerate(treatments):
         groups.setdefault(t.generator, []).append(i)
-    scorings, emitters, states, keys, history = [], [], [], [], [dict() for _ in treatments]
+    scorings, emitters, states, keys = [], [], [], []
+    history: dict[str, list[float]] = {}
     for name, members in groups.items():
-        scoring, emitter = problem(gens[name], None, config, fitness, traversable_fn, names=names)
-        init, _ = _programs(scoring, emitter, compile_cache)
+        scoring, emitter = problem(gens[name], None, configs[members[0]], fitness, traversable, names=names)
+        init, _ = _programs(scoring, emitter, cache)
         group_states = []
         for i in members:
             pair = tuple(names.index(n) for n in configs[i].descriptors)
             state, m0 = init(treatments[i].key, A.centroids_for(configs[i]), S.task_for(configs[i], pair))
             group_states.append(state)
-            history[i] = {k: [float(v)] for k, v in jax.device_get(m0).items()}
+            for k, v in jax.device_get(m0).items():
+                history[f"{k}/{i}"] = [float(v)]
         scorings.append(scoring)
         emitters.append(emitter)
         states.append(_stack(group_states))
         keys.append(jnp.stack([treatments[i].key for i in members]))
-    fns = tuple((s.render_one, s.descriptor_fn, s.traversable_fn) for s in scorings)
-    chunk = _compiled(compile_cache, ("many", fns, tuple(emitters), fitness),
-                      lambda: _many_chunk(tuple(scorings), tuple(emitters), fitness))
-    report = _reporter(progress, "many") if callable(progress) or not progress else _many_printer(len(treatments))
-    done = 0
-    while done < config.generations:
-        stop = min(done + config.checkpoint_every, config.generations)
-        t1 = time.perf_counter()
-        states, metrics = chunk(states, keys, key, stop - done)
-        for members, m in zip(groups.values(), jax.device_get(metrics)):
-            for j, i in enumerate(members):
-                for k, v in m.items():
-                    history[i].setdefault(k, []).extend(float(x) for x in np.asarray(v)[:, j])
-        evaluations = (stop - done) * config.batch_size * len(treatments)
-        done = stop
-        report({"event": "chunk", "generation": done, "generations": config.generations,
-                "seconds": time.perf_counter() - t1,
-                "evaluations_per_s": evaluations / max(time.perf_counter() - t1, 1e-9),
-                "coverage": [h["coverage"][-1] for h in history]})
-    out = [None] * len(treatments)
+    return groups, scorings, emitters, states, keys, history
+
+
+def _many_archives(states, groups, gens, configs, history) -> list[A.Archive]:
+    out = [None] * len(configs)
     for (name, members), group_state in zip(groups.items(), states):
         for j, i in enumerate(members):
             repertoire = jax.tree.map(lambda x, j=j: x[j], group_state.repertoire)
-            out[i] = to_archive(gens[name], repertoire, configs[i], history[i])
+            own = {k.split("/")[0]: v for k, v in history.items() if k.endswith(f"/{i}")}
+            out[i] = to_archive(gens[name], repertoire, configs[i], own)
     return out
 
 
@@ -349,15 +406,6 @@ def _many_chunk(scorings, emitters, fitness):
         return jax.lax.scan(body, states, None, length=n)
 
     return jax.jit(chunk, static_argnums=3)
-
-
-def _many_printer(count: int):
-    def report(info):
-        cov = np.asarray(info["coverage"])
-        print(f"[{count} treatments] gen {info['generation']}/{info['generations']}  coverage min {cov.min():.2f}% "
-              f"mean {cov.mean():.2f}% max {cov.max():.2f}%  {info['evaluations_per_s']:.1f} evals/s", flush=True)
-
-    return report
 
 
 def to_archive(generator, repertoire, config: A.EvolveConfig, history: dict) -> A.Archive:
@@ -377,6 +425,36 @@ def to_archive(generator, repertoire, config: A.EvolveConfig, history: dict) -> 
         config=config,
         metrics={k: np.asarray(v, np.float32) for k, v in history.items()},
     )
+
+
+def _template(key, scoring: S.Scoring, emitter: ME.Emitter, config: A.EvolveConfig) -> ME.MapElitesState:
+    """A zero state of the run's structure, shapes and dtypes (``driver.restore``'s template)."""
+    example = jax.eval_shape(lambda k: emitter.sample(k, 1), key)
+    genome = jax.tree.map(lambda x: jnp.zeros(x.shape[1:], x.dtype), example)
+    return ME.MapElitesState(ME.empty_repertoire(genome, A.centroids_for(config)), jnp.zeros((), jnp.int32),
+                             scoring.task)
+
+
+def _check_meta(run_dir: Path, saved: dict, meta: dict, done: int, generations: int) -> None:
+    """Refuse a checkpoint of another run (generator, key, config except the run settings)."""
+    where = str(Path(run_dir) / driver.CHECKPOINT_NAME)
+    for name in ("generator", "treatments"):
+        if saved.get(name) != meta.get(name):
+            raise ValueError(f"checkpoint {where!r} is of {name} {saved.get(name)!r}, not {meta.get(name)!r}")
+    if saved.get("key") != meta.get("key"):
+        raise ValueError(f"checkpoint {where!r} was made with another PRNG key; use the same key to resume")
+    if saved.get("config") != meta.get("config"):
+        raise ValueError(f"checkpoint {where!r} was made with another config: {saved.get('config')} != "
+                         f"{meta.get('config')}; use another checkpoint folder")
+    if done > generations:
+        raise ValueError(f"checkpoint {where!r} is at generation {done}, beyond config.generations={generations}")
+
+
+def _progress(progress, name: str, config: A.EvolveConfig):
+    """The driver's progress argument: True (its tqdm bar), False, or a callable of the per-chunk line dicts."""
+    if callable(progress) or not progress:
+        return progress
+    return True
 
 
 def _line(done, total, history, seconds, evaluations):
@@ -408,10 +486,6 @@ def progress_printer(name: str):
     return report
 
 
-def _reporter(progress, name):
-    if callable(progress):
-        return progress
-    return progress_printer(name) if progress else (lambda info: None)
 
 
 def _key_data(key) -> np.ndarray:
@@ -427,68 +501,6 @@ def _key_data(key) -> np.ndarray:
 
 def _resume_signature(config: A.EvolveConfig) -> dict:
     d = A.config_to_dict(config)
-    for speed_only in ("generations", "checkpoint_every", "rollout_slots"):
+    for speed_only in ("generations", "checkpoint_every", "rollout_slots", "store_heightmaps"):
         d.pop(speed_only)
     return d
-
-
-def _save_checkpoint(path: Path, name: str, config, key, repertoire, generation: int, history: dict) -> None:
-    from jaxterrain.io import atomic_save_npz
-
-    leaves: list = []
-    tree = A._flatten(jax.tree.map(np.asarray, repertoire.genotypes), leaves)
-    header = {
-        "format": CHECKPOINT_FORMAT,
-        "version": CHECKPOINT_VERSION,
-        "generator": name,
-        "generation": int(generation),
-        "config": A.config_to_dict(config),
-        "genomes": tree,
-        "metrics": sorted(history),
-    }
-    arrays = {f"genome_{k}": leaf for k, leaf in enumerate(leaves)}
-    arrays.update(
-        header=np.frombuffer(json.dumps(header).encode("utf-8"), np.uint8),
-        key=_key_data(key),
-        fitnesses=np.asarray(repertoire.fitnesses),
-        descriptors=np.asarray(repertoire.descriptors),
-        centroids=np.asarray(repertoire.centroids),
-        raw=np.asarray(repertoire.extra_scores["raw"]),
-        **{f"metric_{k}": np.asarray(v, np.float64) for k, v in history.items()},
-    )
-    atomic_save_npz(path, **arrays)
-
-
-def _load_checkpoint(path: Path, name: str, config: A.EvolveConfig, key):
-    from qdax.core.containers.mapelites_repertoire import MapElitesRepertoire
-
-    header, m = A._open_npz(path, "checkpoint")
-    if header.get("format") != CHECKPOINT_FORMAT or header.get("version") != CHECKPOINT_VERSION:
-        raise ValueError(f"{str(path)!r} is not a jaxterrain MAP-Elites checkpoint of version {CHECKPOINT_VERSION}")
-    if header["generator"] != name:
-        raise ValueError(f"checkpoint {str(path)!r} is of generator {header['generator']!r}, not {name!r}")
-    saved = A.resolve_config(A.config_from_dict(header["config"]))
-    if _resume_signature(saved) != _resume_signature(config):
-        raise ValueError(
-            f"checkpoint {str(path)!r} was made with another config: {_resume_signature(saved)} != "
-            f"{_resume_signature(config)}; use another checkpoint folder"
-        )
-    if not np.array_equal(m["key"], _key_data(key)):
-        raise ValueError(f"checkpoint {str(path)!r} was made with another PRNG key; use the same key to resume")
-    generation = int(header["generation"])
-    if generation > config.generations:
-        raise ValueError(
-            f"checkpoint {str(path)!r} is at generation {generation}, beyond config.generations={config.generations}"
-        )
-    leaves = [m[f"genome_{k}"] for k in range(A._count_leaves(header["genomes"]))]
-    genotypes = jax.tree.map(jnp.asarray, A._unflatten(header["genomes"], leaves))
-    repertoire = MapElitesRepertoire(
-        genotypes=genotypes,
-        fitnesses=jnp.asarray(m["fitnesses"]),
-        descriptors=jnp.asarray(m["descriptors"]),
-        centroids=jnp.asarray(m["centroids"]),
-        extra_scores={"raw": jnp.asarray(m["raw"])},
-        keys_extra_scores=("raw",),
-    )
-    history = {k: [float(v) for v in m[f"metric_{k}"]] for k in header["metrics"]}
-    return repertoire, generation, history

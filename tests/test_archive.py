@@ -14,7 +14,6 @@ import numpy as np
 import pytest
 
 from jaxterrain import archive as A
-from jaxterrain import evolution as E
 from jaxterrain import map_elites as ME
 from jaxterrain import scoring as S
 
@@ -83,7 +82,8 @@ CFG = A.EvolveConfig(generations=6, batch_size=8, initial_population=10, bins=4,
 def run(cfg=CFG, key=0, gen=None, **kw):
     kw.setdefault("traversable_fn", always)
     kw.setdefault("compile_cache", CACHE)
-    return A.evolve(gen or make_gen(), desc, cfg, jax.random.key(key), fitness_fn=FITNESS, progress=False, **kw)
+    kw.setdefault("progress", False)
+    return A.evolve(gen or make_gen(), desc, cfg, jax.random.key(key), fitness_fn=FITNESS, **kw)
 
 
 def fixed_problem(genomes, fit, trav, cfg):
@@ -229,20 +229,17 @@ def _assert_same(a, b):
 
 def test_resume_equals_uninterrupted(tmp_path, monkeypatch):
     full = run()
-    # a run killed after its second checkpoint (generation 2) ...
+    # a run killed after its second checkpoint (generation 2): progress is reported after each checkpoint
     calls = []
-    real_save = E._save_checkpoint
 
-    def dying_save(*args, **kw):
-        real_save(*args, **kw)
-        calls.append(1)
+    def dying_progress(info):
+        calls.append(info)
         if len(calls) == 2:
             raise KeyboardInterrupt
 
-    monkeypatch.setattr(E, "_save_checkpoint", dying_save)
     with pytest.raises(KeyboardInterrupt):
-        run(checkpoint_dir=tmp_path)
-    monkeypatch.setattr(E, "_save_checkpoint", real_save)
+        run(checkpoint_dir=tmp_path, progress=dying_progress)
+    assert calls[-1]["generation"] == 2
     # ... resumes with another chunking and ends bit-equal to the uninterrupted run
     resumed = run(CFG._replace(checkpoint_every=3), checkpoint_dir=tmp_path)
     _assert_same(full, resumed)

@@ -288,3 +288,49 @@ def test_combined_generators_step_equals_separate_steps():
             assert_tree_equal(jax.tree.map(lambda x: x[:, t], metrics[g]), m)
     with pytest.raises(ValueError, match="one length"):
         ME.multi_step(states, keys[:1], jax.random.key(0), scorings, emitters, smooth)
+
+
+def test_evolve_many_and_the_batched_coverage_command(tmp_path):
+    """evolve_many: one archive per treatment, each elite in its own cell; a killed run resumes to the same
+    archives; coverage --batched writes the tables from it (smoke preset, two generators, 32 x 32)."""
+    from experiments import coverage
+    from experiments.__main__ import main
+
+    smoke = coverage.PRESETS["smoke"]
+    config = A.EvolveConfig(generations=2, batch_size=4, initial_population=6, bins=4, window=8, stride=2,
+                            checkpoint_every=1, store_heightmaps=False)
+    ranges = {k: tuple(v) for k, v in smoke["ranges"].items()}
+    treatments = [A.Treatment(g, p, jax.random.key(i)) for i, (g, p) in
+                  enumerate([("perlin", ("tri", "tpi")), ("perlin", ("tpi", "roughness")),
+                             ("diamond_square", ("tri", "tpi"))])]
+    slope = S.ignore_needed(lambda hm, key: 1.0 - jnp.mean(jnp.abs(jnp.diff(hm, axis=-1)), axis=(1, 2)) * 10)
+    kw = dict(fitness_fn=slope, generator_options={"size": 32}, ranges=ranges, compile_cache={})
+    archs = A.evolve_many(treatments, config, jax.random.key(9), progress=False, **kw)
+    assert [a.generator_names for a in archs] == [("perlin",), ("perlin",), ("diamond_square",)]
+    assert archs[1].config.descriptors == ("tpi", "roughness") and archs[1].config.ranges == (ranges["tpi"],
+                                                                                                ranges["roughness"])
+    for a in archs:
+        assert A.coverage(a) > 0 and a.metrics["coverage"].shape == (3,)
+        assert A.check_cells(a, generator_options={"size": 32}).all()
+    calls = []
+
+    def dying(info):
+        calls.append(info)
+        if len(calls) == 1:
+            raise KeyboardInterrupt
+
+    with pytest.raises(KeyboardInterrupt):
+        A.evolve_many(treatments, config, jax.random.key(9), checkpoint_dir=tmp_path / "ck", progress=dying, **kw)
+    resumed = A.evolve_many(treatments, config, jax.random.key(9), checkpoint_dir=tmp_path / "ck", progress=False,
+                            **kw)
+    for a, b in zip(archs, resumed):
+        np.testing.assert_array_equal(a.fitness, b.fitness)
+        np.testing.assert_array_equal(a.genomes[0] if not isinstance(a.genomes[0], tuple) else a.genomes[0][0],
+                                      b.genomes[0] if not isinstance(b.genomes[0], tuple) else b.genomes[0][0])
+        for k in a.metrics:
+            np.testing.assert_array_equal(a.metrics[k], b.metrics[k])
+    out = tmp_path / "cov"
+    assert main(["coverage", "--preset", "smoke", "--batched", "--generators", "perlin", "diamond_square",
+                 "--generations", "1", "--out", str(out)]) == 0
+    assert "Perlin Noise" in (out / "coverage.md").read_text() and (out / "batched" / "checkpoint.npz").exists()
+    assert len(list((out / "archives").glob("*/archive.npz"))) == 6
