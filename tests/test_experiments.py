@@ -50,16 +50,16 @@ def test_evolve_smoke_config_and_resume(tmp_path):
 
 
 def test_evolve_time_limit_stops_at_checkpoints_and_resumes_to_the_same_archive(tmp_path):
-    """--time-limit 0 stops after every chunk (exit 3) except the last, which saves the archive; resuming chunk by
+    """--time-limit 1e-6 stops after every chunk (exit 3) except the last, which saves the archive; resuming chunk by
     chunk ends with the archive of an uninterrupted run."""
     from jaxterrain import archive as A
 
     args = ["--preset", "smoke", "--generations", "4", "--checkpoint-every", "2"]
     assert cli("evolve", *args, "--out", str(tmp_path / "whole")) == 0
     out = tmp_path / "cut"
-    codes = [cli("evolve", *args, "--out", str(out), "--time-limit", "0")]
+    codes = [cli("evolve", *args, "--out", str(out), "--time-limit", "1e-6")]
     while codes[-1] == 3 and len(codes) < 5:
-        codes.append(cli("evolve", "--resume", str(out), "--time-limit", "0"))
+        codes.append(cli("evolve", "--resume", str(out), "--time-limit", "1e-6"))
     assert codes == [3, 3, 0]  # cut after generation 0 and after 2; the chunk ending at 4 (the last) saves
     np.testing.assert_array_equal(A.load(out / "archive.npz").fitness, A.load(tmp_path / "whole" / "archive.npz").fitness)
 
@@ -80,7 +80,7 @@ def test_features_time_limit_stops_between_batches_and_resumes_to_the_same_value
             "--windows", "5"]
     assert cli(*args, "--out", str(tmp_path / "whole")) == 0
     out = tmp_path / "cut"
-    assert cli(*args, "--out", str(out), "--time-limit", "0") == 3  # after the first of two batches of 12 terrains
+    assert cli(*args, "--out", str(out), "--time-limit", "1e-6") == 3  # after the first of two batches of 12 terrains
     assert (out / "values_perlin.partial.npz").exists() and not (out / "values_perlin.csv").exists()
     assert cli("features", "--resume", str(out)) == 0
     assert not (out / "values_perlin.partial.npz").exists()
