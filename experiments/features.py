@@ -4,12 +4,15 @@ For each generator (default CPPN and Perlin) it renders random genomes and chain
 terrains span easy to hard), computes TRI, TPI and roughness at several windows (default 5, 10, 20, 30, 40; stride
 2), any extra registered descriptor (e.g. a learned traversability model, when registered in ``jaxterrain.features``)
 and the ground-truth difficulty (1 - fitness of the walker's base policy; ``--fitness slope`` for a cheap stand-in),
-then the Pearson correlation matrix of all of them.
+then the Pearson correlation matrix of all of them. The presets add the learned ``traversability`` descriptor
+(:mod:`jaxterrain.traversability`, the paper's fourth feature).
 
 Writes into the run folder: ``config.json``, ``values_<generator>.csv`` (one row per terrain), ``correlations.csv``
 (generator, feature_a, feature_b, r), ``correlation_<generator>.png`` (heatmaps like Figure 4) and
-``correlations.png`` (both side by side), plus with ``--calibrate`` ``ranges.json``: the [0.5, 99.5] percentile of
-each descriptor over all generators at the archive window (the recipe of ``jaxterrain.archive.DEFAULT_RANGES``).
+``correlations.png`` (both side by side), ``figure4.png`` / ``figure4.csv`` (Figure 4: TRI, TPI and roughness at
+``figure_window``, the extra descriptors and difficulty, one heatmap per generator), plus with ``--calibrate``
+``ranges.json``: the [0.5, 99.5] percentile of each descriptor over all generators at the archive window (the
+recipe of ``jaxterrain.archive.DEFAULT_RANGES``).
 
 Long runs: ``values_<generator>.partial.npz`` holds the rows measured so far (saved after every batch);
 ``--time-limit MIN`` stops between batches and ``--resume RUN`` continues from there with the same values.
@@ -27,14 +30,14 @@ from experiments import common
 
 PRESETS: dict[str, dict] = {
     "paper": dict(generators=["cppn", "perlin"], samples=250, mutation_steps=4, size=256, windows=[5, 10, 20, 30, 40],
-                  stride=2, fitness="difficulty", attempts=20, best=5, batch=50, extra_descriptors=[],
-                  calibrate=False, calibrate_window=30),
+                  stride=2, fitness="difficulty", attempts=20, best=5, batch=50, extra_descriptors=["traversability"],
+                  calibrate=False, calibrate_window=30, figure_window=30),
     "gpu": dict(generators=["cppn", "perlin"], samples=250, mutation_steps=4, size=256, windows=[5, 10, 20, 30, 40],
-                stride=2, fitness="difficulty", attempts=20, best=5, batch=250, extra_descriptors=[],
-                calibrate=False, calibrate_window=30),
+                stride=2, fitness="difficulty", attempts=20, best=5, batch=250, extra_descriptors=["traversability"],
+                calibrate=False, calibrate_window=30, figure_window=30),
     "smoke": dict(generators=["cppn", "perlin"], samples=6, mutation_steps=1, size=48, windows=[5, 10],
-                  stride=2, fitness="slope", attempts=2, best=1, batch=12, extra_descriptors=[],
-                  calibrate=False, calibrate_window=10),
+                  stride=2, fitness="slope", attempts=2, best=1, batch=12, extra_descriptors=["traversability"],
+                  calibrate=False, calibrate_window=10, figure_window=10),
 }
 FEATURES = ("tri", "tpi", "roughness")
 
@@ -89,6 +92,7 @@ def measure(gen, genomes, cfg: dict, key, fitness_fn, progress=print, checkpoint
     batch = int(cfg["batch"])
     windows = [int(w) for w in cfg["windows"]]
     calib = [int(cfg["calibrate_window"])] if cfg.get("calibrate") else []
+    calib += [int(cfg["figure_window"])] if cfg.get("figure_window") else []
     cols: dict[str, list] = {}
     start = 0
     if checkpoint is not None and checkpoint.exists():
@@ -107,7 +111,8 @@ def measure(gen, genomes, cfg: dict, key, fitness_fn, progress=print, checkpoint
             for j, f in enumerate(FEATURES):
                 cols.setdefault(f"{f}_{w}", []).append(d[:, j])
         for extra in cfg.get("extra_descriptors") or []:
-            cols.setdefault(extra, []).append(np.asarray(features.descriptors(hm, names=(extra,)))[:, 0])
+            cols.setdefault(extra, []).append(np.asarray(desc(hm, names=(extra,), window=windows[0],
+                                                              stride=int(cfg["stride"])))[:, 0])
         cols.setdefault("traversable", []).append(np.asarray(trav(hm)).astype(np.float32))
         fit = np.asarray(fitness_fn(hm, jax.random.fold_in(key, s)))
         cols.setdefault("fitness", []).append(fit)
@@ -143,6 +148,35 @@ def plot_heatmap(ax, r, names, title):
                     ax.text(j, i, f"{r[i, j]:.2f}", ha="center", va="center", fontsize=4)
     ax.set_title(title, fontsize=9)
     return img
+
+
+def figure4(results: dict, cfg: dict, folder: Path) -> list[str]:
+    """Figure 4: per generator, the Pearson correlations among TRI, TPI, roughness (at ``figure_window``), the
+    extra descriptors and difficulty: ``figure4.png`` (one heatmap per generator) and ``figure4.csv``. Returns the
+    feature names (empty when the window was not measured, e.g. a run from an older config)."""
+    import matplotlib.pyplot as plt
+
+    from jaxterrain.io import atomic_write_text
+
+    w = cfg.get("figure_window")
+    names = [f"{f}_{w}" for f in FEATURES] + list(cfg.get("extra_descriptors") or []) + ["difficulty"]
+    if not w or not all(n in v for v in results.values() for n in names):
+        return []
+    fig, axes = plt.subplots(1, len(results), figsize=(4.2 * len(results), 4), squeeze=False)
+    rows = []
+    for ax, (gname, values) in zip(axes[0], results.items()):
+        r = correlations(values, names)
+        rows += [(gname, a, b, f"{r[i, j]:.6f}") for i, a in enumerate(names) for j, b in enumerate(names)]
+        img = plot_heatmap(ax, r, names, f"{gname} (n = {len(values['difficulty'])})")
+        for t in ax.texts:
+            t.set_fontsize(7)
+        order = sorted(zip(abs(r[-1, :-1]), names[:-1]))
+        print(f"[{gname}] Figure 4 |r| with difficulty, weakest first: "
+              + ", ".join(f"{n} {a:.3f}" for a, n in order), flush=True)
+    fig.colorbar(img, ax=axes[0].tolist(), shrink=0.8, label="Pearson r")
+    common.save_figure(fig, folder / "figure4.png", dpi=150)
+    atomic_write_text(folder / "figure4.csv", _csv_text(["generator", "feature_a", "feature_b", "r"], rows))
+    return names
 
 
 def _csv_text(header, rows) -> str:
@@ -222,6 +256,7 @@ def main(args) -> int:
     fig.colorbar(img, ax=axes[0].tolist(), shrink=0.8)
     common.save_figure(fig, folder / "correlations.png", dpi=150)
     atomic_write_text(folder / "correlations.csv", _csv_text(["generator", "feature_a", "feature_b", "r"], rows))
+    figure4(results, cfg, folder)
     if cfg.get("calibrate") and calib_values:
         allv = np.concatenate(calib_values)
         ranges = {}
