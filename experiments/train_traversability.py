@@ -116,6 +116,8 @@ def _train_eval(key, train_x, train_y, test_x, test_y, cfg: dict, log=None):
 
 def load_or_collect(folder: Path, names, cfg: dict, key) -> dict:
     """``{generator: balanced {"patches", "labels"}}`` plus counts, walking only generators without a data file."""
+    import time
+
     import jax
     import numpy as np
 
@@ -125,9 +127,10 @@ def load_or_collect(folder: Path, names, cfg: dict, key) -> dict:
     for gi, name in enumerate(names):
         path = folder / f"data_{name}.npz"
         if not path.exists():
+            t0 = time.time()
             raw = collect(name, cfg, jax.random.fold_in(key, gi), jax.random.fold_in(key, 100 + gi),
                           progress=lambda m: print(m, flush=True))
-            atomic_save_npz(path, **raw)
+            atomic_save_npz(path, **raw, seconds=np.float64(time.time() - t0))
         with np.load(path) as f:
             data[name] = {k: f[k] for k in f.files}
         d = data[name]
@@ -208,6 +211,8 @@ def provenance(cfg: dict, data: dict, rows: list[dict], final: dict, seconds: di
     """PROVENANCE.md of an exported model."""
     import jax
 
+    walk_s = (f"{sum(float(d['seconds']) for d in data.values()):.0f} s" if all("seconds" in d for d in data.values())
+              else "not recorded (data files of an earlier version of the command)")
     counts = "\n".join(f"  - {g}: {int(d['walks'])} walks, {len(d['all_labels'])} labelled windows "
                        f"({int(d['all_labels'].sum())} positive), {len(d['labels'])} balanced patches"
                        for g, d in data.items())
@@ -221,8 +226,8 @@ Patch classifier of `jaxterrain.traversability` (`PatchCNN`), loaded by `travers
 - Device: {_device()}; jax {jax.__version__}
 - Date: {date}
 - Commit: {_git_commit()}
-- Time: walking and labelling {seconds['data']:.0f} s, held-out models {seconds['heldout']:.0f} s, final model
-  {seconds['final']:.0f} s
+- Time: walking and labelling {walk_s}, final model {seconds['final']:.0f} s, held-out models
+  {seconds['heldout']:.0f} s
 - Data: {sum(int(d['walks']) for d in data.values())} walks of the shipped base policy, {cfg['terrains']} terrains
   per generator x {cfg['attempts']} attempts, horizon {cfg['horizon']} env steps, amplitude uniform in
   {cfg['amplitude']}, lateral start spread {cfg['start_spread']} m; labels {cfg['label']};
@@ -236,7 +241,8 @@ Patch classifier of `jaxterrain.traversability` (`PatchCNN`), loaded by `travers
 Held out by generator (a model trained on the other generators, tested on the balanced patches of the one left
 out):
 
-{_table(rows)}
+{_table(rows) if rows else "(not run yet)"}
+
 This model was trained on a CPU at a small scale (a few thousand patches, minutes of training). The `gpu` preset
 (64x the walks, 8x the training steps) is ready for a GPU run; re-export its model with `--export-assets`.
 
@@ -248,14 +254,32 @@ Config:
 """
 
 
+def export(folder: Path, params, mcfg, cfg: dict, data: dict, rows: list, final: dict, seconds: dict, date: str,
+           to_assets: bool) -> None:
+    """Write ``folder/model/`` (weights, config.json, PROVENANCE.md) and, with ``to_assets``, copy it to
+    ``jaxterrain/assets/traversability/``."""
+    import shutil
+
+    from jaxterrain import traversability as trav
+    from jaxterrain.io import atomic_write_text
+
+    trav.save(folder / "model", params, mcfg, extra={"label": cfg["label"], "final": final, "heldout": rows,
+                                                      "device": _device(), "date": date, "commit": _git_commit()})
+    atomic_write_text(folder / "model" / "PROVENANCE.md", provenance(cfg, data, rows, final, seconds, date))
+    if to_assets:
+        trav.ASSET_DIR.mkdir(parents=True, exist_ok=True)
+        for name in (trav.WEIGHTS_NAME, trav.CONFIG_NAME, "PROVENANCE.md"):
+            shutil.copyfile(folder / "model" / name, trav.ASSET_DIR / name)
+        trav.shipped.cache_clear()
+        print(f"exported to {trav.ASSET_DIR}", flush=True)
+
+
 def main(args) -> int:
     import datetime
-    import shutil
     import time
 
     import jax
 
-    from jaxterrain import traversability as trav
     from jaxterrain.io import atomic_write_text
 
     folder, cfg = common.setup_run("train-traversability", args, PRESETS, "cpu", overrides(args))
@@ -265,26 +289,19 @@ def main(args) -> int:
     data = load_or_collect(folder, list(cfg["generators"]), cfg, jax.random.fold_in(key, 0))
     seconds = {"data": time.time() - t0}
     t0 = time.time()
-    rows = heldout(data, cfg, jax.random.fold_in(key, 1)) if cfg.get("heldout") else []
-    seconds["heldout"] = time.time() - t0
-    if rows:
-        atomic_write_text(folder / "heldout.md", _table(rows))
-        atomic_write_text(folder / "heldout.json", json.dumps(rows, indent=2) + "\n")
-    t0 = time.time()
     params, mcfg, final = final_model(data, cfg, jax.random.fold_in(key, 2))
     seconds["final"] = time.time() - t0
     print(f"final model: accuracy {final['accuracy']:.3f}, ROC AUC {final['auc']:.3f} on {final['n_test']} "
           f"held-back patches", flush=True)
     date = datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds")
-    trav.save(folder / "model", params, mcfg, extra={"label": cfg["label"], "final": final, "heldout": rows,
-                                                      "device": _device(), "date": date, "commit": _git_commit()})
-    text = provenance(cfg, data, rows, final, seconds, date)
-    atomic_write_text(folder / "model" / "PROVENANCE.md", text)
-    if args.export_assets:
-        trav.ASSET_DIR.mkdir(parents=True, exist_ok=True)
-        for name in (trav.WEIGHTS_NAME, trav.CONFIG_NAME, "PROVENANCE.md"):
-            shutil.copyfile(folder / "model" / name, trav.ASSET_DIR / name)
-        trav.shipped.cache_clear()
-        print(f"exported to {trav.ASSET_DIR}", flush=True)
+    seconds["heldout"], rows = 0.0, []
+    export(folder, params, mcfg, cfg, data, rows, final, seconds, date, args.export_assets)  # usable at once
+    if cfg.get("heldout"):
+        t0 = time.time()
+        rows = heldout(data, cfg, jax.random.fold_in(key, 1))
+        seconds["heldout"] = time.time() - t0
+        atomic_write_text(folder / "heldout.md", _table(rows))
+        atomic_write_text(folder / "heldout.json", json.dumps(rows, indent=2) + "\n")
+        export(folder, params, mcfg, cfg, data, rows, final, seconds, date, args.export_assets)
     print(f"done -> {folder}", flush=True)
     return 0

@@ -15,13 +15,20 @@ same way, on our walker's simulated outcomes::
 Choices (:class:`LabelConfig`, :data:`PATCH`, :data:`MAP_STRIDE`):
 
 - Patch: ``PATCH = 32`` pixels = 1.28 m at 0.04 m per pixel, the paper's 1.2 m (60 px at 2 cm) at our resolution;
-  about two steps of the humanoid. Centred on the torso's (x, y) at the window's start, heights in metres
-  relative to the centre pixel ``(16, 16)`` (:func:`jaxterrain.features.window_centre`), rows along y, columns
-  along +x: the walking direction, orientation 0 as in the paper.
-- Label (:func:`window_labels`): a window of ``window`` env steps starting every ``every`` steps of a walk is
-  positive when the walker is still up at its end and its torso advanced more than ``threshold`` metres along +x,
-  negative when the walker fell (or its physics failed) inside the window; windows that run past the end of a walk
-  that did not fall (goal, time limit, horizon) are not labelled.
+  about two strides of the humanoid. Heights in metres relative to the centre pixel ``(16, 16)``
+  (:func:`jaxterrain.features.window_centre`), rows along y, columns along +x: the walking direction, orientation 0
+  as in the paper. The patch of a window is centred on the torso's (x, y) at the window's middle
+  (:func:`labelled_centres`), so it covers the ground walked during the window, and a fall's patch is centred where
+  the walker fell.
+- Label (:func:`window_labels`): windows of ``window = 30`` env steps (0.45 s) start every ``every = 4`` steps from
+  step ``warmup = 8``. A window is positive when the walker is still up at its end and its torso advanced more
+  than ``threshold = 0.3`` m along +x, negative when the walker fell (or its physics failed) inside the window or
+  advanced less; windows that run past the end of a walk that did not fall (goal, time limit, horizon) are not
+  labelled. Why these numbers: the base policy runs at about 3.5 m/s on flat ground (2.1 m per 40 steps), so a
+  30-step window at speed covers about 1.6 m, a bit more than one patch; it starts from rest and needs about 1 s to
+  reach that speed, and the slowest flat-ground advance of a window starting at step 8 is 0.43 m, so 0.3 m passes
+  every flat-ground window (a walker that does not fall) while a stumble that loses most of its speed fails it.
+  The humanoid's failure mode is falling, not getting stuck (the paper's robot), so most negatives are falls.
 - Model (:class:`PatchCNN`): VALID convolutions 4x4/2, 3x3/2, 3x3/2, 3x3/1 and a 1x1 logit, whose receptive field
   is exactly one 32 x 32 patch and whose total stride is 8. Applied to a whole ``[H, W]`` map it gives the logit of
   every patch whose top-left corner is at ``(8 i, 8 j)``: a ``[(H - 32) // 8 + 1, (W - 32) // 8 + 1]`` map (29 x 29
@@ -263,6 +270,11 @@ def extract_patches_batch(terrains, index, xy, patch: int = PATCH,
         raise ValueError(f"terrains must be [B, H, W]; got shape {tuple(t.shape)}")
     if patch < 2:
         raise ValueError(f"patch must be >= 2 pixels; got {patch}")
+    return _cut(t, jnp.asarray(index, jnp.int32), jnp.asarray(xy, jnp.float32), int(patch), float(cell_size))
+
+
+@functools.partial(jax.jit, static_argnames=("patch", "cell_size"))
+def _cut(t, index, xy, patch: int, cell_size: float):
     padded = jnp.pad(t, ((0, 0), (patch, patch), (patch, patch)), mode="edge")
     corner = pixel_of(xy, t.shape[1:], cell_size) - patch // 2 + patch  # top-left in the padded maps
     corner = jnp.clip(corner, 0, jnp.array(padded.shape[1:]) - patch)
@@ -271,7 +283,7 @@ def extract_patches_batch(terrains, index, xy, patch: int = PATCH,
         p = lax.dynamic_slice(padded, (i, rc[0], rc[1]), (1, patch, patch))[0]
         return p - p[patch // 2, patch // 2]
 
-    return jax.vmap(one)(jnp.asarray(index, jnp.int32), corner)
+    return jax.vmap(one)(index, corner)
 
 
 def balanced_indices(key: jax.Array, labels) -> np.ndarray:
