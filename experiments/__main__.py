@@ -23,7 +23,20 @@ COMMANDS = {
     "learn": ("experiments.learn", "Experiment 2, one treatment: PPO from the base policy on a curriculum over an archive"),
     "curriculum": ("experiments.curriculum", "Experiment 2: every treatment, Figure 7 and Table 2"),
     "train-traversability": ("experiments.train_traversability", "train the learned traversability patch classifier on base-policy walks"),
+    "report": ("experiments.report", "one self-contained HTML page (and Markdown) of run folders, with walker videos"),
+    "export": ("experiments.export", "terrains of an archive as OBJ / STL meshes, PNG, .npy or MJCF"),
 }
+
+
+class HelpFormatter(argparse.ArgumentDefaultsHelpFormatter):
+    """``--help`` shows each option's default, except where there is none to show (None, a flag's False) or the
+    help text already states it."""
+
+    def _get_help_string(self, action):
+        text = action.help or ""
+        if any(action.default is v for v in (None, False, argparse.SUPPRESS)) or "default" in text.lower():
+            return text
+        return super()._get_help_string(action)
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -38,7 +51,8 @@ def main(argv: list[str] | None = None) -> int:
                 continue
             raise
         available[name] = module
-        module.add_arguments(sub.add_parser(name, help=help_text, description=help_text))
+        module.add_arguments(sub.add_parser(name, help=help_text, description=help_text,
+                                            formatter_class=HelpFormatter))
     args = parser.parse_args(argv)
     from experiments.common import UsageError, check_args
 

@@ -11,6 +11,10 @@ writes into a new run folder:
 - ``difficulty.png``   difficulty (1 - fitness) against each descriptor, with Pearson r (Experiment 1a in small)
 - ``summary.md``       per-generator means and timings
 - ``config.json``      the options of this run
+- ``report/``          ``report.html`` (one self-contained page of all of the above, with GIFs of the base policy
+  walking the easiest, the median and the hardest walked terrain, rendered by MuJoCo through OSMesa on a CPU) and
+  its Markdown twin ``report.md`` (``python -m experiments report``; without OpenGL the page says why the videos
+  are missing)
 """
 
 from __future__ import annotations
@@ -29,6 +33,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--attempts", type=int, default=8, help="walks per terrain (the paper: 20)")
     parser.add_argument("--best", type=int, default=2, help="fitness = mean of the best this many walks (paper: 5)")
     parser.add_argument("--out", default=None, help="run folder (default runs/quickstart-<time>)")
+    parser.add_argument("--no-report", action="store_true", help="do not write report/ (the HTML page)")
+    parser.add_argument("--report-frames", type=int, default=60,
+                        help="frames per walker video in the report (0: a report without videos)")
 
 
 NAMES = ("tri", "tpi", "roughness")
@@ -177,7 +184,42 @@ def summary_markdown(samples: dict[str, Sample], skipped: dict[str, str], args: 
     return "\n".join(lines)
 
 
+def report_terrains(samples: dict[str, Sample]) -> list[tuple[str, str, Any]]:
+    """``(label, caption, heightmap)`` of the easiest, median and hardest walked terrain (fewer when fewer were
+    walked), for the report's videos."""
+    import numpy as np
+
+    walked = [(float(f), name, i) for name, s in samples.items() if s.fitness is not None
+              for i, f in enumerate(s.fitness)]
+    if not walked:
+        return []
+    walked.sort(key=lambda t: -t[0])
+    picks = {"easy": walked[0]}
+    if len(walked) >= 3:
+        picks["medium"] = walked[len(walked) // 2]
+    if len(walked) >= 2:
+        picks["hard"] = walked[-1]
+    return [(label, f"{name} terrain {i}, fitness {f:.3f}", np.asarray(samples[name].maps[i]))
+            for label, (f, name, i) in picks.items()]
+
+
+def write_report(run, samples: dict[str, Sample], frames: int) -> None:
+    """``run/report/``: the page of this run, with videos of the walked terrains unless ``frames`` is 0."""
+    import time
+
+    from jaxterrain.report import write_report as write
+
+    t0 = time.perf_counter()
+    path = write([run], run / "report", title=f"jaxterrain quickstart: {run.name}", videos=frames > 0,
+                 video_frames=max(frames, 1), video_size=(240, 180), thumb=64,
+                 extra_terrains={run: report_terrains(samples)}, progress=lambda s: print(s, flush=True))
+    print(f"report {path} ({time.perf_counter() - t0:.0f} s)", flush=True)
+
+
 def main(args: argparse.Namespace) -> int:
+    from jaxterrain.report import render
+
+    render.setup_gl()  # MuJoCo's OpenGL backend (osmesa / egl) must be chosen before mujoco is imported
     import jax
 
     from experiments.common import run_folder, write_config
@@ -192,6 +234,8 @@ def main(args: argparse.Namespace) -> int:
         raise SystemExit(f"--walk must be >= 0, got {args.walk}")
     if args.attempts < 1 or not 1 <= args.best <= args.attempts:
         raise SystemExit(f"--attempts must be >= 1 and --best in [1, attempts], got {args.attempts} / {args.best}")
+    if args.report_frames < 0:
+        raise SystemExit(f"--report-frames must be >= 0, got {args.report_frames}")
     run = run_folder("quickstart", args.out)
     run.mkdir(parents=True, exist_ok=True)
     write_config(run, vars(args))
@@ -236,5 +280,7 @@ def main(args: argparse.Namespace) -> int:
     plot_descriptor_pairs(samples, run / "descriptors.png")
     atomic_write_text(run / "descriptors.csv", descriptors_csv(samples))
     atomic_write_text(run / "summary.md", summary_markdown(samples, skipped, args, walk_note))
-    print(f"wrote {run}")
+    print(f"wrote {run}", flush=True)
+    if not args.no_report:
+        write_report(run, samples, args.report_frames)
     return 0

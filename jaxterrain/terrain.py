@@ -1,4 +1,5 @@
-"""Heightmap <-> physical terrain: scale to metres, MuJoCo hfield geometry, and exports (PNG, .npy, MJCF).
+"""Heightmap <-> physical terrain: scale to metres, MuJoCo hfield geometry, and exports (PNG, .npy, MJCF, and triangle
+meshes as OBJ / STL through trimesh, for Isaac Lab, Gazebo or Blender).
 
 A heightmap is a float array ``[H, W]`` (``[B, H, W]`` for batches), generators give values in ``[0, 1]``.
 :class:`TerrainScale` maps it to metres:
@@ -22,6 +23,10 @@ row 0 lies at ``y = -radius_y``, rows go towards +y), column ``j`` is hfield col
 centred on its geom's position. Writing ``heightmap`` (values in heightmap units) into ``model.hfield_data`` of an
 hfield of size ``hfield_size(shape, scale)`` gives surface heights ``heightmap * scale.height`` metres above the
 geom's z. Sample ``(i, j)`` lies at ``x = -radius_x + j * cell_size``, ``y = -radius_y + i * cell_size``.
+
+Meshes (:func:`to_mesh`, :func:`save_obj`, :func:`save_stl`) use the same placement: one vertex per pixel at
+``(x, y, heightmap * scale.height)`` metres (centred on the origin, as the hfield), two triangles per cell with normals
+towards +z; the surface only (no skirt or bottom), as terrain importers expect.
 """
 
 from __future__ import annotations
@@ -47,6 +52,10 @@ __all__ = [
     "save_npy",
     "load_npy",
     "save_mjcf",
+    "mesh_arrays",
+    "to_mesh",
+    "save_obj",
+    "save_stl",
 ]
 
 _PNG_MAX = 65535
@@ -261,3 +270,54 @@ def save_mjcf(
 </mujoco>
 """
     return atomic_write_text(path, xml)
+
+
+# ----------------------------------------------------------------------------------------------------------------
+# Triangle meshes (trimesh)
+
+
+def mesh_arrays(heightmap, scale: TerrainScale = TerrainScale()) -> tuple[np.ndarray, np.ndarray]:
+    """``(vertices [H * W, 3] float64 metres, faces [2 (H - 1) (W - 1), 3] int64)`` of a ``[H, W]`` heightmap.
+
+    Vertex ``i * W + j`` is sample ``(i, j)`` at ``x = -radius_x + j * cell_size``, ``y = -radius_y + i *
+    cell_size`` (:func:`hfield_size`: centred on the origin, rows towards +y, columns towards +x) and
+    ``z = heightmap[i, j] * scale.height``. Each cell gives two counter-clockwise triangles seen from above, so
+    face normals point up (+z).
+    """
+    validate_scale(scale)
+    h = _single_map(heightmap)
+    nrow, ncol = h.shape
+    rx, ry, _, _ = hfield_size(h.shape, scale)
+    cell = float(scale.cell_size)
+    x = -rx + np.arange(ncol) * cell
+    y = -ry + np.arange(nrow) * cell
+    xx, yy = np.meshgrid(x, y)  # [H, W]
+    vertices = np.stack([xx.ravel(), yy.ravel(), (h * float(scale.height)).ravel()], axis=-1)
+    idx = np.arange(nrow * ncol, dtype=np.int64).reshape(nrow, ncol)
+    v00, v01 = idx[:-1, :-1].ravel(), idx[:-1, 1:].ravel()
+    v10, v11 = idx[1:, :-1].ravel(), idx[1:, 1:].ravel()
+    faces = np.concatenate([np.stack([v00, v01, v11], -1), np.stack([v00, v11, v10], -1)])
+    return vertices, faces
+
+
+def to_mesh(heightmap, scale: TerrainScale = TerrainScale()):
+    """A ``trimesh.Trimesh`` of a ``[H, W]`` heightmap: ``H * W`` vertices (one per pixel, in metres) and
+    ``2 (H - 1) (W - 1)`` triangles (:func:`mesh_arrays`; vertices are kept as given, never merged)."""
+    import trimesh
+
+    vertices, faces = mesh_arrays(heightmap, scale)
+    return trimesh.Trimesh(vertices=vertices, faces=faces, process=False, validate=False)
+
+
+def save_obj(path: str | os.PathLike, heightmap, scale: TerrainScale = TerrainScale()) -> Path:
+    """Write a ``[H, W]`` heightmap as a Wavefront OBJ triangle mesh (:func:`to_mesh`, metres, z up). Atomic.
+    Returns the path."""
+    text = to_mesh(heightmap, scale).export(file_type="obj", include_normals=False, include_texture=False,
+                                            digits=6)
+    return atomic_write_text(path, text)
+
+
+def save_stl(path: str | os.PathLike, heightmap, scale: TerrainScale = TerrainScale()) -> Path:
+    """Write a ``[H, W]`` heightmap as a binary STL triangle mesh (:func:`to_mesh`, metres, z up; STL stores
+    float32 triangles, so vertices are shared only after a reader merges them). Atomic. Returns the path."""
+    return atomic_write_bytes(path, to_mesh(heightmap, scale).export(file_type="stl"))

@@ -111,3 +111,41 @@ def test_mjcf_flat_map(tmp_path):
     np.testing.assert_allclose(heights, 0.15, atol=1e-6)
     with pytest.raises(ValueError, match="finite"):
         T.save_mjcf(tmp_path / "nan.xml", np.full((4, 4), np.nan))
+
+
+@pytest.mark.parametrize("fmt", ["obj", "stl"])
+def test_mesh_round_trip_through_trimesh(tmp_path, fmt):
+    import trimesh
+
+    rng = np.random.default_rng(3)
+    h = rng.random((9, 13)).astype(np.float32)
+    scale = T.TerrainScale(cell_size=0.05, height=2.0)
+    path = (T.save_obj if fmt == "obj" else T.save_stl)(tmp_path / f"t.{fmt}", h, scale)
+    mesh = trimesh.load(path, file_type=fmt, force="mesh")  # STL stores triangles: the loader merges shared corners
+    assert len(mesh.vertices) == 9 * 13  # one vertex per pixel
+    assert len(mesh.faces) == 2 * 8 * 12  # two triangles per cell
+    rx, ry, _, _ = T.hfield_size(h.shape, scale)
+    # Each vertex sits at its sample's (x, y) (the hfield's placement) with z = heightmap * height, in metres.
+    j = np.round((mesh.vertices[:, 0] + rx) / 0.05).astype(int)
+    i = np.round((mesh.vertices[:, 1] + ry) / 0.05).astype(int)
+    assert sorted(zip(i.tolist(), j.tolist())) == [(a, b) for a in range(9) for b in range(13)]
+    np.testing.assert_allclose(mesh.vertices[:, 2], 2.0 * h[i, j], atol=1e-5)
+    np.testing.assert_allclose(mesh.vertices[:, 0], -rx + j * 0.05, atol=1e-6)
+    assert mesh.bounds[0][:2] == pytest.approx((-rx, -ry)) and mesh.bounds[1][:2] == pytest.approx((rx, ry))
+    assert np.all(mesh.face_normals[:, 2] > 0)  # facing up
+    if fmt == "obj":  # OBJ keeps the vertex order: vertex i * W + j is sample (i, j)
+        np.testing.assert_allclose(mesh.vertices[:, 2], 2.0 * h.ravel(), atol=1e-5)
+
+
+def test_to_mesh_vertices_faces_and_area():
+    h = np.zeros((4, 6), np.float32)
+    mesh = T.to_mesh(h, T.TerrainScale(cell_size=0.5))
+    assert mesh.vertices.shape == (24, 3) and mesh.faces.shape == (30, 3)
+    assert mesh.area == pytest.approx(3 * 0.5 * 5 * 0.5)  # a flat 1.5 m x 2.5 m rectangle
+    v, f = T.mesh_arrays(np.full((2, 2), 0.25), T.TerrainScale(1.0, 4.0))
+    np.testing.assert_allclose(v, [[-0.5, -0.5, 1.0], [0.5, -0.5, 1.0], [-0.5, 0.5, 1.0], [0.5, 0.5, 1.0]])
+    assert f.tolist() == [[0, 1, 3], [0, 3, 2]]
+    with pytest.raises(ValueError, match="finite"):
+        T.to_mesh(np.full((3, 3), np.nan))
+    with pytest.raises(ValueError, match="shape"):
+        T.to_mesh(np.zeros((1, 3)))

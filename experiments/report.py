@@ -1,0 +1,64 @@
+"""``python -m experiments report RUN_DIR [RUN_DIR ...]``: one HTML page (and a Markdown twin) of run folders.
+
+The page (``report.html``) is self-contained (images base64-embedded, inline CSS and JS, no network): the
+``config.json``, every table (CSV, Markdown) and figure (PNG) of each run, each archive (``.npz``) as a fitness
+heatmap whose cells show their terrain's thumbnail on hover or click, and GIFs of the base policy (or ``--policy``)
+walking the easiest, the median and the hardest terrain of each archive, rendered by MuJoCo's offscreen renderer
+(``MUJOCO_GL``: osmesa on a CPU machine, from the Debian package ``libosmesa6``; egl on a GPU one). Without a
+working OpenGL backend the page says that the renders were skipped and why. ``report.md`` holds the same with its
+images in ``report_files/``.
+
+Example::
+
+    python -m experiments report runs/quickstart-20261122-101500
+    python -m experiments report runs/evolve-a runs/evolve-b --out runs/report-ab --frames 90
+"""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("runs", nargs="+", type=Path, metavar="RUN_DIR", help="run folders to report on")
+    parser.add_argument("--out", type=Path, default=None,
+                        help="report folder (default: RUN_DIR/report for one run, runs/report-<time> for several)")
+    parser.add_argument("--title", default="jaxterrain report", help="page title")
+    parser.add_argument("--no-videos", action="store_true", help="leave out the walks (no MJX rollout, no GL)")
+    parser.add_argument("--steps", type=int, default=1000, help="env steps walked per video (15 ms each)")
+    parser.add_argument("--frames", type=int, default=60, help="frames per video (evenly spaced over the walk)")
+    parser.add_argument("--width", type=int, default=320, help="video width in pixels")
+    parser.add_argument("--height", type=int, default=240, help="video height in pixels")
+    parser.add_argument("--thumb", type=int, default=64, help="thumbnail side in pixels")
+    parser.add_argument("--policy", type=Path, default=None,
+                        help="policy folder (jaxterrain.rl.save_policy); default: the shipped base policy")
+    parser.add_argument("--seed", type=int, default=0, help="PRNG seed of the walks' initial states")
+    parser.add_argument("--gl", choices=("osmesa", "egl", "glfw"), default=None,
+                        help="MuJoCo OpenGL backend (default: $MUJOCO_GL, else egl with an NVIDIA GPU, else osmesa)")
+
+
+def main(args: argparse.Namespace) -> int:
+    from jaxterrain.report import render
+
+    render.setup_gl(args.gl)  # before anything imports mujoco
+    from experiments.common import run_folder
+    from jaxterrain.report import write_report
+
+    for run in args.runs:
+        if not run.is_dir():
+            raise SystemExit(f"run folder not found: {run}")
+    for name in ("steps", "frames", "width", "height", "thumb"):
+        if getattr(args, name) < 1:
+            raise SystemExit(f"--{name} must be >= 1, got {getattr(args, name)}")
+    out = args.out or (args.runs[0] / "report" if len(args.runs) == 1 else run_folder("report"))
+    policy = None
+    if args.policy is not None:
+        from jaxterrain.rl import load_policy
+
+        policy = load_policy(args.policy)
+    path = write_report(args.runs, out, title=args.title, videos=not args.no_videos, video_steps=args.steps,
+                        video_frames=args.frames, video_size=(args.width, args.height), thumb=args.thumb,
+                        seed=args.seed, policy=policy, progress=lambda s: print(s, flush=True))
+    print(f"wrote {path} and {path.with_suffix('.md')}")
+    return 0
