@@ -175,3 +175,124 @@ def test_default_env_uses_the_policys_solver():
     assert cfg._replace(solver=SOLVER_SOUND) == WalkerConfig(terrain_shape=(32, 32), scale=SCALE)
     # the shipped base policy records the solver it was trained with
     assert difficulty.policy_solver(difficulty.default_policy()) == SOLVER_SOUND
+
+
+# ----------------------------------------------------------------------------------------------------------------
+# The protocol
+# ----------------------------------------------------------------------------------------------------------------
+def _wall_map():
+    """32 x 32 map (0.2 m cells): flat, with a 0.5 m wall across x (every row) at x = 1.1 .. 1.5 m (columns 21-23)."""
+    m = np.zeros((32, 32), np.float32)
+    m[:, 21:24] = 1.0
+    return m
+
+
+def test_protocol_defaults_and_validation():
+    assert difficulty.Protocol() == difficulty.PAPER == (20, 5, 1, 0.0, "mean")
+    assert difficulty.Protocol().validate() == difficulty.PAPER and difficulty.HEADINGS.per_heading == 20
+    bad = [(dict(attempts=0), "protocol.attempts"), (dict(attempts=2.0), "protocol.attempts"),
+           (dict(headings=3), "protocol.headings"), (dict(attempts=10, best=2, headings=4), "protocol.attempts"),
+           (dict(attempts=20, best=6, headings=4), "protocol.best"), (dict(best=0), "protocol.best"),
+           (dict(start_spread=-1.0), "protocol.start_spread"), (dict(start_spread=float("inf")), "start_spread"),
+           (dict(rule="max"), "protocol.rule")]
+    for fields, match in bad:
+        with pytest.raises(ValueError, match=match):
+            difficulty.Protocol(**fields).validate()
+    flat = jnp.zeros((1, 32, 32))
+    with pytest.raises(ValueError, match="attempts=10 conflicts"):
+        difficulty.evaluate(flat, jax.random.PRNGKey(0), attempts=10, protocol=difficulty.PAPER)
+    with pytest.raises(ValueError, match="protocol.best"):
+        difficulty.evaluate(flat, jax.random.PRNGKey(0), protocol=difficulty.Protocol(4, 5))
+    with pytest.raises(ValueError, match="square"):
+        difficulty.evaluate(jnp.zeros((1, 32, 48)), jax.random.PRNGKey(0), protocol=difficulty.Protocol(4, 1, 4))
+    with pytest.raises(ValueError, match="size"):
+        difficulty.fitness_fn(2)
+    with pytest.raises(ValueError, match="start_spread"):  # an env's own spread must agree with the protocol's
+        difficulty.protocol_env_config(CFG._replace(start_spread=1.0), difficulty.Protocol(start_spread=2.0))
+
+
+def test_rotations():
+    """Heading k walks the map turned by rot90(k): +x of the turned map is the original's +x, +y, -x, -y."""
+    n = 8
+    ramp_x = np.tile(np.arange(n, dtype=np.float32), (n, 1))  # [row = y, column = x]: rises along +x
+    turned = np.asarray(difficulty.rotate_headings(jnp.stack([ramp_x, ramp_x.T]), 4)).reshape(2, 4, n, n)
+    rises_x = lambda m: np.all(np.diff(m, axis=1) > 0)  # noqa: E731
+    rises_y = lambda m: np.all(np.diff(m, axis=0) > 0)  # noqa: E731
+    falls_x = lambda m: np.all(np.diff(m, axis=1) < 0)  # noqa: E731
+    falls_y = lambda m: np.all(np.diff(m, axis=0) < 0)  # noqa: E731
+    np.testing.assert_array_equal(turned[0, 0], ramp_x)
+    assert falls_y(turned[0, 1]) and falls_x(turned[0, 2]) and rises_y(turned[0, 3])  # the +x ramp, turned
+    assert rises_x(turned[1, 1]) and falls_x(turned[1, 3])  # the +y ramp: uphill when walking the original's +y
+    assert rises_x(turned[0, 0]) and rises_y(turned[1, 0])
+    two = np.asarray(difficulty.rotate_headings(jnp.asarray(ramp_x)[None], 2))
+    np.testing.assert_array_equal(two, turned[0, :2])  # 2 headings: +x and +y
+    # a wall across x lies on the walker's centre line (row H / 2) in headings 0 and 2 only
+    walls = np.asarray(difficulty.rotate_headings(jnp.asarray(_wall_map())[None], 4))
+    assert [bool(walls[k, 16].max() > 0) for k in range(4)] == [True, False, True, False]
+    with pytest.raises(ValueError, match="square"):
+        difficulty.rotate_headings(jnp.zeros((1, 4, 6)), 4)
+
+
+def test_aggregate_rules():
+    d = jnp.array([[1.0, 0.8, 0.2, 0.4, 1.0, 1.0, 0.0, 0.1]])  # 4 headings x 2 walks, heading-major
+    p = difficulty.Protocol(8, 1, 4)
+    np.testing.assert_allclose(np.asarray(difficulty.heading_scores(d, p)), [[1.0, 0.4, 1.0, 0.1]])
+    np.testing.assert_allclose(np.asarray(difficulty.aggregate(d, p)), [0.625], rtol=1e-6)
+    np.testing.assert_allclose(np.asarray(difficulty.aggregate(d, p._replace(rule="min"))), [0.1])
+    np.testing.assert_allclose(np.asarray(difficulty.aggregate(d, p._replace(best=2))), [(0.9 + 0.3 + 1 + 0.05) / 4],
+                               rtol=1e-6)
+    one = difficulty.Protocol(8, 3)
+    np.testing.assert_array_equal(np.asarray(difficulty.aggregate(d, one)), np.asarray(difficulty.best_of(d, 3)))
+
+
+def test_default_protocol_is_the_existing_computation(flat_pair):
+    """evaluate(protocol=Protocol(4, 2)) and evaluate(4, 2) give exactly the existing pure computation
+    (batched_distances, then best_of) on the same key; the program is the one the other tests compile."""
+    params = _params(gain=0.8, bias=0.05)
+    bumpy = jnp.stack([flat_pair[0], jnp.asarray(np.random.default_rng(1).random((32, 32)) * 0.5, jnp.float32)])
+    key = jax.random.PRNGKey(11)
+    d, _ = difficulty._compiled(CFG, ATTEMPTS, linear_policy, True, None)(bumpy * SCALE.height, key, params)
+    want = np.asarray(difficulty.best_of(d, BEST))
+    kw = dict(policy=linear_policy, env_config=CFG, policy_params=params)
+    got = difficulty.evaluate(bumpy, key, protocol=difficulty.Protocol(ATTEMPTS, BEST), **kw)
+    np.testing.assert_array_equal(np.asarray(got), want)
+    np.testing.assert_array_equal(np.asarray(difficulty.evaluate(bumpy, key, ATTEMPTS, BEST, **kw)), want)
+
+
+# cheaper XLA CPU compiles for a program only compared with itself (as in test_walker.py)
+FAST_COMPILE = {"xla_backend_optimization_level": 0, "xla_llvm_disable_expensive_passes": True}
+
+
+def test_fitness_fn_is_the_paper_computation():
+    """fitness_fn(size, Protocol(2, 1)) inside a jit is bit for bit the computation archive.difficulty_fitness had
+    (the shipped policy, batched_distances, best_of) on the same key."""
+    maps = jnp.stack([jnp.zeros((32, 32)), jnp.asarray(np.random.default_rng(2).random((32, 32)) * 0.6)])
+    fit = difficulty.fitness_fn(32, difficulty.Protocol(2, 1), scale=SCALE)
+    assert difficulty.fitness_fn(32, difficulty.Protocol(2, 1), scale=SCALE) is fit  # cached per arguments
+    policy = difficulty.default_policy()
+    env = difficulty.make_env(difficulty.default_env_config((32, 32), SCALE, policy))
+
+    def old(h, key):
+        return difficulty.best_of(difficulty.batched_distances(env, policy, h * SCALE.height, key, 2)[0], 1)
+
+    key = jax.random.PRNGKey(4)
+    both = jax.jit(lambda h, k: (fit(h, k), old(h, k))).lower(maps, key).compile(FAST_COMPILE)  # one compile
+    new, want = both(maps, key)
+    np.testing.assert_array_equal(np.asarray(new), np.asarray(want))
+    assert float(new[0]) > 0.9 and float(new[1]) < float(new[0])
+
+
+def test_four_headings_see_a_wall_across_x():
+    """The shipped policy under 4 headings: the wall across x stops the walks of headings 0 (+x) and 2 (-x), not
+    those along y; flat ground is easy in every heading."""
+    cfg = CFG._replace(episode_length=300)
+    protocol = difficulty.Protocol(attempts=8, best=2, headings=4)
+    maps = jnp.stack([jnp.asarray(_wall_map()), jnp.zeros((32, 32))])
+    d = difficulty.rollout_distances(maps, jax.random.PRNGKey(0), env_config=cfg, protocol=protocol)
+    scores = np.asarray(difficulty.heading_scores(d, protocol))  # [2 maps, 4 headings]
+    assert np.all(scores[0, [0, 2]] < 0.8) and np.all(scores[0, [1, 3]] >= 0.9), scores  # the wall is at 0.71-0.79
+    assert scores[0, 2] < scores[0, 0]  # the wall is 1.1 m after the start going -x, 3.7 m going +x
+    assert np.all(scores[1] >= 0.9), scores
+    fit = np.asarray(difficulty.aggregate(d, protocol))
+    np.testing.assert_allclose(fit, scores.mean(axis=1), rtol=1e-6)
+    assert fit[0] < 0.8 <= 0.9 <= fit[1]

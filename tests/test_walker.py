@@ -209,3 +209,28 @@ def test_height_scan_observation(settled):
     np.testing.assert_allclose(scan[-1], 0.45 - z, atol=1e-3)
     assert np.all(np.diff(scan[:, ny // 2]) >= -1e-6)  # the step rises ahead
     np.testing.assert_allclose(obs[:45], np.asarray(state.obs[2]), atol=1e-6)
+
+
+def test_start_spread(fns):
+    """start_spread > 0: the start y is uniform in +-spread from the reset key, the joint noise is that of the same key
+    without a spread, and the spawn height follows the terrain under the shifted start; bad values name the field."""
+    spread = 2.0
+    env_s = WalkerEnv(CFG._replace(start_spread=spread))
+    h, w = CFG.terrain_shape
+    y = np.linspace(-3.1, 3.1, h, dtype=np.float32)
+    ramp = jnp.asarray(np.repeat((0.1 + 0.05 * (y + 3.1))[:, None], w, axis=1))  # rises along +y (rows)
+    keys = jax.random.split(jax.random.PRNGKey(5), 8)
+    reset = jax.jit(jax.vmap(env_s.reset, in_axes=(0, None))).lower(keys, ramp).compile(FAST_COMPILE)
+    state = reset(keys, ramp)
+    y0 = np.asarray(state.data.qpos[:, 1])
+    assert np.all(np.abs(y0) <= spread) and np.ptp(y0) > 1.0  # spread out, different per key
+    np.testing.assert_allclose(np.asarray(state.data.qpos[:, 0]), env_s.x_start)
+    feet = np.asarray(state.data.geom_xpos)[:, env_s._feet, 2] - env_s._foot_radius
+    highest = 0.1 + 0.05 * (y0 + 0.25 + 3.1)  # the spawn patch reaches 0.25 m up the ramp
+    np.testing.assert_allclose(feet.min(axis=1), highest + CFG.spawn_clearance, atol=2e-3)
+    plain = fns[0](keys[:3], jnp.stack([ramp] * 3))  # the default env (compiled once for the module): y = 0
+    np.testing.assert_array_equal(np.asarray(plain.data.qpos[:, 7:]), np.asarray(state.data.qpos[:3, 7:]))
+    np.testing.assert_array_equal(np.asarray(plain.data.qpos[:, 1]), 0.0)
+    for bad in (-0.5, float("nan"), 2.5):  # 2.5 > radius_y - side_margin - 0.5 = 2.3
+        with pytest.raises(ValueError, match="start_spread"):
+            WalkerEnv(CFG._replace(start_spread=bad))

@@ -13,10 +13,12 @@ Physical choices (all in :class:`WalkerConfig`):
 
 - Scale: ``terrain_shape`` samples at ``scale`` (default 256 x 256 at 0.04 m = a 10.2 m square, heights up to
   1.0 m). Heights outside ``[0, scale.height]`` metres are clipped, for the physics and for the samples alike.
-- Spawn: torso at ``x_start = -radius_x + start_margin``, ``y = 0``, facing +x, joints at the XML pose plus uniform
-  noise of ``joint_noise`` rad (clipped into the joint ranges) and joint velocities with noise ``qvel_noise``
-  rad/s; the body is lowered so that its lowest foot sphere sits ``spawn_clearance`` above the highest terrain
-  sample in a 0.5 m x 0.5 m patch under the start point (forward kinematics per reset).
+- Spawn: torso at ``x_start = -radius_x + start_margin``, ``y = 0`` (or, with ``start_spread > 0`` m, ``y``
+  uniform in ``[-start_spread, start_spread]``, drawn from the reset key; the default 0 draws nothing), facing +x,
+  joints at the XML pose plus uniform noise of ``joint_noise`` rad (clipped into the joint ranges) and joint
+  velocities with noise ``qvel_noise`` rad/s; the body is lowered so that its lowest foot sphere sits
+  ``spawn_clearance`` above the highest terrain sample in a 0.5 m x 0.5 m patch under the start point (forward
+  kinematics per reset).
 - Termination (``done = 1``): a fall (torso height above the terrain under it outside ``healthy_z_range``, or the
   torso leaving the sides / the back of the heightfield), reaching ``x_goal = radius_x - goal_margin``, the time
   limit ``episode_length`` env steps, or invalid physics (non-finite state or ``|qvel| > max_qvel``) or a
@@ -66,6 +68,7 @@ class WalkerConfig(NamedTuple):
     start_margin: float = 0.5  # x_start = -radius_x + start_margin
     goal_margin: float = 0.5  # x_goal = radius_x - goal_margin
     side_margin: float = 0.3  # fall when |y| > radius_y - side_margin
+    start_spread: float = 0.0  # start y uniform in [-start_spread, start_spread] m (0: y = 0, no key drawn)
     spawn_clearance: float = 0.01  # lowest foot this far above the highest terrain under the start
     # termination
     healthy_z_range: tuple[float, float] = (1.0, 2.0)  # torso z minus terrain height under the torso
@@ -119,6 +122,8 @@ def _check_config(c: WalkerConfig) -> None:
         raise ValueError(f"healthy_z_range must be (low, high) with low < high, got {c.healthy_z_range}")
     if c.joint_noise < 0 or c.qvel_noise < 0:
         raise ValueError(f"joint_noise and qvel_noise must be >= 0, got {c.joint_noise}, {c.qvel_noise}")
+    if not (np.isfinite(c.start_spread) and c.start_spread >= 0):
+        raise ValueError(f"start_spread must be a finite number >= 0 (metres), got {c.start_spread}")
     if min(c.scan_points) < 1:
         raise ValueError(f"scan_points must be >= 1 each, got {c.scan_points}")
 
@@ -173,6 +178,10 @@ class WalkerEnv:
                              f"(terrain_shape={config.terrain_shape}, scale={config.scale})")
         if self.radius_y - config.side_margin <= 0.2:
             raise ValueError(f"terrain too narrow for side_margin={config.side_margin}")
+        max_spread = self.radius_y - config.side_margin - 0.5
+        if config.start_spread > max(max_spread, 0.0):
+            raise ValueError(f"start_spread must lie in [0, {max(max_spread, 0.0):.3g}] m (0.5 m inside the side limit "
+                             f"radius_y - side_margin), got {config.start_spread}")
         self._qpos0 = np.asarray(m.qpos0, np.float32)
         self._jnt_lo = np.asarray(m.jnt_range[1:, 0], np.float32)  # hinge joints (joint 0 = free root)
         self._jnt_hi = np.asarray(m.jnt_range[1:, 1], np.float32)
@@ -210,9 +219,14 @@ class WalkerEnv:
 
     # ----------------------------------------------------------------------------------------------------------
     def reset(self, key: jax.Array, terrain: jax.Array) -> WalkerState:
-        """Initial state at the start edge of ``terrain`` ([H, W] metres) with random joint angles/velocities."""
+        """Initial state at the start edge of ``terrain`` ([H, W] metres) with random joint angles/velocities (and a
+        random lateral start when ``config.start_spread > 0``)."""
         c = self.config
         key_q, key_v = jax.random.split(key)
+        patch_y = self._patch[1]
+        if c.start_spread > 0:  # a stream of its own: the joint noise stays that of the same key without a spread
+            y0 = jax.random.uniform(jax.random.fold_in(key, 1), (), minval=-c.start_spread, maxval=c.start_spread)
+            patch_y = patch_y + y0
         del key
         terrain = jnp.asarray(terrain, jnp.float32)
         m = self.model(terrain)
@@ -220,12 +234,14 @@ class WalkerEnv:
         joints = self._qpos0[7:] + jax.random.uniform(key_q, (nj,), minval=-c.joint_noise, maxval=c.joint_noise)
         joints = jnp.clip(joints, self._jnt_lo, self._jnt_hi)
         qpos = jnp.concatenate([jnp.array([self.x_start, 0.0, 0.0]), self._qpos0[3:7], joints])
+        if c.start_spread > 0:
+            qpos = qpos.at[1].set(y0)
         qvel = jnp.concatenate([jnp.zeros(6), jax.random.uniform(key_v, (self.mj_model.nv - 6,),
                                                                  minval=-c.qvel_noise, maxval=c.qvel_noise)])
         data = mjx.make_data(self.mjx_model).replace(qpos=qpos, qvel=qvel)
         data = mjx.kinematics(m, data)
         foot_bottom = jnp.min(data.geom_xpos[self._feet, 2] - self._foot_radius)  # torso at z = 0
-        ground = jnp.max(self.terrain_height(terrain, *self._patch))
+        ground = jnp.max(self.terrain_height(terrain, self._patch[0], patch_y))
         qpos = qpos.at[2].set(ground - foot_bottom + c.spawn_clearance)
         data = mjx.kinematics(m, data.replace(qpos=qpos))
         zero = jnp.zeros((), jnp.float32)
