@@ -401,3 +401,40 @@ def test_factory_errors():
         C.cppn(config=C.CPPNConfig(weight_replace_prob=0.5, weight_perturb_prob=0.8))
     with pytest.raises(ValueError, match=r"n is 0"):
         C.cppn(size=8).sample(jax.random.key(0), 0)
+
+
+def test_map_elites_hands_render_one_only_valid_genomes(tmp_path):
+    """The library's own path (sample, mutate, insertion of tied offspring, save / load) never gives ``render_one``
+    a genome that ``validate`` refuses: inside ``evolve`` every genome rendered goes to the host through
+    ``jax.debug.callback`` and through ``validate``. A constant fitness makes every offspring of a cell a tie, the
+    case that once mixed offspring leaf by leaf (docs/results/insertion_bug.md)."""
+    from jaxterrain import archive as A
+
+    base = C.cppn(size=SIZE, max_nodes=N, max_connections=NC, config=WILD)
+    seen, bad = [0], []
+
+    def check(genome):
+        g = C.CPPNGenome(*jax.tree.map(np.asarray, genome))
+        seen[0] += int(np.prod(g.node_used.shape[:-1], dtype=np.int64))
+        try:
+            base.validate(g)
+        except ValueError as err:
+            bad.append(str(err))
+
+    def render_one(genome):
+        jax.debug.callback(check, genome)
+        return base.render_one(genome)
+
+    gen = base._replace(render_one=render_one)
+    config = A.EvolveConfig(generations=3, batch_size=16, initial_population=16, bins=4, window=4, stride=2,
+                            ranges=((0.0, 1.0), (0.0, 0.5)), checkpoint_every=3)
+    arch = A.evolve(gen, None, config, jax.random.key(0), fitness_fn=lambda h, key, needed=None: jnp.ones(h.shape[0]),
+                    traversable_fn=lambda h: jnp.ones(h.shape[0], bool), progress=False)
+    assert seen[0] >= 16 + 3 * 16 and not bad, bad[:3]
+    filled = arch.source >= 0
+    assert filled.sum() >= 2
+    elites = jax.tree.map(lambda x: np.asarray(x)[filled], arch.genomes[0])
+    base.validate(C.CPPNGenome(*elites))
+    A.save(tmp_path / "a.npz", arch)
+    again = A.load(tmp_path / "a.npz")
+    base.validate(C.CPPNGenome(*jax.tree.map(lambda x: np.asarray(x)[filled], again.genomes[0])))

@@ -552,3 +552,22 @@ def test_worley_vmap_mixed_n_matches_single():
     few = np.asarray(_worley_distance(jnp.array([3, 10, 0], jnp.float32), SIZE, "sort"))
     more = np.asarray(_worley_distance(jnp.array([3, 40, 0], jnp.float32), SIZE, "sort"))
     assert (more <= few).all() and (more < few).any()
+
+
+@pytest.mark.parametrize("name, options", [("diamond_square", {}), ("cppn", {"max_nodes": 8, "max_connections": 16})])
+def test_render_temporaries_do_not_grow_with_the_batch(name, options):
+    """``render`` runs larger batches as lax.map over chunks: XLA's temporaries at 8 chunks are those of one chunk
+    (only the output grows). Compile-only (memory_analysis of the lowered program), 32 x 32 maps."""
+    gen = generators.get(name, size=32, **options)
+    chunk = generators.RENDER_CHUNK if name != "cppn" else generators.cppn.render_chunk(options["max_nodes"])
+    proto = gen.sample(jax.random.PRNGKey(0), 1)
+
+    def temp_bytes(b):
+        x = jax.tree.map(lambda a: jax.ShapeDtypeStruct((b,) + a.shape[1:], a.dtype), proto)
+        stats = jax.jit(gen.render).lower(x).compile().memory_analysis()
+        if stats is None:
+            pytest.skip("no memory analysis on this backend")
+        return stats.temp_size_in_bytes
+
+    one, eight = temp_bytes(chunk), temp_bytes(8 * chunk)
+    assert eight <= 1.25 * one + (1 << 20), (one, eight)

@@ -252,9 +252,11 @@ def vector_generator(
     batched = chunked_render(render_one, render_chunk)
     mutate_jit = jax.jit(lambda key, g: repair(gaussian_mutation(key, g, gspec, mutation_prob, mutation_sigma)))
 
+    sample_jit = jax.jit(lambda key, n: repair(uniform_genomes(key, n, gspec)), static_argnums=1)
+
     @_mark
     def sample(key: PRNGKey, n: int) -> jax.Array:
-        return repair(uniform_genomes(key, check_count(n, name), gspec))
+        return sample_jit(key, check_count(n, name))
 
     def validate(genomes: Any) -> None:
         g = check_vector_genomes(genomes, gspec, name)

@@ -107,7 +107,8 @@ class CPPNConfig(NamedTuple):
         network acyclic and does not duplicate an existing connection; skipped when none exists or all
         ``max_connections`` slots are used.
       add_node_prob: per genome: split a random enabled connection a -> b: disable it, add a hidden node h
-        with a random activation and bias 0, and connections a -> h (weight 1) and h -> b (the old weight);
+        with a random activation and bias 0, and connections a -> h (weight 1, or ``weight_limit`` if smaller) and
+        h -> b (the old weight);
         skipped when no node slot or fewer than two connection slots are free, or no connection is enabled.
       activation_prob: per genome: one random output / hidden node gets a different random activation.
       toggle_enable_prob: per genome: one random used connection flips its ``enabled`` flag.
@@ -376,7 +377,7 @@ def _add_node(r: _Draws, g: CPPNGenome, cfg: CPPNConfig) -> CPPNGenome:
         node_used=put(g.node_used, node, True),
         conn_src=put(put(g.conn_src, s1, src), s2, node),
         conn_dst=put(put(g.conn_dst, s1, node), s2, dst),
-        conn_weight=put(put(g.conn_weight, s1, 1.0), s2, w),
+        conn_weight=put(put(g.conn_weight, s1, min(1.0, cfg.weight_limit)), s2, w),  # 1, within the limit
         conn_enabled=put(put(enabled, s1, True), s2, True),
         conn_used=put(put(g.conn_used, s1, True), s2, True),
     )
@@ -606,9 +607,7 @@ def cppn(size: int = 256, max_nodes: int = 32, max_connections: int = 128, confi
             validate(genomes)
         return mutate_jit(key, CPPNGenome(*genomes))
 
-    @_mark
-    def sample(key: PRNGKey, n: int) -> CPPNGenome:
-        n = check_count(n, "cppn")
+    def sample_raw(key: PRNGKey, n: int) -> CPPNGenome:
         init_key, mut_key = jax.random.split(key)
         del key
         genomes = minimal_genomes(init_key, n, max_nodes, max_connections, config)
@@ -617,6 +616,12 @@ def cppn(size: int = 256, max_nodes: int = 32, max_connections: int = 128, confi
         return jax.lax.fori_loop(
             0, int(config.init_mutations), lambda i, g: mutate_raw(jax.random.fold_in(mut_key, i), g), genomes
         )
+
+    sample_jit = jax.jit(sample_raw, static_argnums=1)  # one compile per n, not one per call
+
+    @_mark
+    def sample(key: PRNGKey, n: int) -> CPPNGenome:
+        return sample_jit(key, check_count(n, "cppn"))
 
     def render(genomes: CPPNGenome) -> jax.Array:
         if not is_traced(genomes):
