@@ -352,3 +352,88 @@ def test_config_validation_names_the_field():
     with pytest.raises(ValueError, match="must divide"):
         C.validate_config(C.CurriculumConfig(num_envs=3000))
     assert C.validate_config(C.CurriculumConfig()).updates_per_chunk == 4
+
+
+# ---------------------------------------------------------------------------------------------------------------
+# The learn command: bad input (no compile) and the smoke preset end to end
+# ---------------------------------------------------------------------------------------------------------------
+CPPN = "docs/results/exp1b_gpu_sound_cppn_archive.npz"
+
+
+@pytest.fixture(scope="module")
+def tiny_archive(tmp_path_factory):
+    """The CPPN archive cut to its first ``k`` filled cells, with stored heightmaps (gentle bumps: no rendering)."""
+    from jaxterrain import archive as A
+
+    arch = A.load(CPPN)
+    folder = tmp_path_factory.mktemp("arch")
+
+    def make(k: int, name: str, **config):
+        filled = np.flatnonzero(arch.filled)
+        keep = np.zeros_like(arch.filled)
+        keep[filled[:k]] = True
+        x = np.linspace(0, 4 * np.pi, 256, dtype=np.float32)
+        bumps = (0.02 * (1 + np.sin(x)[None, :] * np.cos(x)[:, None]) * 65535).astype(np.uint16)
+        maps = np.where(keep[:, None, None], bumps[None], np.uint16(0))
+        tiny = arch._replace(source=np.where(keep, arch.source, -1).astype(np.int32),
+                             fitness=np.where(keep, arch.fitness, -np.inf).astype(np.float32), heightmaps=maps,
+                             config=arch.config._replace(**config))
+        return str(A.save(folder / name, tiny))
+
+    return make
+
+
+def cli(*argv):
+    from experiments.__main__ import main
+
+    return main(list(argv))
+
+
+def test_learn_rejects_bad_input_with_one_line_naming_it(tmp_path, tiny_archive, capsys):
+    good = tiny_archive(4, "good.npz")
+    corrupt = tmp_path / "corrupt.npz"
+    corrupt.write_bytes(b"PK\x03\x04 not a zip")
+    policy_dir = tmp_path / "policy"
+    policy_dir.mkdir()
+    from jaxterrain import rl
+
+    meta = json.loads((rl.BASE_POLICY_DIR / "config.json").read_text())
+    (policy_dir / "policy.msgpack").write_bytes((rl.BASE_POLICY_DIR / "policy.msgpack").read_bytes())
+    (policy_dir / "config.json").write_text(json.dumps({**meta, "observation_size": 53}))
+    cases = [
+        (["--archive", good, "--trials", "0"], "--trials"),
+        (["--archive", good, "--threshold", "1.5"], "threshold"),
+        (["--archive", good, "--threshold", "0"], "threshold"),
+        (["--archive", str(corrupt)], "corrupt.npz"),
+        (["--archive", str(tmp_path / "missing.npz")], "missing.npz"),
+        (["--archive", tiny_archive(1, "one.npz")], "one.npz: 1 filled cell"),
+        (["--archive", tiny_archive(0, "empty.npz")], "empty.npz: 0 filled cell"),
+        (["--archive", tiny_archive(4, "tri.npz", descriptors=("tri", "tpi"))], "tri.npz: descriptors"),
+        (["--archive", good, "--policy", str(policy_dir)], "policy"),
+    ]
+    for i, (argv, needle) in enumerate(cases):
+        out = tmp_path / f"run{i}"
+        assert cli("learn", "--preset", "smoke", "--out", str(out), *argv) == 2, argv
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and needle in err[0], (argv, err)
+        assert not out.exists()  # nothing left behind
+    assert "observations 53" in err[0]
+
+
+def test_learn_smoke_end_to_end(tmp_path, tiny_archive):
+    out = tmp_path / "learn"
+    archive = tiny_archive(4, "four.npz")
+    assert cli("learn", "--preset", "smoke", "--archive", archive, "--out", str(out)) == 0
+    cfg = json.loads((out / "config.json").read_text())
+    assert cfg["trials"] == 2 and cfg["curriculum"] == "map" and cfg["command"] == "learn"
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["trials"] == 2 and summary["epochs_max"] <= 4 and summary["bank_terrains"] == 4
+    rows = (out / "history.csv").read_text().splitlines()
+    assert rows[0].startswith("trial,chunk,epoch") and len(rows) == 1 + sum(summary["epochs"])
+    evals = np.array([float(r.split(",")[9]) for r in rows[1:]])
+    assert np.all((evals >= 0) & (evals <= 1)) and evals.max() > 0  # the policy walked
+    seq = (out / "sequences.csv").read_text().splitlines()
+    assert seq[0].startswith("trial,order,terrain") and len(seq) >= 3
+    assert (out / "curve.png").stat().st_size > 0 and (out / "milestones.md").read_text().count("|") > 10
+    assert (out / "checkpoint.npz").exists()
+    assert cli("learn", "--resume", str(out)) == 0  # a finished run reports its summary again

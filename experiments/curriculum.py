@@ -1,0 +1,171 @@
+"""``python -m experiments curriculum``: Experiment 2 whole - Figure 7a / 7b and Table 2 with the paper's numbers.
+
+    python -m experiments curriculum --preset gpu-short --out runs/exp2 --time-limit 9 \\
+        --archives perlin=docs/results/exp1b_gpu_sound_perlin_archive.npz cppn=docs/results/exp1b_gpu_sound_cppn_archive.npz
+    python -m experiments curriculum --resume runs/exp2 --time-limit 9            # until it says "done"
+
+Treatments (each one ``learn`` run, ``--trials`` trials together, in ``<run>/<name>-<curriculum>/``): the map
+curriculum on every archive given (``NAME=PATH``; names as in the paper's Table 2: cppn, gan, perlin, worley,
+diamond_square), on their combination (``archive.combine``: the fitter elite per cell; ``<run>/combined_archive.npz``;
+skipped with one archive), and the roughness-sorted standard CL on the ``cppn`` archive (Figure 7b). Finished
+treatments are kept, so ``--resume`` continues where the time limit stopped.
+
+Writes ``figure7a.png`` (hardest terrain traversed vs epoch, every map treatment, mean +- 1 standard error),
+``figure7b.png`` (CPPN: map vs standard CL), ``table2.csv`` / ``table2.md`` (epochs to first traverse a terrain at
+5 %, ..., 50 % of 70.71, ours beside the paper's), ``sequences.csv`` (every trial's terrains in order, all
+treatments) and ``config.json``. Presets: those of ``learn`` (smoke, gpu-short, paper).
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import io
+import json
+import sys
+import time
+from pathlib import Path
+
+from experiments import common
+from experiments import learn
+
+DEFAULT_ARCHIVES = {"perlin": "docs/results/exp1b_gpu_sound_perlin_archive.npz", "cppn": learn.CPPN_ARCHIVE}
+PRESETS = {name: {**{k: v for k, v in p.items() if k not in ("archive", "curriculum")},
+                  "archives": dict(DEFAULT_ARCHIVES), "baseline": "roughness"}
+           for name, p in learn.PRESETS.items()}
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    common.add_run_arguments(parser, PRESETS, "smoke")
+    parser.add_argument("--archives", nargs="+", default=None, metavar="NAME=PATH",
+                        help="archives of the map treatments (default: the perlin and cppn archives in docs/results)")
+    parser.add_argument("--trials", type=int, default=None)
+    parser.add_argument("--max-epochs", type=int, default=None)
+    parser.add_argument("--baseline", choices=["roughness", "random"], default=None,
+                        help="the baseline run on the cppn archive (Figure 7b; default roughness)")
+
+
+def parse_archives(items) -> dict | None:
+    if items is None:
+        return None
+    out = {}
+    for item in items:
+        name, sep, path = item.partition("=")
+        if not sep or not name or not path:
+            raise SystemExit(f"--archives: expected NAME=PATH, got {item!r}")
+        out[name] = path
+    return out
+
+
+def treatments(cfg: dict, folder: Path) -> list[tuple[str, str, str]]:
+    """``[(name, archive path, curriculum)]`` in run order; writes the combined archive when needed."""
+    from jaxterrain import archive as A
+
+    archives = dict(cfg["archives"])
+    out = [(name, path, "map") for name, path in archives.items()]
+    if len(archives) > 1:
+        combined = folder / "combined_archive.npz"
+        if not combined.exists():
+            try:
+                A.save(combined, A.combine([learn.load_archive(p, cfg["descriptors"]) for p in archives.values()]))
+            except ValueError as err:
+                raise learn.BadInput(f"--archives: cannot combine them: {err}") from None
+        out.append(("combined", str(combined), "map"))
+    if "cppn" in archives:
+        out.append(("cppn", archives["cppn"], cfg["baseline"]))
+    return out
+
+
+def _treatment_cfg(cfg: dict, path: str, curriculum: str) -> dict:
+    keep = {k: v for k, v in cfg.items() if k not in ("archives", "baseline", "command", "preset")}
+    return {**keep, "archive": path, "curriculum": curriculum, "command": "learn"}
+
+
+def write_table(folder: Path, rows: list[tuple[str, dict]], trials: int) -> None:
+    """table2.csv (ours: mean epochs and trials reaching each milestone; the paper's) and table2.md."""
+    from jaxterrain.curriculum import MILESTONES, PAPER_TABLE2, format_milestone
+    from jaxterrain.io import atomic_write_text
+
+    pct = [f"{round(100 * m)}%" for m in MILESTONES]
+    buf = io.StringIO()
+    w = csv.writer(buf)
+    w.writerow(["treatment", "source"] + pct + [f"trials_{p}" for p in pct])
+    md = ["| treatment | " + " | ".join(pct) + " |", "|---|" + "---|" * len(pct)]
+    for label, s in rows:
+        means, reached = s["milestone_epochs"], s["milestone_trials"]
+        w.writerow([label, "ours"] + ["" if m is None else f"{m:.1f}" for m in means] + reached)
+        cells = [format_milestone(float("nan") if m is None else m, r, trials) for m, r in zip(means, reached)]
+        md.append(f"| {label} (ours) | " + " | ".join(cells) + " |")
+        paper = PAPER_TABLE2.get(label.split(" ")[0]) if label.endswith(" map") else None
+        if paper is not None:
+            w.writerow([label, "paper"] + ["" if v is None else v for v in paper] + [""] * len(pct))
+            md.append(f"| {label} (paper) | " + " | ".join("-" if v is None else str(v) for v in paper) + " |")
+    atomic_write_text(folder / "table2.csv", buf.getvalue())
+    atomic_write_text(folder / "table2.md", "\n".join(md) + "\n")
+
+
+def write_figures(folder: Path, rows: list[tuple[str, dict]], baseline: str) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    import numpy as np
+
+    curve = lambda s: tuple(np.asarray(s["curve"][k], float) for k in ("epoch", "mean", "se"))  # noqa: E731
+    maps = {label.split(" ")[0]: curve(s) for label, s in rows if label.endswith(" map")}
+    fig, ax = plt.subplots(figsize=(7, 4))
+    learn.plot_curves(ax, maps, "Figure 7a: map-based curriculum per archive (mean +- 1 s.e.)")
+    fig.tight_layout()
+    common.save_figure(fig, folder / "figure7a.png")
+    pair = {label: curve(s) for label, s in rows if label in ("cppn map", f"cppn {baseline}")}
+    if len(pair) == 2:
+        fig, ax = plt.subplots(figsize=(7, 4))
+        learn.plot_curves(ax, pair, f"Figure 7b: CPPN, map-based vs {baseline}-sorted curriculum")
+        fig.tight_layout()
+        common.save_figure(fig, folder / "figure7b.png")
+
+
+def write_sequences(folder: Path, done: list[tuple[str, Path]]) -> None:
+    from jaxterrain.io import atomic_write_text
+
+    lines = []
+    for label, sub in done:
+        rows = (sub / "sequences.csv").read_text().splitlines()
+        if not lines:
+            lines.append("treatment," + rows[0])
+        lines += [f"{label},{r}" for r in rows[1:]]
+    atomic_write_text(folder / "sequences.csv", "\n".join(lines) + "\n")
+
+
+def main(args) -> int:
+    over = dict(archives=parse_archives(args.archives), trials=args.trials, max_epochs=args.max_epochs,
+                baseline=args.baseline)
+    folder, cfg = common.setup_run("curriculum", args, PRESETS, "smoke", over)
+    start = time.perf_counter()
+    limit = None if args.time_limit is None else 60.0 * args.time_limit
+    try:
+        plan = treatments(cfg, folder)
+        for _, path, curriculum in plan:  # every treatment's input, before anything is compiled
+            learn.validate(_treatment_cfg(cfg, path, curriculum))
+    except learn.BadInput as err:
+        print(f"curriculum: {err}", file=sys.stderr)
+        return 2
+    rows, done = [], []
+    for name, path, curriculum in plan:
+        sub = folder / f"{name}-{curriculum}"
+        sub.mkdir(parents=True, exist_ok=True)
+        tcfg = _treatment_cfg(cfg, path, curriculum)
+        common.write_config(sub, tcfg)
+        left = None if limit is None else max(limit - (time.perf_counter() - start), 1e-3)
+        summary = learn.run_treatment(tcfg, sub, left, desc=f"{name} {curriculum}")
+        if summary is None:
+            print(f"time limit reached; continue with: python -m experiments curriculum --resume {folder}", flush=True)
+            return 3
+        rows.append((f"{name} {curriculum}", summary))
+        done.append((f"{name} {curriculum}", sub))
+    write_table(folder, rows, int(cfg["trials"]))
+    write_figures(folder, rows, cfg["baseline"])
+    write_sequences(folder, done)
+    print(f"done: {len(rows)} treatments -> {folder}/table2.md, figure7a.png, figure7b.png", flush=True)
+    print(json.dumps({label: s["hardest_mean"] for label, s in rows}), flush=True)
+    return 0

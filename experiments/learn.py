@@ -1,0 +1,391 @@
+"""``python -m experiments learn``: Experiment 2, one treatment: PPO from the base policy on a curriculum over an archive.
+
+    python -m experiments learn --archive docs/results/exp1b_gpu_sound_cppn_archive.npz --curriculum map --trials 10 \\
+        --preset gpu-short --out runs/learn-cppn --time-limit 9
+    python -m experiments learn --resume runs/learn-cppn --time-limit 9          # until it says "done"
+
+``--curriculum``: ``map`` (the paper's IT&E map-based curriculum), ``roughness`` (standard CL: the terrains sorted by
+roughness, every fifth, in order) or ``random`` (uniform over the archive). Every trial starts from the shipped base
+policy (``--policy DIR`` for another), and the ``--trials`` trials run together (vmap) in one jitted function per
+block of ``chunks_per_call`` chunks (a chunk = 40 epochs of 4 000 env steps + one evaluation; the curriculum's
+choices: ``jaxterrain.curriculum.config``). At the start of every block each trial's envs restart on its current
+terrain, so a checkpoint needs no physics state of thousands of envs and a resumed run equals an uninterrupted one.
+
+Presets: ``paper`` (30 000 epochs, the paper's budget), ``gpu-short`` (3 000 epochs, a tenth), ``smoke`` (CPU,
+about a minute after compiling: 2 trials of 4 one-epoch chunks of 80 env steps on 4 envs, 2 walks per evaluation,
+100-step episodes; the archive's terrains are used as they are).
+
+Writes into the run folder: ``config.json``, ``checkpoint.npz`` + ``metrics.csv`` + ``tb/`` (the driver's),
+``history.csv`` (one row per trial and chunk), ``sequences.csv`` (each trial's terrains in order), ``milestones.csv``
+/ ``.md`` (Table 2's row), ``curve.png`` (hardest terrain traversed vs epoch, mean +- 1 standard error) and
+``summary.json``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import io
+import json
+import shutil
+import sys
+import time
+from pathlib import Path
+
+from experiments import common
+
+CPPN_ARCHIVE = "docs/results/exp1b_gpu_sound_cppn_archive.npz"
+_PAPER = dict(archive=CPPN_ARCHIVE, curriculum="map", trials=10, descriptors=["roughness", "tpi"], policy=None,
+              epochs_per_chunk=40, steps_per_epoch=4000, max_epochs=30000, threshold=0.9, max_fitness=1.0,
+              max_evals=100, attempts=20, best=5, kappa=0.05, rho=0.4, sigma_f=1.0, noise=0.001,
+              gp_evaluation="final", removal_margin=0.05, removal_ties="nearer", credit="threshold",
+              distance_origin="origin", roughness_stride=5, max_observations=None, num_envs=500, unroll_length=10,
+              num_unrolls=8, num_minibatches=8, update_epochs=8, learning_rate=3e-4, episode_length=1000,
+              chunks_per_call=25, fast_compile=False)
+PRESETS: dict[str, dict] = {
+    "paper": _PAPER,
+    "gpu-short": {**_PAPER, "max_epochs": 3000},
+    "smoke": {**_PAPER, "trials": 2, "epochs_per_chunk": 1, "steps_per_epoch": 80, "max_epochs": 4, "max_evals": 2,
+              "attempts": 2, "best": 1, "num_envs": 4, "num_unrolls": 2, "num_minibatches": 2, "update_epochs": 1,
+              "episode_length": 100, "chunks_per_call": 2, "fast_compile": True},
+}
+CURRICULUM_KEYS = ("epochs_per_chunk", "steps_per_epoch", "max_epochs", "threshold", "max_fitness", "max_evals",
+                   "attempts", "best", "kappa", "rho", "sigma_f", "noise", "gp_evaluation", "removal_margin",
+                   "removal_ties", "credit", "distance_origin", "roughness_stride", "max_observations", "num_envs",
+                   "unroll_length", "num_unrolls", "num_minibatches", "update_epochs", "learning_rate")
+
+
+class BadInput(ValueError):
+    """A bad parameter or file, reported as one line before anything is compiled."""
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    common.add_run_arguments(parser, PRESETS, "smoke")
+    parser.add_argument("--archive", default=None, help=f"archive .npz (default {CPPN_ARCHIVE})")
+    parser.add_argument("--curriculum", choices=["map", "roughness", "random"], default=None)
+    parser.add_argument("--trials", type=int, default=None, help="trials run together (paper: 10)")
+    parser.add_argument("--threshold", type=float, default=None, help="fraction of the maximum fitness, in (0, 1]")
+    parser.add_argument("--max-epochs", type=int, default=None)
+    parser.add_argument("--policy", default=None, help="policy folder to start from (default: the base policy)")
+    parser.add_argument("--chunks-per-call", type=int, default=None, help="chunks per jitted call / checkpoint")
+    parser.add_argument("--num-envs", type=int, default=None, help="PPO envs per trial (all on its terrain)")
+
+
+def overrides(args) -> dict:
+    return dict(archive=args.archive, curriculum=args.curriculum, trials=args.trials, threshold=args.threshold,
+                max_epochs=args.max_epochs, policy=args.policy, chunks_per_call=args.chunks_per_call,
+                num_envs=args.num_envs)
+
+
+# ----------------------------------------------------------------------------------------------------------------
+# Validation (before anything is compiled)
+# ----------------------------------------------------------------------------------------------------------------
+def curriculum_config(cfg: dict):
+    """The :class:`jaxterrain.curriculum.CurriculumConfig` of a learn config dict (validated)."""
+    from jaxterrain.curriculum import CurriculumConfig, validate_config
+
+    fields = {k: cfg[k] for k in CURRICULUM_KEYS}
+    try:
+        return validate_config(CurriculumConfig(selector=cfg["curriculum"], **fields))
+    except (ValueError, TypeError) as err:
+        raise BadInput(str(err)) from None
+
+
+def load_archive(path, descriptors):
+    """``archive.load`` with one-line errors naming the file: unreadable, other descriptors, < 2 filled cells."""
+    from jaxterrain import archive as A
+
+    try:
+        arch = A.load(path)
+    except (OSError, ValueError) as err:
+        raise BadInput(f"--archive {path}: {str(err).splitlines()[0]}") from None
+    if tuple(arch.config.descriptors) != tuple(descriptors):
+        raise BadInput(f"--archive {path}: descriptors {tuple(arch.config.descriptors)}, the curriculum expects "
+                       f"{tuple(descriptors)}")
+    filled = int(arch.filled.sum())
+    if filled < 2:
+        raise BadInput(f"--archive {path}: {filled} filled cell(s); a curriculum needs at least 2")
+    return arch
+
+
+def validate(cfg: dict):
+    """``(CurriculumConfig, archive, policy, env)`` or :class:`BadInput` naming the parameter or file."""
+    from jaxterrain.curriculum import walker as W
+    from jaxterrain.terrain import TerrainScale
+
+    trials = cfg.get("trials")
+    if not isinstance(trials, int) or isinstance(trials, bool) or trials < 1:
+        raise BadInput(f"--trials must be an integer >= 1, got {trials!r}")
+    chunks = cfg.get("chunks_per_call")
+    if not isinstance(chunks, int) or chunks < 1:
+        raise BadInput(f"--chunks-per-call must be an integer >= 1, got {chunks!r}")
+    if not isinstance(cfg.get("episode_length"), int) or cfg["episode_length"] < 1:
+        raise BadInput(f"episode_length must be an integer >= 1, got {cfg.get('episode_length')!r}")
+    config = curriculum_config(cfg)
+    arch = load_archive(cfg["archive"], cfg["descriptors"])
+    try:
+        policy = W.load_policy(cfg.get("policy"))
+    except ValueError as err:
+        raise BadInput(f"--policy: {err}") from None
+    shape = (256, 256) if arch.heightmaps is None else tuple(arch.heightmaps.shape[1:])
+    env = W.walker_env(policy, shape, TerrainScale(), cfg["episode_length"])
+    try:
+        W.check_policy(policy, env)
+    except ValueError as err:
+        raise BadInput(f"--policy: {err}") from None
+    return config, arch, policy, env
+
+
+# ----------------------------------------------------------------------------------------------------------------
+# The treatment
+# ----------------------------------------------------------------------------------------------------------------
+def strip_envs(states):
+    """The carried state without the envs' physics (restarted at every block)."""
+    return states._replace(policy=states.policy._replace(env_state=None))
+
+
+FAST_COMPILE = {"xla_backend_optimization_level": 0, "xla_llvm_disable_expensive_passes": True}
+
+
+def compiled(fn, fast: bool, *args):
+    """``jax.jit(fn)`` compiled for ``args``; with ``fast`` (the CPU smoke preset) at XLA's lowest backend
+    optimisation, which compiles the walker's programs several times faster on a CPU."""
+    import jax
+
+    lowered = jax.jit(fn).lower(*args)
+    return lowered.compile(FAST_COMPILE if fast and jax.default_backend() == "cpu" else None)
+
+
+def make_block(config, harness, env_like):
+    """``(states, bank, n) -> states`` (jit it): restart every trial's envs on its terrain, up to ``n`` chunks.
+    ``states`` come without env states (:func:`strip_envs`); ``env_like`` gives one trial's env-state shapes."""
+    import jax
+    import jax.numpy as jnp
+
+    from jaxterrain import curriculum as C
+
+    def block(states, bank, n):
+        trials = states.done.shape[0]
+        envs = jax.tree.map(lambda x: jnp.zeros((trials,) + x.shape, x.dtype), env_like)
+        states = states._replace(policy=states.policy._replace(env_state=envs),
+                                 restart=jnp.ones_like(states.restart))  # envs restart on the current terrains
+        states = C.run_trials(states, bank, jnp.asarray(n, jnp.int32), config=config, harness=harness)
+        return strip_envs(states)
+
+    return block
+
+
+def chunk_metrics(states, start: int, stop: int) -> dict:
+    """Per-chunk ``[stop - start]`` metrics over trials: hardest (mean, a finished trial keeps its last value),
+    evaluation (mean of the trials still running), trials still running."""
+    import numpy as np
+
+    h = states.history
+    hardest = np.asarray(h.hardest, np.float64)
+    epoch = np.asarray(h.epoch)
+    carried = np.zeros_like(hardest)
+    for t in range(hardest.shape[0]):
+        n = int(np.sum(epoch[t] >= 0))
+        carried[t, :n] = hardest[t, :n]
+        carried[t, n:] = hardest[t, n - 1] if n else 0.0
+    ev = np.asarray(h.evaluation, np.float64)[:, start:stop]
+    running = np.sum(epoch[:, start:stop] >= 0, axis=0)
+    evaluation = np.where(running > 0, np.nansum(ev, axis=0) / np.maximum(running, 1), np.nan)
+    return {"hardest": carried[:, start:stop].mean(axis=0), "evaluation": evaluation,
+            "trials_running": running.astype(np.float64)}
+
+
+def setup(cfg: dict, config, arch, policy, env):
+    """Bank, harness, the jitted block and the initial (stripped) trial states."""
+    import jax
+
+    from jaxterrain import bank as B
+    from jaxterrain import curriculum as C
+    from jaxterrain.curriculum import walker as W
+
+    bank = B.from_archive(arch)
+    ppo = config.ppo_config(policy.config)
+    harness = W.walker_harness(env, ppo, config)
+    fast = bool(cfg.get("fast_compile", False))
+    root = jax.random.key(int(cfg["seed"]))
+    start = W.start_state(env, ppo, policy, bank.heightmaps.shape[1:])
+    keys = jax.random.split(jax.random.fold_in(root, 2), int(cfg["trials"]))
+    init = compiled(lambda k, b, s: strip_envs(C.init_trials(k, b, s, config=config, harness=harness)), fast,
+                    keys, bank, start)
+    states = init(keys, bank, start)
+    block = compiled(make_block(config, harness, start.env_state), fast, states, bank, jax.numpy.int32(1))
+    return bank, harness, lambda s, b, n: block(s, b, jax.numpy.int32(n)), states
+
+
+def run_treatment(cfg: dict, folder: Path, time_limit_s: float | None = None, desc: str = "") -> dict | None:
+    """Run (or continue) one treatment in ``folder``; its summary dict when finished, None when the time limit
+    stopped it (checkpointed; call again to continue). Raises :class:`BadInput` before compiling anything."""
+    import numpy as np
+
+    from jaxterrain import driver
+
+    folder = Path(folder)
+    if (folder / "summary.json").exists():
+        return json.loads((folder / "summary.json").read_text())
+    config, arch, policy, env = validate(cfg)
+    t0 = time.perf_counter()
+    bank, _, block, states = setup(cfg, config, arch, policy, env)
+    restored = driver.restore(folder, like=states)
+    done, history = 0, None
+    if restored is not None:
+        states, done, history, _ = restored
+        print(f"resuming at chunk {done} of {config.max_chunks}", flush=True)
+
+    def chunk_fn(s, a, b):
+        if not bool(np.all(np.asarray(s.done))):
+            s = block(s, bank, b - a)
+        return s, chunk_metrics(s, a, b)
+
+    states, done, _ = driver.run_chunks(
+        chunk_fn, states, total=config.max_chunks, every=int(cfg["chunks_per_call"]), start=done, history=history,
+        run_dir=folder, key_metric="hardest", time_limit_s=time_limit_s, desc=desc or cfg["curriculum"],
+        unit="chunk", meta={"config": cfg})
+    if done < config.max_chunks and not bool(np.all(np.asarray(states.done))):
+        return None
+    return write_outputs(folder, cfg, config, bank, states, seconds=time.perf_counter() - t0)
+
+
+# ----------------------------------------------------------------------------------------------------------------
+# Outputs
+# ----------------------------------------------------------------------------------------------------------------
+def _csv(path: Path, header: list, rows: list) -> None:
+    from jaxterrain.io import atomic_write_text
+
+    buf = io.StringIO()
+    w = csv.writer(buf)
+    w.writerow(header)
+    w.writerows(rows)
+    atomic_write_text(path, buf.getvalue())
+
+
+def histories(states) -> dict:
+    """Host numpy history arrays [T, C] of the trial states."""
+    import numpy as np
+
+    h = states.history
+    return {"epoch": np.asarray(h.epoch), "terrain": np.asarray(h.terrain),
+            "evaluation": np.asarray(h.evaluation, np.float64), "hardest": np.asarray(h.hardest, np.float64)}
+
+
+def sequence_rows(hist: dict, bank, config) -> list:
+    """``sequences.csv`` rows: trial, order, terrain, cell, bin0, bin1, distance, prior, chunks, final and best
+    evaluation, reached (the threshold), end epoch."""
+    import numpy as np
+
+    from jaxterrain.curriculum import terrain_runs
+
+    cell, bins = np.asarray(bank.cell), np.asarray(bank.bins)
+    dist, prior = np.asarray(bank.distance), np.asarray(bank.fitness)
+    rows = []
+    for t in range(hist["terrain"].shape[0]):
+        for i, r in enumerate(terrain_runs(hist["terrain"][t], hist["evaluation"][t], hist["epoch"][t])):
+            k = r["terrain"]
+            rows.append([t, i, k, int(cell[k]), int(bins[k, 0]), int(bins[k, 1]), f"{dist[k]:.3f}", f"{prior[k]:.4f}",
+                         r["chunks"], f"{r['final_evaluation']:.4f}", f"{r['best_evaluation']:.4f}",
+                         int(r["best_evaluation"] >= config.threshold * config.max_fitness), r["end_epoch"]])
+    return rows
+
+
+def milestone_rows(label: str, hist: dict) -> tuple[list, list]:
+    """Table 2 row of one treatment: (CSV row with mean epochs and counts, Markdown cells)."""
+    from jaxterrain.curriculum import MILESTONES, first_epochs, format_milestone, milestone_summary
+
+    trials = hist["epoch"].shape[0]
+    mean, reached = milestone_summary(first_epochs(hist["epoch"], hist["hardest"]))
+    cells = [format_milestone(m, r, trials) for m, r in zip(mean, reached)]
+    csv_row = [label] + [("" if r == 0 else f"{m:.1f}") for m, r in zip(mean, reached)] + [int(r) for r in reached]
+    assert len(cells) == len(MILESTONES)
+    return csv_row, cells
+
+
+def plot_curves(ax, curves: dict, title: str = "") -> None:
+    """Figure 7 style: hardest terrain traversed (cells) vs epoch, mean +- 1 standard error, one line per label."""
+    from jaxterrain.bank import MAX_DISTANCE_50
+
+    for label, (grid, mean, se) in curves.items():
+        ax.step(grid, mean, where="post", label=label)
+        ax.fill_between(grid, mean - se, mean + se, step="post", alpha=0.25)
+    ax.set_xlabel("epoch")
+    ax.set_ylabel("hardest terrain traversed (cells from (0, 0))")
+    ax.set_ylim(0, MAX_DISTANCE_50)
+    ax.set_title(title, fontsize=9)
+    ax.legend(fontsize=7)
+
+
+def write_outputs(folder: Path, cfg: dict, config, bank, states, seconds: float) -> dict:
+    """history.csv, sequences.csv, milestones.csv/.md, curve.png and summary.json; returns the summary."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    import numpy as np
+
+    from jaxterrain.curriculum import MILESTONES, hardest_curve
+
+    hist = histories(states)
+    cell, bins, dist = np.asarray(bank.cell), np.asarray(bank.bins), np.asarray(bank.distance)
+    rows = []
+    for t in range(hist["epoch"].shape[0]):
+        for c in np.flatnonzero(hist["epoch"][t] >= 0):
+            k = int(hist["terrain"][t, c])
+            rows.append([t, c, int(hist["epoch"][t, c]), int(hist["epoch"][t, c]) * config.steps_per_epoch, k,
+                         int(cell[k]), int(bins[k, 0]), int(bins[k, 1]), f"{dist[k]:.3f}",
+                         f"{hist['evaluation'][t, c]:.4f}", f"{hist['hardest'][t, c]:.3f}"])
+    _csv(folder / "history.csv", ["trial", "chunk", "epoch", "env_steps", "terrain", "cell", "bin0", "bin1",
+                                  "distance", "evaluation", "hardest"], rows)
+    _csv(folder / "sequences.csv", ["trial", "order", "terrain", "cell", "bin0", "bin1", "distance", "prior",
+                                    "chunks", "final_evaluation", "best_evaluation", "reached", "end_epoch"],
+         sequence_rows(hist, bank, config))
+    label = f"{Path(cfg['archive']).stem} {cfg['curriculum']}"
+    pct = [f"{round(100 * m)}%" for m in MILESTONES]
+    csv_row, cells = milestone_rows(label, hist)
+    _csv(folder / "milestones.csv", ["treatment"] + [f"epochs_{p}" for p in pct] + [f"trials_{p}" for p in pct],
+         [csv_row])
+    from jaxterrain.io import atomic_write_text
+
+    atomic_write_text(folder / "milestones.md", "| treatment | " + " | ".join(pct) + " |\n|---|" + "---|" * len(pct)
+                      + f"\n| {label} | " + " | ".join(cells) + " |\n")
+    grid, mean, se = hardest_curve(hist["epoch"], hist["hardest"])
+    fig, ax = plt.subplots(figsize=(6, 3.5))
+    plot_curves(ax, {label: (grid, mean, se)}, f"{label}: {hist['epoch'].shape[0]} trials, mean +- 1 s.e.")
+    fig.tight_layout()
+    common.save_figure(fig, folder / "curve.png")
+    final = np.asarray(states.hardest, np.float64)
+    summary = {
+        "label": label, "trials": int(final.size), "hardest": final.tolist(), "hardest_mean": float(final.mean()),
+        "hardest_se": float(final.std(ddof=1) / np.sqrt(final.size)) if final.size > 1 else 0.0,
+        "epochs": np.asarray(states.epoch).tolist(), "epochs_max": int(np.max(np.asarray(states.epoch))),
+        "terrains_finished": np.asarray(states.obs_count).tolist(),
+        "ended_without_terrains": [bool(d and e < config.max_epochs)
+                                   for d, e in zip(np.asarray(states.done), np.asarray(states.epoch))],
+        "milestones": dict(zip(pct, cells)), "seconds": seconds, "bank_terrains": int(bank.size),
+        "milestone_epochs": [None if v == "" else float(v) for v in csv_row[1:1 + len(pct)]],
+        "milestone_trials": csv_row[1 + len(pct):],
+        "curve": {"epoch": grid.tolist(), "mean": mean.tolist(), "se": se.tolist()},
+    }
+    atomic_write_text(folder / "summary.json", json.dumps(summary, indent=2) + "\n")
+    return summary
+
+
+def main(args) -> int:
+    folder, cfg = common.setup_run("learn", args, PRESETS, "smoke", overrides(args))
+    try:
+        validate(cfg)  # cheap: files and values, before the run folder fills up or anything compiles
+    except BadInput as err:
+        print(f"learn: {err}", file=sys.stderr)
+        if args.resume is None and sorted(p.name for p in folder.iterdir()) == [common.CONFIG_NAME]:
+            shutil.rmtree(folder)
+        return 2
+    limit = None if args.time_limit is None else 60.0 * args.time_limit
+    summary = run_treatment(cfg, folder, limit)
+    if summary is None:
+        print(f"time limit reached; continue with: python -m experiments learn --resume {folder}", flush=True)
+        return 3
+    print(f"done: hardest traversed {summary['hardest_mean']:.2f} +- {summary['hardest_se']:.2f} cells "
+          f"(of 70.71) after {summary['epochs_max']} epochs -> {folder}", flush=True)
+    return 0
