@@ -437,3 +437,22 @@ def test_learn_smoke_end_to_end(tmp_path, tiny_archive):
     assert (out / "curve.png").stat().st_size > 0 and (out / "milestones.md").read_text().count("|") > 10
     assert (out / "checkpoint.npz").exists()
     assert cli("learn", "--resume", str(out)) == 0  # a finished run reports its summary again
+
+
+def test_curriculum_tables_put_the_papers_numbers_beside_ours(tmp_path):
+    from experiments import curriculum as exp
+
+    def summary(first_two, reached):
+        return {"milestone_epochs": list(first_two) + [None] * 8, "milestone_trials": list(reached) + [0] * 8,
+                "curve": {"epoch": [0, 40, 80], "mean": [0.0, 4.0, 8.0], "se": [0.0, 1.0, 0.5]}}
+
+    rows = [("cppn map", summary([40.0, 120.0], [2, 1])), ("cppn roughness", summary([80.0, None], [2, 0]))]
+    exp.write_table(tmp_path, rows, trials=2)
+    exp.write_figures(tmp_path, rows, "roughness")
+    md = (tmp_path / "table2.md").read_text().splitlines()
+    assert md[2] == "| cppn map (ours) | 40 | 120 (1/2) | - | - | - | - | - | - | - | - |"
+    assert md[3] == "| cppn map (paper) | 40 | 80 | 120 | 240 | 960 | 4720 | 7000 | 9880 | 13280 | - |"
+    assert md[4].startswith("| cppn roughness (ours) | 80 | - |") and len(md) == 5
+    table = (tmp_path / "table2.csv").read_text().splitlines()
+    assert table[1].startswith("cppn map,ours,40.0,120.0,,") and table[2].startswith("cppn map,paper,40,80,120")
+    assert (tmp_path / "figure7a.png").stat().st_size > 0 and (tmp_path / "figure7b.png").stat().st_size > 0
