@@ -271,6 +271,7 @@ def export(folder: Path, params, mcfg, cfg: dict, data: dict, rows: list, final:
         for name in (trav.WEIGHTS_NAME, trav.CONFIG_NAME, "PROVENANCE.md"):
             shutil.copyfile(folder / "model" / name, trav.ASSET_DIR / name)
         trav.shipped.cache_clear()
+        trav._shipped_descriptor.cache_clear()
         print(f"exported to {trav.ASSET_DIR}", flush=True)
 
 

@@ -463,17 +463,23 @@ def shipped() -> Model:
 def make_descriptor(model: Model, scale: TerrainScale = TerrainScale()) -> Callable:
     """``fn(heightmaps [B, H, W] in [0, 1]) -> [B]``: the mean of :func:`traversability_map` (jit / vmap-able)."""
 
+    @jax.jit
     def fn(heightmaps):
         return jnp.mean(traversability_map(model.params, heightmaps, model.config, scale), axis=(-2, -1))
 
     return fn
 
 
+@functools.lru_cache(maxsize=1)
+def _shipped_descriptor() -> Callable:
+    return make_descriptor(shipped())
+
+
 def descriptor(heightmaps) -> jax.Array:
     """The ``"traversability"`` descriptor: mean traversability probability of the shipped model over the strided
     map, ``[B, H, W]`` (heightmap units, H, W >= 32) -> ``[B]`` float32 in (0, 1); ``[H, W]`` -> ``[]``. The
     weights are loaded on the first call."""
-    return make_descriptor(shipped())(heightmaps)
+    return _shipped_descriptor()(heightmaps)
 
 
 features.register_descriptor("traversability", descriptor, windowed=False, overwrite=True)
