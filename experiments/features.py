@@ -162,7 +162,8 @@ def figure4(results: dict, cfg: dict, folder: Path) -> list[str]:
     names = [f"{f}_{w}" for f in FEATURES] + list(cfg.get("extra_descriptors") or []) + ["difficulty"]
     if not w or not all(n in v for v in results.values() for n in names):
         return []
-    fig, axes = plt.subplots(1, len(results), figsize=(4.2 * len(results), 4), squeeze=False)
+    fig, axes = plt.subplots(1, len(results), figsize=(4.4 * len(results) + 1, 4.4), squeeze=False,
+                             layout="constrained")
     rows = []
     for ax, (gname, values) in zip(axes[0], results.items()):
         r = correlations(values, names)
