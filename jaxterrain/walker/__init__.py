@@ -5,9 +5,17 @@
     terrain = flat_terrain(env.config)                         # [256, 256] float32 metres
     state = env.reset(key, terrain)
     state = env.step(state, action, terrain)                   # action [17] in [-1, 1]
+
+Per-env terrains as tiles of one heightfield (needed by the MuJoCo Warp backend, works under MJX-JAX too):
+
+    env = WalkerEnv(WalkerConfig(tiles=T, backend="warp"))    # or backend="jax"
+    bank = env.make_bank(terrains)                             # [T, H, W] metres -> TileBank (device pytree)
+    state = jax.vmap(env.reset, in_axes=(0, TILE_AXES))(keys, bank.at(idx))   # idx [N] int32 tile per env
+    state = jax.vmap(env.step, in_axes=(0, 0, TILE_AXES))(state, actions, bank.at(idx))
+    state = env.select(done, reset_state, state)               # auto-reset (never tree-map jnp.where over data)
 """
 
-from jaxterrain.walker.env import WalkerConfig, WalkerEnv, WalkerState, flat_terrain, sample_heights
+from jaxterrain.walker.env import BACKENDS, WalkerConfig, WalkerEnv, WalkerState, flat_terrain, sample_heights
 from jaxterrain.walker.model import (
     NAMED_SOLVERS,
     SOLVER_FAST,
@@ -23,8 +31,14 @@ from jaxterrain.walker.model import (
     solver_label,
     standing_offset,
 )
+from jaxterrain.walker.tiles import TILE_AXES, Tile, TileBank, warp_available
 
 __all__ = [
+    "BACKENDS",
+    "TILE_AXES",
+    "Tile",
+    "TileBank",
+    "warp_available",
     "WalkerConfig",
     "WalkerEnv",
     "WalkerState",

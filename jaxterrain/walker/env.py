@@ -9,6 +9,30 @@ Both are pure and vmappable: ``jax.vmap(env.step, in_axes=(0, 0, None))`` shares
 ``mjx_model.replace(hfield_data=...)`` inside the function (see :func:`jaxterrain.walker.model.metres_to_hfield`):
 nothing about the terrain is baked into a closure, so a curriculum can switch terrains inside one jit-compiled loop.
 
+Backends and tiled terrains (``WalkerConfig.backend``, ``WalkerConfig.tiles``):
+
+    env = WalkerEnv(WalkerConfig(tiles=T, backend="warp"))  # backend "jax" (default) or "warp" (MJX-Warp)
+    bank = env.make_bank(terrains)                         # [T, H, W] metres -> TileBank, a device-resident pytree
+    state = env.reset(key, bank.at(i))                     # terrain = Tile(bank, index i): env on tile i
+    state = env.step(state, action, bank.at(i))
+    jax.vmap(env.step, in_axes=(0, 0, TILE_AXES))(states, actions, bank.at(idx))   # idx [N]: a tile per env
+    bank = env.set_tile(bank, i, terrain)                  # jit-able; env.bank_terrains(bank) -> [T, H, W]
+    states = env.select(done, reset_states, states)        # batched auto-reset / pools, for both backends
+
+- ``tiles = 0`` (default, ``backend="jax"`` only): the classic API above, one ``[H, W]`` array per env.
+- ``tiles = T >= 1``: the model's heightfield holds ``T`` tiles of ``terrain_shape`` on a near-square grid
+  (:mod:`jaxterrain.walker.tiles`); the terrain argument is a :class:`~jaxterrain.walker.tiles.Tile`. Every env is
+  spawned on its tile: ``qpos[:2]`` are world coordinates, ``env.tile_origin(index)`` the tile centre to subtract
+  (``state.x_start`` is world x too, so ``distance`` is unchanged); heights, the side and back limits and the goal
+  are tile-local, and the observation has no x / y, so a walk on tile ``i`` is the walk on that terrain alone (up to
+  float32 rounding of the shifted coordinates). No model field is batched: all envs share one ``mjx.Model``.
+- ``backend = "warp"``: ``mjx.put_model(impl="warp")`` and ``make_data(impl="warp")`` (needs ``tiles >= 1`` and
+  ``pip install 'jaxterrain[warp]'``). MJX-Warp's ``Data`` carries contact buffers shared by all envs
+  (``naconmax = warp_contacts * warp_worlds``; set ``warp_worlds`` >= the number of envs stepped together, over all
+  vmap axes): merge states with ``env.select`` or ``mjx.Data.where``, never with ``jax.tree.map(jnp.where, ...)``
+  over ``state.data``. A step whose contacts or constraints overflowed those buffers is invalid (``failed = 1``).
+  ``jax.vmap`` of ``reset`` / ``step`` (nested too) works unchanged; MJX-Warp batches the physics itself.
+
 Physical choices (all in :class:`WalkerConfig`):
 
 - Scale: ``terrain_shape`` samples at ``scale`` (default 256 x 256 at 0.04 m = a 10.2 m square, heights up to
@@ -44,6 +68,8 @@ import mujoco
 import numpy as np
 from mujoco import mjx
 
+from jaxterrain.terrain import hfield_size
+from jaxterrain.walker import tiles as _tiles
 from jaxterrain.walker.model import (
     FOOT_GEOMS,
     SOLVER_SOUND,
@@ -53,6 +79,11 @@ from jaxterrain.walker.model import (
     check_terrain_shape,
     metres_to_hfield,
 )
+from jaxterrain.walker.tiles import Tile, TileBank
+
+BACKENDS = ("jax", "warp")
+# MuJoCo Warp overflow bits (mujoco_warp OverflowType) that mean dropped contacts or constraints: the step is invalid.
+_WARP_DROPPED = (1 << 0) | (1 << 1) | (1 << 2) | (1 << 3)  # NEFC, NJMAX_NNZ, BROADPHASE, NARROWPHASE
 
 
 class WalkerConfig(NamedTuple):
@@ -85,6 +116,12 @@ class WalkerConfig(NamedTuple):
     scan_x: tuple[float, float] = (0.0, 1.4)  # ahead of the torso, heading frame
     scan_y: tuple[float, float] = (-0.4, 0.4)  # lateral, heading frame
     scan_points: tuple[int, int] = (8, 5)  # (along x, along y)
+    # physics backend and terrain layout (see the module docstring)
+    backend: str = "jax"  # "jax" (MJX-JAX) | "warp" (MJX-Warp, needs tiles >= 1 and warp-lang + mujoco-warp)
+    tiles: int = 0  # 0: terrain = one [H, W] array per env; T >= 1: terrain = a Tile of a bank of T tiles
+    warp_worlds: int = 8192  # warp: contacts are allocated for this many envs stepped together (all vmap axes)
+    warp_contacts: int = 8  # warp: contacts per env (2 feet x up to 4 hfield contacts each)
+    warp_njmax: int = 64  # warp: constraint rows per env (8 contacts x 4 + 17 joint limits = 49 at most)
 
 
 class WalkerState(NamedTuple):
@@ -126,6 +163,20 @@ def _check_config(c: WalkerConfig) -> None:
         raise ValueError(f"start_spread must be a finite number >= 0 (metres), got {c.start_spread}")
     if min(c.scan_points) < 1:
         raise ValueError(f"scan_points must be >= 1 each, got {c.scan_points}")
+    if c.backend not in BACKENDS:
+        raise ValueError(f"backend must be one of {BACKENDS}, got {c.backend!r}")
+    if int(c.tiles) != c.tiles or c.tiles < 0:
+        raise ValueError(f"tiles must be an integer >= 0, got {c.tiles!r}")
+    if c.backend == "warp" and c.tiles < 1:
+        raise ValueError("backend='warp' needs tiles >= 1: MuJoCo Warp shares one heightfield across all envs, so "
+                         "per-env terrains come from a bank of tiles (WalkerConfig(tiles=T), env.make_bank)")
+    if min(c.warp_worlds, c.warp_contacts, c.warp_njmax) < 1:
+        raise ValueError(f"warp_worlds, warp_contacts and warp_njmax must be >= 1, got {c.warp_worlds}, "
+                         f"{c.warp_contacts}, {c.warp_njmax}")
+    h, w = c.terrain_shape
+    rows, cols = _tiles.grid(max(c.tiles, 1))
+    if c.tiles and rows * h * cols * w >= 2 ** 31:
+        raise ValueError(f"{c.tiles} tiles of {h} x {w} exceed MuJoCo's int32 heightfield size")
 
 
 def sample_heights(terrain: jax.Array, x: jax.Array, y: jax.Array, radius_x: float, radius_y: float,
@@ -165,11 +216,28 @@ class WalkerEnv:
     def __init__(self, config: WalkerConfig = WalkerConfig()):
         _check_config(config)
         self.config = config
-        self.mj_model = build_model(config.terrain_shape, config.scale, config.solver, config.timestep)
-        self.mjx_model = mjx.put_model(self.mj_model, impl="jax")
+        h, w = config.terrain_shape
+        self.tiles = int(config.tiles)
+        self.grid = _tiles.grid(max(self.tiles, 1))  # (rows, cols) of the tile grid
+        hfield_shape = (self.grid[0] * h, self.grid[1] * w) if self.tiles else (h, w)
+        self.mj_model = build_model(hfield_shape, config.scale, config.solver, config.timestep)
+        self.backend = config.backend
+        if config.backend == "warp":
+            try:
+                self.mjx_model = mjx.put_model(self.mj_model, impl="warp")
+                self._data0 = mjx.make_data(self.mj_model, impl="warp", naconmax=config.warp_contacts
+                                            * config.warp_worlds, njmax=config.warp_njmax)
+            except Exception as err:  # noqa: BLE001 - say what is missing
+                raise RuntimeError(f"backend='warp' needs warp-lang and mujoco-warp (pip install "
+                                   f"'jaxterrain[warp]'): {type(err).__name__}: {err}") from err
+        else:
+            self.mjx_model = mjx.put_model(self.mj_model, impl="jax")
+            self._data0 = None
         m = self.mj_model
         self.dt = config.timestep * config.n_frames
-        self.radius_x, self.radius_y, self.elevation_z, self.base_z = (float(v) for v in m.hfield_size[0])
+        # one tile's (= one terrain's) heightfield size; the model's own hfield is the whole grid when tiled
+        self.radius_x, self.radius_y, self.elevation_z, self.base_z = (
+            float(v) for v in hfield_size((h, w), config.scale, float(m.hfield_size[0, 3])))
         self.x_start = -self.radius_x + config.start_margin
         self.x_goal = self.radius_x - config.goal_margin
         self.track_length = self.x_goal - self.x_start
@@ -205,22 +273,138 @@ class WalkerEnv:
         """A flat ``[H, W]`` float32 terrain at ``height`` metres."""
         return flat_terrain(self.config, height)
 
-    def terrain_height(self, terrain: jax.Array, x: jax.Array, y: jax.Array) -> jax.Array:
-        """Bilinear terrain height in metres under world points (see :func:`sample_heights`)."""
+    def terrain_height(self, terrain, x: jax.Array, y: jax.Array) -> jax.Array:
+        """Bilinear terrain height in metres under world points (see :func:`sample_heights`); ``terrain`` is an
+        ``[H, W]`` array (``tiles = 0``) or a :class:`Tile` (its tile alone, as if it were a single terrain)."""
+        if isinstance(terrain, Tile):
+            x0, y0 = self.tile_origin(terrain.index)
+            return self._tile_heights(terrain, x - x0, y - y0)
         return sample_heights(terrain, x, y, self.radius_x, self.radius_y, self.elevation_z)
 
-    def model(self, terrain: jax.Array) -> mjx.Model:
-        """The mjx.Model with ``terrain`` ([H, W] metres) as its heightfield."""
+    def model(self, terrain) -> mjx.Model:
+        """The mjx.Model with ``terrain`` as its heightfield: an ``[H, W]`` array in metres (``tiles = 0``), or a
+        :class:`TileBank` / :class:`Tile` (its whole bank)."""
+        if isinstance(terrain, Tile):
+            terrain = terrain.bank
+        if isinstance(terrain, TileBank):
+            return self.mjx_model.replace(hfield_data=self._check_bank(terrain).data.reshape(-1))
+        if self.tiles:
+            raise TypeError(f"this env is tiled (config.tiles={self.tiles}): pass a walker.Tile (bank.at(index)) "
+                            "as the terrain, not an array; env.make_bank(terrains [T, H, W]) builds the bank")
         terrain = jnp.asarray(terrain, jnp.float32)
         if terrain.shape != tuple(self.config.terrain_shape):
             raise ValueError(f"terrain must have shape {tuple(self.config.terrain_shape)} (config.terrain_shape), "
                              f"got {terrain.shape}")
         return self.mjx_model.replace(hfield_data=metres_to_hfield(terrain, self.elevation_z))
 
+    # ---- tile banks (config.tiles >= 1) ----------------------------------------------------------------------
+    def make_bank(self, terrains: jax.Array) -> TileBank:
+        """A :class:`TileBank` of ``terrains`` (``[T, H, W]`` metres, ``T = config.tiles``; heights clipped to
+        ``[0, scale.height]`` like the physics). Jit-able."""
+        self._need_tiles()
+        terrains = jnp.asarray(terrains, jnp.float32)
+        want = (self.tiles,) + tuple(self.config.terrain_shape)
+        if terrains.shape != want:
+            raise ValueError(f"terrains must have shape {want} ([config.tiles, *config.terrain_shape]), "
+                             f"got {terrains.shape}")
+        data = jnp.clip(terrains / self.elevation_z, 0.0, 1.0)
+        return TileBank(_tiles.pack(data, *self.grid))
+
+    def flat_bank(self, height: float = 0.0) -> TileBank:
+        """A bank of ``config.tiles`` flat tiles at ``height`` metres."""
+        self._need_tiles()
+        return self.make_bank(jnp.full((self.tiles,) + tuple(self.config.terrain_shape), height, jnp.float32))
+
+    def set_tile(self, bank: TileBank, index, terrain: jax.Array) -> TileBank:
+        """``bank`` with tile ``index`` replaced by ``terrain`` ([H, W] metres). Pure and jit-able (``index`` may be
+        traced); envs standing on that tile see the new terrain from their next step on."""
+        self._need_tiles()
+        h, w = self.config.terrain_shape
+        terrain = jnp.asarray(terrain, jnp.float32)
+        if terrain.shape != (h, w):
+            raise ValueError(f"terrain must have shape {(h, w)}, got {terrain.shape}")
+        row, col = _tiles.tile_grid_pos(index, self.grid[1])
+        tile = jnp.clip(terrain / self.elevation_z, 0.0, 1.0).astype(bank.data.dtype)
+        return TileBank(jax.lax.dynamic_update_slice(bank.data, tile, (row * h, col * w)))
+
+    def bank_terrains(self, bank: TileBank) -> jax.Array:
+        """The ``[T, H, W]`` terrains (metres, clipped) of ``bank``."""
+        self._need_tiles()
+        return _tiles.unpack(self._check_bank(bank).data, self.tiles, tuple(self.config.terrain_shape)) \
+            * self.elevation_z
+
+    def tile_origin(self, index) -> tuple[jax.Array, jax.Array]:
+        """World ``(x, y)`` of the centre of tile ``index`` (``(0, 0)`` for an untiled env): a walker's tile-local
+        position is its ``qpos[:2]`` minus this."""
+        if not self.tiles:
+            return jnp.zeros((), jnp.float32), jnp.zeros((), jnp.float32)
+        h, w = self.config.terrain_shape
+        rows, cols = self.grid
+        row, col = _tiles.tile_grid_pos(index, cols)
+        cell_x, cell_y = 2.0 * self.radius_x / (w - 1), 2.0 * self.radius_y / (h - 1)
+        x0 = cell_x * w * (col.astype(jnp.float32) - 0.5 * (cols - 1))
+        y0 = cell_y * h * (row.astype(jnp.float32) - 0.5 * (rows - 1))
+        return x0.astype(jnp.float32), y0.astype(jnp.float32)
+
+    def select(self, mask: jax.Array, new: WalkerState, old: WalkerState) -> WalkerState:
+        """Batched states: ``new`` where ``mask`` (leading axes of the states, e.g. ``[N]``) else ``old``. Use this
+        instead of ``jax.tree.map(jnp.where ...)`` (auto-reset, pools): MJX-Warp's ``Data`` holds contact buffers
+        shared by all envs (``mjx.Data.where``), which a plain tree-map would turn into per-env copies."""
+        mask = jnp.asarray(mask, bool)
+
+        def one(m, a, b):
+            data = a.data.where(~m, b.data)  # Data.where(done, other): other where done
+            rest = jax.tree.map(lambda x, y: jnp.where(m, x, y), a._replace(data=None), b._replace(data=None))
+            return rest._replace(data=data)
+
+        for _ in range(mask.ndim):
+            one = jax.vmap(one)
+        return one(mask, new, old)
+
+    def _need_tiles(self):
+        if not self.tiles:
+            raise ValueError("this env is not tiled: build it with WalkerConfig(tiles=T) to use tile banks")
+
+    def _check_bank(self, bank: TileBank) -> TileBank:
+        want = tuple(self.mj_model.hfield_nrow) + tuple(self.mj_model.hfield_ncol)
+        if tuple(bank.data.shape) != want:
+            raise ValueError(f"tile bank data must have shape {want} (config.tiles={self.tiles} tiles of "
+                             f"{tuple(self.config.terrain_shape)}), got {tuple(bank.data.shape)}: build it with "
+                             "env.make_bank")
+        return bank
+
+    def _terrain(self, terrain):
+        """(model, heights(x_local, y_local), (x0, y0) tile origin) for a terrain argument."""
+        heights, origin = self._surface(terrain)
+        return self.model(terrain), heights, origin
+
+    def _surface(self, terrain):
+        """(heights(x_local, y_local) in metres, (x0, y0) world origin of the terrain) for a terrain argument."""
+        if self.tiles:
+            if not isinstance(terrain, Tile):
+                raise TypeError(f"this env is tiled (config.tiles={self.tiles}): the terrain must be a walker.Tile "
+                                f"(bank.at(index)), got {type(terrain).__name__}")
+            return (lambda x, y: self._tile_heights(terrain, x, y)), self.tile_origin(terrain.index)
+        if isinstance(terrain, (Tile, TileBank)):
+            raise TypeError("this env is not tiled (config.tiles=0): pass an [H, W] terrain array")
+        terrain = jnp.asarray(terrain, jnp.float32)
+        zero = jnp.zeros((), jnp.float32)
+        return (lambda x, y: sample_heights(terrain, x, y, self.radius_x, self.radius_y, self.elevation_z)), (zero,
+                                                                                                            zero)
+
+    def _tile_heights(self, tile: Tile, x, y):
+        row, col = _tiles.tile_grid_pos(tile.index, self.grid[1])
+        return _tiles.sample_tile_heights(tile.bank.data, row, col, x, y, tuple(self.config.terrain_shape),
+                                          self.radius_x, self.radius_y, self.elevation_z)
+
+    def _make_data(self):
+        return mjx.make_data(self.mjx_model) if self._data0 is None else self._data0
+
     # ----------------------------------------------------------------------------------------------------------
-    def reset(self, key: jax.Array, terrain: jax.Array) -> WalkerState:
-        """Initial state at the start edge of ``terrain`` ([H, W] metres) with random joint angles/velocities (and a
-        random lateral start when ``config.start_spread > 0``)."""
+    def reset(self, key: jax.Array, terrain) -> WalkerState:
+        """Initial state at the start edge of ``terrain`` (an ``[H, W]`` array in metres, or a :class:`Tile` of a
+        tiled env) with random joint angles/velocities (and a random lateral start when
+        ``config.start_spread > 0``)."""
         c = self.config
         key_q, key_v = jax.random.split(key)
         patch_y = self._patch[1]
@@ -228,48 +412,54 @@ class WalkerEnv:
             y0 = jax.random.uniform(jax.random.fold_in(key, 1), (), minval=-c.start_spread, maxval=c.start_spread)
             patch_y = patch_y + y0
         del key
-        terrain = jnp.asarray(terrain, jnp.float32)
-        m = self.model(terrain)
+        m, heights, (ox, oy) = self._terrain(terrain)
         nj = self._qpos0.shape[0] - 7
         joints = self._qpos0[7:] + jax.random.uniform(key_q, (nj,), minval=-c.joint_noise, maxval=c.joint_noise)
         joints = jnp.clip(joints, self._jnt_lo, self._jnt_hi)
-        qpos = jnp.concatenate([jnp.array([self.x_start, 0.0, 0.0]), self._qpos0[3:7], joints])
+        qpos = jnp.concatenate([jnp.stack([ox + self.x_start, oy, jnp.zeros((), jnp.float32)]), self._qpos0[3:7],
+                                joints])
         if c.start_spread > 0:
-            qpos = qpos.at[1].set(y0)
+            qpos = qpos.at[1].set(oy + y0)
         qvel = jnp.concatenate([jnp.zeros(6), jax.random.uniform(key_v, (self.mj_model.nv - 6,),
                                                                  minval=-c.qvel_noise, maxval=c.qvel_noise)])
-        data = mjx.make_data(self.mjx_model).replace(qpos=qpos, qvel=qvel)
+        data = self._make_data().replace(qpos=qpos, qvel=qvel)
         data = mjx.kinematics(m, data)
         foot_bottom = jnp.min(data.geom_xpos[self._feet, 2] - self._foot_radius)  # torso at z = 0
-        ground = jnp.max(self.terrain_height(terrain, self._patch[0], patch_y))
+        ground = jnp.max(heights(self._patch[0], patch_y))
         qpos = qpos.at[2].set(ground - foot_bottom + c.spawn_clearance)
         data = mjx.kinematics(m, data.replace(qpos=qpos))
         zero = jnp.zeros((), jnp.float32)
         metrics = {"forward_reward": zero, "reward_alive": zero, "reward_quadctrl": zero, "x_velocity": zero,
-                   "torso_height": qpos[2] - self.terrain_height(terrain, qpos[0], qpos[1]), "distance": zero}
-        return WalkerState(data=data, obs=self._obs(data, terrain), reward=zero, done=zero, truncation=zero,
-                           failed=zero, steps=jnp.zeros((), jnp.int32), x_start=jnp.asarray(qpos[0], jnp.float32),
-                           distance=zero, metrics=metrics)
+                   "torso_height": qpos[2] - heights(qpos[0] - ox, qpos[1] - oy), "distance": zero}
+        return WalkerState(data=data, obs=self._obs(data, terrain), reward=zero, done=zero,
+                           truncation=zero, failed=zero, steps=jnp.zeros((), jnp.int32),
+                           x_start=jnp.asarray(qpos[0], jnp.float32), distance=zero, metrics=metrics)
 
-    def step(self, state: WalkerState, action: jax.Array, terrain: jax.Array) -> WalkerState:
-        """Advance ``n_frames`` physics steps with ``action`` [A] in [-1, 1] (clipped) on ``terrain`` [H, W] m."""
+    def step(self, state: WalkerState, action: jax.Array, terrain) -> WalkerState:
+        """Advance ``n_frames`` physics steps with ``action`` [A] in [-1, 1] (clipped) on ``terrain`` (the one
+        given to reset: an ``[H, W]`` array in metres, or a :class:`Tile` of a tiled env)."""
         c = self.config
-        terrain = jnp.asarray(terrain, jnp.float32)
-        m = self.model(terrain)
+        m, heights, (ox, oy) = self._terrain(terrain)
         action = jnp.asarray(action, jnp.float32)
         action_ok = jnp.all(jnp.isfinite(action))
         a = jnp.clip(jnp.nan_to_num(action, nan=0.0, posinf=1.0, neginf=-1.0), -1.0, 1.0)
         ctrl = self._ctrl_lo + (a + 1.0) * (self._ctrl_hi - self._ctrl_lo) * 0.5
         d0 = state.data
-        d = jax.lax.fori_loop(0, c.n_frames, lambda _, d: mjx.step(m, d), d0.replace(ctrl=ctrl))
+        d = d0.replace(ctrl=ctrl)
+        warp = self._data0 is not None
+        if warp:  # overflow bits of this env step only
+            d = d.replace(_impl=d._impl.replace(overflow=jnp.zeros_like(d._impl.overflow)))
+        d = jax.lax.fori_loop(0, c.n_frames, lambda _, d: mjx.step(m, d), d)
         physics_ok = (jnp.all(jnp.isfinite(d.qpos)) & jnp.all(jnp.isfinite(d.qvel))
                       & (jnp.max(jnp.abs(d.qvel)) <= c.max_qvel))
+        if warp:  # dropped contacts / constraints (more envs than warp_worlds, or njmax too small): not physics
+            physics_ok = physics_ok & jnp.all((d._impl.overflow & _WARP_DROPPED) == 0)
         invalid = ~(physics_ok & action_ok)
-        d = jax.tree.map(lambda new, old: jnp.where(invalid, old, new), d, d0)
+        d = d.where(invalid, d0)  # mjx.Data.where keeps MJX-Warp's shared contact buffers shared
 
-        x, y, z = d.qpos[0], d.qpos[1], d.qpos[2]
-        x_velocity = jnp.where(invalid, 0.0, (x - d0.qpos[0]) / self.dt)
-        torso_height = z - self.terrain_height(terrain, x, y)
+        x, y, z = d.qpos[0] - ox, d.qpos[1] - oy, d.qpos[2]  # tile-local
+        x_velocity = jnp.where(invalid, 0.0, (d.qpos[0] - d0.qpos[0]) / self.dt)
+        torso_height = z - heights(x, y)
         lo, hi = c.healthy_z_range
         healthy = (torso_height > lo) & (torso_height < hi)
         in_bounds = (jnp.abs(y) < self.radius_y - c.side_margin) & (x > -self.radius_x + 0.5 * c.start_margin)
@@ -283,7 +473,7 @@ class WalkerEnv:
         forward_reward = c.forward_reward_weight * x_velocity
         ctrl_cost = c.ctrl_cost_weight * jnp.sum(jnp.square(ctrl))
         reward = jnp.where(invalid, 0.0, forward_reward + c.healthy_reward - ctrl_cost)
-        distance = jnp.clip((x - state.x_start) / self.track_length, 0.0, 1.0)
+        distance = jnp.clip((d.qpos[0] - state.x_start) / self.track_length, 0.0, 1.0)
         f32 = lambda v: jnp.asarray(v, jnp.float32)  # noqa: E731
         metrics = {"forward_reward": f32(jnp.where(invalid, 0.0, forward_reward)), "reward_alive": f32(
             jnp.where(invalid, 0.0, c.healthy_reward)), "reward_quadctrl": f32(-ctrl_cost),
@@ -293,16 +483,18 @@ class WalkerEnv:
                            distance=f32(distance), metrics=metrics)
 
     # ----------------------------------------------------------------------------------------------------------
-    def _obs(self, data: mjx.Data, terrain: jax.Array) -> jax.Array:
+    def _obs(self, data: mjx.Data, terrain) -> jax.Array:
+        heights, (ox, oy) = self._surface(terrain)
         qpos, qvel = data.qpos, data.qvel
-        z = qpos[2] - self.terrain_height(terrain, qpos[0], qpos[1])
+        x, y = qpos[0] - ox, qpos[1] - oy
+        z = qpos[2] - heights(x, y)
         parts = [z[None], qpos[3:], qvel]
         if self.config.height_scan:
             yaw = _yaw(qpos[3:7])
             cy, sy = jnp.cos(yaw), jnp.sin(yaw)
-            px = qpos[0] + cy * self._scan[0] - sy * self._scan[1]
-            py = qpos[1] + sy * self._scan[0] + cy * self._scan[1]
-            parts.append(self.terrain_height(terrain, px, py) - qpos[2])
+            px = x + cy * self._scan[0] - sy * self._scan[1]
+            py = y + sy * self._scan[0] + cy * self._scan[1]
+            parts.append(heights(px, py) - qpos[2])
         obs = jnp.concatenate(parts).astype(jnp.float32)
         return jnp.clip(jnp.nan_to_num(obs, nan=0.0, posinf=1e4, neginf=-1e4), -1e4, 1e4)
 

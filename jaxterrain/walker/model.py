@@ -114,8 +114,11 @@ def build_spec(terrain_shape=(256, 256), scale: TerrainScale = TerrainScale(),
     friction = np.array(floor.friction).copy()
     spec.delete(floor)
     size = [float(v) for v in hfield_size((nrow, ncol), scale)]
-    hfield = spec.add_hfield(name=HFIELD_NAME, nrow=nrow, ncol=ncol, size=size)
-    hfield.userdata = [0.0] * (nrow * ncol)
+    # all-zero elevation data as MuJoCo's binary hfield format (int32 nrow, int32 ncol, float32 data) in the spec's
+    # assets: a copy of bytes, where ``userdata = [0.0] * n`` converts n Python floats (seconds for tile banks)
+    spec.assets = {**spec.assets, "terrain.bin": np.array([nrow, ncol], np.int32).tobytes()
+                   + bytes(4 * nrow * ncol)}
+    hfield = spec.add_hfield(name=HFIELD_NAME, file="terrain.bin", size=size)
     geom = spec.worldbody.add_geom(name=FLOOR_GEOM, type=mujoco.mjtGeom.mjGEOM_HFIELD, hfieldname=HFIELD_NAME,
                                    contype=0, conaffinity=1, condim=3)
     geom.friction = friction
