@@ -7,16 +7,20 @@ Presets:
   plumbing (training, checkpoints, resume, export, evaluation), not the walking.
 - ``gpu``: the real run on one H100/H200: brax's MJX-humanoid PPO recipe (``PPOConfig()`` defaults: 3072 envs,
   122 880 env steps per update, see ``jaxterrain.rl.config``), the paper-sized env (``WalkerConfig()``: 256 x 256
-  flat hfield, 1000-step episodes), 410 updates = 50.4 M env steps (``--env-steps``), stopping early if
-  ``--time-budget`` seconds (default 480) would be overrun. A checkpoint is written after every chunk of 10
-  updates: a run stopped by its budget or killed continues with ``--resume --out SAME_DIR``.
+  flat hfield, 1000-step episodes), 410 updates = 50.4 M env steps (``--env-steps``), stopping after the chunk in
+  which ``--time-budget`` seconds (default 480, less a minute kept for the evaluation) pass. The loop is
+  ``jaxterrain.driver.run_chunks``, as in ``evolve``: after every chunk of 10 updates it writes ``checkpoint.npz``
+  (the whole PPO state, env states included, so a resumed run is bit-identical to an uninterrupted one),
+  ``metrics.csv`` and TensorBoard events (``tb/``); a run stopped by its budget (or ``--time-limit MIN``) or
+  killed (exit code 3 after a time-limit stop, as ``evolve``) continues with ``--resume RUN_DIR``, which takes the
+  run's saved settings (preset, seed, env steps, solver) for the options left out.
   Measured on one H100 (2026-11-21) under the default solver (``SOLVER_SOUND``, Newton 4 / 16): ~140 k env
   steps/s, 50.4 M env steps in about 6.5 min over two commands (the first stopped by its budget at 46.7 M);
   best-5 / all-20 flat distance 1.00 / 0.98. Under ``--solver fast`` (brax's Newton 1 / 4) an H200 did ~315 k env
   steps/s, 50 M in 218 s, but that policy walks only under the fast solver (``jaxterrain.walker.SOLVER_SOUND``).
 
-Writes into ``--out RUN_DIR``: ``config.json`` (preset, options, env and PPO config), ``checkpoint.msgpack``,
-``progress.jsonl`` (one line per chunk), ``policy/`` (``policy.msgpack`` + ``config.json``, loadable with
+Writes into ``--out RUN_DIR``: ``config.json`` (command, preset, options, env and PPO config),
+``checkpoint.npz``, ``metrics.csv``, ``tb/``, ``policy/`` (``policy.msgpack`` + ``config.json``, loadable with
 ``jaxterrain.rl.load_policy``) and, once training is complete, ``eval.json``: the normalised distance of the
 deterministic policy on flat ground over 20 attempts (random joint initialisations): mean of the best 5 and mean of
 all 20 (bar for shipping: >= 0.9 and >= 0.7). ``--export-assets`` copies the policy to
@@ -33,15 +37,21 @@ PRESETS = ("smoke", "gpu")
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--preset", choices=PRESETS, default="smoke")
+    parser.add_argument("--preset", choices=PRESETS, default=None,
+                        help="smoke (default) or gpu; with --resume: the run's")
     parser.add_argument("--out", default=None, help="run folder (default runs/train-base-policy-<preset>-<time>)")
-    parser.add_argument("--resume", action="store_true", help="continue from OUT/checkpoint.msgpack")
-    parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--resume", nargs="?", const="latest", default=None, metavar="FOLDER",
+                        help="continue the run in FOLDER from its checkpoint.npz (default: --out, else the newest "
+                             "runs/train-base-policy-*)")
+    parser.add_argument("--time-limit", type=float, default=None, metavar="MIN",
+                        help="stop cleanly after about MIN minutes of training (after a checkpoint)")
+    parser.add_argument("--seed", type=int, default=None, help="PRNG seed (default 0; with --resume: the run's)")
     parser.add_argument("--env-steps", type=float, default=None,
                         help="total env steps to train (default: smoke 4 updates, gpu 410 updates = 50.4e6)")
     parser.add_argument("--time-budget", type=float, default=None,
-                        help="seconds of wall time for this process; training stops after the chunk that would "
-                             "overrun it, leaving a checkpoint (default: smoke none, gpu 480)")
+                        help="seconds of wall time for this process; training stops after the chunk in which "
+                             "the budget less the evaluation's minute passes, leaving a checkpoint (default: smoke "
+                             "none, gpu 480)")
     parser.add_argument("--updates-per-chunk", type=int, default=None,
                         help="PPO updates per jitted chunk = per checkpoint (default: smoke 2, gpu 10)")
     parser.add_argument("--num-envs", type=int, default=None, help="override PPOConfig.num_envs")
@@ -49,8 +59,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="walker contact solver: sound (default: Newton 4 iterations / 16 line-search), fast, "
                              "xml, or ITERATIONS,LS_ITERATIONS,EULERDAMP such as 4,16,0; recorded with the policy, and "
                              "difficulty.evaluate then walks it under the same options")
-    parser.add_argument("--checkpoint-env-state", action="store_true",
-                        help="also checkpoint the batched env state (bit-exact resume; large for the gpu preset)")
+    parser.add_argument("--no-progress", action="store_true", help="one line per chunk instead of a progress bar")
     parser.add_argument("--eval-attempts", type=int, default=20)
     parser.add_argument("--eval-best", type=int, default=5)
     parser.add_argument("--skip-eval", action="store_true")
@@ -141,8 +150,7 @@ class RunSettings(NamedTuple):
 class RunFolder(NamedTuple):
     """Where a run lives and how it was started."""
 
-    path: Path  # the run folder (--out)
-    checkpoint: Path  # path / "checkpoint.msgpack"
+    path: Path  # the run folder (--out / --resume FOLDER)
     command: str  # this process's command line
     config: dict  # what path / "config.json" holds
 
@@ -155,23 +163,43 @@ class TrainOrigin(NamedTuple):
 
 
 class TrainOutcome(NamedTuple):
-    """The result of :func:`train_with_checkpoints`: the last state and whether the time budget stopped it."""
+    """The result of :func:`train_with_checkpoints`: the last state and whether a time limit stopped it."""
 
     state: Any  # jaxterrain.rl training state
     stopped: bool
 
 
-class _Stop(Exception):
-    """Raised from the chunk callback to stop training before the time budget is overrun."""
+def saved_options(args: argparse.Namespace) -> argparse.Namespace:
+    """Fill the options left out (``None``) from the run's ``config.json`` when resuming (``--resume FOLDER``
+    continues the run as it was started, as in ``evolve``), then from the defaults (preset smoke, seed 0)."""
+    import json
+
+    saved = {}
+    if args.resume is not None:
+        path = _run_path(args) / "config.json"
+        saved = json.loads(path.read_text()) if path.is_file() else {}
+    solver = (saved.get("walker_config") or {}).get("solver")
+    from_run = {"preset": saved.get("preset"), "seed": saved.get("seed"), "env_steps": saved.get("env_steps"),
+                "updates_per_chunk": saved.get("updates_per_chunk"),
+                "num_envs": (saved.get("ppo_config") or {}).get("num_envs"),
+                "solver": (f"{solver['iterations']},{solver['ls_iterations']},{int(solver['eulerdamp'])}"
+                           if isinstance(solver, dict) else None)}
+    for name, value in from_run.items():
+        if getattr(args, name) is None and value is not None:
+            setattr(args, name, value)
+    args.preset = args.preset or "smoke"
+    args.seed = 0 if args.seed is None else args.seed
+    return args
 
 
 def resolve_settings(args: argparse.Namespace) -> RunSettings:
-    """The preset of ``--preset`` with the command-line overrides, checked (SystemExit names the bad option)."""
+    """The preset of ``--preset`` (default smoke) with the command-line overrides, checked (SystemExit names the
+    bad option)."""
     import math
 
     from jaxterrain import rl
 
-    env_cfg, ppo_cfg, default_steps, default_budget, default_chunk = presets()[args.preset]
+    env_cfg, ppo_cfg, default_steps, default_budget, default_chunk = presets()[args.preset or "smoke"]
     if args.solver is not None:
         from jaxterrain.walker import parse_solver
 
@@ -205,35 +233,47 @@ def _command_line() -> str:
         "train-base-policy"] else sys.argv[1:])
 
 
+def _run_path(args: argparse.Namespace) -> Path:
+    """``--resume FOLDER``; ``--resume`` alone: ``--out``, else the newest run; otherwise ``--out`` or a new
+    ``runs/train-base-policy-<preset>-<UTC time>``."""
+    from experiments.common import latest_run, run_folder
+
+    if args.resume not in (None, "latest"):
+        if args.out is not None and Path(args.out) != Path(args.resume):
+            raise SystemExit(f"--resume {args.resume} and --out {args.out} name different runs; give one of them")
+        return Path(args.resume)
+    if args.resume == "latest":
+        return Path(args.out) if args.out is not None else latest_run("train-base-policy")
+    return run_folder(f"train-base-policy-{args.preset}", args.out)
+
+
 def prepare_run_folder(args: argparse.Namespace, settings: RunSettings) -> RunFolder:
     """Create the run folder and write its ``config.json``; on ``--resume`` check the checkpoint and config."""
     import json
 
+    from jaxterrain import driver
     from jaxterrain.io import atomic_write_text
 
-    from experiments.common import run_folder
-
-    run = run_folder(f"train-base-policy-{args.preset}", args.out)
-    ckpt_path = run / "checkpoint.msgpack"
-    if args.resume and not ckpt_path.is_file():
-        raise SystemExit(f"--resume: no checkpoint at {ckpt_path}")
+    run = _run_path(args)
+    if args.resume and not (run / driver.CHECKPOINT_NAME).is_file():
+        raise SystemExit(f"--resume: no checkpoint at {run / driver.CHECKPOINT_NAME}")
     run.mkdir(parents=True, exist_ok=True)
     command = _command_line()
     run_config = {
-        "preset": args.preset, "seed": args.seed, "env_steps": settings.env_steps,
+        "command": "train-base-policy", "preset": args.preset, "seed": args.seed, "env_steps": settings.env_steps,
         "num_updates": settings.num_updates, "updates_per_chunk": settings.updates_per_chunk,
         "time_budget_s": settings.time_budget, "walker_config": _to_jsonable(settings.env_config),
-        "ppo_config": settings.ppo_config.to_json_dict(), "command": command,
+        "ppo_config": settings.ppo_config.to_json_dict(), "command_line": command,
     }
     if args.resume and (run / "config.json").is_file():
         old = json.loads((run / "config.json").read_text())
         for k in ("walker_config", "ppo_config", "seed"):
             if old.get(k) != run_config[k]:
                 raise SystemExit(f"--resume: {k} differs from the run's config.json; resume with the same options")
-        run_config["command"] = old.get("command", command)  # the command that started the run
+        run_config["command_line"] = old.get("command_line", command)  # the command that started the run
         run_config["resumed_with"] = list(old.get("resumed_with", [])) + [command]
     atomic_write_text(run / "config.json", json.dumps(run_config, indent=2) + "\n")
-    return RunFolder(run, ckpt_path, command, run_config)
+    return RunFolder(run, command, run_config)
 
 
 def _device_name() -> str:
@@ -244,103 +284,67 @@ def _device_name() -> str:
     return f"{device.platform}:{device.device_kind}"
 
 
-def init_or_resume(key, env, ppo_cfg, terrain, ckpt_path: Path, resume: bool):
-    """A fresh PPO training state (``rl.init``), or with ``resume`` the one at ``ckpt_path``.
-
-    A checkpoint without the env state resumes with freshly reset envs, so its running episode sums are zeroed.
-    """
+def init_or_resume(key, env, ppo_cfg, terrain, run: Path, resume: bool):
+    """``(state, updates done, metric history, checkpoint meta)``: a fresh PPO training state (``rl.init``), or
+    with ``resume`` the run's ``checkpoint.npz`` (``jaxterrain.driver`` format, env states included)."""
     import jax
-    import jax.numpy as jnp
 
-    from jaxterrain import rl
+    from jaxterrain import driver, rl
 
     state = jax.jit(lambda k, t: rl.init(k, env, ppo_cfg, t))(key, terrain)
-    if resume:
-        state = rl.load_checkpoint(ckpt_path, like=state)
-        meta = rl.checkpoint_metadata(ckpt_path)
-        if not meta.get("include_env_state", False):  # envs were freshly reset: drop the running episode sums
-            zero = jnp.zeros_like(state.episode.ret)
-            state = state._replace(episode=state.episode._replace(ret=zero, length=zero))
-        print(f"resumed at update {int(state.update_step)}, {int(state.env_steps):,d} env steps", flush=True)
-    return state
+    if not resume:
+        return state, 0, None, {}
+    state, done, history, meta = driver.restore(run, like=state)
+    print(f"resumed at update {done}, {int(state.env_steps):,d} env steps", flush=True)
+    return state, done, history, meta
 
 
-def training_origin(ckpt_path: Path, resume: bool, state, num_updates: int, device_name: str) -> TrainOrigin:
-    """The checkpoint's devices and commit (from its metadata on ``resume``), plus this device if it will train."""
-    from jaxterrain import rl
-
-    train_devices = []  # devices that trained this run (a resumed run may add one)
-    train_commit = _git_commit()
-    if resume:
-        old_meta = rl.checkpoint_metadata(ckpt_path)
-        train_devices = list(old_meta.get("train_devices", []))
-        train_commit = old_meta.get("train_commit", train_commit)
-    if int(state.update_step) < num_updates and device_name not in train_devices:
+def training_origin(meta: dict, done: int, num_updates: int, device_name: str) -> TrainOrigin:
+    """The devices and commit that trained the run so far (from the checkpoint's ``meta``), plus this device if
+    it will train."""
+    train_devices = list(meta.get("train_devices", []))  # devices that trained this run (a resume may add one)
+    train_commit = meta.get("train_commit", _git_commit())
+    if done < num_updates and device_name not in train_devices:
         train_devices.append(device_name)
     return TrainOrigin(train_devices, train_commit)
 
 
-class _ChunkCallback:
-    """``rl.train``'s per-chunk callback: prints and logs progress, checkpoints, and stops before the budget.
+def _print_chunk(steps_per_update: int):
+    """A ``run_chunks`` progress callable: one line per chunk (updates, env steps/s, return, loss)."""
 
-    ``last_state`` is the state of the last completed chunk (what a budget stop leaves).
-    """
+    def show(info: dict) -> None:
+        rate = info["steps_per_s"] * steps_per_update
+        print(f"update {info['done']:>6d}/{info['total']}  {rate:>10,.0f} env steps/s  "
+              f"return {info.get('episode_return', float('nan')):9.3f}  loss {info.get('loss', float('nan')):8.4f}",
+              flush=True)
 
-    def __init__(self, args, settings: RunSettings, run: RunFolder, origin: TrainOrigin, state, t_start: float):
-        import time
-
-        from jaxterrain import rl
-
-        self.args, self.settings, self.run, self.origin, self.t_start = args, settings, run, origin, t_start
-        self.progress = rl.Progress(settings.ppo_config, print_fn=lambda s: print(s, flush=True))
-        self.chunk_times: list[float] = []
-        self.last_state, self.last_t = state, time.perf_counter()
-
-    def __call__(self, s, metrics) -> None:
-        import json
-        import time
-
-        from jaxterrain import rl
-
-        args = self.args
-        line = self.progress(s, metrics)
-        rl.save_checkpoint(self.run.checkpoint, s, include_env_state=args.checkpoint_env_state,
-                           metadata={"include_env_state": args.checkpoint_env_state, "preset": args.preset,
-                                     "train_devices": self.origin.devices, "train_commit": self.origin.commit,
-                                     "command": self.run.command})
-        with open(self.run.path / "progress.jsonl", "a") as f:
-            f.write(json.dumps(line) + "\n")
-        now = time.perf_counter()
-        self.chunk_times.append(now - self.last_t)
-        self.last_state, self.last_t = s, now
-        if self._over_budget(now, int(s.update_step)):
-            raise _Stop
-
-    def _over_budget(self, now: float, update_step: int) -> bool:
-        """Would one more chunk (plus the evaluation's reserve) overrun the time budget?"""
-        budget, times = self.settings.time_budget, self.chunk_times
-        if budget is None:
-            return False
-        typical = min(times[-3:]) if len(times) > 1 else times[-1] * 0.5
-        eval_reserve = 0 if self.args.skip_eval else 60.0
-        return now - self.t_start + typical * 1.1 + eval_reserve > budget and update_step < self.settings.num_updates
+    return show
 
 
-def train_with_checkpoints(key, env, terrain, state, args, settings: RunSettings, run: RunFolder,
+def train_with_checkpoints(env, terrain, state, start: int, history, args, settings: RunSettings, run: RunFolder,
                            origin: TrainOrigin, t_start: float) -> TrainOutcome:
-    """Train the remaining updates in chunks, checkpointing after each, stopping early before the budget."""
-    from jaxterrain import rl
+    """Train updates ``[start, num_updates)`` through ``jaxterrain.driver.run_chunks``: a checkpoint, metrics.csv
+    and TensorBoard events after every chunk; stops after the chunk in which the time limit passes."""
+    import time
 
-    callback = _ChunkCallback(args, settings, run, origin, state, t_start)
-    remaining = settings.num_updates - int(state.update_step)
-    if remaining <= 0:
-        return TrainOutcome(state, False)
-    try:
-        state, _ = rl.train(key, env, settings.ppo_config, remaining, terrain, state=state, callback=callback,
-                            updates_per_chunk=settings.updates_per_chunk)
-    except _Stop:
-        return TrainOutcome(callback.last_state, True)
-    return TrainOutcome(state, False)
+    from jaxterrain import driver, rl
+
+    limits = []
+    if settings.time_budget is not None:  # the process's budget, less what has passed and the evaluation's minute
+        reserve = 0.0 if args.skip_eval else 60.0
+        limits.append(max(settings.time_budget - (time.perf_counter() - t_start) - reserve, 1e-3))
+    if args.time_limit is not None:
+        limits.append(args.time_limit * 60.0)
+    meta = {"preset": args.preset, "train_devices": origin.devices, "train_commit": origin.commit,
+            "command": "train-base-policy", "command_line": run.command}
+    cfg = settings.ppo_config
+    state, done, _ = driver.run_chunks(
+        rl.chunk_fn(env, cfg, terrain), state, total=settings.num_updates, every=settings.updates_per_chunk,
+        start=start, history=history, run_dir=run.path, key_metric="episode_return",
+        time_limit_s=min(limits) if limits else None,
+        progress=_print_chunk(cfg.steps_per_update) if args.no_progress else True,
+        desc="train-base-policy", unit="update", meta=meta)
+    return TrainOutcome(state, done < settings.num_updates)
 
 
 def save_run_policy(policy_dir: Path, state, settings: RunSettings, env) -> None:
@@ -353,15 +357,15 @@ def save_run_policy(policy_dir: Path, state, settings: RunSettings, env) -> None
 
 
 def resume_command(command: str, run: Path) -> str:
-    """``command`` without its ``--out`` / ``--resume``, plus ``--out run --resume``: how to continue the run."""
+    """``command`` without its ``--out`` / ``--resume [FOLDER]``, plus ``--resume run``: how to continue the run."""
     tokens, again = command.split(), []
     while tokens:
         tok = tokens.pop(0)
-        if tok == "--out" and tokens:
+        if tok in ("--out", "--resume") and tokens and (tok == "--out" or not tokens[0].startswith("--")):
             tokens.pop(0)
-        elif tok != "--resume" and not tok.startswith("--out="):
+        elif tok != "--resume" and not tok.startswith(("--out=", "--resume=")):
             again.append(tok)
-    return f"{' '.join(again)} --out {run} --resume"
+    return f"{' '.join(again)} --resume {run}"
 
 
 def evaluate_policy(policy_dir: Path, env, env_cfg, terrain, seed: int, attempts: int, best: int,
@@ -421,7 +425,7 @@ def build_provenance(args, run: RunFolder, state, origin: TrainOrigin, device_na
     import jax
 
     return {
-        "command": run.config["command"], "resumed_with": run.config.get("resumed_with", []),
+        "command": run.config["command_line"], "resumed_with": run.config.get("resumed_with", []),
         "preset": args.preset, "seed": args.seed, "env_steps": int(state.env_steps),
         "updates": int(state.update_step), "commit": origin.commit, "export_commit": _git_commit(),
         "device": ", ".join(origin.devices) or "unknown", "eval_device": device_name, "jax": jax.__version__,
@@ -472,7 +476,7 @@ def main(args: argparse.Namespace) -> int:
     from jaxterrain import rl
     from jaxterrain.walker import WalkerEnv
 
-    settings = resolve_settings(args)
+    settings = resolve_settings(saved_options(args))
     run = prepare_run_folder(args, settings)
     device_name = _device_name()
     ppo_cfg, total_steps = settings.ppo_config, settings.num_updates * settings.ppo_config.steps_per_update
@@ -482,16 +486,16 @@ def main(args: argparse.Namespace) -> int:
 
     env = WalkerEnv(settings.env_config)
     terrain = jnp.zeros(tuple(settings.env_config.terrain_shape), jnp.float32)  # flat ground
-    key = jax.random.PRNGKey(args.seed)
-    state = init_or_resume(key, env, ppo_cfg, terrain, run.checkpoint, args.resume)
-    origin = training_origin(run.checkpoint, args.resume, state, settings.num_updates, device_name)
-    outcome = train_with_checkpoints(key, env, terrain, state, args, settings, run, origin, t_start)
+    state, start, history, meta = init_or_resume(jax.random.PRNGKey(args.seed), env, ppo_cfg, terrain, run.path,
+                                                 bool(args.resume))
+    origin = training_origin(meta, start, settings.num_updates, device_name)
+    outcome = train_with_checkpoints(env, terrain, state, start, history, args, settings, run, origin, t_start)
     state, steps_done, train_s = outcome.state, int(outcome.state.env_steps), time.perf_counter() - t_start
     save_run_policy(run.path / "policy", state, settings, env)
     if outcome.stopped:
-        print(f"time budget reached at {steps_done:,d} / {total_steps:,d} env steps ({train_s:.0f} s); "
+        print(f"time limit reached at {steps_done:,d} / {total_steps:,d} env steps ({train_s:.0f} s); "
               f"continue with: {resume_command(run.command, run.path)}", flush=True)
-        return 0
+        return 3  # as evolve: stopped by the time limit, resumable
     print(f"training done: {steps_done:,d} env steps in {train_s:.0f} s", flush=True)
     if args.skip_eval:
         return 0

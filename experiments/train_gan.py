@@ -14,7 +14,8 @@ steps; on in the gpu preset: without it the discriminator wins after ~3000 steps
 The loop is ``jaxterrain.driver.run_chunks``, as in ``evolve``: every ``--ckpt-every`` steps it writes
 ``checkpoint.npz`` (params, batch statistics, optimiser states, step and key; the previous one kept as
 ``checkpoint.prev.npz``), ``metrics.csv`` and TensorBoard events (``tb/``); ``--time-limit MIN`` stops after a
-checkpoint and ``--resume FOLDER`` continues the run bit-identically. The run folder also gets ``config.json``
+checkpoint (exit code 3, as ``evolve``) and ``--resume FOLDER`` continues the run bit-identically with the
+settings saved in its ``config.json``. The run folder also gets ``config.json``
 (command, arguments, config), ``log.jsonl`` (every ``--log-every`` steps), ``samples/step_<8-digit step>.png`` (a
 fixed-latent grid, plus ``real.png``), ``final/`` (``generator.msgpack`` + ``config.json``, loadable with
 ``generators.get("gan", weights="<run>/final")``) and ``quality.json``
@@ -47,7 +48,8 @@ PRESETS: dict[str, dict[str, Any]] = {
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--preset", choices=sorted(PRESETS), default="smoke", help="size of the run (default smoke)")
+    parser.add_argument("--preset", choices=sorted(PRESETS), default=None,
+                        help="size of the run (default smoke; with --resume: the run's)")
     parser.add_argument("--steps", type=int, help="total training steps (default: the preset's)")
     parser.add_argument("--batch-size", type=int, help="patches per step (default: the preset's)")
     parser.add_argument("--size", type=int, help="heightmap side; must fit the preset's architecture")
@@ -58,8 +60,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "runs/train-gan-*)")
     parser.add_argument("--time-limit", type=float, default=None, metavar="MIN",
                         help="stop cleanly after about MIN minutes (after a checkpoint); continue with --resume")
-    parser.add_argument("--seed", type=int, default=0)
-    parser.add_argument("--lr", type=float, default=2e-4, help="Adam learning rate of both networks (2e-4)")
+    parser.add_argument("--seed", type=int, default=None, help="PRNG seed (default 0; with --resume: the run's)")
+    parser.add_argument("--lr", type=float, default=None, help="Adam learning rate of both networks (2e-4)")
     parser.add_argument("--r1", type=float, help="R1 penalty weight on real data, applied lazily every 8 steps "
                         "(0 = off; default: the preset's)")
     parser.add_argument("--sample-every", type=int, help="steps between sample grids")
@@ -186,9 +188,31 @@ def _scales():
 # ----------------------------------------------------------------------------------------------------------------
 
 
+_RESOLVED = ("steps", "batch_size", "size", "sample_every", "ckpt_every", "log_every", "quality_samples", "r1")
+
+
+def saved_options(args) -> None:
+    """Fill the options left out (``None``) from the run's ``config.json`` when resuming (``--resume FOLDER``
+    continues the run as it was started, as in ``evolve``), then from the defaults (smoke, seed 0, lr 2e-4)."""
+    saved = {}
+    if args.resume is not None:
+        path = _run_path(args) / "config.json"
+        saved = json.loads(path.read_text()) if path.is_file() else {}
+    resolved = saved.get("resolved") or {}
+    from_run = {"preset": saved.get("preset"), "seed": resolved.get("seed"), "lr": resolved.get("lr"),
+                **{name: resolved.get(name) for name in _RESOLVED}}
+    for name, value in from_run.items():
+        if getattr(args, name, None) is None and value is not None:
+            setattr(args, name, value)
+    args.preset = args.preset or "smoke"
+    args.seed = 0 if args.seed is None else args.seed
+    args.lr = 2e-4 if args.lr is None else args.lr
+
+
 def _resolve(args) -> dict:
+    saved_options(args)
     preset = dict(PRESETS[args.preset])
-    for name in ("steps", "batch_size", "size", "sample_every", "ckpt_every", "log_every", "quality_samples", "r1"):
+    for name in _RESOLVED:
         if getattr(args, name, None) is not None:
             preset[name] = getattr(args, name)
         setattr(args, name, preset[name])
@@ -228,19 +252,23 @@ def make_config(preset: dict):
                      disc_channels=tuple(preset["disc_channels"])).check()
 
 
-def prepare_run_dir(args) -> Path:
-    """The run folder, created: ``--resume FOLDER``; ``--resume`` alone: ``--out``, else the newest
-    ``runs/train-gan-*``; otherwise ``--out`` or ``runs/train-gan-<UTC time>``."""
+def _run_path(args) -> Path:
+    """``--resume FOLDER``; ``--resume`` alone: ``--out``, else the newest ``runs/train-gan-*``; otherwise ``--out``
+    or ``runs/train-gan-<UTC time>``."""
     from experiments.common import latest_run, run_folder
 
     if args.resume not in (None, "latest"):
-        run_dir = Path(args.resume)
-        if args.out is not None and Path(args.out) != run_dir:
-            raise ValueError(f"--resume {run_dir} and --out {args.out} name different runs; give one of them")
-    elif args.resume == "latest":
-        run_dir = Path(args.out) if args.out is not None else latest_run("train-gan")
-    else:
-        run_dir = run_folder("train-gan", args.out)
+        if args.out is not None and Path(args.out) != Path(args.resume):
+            raise ValueError(f"--resume {args.resume} and --out {args.out} name different runs; give one of them")
+        return Path(args.resume)
+    if args.resume == "latest":
+        return Path(args.out) if args.out is not None else latest_run("train-gan")
+    return run_folder("train-gan", args.out)
+
+
+def prepare_run_dir(args) -> Path:
+    """The run folder (see :func:`_run_path`), created."""
+    run_dir = _run_path(args)
     run_dir.mkdir(parents=True, exist_ok=True)
     return run_dir
 
@@ -425,8 +453,8 @@ def main(args: argparse.Namespace) -> int:
     outcome = train(args, run_dir, config, data.tiles)
     if outcome.done < args.steps:
         print(f"time limit reached at step {outcome.done} of {args.steps}; continue with: "
-              f"python -m experiments train-gan --resume {run_dir} (and the same options)", flush=True)
-        return 0
+              f"python -m experiments train-gan --resume {run_dir}", flush=True)
+        return 3  # as evolve: stopped by the time limit, resumable
     variables = {"params": outcome.state.g_params, "batch_stats": outcome.state.g_stats}
     save_generator(run_dir / "final", config, variables)
     quality = run_quality(args, run_dir, config, variables, data.tiles)

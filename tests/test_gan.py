@@ -208,10 +208,10 @@ def test_train_checkpoint_resume_bit_equal(tmp_path, monkeypatch):
     parser = argparse.ArgumentParser()
     train_gan.add_arguments(parser)
     assert train_gan.main(_args(tmp_path / "b", 2, resume=True)) == 0
-    assert train_gan.main(parser.parse_args(
-        ["--preset", "smoke", "--size", "32", "--batch-size", "2", "--steps", "3", "--ckpt-every", "1",
-         "--sample-every", "1", "--log-every", "1", "--quality-samples", "0", "--no-progress",
-         "--resume", str(tmp_path / "b")])) == 0
+    # --resume FOLDER alone takes the run's settings from its config.json (only --steps changes here)
+    assert train_gan.main(parser.parse_args(["--resume", str(tmp_path / "b"), "--steps", "3", "--no-progress"])) == 0
+    saved = json.loads((tmp_path / "b" / "config.json").read_text())
+    assert saved["command"] == "train-gan" and saved["resolved"]["batch_size"] == 2 and saved["resolved"]["steps"] == 3
     a = (tmp_path / "a" / "final" / "generator.msgpack").read_bytes()
     b = (tmp_path / "b" / "final" / "generator.msgpack").read_bytes()
     assert a == b  # bit-equal generator after resume
@@ -247,7 +247,7 @@ def test_train_time_limit_stops_after_a_checkpoint(tmp_path, monkeypatch):
     like = gan_train.init_state(jax.random.PRNGKey(0), G.GanConfig(size=32, channels=(16, 8, 4),
                                                                      disc_channels=(8, 16)))
     # a limit of 0.6 ms: the run stops after its first chunk, with a checkpoint and no final/ folder
-    assert train_gan.main(_args(tmp_path / "c", 3, extra=["--time-limit", "0.00001"])) == 0
+    assert train_gan.main(_args(tmp_path / "c", 3, extra=["--time-limit", "0.00001"])) == 3  # as evolve
     assert driver.restore(tmp_path / "c", like)[1] == 1
     assert not (tmp_path / "c" / "final").exists()
     with pytest.raises(ValueError, match="different runs"):

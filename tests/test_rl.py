@@ -187,7 +187,7 @@ def test_checkpoint_round_trip_and_resume_equals_uninterrupted(tmp_path):
     full, _ = rl.train(key, env, CFG, 4, TERRAIN, state=s0, updates_per_chunk=2)
 
     half, _ = rl.train(key, env, CFG, 2, TERRAIN, state=s0, updates_per_chunk=2)
-    path = tmp_path / "ckpt.msgpack"
+    path = tmp_path / "ckpt.npz"
     rl.save_checkpoint(path, half)
     loaded = rl.load_checkpoint(path, like=s0)
     assert tree_equal(loaded, half)  # bit-equal params, Adam state, normaliser, env state, counters, key
@@ -197,8 +197,8 @@ def test_checkpoint_round_trip_and_resume_equals_uninterrupted(tmp_path):
     assert not tree_equal(half.params, full.params)
 
     # without the env state: params etc. restored, env state taken from `like`
-    rl.save_checkpoint(tmp_path / "small.msgpack", half, include_env_state=False)
-    small = rl.load_checkpoint(tmp_path / "small.msgpack", like=s0)
+    rl.save_checkpoint(tmp_path / "small.npz", half, include_env_state=False)
+    small = rl.load_checkpoint(tmp_path / "small.npz", like=s0)
     assert tree_equal(small.params, half.params) and tree_equal(small.env_state, s0.env_state)
     # a checkpoint of another config is refused with the leaf named
     other = rl.init(key, env, CFG._replace(policy_hidden=(8,)), TERRAIN)
@@ -263,3 +263,68 @@ def test_policy_export_and_load(tmp_path, monkeypatch):
     monkeypatch.setattr(rl.checkpoint, "BASE_POLICY_DIR", tmp_path / "missing")
     with pytest.raises(FileNotFoundError, match="train-base-policy"):
         rl.load_policy()
+
+
+def test_driver_resume_equals_uninterrupted(tmp_path):
+    """rl.chunk_fn under jaxterrain.driver.run_chunks: a run stopped after one chunk and restored from its
+    checkpoint.npz ends bit-identical (state and metric history) to an uninterrupted one; rl.train(run_dir=...)
+    writes the same files."""
+    from jaxterrain import driver
+
+    key = jax.random.PRNGKey(11)
+    s0 = rl.init(key, ENV, CFG, TERRAIN)
+    chunk = rl.chunk_fn(ENV, CFG, TERRAIN)
+    full, done, h_full = driver.run_chunks(chunk, s0, total=4, every=2, run_dir=tmp_path / "a", progress=False)
+    assert done == 4 and int(full.update_step) == 4 and len(h_full["loss"]) == 4
+    _, done, _ = driver.run_chunks(chunk, s0, total=4, every=2, run_dir=tmp_path / "b", progress=False,
+                                   time_limit_s=1e-6)
+    assert done == 2  # stopped after the first chunk, checkpoint written
+    state, start, history, _ = driver.restore(tmp_path / "b", like=s0)
+    assert start == 2 and int(state.update_step) == 2 and len(history["loss"]) == 2
+    resumed, done, h_res = driver.run_chunks(chunk, state, total=4, every=2, start=start, history=history,
+                                             run_dir=tmp_path / "b", progress=False)
+    assert done == 4 and tree_equal(resumed, full) and h_res == h_full
+    rows = (tmp_path / "b" / "metrics.csv").read_text().splitlines()
+    assert [r.split(",")[0] for r in rows[1:]] == ["1", "2", "3", "4"]
+    # the library entry point: same state as the driver loop, the checkpoint loads with rl.load_checkpoint
+    trained, metrics = rl.train(key, ENV, CFG, 4, TERRAIN, state=s0, updates_per_chunk=2, run_dir=tmp_path / "c")
+    assert tree_equal(trained, full) and metrics["loss"].shape == (4,)
+    np.testing.assert_array_equal(metrics["loss"], np.asarray(h_full["loss"], np.float32))
+    assert tree_equal(rl.load_checkpoint(tmp_path / "c" / driver.CHECKPOINT_NAME, like=s0), full)
+
+
+@pytest.mark.slow
+def test_train_base_policy_resume_bit_identical(tmp_path):
+    """train-base-policy --preset smoke: stopped by --time-limit after one chunk, then --resume FOLDER, ends with
+    the same policy bytes and checkpoint as an uninterrupted run (MJX compiles: minutes on 2 CPU cores)."""
+    import argparse
+
+    from experiments import train_base_policy as tbp
+    from jaxterrain import driver
+
+    parser = argparse.ArgumentParser()
+    tbp.add_arguments(parser)
+    common = ["--preset", "smoke", "--skip-eval", "--no-progress"]
+    assert tbp.main(parser.parse_args(common + ["--out", str(tmp_path / "a")])) == 0
+    assert tbp.main(parser.parse_args(common + ["--out", str(tmp_path / "b"), "--time-limit", "1e-6"])) == 3
+    cfg_b = json.loads((tmp_path / "b" / "config.json").read_text())
+    assert cfg_b["command"] == "train-base-policy" and cfg_b["num_updates"] == 4
+    # --resume FOLDER alone continues the run with its saved settings (preset, seed, steps), as in evolve
+    assert tbp.main(parser.parse_args(["--resume", str(tmp_path / "b"), "--skip-eval", "--no-progress"])) == 0
+    for name in ("policy.msgpack", "config.json"):
+        assert (tmp_path / "a" / "policy" / name).read_bytes() == (tmp_path / "b" / "policy" / name).read_bytes()
+    like = _like_base_policy(tbp)
+    (sa, da, ha, _), (sb, db, hb, meta) = (driver.restore(tmp_path / r, like=like) for r in ("a", "b"))
+    assert da == db == 4 and tree_equal(sa, sb) and ha == hb
+    assert meta["command"] == "train-base-policy" and meta["train_devices"]
+    assert json.loads((tmp_path / "b" / "config.json").read_text())["resumed_with"]
+
+
+def _like_base_policy(tbp):
+    """A fresh smoke-preset PPO state (the structure of a train-base-policy checkpoint)."""
+    from jaxterrain.walker import WalkerEnv
+
+    env_cfg, ppo_cfg = tbp.presets()["smoke"][:2]
+    env = WalkerEnv(env_cfg)
+    return jax.jit(lambda k, t: rl.init(k, env, ppo_cfg, t))(
+        jax.random.PRNGKey(0), jnp.zeros(tuple(env_cfg.terrain_shape), jnp.float32))

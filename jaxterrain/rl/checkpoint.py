@@ -1,9 +1,11 @@
 """Checkpoints of a whole :class:`~jaxterrain.rl.ppo.TrainState` and export / loading of a deterministic policy.
 
-Checkpoint (``save_checkpoint``): one msgpack file (flax.serialization) mapping every leaf's tree path
-(``jax.tree_util.keystr``, e.g. ``.params['policy']['params']['mlp']['hidden_0']['kernel']``) to its array: params,
-Adam state, normaliser, episode counters, key, step counters and (by default) the batched env state, so that a
-resumed run is bit-identical to an uninterrupted one. Written atomically through :mod:`jaxterrain.io`.
+Checkpoint (``save_checkpoint``): the one checkpoint format of the project, ``jaxterrain.driver``'s npz (every leaf
+under its tree path, e.g. ``.params['policy']['params']['mlp']['hidden_0']['kernel']``): params, Adam state,
+normaliser, episode counters, key, step counters and (by default) the batched env state, so that a resumed run is
+bit-identical to an uninterrupted one. ``done`` is the update step; the header's ``meta`` holds
+``{"format": CHECKPOINT_FORMAT, "include_env_state": bool, "metadata": {...}}``. A ``run_dir/checkpoint.npz``
+written by ``rl.train(..., run_dir=...)`` or ``jaxterrain.driver.run_chunks`` loads the same way.
 
 Policy (``save_policy``): a folder with ``policy.msgpack`` (``{"params": {"policy", "value"}, "normaliser"}``)
 and ``config.json`` (the :class:`PPOConfig`, observation and action sizes). ``load_policy()`` without a path
@@ -22,47 +24,46 @@ import jax.numpy as jnp
 import numpy as np
 from flax import serialization
 
+from jaxterrain import driver
 from jaxterrain.io import atomic_write_bytes, atomic_write_text
 from jaxterrain.rl import networks as nets
 from jaxterrain.rl.config import PPOConfig
 
-CHECKPOINT_FORMAT = "jaxterrain.rl.checkpoint/1"
+CHECKPOINT_FORMAT = "jaxterrain.rl.checkpoint/2"
 POLICY_FORMAT = "jaxterrain.rl.policy/1"
 BASE_POLICY_DIR = Path(__file__).resolve().parent.parent / "assets" / "base_policy"
 
 
-def _is_key_array(x) -> bool:
-    return hasattr(x, "dtype") and jnp.issubdtype(x.dtype, jax.dtypes.prng_key)
-
-
 def save_checkpoint(path: str | os.PathLike, state: Any, include_env_state: bool = True,
                     metadata: Optional[dict] = None) -> Path:
-    """Write ``state`` (a TrainState or any pytree of arrays) to ``path`` atomically.
+    """Write ``state`` (a TrainState or any pytree of arrays) to ``path`` atomically (``jaxterrain.driver``'s npz).
 
     ``include_env_state=False`` leaves out ``state.env_state`` (smaller; :func:`load_checkpoint` then keeps the
     env state of ``like``). ``metadata``: a JSON-serialisable dict stored alongside (e.g. the config).
     """
     if not include_env_state and hasattr(state, "_replace"):
         state = state._replace(env_state=None)
-    leaves = {}
-    for path_elems, leaf in jax.tree_util.tree_flatten_with_path(state)[0]:
-        name = jax.tree_util.keystr(path_elems)
-        if _is_key_array(leaf):
-            leaf = jax.random.key_data(leaf)
-        leaves[name] = np.asarray(jax.device_get(leaf))
-    payload = {
-        "format": CHECKPOINT_FORMAT,
-        "include_env_state": include_env_state,
-        "metadata": json.dumps(metadata or {}),
-        "leaves": leaves,
-    }
-    return atomic_write_bytes(path, serialization.msgpack_serialize(payload))
+    step = getattr(state, "update_step", None)
+    done = int(np.max(np.asarray(step))) if step is not None else 0
+    meta = {"format": CHECKPOINT_FORMAT, "include_env_state": bool(include_env_state), "metadata": metadata or {}}
+    return driver.save_checkpoint(path, state, done=done, meta=meta)
+
+
+def _header_meta(path: Path) -> dict:
+    """The ``meta`` of a driver checkpoint's header, without a template state."""
+    if not path.is_file():
+        raise FileNotFoundError(f"checkpoint not found: {path}")
+    try:
+        with np.load(path, allow_pickle=False) as data:
+            header = json.loads(bytes(data["header"]).decode("utf-8"))
+    except (OSError, ValueError, KeyError, EOFError) as err:
+        raise ValueError(f"{path}: not a readable jaxterrain checkpoint ({err})") from err
+    return dict(header.get("meta") or {})
 
 
 def checkpoint_metadata(path: str | os.PathLike) -> dict:
     """The ``metadata`` dict stored by :func:`save_checkpoint`."""
-    payload = serialization.msgpack_restore(Path(path).read_bytes())
-    return json.loads(payload.get("metadata", "{}"))
+    return dict(_header_meta(Path(path)).get("metadata") or {})
 
 
 def load_checkpoint(path: str | os.PathLike, like: Any) -> Any:
@@ -71,36 +72,12 @@ def load_checkpoint(path: str | os.PathLike, like: Any) -> Any:
     Every leaf must be present with the same shape and dtype; otherwise ``ValueError`` names the leaf.
     """
     path = Path(path)
-    if not path.is_file():
-        raise FileNotFoundError(f"checkpoint not found: {path}")
-    payload = serialization.msgpack_restore(path.read_bytes())
-    if payload.get("format") != CHECKPOINT_FORMAT:
-        raise ValueError(f"{path}: not a {CHECKPOINT_FORMAT} file (format={payload.get('format')!r})")
-    stored = payload["leaves"]
-    keep_env = not payload["include_env_state"] and hasattr(like, "_replace")
+    meta = _header_meta(path)
+    if meta.get("format", CHECKPOINT_FORMAT) != CHECKPOINT_FORMAT:  # no format: a driver run's checkpoint
+        raise ValueError(f"{path}: not a {CHECKPOINT_FORMAT} file (format={meta.get('format')!r})")
+    keep_env = not meta.get("include_env_state", True) and hasattr(like, "_replace")
     target = like._replace(env_state=None) if keep_env else like
-    flat, treedef = jax.tree_util.tree_flatten_with_path(target)
-    out = []
-    for path_elems, leaf in flat:
-        name = jax.tree_util.keystr(path_elems)
-        if name not in stored:
-            raise ValueError(f"{path}: checkpoint has no leaf {name}; it was saved from a different config/env")
-        arr = np.asarray(stored[name])
-        if _is_key_array(leaf):
-            ref = jax.random.key_data(leaf)
-            if arr.shape != ref.shape:
-                raise ValueError(f"{path}: leaf {name} has shape {arr.shape}, expected {ref.shape}")
-            out.append(jax.random.wrap_key_data(jnp.asarray(arr), impl=jax.random.key_impl(leaf)))
-            continue
-        ref_shape, ref_dtype = np.shape(leaf), np.asarray(leaf).dtype if not hasattr(leaf, "dtype") else leaf.dtype
-        if arr.shape != tuple(ref_shape) or arr.dtype != ref_dtype:
-            raise ValueError(
-                f"{path}: leaf {name} is {arr.dtype}{list(arr.shape)}, expected {ref_dtype}{list(ref_shape)}")
-        out.append(jnp.asarray(arr))
-    extra = set(stored) - {jax.tree_util.keystr(p) for p, _ in flat}
-    if extra:
-        raise ValueError(f"{path}: checkpoint has leaves not in `like`: {sorted(extra)[:5]}")
-    restored = jax.tree_util.tree_unflatten(treedef, out)
+    restored, _, _, _ = driver.load_checkpoint(path, target)
     if keep_env:
         restored = restored._replace(env_state=like.env_state)
     return restored

@@ -387,10 +387,26 @@ def _is_seed_batch(key) -> bool:
     return key.ndim == 2
 
 
+def chunk_fn(env: EnvLike, config: PPOConfig, terrains: jax.Array, batched: bool = False,
+             terrain_seed_axis: Optional[int] = None) -> Callable[[TrainState, int, int], tuple[TrainState, dict]]:
+    """The ``jaxterrain.driver.run_chunks`` chunk of PPO: ``(state, start, stop) -> (state, metrics)`` runs
+    ``stop - start`` updates (:func:`compiled_chunk`, cached per length) on ``terrains``; metrics are numpy arrays
+    [stop - start] (or [S, stop - start] for a batch of seeds, ``batched``)."""
+
+    def chunk(state: TrainState, start: int, stop: int):
+        fn = compiled_chunk(env, config, stop - start, batched, terrain_seed_axis)
+        state, metrics = fn(state, terrains)
+        return state, jax.tree_util.tree_map(np.asarray, metrics)
+
+    return chunk
+
+
 def train(key: jax.Array, env: EnvLike, config: PPOConfig, num_updates: int, terrains: jax.Array,
           state: Optional[TrainState] = None, callback: Optional[Callable[[TrainState, dict], Any]] = None,
-          updates_per_chunk: int = 10):
-    """Run ``num_updates`` PPO updates in jitted chunks of ``updates_per_chunk`` (a ``lax.scan`` each).
+          updates_per_chunk: int = 10, *, run_dir=None, time_limit_s: Optional[float] = None,
+          progress: Any = False, meta: Optional[dict] = None):
+    """Run ``num_updates`` PPO updates in jitted chunks of ``updates_per_chunk`` (a ``lax.scan`` each), through
+    ``jaxterrain.driver.run_chunks``.
 
     Args:
       key: PRNG key; seeds :func:`init` when ``state`` is None (otherwise unused: the update keys come from
@@ -401,11 +417,16 @@ def train(key: jax.Array, env: EnvLike, config: PPOConfig, num_updates: int, ter
       terrains: [num_envs, H, W] or [H, W], shared by all seeds ([S, num_envs, H, W] gives each seed its own).
       state: continue from this :class:`TrainState` (e.g. a loaded checkpoint).
       callback: ``callback(state, metrics)`` on the host after every chunk, metrics a dict of numpy arrays
-        [chunk] (or [S, chunk]); use it for progress output and checkpoints.
+        [chunk] (or [S, chunk]).
       updates_per_chunk: updates per jitted call (a last shorter chunk compiles once more).
+      run_dir, time_limit_s, progress, meta: as in ``jaxterrain.driver.run_chunks`` (a checkpoint, metrics.csv
+        and TensorBoard events in ``run_dir`` after every chunk; stop after ``time_limit_s``; a progress bar).
 
-    Returns ``(state, metrics)``: the final state and a dict of numpy arrays [num_updates] ([S, num_updates]).
+    Returns ``(state, metrics)``: the final state and a dict of numpy arrays [n] ([S, n]), n = the updates run
+    (``num_updates`` unless the time limit stopped it earlier).
     """
+    from jaxterrain import driver
+
     if not isinstance(num_updates, int) or num_updates < 0:
         raise ValueError(f"num_updates must be an integer >= 0, got {num_updates!r}")
     if not isinstance(updates_per_chunk, int) or updates_per_chunk < 1:
@@ -420,16 +441,18 @@ def train(key: jax.Array, env: EnvLike, config: PPOConfig, num_updates: int, ter
             init_fn = jax.vmap(init_fn, in_axes=(0, terrain_seed_axis))
         state = jax.jit(init_fn)(_raw_key(key) if not batched else key, terrains)
     history = []
-    done = 0
-    while done < num_updates:
-        n = min(updates_per_chunk, num_updates - done)
-        chunk = compiled_chunk(env, config, n, batched, terrain_seed_axis)
-        state, metrics = chunk(state, terrains)
-        metrics = jax.tree_util.tree_map(np.asarray, metrics)
+    run = chunk_fn(env, config, terrains, batched, terrain_seed_axis)
+
+    def chunk(s, start, stop):
+        s, metrics = run(s, start, stop)
         history.append(metrics)
-        done += n
         if callback is not None:
-            callback(state, metrics)
+            callback(s, metrics)
+        return s, metrics
+
+    state, _, _ = driver.run_chunks(chunk, state, total=num_updates, every=updates_per_chunk, run_dir=run_dir,
+                                    time_limit_s=time_limit_s, progress=progress, desc="ppo", unit="update",
+                                    key_metric="episode_return", meta=meta)
     if history:
         axis = 1 if batched else 0
         metrics = {name: np.concatenate([h[name] for h in history], axis=axis) for name in history[0]}
