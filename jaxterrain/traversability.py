@@ -61,8 +61,8 @@ from jaxterrain.terrain import TerrainScale, validate_scale
 
 __all__ = ["PATCH", "MAP_STRIDE", "ASSET_DIR", "LabelConfig", "ModelConfig", "TrainConfig", "Walks", "PatchCNN",
            "ZeroSumConv", "walk", "walk_fn", "window_labels", "labelled_centres", "extract_patches",
-           "extract_patches_batch", "pixel_of", "balanced_indices", "init_params", "apply_patches", "logit_map", "traversability_map",
-           "descriptor", "make_descriptor", "train", "roc_auc", "accuracy", "save", "load", "shipped", "Model"]
+           "extract_patches_batch", "pixel_of", "balanced_indices", "init_params", "apply_patches", "logit_map",
+           "traversability_map", "descriptor", "make_descriptor", "train", "roc_auc", "accuracy", "save", "load", "shipped", "Model"]
 
 PATCH = 32  # pixels (1.28 m at 0.04 m per pixel)
 MAP_STRIDE = 8  # pixels between neighbouring patches of a traversability map (the network's total stride)
