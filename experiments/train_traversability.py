@@ -12,8 +12,12 @@
    ``jaxterrain/assets/traversability/`` with a ``PROVENANCE.md``.
 
 Presets: ``smoke`` (seconds of walking; a tiny model; tests), ``cpu`` (a few thousand patches and a few minutes of
-training on a 2-core CPU: the shipped model), ``gpu`` (64x the walks and 8x the training, for a later GPU run).
-``--resume RUN`` reuses the data files already written.
+training on a 2-core CPU: the shipped model), ``gpu`` (64x the walks and 8x the training steps; ready, not run yet:
+on the GPU machine, whose commands stop at 10 minutes, run it as
+``train-traversability --preset gpu --time-limit 8 --out RUN --export-assets``, then ``--resume RUN
+--export-assets`` until it exits 0).
+``--resume RUN`` reuses what is written: the data files, the final model (``model/``) and the held-out rows
+(``heldout.json``); ``--time-limit MIN`` stops between generators' walks and between held-out models (exit code 3).
 """
 
 from __future__ import annotations
@@ -114,8 +118,9 @@ def _train_eval(key, train_x, train_y, test_x, test_y, cfg: dict, log=None):
                           "accuracy": trav.accuracy(scores, test_y), "auc": trav.roc_auc(scores, test_y)}
 
 
-def load_or_collect(folder: Path, names, cfg: dict, key) -> dict:
-    """``{generator: balanced {"patches", "labels"}}`` plus counts, walking only generators without a data file."""
+def load_or_collect(folder: Path, names, cfg: dict, key, clock: common.Clock | None = None) -> dict:
+    """``{generator: balanced {"patches", "labels"}}`` plus counts, walking only generators without a data file
+    (``clock``: raises :class:`common.TimeUp` before walking another generator once the time limit has passed)."""
     import time
 
     import jax
@@ -123,10 +128,13 @@ def load_or_collect(folder: Path, names, cfg: dict, key) -> dict:
 
     from jaxterrain.io import atomic_save_npz
 
-    data = {}
+    data, walked = {}, False
     for gi, name in enumerate(names):
         path = folder / f"data_{name}.npz"
         if not path.exists():
+            if clock is not None and walked:
+                clock.check()
+            walked = True
             t0 = time.time()
             raw = collect(name, cfg, jax.random.fold_in(key, gi), jax.random.fold_in(key, 100 + gi),
                           progress=lambda m: print(m, flush=True))
@@ -140,20 +148,28 @@ def load_or_collect(folder: Path, names, cfg: dict, key) -> dict:
     return data
 
 
-def heldout(data: dict, cfg: dict, key) -> list[dict]:
-    """Leave-one-generator-out: a model per generator trained on the others, scored on it."""
+def heldout(data: dict, cfg: dict, key, folder: Path, clock: common.Clock | None = None) -> list[dict]:
+    """Leave-one-generator-out: a model per generator trained on the others, scored on it. Rows so far are kept in
+    ``folder/heldout.json`` and reused (``--resume``); ``clock`` raises :class:`common.TimeUp` between models."""
     import jax
     import numpy as np
 
-    rows = []
+    from jaxterrain.io import atomic_write_text
+
+    path = folder / "heldout.json"
+    rows = json.loads(path.read_text()) if path.exists() else []
+    done = {r["left_out"] for r in rows}
     for gi, left in enumerate(data):
         others = [g for g in data if g != left and len(data[g]["labels"])]
-        if not others or not len(data[left]["labels"]):
+        if left in done or not others or not len(data[left]["labels"]):
             continue
+        if clock is not None and len(rows) > len(done):
+            clock.check()
         tx = np.concatenate([data[g]["patches"] for g in others])
         ty = np.concatenate([data[g]["labels"] for g in others])
         _, _, m = _train_eval(jax.random.fold_in(key, gi), tx, ty, data[left]["patches"], data[left]["labels"], cfg)
         rows.append({"left_out": left, **m})
+        atomic_write_text(path, json.dumps(rows, indent=2) + "\n")
         print(f"  held out {left}: accuracy {m['accuracy']:.3f}, ROC AUC {m['auc']:.3f} "
               f"(train {m['n_train']}, test {m['n_test']})", flush=True)
     return rows
@@ -264,7 +280,8 @@ def export(folder: Path, params, mcfg, cfg: dict, data: dict, rows: list, final:
     from jaxterrain.io import atomic_write_text
 
     trav.save(folder / "model", params, mcfg, extra={"label": cfg["label"], "final": final, "heldout": rows,
-                                                      "device": _device(), "date": date, "commit": _git_commit()})
+                                                      "device": _device(), "date": date, "commit": _git_commit(),
+                                                      "seconds": seconds})
     atomic_write_text(folder / "model" / "PROVENANCE.md", provenance(cfg, data, rows, final, seconds, date))
     if to_assets:
         trav.ASSET_DIR.mkdir(parents=True, exist_ok=True)
@@ -281,17 +298,29 @@ def main(args) -> int:
 
     import jax
 
+    from jaxterrain import traversability as trav
     from jaxterrain.io import atomic_write_text
 
     folder, cfg = common.setup_run("train-traversability", args, PRESETS, "cpu", overrides(args))
     print(f"train-traversability: {folder}  device {_device()}", flush=True)
     key = jax.random.key(int(cfg["seed"]))
+    clock = common.Clock(args.time_limit)
     t0 = time.time()
-    data = load_or_collect(folder, list(cfg["generators"]), cfg, jax.random.fold_in(key, 0))
+    try:
+        data = load_or_collect(folder, list(cfg["generators"]), cfg, jax.random.fold_in(key, 0), clock)
+    except common.TimeUp:
+        print(f"time limit reached; continue with: python -m experiments train-traversability --resume {folder}",
+              flush=True)
+        return 3
     seconds = {"data": time.time() - t0}
     t0 = time.time()
-    params, mcfg, final = final_model(data, cfg, jax.random.fold_in(key, 2))
-    seconds["final"] = time.time() - t0
+    if (folder / "model" / trav.WEIGHTS_NAME).exists():  # --resume after the final model: keep it
+        saved = trav.load(folder / "model")
+        params, mcfg, final = saved.params, saved.config, saved.meta["final"]
+        seconds["final"] = float(saved.meta.get("seconds", {}).get("final", 0.0))
+    else:
+        params, mcfg, final = final_model(data, cfg, jax.random.fold_in(key, 2))
+        seconds["final"] = time.time() - t0
     print(f"final model: accuracy {final['accuracy']:.3f}, ROC AUC {final['auc']:.3f} on {final['n_test']} "
           f"held-back patches", flush=True)
     date = datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds")
@@ -299,10 +328,14 @@ def main(args) -> int:
     export(folder, params, mcfg, cfg, data, rows, final, seconds, date, args.export_assets)  # usable at once
     if cfg.get("heldout"):
         t0 = time.time()
-        rows = heldout(data, cfg, jax.random.fold_in(key, 1))
+        try:
+            rows = heldout(data, cfg, jax.random.fold_in(key, 1), folder, clock)
+        except common.TimeUp:
+            print(f"time limit reached after the final model (exported); held-out models continue with: "
+                  f"python -m experiments train-traversability --resume {folder}", flush=True)
+            return 3
         seconds["heldout"] = time.time() - t0
         atomic_write_text(folder / "heldout.md", _table(rows))
-        atomic_write_text(folder / "heldout.json", json.dumps(rows, indent=2) + "\n")
         export(folder, params, mcfg, cfg, data, rows, final, seconds, date, args.export_assets)
     print(f"done -> {folder}", flush=True)
     return 0
