@@ -195,8 +195,12 @@ def chunk_metrics(states, start: int, stop: int) -> dict:
             "trials_running": running.astype(np.float64)}
 
 
+_PROGRAMS: dict = {}  # (config, ppo, walker, trials, bank shape, fast) -> (init, block): treatments share them
+
+
 def setup(cfg: dict, config, arch, policy, env):
-    """Bank, harness, the jitted block and the initial (stripped) trial states."""
+    """Bank, the compiled block ``(states, bank, n) -> states`` and the initial (stripped) trial states. Compiled
+    programs are reused by later treatments with the same settings and bank shape (``experiments curriculum``)."""
     import jax
 
     from jaxterrain import bank as B
@@ -205,16 +209,19 @@ def setup(cfg: dict, config, arch, policy, env):
 
     bank = B.from_archive(arch)
     ppo = config.ppo_config(policy.config)
-    harness = W.walker_harness(env, ppo, config)
     fast = bool(cfg.get("fast_compile", False))
-    root = jax.random.key(int(cfg["seed"]))
     start = W.start_state(env, ppo, policy, bank.heightmaps.shape[1:])
-    keys = jax.random.split(jax.random.fold_in(root, 2), int(cfg["trials"]))
-    init = compiled(lambda k, b, s: strip_envs(C.init_trials(k, b, s, config=config, harness=harness)), fast,
-                    keys, bank, start)
-    states = init(keys, bank, start)
-    block = compiled(make_block(config, harness, start.env_state), fast, states, bank, jax.numpy.int32(1))
-    return bank, harness, lambda s, b, n: block(s, b, jax.numpy.int32(n)), states
+    keys = jax.random.split(jax.random.fold_in(jax.random.key(int(cfg["seed"])), 2), int(cfg["trials"]))
+    sig = (config, ppo, env.config, int(cfg["trials"]), tuple(bank.heightmaps.shape), fast)
+    if sig not in _PROGRAMS:
+        harness = W.walker_harness(env, ppo, config)
+        init = compiled(lambda k, b, s: strip_envs(C.init_trials(k, b, s, config=config, harness=harness)), fast,
+                        keys, bank, start)
+        like = init(keys, bank, start)
+        block = compiled(make_block(config, harness, start.env_state), fast, like, bank, jax.numpy.int32(1))
+        _PROGRAMS[sig] = (init, block)
+    init, block = _PROGRAMS[sig]
+    return bank, lambda s, b, n: block(s, b, jax.numpy.int32(n)), init(keys, bank, start)
 
 
 def run_treatment(cfg: dict, folder: Path, time_limit_s: float | None = None, desc: str = "") -> dict | None:
@@ -229,7 +236,7 @@ def run_treatment(cfg: dict, folder: Path, time_limit_s: float | None = None, de
         return json.loads((folder / "summary.json").read_text())
     config, arch, policy, env = validate(cfg)
     t0 = time.perf_counter()
-    bank, _, block, states = setup(cfg, config, arch, policy, env)
+    bank, block, states = setup(cfg, config, arch, policy, env)
     restored = driver.restore(folder, like=states)
     done, history = 0, None
     if restored is not None:
