@@ -1,7 +1,8 @@
 """``python -m experiments curriculum``: Experiment 2 whole - Figure 7a / 7b and Table 2 with the paper's numbers.
 
     python -m experiments curriculum --preset gpu-short --out runs/exp2 --time-limit 9 \\
-        --archives perlin=docs/results/exp1b_gpu_sound_perlin_archive.npz cppn=docs/results/exp1b_gpu_sound_cppn_archive.npz
+        --archives perlin=docs/results/exp1b_gpu_sound_perlin_archive.npz \\
+                   cppn=docs/results/exp1b_gpu_sound_cppn_archive.npz
     python -m experiments curriculum --resume runs/exp2 --time-limit 9            # until it says "done"
 
 Treatments (each one ``learn`` run, ``--trials`` trials together, in ``<run>/<name>-<curriculum>/``): the map
