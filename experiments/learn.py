@@ -1,4 +1,4 @@
-"""``python -m experiments learn``: one Experiment 2 treatment, PPO from the base policy on a curriculum over an archive.
+"""``python -m experiments learn``: one Experiment 2 treatment, PPO from the base policy on an archive curriculum.
 
     python -m experiments learn --archive docs/results/exp1b_gpu_sound_cppn_archive.npz --curriculum map --trials 10 \\
         --preset gpu-short --out runs/learn-cppn --time-limit 9
