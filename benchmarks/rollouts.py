@@ -4,10 +4,13 @@ Measures, in one run (every figure after a warm-up / compile, device work waited
 
 1. ours: physics steps/s of the batched walker (``jaxterrain.walker.WalkerEnv``, its default solver
    options ``SOLVER_SOUND``: Newton 4 / 16, no Euler damping) with the policy in the loop (obs -> policy MLP ->
-   env.step, auto-reset on done), every env its own 256 x 256 terrain, at several batch sizes;
+   env.step, auto-reset on done), every env on its own 256 x 256 terrain, at several batch sizes, for every
+   ``--backend`` (``jax``: MJX-JAX, ``warp``: MJX-Warp) and ``--layout`` (``classic``: each env carries its own
+   heightfield in a batched model field, MJX-JAX only; ``tiles``: one heightfield holding the ``--bank`` terrains
+   as tiles, env ``i`` on tile ``i % bank``, see ``jaxterrain.walker.tiles``); Warp runs only the tiles layout;
 2. (a) raw MJX with the XML's solver options (Newton, iterations 8, ls_iterations 50, Euler damping) and random
    actions on the same terrains, plus raw MJX with our options (the policy/env overhead is the difference) and
-   any others (``--raw-solvers``, e.g. ``fast``: brax's Newton 1 / 4);
+   any others (``--raw-solvers``, e.g. ``fast``: brax's Newton 1 / 4), per backend / layout as in 1.;
 3. (b) MuJoCo C ``mujoco.rollout`` with ``--threads`` threads on the same model and terrains, random controls
    (both solver settings);
 4. ``difficulty`` timings: one paper generation (20 terrains x 20 attempts) via ``difficulty.evaluate`` and
@@ -15,7 +18,11 @@ Measures, in one run (every figure after a warm-up / compile, device work waited
    (the rollout loop stops when every attempt has ended);
 5. solver check: the policy's flat-ground normalised distance (best 5 / all 20 of 20 attempts on 8 flat terrains)
    under our solver options and under the XML's converged ones - with the shipped base policy this is the evidence
-   that our settings keep the walking sound.
+   that our settings keep the walking sound;
+6. backend check (``--backend`` with more than one backend): the same policy, keys and terrains under every
+   backend (tiles layout): flat-ground best 5 / all 20 distance and fitness (best 5 of 20) on ``--check-perlin``
+   Perlin terrains, with the largest per-terrain fitness difference against the first backend (issue 14's bar:
+   0.03).
 
 The policy is the shipped base policy when ``jaxterrain.rl.load_policy()`` finds it, else an MLP of the PPO config's
 size with random parameters (said in the output). Terrains: Perlin terrains from ``jaxterrain.generators`` (a bank
@@ -23,8 +30,10 @@ of ``--bank`` distinct maps, tiled to one per env), heights ``* scale.height`` m
 
     python benchmarks/rollouts.py --out runs/rollouts.json
 
-Every batch size is one XLA compile (~0.5-1 min on the GPU machine); to stay inside a 10-minute command, split:
-``--skip eval,solver`` (throughput table) and ``--skip ours,raw,c`` (difficulty timings and solver check).
+Every batch size is one XLA compile (~0.5-1 min on the GPU machine; MJX-Warp compiles in seconds); to stay inside a
+10-minute command, split: ``--skip eval,solver,backend`` (throughput table) and ``--skip ours,raw,c`` (difficulty
+timings and checks). Backends: ``--backend jax,warp --layout classic,tiles`` (warp needs ``pip install
+'jaxterrain[warp]'``; its rows are skipped with the reason when warp does not import).
 """
 
 from __future__ import annotations
@@ -103,19 +112,28 @@ def make_policy(env: WalkerEnv, key):
 
 
 # --------------------------------------------------------------------------------------------------------------
-def bench_ours(env, policy, terrains_m, env_steps, repeats):
-    """Policy in the loop with auto-reset; returns physics steps/s."""
-    b = terrains_m.shape[0]
-    reset = jax.vmap(env.reset)
-    step = jax.vmap(env.step)
+def per_env_terrains(env, bank_m, b):
+    """(terrain argument of a vmapped reset/step for ``b`` envs, its in_axes): ``[b, H, W]`` copies of the bank
+    (classic layout) or the bank's tiles ``i % bank`` (tiled env)."""
+    k = bank_m.shape[0]
+    if env.tiles:
+        return env.make_bank(bank_m).at(jnp.arange(b) % k), walker.TILE_AXES
+    return jnp.tile(bank_m, (-(-b // k), 1, 1))[:b], 0
+
+
+def bench_ours(env, policy, terrains_m, env_steps, repeats, axes=0):
+    """Policy in the loop with auto-reset; returns physics steps/s. ``terrains_m``: ``[B, H, W]`` (``axes=0``) or
+    a tiled env's ``Tile`` of B indices (``axes=walker.TILE_AXES``)."""
+    b = int(jax.tree.leaves(terrains_m)[-1].shape[0])
+    reset = jax.vmap(env.reset, in_axes=(0, axes))
+    step = jax.vmap(env.step, in_axes=(0, 0, axes))
     act = jax.vmap(policy)
 
     @jax.jit
     def run(state, init, terrains):
         def body(s, _):
             s = step(s, act(s.obs), terrains)
-            done = s.done > 0
-            s = jax.tree.map(lambda a, r: jnp.where(done.reshape((-1,) + (1,) * (a.ndim - 1)), r, a), s, init)
+            s = env.select(s.done > 0, init, s)  # auto-reset (keeps MJX-Warp's shared contact buffers shared)
             return s, s.distance
 
         return jax.lax.scan(body, state, None, length=env_steps)
@@ -135,27 +153,30 @@ def bench_ours(env, policy, terrains_m, env_steps, repeats):
             "finite": bool(jnp.all(jnp.isfinite(state.obs)))}
 
 
-def bench_raw_mjx(env, terrains_m, phys_steps, repeats):
-    """Raw mjx.step with random controls (uniform in ctrlrange) on per-env hfields; no resets."""
-    b = terrains_m.shape[0]
+def bench_raw_mjx(env, terrains_m, phys_steps, repeats, axes=0):
+    """Raw mjx.step with random controls (uniform in ctrlrange) on per-env hfields (classic) or on the tiles of one
+    shared heightfield (tiled env: ``terrains_m`` a ``Tile``, ``axes=walker.TILE_AXES``); no resets."""
+    b = int(jax.tree.leaves(terrains_m)[-1].shape[0])
     mx = env.mjx_model
     lo, hi = env._ctrl_lo, env._ctrl_hi
-    init = jax.jit(jax.vmap(env.reset))(jax.random.split(jax.random.PRNGKey(1), b), terrains_m).data
+    init = jax.jit(jax.vmap(env.reset, in_axes=(0, axes)))(jax.random.split(jax.random.PRNGKey(1), b),
+                                                            terrains_m).data
 
     @jax.jit
     def run(data, terrains, key):
-        hdata = jnp.clip(terrains / env.elevation_z, 0, 1).reshape(b, -1)
-
-        def one(d, h, k):
-            m = mx.replace(hfield_data=h)
-
+        def one(d, m, k):
             def body(d, kk):
                 ctrl = jax.random.uniform(kk, (mx.nu,), minval=lo, maxval=hi)
                 return mjx.step(m, d.replace(ctrl=ctrl)), None
 
             return jax.lax.scan(body, d, jax.random.split(k, phys_steps))[0]
 
-        return jax.vmap(one)(data, hdata, jax.random.split(key, b))
+        keys = jax.random.split(key, b)
+        if env.tiles:  # one model (the whole bank) shared by every env
+            m = env.model(terrains.bank)
+            return jax.vmap(lambda d, k: one(d, m, k))(data, keys)
+        hdata = jnp.clip(terrains / env.elevation_z, 0, 1).reshape(b, -1)
+        return jax.vmap(lambda d, h, k: one(d, mx.replace(hfield_data=h), k))(data, hdata, keys)
 
     t0 = time.perf_counter()
     out = block(run(init, terrains_m, jax.random.PRNGKey(2)))
@@ -244,6 +265,65 @@ def solver_check(cfg, policy, solvers=(("sound", SOLVER_SOUND), ("xml", SOLVER_X
     return out
 
 
+def tiled_distances(env, policy, terrains_m, key, attempts):
+    """``[B, attempts]`` final normalised distances (0 where failed) of ``attempts`` walks on each of ``terrains_m``
+    ``[B, H, W]`` on a tiled env (``tiles = B``): difficulty.batched_distances' loop with the terrains as tiles."""
+    b = terrains_m.shape[0]
+
+    @jax.jit
+    def run(terrains_m, key):
+        reset_keys = jax.random.split(key, (b, attempts))
+        tiles = env.make_bank(terrains_m).at(jnp.arange(b))
+        reset = jax.vmap(jax.vmap(env.reset, in_axes=(0, None)), in_axes=(0, walker.TILE_AXES))
+        step = jax.vmap(jax.vmap(env.step, in_axes=(0, 0, None)), in_axes=(0, 0, walker.TILE_AXES))
+        act = jax.vmap(jax.vmap(policy))
+        state = reset(reset_keys, tiles)
+
+        def cond(c):
+            return (c[0] < env.config.episode_length) & ~jnp.all(c[2])
+
+        def body(c):
+            t, state, ended, final, length = c
+            state = step(state, act(state.obs), tiles)
+            final = jnp.where(ended, final, jnp.where(state.failed > 0, 0.0, state.distance))
+            length = jnp.where(ended, length, state.steps)
+            return t + 1, state, ended | (state.done > 0), final, length
+
+        zeros = jnp.zeros((b, attempts), jnp.float32)
+        c = jax.lax.while_loop(cond, body, (jnp.int32(0), state, zeros > 0, zeros, zeros.astype(jnp.int32)))
+        return c[3], c[4]
+
+    return run(terrains_m, key)
+
+
+def backend_check(cfg, policy, backends, n_flat, perlin_m, attempts=20, best=5):
+    """Per backend (tiles layout; same keys, terrains, policy): flat-ground best-5 / all means of the normalised
+    distance over ``n_flat`` flat terrains x ``attempts``, and fitness (mean of the best 5) on the ``perlin_m``
+    terrains ``[P, H, W]`` metres, with the largest |fitness difference| against the first backend."""
+    flat = jnp.zeros((n_flat,) + tuple(cfg.terrain_shape), jnp.float32)
+    terrains = jnp.concatenate([flat, jnp.asarray(perlin_m, jnp.float32)])
+    b = terrains.shape[0]
+    out, first = {}, None
+    for backend in backends:
+        env = WalkerEnv(cfg._replace(backend=backend, tiles=b, warp_worlds=b * attempts))
+        t0 = time.perf_counter()
+        d, length = block(tiled_distances(env, policy, terrains, jax.random.PRNGKey(5), attempts))
+        d, length = np.asarray(d), np.asarray(length)
+        fit = np.sort(d, axis=1)[:, -best:].mean(1)
+        r = {"seconds_incl_compile": time.perf_counter() - t0, "env_steps": int(length.sum()),
+             "flat_best5_mean": float(fit[:n_flat].mean()) if n_flat else None,
+             "flat_all_mean": float(d[:n_flat].mean()) if n_flat else None,
+             "perlin_fitness": fit[n_flat:].tolist(), "perlin_fitness_mean": float(fit[n_flat:].mean())
+             if b > n_flat else None}
+        if first is None:
+            first = fit
+        else:
+            r["max_abs_fitness_diff_vs_" + backends[0]] = float(np.max(np.abs(fit - first)))
+            r["mean_fitness_diff_vs_" + backends[0]] = float(np.mean(fit - first))
+        out[backend] = r
+    return out
+
+
 def main(argv=None):
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--out", default=None, help="JSON result path")
@@ -263,9 +343,22 @@ def main(argv=None):
     p.add_argument("--raw-solvers", default="xml;sound", help="';' list of solvers for raw MJX: xml, sound, fast or "
                    "ITERATIONS,LS_ITERATIONS,EULERDAMP")
     p.add_argument("--check-solvers", default="sound;xml", help="';' list of solvers for the flat-ground check")
-    p.add_argument("--skip", default="", help="comma list of parts to skip: ours,raw,c,eval,solver")
+    p.add_argument("--backend", default="jax", help="comma list of physics backends for ours / raw: jax, warp")
+    p.add_argument("--layout", default="classic,tiles", help="comma list of terrain layouts for ours / raw: classic "
+                   "(per-env heightfield, jax only), tiles (one heightfield of --bank tiles)")
+    p.add_argument("--check-flat", type=int, default=8, help="backend check: flat terrains (x 20 attempts)")
+    p.add_argument("--check-perlin", type=int, default=64, help="backend check: Perlin terrains (x 20 attempts)")
+    p.add_argument("--skip", default="", help="comma list of parts to skip: ours,raw,c,eval,solver,backend")
     args = p.parse_args(argv)
     skip = set(filter(None, args.skip.split(",")))
+    backends = [v for v in args.backend.split(",") if v]
+    layouts = [v for v in args.layout.split(",") if v]
+    for v in backends:
+        if v not in walker.BACKENDS:
+            p.error(f"--backend: {v!r} is not one of {walker.BACKENDS}")
+    for v in layouts:
+        if v not in ("classic", "tiles"):
+            p.error(f"--layout: {v!r} is not classic or tiles")
 
     env_info = environment()
     log("environment", env_info)
@@ -277,50 +370,72 @@ def main(argv=None):
     log("policy:", policy_desc)
     bank = terrain_bank(jax.random.PRNGKey(11), args.bank, args.size)
     bank_m = bank * scale.height
-    rows, result = [], {"environment": env_info, "policy": policy_desc, "solver_ours": cfg.solver._asdict(),
+    warp_ok, warp_why = walker.warp_available()
+    variants, skipped = [], []
+    for backend in backends:
+        for layout in layouts:
+            if backend == "warp" and layout == "classic":
+                continue  # MuJoCo Warp shares one heightfield across worlds: tiles only
+            if backend == "warp" and not warp_ok:
+                skipped.append(f"{backend}/{layout}: {warp_why}")
+                continue
+            variants.append((backend, layout))
+    for why in skipped:
+        log("skipped", why)
+
+    def variant_env(backend, layout, b, solver=None):
+        c = cfg if solver is None else cfg._replace(solver=solver)
+        if layout == "tiles":
+            c = c._replace(backend=backend, tiles=args.bank, warp_worlds=max(b, 1))
+        return WalkerEnv(c)
+
+    rows, result = [], {"environment": env_info, "variants": [list(v) for v in variants], "skipped": skipped, "policy": policy_desc, "solver_ours": cfg.solver._asdict(),
                         "solver_xml": SOLVER_XML._asdict(), "terrain": {"shape": [args.size, args.size],
                                                                          "scale": scale._asdict(),
                                                                          "distinct": args.bank},
                         "ours": [], "raw_mjx_xml": [], "raw_mjx_sound": [], "mujoco_c": [], "difficulty": []}
 
-    def per_env(b):
-        return jnp.tile(bank_m, (-(-b // args.bank), 1, 1))[:b]
-
     def save():
         write_json(args.out, result)
 
     if "ours" not in skip:
-        for b in [int(v) for v in args.batch_sizes.split(",") if v]:
-            try:
-                r = bench_ours(env, policy, per_env(b), args.env_steps, args.repeats)
-            except Exception as err:  # noqa: BLE001 (out of memory: stop growing)
-                log(f"ours at {b} envs failed: {type(err).__name__}: {str(err)[:300]}")
-                break
-            r["batch"] = b
-            result["ours"].append(r)
-            rows.append({"what": f"ours: walker + policy, {walker.solver_label(cfg.solver)}", "batch": b,
-                         "M steps/s": r["steps_per_s"] / 1e6,
-                         "compile+1st s": r["first_call_s"]})
-            log(rows[-1])
-            save()
+        for backend, layout in variants:
+            for b in [int(v) for v in args.batch_sizes.split(",") if v]:
+                try:
+                    e = variant_env(backend, layout, b)
+                    terr, axes = per_env_terrains(e, bank_m, b)
+                    r = bench_ours(e, policy, terr, args.env_steps, args.repeats, axes=axes)
+                except Exception as err:  # noqa: BLE001 (out of memory: stop growing)
+                    log(f"ours {backend}/{layout} at {b} envs failed: {type(err).__name__}: {str(err)[:300]}")
+                    break
+                r.update(batch=b, backend=backend, layout=layout)
+                result["ours"].append(r)
+                rows.append({"what": f"ours: walker + policy, {walker.solver_label(cfg.solver)}", "backend":
+                             f"{backend}/{layout}", "batch": b, "M steps/s": r["steps_per_s"] / 1e6,
+                             "compile+1st s": r["first_call_s"]})
+                log(rows[-1])
+                save()
     if "raw" not in skip:
         for text in filter(None, args.raw_solvers.split(";")):
             sname, solver = parse_solver(text)
             name = f"raw_mjx_{sname}" if text in walker.NAMED_SOLVERS else f"raw_mjx {sname}"
-            e = WalkerEnv(cfg._replace(solver=solver))
             result.setdefault(name, [])
-            for b in [int(v) for v in args.raw_batch_sizes.split(",") if v]:
-                try:
-                    r = bench_raw_mjx(e, per_env(b), args.env_steps * cfg.n_frames, args.repeats)
-                except Exception as err:  # noqa: BLE001
-                    log(f"{name} at {b} envs failed: {type(err).__name__}: {str(err)[:300]}")
-                    break
-                r["batch"] = b
-                result[name].append(r)
-                rows.append({"what": f"(a) {name.replace('_', ' ')}, random actions", "batch": b,
-                             "M steps/s": r["steps_per_s"] / 1e6, "compile+1st s": r["first_call_s"]})
-                log(rows[-1])
-                save()
+            for backend, layout in variants:
+                for b in [int(v) for v in args.raw_batch_sizes.split(",") if v]:
+                    try:
+                        e = variant_env(backend, layout, b, solver)
+                        terr, axes = per_env_terrains(e, bank_m, b)
+                        r = bench_raw_mjx(e, terr, args.env_steps * cfg.n_frames, args.repeats, axes=axes)
+                    except Exception as err:  # noqa: BLE001
+                        log(f"{name} {backend}/{layout} at {b} envs failed: {type(err).__name__}: {str(err)[:300]}")
+                        break
+                    r.update(batch=b, backend=backend, layout=layout)
+                    result[name].append(r)
+                    rows.append({"what": f"(a) {name.replace('_', ' ')}, random actions", "backend":
+                                 f"{backend}/{layout}", "batch": b, "M steps/s": r["steps_per_s"] / 1e6,
+                                 "compile+1st s": r["first_call_s"]})
+                    log(rows[-1])
+                    save()
     if "c" not in skip:
         qpos0 = np.asarray(jax.jit(jax.vmap(env.reset))(jax.random.split(jax.random.PRNGKey(1), args.bank),
                                                          bank_m).data.qpos)
@@ -328,7 +443,7 @@ def main(argv=None):
             r = bench_c_rollout(e, bank_m, qpos0, args.c_rollouts, args.c_steps, args.threads)
             r["solver"] = name
             result["mujoco_c"].append(r)
-            rows.append({"what": f"(b) MuJoCo C rollout, {name} solver, {args.threads} threads",
+            rows.append({"what": f"(b) MuJoCo C rollout, {name} solver, {args.threads} threads", "backend": "C",
                          "batch": args.c_rollouts, "M steps/s": r["steps_per_s"] / 1e6})
             log(rows[-1])
             save()
@@ -341,6 +456,7 @@ def main(argv=None):
             r = bench_difficulty(cfg, policy, hm, 20, args.repeats if b <= 512 else 1, slots)
             result["difficulty"].append(r)
             rows.append({"what": f"difficulty.evaluate {b} terrains x 20 attempts, slots {slots or 'all'}",
+                         "backend": "jax/classic",
                          "batch": b * 20, "seconds": r["seconds"], "compile+1st s": r["first_call_s"],
                          "M steps/s": r["env_steps"] * cfg.n_frames / r["seconds"] / 1e6,
                          "note": f"{r['env_steps']} env steps, longest {r['loop_iterations']}, "
@@ -352,7 +468,25 @@ def main(argv=None):
         result["solver_check"] = r
         for name, v in r.items():
             rows.append({"what": f"flat ground, {name} solver: normalised distance best-5 / all-20",
+                         "backend": "jax/classic",
                          "note": f"{v['best5_mean']:.3f} / {v['all_mean']:.3f}"})
+            log(rows[-1])
+        save()
+    if "backend" not in skip:
+        chk = [v for v in backends if v == "jax" or warp_ok]
+        perlin_m = bank_m[: args.check_perlin] if args.check_perlin <= args.bank else \
+            terrain_bank(jax.random.PRNGKey(12), args.check_perlin, args.size) * scale.height
+        r = backend_check(cfg, policy, chk, args.check_flat, perlin_m)
+        result["backend_check"] = r
+        for name, v in r.items():
+            diff = v.get(f"max_abs_fitness_diff_vs_{chk[0]}")
+            flat_txt = (f"flat best-5 / all-20 {v['flat_best5_mean']:.3f} / {v['flat_all_mean']:.3f}; "
+                        if v["flat_best5_mean"] is not None else "")
+            perlin_txt = (f"Perlin fitness mean {v['perlin_fitness_mean']:.3f} over {len(v['perlin_fitness'])}"
+                          if v["perlin_fitness_mean"] is not None else "")
+            rows.append({"what": f"backend check ({args.check_flat} flat + {len(v['perlin_fitness'])} Perlin x 20)",
+                         "backend": f"{name}/tiles", "note": flat_txt + perlin_txt + (
+                             f"; max |fitness diff| vs {chk[0]} {diff:.3f}" if diff is not None else "")})
             log(rows[-1])
         save()
     best_ours = max((r["steps_per_s"] for r in result["ours"]), default=0.0)
@@ -362,7 +496,7 @@ def main(argv=None):
     save()
     print()
     print(f"device: {env_info['device']}; policy: {policy_desc}; terrains: per-env {args.size}x{args.size}")
-    print(markdown_table(rows, ["what", "batch", "M steps/s", "seconds", "compile+1st s", "note"]))
+    print(markdown_table(rows, ["what", "backend", "batch", "M steps/s", "seconds", "compile+1st s", "note"]))
     print(f"\nours best {best_ours / 1e6:.2f} M physics steps/s; vs MuJoCo C (XML solver) "
           f"{(best_ours / best_c) if best_c else float('nan'):.1f}x")
 
