@@ -79,7 +79,7 @@ class TerrainScale(_TerrainScaleFields):
 
     Attributes:
       cell_size: metres between neighbouring pixels (> 0), default 0.04.
-      height: metres for heightmap value 1.0 (> 0), default 0.5.
+      height: metres for heightmap value 1.0 (> 0), default 1.0.
     """
 
     __slots__ = ()
@@ -94,6 +94,12 @@ def validate_scale(scale) -> TerrainScale:
     """Raise ``ValueError`` unless ``scale`` is a :class:`TerrainScale` with positive (concrete) fields."""
     if not isinstance(scale, _TerrainScaleFields):
         raise ValueError(f"scale must be a jaxterrain.terrain.TerrainScale; got {type(scale).__name__}")
+    for name in ("cell_size", "height"):
+        value = getattr(scale, name)
+        numeric = isinstance(value, numbers.Real) or (hasattr(value, "dtype") and getattr(value, "ndim", 1) == 0
+                                                     and np.issubdtype(np.dtype(value.dtype), np.number))
+        if not numeric or isinstance(value, bool):
+            raise ValueError(f"TerrainScale.{name} must be a finite number of metres > 0; got {value!r}")
     _check_positive("cell_size", scale.cell_size)
     _check_positive("height", scale.height)
     return scale

@@ -445,8 +445,10 @@ def load(folder: str | os.PathLike | None = None) -> Model:
         if got[p].shape != spec.shape:
             raise ValueError(f"{weights}: parameter {jax.tree_util.keystr(p)} has shape {got[p].shape}, the "
                              f"architecture in {cfg_path} needs {spec.shape}")
+    # numpy leaves: a first load inside a jit trace (the descriptor called by a jitted features.descriptors) must
+    # not turn the cached weights into that trace's tracers
     params = jax.tree_util.tree_unflatten(jax.tree.structure(like),
-                                          [jnp.asarray(got[p], jnp.float32) for p in flat_like])
+                                          [np.asarray(got[p], np.float32) for p in flat_like])
     return Model(params=params, config=config, meta=meta)
 
 

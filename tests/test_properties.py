@@ -417,8 +417,8 @@ def test_bad_terrain_scales_name_the_field(field, value, where):
 
 
 def test_non_numeric_terrain_scales_are_refused_where_used():
-    """Known gap (jaxterrain/terrain.py, not this suite's module): TerrainScale skips non-numbers on purpose (pytree
-    placeholders), and validate_scale does too, so None / a string fails later with a TypeError."""
+    """TerrainScale itself skips non-numbers on purpose (pytree placeholders); validate_scale, which every entry point
+    calls, refuses them naming the field. Any gap is reported as an xfail listing it."""
     gaps = []
     for value in (None, "1", [1.0]):
         TRIED["bad TerrainScale"] += 1
@@ -571,7 +571,7 @@ def policy_dir(tmp_path_factory):
 
 def test_bad_policy_files_name_the_file(policy_dir, tmp_path):
     """Every damaged policy file must give a ValueError or FileNotFoundError naming the file. Deterministic: 2 files
-    x 4 corruptions x 5 seeds. Gaps are reported as an xfail listing them (jaxterrain/rl/checkpoint.py's to fix)."""
+    x 4 corruptions x 5 seeds. Gaps are reported as an xfail listing them."""
     from jaxterrain.rl import checkpoint
 
     rng = np.random.default_rng(0)

@@ -130,14 +130,7 @@ def load_policy(path: str | os.PathLike | None = None) -> Callable[[jax.Array], 
                 f"the base policy is not shipped yet ({weights} is missing); train it with "
                 "`python -m experiments train-base-policy --preset gpu --export-assets`")
         raise FileNotFoundError(f"no policy.msgpack in {folder}")
-    meta = json.loads((folder / "config.json").read_text())
-    if meta.get("format") != POLICY_FORMAT:
-        raise ValueError(f"{folder}/config.json: not a {POLICY_FORMAT} policy (format={meta.get('format')!r})")
-    blob = serialization.msgpack_restore(weights.read_bytes())
-    config = PPOConfig.from_json_dict(meta["ppo_config"])
-    params = _to_jnp(blob["params"])
-    normaliser = nets.RunningStats(**_to_jnp(blob["normaliser"]))
-    action_size = int(meta["action_size"])
+    config, meta, action_size, params, normaliser = _read_policy(folder, weights)
 
     def policy(obs: jax.Array) -> jax.Array:
         return nets.deterministic_action(config, action_size, params, normaliser, jnp.asarray(obs, jnp.float32))
@@ -146,6 +139,36 @@ def load_policy(path: str | os.PathLike | None = None) -> Callable[[jax.Array], 
     policy.observation_size, policy.action_size = int(meta["observation_size"]), action_size
     policy.meta, policy.path = meta, folder
     return policy
+
+
+def _read_policy(folder: Path, weights: Path):
+    """Parse and check a policy folder; every problem is a ``ValueError`` naming the file."""
+    cfg_path = folder / "config.json"
+    try:
+        meta = json.loads(cfg_path.read_text())
+        if not isinstance(meta, dict):
+            raise ValueError("not a JSON object")
+    except (OSError, ValueError, UnicodeDecodeError) as err:
+        raise ValueError(f"{cfg_path}: not a readable policy config ({err})") from err
+    if meta.get("format") != POLICY_FORMAT:
+        raise ValueError(f"{cfg_path}: not a {POLICY_FORMAT} policy (format={meta.get('format')!r})")
+    try:
+        config = PPOConfig.from_json_dict(meta["ppo_config"])
+        action_size, observation_size = int(meta["action_size"]), int(meta["observation_size"])
+    except (KeyError, TypeError, ValueError) as err:
+        raise ValueError(f"{cfg_path}: incomplete policy config ({err!r})") from err
+    try:
+        blob = serialization.msgpack_restore(weights.read_bytes())
+        params, normaliser = _to_jnp(blob["params"]), nets.RunningStats(**_to_jnp(blob["normaliser"]))
+    except Exception as err:  # msgpack raises many unrelated types on damaged bytes
+        raise ValueError(f"{weights}: damaged policy weights, cannot be decoded ({type(err).__name__}: {err})") from err
+    like = jax.eval_shape(lambda: nets.init_params(jax.random.key(0), config, observation_size, action_size))
+    shapes = lambda t: [(jax.tree_util.keystr(k), tuple(np.shape(v))) for k, v in  # noqa: E731
+                        jax.tree_util.tree_flatten_with_path(t)[0]]
+    if shapes(params) != shapes(like) or tuple(np.shape(normaliser.mean)) != (observation_size,):
+        raise ValueError(f"{weights}: parameters do not match the networks of {cfg_path} "
+                         f"(observation {observation_size}, action {action_size})")
+    return config, meta, action_size, params, normaliser
 
 
 def policy_fn(config: PPOConfig, action_size: int) -> Callable[[Any, jax.Array], jax.Array]:
