@@ -167,7 +167,7 @@ def _read_policy(folder: Path, weights: Path):
                         jax.tree_util.tree_flatten_with_path(t)[0]]
     if shapes(params) != shapes(like) or tuple(np.shape(normaliser.mean)) != (observation_size,):
         raise ValueError(f"{weights}: parameters do not match the networks of {cfg_path} "
-                         f"(observation {observation_size}, action {action_size})")
+                         f"(observations {observation_size}, actions {action_size})")
     return config, meta, action_size, params, normaliser
 
 
