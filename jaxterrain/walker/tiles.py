@@ -26,6 +26,17 @@ tiles the surface spans one cell linearly from one tile's edge to the next (a si
 its edge), and MuJoCo's heightfield ``base_z`` box is one box under all tiles. The walker ends its episode when its
 torso is ``side_margin`` (0.3 m) from a side edge or ``goal_margin`` (0.5 m) from the front edge, so a foot can
 only reach the seam near an episode's end.
+
+Not yet migrated (the classic ``terrain [H, W]`` API still serves them; what each must change to walk on tiles):
+
+* ``difficulty.batched_distances``: an env built with ``tiles=B`` (and ``warp_worlds=B * attempts`` or ``slots``);
+  ``tiles = env.make_bank(terrains).at(jnp.arange(B))`` in place of ``terrains``; outer ``in_axes`` ``(0,
+  TILE_AXES)`` for reset and ``(0, 0, TILE_AXES)`` for step (``benchmarks/rollouts.py``'s ``tiled_distances`` is
+  exactly this loop). ``_pooled_distances``: the pool's terrain becomes a ``Tile`` (``bank.at(j // attempts)``) and
+  the refill merges states with ``env.select(take, new, old)`` and ``index=jnp.where(take, new.index, old.index)``.
+* ``rl.ppo``: per-env terrains ``bank.at(idx)`` under ``TILE_AXES`` (or one shared ``bank.at(0)``), the auto-reset's
+  ``_select`` -> ``env.select``; ``warp_worlds`` >= seeds x ``num_envs``.
+* ``traversability`` and ``report.render``: subtract ``env.tile_origin(index)`` from ``qpos[..., :2]``.
 """
 
 from __future__ import annotations
