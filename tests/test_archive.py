@@ -6,7 +6,7 @@ two "descriptors" read back a and b, fitness is 1 - (a + b) / 2, and mutate adds
 
 from __future__ import annotations
 
-from typing import Any, Callable, NamedTuple
+from typing import NamedTuple
 
 import jax
 import jax.numpy as jnp
@@ -14,19 +14,11 @@ import numpy as np
 import pytest
 
 from jaxterrain import archive as A
+from jaxterrain.generators.base import Generator as FakeGen  # the library's bundle, fake functions
 from jaxterrain import map_elites as ME
 from jaxterrain import scoring as S
 
 
-class FakeGen(NamedTuple):
-    name: str
-    spec: Any
-    size: int
-    sample: Callable
-    mutate: Callable
-    render: Callable
-    render_one: Callable
-    validate: Callable
 
 
 class PairGenome(NamedTuple):  # a pytree genome, like the CPPN's

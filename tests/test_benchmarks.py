@@ -1,17 +1,11 @@
 """The pool model of benchmarks/rollout_order.py, whose step counts RESULTS.md reports."""
 
-import importlib.util
-import sys
-from pathlib import Path
 
 import numpy as np
 
-_PATH = Path(__file__).resolve().parents[1] / "benchmarks" / "rollout_order.py"
-_spec = importlib.util.spec_from_file_location("rollout_order", _PATH)
-rollout_order = importlib.util.module_from_spec(_spec)
-_saved_path = list(sys.path)
-_spec.loader.exec_module(rollout_order)  # it puts benchmarks/ on sys.path for its own imports
-sys.path[:] = _saved_path
+from benchmark_loader import load_benchmark
+
+rollout_order = load_benchmark("rollout_order")
 
 
 def test_pool_model_by_hand():

@@ -3,7 +3,7 @@ treatments equal runs done one by one."""
 
 from __future__ import annotations
 
-from typing import Any, Callable, NamedTuple
+from typing import NamedTuple
 
 import jax
 import jax.numpy as jnp
@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 
 from jaxterrain import archive as A
+from jaxterrain.generators.base import Generator as FakeGen  # the library's bundle, fake functions
 from jaxterrain import map_elites as ME
 from jaxterrain import scoring as S
 
@@ -20,15 +21,6 @@ class UV(NamedTuple):  # a two-leaf genome: mixing leaves of two offspring gives
     v: jax.Array
 
 
-class FakeGen(NamedTuple):
-    name: str
-    spec: Any
-    size: int
-    sample: Callable
-    mutate: Callable
-    render: Callable
-    render_one: Callable
-    validate: Callable
 
 
 SIZE = 8

@@ -1,10 +1,7 @@
 """benchmarks/ppo.py: the brax config mapping, the jax >= 0.10 patch, the walker as a brax Env, and (slow) the
 whole --quick run."""
 
-import importlib.util
 import json
-import sys
-from pathlib import Path
 
 import jax
 import jax.numpy as jnp
@@ -14,12 +11,9 @@ import pytest
 from jaxterrain import rl
 from jaxterrain.walker import TerrainScale, WalkerConfig, WalkerEnv
 
-_PATH = Path(__file__).resolve().parents[1] / "benchmarks" / "ppo.py"
-_spec = importlib.util.spec_from_file_location("ppo_benchmark", _PATH)
-bench = importlib.util.module_from_spec(_spec)
-_saved_path = list(sys.path)
-_spec.loader.exec_module(bench)  # it puts benchmarks/ on sys.path for its own imports
-sys.path[:] = _saved_path
+from benchmark_loader import load_benchmark
+
+bench = load_benchmark("ppo")
 
 SMALL_ENV = WalkerConfig(terrain_shape=(16, 32), scale=TerrainScale(cell_size=0.2, height=0.5), episode_length=30)
 
