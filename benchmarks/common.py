@@ -7,7 +7,6 @@ import json
 import os
 import platform
 import statistics
-import subprocess
 import time
 from pathlib import Path
 from typing import Any, Callable, Sequence
@@ -16,12 +15,10 @@ import jax
 
 
 def environment() -> dict[str, Any]:
-    """Facts every result carries: device, date, commit, versions."""
-    try:
-        commit = subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True,
-                                check=False).stdout.strip() or os.environ.get("JAXTERRAIN_COMMIT", "unknown")
-    except OSError:
-        commit = os.environ.get("JAXTERRAIN_COMMIT", "unknown")
+    """Facts every result carries: device, date, commit (``jaxterrain.provenance.git_commit``: ``$JAXTERRAIN_COMMIT``
+    first, else the checkout's short hash), versions."""
+    from jaxterrain.provenance import git_commit
+
     dev = jax.devices()[0]
     return {
         "device": getattr(dev, "device_kind", str(dev)),
@@ -29,7 +26,7 @@ def environment() -> dict[str, Any]:
         "cpu_count": os.cpu_count(),
         "host": platform.node(),
         "date": datetime.date.today().isoformat(),
-        "commit": os.environ.get("JAXTERRAIN_COMMIT", commit),
+        "commit": git_commit(short=True, mark_dirty=False),
         "jax": jax.__version__,
     }
 

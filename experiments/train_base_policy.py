@@ -93,16 +93,6 @@ def _to_jsonable(x):
     return x
 
 
-def _git_commit() -> str:
-    import subprocess
-
-    try:
-        out = subprocess.run(["git", "rev-parse", "HEAD"], capture_output=True, text=True, timeout=10)
-        return out.stdout.strip() if out.returncode == 0 and out.stdout.strip() else "unknown (no commit)"
-    except (OSError, subprocess.SubprocessError):
-        return "unknown (git unavailable)"
-
-
 def evaluate_flat(env, policy, terrain, key, attempts: int = 20, best: int = 5, steps: int | None = None):
     """Normalised distance of ``policy`` on ``terrain`` over ``attempts`` episodes (random initial joints).
 
@@ -302,8 +292,10 @@ def init_or_resume(key, env, ppo_cfg, terrain, run: Path, resume: bool):
 def training_origin(meta: dict, done: int, num_updates: int, device_name: str) -> TrainOrigin:
     """The devices and commit that trained the run so far (from the checkpoint's ``meta``), plus this device if
     it will train."""
+    from jaxterrain.provenance import git_commit
+
     train_devices = list(meta.get("train_devices", []))  # devices that trained this run (a resume may add one)
-    train_commit = meta.get("train_commit", _git_commit())
+    train_commit = meta.get("train_commit", git_commit())
     if done < num_updates and device_name not in train_devices:
         train_devices.append(device_name)
     return TrainOrigin(train_devices, train_commit)
@@ -424,10 +416,12 @@ def build_provenance(args, run: RunFolder, state, origin: TrainOrigin, device_na
 
     import jax
 
+    from jaxterrain.provenance import git_commit
+
     return {
         "command": run.config["command_line"], "resumed_with": run.config.get("resumed_with", []),
         "preset": args.preset, "seed": args.seed, "env_steps": int(state.env_steps),
-        "updates": int(state.update_step), "commit": origin.commit, "export_commit": _git_commit(),
+        "updates": int(state.update_step), "commit": origin.commit, "export_commit": git_commit(),
         "device": ", ".join(origin.devices) or "unknown", "eval_device": device_name, "jax": jax.__version__,
         "date": datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds"),
         "eval": {k: result[k] for k in ("best_mean", "all_mean", "attempts", "best", "passes_bar")},

@@ -27,7 +27,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import subprocess
 import sys
 import time
 from pathlib import Path
@@ -106,26 +105,6 @@ def save_grid(path: Path, maps, cols: int = 4) -> Path:
 # ----------------------------------------------------------------------------------------------------------------
 
 
-def _git_commit() -> str:
-    root = Path(__file__).resolve().parent.parent
-    try:
-        head = subprocess.run(["git", "rev-parse", "HEAD"], cwd=root, capture_output=True, text=True, timeout=10)
-        commit = head.stdout.strip() if head.returncode == 0 else "none (no commit yet)"
-        dirty = subprocess.run(["git", "status", "--porcelain"], cwd=root, capture_output=True, text=True, timeout=10)
-        if dirty.stdout.strip():
-            commit += " (working tree has uncommitted changes)"
-        return commit
-    except (OSError, subprocess.SubprocessError):
-        return "unknown (git not available)"
-
-
-def _device() -> str:
-    import jax
-
-    d = jax.devices()[0]
-    return f"{jax.device_count()} x {getattr(d, 'device_kind', d.platform)} ({d.platform})"
-
-
 def export_assets(run_dir: Path, asset_dir: Path, provenance: str) -> Path:
     """Copy ``final/`` (weights + config), the last sample grid and quality.json into ``asset_dir``."""
     from jaxterrain.io import atomic_write_bytes, atomic_write_text
@@ -149,6 +128,7 @@ def provenance_text(args, config, data_desc, state_step, wall, quality, metrics)
     import jax
     import optax
 
+    from jaxterrain import provenance
     from jaxterrain.generators import gan_train
     from jaxterrain.generators.gan import generator_flops
 
@@ -168,8 +148,8 @@ def provenance_text(args, config, data_desc, state_step, wall, quality, metrics)
   - patches: random crops of {list(_scales())} cells (those that fit in the tile), resampled to {config.size} x
     {config.size}, random flips and 90-degree rotations, each patch min-max normalised to [0, 1].
 - Latents: N(0, 1) truncated to [-3, 3] (the genome range).
-- Commit: {_git_commit()}
-- Device: {_device()}; jax {jax.__version__}, flax {flax.__version__}, optax {optax.__version__}
+- Commit: {provenance.git_commit()}
+- Device: {provenance.device()}; jax {jax.__version__}, flax {flax.__version__}, optax {optax.__version__}
 - Date (UTC): {time.strftime('%Y-%m-%d %H:%M:%S', time.gmtime())}; training wall time: {wall:.0f} s
 - Last logged metrics: {json.dumps({k: round(float(v), 4) for k, v in (metrics or {}).items()})}
 - Quality check (Wasserstein-1 of TRI/TPI/roughness distributions to training patches, in units of the real
@@ -438,13 +418,14 @@ def run_quality(args, run_dir: Path, config, variables, tiles) -> dict | None:
 
 def main(args: argparse.Namespace) -> int:
     """Resolve the options, load the data, train (or resume), save ``final/``, check quality, optionally export."""
+    from jaxterrain import provenance
     from jaxterrain.generators.gan import ASSET_DIR, save_generator
 
     preset = _resolve(args)
     config = make_config(preset)
     run_dir = prepare_run_dir(args)
     data = load_training_data(args.data)
-    print(f"train-gan: {run_dir}  device {_device()}  data {data.num_tiles} tiles", flush=True)
+    print(f"train-gan: {run_dir}  device {provenance.device()}  data {data.num_tiles} tiles", flush=True)
     if args.quality_only:
         run_quality_only(args, run_dir, data.tiles)
         return 0

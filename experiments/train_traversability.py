@@ -192,30 +192,6 @@ def final_model(data: dict, cfg: dict, key):
     return _train_eval(jax.random.fold_in(key, 2), x[tr], y[tr], x[test], y[test], cfg, log=log)
 
 
-def _git_commit() -> str:
-    import subprocess
-
-    root = Path(__file__).resolve().parent.parent
-    try:
-        head = subprocess.run(["git", "rev-parse", "HEAD"], cwd=root, capture_output=True, text=True, timeout=10)
-        commit = head.stdout.strip() if head.returncode == 0 else "none"
-        dirty = subprocess.run(["git", "status", "--porcelain"], cwd=root, capture_output=True, text=True, timeout=10)
-        return commit + (" (working tree had uncommitted changes)" if dirty.stdout.strip() else "")
-    except (OSError, subprocess.SubprocessError):
-        return "unknown (git not available)"
-
-
-def _device() -> str:
-    import os
-
-    import jax
-
-    d = jax.devices()[0]
-    kind = getattr(d, "device_kind", d.platform)
-    cores = f", {os.cpu_count()} CPU cores" if d.platform == "cpu" else ""
-    return f"{jax.device_count()} x {kind} ({d.platform}{cores})"
-
-
 def _table(rows: list[dict]) -> str:
     lines = ["| left-out generator | train patches | test patches | accuracy | ROC AUC |", "|---|---|---|---|---|"]
     lines += [f"| {r['left_out']} | {r['n_train']} | {r['n_test']} | {r['accuracy']:.3f} | {r['auc']:.3f} |"
@@ -226,6 +202,8 @@ def _table(rows: list[dict]) -> str:
 def provenance(cfg: dict, data: dict, rows: list[dict], final: dict, seconds: dict, date: str) -> str:
     """PROVENANCE.md of an exported model."""
     import jax
+
+    from jaxterrain.provenance import device, git_commit
 
     walk_s = (f"{sum(float(d['seconds']) for d in data.values()):.0f} s" if all("seconds" in d for d in data.values())
               else "not recorded (data files of an earlier version of the command)")
@@ -239,9 +217,9 @@ Patch classifier of `jaxterrain.traversability` (`PatchCNN`), loaded by `travers
 
 - Command: `python -m experiments train-traversability --preset {cfg.get('preset')} --export-assets`
   (config: `config.json` of the run, copied below)
-- Device: {_device()}; jax {jax.__version__}
+- Device: {device()}; jax {jax.__version__}
 - Date: {date}
-- Commit: {_git_commit()}
+- Commit: {git_commit()}
 - Time: walking and labelling {walk_s}, final model {seconds['final']:.0f} s, held-out models
   {seconds['heldout']:.0f} s
 - Data: {sum(int(d['walks']) for d in data.values())} walks of the shipped base policy, {cfg['terrains']} terrains
@@ -278,9 +256,10 @@ def export(folder: Path, params, mcfg, cfg: dict, data: dict, rows: list, final:
 
     from jaxterrain import traversability as trav
     from jaxterrain.io import atomic_write_text
+    from jaxterrain.provenance import device, git_commit
 
     trav.save(folder / "model", params, mcfg, extra={"label": cfg["label"], "final": final, "heldout": rows,
-                                                      "device": _device(), "date": date, "commit": _git_commit(),
+                                                      "device": device(), "date": date, "commit": git_commit(),
                                                       "seconds": seconds})
     atomic_write_text(folder / "model" / "PROVENANCE.md", provenance(cfg, data, rows, final, seconds, date))
     if to_assets:
@@ -300,9 +279,10 @@ def main(args) -> int:
 
     from jaxterrain import traversability as trav
     from jaxterrain.io import atomic_write_text
+    from jaxterrain.provenance import device
 
     folder, cfg = common.setup_run("train-traversability", args, PRESETS, "cpu", overrides(args))
-    print(f"train-traversability: {folder}  device {_device()}", flush=True)
+    print(f"train-traversability: {folder}  device {device()}", flush=True)
     key = jax.random.key(int(cfg["seed"]))
     clock = common.Clock(args.time_limit)
     t0 = time.time()
