@@ -268,13 +268,13 @@ def slope_fitness(heightmaps, key=None):
     """
     import jax.numpy as jnp
 
+    from jaxterrain.difficulty import smoothness_priority
     from jaxterrain.terrain import TerrainScale
 
     scale = TerrainScale()
     h = jnp.asarray(heightmaps, jnp.float32) * (scale.height / scale.cell_size)
-    dx = jnp.mean(jnp.abs(jnp.diff(h, axis=-1)), axis=(-2, -1))
-    dy = jnp.mean(jnp.abs(jnp.diff(h, axis=-2)), axis=(-2, -1))
-    return 1.0 - jnp.clip((dx + dy) / 2.0, 0.0, 1.0)
+    # smoothness_priority = -(mean |dz/dx| + mean |dz/dy|) of the map in metres per pixel: minus twice the slope
+    return 1.0 - jnp.clip(-smoothness_priority(h) / 2.0, 0.0, 1.0)
 
 
 def fitness_function(name: str, attempts: int, best: int, size: int, slots: int | None = None):

@@ -22,9 +22,9 @@ Presets:
 Writes into ``--out RUN_DIR``: ``config.json`` (command, preset, options, env and PPO config),
 ``checkpoint.npz``, ``metrics.csv``, ``tb/``, ``policy/`` (``policy.msgpack`` + ``config.json``, loadable with
 ``jaxterrain.rl.load_policy``) and, once training is complete, ``eval.json``: the normalised distance of the
-deterministic policy on flat ground over 20 attempts (random joint initialisations): mean of the best 5 and mean of
-all 20 (bar for shipping: >= 0.9 and >= 0.7). ``--export-assets`` copies the policy to
-``jaxterrain/assets/base_policy/`` with ``PROVENANCE.md`` (command, steps, commit, device, date, eval).
+deterministic policy on flat ground over 20 attempts (random joint initialisations; ``jaxterrain.difficulty``'s
+rollouts): mean of the best 5 and mean of all 20 (bar for shipping: >= 0.9 and >= 0.7). ``--export-assets`` copies
+the policy to ``jaxterrain/assets/base_policy/`` with ``PROVENANCE.md`` (command, steps, commit, device, date, eval).
 """
 
 from __future__ import annotations
@@ -91,39 +91,6 @@ def _to_jsonable(x):
     if isinstance(x, (list, tuple)):
         return [_to_jsonable(v) for v in x]
     return x
-
-
-def evaluate_flat(env, policy, terrain, key, attempts: int = 20, best: int = 5, steps: int | None = None):
-    """Normalised distance of ``policy`` on ``terrain`` over ``attempts`` episodes (random initial joints).
-
-    Each attempt's distance is ``state.distance`` at its first ``done`` (or after ``steps``, default the env's
-    episode length). Returns a dict with the per-attempt distances and the best-``best`` and all-attempt means.
-    """
-    import jax
-    import jax.numpy as jnp
-    import numpy as np
-
-    steps = int(steps or env.config.episode_length)
-
-    @jax.jit
-    def rollout(key):
-        s = jax.vmap(env.reset, in_axes=(0, None))(jax.random.split(key, attempts), terrain)
-
-        def body(carry, _):
-            s, alive, dist = carry
-            s = jax.vmap(env.step, in_axes=(0, 0, None))(s, policy(s.obs), terrain)
-            dist = jnp.where(alive, s.distance, dist)
-            alive = alive & (s.done == 0)
-            return (s, alive, dist), None
-
-        init = (s, jnp.ones((attempts,), bool), jnp.zeros((attempts,), jnp.float32))
-        (_, _, dist), _ = jax.lax.scan(body, init, None, length=steps)
-        return jnp.where(jnp.isfinite(dist), dist, 0.0)
-
-    dist = np.asarray(rollout(key))
-    top = np.sort(dist)[::-1][:best]
-    return {"attempts": attempts, "best": best, "distances": [float(d) for d in dist],
-            "best_mean": float(np.mean(top)), "all_mean": float(np.mean(dist))}
 
 
 class RunSettings(NamedTuple):
@@ -360,35 +327,27 @@ def resume_command(command: str, run: Path) -> str:
     return f"{' '.join(again)} --resume {run}"
 
 
-def evaluate_policy(policy_dir: Path, env, env_cfg, terrain, seed: int, attempts: int, best: int,
-                    steps_done: int) -> dict:
-    """``eval.json``'s content: flat-ground normalised distances of the deterministic policy in ``policy_dir``
-    (``jaxterrain.difficulty``'s metric, else :func:`evaluate_flat`), their means and the bar verdict."""
+def evaluate_policy(policy_dir: Path, env_cfg, seed: int, attempts: int, best: int, steps_done: int) -> dict:
+    """``eval.json``'s content: the flat-ground normalised distances of the deterministic policy in ``policy_dir``
+    under the env config ``env_cfg`` (``jaxterrain.difficulty.rollout_distances``), the mean of the ``best``
+    largest (``difficulty.best_of``) and of all, and the bar verdict."""
     import time
 
     import jax
     import jax.numpy as jnp
     import numpy as np
 
-    from jaxterrain import rl
+    from jaxterrain import difficulty, rl
 
     policy = rl.load_policy(policy_dir)
-    eval_key = jax.random.PRNGKey(seed + 1_000_003)
     t_eval = time.perf_counter()
-    try:  # the project's official metric (jaxterrain.difficulty), same env config
-        from jaxterrain import difficulty
-
-        dist = np.asarray(difficulty.rollout_distances(
-            jnp.zeros((1,) + tuple(env_cfg.terrain_shape), jnp.float32), eval_key, attempts=attempts,
-            policy=policy, scale=env_cfg.scale, env_config=env_cfg)[0])
-        top = np.sort(dist)[::-1][:best]
-        result = {"attempts": attempts, "best": best, "distances": [float(d) for d in dist],
-                  "best_mean": float(np.mean(top)), "all_mean": float(np.mean(dist)),
-                  "method": "jaxterrain.difficulty.rollout_distances"}
-    except ImportError as err:
-        print(f"jaxterrain.difficulty unavailable ({err}); evaluating with the env directly", flush=True)
-        result = evaluate_flat(env, policy, terrain, eval_key, attempts, best)
-        result["method"] = "experiments.train_base_policy.evaluate_flat (env directly)"
+    dist = difficulty.rollout_distances(jnp.zeros((1,) + tuple(env_cfg.terrain_shape), jnp.float32),
+                                        jax.random.PRNGKey(seed + 1_000_003), attempts=attempts, policy=policy,
+                                        scale=env_cfg.scale, env_config=env_cfg)  # [1, attempts]
+    row = np.asarray(dist[0])
+    result = {"attempts": attempts, "best": best, "distances": [float(d) for d in row],
+              "best_mean": float(difficulty.best_of(dist, best)[0]), "all_mean": float(np.mean(row)),
+              "method": "jaxterrain.difficulty.rollout_distances"}
     result.update(env_steps=steps_done, eval_s=time.perf_counter() - t_eval,
                   passes_bar=bool(result["best_mean"] >= 0.9 and result["all_mean"] >= 0.7))
     return result
@@ -494,8 +453,8 @@ def main(args: argparse.Namespace) -> int:
     if args.skip_eval:
         return 0
 
-    result = evaluate_policy(run.path / "policy", env, settings.env_config, terrain, args.seed,
-                             args.eval_attempts, args.eval_best, steps_done)
+    result = evaluate_policy(run.path / "policy", settings.env_config, args.seed, args.eval_attempts, args.eval_best,
+                             steps_done)
     write_eval(run.path, result)
     if args.export_assets:
         dest = Path(args.assets_dir) if args.assets_dir else rl.BASE_POLICY_DIR
