@@ -302,3 +302,43 @@ def generator_available(name: str, size: int) -> tuple[bool, str]:
     except Exception as err:  # noqa: BLE001 - any failure means "skip this generator", reported to the user
         msg = str(err).splitlines()[0] if str(err) else ""
         return False, f"{type(err).__name__}: {msg[:100]}{'...' if len(msg) > 100 else ''}"
+
+
+def resume_folder(command: str, resume: Any, out: Any = None) -> Path:
+    """The run folder that ``--resume`` names: ``--resume FOLDER`` is FOLDER (with an ``--out`` naming another folder
+    it is a :class:`UsageError`: the two name different runs); ``--resume`` alone is ``--out`` when given, else the
+    newest run of ``command`` (:func:`latest_run`)."""
+    if resume not in (None, "latest"):
+        if out is not None and Path(out) != Path(resume):
+            raise UsageError(f"--resume {resume} and --out {out} name different runs; give one of them")
+        return Path(resume)
+    return Path(out) if out is not None else latest_run(command)
+
+
+def setup_resumable_run(command: str, args: argparse.Namespace, presets: dict[str, dict], default_preset: str,
+                        overrides: dict[str, Any], extendable: tuple[str, ...] = ()) -> tuple[Path, dict]:
+    """:func:`setup_run` for the training commands (``train-gan``, ``train-base-policy``, ``train-traversability``,
+    ``features``). Returns ``(folder, config)``.
+
+    A fresh run is exactly :func:`setup_run`. ``--resume`` continues the run in :func:`resume_folder` (so
+    ``--out RUN --resume`` continues RUN) with the config saved there; options given on the command line are
+    ignored (a note on stderr says which), except the keys of ``extendable`` (how long the run lasts and how often
+    it logs, e.g. ``steps``): those replace the saved values, are checked as a fresh config is, and are written
+    back to the run's ``config.json``.
+    """
+    if args.resume is None:
+        return setup_run(command, args, presets, default_preset, overrides)
+    check_resume(command, args.resume)
+    folder = resume_folder(command, args.resume, getattr(args, "out", None))
+    config = load_config(folder)
+    given = {k: v for k, v in overrides.items() if v is not None}
+    changed = {k: v for k, v in given.items() if k in extendable}
+    ignored = sorted(set(given) - set(changed))
+    if ignored:
+        print(f"--resume: ignoring {ignored}; the run continues with its saved config", file=sys.stderr)
+    if changed:
+        config.update(changed)
+        check_values(config, lambda k: flag(k) if k in changed else f"{folder / CONFIG_NAME}: key {k!r}")
+        write_config(folder, config)
+    print(f"resuming {folder}", flush=True)
+    return folder, config

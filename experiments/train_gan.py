@@ -15,10 +15,12 @@ The loop is ``jaxterrain.driver.run_chunks``, as in ``evolve``: every ``--ckpt-e
 ``checkpoint.npz`` (params, batch statistics, optimiser states, step and key; the previous one kept as
 ``checkpoint.prev.npz``), ``metrics.csv`` and TensorBoard events (``tb/``); ``--time-limit MIN`` stops after a
 checkpoint (exit code 3, as ``evolve``) and ``--resume FOLDER`` continues the run bit-identically with the
-settings saved in its ``config.json``. The run folder also gets ``config.json``
-(command, arguments, config), ``log.jsonl`` (every ``--log-every`` steps), ``samples/step_<8-digit step>.png`` (a
-fixed-latent grid, plus ``real.png``), ``final/`` (``generator.msgpack`` + ``config.json``, loadable with
-``generators.get("gan", weights="<run>/final")``) and ``quality.json``
+settings saved in its ``config.json`` (``experiments.common.setup_resumable_run``: ``--steps``, ``--ckpt-every``,
+``--sample-every``, ``--log-every`` and ``--quality-samples`` given with it replace the saved ones, e.g. to train
+longer; the other options are the run's). The run folder also gets ``config.json`` (the settings, as in every
+command: ``--config RUN/config.json`` re-runs them), ``log.jsonl`` (every ``--log-every`` steps),
+``samples/step_<8-digit step>.png`` (a fixed-latent grid, plus ``real.png``), ``final/`` (``generator.msgpack`` +
+``config.json``, loadable with ``generators.get("gan", weights="<run>/final")``) and ``quality.json``
 (:func:`jaxterrain.generators.gan_train.quality_check`). ``--export-assets`` copies ``final/`` into
 ``jaxterrain/assets/gan/`` with ``PROVENANCE.md`` and a sample grid.
 """
@@ -32,44 +34,51 @@ import time
 from pathlib import Path
 from typing import Any, NamedTuple
 
+from experiments import common
+
 PRESETS: dict[str, dict[str, Any]] = {
     # tiny: a few seconds of steps on CPU at 64 x 64
     "smoke": dict(
         size=64, channels=(64, 32, 16, 8), disc_channels=(16, 32, 64), batch_size=8, steps=20,
-        sample_every=10, ckpt_every=10, log_every=5, quality_samples=32, r1=0.0,
+        sample_every=10, ckpt_every=10, log_every=5, quality_samples=32, r1=0.0, lr=2e-4, data=None,
     ),
     # the shipped weights: 256 x 256, default architecture; about 4 minutes on one H100 (see README / PROVENANCE)
     "gpu": dict(
         size=256, channels=(256, 128, 64, 32, 16, 8), disc_channels=(16, 32, 64, 128, 256, 256), batch_size=64,
-        steps=12000, sample_every=2000, ckpt_every=2000, log_every=500, quality_samples=512, r1=1.0,
+        steps=12000, sample_every=2000, ckpt_every=2000, log_every=500, quality_samples=512, r1=1.0, lr=2e-4,
+        data=None,
     ),
 }
 
 
+# What ``--resume`` may change (how long the run lasts and how often it logs); the rest is the run's.
+EXTENDABLE = ("steps", "sample_every", "ckpt_every", "log_every", "quality_samples")
+
+
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--preset", choices=sorted(PRESETS), default=None,
-                        help="size of the run (default smoke; with --resume: the run's)")
-    parser.add_argument("--steps", type=int, help="total training steps (default: the preset's)")
-    parser.add_argument("--batch-size", type=int, help="patches per step (default: the preset's)")
-    parser.add_argument("--size", type=int, help="heightmap side; must fit the preset's architecture")
-    parser.add_argument("--data", help="folder / file of DEM tiles (.tif .tiff .npy .npz); default: matplotlib DEMs")
-    parser.add_argument("--out", help="run folder (default runs/train-gan-<timestamp>)")
-    parser.add_argument("--resume", nargs="?", const="latest", default=None, metavar="FOLDER",
-                        help="continue the run in FOLDER from its checkpoint (default: --out, else the newest "
-                             "runs/train-gan-*)")
-    parser.add_argument("--time-limit", type=float, default=None, metavar="MIN",
-                        help="stop cleanly after about MIN minutes (after a checkpoint); continue with --resume")
-    parser.add_argument("--seed", type=int, default=None, help="PRNG seed (default 0; with --resume: the run's)")
-    parser.add_argument("--lr", type=float, default=None, help="Adam learning rate of both networks (2e-4)")
-    parser.add_argument("--r1", type=float, help="R1 penalty weight on real data, applied lazily every 8 steps "
-                        "(0 = off; default: the preset's)")
-    parser.add_argument("--sample-every", type=int, help="steps between sample grids")
-    parser.add_argument("--ckpt-every", type=int, help="steps between checkpoints")
-    parser.add_argument("--log-every", type=int, help="steps between log lines")
-    parser.add_argument("--quality-samples", type=int, help="terrains per set in the quality check (0 = skip)")
+    common.add_run_arguments(parser, PRESETS, "smoke")
+    parser.add_argument("--steps", type=int, default=None, help="total training steps (default: the preset's)")
+    parser.add_argument("--batch-size", type=int, default=None, help="patches per step (default: the preset's)")
+    parser.add_argument("--size", type=int, default=None, help="heightmap side; must fit the preset's architecture")
+    parser.add_argument("--data", default=None,
+                        help="folder / file of DEM tiles (.tif .tiff .npy .npz); default: matplotlib DEMs")
+    parser.add_argument("--lr", type=float, default=None, help="Adam learning rate of both networks (default 2e-4)")
+    parser.add_argument("--r1", type=float, default=None, help="R1 penalty weight on real data, applied lazily "
+                        "every 8 steps (0 = off; default: the preset's)")
+    parser.add_argument("--sample-every", type=int, default=None, help="steps between sample grids")
+    parser.add_argument("--ckpt-every", type=int, default=None, help="steps between checkpoints")
+    parser.add_argument("--log-every", type=int, default=None, help="steps between log lines")
+    parser.add_argument("--quality-samples", type=int, default=None,
+                        help="terrains per set in the quality check (0 = skip)")
     parser.add_argument("--quality-only", metavar="WEIGHTS", help="only run the quality check of these weights")
     parser.add_argument("--export-assets", action="store_true", help="copy the result into jaxterrain/assets/gan/")
     parser.add_argument("--no-progress", action="store_true", help="log lines only, no progress bar")
+
+
+def overrides(args) -> dict:
+    """The settings given on the command line (None: not given)."""
+    return {name: getattr(args, name) for name in ("steps", "batch_size", "size", "data", "lr", "r1", "sample_every",
+                                                    "ckpt_every", "log_every", "quality_samples")}
 
 
 # ----------------------------------------------------------------------------------------------------------------
@@ -123,7 +132,7 @@ def export_assets(run_dir: Path, asset_dir: Path, provenance: str) -> Path:
     return asset_dir
 
 
-def provenance_text(args, config, data_desc, state_step, wall, quality, metrics) -> str:
+def provenance_text(cfg: dict, config, data_desc, state_step, wall, quality, metrics) -> str:
     import flax
     import jax
     import optax
@@ -140,8 +149,8 @@ def provenance_text(args, config, data_desc, state_step, wall, quality, metrics)
 
 - Command: `python -m experiments {' '.join(sys.argv[1:]) if sys.argv[1:] else 'train-gan'}`
   (`{' '.join(sys.argv)}`)
-- Preset: {args.preset}; steps: {state_step}; batch size: {args.batch_size}; Adam lr {args.lr}, b1 0.5, b2 0.999;
-  loss: non-saturating GAN; R1 weight: {args.r1} (lazy, every {gan_train.R1_EVERY} steps); seed: {args.seed}
+- Preset: {cfg['preset']}; steps: {state_step}; batch size: {cfg['batch_size']}; Adam lr {cfg['lr']}, b1 0.5, b2 0.999;
+  loss: non-saturating GAN; R1 weight: {cfg['r1']} (lazy, every {gan_train.R1_EVERY} steps); seed: {cfg['seed']}
 - Architecture (`config.json`): {json.dumps(config.to_json())}
   - generator parameters: {gan_train.generator_params(config)} ; FLOPs per sample: {generator_flops(config) / 1e6:.1f} M
 - Data: {data_desc}
@@ -168,44 +177,6 @@ def _scales():
 # ----------------------------------------------------------------------------------------------------------------
 
 
-_RESOLVED = ("steps", "batch_size", "size", "sample_every", "ckpt_every", "log_every", "quality_samples", "r1")
-
-
-def saved_options(args) -> None:
-    """Fill the options left out (``None``) from the run's ``config.json`` when resuming (``--resume FOLDER``
-    continues the run as it was started, as in ``evolve``), then from the defaults (smoke, seed 0, lr 2e-4)."""
-    saved = {}
-    if args.resume is not None:
-        path = _run_path(args) / "config.json"
-        saved = json.loads(path.read_text()) if path.is_file() else {}
-    resolved = saved.get("resolved") or {}
-    from_run = {"preset": saved.get("preset"), "seed": resolved.get("seed"), "lr": resolved.get("lr"),
-                **{name: resolved.get(name) for name in _RESOLVED}}
-    for name, value in from_run.items():
-        if getattr(args, name, None) is None and value is not None:
-            setattr(args, name, value)
-    args.preset = args.preset or "smoke"
-    args.seed = 0 if args.seed is None else args.seed
-    args.lr = 2e-4 if args.lr is None else args.lr
-
-
-def _resolve(args) -> dict:
-    saved_options(args)
-    preset = dict(PRESETS[args.preset])
-    for name in _RESOLVED:
-        if getattr(args, name, None) is not None:
-            preset[name] = getattr(args, name)
-        setattr(args, name, preset[name])
-    for name in ("steps", "batch_size", "sample_every", "ckpt_every", "log_every"):
-        if preset[name] < 1:
-            raise ValueError(f"--{name.replace('_', '-')} must be >= 1; got {preset[name]}")
-    if preset["r1"] < 0:
-        raise ValueError(f"--r1 must be >= 0; got {preset['r1']}")
-    if preset["quality_samples"] < 0:
-        raise ValueError(f"--quality-samples must be >= 0; got {preset['quality_samples']}")
-    return preset
-
-
 class TrainingData(NamedTuple):
     """The DEM tiles a run trains on (``tiles``: ``jaxterrain.dem.DemTiles``), how many, and a one-line description."""
 
@@ -224,33 +195,12 @@ class TrainOutcome(NamedTuple):
     last_metrics: dict[str, float] | None
 
 
-def make_config(preset: dict):
-    """The checked ``GanConfig`` of the resolved ``preset`` (see :func:`_resolve`)."""
+def make_config(cfg: dict):
+    """The checked ``GanConfig`` of the run's settings ``cfg`` (size, channels, disc_channels)."""
     from jaxterrain.generators.gan import GanConfig
 
-    return GanConfig(size=preset["size"], channels=tuple(preset["channels"]),
-                     disc_channels=tuple(preset["disc_channels"])).check()
-
-
-def _run_path(args) -> Path:
-    """``--resume FOLDER``; ``--resume`` alone: ``--out``, else the newest ``runs/train-gan-*``; otherwise ``--out``
-    or ``runs/train-gan-<UTC time>``."""
-    from experiments.common import latest_run, run_folder
-
-    if args.resume not in (None, "latest"):
-        if args.out is not None and Path(args.out) != Path(args.resume):
-            raise ValueError(f"--resume {args.resume} and --out {args.out} name different runs; give one of them")
-        return Path(args.resume)
-    if args.resume == "latest":
-        return Path(args.out) if args.out is not None else latest_run("train-gan")
-    return run_folder("train-gan", args.out)
-
-
-def prepare_run_dir(args) -> Path:
-    """The run folder (see :func:`_run_path`), created."""
-    run_dir = _run_path(args)
-    run_dir.mkdir(parents=True, exist_ok=True)
-    return run_dir
+    return GanConfig(size=int(cfg["size"]), channels=tuple(cfg["channels"]),
+                     disc_channels=tuple(cfg["disc_channels"])).check()
 
 
 def load_training_data(data: str | None) -> TrainingData:
@@ -264,7 +214,7 @@ def load_training_data(data: str | None) -> TrainingData:
     return TrainingData(tiles, len(dems), description)
 
 
-def run_quality_only(args, run_dir: Path, tiles) -> None:
+def run_quality_only(weights: str, cfg: dict, run_dir: Path, tiles) -> None:
     """``--quality-only WEIGHTS``: write the :func:`quality_check` of those weights to ``run_dir/quality.json``."""
     import jax
 
@@ -272,41 +222,23 @@ def run_quality_only(args, run_dir: Path, tiles) -> None:
     from jaxterrain.generators.gan import load_generator
     from jaxterrain.io import atomic_write_text
 
-    cfg, variables = load_generator(args.quality_only)
-    report = gan_train.quality_check(jax.random.PRNGKey(args.seed + 1), cfg, variables, tiles,
-                                     max(args.quality_samples, 8))
+    gan_cfg, variables = load_generator(weights)
+    report = gan_train.quality_check(jax.random.PRNGKey(int(cfg["seed"]) + 1), gan_cfg, variables, tiles,
+                                     max(int(cfg["quality_samples"]), 8))
     atomic_write_text(run_dir / "quality.json", json.dumps(report, indent=2) + "\n")
     print(json.dumps(report["mean_w1"]), "gan_closer_than_perlin:", report["gan_closer_than_perlin"])
 
 
-def write_run_json(args, run_dir: Path, preset: dict, config, data_desc: str) -> None:
-    """Write ``config.json`` (command, argv, resolved options, config); on ``--resume`` first check that the
-    config is the one the run was trained with."""
-    from jaxterrain.io import atomic_write_text
-
-    run_json = run_dir / "config.json"
-    if args.resume and run_json.exists():
-        saved = json.loads(run_json.read_text())
-        if saved.get("config") != config.to_json():
-            raise ValueError(f"--resume: {run_dir} was trained with config {saved.get('config')}, "
-                             f"not {config.to_json()}; use the same --preset/--size")
-    atomic_write_text(run_json, json.dumps({"command": "train-gan", "argv": sys.argv, "preset": args.preset,
-                                            "resolved": {k: v for k, v in preset.items()
-                                                         if k not in ("channels", "disc_channels")}
-                                            | {"lr": args.lr, "r1": args.r1, "seed": args.seed, "data": data_desc},
-                                            "config": config.to_json()}, indent=2) + "\n")
-
-
-def init_or_resume(args, run_dir: Path, config) -> tuple[Any, int, dict | None]:
-    """``(state, steps done, metric history)``: a fresh ``GanTrainState`` from ``--seed`` and 0 steps, or with
-    ``--resume`` the run's ``checkpoint.npz`` (``jaxterrain.driver`` format)."""
+def init_or_resume(cfg: dict, run_dir: Path, config, resume: bool) -> tuple[Any, int, dict | None]:
+    """``(state, steps done, metric history)``: a fresh ``GanTrainState`` from the run's seed and 0 steps, or with
+    ``resume`` the run's ``checkpoint.npz`` (``jaxterrain.driver`` format; none yet: a fresh state)."""
     import jax
 
     from jaxterrain import driver
     from jaxterrain.generators import gan_train
 
-    state = gan_train.init_state(jax.random.PRNGKey(args.seed), config, args.lr)
-    if not args.resume:
+    state = gan_train.init_state(jax.random.PRNGKey(int(cfg["seed"])), config, float(cfg["lr"]))
+    if not resume:
         return state, 0, None
     restored = driver.restore(run_dir, like=state)
     if restored is None:
@@ -342,7 +274,7 @@ def _say(line: str) -> None:
         print(line, flush=True)
 
 
-def make_chunk(args, run_dir: Path, config, tiles, start: int):
+def make_chunk(cfg: dict, run_dir: Path, config, tiles, start: int):
     """The ``jaxterrain.driver`` chunk ``(state, a, b) -> (state, metrics [b - a])``: steps ``a + 1 .. b`` of the
     jitted train step, with log lines and sample grids at their intervals (``start``: where this process began)."""
     import jax
@@ -350,42 +282,45 @@ def make_chunk(args, run_dir: Path, config, tiles, start: int):
 
     from jaxterrain.generators import gan_train
 
-    step_fn = gan_train.jitted_step(config, args.batch_size, float(args.lr), float(args.r1),
+    step_fn = gan_train.jitted_step(config, int(cfg["batch_size"]), float(cfg["lr"]), float(cfg["r1"]),
                                     jax.default_backend() != "cpu")
+    steps, log_every, sample_every = int(cfg["steps"]), int(cfg["log_every"]), int(cfg["sample_every"])
     sample_fn, _ = gan_train.jitted_samples(config)
     t0 = time.time()
 
     def chunk(state, a: int, b: int):
-        steps = []
+        done = []
         for step in range(a + 1, b + 1):
             state, metrics = step_fn(state, tiles)
-            steps.append(metrics)
-            if step % args.log_every == 0 or step == args.steps:
-                _log_metrics(_say, run_dir / "log.jsonl", step, args.steps, start, t0, metrics)
-            if step % args.sample_every == 0 or step == args.steps:
+            done.append(metrics)
+            if step % log_every == 0 or step == steps:
+                _log_metrics(_say, run_dir / "log.jsonl", step, steps, start, t0, metrics)
+            if step % sample_every == 0 or step == steps:
                 save_grid(run_dir / "samples" / f"step_{step:08d}.png", sample_fn(state.g_params, state.g_stats))
-        return state, {k: jnp.stack([m[k] for m in steps]) for k in steps[0]}
+        return state, {k: jnp.stack([m[k] for m in done]) for k in done[0]}
 
     return chunk
 
 
-def train(args, run_dir: Path, config, tiles) -> TrainOutcome:
-    """Train (or resume) to ``--steps`` through ``jaxterrain.driver.run_chunks``: a checkpoint (``checkpoint.npz``),
-    ``metrics.csv`` and TensorBoard events every ``--ckpt-every`` steps; stops early after ``--time-limit``."""
+def train(cfg: dict, run_dir: Path, config, tiles, resume: bool = False, time_limit: float | None = None,
+          progress: bool = True) -> TrainOutcome:
+    """Train (or ``resume``) to ``cfg["steps"]`` through ``jaxterrain.driver.run_chunks``: a checkpoint
+    (``checkpoint.npz``), ``metrics.csv`` and TensorBoard events every ``cfg["ckpt_every"]`` steps; stops early
+    after ``time_limit`` minutes (``--time-limit``)."""
     import jax
 
     from jaxterrain import driver
     from jaxterrain.generators import gan_train
 
-    state, start, history = init_or_resume(args, run_dir, config)
+    state, start, history = init_or_resume(cfg, run_dir, config, resume)
     _, real_fn = gan_train.jitted_samples(config)
     if not (run_dir / "samples" / "real.png").exists():
         save_grid(run_dir / "samples" / "real.png", real_fn(jax.random.PRNGKey(7), tiles))
     t0 = time.time()
     state, done, history = driver.run_chunks(
-        make_chunk(args, run_dir, config, tiles, start), state, total=args.steps, every=args.ckpt_every,
+        make_chunk(cfg, run_dir, config, tiles, start), state, total=int(cfg["steps"]), every=int(cfg["ckpt_every"]),
         start=start, history=history, run_dir=run_dir, key_metric="g_loss",
-        time_limit_s=args.time_limit * 60.0 if args.time_limit else None, progress=not args.no_progress,
+        time_limit_s=time_limit * 60.0 if time_limit else None, progress=progress,
         desc="train-gan", meta={"command": "train-gan", "config": config.to_json()})
     wall = time.time() - t0
     if start < done:
@@ -394,7 +329,7 @@ def train(args, run_dir: Path, config, tiles) -> TrainOutcome:
     return TrainOutcome(state, done, wall, last)
 
 
-def run_quality(args, run_dir: Path, config, variables, tiles) -> dict | None:
+def run_quality(cfg: dict, run_dir: Path, config, variables, tiles) -> dict | None:
     """The :func:`quality_check` of the trained generator, written to ``quality.json`` (None if skipped)."""
     import jax
 
@@ -402,11 +337,11 @@ def run_quality(args, run_dir: Path, config, variables, tiles) -> dict | None:
 
     from jaxterrain.io import atomic_write_text
 
-    if args.quality_samples <= 0:
+    if int(cfg["quality_samples"]) <= 0:
         return None
     try:
-        quality = gan_train.quality_check(jax.random.PRNGKey(args.seed + 1), config, variables, tiles,
-                                          args.quality_samples)
+        quality = gan_train.quality_check(jax.random.PRNGKey(int(cfg["seed"]) + 1), config, variables, tiles,
+                                          int(cfg["quality_samples"]))
     except ImportError as err:
         print(f"quality check skipped: {err}", flush=True)
         return None
@@ -417,30 +352,30 @@ def run_quality(args, run_dir: Path, config, variables, tiles) -> dict | None:
 
 
 def main(args: argparse.Namespace) -> int:
-    """Resolve the options, load the data, train (or resume), save ``final/``, check quality, optionally export."""
+    """Resolve the settings and the run folder, load the data, train (or resume), save ``final/``, check quality,
+    optionally export."""
     from jaxterrain import provenance
     from jaxterrain.generators.gan import ASSET_DIR, save_generator
 
-    preset = _resolve(args)
-    config = make_config(preset)
-    run_dir = prepare_run_dir(args)
-    data = load_training_data(args.data)
+    run_dir, cfg = common.setup_resumable_run("train-gan", args, PRESETS, "smoke", overrides(args), EXTENDABLE)
+    config = make_config(cfg)
+    data = load_training_data(cfg.get("data"))
     print(f"train-gan: {run_dir}  device {provenance.device()}  data {data.num_tiles} tiles", flush=True)
     if args.quality_only:
-        run_quality_only(args, run_dir, data.tiles)
+        run_quality_only(args.quality_only, cfg, run_dir, data.tiles)
         return 0
 
-    write_run_json(args, run_dir, preset, config, data.description)
-    outcome = train(args, run_dir, config, data.tiles)
-    if outcome.done < args.steps:
-        print(f"time limit reached at step {outcome.done} of {args.steps}; continue with: "
+    outcome = train(cfg, run_dir, config, data.tiles, resume=args.resume is not None, time_limit=args.time_limit,
+                    progress=not args.no_progress)
+    if outcome.done < int(cfg["steps"]):
+        print(f"time limit reached at step {outcome.done} of {cfg['steps']}; continue with: "
               f"python -m experiments train-gan --resume {run_dir}", flush=True)
         return 3  # as evolve: stopped by the time limit, resumable
     variables = {"params": outcome.state.g_params, "batch_stats": outcome.state.g_stats}
     save_generator(run_dir / "final", config, variables)
-    quality = run_quality(args, run_dir, config, variables, data.tiles)
+    quality = run_quality(cfg, run_dir, config, variables, data.tiles)
     if args.export_assets:
-        text = provenance_text(args, config, data.description, int(outcome.state.step), outcome.wall, quality,
+        text = provenance_text(cfg, config, data.description, int(outcome.state.step), outcome.wall, quality,
                                outcome.last_metrics)
         out = export_assets(run_dir, ASSET_DIR, text)
         print(f"exported the generator to {out}", flush=True)

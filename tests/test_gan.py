@@ -211,7 +211,7 @@ def test_train_checkpoint_resume_bit_equal(tmp_path, monkeypatch):
     # --resume FOLDER alone takes the run's settings from its config.json (only --steps changes here)
     assert train_gan.main(parser.parse_args(["--resume", str(tmp_path / "b"), "--steps", "3", "--no-progress"])) == 0
     saved = json.loads((tmp_path / "b" / "config.json").read_text())
-    assert saved["command"] == "train-gan" and saved["resolved"]["batch_size"] == 2 and saved["resolved"]["steps"] == 3
+    assert saved["command"] == "train-gan" and saved["batch_size"] == 2 and saved["steps"] == 3
     a = (tmp_path / "a" / "final" / "generator.msgpack").read_bytes()
     b = (tmp_path / "b" / "final" / "generator.msgpack").read_bytes()
     assert a == b  # bit-equal generator after resume
@@ -238,7 +238,7 @@ def test_train_checkpoint_resume_bit_equal(tmp_path, monkeypatch):
 
 
 def test_train_time_limit_stops_after_a_checkpoint(tmp_path, monkeypatch):
-    from experiments import train_gan
+    from experiments import common, train_gan
     from jaxterrain import driver
     from jaxterrain.generators import gan_train
 
@@ -251,7 +251,7 @@ def test_train_time_limit_stops_after_a_checkpoint(tmp_path, monkeypatch):
     assert driver.restore(tmp_path / "c", like)[1] == 1
     assert not (tmp_path / "c" / "final").exists()
     with pytest.raises(ValueError, match="different runs"):
-        train_gan.prepare_run_dir(argparse.Namespace(resume=str(tmp_path / "c"), out=str(tmp_path / "d")))
+        common.resume_folder("train-gan", str(tmp_path / "c"), str(tmp_path / "d"))
 
 
 def test_wasserstein_and_quality_report(tiny_weights):
