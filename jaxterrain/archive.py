@@ -12,7 +12,9 @@
 The pipeline: :mod:`jaxterrain.scoring` (render, descriptors, Algorithm 1, fitness; QDax's scoring contract),
 :mod:`jaxterrain.map_elites` (the pure state, ``init`` / ``step``, the one-winner-per-cell insertion, several
 treatments at once), :mod:`jaxterrain.evolution` (the host drivers ``evolve`` / ``evolve_many``, re-exported here),
-and this module (the host archive).
+and this module (the host archive). This module is the entry; two private modules beside it hold the types and
+settings (``_archive_types``: :class:`EvolveConfig`, :class:`Archive`, :data:`DEFAULT_RANGES`, ``resolve_config``)
+and the file (``_archive_file``: ``save`` / ``load``), re-exported here.
 
 The loop (see :mod:`jaxterrain.map_elites`): generation 0 evaluates ``initial_population`` random genomes; every
 later generation mutates ``batch_size`` parents drawn uniformly from the filled cells. Replacement is ordinary
@@ -62,210 +64,31 @@ One uncompressed ``.npz`` (written atomically) with these members:
 
 from __future__ import annotations
 
-import importlib
-import json
-import math
-import os
-import zipfile
-from pathlib import Path
-from typing import Any, Callable, NamedTuple, Sequence
+from typing import Any, Sequence
 
 import jax
 import jax.numpy as jnp
 import numpy as np
 
-from jaxterrain.map_elites import METRIC_NAMES
-from jaxterrain.terrain import TerrainScale, validate_scale
-
-PRNGKey = jax.Array
-FitnessFn = Callable[[jax.Array, PRNGKey, jax.Array], jax.Array]
-"""``(heightmaps [B, H, W], key, needed [B] bool) -> [B]``; see :mod:`jaxterrain.scoring`."""
-
-FORMAT = "jaxterrain-archive"
-VERSION = 1
-
-# Grid ranges per descriptor name, shared by every generator (window 30, stride 2, 256 x 256 heightmaps in [0, 1]).
-# How they were chosen (2026-11-21; `python -m experiments features --calibrate` does the same): 32 random genomes
-# plus 32 twice-mutated ones of each generator were rendered at 256 x 256 and described with window 30 / stride 2.
-# Each range is [0.5th, 99.5th] percentile of the pooled values, rounded outwards to 2 significant digits, with 0 as
-# the lower end of these non-negative descriptors. Pooled percentiles [0.5, 99.5]: without the GAN (cppn,
-# diamond_square, perlin, worley) tri [0.00046, 0.166], roughness [0.0024, 0.750]; with the GAN (all five)
-# tri [0.00015, 0.152], tpi (mean |TPI|) [0.00001, 0.110], roughness [0.0007, 0.630].
-# So nearly every terrain falls inside the grid and the 50 bins are not spent on values no generator reaches.
-# Re-measure after changing a feature definition or the generators; other windows need ``config.ranges``.
-DEFAULT_RANGES: dict[str, tuple[float, float]] = {
-    "tri": (0.0, 0.17),
-    "tpi": (0.0, 0.12),
-    "roughness": (0.0, 0.76),
-}
-
-
-class EvolveConfig(NamedTuple):
-    """MAP-Elites settings (defaults: the paper's protocol, 5 000 generations x 20 offspring).
-
-    Attributes:
-      generations: generations after the initial population (paper: 5 000).
-      batch_size: offspring per generation (paper: 20).
-      initial_population: random genomes evaluated in generation 0 (paper: 100).
-      bins: cells per descriptor (paper: 50), so ``bins ** 2`` cells.
-      descriptors: the two descriptor names (``features.descriptors`` names).
-      ranges: ``((lo, hi), (lo, hi))`` grid ranges of the two descriptors, or None for :data:`DEFAULT_RANGES`.
-      window, stride: descriptor kernel size and stride (paper: 30 and 2).
-      attempts, best: walker attempts per terrain and how many of the best are averaged (paper: 20 and 5).
-      checkpoint_every: RUN SETTING: generations per jitted chunk (and between checkpoints when a checkpoint folder
-        is given); does not change the archive.
-      robot_height: robot height in metres for Algorithm 1 (threshold robot_height / 3); None: the features
-        module's default.
-      traversable_window: Algorithm 1's window (approx. step length, paper: 26 pixels).
-      out_of_range: "clip" (into the edge cells) or "reject" (never inserted); see the module docstring.
-      store_heightmaps: RUN SETTING: render the elites at the end and keep their heightmaps (uint16) in the archive.
-      rollout_slots: RUN SETTING: env slots of the difficulty fitness's rollout pool
-        (``difficulty.batched_distances``), or None to run each generation's ``batch_size x attempts`` rollouts all
-        at once. A speed knob only (same rollouts, statistically the same fitness), so a run may resume with
-        another value.
-      scale: the ONE :class:`~jaxterrain.terrain.TerrainScale` (metres per pixel and per heightmap unit) of both
-        Algorithm 1 and the walker fitness (default ``TerrainScale()``: 0.04 m, 1.0 m).
-
-    The run settings (and ``generations``) stay here so that config files and archive headers keep one shape; they
-    are the host driver's, not the algorithm's.
-    """
-
-    generations: int = 5000
-    batch_size: int = 20
-    initial_population: int = 100
-    bins: int = 50
-    descriptors: tuple[str, str] = ("roughness", "tpi")
-    ranges: tuple[tuple[float, float], tuple[float, float]] | None = None
-    window: int = 30
-    stride: int = 2
-    attempts: int = 20
-    best: int = 5
-    checkpoint_every: int = 100
-    robot_height: float | None = None
-    traversable_window: int = 26
-    out_of_range: str = "clip"
-    store_heightmaps: bool = True
-    rollout_slots: int | None = None
-    scale: TerrainScale = TerrainScale()
-
-
-class Archive(NamedTuple):
-    """A MAP-Elites archive (host numpy arrays).
-
-    Attributes:
-      genomes: tuple with one genome pytree per generator name; leaves ``[cells, ...]`` (rows of cells held by
-        another generator or empty are zeros).
-      generator_names: tuple of generator names; ``source`` indexes it.
-      source: [cells] int32, the generator id of each elite, -1 for an empty cell.
-      fitness: [cells] float32, ``-inf`` for an empty cell.
-      descriptors: [cells, 2] float32, raw (unclipped) descriptor values of the elites.
-      centroids: [cells, 2] float32, grid centroids (cell i has centroid i).
-      heightmaps: [cells, H, W] uint16 (height * 65535) of the elites (zeros for empty cells), or None.
-      config: the :class:`EvolveConfig` (ranges resolved).
-      metrics: dict name -> [generations + 1] float32 history (empty for a combined archive).
-    """
-
-    genomes: tuple
-    generator_names: tuple[str, ...]
-    source: np.ndarray
-    fitness: np.ndarray
-    descriptors: np.ndarray
-    centroids: np.ndarray
-    heightmaps: np.ndarray | None
-    config: EvolveConfig
-    metrics: dict
-
-    @property
-    def filled(self) -> np.ndarray:
-        """[cells] bool, True where a cell holds an elite."""
-        return self.source >= 0
-
+# The stages, re-exported: every name below stays importable from jaxterrain.archive.
+from jaxterrain._archive_file import FORMAT, VERSION, load, save  # noqa: F401
+from jaxterrain._archive_types import (  # noqa: F401
+    DEFAULT_RANGES,
+    Archive,
+    EvolveConfig,
+    FitnessFn,
+    PRNGKey,
+    centroids_for,
+    config_from_dict,
+    config_to_dict,
+    resolve_config,
+)
+from jaxterrain.map_elites import METRIC_NAMES  # noqa: F401
+from jaxterrain.terrain import TerrainScale
 
 # ----------------------------------------------------------------------------------------------------------------
-# Config helpers
+# Elites: render, re-derive their cells, query
 # ----------------------------------------------------------------------------------------------------------------
-
-
-def resolve_config(config: EvolveConfig) -> EvolveConfig:
-    """Check ``config`` on the host and fill in ``ranges`` from :data:`DEFAULT_RANGES`. Raises ``ValueError``."""
-    def positive(name, value, minimum=1):
-        if int(value) != value or value < minimum:
-            raise ValueError(f"EvolveConfig.{name} must be an integer >= {minimum}; got {value!r}")
-
-    positive("generations", config.generations, 0)
-    for name in ("batch_size", "initial_population", "bins", "window", "stride", "attempts", "best",
-                 "checkpoint_every", "traversable_window"):
-        positive(name, getattr(config, name))
-    if config.best > config.attempts:
-        raise ValueError(f"EvolveConfig.best must be in [1, attempts={config.attempts}]; got {config.best}")
-    names = tuple(config.descriptors)
-    if len(names) != 2 or len(set(names)) != 2:
-        raise ValueError(f"EvolveConfig.descriptors must be two different descriptor names; got {names!r}")
-    if config.out_of_range not in ("clip", "reject"):
-        raise ValueError(f"EvolveConfig.out_of_range must be 'clip' or 'reject'; got {config.out_of_range!r}")
-    if config.rollout_slots is not None:
-        positive("rollout_slots", config.rollout_slots)
-    if config.robot_height is not None and not config.robot_height > 0:
-        raise ValueError(f"EvolveConfig.robot_height must be > 0 metres or None; got {config.robot_height!r}")
-    scale = config.scale
-    if isinstance(scale, dict):
-        scale = TerrainScale(**scale)
-    elif not isinstance(scale, TerrainScale) and isinstance(scale, (tuple, list)):
-        scale = TerrainScale(*scale)
-    try:
-        scale = validate_scale(scale)
-    except ValueError as err:
-        raise ValueError(f"EvolveConfig.scale: {err}") from err
-    if config.ranges is None:
-        missing = [n for n in names if n not in DEFAULT_RANGES]
-        if missing:
-            raise ValueError(
-                f"EvolveConfig.ranges: no default range for descriptor(s) {missing}; known: "
-                f"{sorted(DEFAULT_RANGES)}; pass ranges=((lo, hi), (lo, hi))"
-            )
-        ranges = tuple(DEFAULT_RANGES[n] for n in names)
-    else:
-        ranges = tuple(config.ranges)
-    ranges = tuple((float(lo), float(hi)) for lo, hi in ranges)
-    if len(ranges) != 2 or any(not (math.isfinite(lo) and math.isfinite(hi) and hi > lo) for lo, hi in ranges):
-        raise ValueError(f"EvolveConfig.ranges must be two finite (lo, hi) pairs with hi > lo; got {config.ranges!r}")
-    return config._replace(descriptors=names, ranges=ranges, scale=scale)
-
-
-def config_to_dict(config: EvolveConfig) -> dict:
-    """JSON-friendly dict of an :class:`EvolveConfig`."""
-    d = config._asdict()
-    d["descriptors"] = list(config.descriptors)
-    d["ranges"] = None if config.ranges is None else [list(r) for r in config.ranges]
-    d["scale"] = {"cell_size": float(config.scale.cell_size), "height": float(config.scale.height)}
-    return d
-
-
-def config_from_dict(d: dict) -> EvolveConfig:
-    """Inverse of :func:`config_to_dict`; unknown keys raise ``ValueError``."""
-    unknown = set(d) - set(EvolveConfig._fields)
-    if unknown:
-        raise ValueError(f"unknown EvolveConfig field(s) {sorted(unknown)}; known: {list(EvolveConfig._fields)}")
-    d = dict(d)
-    if "descriptors" in d:
-        d["descriptors"] = tuple(d["descriptors"])
-    if d.get("ranges") is not None:
-        d["ranges"] = tuple(tuple(float(v) for v in r) for r in d["ranges"])
-    if isinstance(d.get("scale"), dict):  # absent in files written before the field existed: the default scale
-        d["scale"] = TerrainScale(**d["scale"])
-    return EvolveConfig(**d)
-
-
-def centroids_for(config: EvolveConfig) -> jax.Array:
-    """[bins * bins, 2] float32 grid centroids over the config's ranges (QDax ``compute_euclidean_centroids``).
-
-    Cell ``i * bins + j`` has descriptor 0 in bin ``j`` and descriptor 1 in bin ``i`` (QDax's meshgrid order).
-    """
-    from qdax.core.containers.mapelites_repertoire import compute_euclidean_centroids
-
-    config = resolve_config(config)
-    (lo0, hi0), (lo1, hi1) = config.ranges
-    return compute_euclidean_centroids((config.bins, config.bins), minval=[lo0, lo1], maxval=[hi0, hi1])
 
 
 def render_elites(generator, genomes, filled: np.ndarray, batch: int = 64) -> np.ndarray:
@@ -462,197 +285,20 @@ def _bcast(mask, x):
     return mask.reshape(mask.shape + (1,) * (np.ndim(x) - 1))
 
 
-# ----------------------------------------------------------------------------------------------------------------
-# Pytree <-> JSON + flat arrays
-# ----------------------------------------------------------------------------------------------------------------
+# The host drivers live in jaxterrain.evolution, which imports this module: they are imported on first use, so that
+# either module can be imported first.
+_DRIVERS = ("Treatment", "difficulty_fitness", "evolve", "evolve_many", "progress_printer")
 
 
-def _flatten(tree, leaves: list):
-    if tree is None:
-        return {"type": "none"}
-    if isinstance(tree, tuple) and hasattr(tree, "_fields"):
-        cls = type(tree)
-        return {
-            "type": "namedtuple",
-            "class": f"{cls.__module__}:{cls.__qualname__}",
-            "fields": list(tree._fields),
-            "children": [_flatten(c, leaves) for c in tree],
-        }
-    if isinstance(tree, (tuple, list)):
-        return {"type": type(tree).__name__, "children": [_flatten(c, leaves) for c in tree]}
-    if isinstance(tree, dict):
-        keys = list(tree)
-        if not all(isinstance(k, str) for k in keys):
-            raise ValueError(f"archive genomes: dict keys must be strings to be saved; got {keys!r}")
-        return {"type": "dict", "keys": keys, "children": [_flatten(tree[k], leaves) for k in keys]}
-    if isinstance(tree, (np.ndarray, jax.Array, np.generic, float, int, bool)):
-        leaves.append(np.asarray(tree))
-        return {"type": "leaf", "index": len(leaves) - 1}
-    raise ValueError(
-        f"archive genomes: cannot save a pytree node of type {type(tree).__name__}; use arrays in "
-        "tuples, lists, dicts or NamedTuples"
-    )
+def __getattr__(name: str):
+    if name in _DRIVERS:
+        from jaxterrain import evolution
+
+        value = getattr(evolution, name)
+        globals()[name] = value
+        return value
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 
-def _unflatten(node, leaves: list):
-    kind = node["type"]
-    if kind == "none":
-        return None
-    if kind == "leaf":
-        return leaves[node["index"]]
-    children = [_unflatten(c, leaves) for c in node.get("children", [])]
-    if kind == "tuple":
-        return tuple(children)
-    if kind == "list":
-        return children
-    if kind == "dict":
-        return dict(zip(node["keys"], children))
-    if kind == "namedtuple":
-        module, _, qualname = node["class"].partition(":")
-        try:
-            obj = importlib.import_module(module)
-            for part in qualname.split("."):
-                obj = getattr(obj, part)
-        except (ImportError, AttributeError) as err:
-            raise ValueError(f"genome class {node['class']} cannot be imported: {err}") from err
-        return obj(*children)
-    raise ValueError(f"unknown genome tree node type {kind!r}")
-
-
-def _count_leaves(node) -> int:
-    if node["type"] == "leaf":
-        return 1
-    return sum(_count_leaves(c) for c in node.get("children", []))
-
-
-# ----------------------------------------------------------------------------------------------------------------
-# save / load
-# ----------------------------------------------------------------------------------------------------------------
-
-
-def save(path: str | os.PathLike, archive: Archive) -> Path:
-    """Write ``archive`` to ``path`` (.npz, format in the module docstring), atomically."""
-    from jaxterrain.io import atomic_save_npz
-
-    cells = archive.fitness.shape[0]
-    arrays: dict[str, np.ndarray] = {}
-    trees = []
-    for i, g in enumerate(archive.genomes):
-        leaves: list = []
-        trees.append(_flatten(g, leaves))
-        for k, leaf in enumerate(leaves):
-            if leaf.ndim < 1 or leaf.shape[0] != cells:
-                raise ValueError(f"save: genome leaf {k} of generator {i} has shape {leaf.shape}; needs [{cells}, ...]")
-            arrays[f"genome_{i}_{k}"] = leaf
-    filled = archive.source >= 0
-    hm_header = None
-    if archive.heightmaps is not None:
-        hm = np.asarray(archive.heightmaps)[filled]
-        hm_header = {"shape": list(hm.shape), "dtype": "uint16", "scale": 65535}
-        arrays["heightmaps"] = hm.astype(np.uint16)
-    header = {
-        "format": FORMAT,
-        "version": VERSION,
-        "generator_names": list(archive.generator_names),
-        "descriptor_names": list(archive.config.descriptors),
-        "ranges": [list(r) for r in archive.config.ranges],
-        "bins": archive.config.bins,
-        "cells": cells,
-        "config": config_to_dict(archive.config),
-        "genomes": trees,
-        "heightmaps": hm_header,
-        "metrics": sorted(archive.metrics),
-    }
-    arrays["header"] = np.frombuffer(json.dumps(header).encode("utf-8"), np.uint8)
-    arrays["fitness"] = np.asarray(archive.fitness, np.float32)
-    arrays["descriptors"] = np.asarray(archive.descriptors, np.float32)
-    arrays["centroids"] = np.asarray(archive.centroids, np.float32)
-    arrays["source"] = np.asarray(archive.source, np.int32)
-    for name, values in archive.metrics.items():
-        arrays[f"metric_{name}"] = np.asarray(values, np.float32)
-    return atomic_save_npz(path, **arrays)
-
-
-def _open_npz(path: Path, what: str):
-    if not path.exists():
-        raise FileNotFoundError(f"{what} file {str(path)!r} does not exist")
-    try:
-        data = np.load(path, allow_pickle=False)
-        members = {name: data[name] for name in data.files}  # reads (and CRC-checks) every member
-        header = json.loads(bytes(members.pop("header")).decode("utf-8"))
-    except (zipfile.BadZipFile, EOFError, OSError, KeyError, ValueError, UnicodeDecodeError) as err:
-        raise ValueError(f"{str(path)!r} is not a readable {what} file (truncated or corrupt?): {err}") from err
-    if not isinstance(header, dict):
-        raise ValueError(f"{str(path)!r}: the header is not a JSON object")
-    return header, members
-
-
-def _need(path, members, name, shape, dtype):
-    if name not in members:
-        raise ValueError(f"{str(path)!r}: member {name!r} is missing")
-    a = members[name]
-    if tuple(a.shape) != tuple(shape) or (dtype is not None and a.dtype != np.dtype(dtype)):
-        raise ValueError(
-            f"{str(path)!r}: member {name!r} has shape {a.shape} dtype {a.dtype}; expected {tuple(shape)} {dtype}"
-        )
-    return a
-
-
-def load(path: str | os.PathLike) -> Archive:
-    """Read an archive written by :func:`save`; ``ValueError`` for a wrong, truncated or corrupt file."""
-    path = Path(path)
-    header, m = _open_npz(path, "archive")
-    if header.get("format") != FORMAT:
-        raise ValueError(f"{str(path)!r} is not a jaxterrain archive (format {header.get('format')!r})")
-    if header.get("version") != VERSION:
-        raise ValueError(
-            f"{str(path)!r}: archive format version {header.get('version')!r}; this reader knows {VERSION}"
-        )
-    try:
-        config = resolve_config(config_from_dict(header["config"]))
-        cells = int(header["cells"])
-        names = tuple(header["generator_names"])
-        trees = header["genomes"]
-        metric_names = header["metrics"]
-        hm_header = header["heightmaps"]
-    except (KeyError, TypeError) as err:
-        raise ValueError(f"{str(path)!r}: incomplete header ({err})") from err
-    if cells != config.bins**2 or len(trees) != len(names):
-        raise ValueError(f"{str(path)!r}: header is inconsistent (cells {cells}, bins {config.bins})")
-    fitness = _need(path, m, "fitness", (cells,), np.float32)
-    descriptors = _need(path, m, "descriptors", (cells, 2), np.float32)
-    centroids = _need(path, m, "centroids", (cells, 2), np.float32)
-    source = _need(path, m, "source", (cells,), np.int32)
-    if np.any(source >= len(names)) or np.any(source < -1):
-        raise ValueError(f"{str(path)!r}: source ids outside [-1, {len(names) - 1}]")
-    genomes = []
-    for i, tree in enumerate(trees):
-        leaves = []
-        for k in range(_count_leaves(tree)):
-            name = f"genome_{i}_{k}"
-            if name not in m:
-                raise ValueError(f"{str(path)!r}: member {name!r} is missing")
-            if m[name].ndim < 1 or m[name].shape[0] != cells:
-                raise ValueError(f"{str(path)!r}: member {name!r} has shape {m[name].shape}; expected [{cells}, ...]")
-            leaves.append(m[name])
-        genomes.append(_unflatten(tree, leaves))
-    maps = None
-    if hm_header is not None:
-        n_filled = int(np.sum(source >= 0))
-        shape = tuple(hm_header["shape"])
-        hm = _need(path, m, "heightmaps", (n_filled,) + shape[1:], np.uint16)
-        maps = np.zeros((cells,) + shape[1:], np.uint16)
-        maps[source >= 0] = hm
-    metrics = {name: _need(path, m, f"metric_{name}", m.get(f"metric_{name}", np.zeros(0)).shape, np.float32)
-               for name in metric_names}
-    return Archive(tuple(genomes), names, source, fitness, descriptors, centroids, maps, config, metrics)
-
-
-# The host drivers live in jaxterrain.evolution (imported last: it uses this module's names).
-from jaxterrain.evolution import (  # noqa: E402
-    Treatment,
-    difficulty_fitness,
-    evolve,
-    evolve_many,
-    progress_printer,
-)
+def __dir__() -> list[str]:
+    return sorted(set(globals()) | set(_DRIVERS))
