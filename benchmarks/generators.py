@@ -5,7 +5,9 @@
 For each generator: the JAX render (jit of ``render`` over a batch of fresh genomes, device-resident, median of
 ``--repeats`` timed calls after a compile call, rotating through three genome sets) at each batch size; the same JAX
 function on the host CPU backend (peer 1); and for the noise generators a NumPy/SciPy implementation of the same
-algorithm (benchmarks/reference.py, one core, peer 2). Prints a Markdown table; ``--out`` writes JSON.
+algorithm (benchmarks/reference.py, one core, peer 2). Beside each batch: ``GiB@B``, XLA's planned device memory of
+the compiled render (arguments + outputs + temporaries; the bound a public ``render`` must fit, issue 17), and the
+process's running peak. Prints a Markdown table; ``--out`` writes JSON.
 """
 
 from __future__ import annotations
@@ -33,6 +35,26 @@ def jax_rate(gen, batch: int, repeats: int, device=None) -> float:
     fn = jax.jit(gen.render)  # runs where the (committed) inputs live
     t = common.median_time(fn, sets, repeats=repeats)
     return batch / t
+
+
+GIB = 2.0**30
+
+
+def planned_gib(gen, batch: int) -> float:
+    """XLA's planned device memory of ``render`` at ``batch`` (arguments + outputs + temporaries, GiB), from the
+    compiled program's ``memory_analysis`` (NaN where the backend does not report it)."""
+    genomes = jax.eval_shape(lambda k: gen.sample(k, batch), jax.random.key(0))
+    try:
+        m = jax.jit(gen.render).lower(genomes).compile().memory_analysis()
+        return (m.argument_size_in_bytes + m.output_size_in_bytes + m.temp_size_in_bytes) / GIB
+    except Exception:  # noqa: BLE001 - memory_analysis is optional per backend
+        return float("nan")
+
+
+def peak_gib() -> float:
+    """The process's peak device memory so far (GiB; NaN where the device does not report it)."""
+    stats = jax.devices()[0].memory_stats() or {}
+    return stats.get("peak_bytes_in_use", float("nan")) / GIB
 
 
 def numpy_rate(name: str, gen, n: int) -> float:
@@ -73,8 +95,10 @@ def main() -> None:
                 print(f"{name} batch {b}: {type(err).__name__}: {str(err)[:200]}")
                 continue
             row[f"jax@{b}"] = r
+            row[f"GiB@{b}"] = planned_gib(gen, b)
             best = max(best, r)
-            print(f"{name:15s} batch {b:6d}: {r:12,.0f} terrains/s", flush=True)
+            print(f"{name:15s} batch {b:6d}: {r:12,.0f} terrains/s, planned {row[f'GiB@{b}']:.2f} GiB, process "
+                  f"peak so far {peak_gib():.2f} GiB", flush=True)
         row["jax best"] = best
         cpu = jax.devices("cpu")[0]
         row["jax-cpu"] = jax_rate(gen, args.cpu_batch, 3, device=cpu)
@@ -84,7 +108,7 @@ def main() -> None:
         row["speedup vs jax-cpu"] = best / row["jax-cpu"]
         rows.append(row)
         print(row, flush=True)
-    cols = ["generator", *[f"jax@{b}" for b in args.batch], "jax-cpu", "numpy", "speedup vs numpy",
+    cols = ["generator", *[f"jax@{b}" for b in args.batch], *[f"GiB@{b}" for b in args.batch], "jax-cpu", "numpy", "speedup vs numpy",
             "speedup vs jax-cpu"]
     print()
     print(common.markdown_table(rows, cols))
