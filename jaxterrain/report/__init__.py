@@ -10,7 +10,9 @@ One module per stage:
 - :mod:`~jaxterrain.report.archives`: an archive's filled cells with thumbnails, and its easy / medium / hard elites;
 - :mod:`~jaxterrain.report.render`: MJX rollouts recorded, replayed by MuJoCo's offscreen renderer into GIFs
   (``MUJOCO_GL``: osmesa on a CPU machine, egl on a GPU one; :func:`~jaxterrain.report.render.setup_gl`);
-- :mod:`~jaxterrain.report.page`: the HTML page and the Markdown twin.
+- :mod:`~jaxterrain.report.page`: the HTML page and the Markdown twin, with
+  :mod:`~jaxterrain.report.markdown` (tables, Markdown to HTML) and :mod:`~jaxterrain.report.heatmap` (an archive as
+  an interactive heatmap).
 
 Importing this package does not import mujoco, so MUJOCO_GL can still be chosen after it (``render.setup_gl``).
 """
