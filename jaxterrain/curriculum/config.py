@@ -55,6 +55,8 @@ from __future__ import annotations
 import math
 from typing import NamedTuple, Optional
 
+from jaxterrain._validate import int_at_least, known_fields, one_of
+
 __all__ = ["CurriculumConfig", "validate_config", "SELECTORS"]
 
 SELECTORS = ("map", "roughness", "random")
@@ -157,16 +159,8 @@ class CurriculumConfig(NamedTuple):
 
     @classmethod
     def from_json_dict(cls, d: dict) -> "CurriculumConfig":
-        unknown = set(d) - set(cls._fields)
-        if unknown:
-            raise ValueError(f"CurriculumConfig: unknown fields {sorted(unknown)}")
+        known_fields("CurriculumConfig", cls._fields, d)
         return cls(**d)
-
-
-def _int_at_least(config, name: str, lo: int) -> None:
-    v = getattr(config, name)
-    if not isinstance(v, int) or isinstance(v, bool) or v < lo:
-        raise ValueError(f"CurriculumConfig.{name} must be an integer >= {lo}, got {v!r}")
 
 
 def _float_in(config, name: str, lo: float, hi: Optional[float], lo_open: bool, hi_open: bool = False) -> None:
@@ -182,10 +176,12 @@ def _float_in(config, name: str, lo: float, hi: Optional[float], lo_open: bool, 
                          f"got {v!r}")
 
 
+def _int_at_least(config, name: str, lo: int) -> None:
+    int_at_least("CurriculumConfig", config, name, lo)
+
+
 def _choice(config, name: str, options: tuple) -> None:
-    v = getattr(config, name)
-    if v not in options:
-        raise ValueError(f"CurriculumConfig.{name} must be one of {options}, got {v!r}")
+    one_of("CurriculumConfig", config, name, options)
 
 
 def validate_config(config: CurriculumConfig) -> CurriculumConfig:

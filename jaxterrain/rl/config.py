@@ -4,6 +4,8 @@ from __future__ import annotations
 
 from typing import NamedTuple, Optional, Tuple
 
+from jaxterrain._validate import int_at_least, known_fields, one_of
+
 ACTIVATIONS = ("swish", "relu", "tanh", "elu")
 DISTRIBUTIONS = ("tanh_normal", "normal")
 
@@ -95,22 +97,14 @@ class PPOConfig(NamedTuple):
     @classmethod
     def from_json_dict(cls, d: dict) -> "PPOConfig":
         """Inverse of :meth:`to_json_dict`; unknown keys raise ``ValueError``."""
-        unknown = set(d) - set(cls._fields)
-        if unknown:
-            raise ValueError(f"PPOConfig: unknown fields {sorted(unknown)}")
+        known_fields("PPOConfig", cls._fields, d)
         return cls(**{k: (tuple(v) if isinstance(v, list) else v) for k, v in d.items()})
 
 
 def validate_config(config: PPOConfig) -> PPOConfig:
     """Raise ``ValueError`` naming the first bad field and its allowed range; return ``config`` unchanged."""
-
-    def positive_int(name):
-        v = getattr(config, name)
-        if not isinstance(v, int) or isinstance(v, bool) or v < 1:
-            raise ValueError(f"PPOConfig.{name} must be an integer >= 1, got {v!r}")
-
     for name in ("num_envs", "unroll_length", "num_unrolls", "num_minibatches", "update_epochs"):
-        positive_int(name)
+        int_at_least("PPOConfig", config, name, 1)
     if (config.num_envs * config.num_unrolls) % config.num_minibatches:
         raise ValueError(
             f"PPOConfig.num_minibatches ({config.num_minibatches}) must divide num_envs * num_unrolls "
@@ -141,10 +135,6 @@ def validate_config(config: PPOConfig) -> PPOConfig:
         v = getattr(config, name)
         if not isinstance(v, tuple) or not all(isinstance(s, int) and s >= 1 for s in v):
             raise ValueError(f"PPOConfig.{name} must be a tuple of integers >= 1, got {v!r}")
-    if config.activation not in ACTIVATIONS:
-        raise ValueError(f"PPOConfig.activation must be one of {ACTIVATIONS}, got {config.activation!r}")
-    if config.action_distribution not in DISTRIBUTIONS:
-        raise ValueError(
-            f"PPOConfig.action_distribution must be one of {DISTRIBUTIONS}, got {config.action_distribution!r}"
-        )
+    one_of("PPOConfig", config, "activation", ACTIVATIONS)
+    one_of("PPOConfig", config, "action_distribution", DISTRIBUTIONS)
     return config
