@@ -1,0 +1,169 @@
+"""Experiment 2's costs on the GPU machine: a curriculum chunk, its parts, and bare PPO, in one run.
+
+    python benchmarks/curriculum.py [--archive A.npz] [--trials 1,10] [--chunks 2] [--out result.json]
+
+Builds exactly what ``python -m experiments learn --preset gpu-short`` builds (``experiments.learn.setup``: the bank
+of the archive, the base policy, the walker, the compiled block of chunks) and measures, each after its compile (the
+compile seconds are reported too; ``JAX_COMPILATION_CACHE_DIR`` lets a second command on the same machine skip them):
+
+1. ``block``: the learn command's jitted block (every trial's envs restart on its terrain, then ``--chunks`` chunks:
+   PPO training on the current terrain, an evaluation, the GP update and the terrain switch) for each ``--trials``
+   count T: seconds per chunk and env steps/s (T x 160 000 env steps per chunk);
+2. ``train`` / ``evaluate``: the harness's two parts alone, vmapped over T trials on fixed terrains: seconds per
+   chunk each (where a chunk's time goes);
+3. ``ppo``: bare PPO (``rl.run_updates``, the curriculum's PPO config, one fixed terrain, the same updates per chunk,
+   no evaluation, no curriculum) at T = 1: the peer of the curriculum-overhead ratio (issue 13: >= 0.9x).
+
+Ratios printed: curriculum overhead = block env steps/s at T=1 / bare PPO's; trials at once = block env steps/s at
+the largest T / at T=1 (issue 13: >= 3x for 10 trials). Extrapolated: a paper-budget trial (750 chunks) at T=1
+and the 10 trials of a treatment, from the measured seconds per chunk.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+from pathlib import Path
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+import common  # noqa: E402
+from experiments import learn  # noqa: E402
+from jaxterrain import rl  # noqa: E402
+from jaxterrain.curriculum import walker as W  # noqa: E402
+
+
+def timed(fn, *args):
+    t0 = time.perf_counter()
+    out = jax.block_until_ready(fn(*args))
+    return out, time.perf_counter() - t0
+
+
+def learn_cfg(args, trials: int) -> dict:
+    cfg = {**learn.PRESETS[args.preset], "seed": 0, "trials": trials}
+    if args.archive:
+        cfg["archive"] = args.archive
+    if args.backend and "backend" in cfg:
+        cfg["backend"] = args.backend
+    elif args.backend not in (None, "jax"):
+        raise SystemExit(f"this learn command has no backend setting; --backend {args.backend} is not available")
+    if args.num_envs:
+        cfg["num_envs"] = args.num_envs
+    return cfg
+
+
+def measure_block(args, trials: int) -> dict:
+    """The learn command's block at ``trials``: compile seconds, seconds per chunk, env steps/s."""
+    cfg = learn_cfg(args, trials)
+    config, arch, policy, env = learn.validate(cfg)
+    t0 = time.perf_counter()
+    bank, block, states = learn.setup(cfg, config, arch, policy, env)
+    jax.block_until_ready(states)
+    compile_s = time.perf_counter() - t0
+    states, first = timed(block, states, bank, 1)  # first call: a chunk (and any lazy work)
+    states, t = timed(block, states, bank, args.chunks)
+    chunks = int(np.max(np.asarray(states.chunk)))
+    per_chunk = t / args.chunks
+    row = {"part": "block (learn)", "trials": trials, "compile_s": compile_s, "first_chunk_s": first,
+           "s_per_chunk": per_chunk, "env_steps_per_s": trials * config.steps_per_chunk / per_chunk,
+           "chunks_done": chunks, "hardest_mean": float(np.mean(np.asarray(states.hardest)))}
+    if args.parts:
+        row.update(measure_parts(cfg, config, bank, policy, env, trials))
+    return row
+
+
+def measure_parts(cfg, config, bank, policy, env, trials: int) -> dict:
+    """The harness's train and evaluate alone, vmapped over ``trials`` on the bank's first terrains."""
+    ppo = config.ppo_config(policy.config)
+    harness = W.walker_harness(env, ppo, config)
+    start = W.start_state(env, ppo, policy, bank.heightmaps.shape[1:])
+    terrains = bank.heightmaps[jnp.arange(trials) % bank.heightmaps.shape[0]]
+    keys = jax.random.split(jax.random.key(1), trials)
+    policies = jax.tree.map(lambda x: jnp.broadcast_to(x, (trials,) + x.shape), start)
+    policies = jax.jit(jax.vmap(harness.reset))(policies, keys, terrains)
+    train = jax.jit(jax.vmap(harness.train))
+    evaluate = jax.jit(jax.vmap(harness.evaluate))
+    t0 = time.perf_counter()
+    trained = jax.block_until_ready(train(policies, keys, terrains))
+    train_compile = time.perf_counter() - t0
+    trained, train_s = timed(train, trained, keys, terrains)
+    t0 = time.perf_counter()
+    jax.block_until_ready(evaluate(trained, keys, terrains))
+    eval_compile = time.perf_counter() - t0
+    fit, eval_s = timed(evaluate, trained, keys, terrains)
+    return {"train_compile_s": train_compile, "train_s_per_chunk": train_s, "eval_compile_s": eval_compile,
+            "eval_s_per_chunk": eval_s, "eval_fitness_mean": float(np.mean(np.asarray(fit)))}
+
+
+def measure_ppo(args) -> dict:
+    """Bare PPO on one fixed terrain with the curriculum's PPO config, one chunk's updates per call."""
+    cfg = learn_cfg(args, 1)
+    config, arch, policy, env = learn.validate(cfg)
+    bank, _, _ = learn.setup(cfg, config, arch, policy, env)
+    ppo = config.ppo_config(policy.config)
+    terrain = bank.heightmaps[0]
+    start = W.start_state(env, ppo, policy, bank.heightmaps.shape[1:])
+    state = jax.jit(lambda s, k, t: rl.reset_envs(s, k, t, env=env, config=ppo))(start, jax.random.key(2), terrain)
+    run = jax.jit(lambda s, t: rl.run_updates(s, t, env=env, config=ppo, num_updates=config.updates_per_chunk)[0])
+    t0 = time.perf_counter()
+    state = jax.block_until_ready(run(state, terrain))
+    compile_s = time.perf_counter() - t0
+    times = []
+    for _ in range(args.repeats):
+        state, t = timed(run, state, terrain)
+        times.append(t)
+    t = float(np.median(times))
+    return {"part": "bare PPO (one terrain)", "trials": 1, "compile_s": compile_s, "s_per_chunk": t,
+            "env_steps_per_s": config.steps_per_chunk / t}
+
+
+def main() -> None:
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument("--archive", default=None, help=f"default: the learn command's ({learn.CPPN_ARCHIVE})")
+    p.add_argument("--preset", default="gpu-short", choices=sorted(learn.PRESETS), help="the learn preset (smoke: CPU)")
+    p.add_argument("--trials", default="1,10", help="comma list of trial counts")
+    p.add_argument("--chunks", type=int, default=2, help="chunks per timed block call")
+    p.add_argument("--repeats", type=int, default=2, help="bare PPO: timed calls")
+    p.add_argument("--num-envs", type=int, default=None, help="PPO envs per trial (default: the preset's)")
+    p.add_argument("--backend", default=None, help="walker backend, where the learn command has the setting")
+    p.add_argument("--parts", action="store_true", help="also time train / evaluate alone (two more compiles)")
+    p.add_argument("--skip-ppo", action="store_true", help="skip bare PPO")
+    p.add_argument("--out", default=None)
+    args = p.parse_args()
+
+    env = common.environment()
+    print(f"# curriculum on {env['device']} ({env['date']}, commit {env['commit']}, jax {env['jax']})", flush=True)
+    rows = []
+    if not args.skip_ppo:
+        rows.append(measure_ppo(args))
+        print(rows[-1], flush=True)
+    for trials in [int(t) for t in args.trials.split(",")]:
+        rows.append(measure_block(args, trials))
+        print(rows[-1], flush=True)
+    blocks = {r["trials"]: r for r in rows if r["part"].startswith("block")}
+    ratios = {}
+    if 1 in blocks:
+        paper_chunks = learn.PRESETS["paper"]["max_epochs"] // learn.PRESETS["paper"]["epochs_per_chunk"]
+        ratios["paper_trial_minutes_T1"] = blocks[1]["s_per_chunk"] * paper_chunks / 60
+        if not args.skip_ppo:
+            ratios["curriculum_overhead"] = blocks[1]["env_steps_per_s"] / rows[0]["env_steps_per_s"]
+        big = max(blocks)
+        if big > 1:
+            ratios[f"trials_{big}_vs_1"] = blocks[big]["env_steps_per_s"] / blocks[1]["env_steps_per_s"]
+            ratios[f"paper_treatment_minutes_T{big}"] = blocks[big]["s_per_chunk"] * paper_chunks / 60
+    print()
+    cols = ["part", "trials", "compile_s", "s_per_chunk", "env_steps_per_s", "train_s_per_chunk",
+            "eval_s_per_chunk", "train_compile_s", "eval_compile_s"]
+    print(common.markdown_table(rows, cols))
+    print(ratios, flush=True)
+    common.write_json(args.out, {"environment": env, "rows": rows, "ratios": ratios})
+
+
+if __name__ == "__main__":
+    main()
