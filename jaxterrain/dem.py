@@ -8,10 +8,11 @@
 Files (:func:`read_dem`): ``.tif`` / ``.tiff`` (GeoTIFF, read with ``tifffile``; the ``GDAL_NODATA`` value and
 non-finite values are no-data), ``.npy`` (one 2-D array) and ``.npz`` (the array named ``elevation`` if there is
 one, else the only array of 2 or more non-singleton dimensions in it). Singleton axes are dropped (a one-band
-GeoTIFF read as ``[1, H, W]`` is fine); anything else that is not 2-D is refused. No-data cells are filled with the tile's lowest valid elevation. Units do
-not matter (every patch is normalised on its own), but the cells should be square.
+GeoTIFF read as ``[1, H, W]`` is fine); anything else that is not 2-D is refused. No-data cells are filled with the
+tile's lowest valid elevation. Units do not matter (every patch is normalised on its own), but the cells should be
+square.
 
-The built-in data set (:func:`builtin_tiles`) is the real DEM that ships with matplotlib, so it works offline:
+The built-in data set (:func:`builtin_dems`) is the real DEM that ships with matplotlib, so it works offline:
 ``jacksboro_fault_dem.npz`` (344 x 403 cells, int16 metres, ~90 m cells) and the land part of ``topobathy.npz``
 (91 x 120; the sea floor, elevation <= 0, is set to sea level 0 m). It is SMALL - two tiles, against the paper's
 30 000 OpenTopography patches - and both tiles are smaller than the 256 x 256 output: patches are crops of 64 to

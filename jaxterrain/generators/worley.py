@@ -38,10 +38,8 @@ always gives the same map, bit for bit.
   waits for its slowest pixel. A last pass keeps each pixel's 4 smallest ``d2 >= L^2`` in sorted registers; exactly
   ``c_lo`` values lie below, so ``F_D^2`` is element ``rank - c_lo``. The result is a point's squared distance
   itself, equal to "sort" bit for bit. This holds on the CPU (Pallas's interpreter), with ties, duplicate points and
-  the overflow fallback; on an H200 the difference was 0 on 16 test maps.
-  2026-11-21, commit b6ed910, B = 4096: 118,085 maps/s on an H200 (117,697 in ``benchmarks/generators.py``), 30x
-  "bracket" (3,918) in the same run; 111,892 on an H100, 29x. On the 2-core CPU Pallas only interprets: 2.2
-  maps/s, against "bracket" 7.0 and "tiled" 15.
+  the overflow fallback; on an H200 the difference was 0 on 16 test maps. On a CPU Pallas only interprets (slower
+  than "bracket"), so "auto" picks "pallas" only on a GPU.
 
 * ``"sort"`` (the exact reference): materialise ``d2`` block by block (``_ROW_BLOCK`` = 16 rows, ``lax.map``)
   and take element ``D`` of ``jnp.sort(d2)[..., :101]`` (a one-hot sum, no gather). Exact. Memory:
@@ -68,10 +66,9 @@ always gives the same map, bit for bit.
   the rest are counted or dropped exactly, see the end of this docstring), and steps 3-4 run over those: 4.2x
   fewer point-pixel pairs. Same values as "bracket" (bit for bit in the tests). A tile with more than 96
   candidates (none seen at 256 x 256, max 83) sends its batch through "bracket" once, so the result never
-  depends on the cap ("pallas" redoes it by its kernel over all points instead). On the 2-core CPU (256 x 256,
-  B = 4, same run): "tiled" 9.9 maps/s, "bracket" 5.8 (1.7x). H200: 6,592 maps/s at B = 1024, against "bracket"
-  3,916 (1.7x) and "pallas" 55,949 (its first version) in one session: XLA pays the 96 slots everywhere and
-  materialises the gathered terms (9.3 GB at B = 1024).
+  depends on the cap ("pallas" redoes it by its kernel over all points instead). About 1.7x "bracket" on the CPU
+  and on a GPU alike, far below "pallas" on a GPU: XLA pays the 96 slots everywhere and materialises the gathered
+  terms (9.3 GB at B = 1024).
 
 Loop structure (all count-based methods): each trip is ONE fused XLA reduction over the points,
 ``sum_p((dy2[i, p] + dx2[j, p]) < t[i, j])`` (or an int32 ``min_p`` over the float bit patterns for the snap), whose
@@ -80,7 +77,7 @@ by the batch under ``vmap`` (the trip counts are static). Three XLA behaviours h
 optimised HLO (``jax.jit(f).lower(x).compile().as_text()``, and ``memory_analysis().temp_size_in_bytes``):
 (a) while-loop-invariant code motion hoisted the loop-invariant broadcast add ``dy2[:, None, :] + dx2[None, :, :]``
 out of the loop, so the loop carried a materialised ``f32[B, H, W, 400]`` (105 MB per map) and re-read it on every
-trip (memory-bound: the ~120 maps/s of the first "bisect"); ``_tie`` (an optimisation barrier on the loop carry)
+trip (memory-bound); ``_tie`` (an optimisation barrier on the loop carry)
 stops it. (b) outside a loop XLA fuses the whole producer of ``dy2`` (PRNG bits -> points -> squares) into the
 [H, W, 400] reduction, or materialises it, so the snap runs as the last trip of the same loop (a ``cond`` on the
 unbatched trip index), where ``dy2`` / ``dx2`` are loop-carried buffers. (c) XLA:CPU's TreeReductionRewriter splits
@@ -102,25 +99,18 @@ bisect     31                                                     ~3.3e9
 bracket    31 / 60 (coarse) + 14 (bisection) + 1 (snap) = 15.5     ~1.6e9
 =========  =====================================================  ===============
 
-Measured, one H100 (jax 0.11.2, 256 x 256, random genomes, ``jit(vmap(render_one))``), before the fused loops:
-``"sort"`` ~1,000 maps/s (B = 32 to 128; ``lax.top_k`` with k = 101 instead of the full sort: ~940 maps/s), the
-untied ``"bisect"`` ~120 maps/s with a ~70 s compile. On the shared 2-core CPU (jax 0.10.2, B = 4, noisy):
-"sort" 0.43 maps/s, untied "bisect" ~4-5, "bisect" 2.8, "bracket" 6.3 (with the flat reduction and the CPU tree
-rewriter off: "bisect" 16, "bracket" 30). ``benchmarks/worley_variants.py`` times the variants on any device.
-Measured with the fused loops, one H200, 2026-11-21, commit 950a827 (``worley_variants.py --variants sort bracket
-bracket:major --batch 256 1024``): "sort" 1,028 maps/s, "bracket" 3,956 maps/s at B = 1024 (3.85x), max |difference|
-5.1e-4 px (3.9e-6 on the [0, 1] map), so "bracket" was the default until "pallas".
+``benchmarks/worley_variants.py`` times the variants on any device (``--stages``: where the time of "pallas" goes);
+every measured figure, with its device, date and commit, is in ``benchmarks/RESULTS.md`` (the Worley sections).
 Ceiling: at ~3e13 simple ops/s (H100 FP32 lanes) "bracket" is ~20,000 maps/s if compute-bound; XLA's generic
 reduction emitter reloads ``dy2`` and ``dx2`` from L1 for every pair, so expect a few thousand. The 100,000 maps/s
 target needed fewer pairs: "pallas", per-tile candidate lists in a hand-written kernel (only points whose distance
-range over the tile meets the tile's bracket; 16-40 of 400 on average) with register-blocked pixels. Where the time
-goes in "pallas" (H200, B = 4096, ``worley_variants.py --stages``): points, coarse grid and brackets 31 %, the fused
-lists and selection 69 %. Exactness of such a list: with a tile's bracket ``[Lt, Ut]`` (min of ``L``, max of ``U``
-over its pixels), a point farther than ``Ut`` from the whole tile is never among the first D + 1, and a point nearer
-than ``Lt`` to all of it is always among the first D; so ``F_D`` is the ``(D - inside)``-th smallest over the
-remaining candidates, exactly. The cap can be checked offline once and for all: the genome space is finite (101
-integer seeds x N in [2, 400] x D in [0, N / 4], about 2.1 M genomes per map size), and the per-tile candidate count
-needs only the exact coarse grid (about 1/60 of a map's work), so every genome can be enumerated offline.
+range over the tile meets the tile's bracket; 16-40 of 400 on average) with register-blocked pixels. Exactness of
+such a list: with a tile's bracket ``[Lt, Ut]`` (min of ``L``, max of ``U`` over its pixels), a point farther than
+``Ut`` from the whole tile is never among the first D + 1, and a point nearer than ``Lt`` to all of it is always
+among the first D; so ``F_D`` is the ``(D - inside)``-th smallest over the remaining candidates, exactly. The cap
+can be checked offline once and for all: the genome space is finite (101 integer seeds x N in [2, 400] x D in
+[0, N / 4], about 2.1 M genomes per map size), and the per-tile candidate count needs only the exact coarse grid
+(about 1/60 of a map's work), so every genome can be enumerated offline.
 """
 
 from __future__ import annotations
