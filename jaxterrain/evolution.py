@@ -6,7 +6,15 @@ walker fitness), run :mod:`jaxterrain.map_elites` in jitted ``lax.scan`` chunks 
 generations, and return host :class:`~jaxterrain.archive.Archive` s. Re-exported by :mod:`jaxterrain.archive`.
 
 The loop and the checkpoints are :func:`jaxterrain.driver.run_chunks`'s. Compiled programs: a run compiles its
-init and one chunk per chunk length. Pass ``compile_cache={}`` (any dict the
+init and one chunk per chunk length.
+
+Several devices: ``mesh=sharding.make_mesh()`` (``--devices`` of the commands) splits every generation's offspring
+batch over the mesh's devices (render, descriptors, Algorithm 1 and the walker's rollouts, each device its own
+rows; a batch that does not divide is padded and the padding masked out, see :mod:`jaxterrain.scoring`) while the
+repertoire stays replicated on every device (selection, mutation and insertion run on each, identically). Rows
+are scored with per-row keys, so the same key gives the same archive on 1 and on N devices (bit for bit on CPU with
+a per-row deterministic fitness; the walker's rollouts up to float rounding). ``mesh=None`` keeps the one-device
+program and its one key per batch (archives made before sharding reproduce). Pass ``compile_cache={}`` (any dict the
 caller owns) to reuse them across runs of the same problem; nothing is cached behind the caller's back.
 """
 
@@ -108,7 +116,8 @@ def default_fitness(size: int, config: A.EvolveConfig) -> A.FitnessFn:
     return difficulty_fitness(int(size), config.attempts, config.best, config.scale, config.rollout_slots)
 
 
-def problem(generator, descriptors, config: A.EvolveConfig, fitness_fn=None, traversable=None, names=None):
+def problem(generator, descriptors, config: A.EvolveConfig, fitness_fn=None, traversable=None, names=None,
+            mesh=None):
     """``(scoring, emitter)`` of one generator under a resolved config.
 
     Args:
@@ -120,6 +129,7 @@ def problem(generator, descriptors, config: A.EvolveConfig, fitness_fn=None, tra
       traversable: ``heightmaps -> [B] bool`` or None for :func:`traversable_fn` (Algorithm 1 at ``config.scale``).
       names: with ``descriptors`` None, the descriptor set to compute (default ``config.descriptors``); the grid
         pair is then ``config.descriptors``' positions in it.
+      mesh: None, or a ``jax.sharding.Mesh`` over which the scoring splits its rows.
     """
     pair = (0, 1)
     if descriptors is None:
@@ -128,7 +138,7 @@ def problem(generator, descriptors, config: A.EvolveConfig, fitness_fn=None, tra
         descriptors = descriptor_fn(names, int(config.window), int(config.stride))
     fitness_fn = default_fitness(generator.size, config) if fitness_fn is None else fitness_fn
     traversable = traversable_fn(config) if traversable is None else traversable
-    scoring = S.make_scoring_fn(generator, descriptors, traversable, fitness_fn, config, pair)
+    scoring = S.make_scoring_fn(generator, descriptors, traversable, fitness_fn, config, pair, mesh)
     emitter = ME.Emitter(generator.sample, generator.mutate, int(config.batch_size), int(config.initial_population))
     return scoring, emitter
 
@@ -141,18 +151,30 @@ def _compiled(cache: dict | None, key, build):
     return cache[key]
 
 
+def _replicated(mesh) -> dict:
+    """``jax.jit`` options that leave every output whole on every device of ``mesh`` (none without a mesh)."""
+    if mesh is None:
+        return {}
+    from jaxterrain import sharding
+
+    return {"out_shardings": sharding.replicated(mesh)}
+
+
 def _programs(scoring: S.Scoring, emitter: ME.Emitter, cache: dict | None):
-    """Jitted ``init(key, centroids, task)`` and ``chunk(state, key, n) -> (state, metrics [n])``."""
-    fns = (scoring.render_one, scoring.descriptor_fn, scoring.traversable_fn, scoring.fitness_fn, emitter)
+    """Jitted ``init(key, centroids, task)`` and ``chunk(state, key, n) -> (state, metrics [n])``; with a mesh
+    their outputs (the repertoire, the metrics) are replicated on its devices."""
+    fns = (scoring.render_one, scoring.descriptor_fn, scoring.traversable_fn, scoring.fitness_fn, emitter,
+           scoring.mesh)
+    out = _replicated(scoring.mesh)
 
     def build_init():
-        return jax.jit(lambda key, centroids, task: ME.init(key, scoring, emitter, centroids, task))
+        return jax.jit(lambda key, centroids, task: ME.init(key, scoring, emitter, centroids, task), **out)
 
     def build_chunk():
         def chunk(state, key, n):
             return jax.lax.scan(lambda s, _: ME.step(s, key, scoring, emitter), state, None, length=n)
 
-        return jax.jit(chunk, static_argnums=2)
+        return jax.jit(chunk, static_argnums=2, **out)
 
     return _compiled(cache, ("init",) + fns, build_init), _compiled(cache, ("chunk",) + fns, build_chunk)
 
@@ -173,6 +195,7 @@ def evolve(
     traversable_fn: Callable[[jax.Array], jax.Array] | None = None,
     generator_options: dict | None = None,
     compile_cache: dict | None = None,
+    mesh=None,
 ) -> A.Archive:
     """Run MAP-Elites for one generator and one descriptor pair; returns the final :class:`~jaxterrain.archive.Archive`.
 
@@ -200,6 +223,10 @@ def evolve(
         with ``config.robot_height``, ``config.traversable_window`` and ``config.scale``).
       generator_options: options for ``generators.get`` when ``generator`` is a name (e.g. ``{"size": 64}``).
       compile_cache: a dict owned by the caller to keep compiled programs in across runs of the same problem.
+      mesh: None (one device, one key per batch) or a ``jax.sharding.Mesh`` (``sharding.make_mesh()``): every
+        generation's offspring split over its devices with per-row keys, the repertoire replicated; the same key
+        gives the same archive on any number of devices (module docstring). Speed only: a run may resume on
+        another device count.
     """
     if isinstance(generator, str):
         from jaxterrain import generators as _generators
@@ -209,7 +236,7 @@ def evolve(
         config = config._replace(descriptors=tuple(descriptors))
         descriptors = None
     config = A.resolve_config(config)
-    scoring, emitter = problem(generator, descriptors, config, fitness_fn, traversable_fn)
+    scoring, emitter = problem(generator, descriptors, config, fitness_fn, traversable_fn, mesh=mesh)
     init, chunk = _programs(scoring, emitter, compile_cache)
     meta = {"generator": generator.name, "config": _resume_signature(config), "key": _key_data(key).tolist()}
     run_dir = None if checkpoint_dir is None else Path(checkpoint_dir)
@@ -275,6 +302,7 @@ def evolve_many(
     generator_options: dict | None = None,
     ranges: dict | None = None,
     compile_cache: dict | None = None,
+    mesh=None,
 ) -> list[A.Archive]:
     """Evolve several treatments at once: one jitted generation steps them all (:func:`map_elites.multi_step`).
 
@@ -299,6 +327,8 @@ def evolve_many(
       generator_options: options for ``generators.get`` (e.g. ``{"size": 64}``).
       ranges: ``{descriptor name: (lo, hi)}``, default :data:`~jaxterrain.archive.DEFAULT_RANGES`.
       compile_cache: a caller-owned dict to keep compiled programs in.
+      mesh: None or a ``jax.sharding.Mesh``: each generation's offspring of all treatments split over its devices
+        (:func:`map_elites.multi_step`), the states replicated; the same archives on any number of devices.
 
     Returns:
       one :class:`~jaxterrain.archive.Archive` per treatment, in order.
@@ -320,7 +350,7 @@ def evolve_many(
     config = configs[0]
     fitness = default_fitness(sizes.pop(), config) if fitness_fn is None else fitness_fn
     groups, scorings, emitters, states, keys, history = _init_many(treatments, configs, names, gens, fitness,
-                                                                   traversable_fn, compile_cache)
+                                                                   traversable_fn, compile_cache, mesh)
     history["coverage"] = [float(np.mean([history[f"coverage/{i}"][0] for i in range(len(treatments))]))]
     meta = {"treatments": [[t.generator, list(t.descriptors), _key_data(t.key).tolist()] for t in treatments],
             "config": _resume_signature(config._replace(descriptors=("-", "-"), ranges=((0, 1), (0, 1)))),
@@ -336,8 +366,8 @@ def evolve_many(
             run_dir.mkdir(parents=True, exist_ok=True)
             driver.save_checkpoint(run_dir / driver.CHECKPOINT_NAME, states, done=0, history=history, meta=meta)
     fns = tuple((s.render_one, s.descriptor_fn, s.traversable_fn) for s in scorings)
-    chunk = _compiled(compile_cache, ("many", fns, tuple(emitters), fitness),
-                      lambda: _many_chunk(tuple(scorings), tuple(emitters), fitness))
+    chunk = _compiled(compile_cache, ("many", fns, tuple(emitters), fitness, mesh),
+                      lambda: _many_chunk(tuple(scorings), tuple(emitters), fitness, mesh))
     order = [i for members in groups.values() for i in members]
 
     def chunk_fn(states, start, stop):
@@ -362,7 +392,7 @@ def evolve_many(
     return _many_archives(states, groups, gens, configs, history)
 
 
-def _init_many(treatments, configs, names, gens, fitness, traversable, cache):
+def _init_many(treatments, configs, names, gens, fitness, traversable, cache, mesh=None):
     """Generation 0 of every treatment, grouped by generator: ``(groups {name: [treatment index]}, scorings,
     emitters, stacked states per group, stacked keys per group, history {"<metric>/<index>": [value]})``."""
     groups: dict[str, list[int]] = {}
@@ -371,7 +401,8 @@ def _init_many(treatments, configs, names, gens, fitness, traversable, cache):
     scorings, emitters, states, keys = [], [], [], []
     history: dict[str, list[float]] = {}
     for name, members in groups.items():
-        scoring, emitter = problem(gens[name], None, configs[members[0]], fitness, traversable, names=names)
+        scoring, emitter = problem(gens[name], None, configs[members[0]], fitness, traversable, names=names,
+                                   mesh=mesh)
         init, _ = _programs(scoring, emitter, cache)
         group_states = []
         for i in members:
@@ -397,7 +428,7 @@ def _many_archives(states, groups, gens, configs, history) -> list[A.Archive]:
     return out
 
 
-def _many_chunk(scorings, emitters, fitness):
+def _many_chunk(scorings, emitters, fitness, mesh=None):
     def chunk(states, keys, key, n):
         def body(st, _):
             fitness_key = jax.random.fold_in(key, st[0].generation[0])
@@ -405,7 +436,7 @@ def _many_chunk(scorings, emitters, fitness):
 
         return jax.lax.scan(body, states, None, length=n)
 
-    return jax.jit(chunk, static_argnums=3)
+    return jax.jit(chunk, static_argnums=3, **_replicated(mesh))
 
 
 def to_archive(generator, repertoire, config: A.EvolveConfig, history: dict) -> A.Archive:

@@ -231,6 +231,12 @@ def multi_step(states: Sequence[MapElitesState], keys: Sequence[jax.Array], fitn
     needed)`` once (the scorings' own fitness functions are not called), then split back for insertion. With a
     per-terrain deterministic fitness this equals one :func:`step` per treatment.
 
+    When the scorings carry a ``mesh`` (all the same one), every group's offspring rows are split over its devices
+    (each group padded to a multiple of the device count; the padding is never walked and is cut off before
+    insertion): each device renders and describes its rows of every group and walks them in ONE keyed fitness
+    call (:func:`jaxterrain.scoring.keyed_fitness`) with the per-row keys ``split(fitness_key, total)`` (rows in
+    group order), so the states do not depend on the number of devices.
+
     Returns:
       ``(states, metrics)``: a list of states (one per group, generation one higher) and a list of metric dicts
       whose values are ``[T_i]``.
@@ -238,20 +244,27 @@ def multi_step(states: Sequence[MapElitesState], keys: Sequence[jax.Array], fitn
     if not (len(states) == len(keys) == len(scorings) == len(emitters)) or not states:
         raise ValueError("multi_step: states, keys, scorings and emitters must be non-empty sequences of one length; "
                          f"got {len(states)}, {len(keys)}, {len(scorings)}, {len(emitters)}")
-    made = []
-    for state, keys_i, scoring, emitter in zip(states, keys, scorings, emitters):
-        offspring, _ = jax.vmap(lambda st, k, em=emitter: _offspring(st, k, em))(state, keys_i)
-        pending = jax.vmap(scoring.prepare)(offspring, state.task)
-        made.append((offspring, pending))
-    maps = jnp.concatenate([p.heightmaps.reshape((-1,) + p.heightmaps.shape[2:]) for _, p in made])
-    needed = jnp.concatenate([p.needed.reshape(-1) for _, p in made])
-    fitness = S._call_fitness(fitness_fn, maps, fitness_key, needed)
-    fitness = jnp.asarray(fitness, jnp.float32).reshape(-1)
-    out_states, out_metrics, start = [], [], 0
-    for state, (offspring, pending) in zip(states, made):
-        t, b = pending.needed.shape
-        part = fitness[start:start + t * b].reshape(t, b)
-        start += t * b
+    mesh = scorings[0].mesh
+    if any(s.mesh != mesh for s in scorings):
+        raise ValueError("multi_step: every scoring must carry the same mesh (or none)")
+    children = [jax.vmap(lambda st, k, em=emitter: _offspring(st, k, em))(state, keys_i)[0]
+                for state, keys_i, emitter in zip(states, keys, emitters)]
+    if mesh is None:
+        made = [jax.vmap(scoring.prepare)(offspring, state.task)
+                for state, scoring, offspring in zip(states, scorings, children)]
+        maps = jnp.concatenate([p.heightmaps.reshape((-1,) + p.heightmaps.shape[2:]) for p in made])
+        needed = jnp.concatenate([p.needed.reshape(-1) for p in made])
+        fitness = S._call_fitness(fitness_fn, maps, fitness_key, needed)
+        fitness = jnp.asarray(fitness, jnp.float32).reshape(-1)
+        parts, start = [], 0
+        for p in made:
+            t, b = p.needed.shape
+            parts.append(fitness[start:start + t * b].reshape(t, b))
+            start += t * b
+    else:
+        made, parts = _sharded_scores(children, [s.task for s in states], fitness_key, scorings, fitness_fn, mesh)
+    out_states, out_metrics = [], []
+    for state, offspring, pending, part in zip(states, children, made, parts):
 
         def finish_one(st, genomes, pend, fit):
             scored = S.Scoring.complete(pend, fit, st.task)
@@ -262,3 +275,45 @@ def multi_step(states: Sequence[MapElitesState], keys: Sequence[jax.Array], fitn
         out_states.append(new_state)
         out_metrics.append(m)
     return out_states, out_metrics
+
+
+def _sharded_scores(children, tasks, fitness_key, scorings, fitness_fn, mesh):
+    """:func:`multi_step`'s scoring over a mesh: ``(pendings, fitness)`` per group, shaped ``[T_i, B_i]`` (the
+    pendings without heightmaps, which stay on their devices)."""
+    from jax.sharding import PartitionSpec as P
+
+    from jaxterrain import sharding as SH
+
+    rows, shapes = [], []
+    for offspring, task in zip(children, tasks):
+        t, b = task.pair.shape[0], jax.tree.leaves(offspring)[0].shape[1]
+        flat = jax.tree.map(lambda x, t=t, b=b: x.reshape((t * b,) + x.shape[2:]), offspring)
+        rows.append((flat, jax.tree.map(lambda x, b=b: jnp.repeat(x, b, axis=0), task)))
+        shapes.append((t, b))
+    counts = [t * b for t, b in shapes]
+    keys = SH.row_keys(fitness_key, sum(counts))
+    groups, start = [], 0
+    for (flat, task), n in zip(rows, counts):
+        length = SH.padded_length(n, mesh)
+        groups.append(SH.pad_rows((flat, task, keys[start:start + n]), length) + (jnp.arange(length) < n,))
+        start += n
+    keyed = S.keyed_fitness(fitness_fn)
+
+    def local(groups):
+        pendings = [scoring.prepare(g, task) for scoring, (g, task, _, _) in zip(scorings, groups)]
+        needed = [p.needed & g[3] for p, g in zip(pendings, groups)]
+        maps = jnp.concatenate([p.heightmaps for p in pendings])
+        fitness = jnp.asarray(keyed(maps, jnp.concatenate([g[2] for g in groups]), jnp.concatenate(needed)),
+                              jnp.float32)
+        out, begin = [], 0
+        for p, nd in zip(pendings, needed):
+            out.append((p._replace(heightmaps=None, needed=nd), fitness[begin:begin + nd.shape[0]]))
+            begin += nd.shape[0]
+        return out
+
+    scored = jax.shard_map(local, mesh=mesh, in_specs=(P(SH.AXIS),), out_specs=P(SH.AXIS), check_vma=False)(groups)
+    made, parts = [], []
+    for (pending, fitness), (t, b) in zip(scored, shapes):
+        made.append(jax.tree.map(lambda x, t=t, b=b: x[:t * b].reshape((t, b) + x.shape[1:]), pending))
+        parts.append(fitness[:t * b].reshape(t, b))
+    return made, parts

@@ -21,6 +21,21 @@ descriptors usable, in range when out-of-range terrains are rejected); the fitne
 fitness function may skip them (the walker's rollout pool never starts their rollouts). Wrap a function of
 ``(heightmaps, key)`` with :func:`ignore_needed`. The physical scale (metres per heightmap unit and per pixel) is
 the caller's: build Algorithm 1 and the walker fitness from ONE ``TerrainScale`` (``archive.EvolveConfig.scale``).
+
+Over several devices
+--------------------
+A :class:`Scoring` with a ``mesh`` (``make_scoring_fn(..., mesh=sharding.make_mesh())``) splits the batch's rows
+over the mesh's devices: each device renders, describes, checks and walks its own rows (one ``shard_map``), and
+only the per-row results (fitness, descriptors, verdicts) come back whole. The fitness is then called in its
+keyed form, ``(heightmaps [B, H, W], keys [B], needed [B] bool) -> [B]``, with ``keys = split(key, B)`` drawn for
+the whole batch first, so that row ``i`` is scored with the same key on 1 or N devices (:func:`keyed_fitness`:
+the function's own ``keyed`` attribute when it has one, as ``difficulty.fitness_fn``'s walker fitness does, else
+:func:`keyed_rows`). A batch that does not divide over the devices is PADDED with copies of its last row; the
+padding is never walked (``needed`` False) and is cut off before the counts and the insertion, so it never enters.
+With a per-row deterministic fitness, results are the same on any number of devices, bit for bit on CPU; the
+walker's rollouts are the same up to float rounding (XLA compiles another program per local batch), which its
+chaotic dynamics can grow into a different outcome of a single walk. Without a mesh the fitness gets the batch's
+one key, as before.
 """
 
 from __future__ import annotations
@@ -31,7 +46,7 @@ import jax
 import jax.numpy as jnp
 
 __all__ = ["RENDER_CHUNK", "Task", "Pending", "Scoring", "make_scoring_fn", "ignore_needed", "render_batch",
-           "task_for", "count_names"]
+           "task_for", "count_names", "keyed_rows", "keyed_fitness"]
 
 RENDER_CHUNK = 1024
 """Terrains rendered at once (``lax.map`` over chunks of ``vmap``): bounds the generators' temporaries (the GAN at
@@ -108,6 +123,28 @@ def ignore_needed(fitness_fn: Callable[[jax.Array, Any], jax.Array]) -> Callable
     return fitness
 
 
+def keyed_rows(fitness_fn: Callable) -> Callable:
+    """The keyed form of a fitness function: ``(heightmaps [B, H, W], keys [B], needed [B] bool) -> [B]`` float32,
+    where row ``i`` is scored ALONE with its own key (``fitness_fn(heightmaps[i:i+1], keys[i], needed[i:i+1])``,
+    a ``vmap`` of batch-1 calls), so a row's fitness does not depend on which rows share its call or its device."""
+
+    def keyed(heightmaps, keys, needed):
+        def one(h, k, n):
+            return jnp.asarray(_call_fitness(fitness_fn, h[None], k, n[None]), jnp.float32).reshape(())
+
+        return jax.vmap(one)(heightmaps, keys, jnp.asarray(needed, bool))
+
+    keyed.__wrapped__ = fitness_fn
+    return keyed
+
+
+def keyed_fitness(fitness_fn: Callable) -> Callable:
+    """``fitness_fn.keyed`` when the function carries its own keyed form (``(heightmaps, keys [B], needed) -> [B]``,
+    e.g. the walker fitness of ``difficulty.fitness_fn``: one rollout pool per device), else :func:`keyed_rows`."""
+    keyed = getattr(fitness_fn, "keyed", None)
+    return keyed if callable(keyed) else keyed_rows(fitness_fn)
+
+
 def _call_fitness(fitness_fn, heightmaps, key, needed):
     try:
         return fitness_fn(heightmaps, key, needed)
@@ -126,7 +163,8 @@ class Scoring(NamedTuple):
     ``scoring(genomes, key, task=None) -> (fitness [B], cell_descriptors [B, 2], extras)``: ``extras`` holds
     ``"raw"`` ([B, 2] unclipped descriptors) and the scalar counts ``"rejected"``, ``"out_of_range"``, ``"nan"``
     (float32). ``task`` defaults to :attr:`task`. Stages: :meth:`prepare` (render, describe, Algorithm 1, the range
-    check) and :meth:`complete` (fitness -> insertion values), so several batches can share one fitness call.
+    check) and :meth:`complete` (fitness -> insertion values), so several batches can share one fitness call. With
+    a ``mesh`` the rows are split over its devices and scored with per-row keys (module docstring).
 
     Attributes:
       render_one: ``genome -> [H, W]`` heightmap in [0, 1].
@@ -134,6 +172,7 @@ class Scoring(NamedTuple):
       traversable_fn: ``[B, H, W] -> [B] bool`` (Algorithm 1).
       fitness_fn: ``(heightmaps [B, H, W], key, needed [B] bool) -> [B]``.
       task: the default :class:`Task`.
+      mesh: None (one device), or a ``jax.sharding.Mesh`` (``sharding.make_mesh``) to split the rows over.
     """
 
     render_one: Callable
@@ -141,13 +180,15 @@ class Scoring(NamedTuple):
     traversable_fn: Callable
     fitness_fn: Callable
     task: Task
+    mesh: Any = None
 
     def prepare(self, genomes, task: Task | None = None) -> Pending:
-        """Render, describe and check a batch (genome leaves ``[B, ...]``)."""
+        """Render, describe and check a batch (genome leaves ``[B, ...]``); ``task``: one :class:`Task`, or one per
+        row (leaves with a leading ``[B]``)."""
         task = self.task if task is None else task
         heightmaps = render_batch(self.render_one, genomes)
         every = jnp.asarray(self.descriptor_fn(heightmaps), jnp.float32)
-        raw = jnp.take(every, task.pair, axis=-1)
+        raw = jnp.take_along_axis(every, jnp.broadcast_to(task.pair, every.shape[:-1] + (2,)), axis=-1)
         traversable = jnp.asarray(self.traversable_fn(heightmaps), bool)
         finite = jnp.all(jnp.isfinite(raw), axis=-1)
         outside = jnp.any((raw < task.lo) | (raw > task.hi), axis=-1) | ~finite
@@ -171,15 +212,31 @@ class Scoring(NamedTuple):
         }
         return insert_fitness, cell, extras
 
+    def prepare_rows(self, genomes, keys, task: Task, mask) -> tuple[Pending, jax.Array]:
+        """One device's share of a sharded batch: :meth:`prepare`, then the keyed fitness (:func:`keyed_fitness`)
+        of the rows that are ``needed`` and real (``mask`` [b] bool, False on padding). Returns the
+        :class:`Pending` without its heightmaps (they stay on the device) and the fitness [b]."""
+        pending = self.prepare(genomes, task)
+        needed = pending.needed & mask
+        fitness = keyed_fitness(self.fitness_fn)(pending.heightmaps, keys, needed)
+        return pending._replace(heightmaps=None, needed=needed), jnp.asarray(fitness, jnp.float32)
+
     def __call__(self, genomes, key, task: Task | None = None):
         task = self.task if task is None else task
+        if self.mesh is not None:
+            from jaxterrain import sharding
+
+            n = jax.tree.leaves(genomes)[0].shape[0]
+            pending, fitness = sharding.map_rows(self.prepare_rows, self.mesh, replicated=(2,), mask=True)(
+                genomes, sharding.row_keys(key, n), task)
+            return self.complete(pending, fitness, task)
         pending = self.prepare(genomes, task)
         fitness = _call_fitness(self.fitness_fn, pending.heightmaps, key, pending.needed)
         return self.complete(pending, fitness, task)
 
 
 def make_scoring_fn(generator, descriptor_fn: Callable, traversable_fn: Callable, fitness_fn: Callable,
-                    config, pair=(0, 1)) -> Scoring:
+                    config, pair=(0, 1), mesh=None) -> Scoring:
     """The scoring function of one generator (see the module docstring).
 
     Args:
@@ -190,6 +247,7 @@ def make_scoring_fn(generator, descriptor_fn: Callable, traversable_fn: Callable
         :func:`ignore_needed`.
       config: a resolved ``archive.EvolveConfig`` (``ranges``, ``out_of_range``).
       pair: indices of the grid's two descriptors in ``descriptor_fn``'s output.
+      mesh: None, or a ``jax.sharding.Mesh`` whose devices split every batch's rows (see "Over several devices").
 
     Returns:
       a :class:`Scoring`, callable as ``(genomes, key) -> (fitness [B], cell descriptors [B, 2], extras)``.
@@ -198,4 +256,4 @@ def make_scoring_fn(generator, descriptor_fn: Callable, traversable_fn: Callable
                      ("fitness_fn", fitness_fn)):
         if not callable(fn):
             raise ValueError(f"make_scoring_fn: {name} must be callable; got {type(fn).__name__}")
-    return Scoring(generator.render_one, descriptor_fn, traversable_fn, fitness_fn, task_for(config, pair))
+    return Scoring(generator.render_one, descriptor_fn, traversable_fn, fitness_fn, task_for(config, pair), mesh)

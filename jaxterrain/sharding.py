@@ -23,7 +23,8 @@ import jax.numpy as jnp
 import numpy as np
 from jax.sharding import Mesh, NamedSharding, PartitionSpec as P
 
-__all__ = ["AXIS", "initialize", "make_mesh", "map_rows", "pad_rows", "padded_length", "replicate", "shard_rows"]
+__all__ = ["AXIS", "initialize", "make_mesh", "setup", "map_rows", "pad_rows", "padded_length", "replicate",
+           "replicated", "rows", "row_keys", "shard_rows"]
 
 AXIS = "batch"
 
@@ -46,6 +47,8 @@ def initialize(coordinator: Optional[str] = None, num_processes: Optional[int] =
         process_id = int(os.environ["JAXTERRAIN_PROCESS_ID"])
     if coordinator is None and num_processes is None and process_id is None:
         return
+    if jax.distributed.is_initialized():
+        return
     if coordinator is None or num_processes is None or process_id is None:
         raise ValueError("initialize: give the coordinator address, num_processes and process_id together "
                          f"(got {coordinator!r}, {num_processes!r}, {process_id!r})")
@@ -53,6 +56,13 @@ def initialize(coordinator: Optional[str] = None, num_processes: Optional[int] =
         raise ValueError(f"initialize: process_id must be in [0, num_processes={num_processes}); got {process_id}")
     jax.config.update("jax_cpu_collectives_implementation", "gloo")  # CPU processes reach each other (GPUs: NCCL)
     jax.distributed.initialize(coordinator_address=coordinator, num_processes=num_processes, process_id=process_id)
+
+
+def setup(num_devices: Optional[int] = None) -> Mesh:
+    """What a command does first: :func:`initialize` from the environment (nothing when the variables are unset),
+    then :func:`make_mesh` over the first ``num_devices`` devices of all processes (None: all of them)."""
+    initialize()
+    return make_mesh(num_devices)
 
 
 def make_mesh(num_devices: Optional[int] = None, devices: Optional[Sequence[Any]] = None) -> Mesh:
@@ -65,6 +75,22 @@ def make_mesh(num_devices: Optional[int] = None, devices: Optional[Sequence[Any]
                              f"got {num_devices!r}")
         devices = devices[:num_devices]
     return Mesh(np.asarray(devices), (AXIS,))
+
+
+def replicated(mesh: Mesh) -> NamedSharding:
+    """The sharding of a value held whole on every device of ``mesh`` (e.g. a repertoire, policy parameters)."""
+    return NamedSharding(mesh, P())
+
+
+def rows(mesh: Mesh) -> NamedSharding:
+    """The sharding of a value whose leading axis (rows) is split over the devices of ``mesh``."""
+    return NamedSharding(mesh, P(AXIS))
+
+
+def row_keys(key: jax.Array, n: int) -> jax.Array:
+    """``[n]`` keys, one per row: ``jax.random.split(key, n)``, drawn for the whole batch BEFORE it is split over
+    devices, so that row ``i`` gets the same key on any number of devices."""
+    return jax.random.split(key, n)
 
 
 def padded_length(n: int, mesh: Mesh) -> int:
@@ -105,22 +131,25 @@ def replicate(tree: Any, mesh: Mesh) -> Any:
     return jax.device_put(tree, NamedSharding(mesh, P()))
 
 
-def map_rows(fn: Callable, mesh: Mesh, replicated: tuple[int, ...] = ()) -> Callable:
+def map_rows(fn: Callable, mesh: Mesh, replicated: tuple[int, ...] = (), mask: bool = False) -> Callable:
     """``fn(*args)`` with the rows (leading axis) of every argument split over the mesh's devices.
 
     ``fn`` maps batched arguments to a batched result (a pytree of arrays whose leading axis is the rows) and must
     treat rows independently; arguments whose positions are in ``replicated`` (e.g. policy parameters) are passed
     whole to every device. The returned function pads the rows to a multiple of the device count, runs ``fn`` on
-    each device's rows under ``jax.shard_map`` inside one ``jit``, and returns the real rows only.
+    each device's rows under ``jax.shard_map`` inside one ``jit``, and returns the real rows only. With ``mask``,
+    ``fn`` gets one more, last argument: ``[rows] bool``, False on the padding rows (e.g. to skip their work).
     """
     replicated = frozenset(replicated)
 
     def run(*args):
-        rows = [a for i, a in enumerate(args) if i not in replicated]
-        n = jax.tree.leaves(rows)[0].shape[0]
+        batched = [a for i, a in enumerate(args) if i not in replicated]
+        n = jax.tree.leaves(batched)[0].shape[0]
         length = padded_length(n, mesh)
         specs = tuple(P() if i in replicated else P(AXIS) for i in range(len(args)))
         padded = tuple(a if i in replicated else pad_rows(a, length) for i, a in enumerate(args))
+        if mask:
+            specs, padded = specs + (P(AXIS),), padded + (jnp.arange(length) < n,)
         out = jax.shard_map(fn, mesh=mesh, in_specs=specs, out_specs=P(AXIS), check_vma=False)(*padded)
         return jax.tree.map(lambda x: x[:n], out)
 
