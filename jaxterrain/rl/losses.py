@@ -44,9 +44,30 @@ def gae(rewards: jax.Array, values: jax.Array, dones: jax.Array, last_value: jax
     return jax.lax.stop_gradient(advantages), jax.lax.stop_gradient(targets)
 
 
+def batch_mean(x: jax.Array, weight: Optional[jax.Array] = None, axis_name: Optional[str] = None) -> jax.Array:
+    """``jnp.mean(x)``; with ``weight`` (x's shape, 1 for real entries, 0 for padding) and / or ``axis_name`` (a
+    ``shard_map`` axis over which the batch is split), THIS device's share of the weighted mean of the whole batch,
+    ``sum(weight * x) / psum(sum(weight))``: ``psum`` the shares for the mean. The total weight is a constant for
+    gradients, so the gradient of a share is the device's share of the gradient of the mean."""
+    if weight is None and axis_name is None:
+        return jnp.mean(x)
+    w = jnp.ones_like(x) if weight is None else jnp.broadcast_to(weight, x.shape).astype(x.dtype)
+    total = jnp.sum(w)
+    if axis_name is not None:
+        total = jax.lax.psum(jax.lax.stop_gradient(total), axis_name)
+    return jnp.sum(w * x) / total
+
+
+def _all_mean(x, weight, axis_name):
+    """The weighted mean of the whole batch (the shares summed over ``axis_name``)."""
+    share = batch_mean(x, weight, axis_name)
+    return share if axis_name is None else jax.lax.psum(share, axis_name)
+
+
 def ppo_loss(log_prob: jax.Array, old_log_prob: jax.Array, advantages: jax.Array, values: jax.Array,
              targets: jax.Array, entropy: jax.Array, *, clip_eps: float, vf_coef: float, entropy_coef: float,
-             normalize_advantage: bool = True):
+             normalize_advantage: bool = True, weight: Optional[jax.Array] = None,
+             axis_name: Optional[str] = None):
     """Clipped PPO objective on a batch of any shape (all arrays the same shape, e.g. [T, B]).
 
     ``loss = policy_loss + value_loss + entropy_loss`` with
@@ -58,22 +79,33 @@ def ppo_loss(log_prob: jax.Array, old_log_prob: jax.Array, advantages: jax.Array
 
     Returns ``(loss [], aux)`` where aux holds the three terms, ``approx_kl = mean((ratio - 1) - log ratio)``
     and ``clip_fraction = mean(|ratio - 1| > clip_eps)``.
+
+    Data parallel (``rl.update(..., mesh=...)``): ``weight`` (the arrays' shape; 0 masks padding out) and
+    ``axis_name`` (the ``shard_map`` axis the batch is split over) make every mean this device's share of the
+    whole batch's mean (:func:`batch_mean`; the loss, its gradient and aux are then summed over the axis), and the
+    advantages are standardised with the mean and std of the whole batch.
     """
+    mean = lambda x: batch_mean(x, weight, axis_name)  # noqa: E731
     if normalize_advantage:
-        advantages = (advantages - jnp.mean(advantages)) / (jnp.std(advantages) + 1e-8)
+        if weight is None and axis_name is None:
+            advantages = (advantages - jnp.mean(advantages)) / (jnp.std(advantages) + 1e-8)
+        else:
+            centre = _all_mean(advantages, weight, axis_name)
+            std = jnp.sqrt(_all_mean(jnp.square(advantages - centre), weight, axis_name))
+            advantages = (advantages - centre) / (std + 1e-8)
     log_ratio = log_prob - old_log_prob
     ratio = jnp.exp(log_ratio)
     surrogate = jnp.minimum(ratio * advantages, jnp.clip(ratio, 1.0 - clip_eps, 1.0 + clip_eps) * advantages)
-    policy_loss = -jnp.mean(surrogate)
-    value_loss = vf_coef * 0.5 * jnp.mean(jnp.square(targets - values))
-    entropy_loss = -entropy_coef * jnp.mean(entropy)
+    policy_loss = -mean(surrogate)
+    value_loss = vf_coef * 0.5 * mean(jnp.square(targets - values))
+    entropy_loss = -entropy_coef * mean(entropy)
     loss = policy_loss + value_loss + entropy_loss
     aux = {
         "policy_loss": policy_loss,
         "value_loss": value_loss,
         "entropy_loss": entropy_loss,
-        "entropy": jnp.mean(entropy),
-        "approx_kl": jax.lax.stop_gradient(jnp.mean((ratio - 1.0) - log_ratio)),
-        "clip_fraction": jax.lax.stop_gradient(jnp.mean((jnp.abs(ratio - 1.0) > clip_eps).astype(jnp.float32))),
+        "entropy": mean(entropy),
+        "approx_kl": jax.lax.stop_gradient(mean((ratio - 1.0) - log_ratio)),
+        "clip_fraction": jax.lax.stop_gradient(mean((jnp.abs(ratio - 1.0) > clip_eps).astype(jnp.float32))),
     }
     return loss, aux

@@ -164,12 +164,15 @@ def log_prob(distribution: str, loc: jax.Array, scale: jax.Array, raw: jax.Array
     return jnp.sum(lp, axis=-1)
 
 
-def entropy(distribution: str, key: jax.Array, loc: jax.Array, scale: jax.Array) -> jax.Array:
+def entropy(distribution: str, key: jax.Array, loc: jax.Array, scale: jax.Array,
+            noise: jax.Array | None = None) -> jax.Array:
     """Entropy [...]: exact for ``normal``; for ``tanh_normal`` the Gaussian entropy plus the log-Jacobian at one
-    sample (brax's single-sample estimate)."""
+    sample (brax's single-sample estimate), ``sample_raw(key, loc, scale)``, or ``loc + scale * noise`` when the
+    standard normal ``noise`` (loc's shape) is given (a data-parallel device's slice of the batch's draw)."""
     ent = 0.5 + _LOG_SQRT_2PI + jnp.log(scale)
     if distribution == "tanh_normal":
-        ent = ent + _tanh_log_det_jacobian(sample_raw(key, loc, scale))
+        raw = sample_raw(key, loc, scale) if noise is None else loc + scale * noise
+        ent = ent + _tanh_log_det_jacobian(raw)
     return jnp.sum(ent, axis=-1)
 
 

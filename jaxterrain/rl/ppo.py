@@ -29,7 +29,7 @@ import optax
 
 from jaxterrain.rl import networks as nets
 from jaxterrain.rl.config import PPOConfig, validate_config
-from jaxterrain.rl.losses import gae, ppo_loss
+from jaxterrain.rl.losses import batch_mean, gae, ppo_loss
 
 
 class EnvLike(Protocol):
@@ -242,10 +242,17 @@ def _collect(state: TrainState, key, terrains, env, config):
     return env_state, episode, data, bootstrap_obs
 
 
-def loss_fn(params, normaliser, batch: Transition, bootstrap_obs, key, *, config: PPOConfig, action_size: int):
+def loss_fn(params, normaliser, batch: Transition, bootstrap_obs, key, *, config: PPOConfig, action_size: int,
+            weight=None, rows=None, axis_name=None):
     """PPO loss on a minibatch of segments: ``batch`` fields [b, T, ...], ``bootstrap_obs`` [b, O].
 
     GAE is recomputed with the current value network per minibatch (as brax). Returns ``(loss, aux)``.
+
+    Data parallel (inside :func:`update`'s ``shard_map``): ``batch`` is this device's slice of the minibatch,
+    ``weight`` [b] (0 on padding), ``rows = (start, total)`` its place in the minibatch of ``total`` segments (the
+    entropy's one-sample estimate takes its slice of the whole minibatch's normal draw) and ``axis_name`` the mesh
+    axis: the loss and aux are then this device's shares of the minibatch means (:func:`~jaxterrain.rl.losses.
+    batch_mean`; sum them over the axis).
     """
     batch = jax.tree_util.tree_map(lambda x: jnp.swapaxes(x, 0, 1), batch)  # [T, b, ...]
     loc, scale = nets.policy_apply(config, action_size, params, normaliser, batch.obs)
@@ -255,16 +262,26 @@ def loss_fn(params, normaliser, batch: Transition, bootstrap_obs, key, *, config
         batch.reward * config.reward_scaling, jax.lax.stop_gradient(values), batch.done,
         jax.lax.stop_gradient(last_value), config.gamma, config.gae_lambda, batch.truncation)
     logp = nets.log_prob(config.action_distribution, loc, scale, batch.raw_action)
-    ent = nets.entropy(config.action_distribution, key, loc, scale)
+    noise = None
+    if rows is not None:  # this device's columns of the whole minibatch's draw [T, total, A]
+        start, total = rows
+        t, b = loc.shape[:2]
+        draw = jax.random.normal(key, (t, total) + loc.shape[2:], loc.dtype)
+        draw = jnp.concatenate([draw, jnp.zeros((t, b) + loc.shape[2:], loc.dtype)], axis=1)  # padding rows
+        noise = jax.lax.dynamic_slice_in_dim(draw, start, b, axis=1)
+    ent = nets.entropy(config.action_distribution, key, loc, scale, noise)
+    w = None if weight is None else jnp.broadcast_to(weight[None, :], logp.shape)
     loss, aux = ppo_loss(logp, batch.log_prob, advantages, values, targets, ent, clip_eps=config.clip_eps,
                          vf_coef=config.vf_coef, entropy_coef=config.entropy_coef,
-                         normalize_advantage=config.normalize_advantage)
-    aux = dict(aux, mean_std=jnp.mean(scale), value_target=jnp.mean(targets))
-    return loss, aux
+                         normalize_advantage=config.normalize_advantage, weight=w, axis_name=axis_name)
+    if w is None and axis_name is None:
+        return loss, dict(aux, mean_std=jnp.mean(scale), value_target=jnp.mean(targets))
+    return loss, dict(aux, mean_std=batch_mean(jnp.mean(scale, axis=-1), w, axis_name),
+                      value_target=batch_mean(targets, w, axis_name))
 
 
 def update(state: TrainState, key: jax.Array, terrains: jax.Array, *, env: EnvLike,
-           config: PPOConfig):
+           config: PPOConfig, mesh=None):
     """One PPO iteration: collect ``config.steps_per_update`` transitions, update the normaliser, then
     ``update_epochs`` x ``num_minibatches`` Adam steps on the clipped objective.
 
@@ -273,10 +290,21 @@ def update(state: TrainState, key: jax.Array, terrains: jax.Array, *, env: EnvLi
     do not re-compile. Returns ``(state, metrics)``, metrics a dict of [] float32 (losses averaged over all
     minibatch steps; ``episode_return``: mean over envs of the last finished episode's return, unscaled, over envs
     that finished one; ``episodes``: episodes finished during this update).
+
+    ``mesh`` (a ``jax.sharding.Mesh``, data parallel): the envs (and per-env terrains) are split over its devices,
+    each device steps its own; the policy, value net, normaliser and optimiser state are replicated. Every epoch
+    draws the same permutation as without a mesh, and each minibatch is split over the devices (padded to a
+    multiple of the device count, the padding weighted 0): every device computes the gradient of its share of the
+    minibatch loss, the gradients are summed (``psum``: their mean over the devices weighted by their rows) and
+    every device applies the same Adam step. Advantage standardisation uses the whole minibatch's statistics, and
+    the random draws are the ones of the one-device update, so the result equals :func:`update` without a mesh up
+    to float rounding (tested on 4 CPU devices and on two processes).
     """
     key = _raw_key(key)
     collect_key, sgd_key = jax.random.split(key)
     del key
+    if mesh is not None:
+        state, terrains = _split_envs(state, terrains, config, mesh)
     env_state, episode, data, bootstrap_obs = _collect(state, collect_key, terrains, env, config)
 
     normaliser = state.normaliser
@@ -287,28 +315,8 @@ def update(state: TrainState, key: jax.Array, terrains: jax.Array, *, env: EnvLi
     k, t, n = config.num_unrolls, config.unroll_length, config.num_envs
     segments = jax.tree_util.tree_map(lambda x: jnp.reshape(jnp.swapaxes(x, 1, 2), (k * n, t) + x.shape[3:]), data)
     boots = jnp.reshape(bootstrap_obs, (k * n, bootstrap_obs.shape[-1]))
-    optimizer = make_optimizer(config)
-    grad_fn = jax.value_and_grad(functools.partial(loss_fn, config=config, action_size=env.action_size),
-                                 has_aux=True)
-    m = config.num_minibatches
-
-    def minibatch_step(carry, mb):
-        params, opt_state = carry
-        batch, boot, mb_key = mb
-        (loss, aux), grads = grad_fn(params, normaliser, batch, boot, mb_key)
-        updates, opt_state = optimizer.update(grads, opt_state, params)
-        params = optax.apply_updates(params, updates)
-        return (params, opt_state), dict(aux, loss=loss, grad_norm=optax.global_norm(grads))
-
-    def epoch(carry, epoch_key):
-        perm_key, mb_key = jax.random.split(epoch_key)
-        perm = jax.random.permutation(perm_key, k * n)
-        shuffle = lambda x: jnp.reshape(x[perm], (m, -1) + x.shape[1:])
-        mbs = (jax.tree_util.tree_map(shuffle, segments), shuffle(boots), jax.random.split(mb_key, m))
-        return jax.lax.scan(minibatch_step, carry, mbs)
-
-    (params, opt_state), sgd_metrics = jax.lax.scan(
-        epoch, (state.params, state.opt_state), jax.random.split(sgd_key, config.update_epochs))
+    params, opt_state, sgd_metrics = _sgd(state.params, state.opt_state, normaliser, segments, boots, sgd_key,
+                                          config=config, action_size=env.action_size, mesh=mesh)
 
     finished = episode.count > 0
     metrics = {name: jnp.mean(v) for name, v in sgd_metrics.items()}
@@ -332,15 +340,80 @@ def update(state: TrainState, key: jax.Array, terrains: jax.Array, *, env: EnvLi
     return new_state, metrics
 
 
-def run_updates(state: TrainState, terrains: jax.Array, *, env: EnvLike, config: PPOConfig, num_updates: int):
+def _sgd(params, opt_state, normaliser, segments: Transition, boots, key, *, config: PPOConfig, action_size: int,
+         mesh=None):
+    """``update_epochs`` passes of ``num_minibatches`` Adam steps over the segments [K * N, T, ...] (bootstrap
+    observations [K * N, O]), shuffled per epoch. Returns ``(params, opt_state, metrics [epochs, minibatches])``.
+    With ``mesh`` every minibatch is split over its devices (see :func:`update`)."""
+    optimizer = make_optimizer(config)
+    m, total = config.num_minibatches, boots.shape[0]
+    size = total // m  # segments per minibatch
+    if mesh is None:
+        local, axis_name = size, None
+    else:
+        from jaxterrain import sharding
+
+        local, axis_name = -(-size // mesh.devices.size), sharding.AXIS  # segments per device, padded
+    grad_fn = jax.value_and_grad(functools.partial(loss_fn, config=config, action_size=action_size,
+                                                   axis_name=axis_name), has_aux=True)
+
+    def minibatch_step(carry, mb):
+        params, opt_state = carry
+        batch, boot, mb_key = mb
+        if mesh is None:
+            (loss, aux), grads = grad_fn(params, normaliser, batch, boot, mb_key)
+        else:  # this device's rows of the minibatch (padded with weight 0); shares summed over the devices
+            start = jax.lax.axis_index(axis_name) * local
+            padded = sharding.pad_rows((batch, boot), local * mesh.devices.size)
+            mine = jax.tree_util.tree_map(lambda x: jax.lax.dynamic_slice_in_dim(x, start, local), padded)
+            weight = (start + jnp.arange(local) < size).astype(jnp.float32)
+            (loss, aux), grads = grad_fn(params, normaliser, mine[0], mine[1], mb_key, weight=weight,
+                                         rows=(start, size))
+            loss, aux, grads = jax.lax.psum((loss, aux, grads), axis_name)
+        updates, opt_state = optimizer.update(grads, opt_state, params)
+        params = optax.apply_updates(params, updates)
+        return (params, opt_state), dict(aux, loss=loss, grad_norm=optax.global_norm(grads))
+
+    def epochs(params, opt_state, segments, boots, key):
+        def epoch(carry, epoch_key):
+            perm_key, mb_key = jax.random.split(epoch_key)
+            perm = jax.random.permutation(perm_key, total)
+            shuffle = lambda x: jnp.reshape(x[perm], (m, -1) + x.shape[1:])
+            mbs = (jax.tree_util.tree_map(shuffle, segments), shuffle(boots), jax.random.split(mb_key, m))
+            return jax.lax.scan(minibatch_step, carry, mbs)
+
+        (params, opt_state), metrics = jax.lax.scan(epoch, (params, opt_state),
+                                                    jax.random.split(key, config.update_epochs))
+        return params, opt_state, metrics
+
+    if mesh is None:
+        return epochs(params, opt_state, segments, boots, key)
+    from jax.sharding import PartitionSpec as P  # every device holds the whole batch, computes on its rows
+
+    return jax.shard_map(epochs, mesh=mesh, in_specs=P(), out_specs=P(), check_vma=False)(
+        params, opt_state, segments, boots, key)
+
+
+def _split_envs(state: TrainState, terrains: jax.Array, config: PPOConfig, mesh):
+    """``state``'s envs (and per-env ``terrains``) constrained to be split over ``mesh``'s devices (inside jit)."""
+    from jaxterrain import sharding
+
+    rows = lambda tree: jax.lax.with_sharding_constraint(tree, sharding.rows(mesh))  # noqa: E731
+    state = state._replace(env_state=rows(state.env_state), episode=rows(state.episode))
+    return state, (rows(terrains) if _terrain_axis(terrains, config.num_envs) == 0 else terrains)
+
+
+def run_updates(state: TrainState, terrains: jax.Array, *, env: EnvLike, config: PPOConfig, num_updates: int,
+                mesh=None):
     """``num_updates`` updates in one ``lax.scan``; each splits its key off ``state.key``. Pure (jit/vmap it).
+    ``mesh``: data parallel over its devices (:func:`update`).
 
     Returns ``(state, metrics)`` with metrics [num_updates] per name.
     """
 
     def body(s, _):
         next_key, update_key = jax.random.split(s.key)
-        return update(s._replace(key=next_key), update_key, terrains, env=env, config=config)
+        return update(s._replace(key=next_key), update_key, terrains, env=env, config=config, mesh=mesh)
 
     return jax.lax.scan(body, state, None, length=num_updates)
 
@@ -359,25 +432,30 @@ def make_train(env: EnvLike, config: PPOConfig, num_updates: int):
 # ----------------------------------------------------------------------------------------------------------------
 # Host-side driver: chunks of jitted scans, callback between chunks (progress, checkpoints)
 # ----------------------------------------------------------------------------------------------------------------
-def _build_chunk(env, config, num_updates, batched, terrain_seed_axis):
-    fn = functools.partial(run_updates, env=env, config=config, num_updates=num_updates)
+def _build_chunk(env, config, num_updates, batched, terrain_seed_axis, mesh=None):
+    fn = functools.partial(run_updates, env=env, config=config, num_updates=num_updates, mesh=mesh)
     if batched:
         fn = jax.vmap(fn, in_axes=(0, terrain_seed_axis))
-    return jax.jit(fn)
+    if mesh is None:
+        return jax.jit(fn)
+    from jaxterrain import sharding  # whole on every device between chunks: any process can read or save it
+
+    return jax.jit(fn, out_shardings=sharding.replicated(mesh))
 
 
 @functools.lru_cache(maxsize=32)
-def _cached_chunk(env, config, num_updates, batched, terrain_seed_axis):
-    return _build_chunk(env, config, num_updates, batched, terrain_seed_axis)
+def _cached_chunk(env, config, num_updates, batched, terrain_seed_axis, mesh=None):
+    return _build_chunk(env, config, num_updates, batched, terrain_seed_axis, mesh)
 
 
-def compiled_chunk(env, config, num_updates: int, batched: bool = False, terrain_seed_axis=None):
+def compiled_chunk(env, config, num_updates: int, batched: bool = False, terrain_seed_axis=None, mesh=None):
     """The jitted ``(state, terrains) -> (state, metrics)`` running ``num_updates`` updates; cached per
-    (env, config, num_updates, batched) so repeated :func:`train` calls do not re-compile."""
+    (env, config, num_updates, batched, mesh) so repeated :func:`train` calls do not re-compile. With ``mesh``
+    (data parallel, :func:`update`) the returned state is replicated on every device of the mesh."""
     try:
-        return _cached_chunk(env, config, num_updates, batched, terrain_seed_axis)
+        return _cached_chunk(env, config, num_updates, batched, terrain_seed_axis, mesh)
     except TypeError:  # unhashable env
-        return _build_chunk(env, config, num_updates, batched, terrain_seed_axis)
+        return _build_chunk(env, config, num_updates, batched, terrain_seed_axis, mesh)
 
 
 def _is_seed_batch(key) -> bool:
@@ -388,13 +466,15 @@ def _is_seed_batch(key) -> bool:
 
 
 def chunk_fn(env: EnvLike, config: PPOConfig, terrains: jax.Array, batched: bool = False,
-             terrain_seed_axis: Optional[int] = None) -> Callable[[TrainState, int, int], tuple[TrainState, dict]]:
+             terrain_seed_axis: Optional[int] = None,
+             mesh=None) -> Callable[[TrainState, int, int], tuple[TrainState, dict]]:
     """The ``jaxterrain.driver.run_chunks`` chunk of PPO: ``(state, start, stop) -> (state, metrics)`` runs
     ``stop - start`` updates (:func:`compiled_chunk`, cached per length) on ``terrains``; metrics are numpy arrays
-    [stop - start] (or [S, stop - start] for a batch of seeds, ``batched``)."""
+    [stop - start] (or [S, stop - start] for a batch of seeds, ``batched``). ``mesh``: data parallel
+    (:func:`update`)."""
 
     def chunk(state: TrainState, start: int, stop: int):
-        fn = compiled_chunk(env, config, stop - start, batched, terrain_seed_axis)
+        fn = compiled_chunk(env, config, stop - start, batched, terrain_seed_axis, mesh)
         state, metrics = fn(state, terrains)
         return state, jax.tree_util.tree_map(np.asarray, metrics)
 
@@ -404,7 +484,7 @@ def chunk_fn(env: EnvLike, config: PPOConfig, terrains: jax.Array, batched: bool
 def train(key: jax.Array, env: EnvLike, config: PPOConfig, num_updates: int, terrains: jax.Array,
           state: Optional[TrainState] = None, callback: Optional[Callable[[TrainState, dict], Any]] = None,
           updates_per_chunk: int = 10, *, run_dir=None, time_limit_s: Optional[float] = None,
-          progress: Any = False, meta: Optional[dict] = None):
+          progress: Any = False, meta: Optional[dict] = None, mesh=None):
     """Run ``num_updates`` PPO updates in jitted chunks of ``updates_per_chunk`` (a ``lax.scan`` each), through
     ``jaxterrain.driver.run_chunks``.
 
@@ -421,6 +501,8 @@ def train(key: jax.Array, env: EnvLike, config: PPOConfig, num_updates: int, ter
       updates_per_chunk: updates per jitted call (a last shorter chunk compiles once more).
       run_dir, time_limit_s, progress, meta: as in ``jaxterrain.driver.run_chunks`` (a checkpoint, metrics.csv
         and TensorBoard events in ``run_dir`` after every chunk; stop after ``time_limit_s``; a progress bar).
+      mesh: a ``jax.sharding.Mesh`` (``sharding.make_mesh()``) to train data parallel over its devices
+        (:func:`update`: the envs split, the gradients summed, the policy replicated); not with a batch of seeds.
 
     Returns ``(state, metrics)``: the final state and a dict of numpy arrays [n] ([S, n]), n = the updates run
     (``num_updates`` unless the time limit stopped it earlier).
@@ -434,14 +516,20 @@ def train(key: jax.Array, env: EnvLike, config: PPOConfig, num_updates: int, ter
     validate_config(config)
     terrains = jnp.asarray(terrains, jnp.float32)
     batched = _is_seed_batch(key) if state is None else state.update_step.ndim == 1
+    if batched and mesh is not None:
+        raise ValueError("train: mesh (data parallel) takes one seed; got a batch of seeds")
     terrain_seed_axis = 0 if (batched and terrains.ndim == 4) else None
     if state is None:
         init_fn = lambda k, tr: init(k, env, config, tr)  # noqa: E731
         if batched:
             init_fn = jax.vmap(init_fn, in_axes=(0, terrain_seed_axis))
         state = jax.jit(init_fn)(_raw_key(key) if not batched else key, terrains)
+    if mesh is not None:
+        from jaxterrain import sharding
+
+        state = sharding.replicate(state, mesh)
     history = []
-    run = chunk_fn(env, config, terrains, batched, terrain_seed_axis)
+    run = chunk_fn(env, config, terrains, batched, terrain_seed_axis, mesh)
 
     def chunk(s, start, stop):
         s, metrics = run(s, start, stop)
