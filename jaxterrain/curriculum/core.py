@@ -292,9 +292,18 @@ def run_trials(states: State, bank: TerrainBank, num_chunks: jax.Array, *, confi
     return jax.lax.while_loop(cond, body, (jnp.zeros((), jnp.int32), states))[1]
 
 
-def make_runner(config: CurriculumConfig, harness: Harness) -> Callable[[State, TerrainBank, Any], State]:
+def make_runner(config: CurriculumConfig, harness: Harness, mesh=None) -> Callable[[State, TerrainBank, Any], State]:
     """The jitted ``(states [T], bank, num_chunks) -> states`` of :func:`run_trials` (``states`` donated). Build it
     once per (config, harness) and call it per block of chunks: neither terrain switches nor the block length
-    re-compile it (a new trial count, a new bank shape does)."""
+    re-compile it (a new trial count, a new bank shape does).
+
+    ``mesh`` (a ``jax.sharding.Mesh``): the trials are split over its devices (``sharding.map_rows``: the trial
+    axis sharded, the bank replicated; a trial count that does not divide is padded with copies of the last trial,
+    cut off again), each device running its own trials' loop (it stops when ITS trials are done). A trial's chunks
+    depend only on its own state and key, so the states are those of the one-device runner."""
     fn = functools.partial(run_trials, config=config, harness=harness)
+    if mesh is not None:
+        from jaxterrain import sharding
+
+        return sharding.map_rows(lambda s, b, n: fn(s, b, jnp.asarray(n, jnp.int32)), mesh, replicated=(1, 2))
     return jax.jit(lambda s, b, n: fn(s, b, jnp.asarray(n, jnp.int32)), donate_argnums=(0,))

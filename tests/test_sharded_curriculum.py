@@ -1,0 +1,35 @@
+"""Curriculum trials over 4 forced CPU devices (a subprocess: XLA_FLAGS must precede jax's start): 5 trials (padded
+to 8) split over the devices, the bank replicated, run the chunks of the one-device runner exactly."""
+
+from __future__ import annotations
+
+import textwrap
+from pathlib import Path
+
+from test_sharding import run_on_devices
+
+TESTS = str(Path(__file__).parent)
+
+_SCRIPT = textwrap.dedent("""
+    import sys
+    sys.path.insert(0, TESTS)
+    import jax, numpy as np
+    from jaxterrain import curriculum as C, sharding as SH
+    from test_curriculum import toy_bank, fake_harness, small, START, tree_equal
+
+    assert len(jax.devices()) == 4
+    bank = toy_bank(np.linspace(1.0, 0.2, 9).reshape(3, 3))
+    config, harness = small("random", max_evals=2, max_epochs=6), fake_harness(0.3)
+    states = C.init_trials(jax.random.split(jax.random.key(0), 5), bank, START, config=config, harness=harness)
+    four = C.make_runner(config, harness, mesh=SH.make_mesh())(states, bank, 4)
+    one = C.make_runner(config, harness)(states, bank, 4)  # donates (deletes) states: last
+    assert tree_equal(one, four)
+    terrains = np.asarray(four.history.terrain)
+    assert (terrains[:, :4] >= 0).all() and len({tuple(t) for t in terrains}) > 1  # 4 chunks; the trials differ
+    assert np.asarray(four.policy["resets"]).min() >= 1
+    print("ok")
+""").replace("TESTS", repr(TESTS))
+
+
+def test_sharded_trials_equal_the_one_device_runner():
+    assert run_on_devices(_SCRIPT).strip().endswith("ok")
