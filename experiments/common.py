@@ -342,3 +342,14 @@ def setup_resumable_run(command: str, args: argparse.Namespace, presets: dict[st
         write_config(folder, config)
     print(f"resuming {folder}", flush=True)
     return folder, config
+
+
+def say(line: str) -> None:
+    """Print ``line`` to stdout above the progress bar of ``jaxterrain.driver.run_chunks`` (``tqdm.write``), or
+    plainly without tqdm."""
+    try:
+        from tqdm.auto import tqdm
+
+        tqdm.write(line, file=sys.stdout)
+    except ImportError:  # pragma: no cover
+        print(line, flush=True)

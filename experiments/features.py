@@ -14,8 +14,11 @@ Writes into the run folder: ``config.json``, ``values_<generator>.csv`` (one row
 ``ranges.json``: the [0.5, 99.5] percentile of each descriptor over all generators at the archive window (the
 recipe of ``jaxterrain.archive.DEFAULT_RANGES``).
 
-Long runs: ``values_<generator>.partial.npz`` holds the rows measured so far (saved after every batch);
-``--time-limit MIN`` stops between batches and ``--resume RUN`` continues from there with the same values.
+Long runs go through ``jaxterrain.driver.run_chunks``, one step per batch of ``batch`` terrains (generator after
+generator): after every batch ``checkpoint.npz`` (the columns measured so far; the one before kept as
+``checkpoint.prev.npz``), ``metrics.csv`` and TensorBoard events (``tb/``: the batch's mean difficulty and
+traversable fraction) and a progress bar; ``--time-limit MIN`` stops after a batch (exit code 3) and ``--resume RUN``
+continues from there with the same values.
 """
 
 from __future__ import annotations
@@ -25,6 +28,7 @@ import csv
 import io
 import json
 from pathlib import Path
+from typing import Any, NamedTuple
 
 from experiments import common
 
@@ -73,59 +77,132 @@ def terrain_set(gen, key, samples: int, steps: int):
     return jax.tree.map(lambda *xs: jax.numpy.concatenate(xs), *out)
 
 
-def measure(gen, genomes, cfg: dict, key, fitness_fn, progress=print, checkpoint: Path | None = None,
-            clock: common.Clock | None = None) -> dict[str, "np.ndarray"]:  # noqa: F821
-    """Columns ``{name: [N]}``: ``<feature>_<window>`` for every feature and window, extras, fitness, difficulty.
+def _windows(cfg: dict) -> list[int]:
+    """Every window measured, ascending: ``windows``, the calibration window (with ``calibrate``) and the figure's."""
+    extra = [int(cfg["calibrate_window"])] if cfg.get("calibrate") else []
+    extra += [int(cfg["figure_window"])] if cfg.get("figure_window") else []
+    return sorted(set([int(w) for w in cfg["windows"]] + extra))
 
-    The terrains are measured in batches of ``cfg["batch"]``; batch ``s`` walks with key ``fold_in(key, s)``. With
-    ``checkpoint`` (an ``.npz`` path) the columns so far are saved after every batch and a saved file is continued
-    from, so a killed or time-limited run (``clock``: raises :class:`common.TimeUp` between batches) resumes with
-    the same values.
-    """
+
+def columns(cfg: dict) -> list[str]:
+    """The measured columns in their CSV order: ``<feature>_<window>`` for every window (ascending) and feature,
+    the extra descriptors, ``traversable`` (Algorithm 1, 0 / 1) and ``fitness``; ``values_<generator>.csv`` adds
+    ``difficulty`` = 1 - fitness."""
+    return ([f"{f}_{w}" for w in _windows(cfg) for f in FEATURES] + list(cfg.get("extra_descriptors") or [])
+            + ["traversable", "fitness"])
+
+
+class Plan(NamedTuple):
+    """One generator's terrains: its name, its index in ``cfg["generators"]`` (which picks its keys), the
+    generator, the genomes of :func:`terrain_set` and their count."""
+
+    name: str
+    index: int
+    gen: Any
+    genomes: Any
+    n: int
+
+
+def plan(cfg: dict, key) -> list[Plan]:
+    """The generators of ``cfg`` that can render at ``cfg["size"]`` (the others are skipped with a line saying
+    why), each with its genomes from ``fold_in(key, 2 * index)``."""
+    import jax
+
+    from jaxterrain import generators
+
+    size, plans = int(cfg["size"]), []
+    for gi, name in enumerate(cfg["generators"]):
+        ok, why = common.generator_available(name, size)
+        if not ok:
+            print(f"[{name}] skipped: {why}", flush=True)
+            continue
+        gen = generators.get(name, size=size)
+        genomes = terrain_set(gen, jax.random.fold_in(key, 2 * gi), int(cfg["samples"]), int(cfg["mutation_steps"]))
+        plans.append(Plan(name, gi, gen, genomes, int(jax.tree.leaves(genomes)[0].shape[0])))
+    return plans
+
+
+def measure_batch(heightmaps, cfg: dict, key, fitness_fn, descriptors_fn, traversable_fn) -> dict[str, Any]:
+    """The :func:`columns` of ``heightmaps`` [B, H, W] as float32 ``[B]`` arrays: TRI, TPI and roughness at every
+    window (``descriptors_fn``: jitted ``features.descriptors``), the extra descriptors at the first window,
+    Algorithm 1 (``traversable_fn``) and ``fitness_fn(heightmaps, key)``."""
+    import numpy as np
+
+    stride = int(cfg["stride"])
+    out = {}
+    for w in _windows(cfg):
+        d = np.asarray(descriptors_fn(heightmaps, names=FEATURES, window=w, stride=stride))
+        out.update({f"{f}_{w}": d[:, j] for j, f in enumerate(FEATURES)})
+    for extra in cfg.get("extra_descriptors") or []:
+        out[extra] = np.asarray(descriptors_fn(heightmaps, names=(extra,), window=int(cfg["windows"][0]),
+                                               stride=stride))[:, 0]
+    out["traversable"] = np.asarray(traversable_fn(heightmaps)).astype(np.float32)
+    out["fitness"] = np.asarray(fitness_fn(heightmaps, key))
+    return out
+
+
+def make_chunk(plans: list[Plan], cfg: dict, key, fitness_fn):
+    """``(chunk, steps)``: the ``jaxterrain.driver`` chunk over the batches of ``cfg["batch"]`` terrains of every
+    plan in turn, and their number. Step ``i`` measures its batch (terrains ``s .. s + batch`` of a generator, fitness
+    key ``fold_in(fold_in(key, 2 * index + 1), s)``) into ``state[name][column][s:s + batch]``; its metrics are
+    the batch's mean difficulty and traversable fraction."""
     import jax
     import numpy as np
 
     from jaxterrain import features
-    from jaxterrain.io import atomic_save_npz
 
-    n = jax.tree.leaves(genomes)[0].shape[0]
     batch = int(cfg["batch"])
-    windows = [int(w) for w in cfg["windows"]]
-    calib = [int(cfg["calibrate_window"])] if cfg.get("calibrate") else []
-    calib += [int(cfg["figure_window"])] if cfg.get("figure_window") else []
-    cols: dict[str, list] = {}
-    start = 0
-    if checkpoint is not None and checkpoint.exists():
-        with np.load(checkpoint) as saved:
-            start = int(saved["_measured"])
-            cols = {k: [saved[k]] for k in saved.files if k != "_measured"}
-        progress(f"  [{gen.name}] continuing after {start}/{n} terrains ({checkpoint})")
-    render = jax.jit(jax.vmap(gen.render_one))
-    desc = jax.jit(features.descriptors, static_argnames=("names", "window", "stride"))
-    trav = jax.jit(features.is_traversable)
-    for s in range(start, n, batch):
-        part = jax.tree.map(lambda x: x[s : s + batch], genomes)
-        hm = render(part)
-        for w in sorted(set(windows + calib)):
-            d = np.asarray(desc(hm, names=FEATURES, window=w, stride=int(cfg["stride"])))
-            for j, f in enumerate(FEATURES):
-                cols.setdefault(f"{f}_{w}", []).append(d[:, j])
-        for extra in cfg.get("extra_descriptors") or []:
-            cols.setdefault(extra, []).append(np.asarray(desc(hm, names=(extra,), window=windows[0],
-                                                              stride=int(cfg["stride"])))[:, 0])
-        cols.setdefault("traversable", []).append(np.asarray(trav(hm)).astype(np.float32))
-        fit = np.asarray(fitness_fn(hm, jax.random.fold_in(key, s)))
-        cols.setdefault("fitness", []).append(fit)
-        progress(f"  [{gen.name}] {min(s + batch, n)}/{n} terrains measured")
-        del hm
-        if checkpoint is not None:
-            atomic_save_npz(checkpoint, _measured=np.int64(min(s + batch, n)),
-                            **{k: np.concatenate(v) for k, v in cols.items()})
-        if clock is not None and s + batch < n:
-            clock.check()
-    out = {k: np.concatenate(v).astype(np.float64) for k, v in cols.items()}
-    out["difficulty"] = 1.0 - out["fitness"]
-    return out
+    steps = [(p, s) for p in plans for s in range(0, p.n, batch)]
+    render = {p.name: jax.jit(jax.vmap(p.gen.render_one)) for p in plans}
+    descriptors_fn = jax.jit(features.descriptors, static_argnames=("names", "window", "stride"))
+    traversable_fn = jax.jit(features.is_traversable)
+
+    def chunk(state, a: int, b: int):
+        state = jax.tree.map(np.array, state)  # host copies to write into
+        difficulty, traversable = [], []
+        for p, s in steps[a:b]:
+            heightmaps = render[p.name](jax.tree.map(lambda x: x[s:s + batch], p.genomes))
+            values = measure_batch(heightmaps, cfg, jax.random.fold_in(jax.random.fold_in(key, 2 * p.index + 1), s),
+                                   fitness_fn, descriptors_fn, traversable_fn)
+            for name, v in values.items():
+                state[p.name][name][s:s + len(v)] = v
+            common.say(f"  [{p.name}] {min(s + batch, p.n)}/{p.n} terrains measured")
+            difficulty.append(1.0 - float(np.mean(values["fitness"])))
+            traversable.append(float(np.mean(values["traversable"])))
+        return state, {"difficulty": np.asarray(difficulty), "traversable": np.asarray(traversable)}
+
+    return chunk, len(steps)
+
+
+def measure_all(plans: list[Plan], cfg: dict, key, fitness_fn, folder: Path, resume: bool,
+                time_limit: float | None) -> dict[str, dict] | None:
+    """Measure every plan through ``jaxterrain.driver.run_chunks`` in ``folder`` (``resume``: from its checkpoint;
+    ``time_limit`` minutes: stop after the batch in which they pass). Returns ``{generator: {column: [N]
+    float64}}`` with ``difficulty``, or None when the time limit stopped the run first."""
+    import numpy as np
+
+    from jaxterrain import driver
+
+    chunk, total = make_chunk(plans, cfg, key, fitness_fn)
+    names = columns(cfg)
+    state = {p.name: {c: np.zeros(p.n, np.float32) for c in names} for p in plans}
+    start, history = 0, None
+    restored = driver.restore(folder, like=state) if resume else None
+    if restored is not None:
+        state, start, history, _ = restored
+        print(f"resumed after {start} of {total} batches", flush=True)
+    state, done, _ = driver.run_chunks(
+        chunk, state, total=total, every=1, start=start, history=history, run_dir=folder, key_metric="difficulty",
+        time_limit_s=None if time_limit is None else 60.0 * time_limit, desc="features", unit="batch",
+        meta={"command": "features", "generators": [p.name for p in plans]})
+    if done < total:
+        return None
+    results = {}
+    for p in plans:
+        values = {c: np.asarray(state[p.name][c]).astype(np.float64) for c in names}
+        values["difficulty"] = 1.0 - values["fitness"]
+        results[p.name] = values
+    return results
 
 
 def correlations(values: dict, names: list[str]):
@@ -188,60 +265,25 @@ def _csv_text(header, rows) -> str:
     return buf.getvalue()
 
 
-def main(args) -> int:
-    import jax
-    import matplotlib
-    import numpy as np
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    from jaxterrain import generators
+def write_values(results: dict, folder: Path) -> None:
+    """``values_<generator>.csv``: one row per terrain, the columns of :func:`columns` and ``difficulty``."""
     from jaxterrain.io import atomic_write_text
 
-    folder, cfg = common.setup_run("features", args, PRESETS, "smoke", overrides(args))
-    clock = common.Clock(args.time_limit)
-    key = jax.random.key(int(cfg["seed"]))
-    size = int(cfg["size"])
-    windows = [int(w) for w in cfg["windows"]]
-    fitness_fn = jax.jit(common.fitness_function(cfg["fitness"], int(cfg["attempts"]), int(cfg["best"]), size))
-    results = {}
-    calib_values = []
-    for gi, name in enumerate(cfg["generators"]):
-        ok, why = common.generator_available(name, size)
-        if not ok:
-            print(f"[{name}] skipped: {why}", flush=True)
-            continue
-        values_path = folder / f"values_{name}.csv"
-        if values_path.exists():  # --resume: reuse finished generators
-            with open(values_path) as f:
-                rows = list(csv.reader(f))
-            values = {h: np.array([float(r[i]) for r in rows[1:]]) for i, h in enumerate(rows[0])}
-            print(f"[{name}] reusing {values_path}", flush=True)
-        else:
-            gen = generators.get(name, size=size)
-            genomes = terrain_set(gen, jax.random.fold_in(key, 2 * gi), int(cfg["samples"]), int(cfg["mutation_steps"]))
-            partial = folder / f"values_{name}.partial.npz"
-            try:
-                if results:
-                    clock.check()  # between generators too
-                values = measure(gen, genomes, cfg, jax.random.fold_in(key, 2 * gi + 1), fitness_fn,
-                                 progress=lambda m: print(m, flush=True), checkpoint=partial, clock=clock)
-            except common.TimeUp:
-                print(f"time limit reached; continue with: python -m experiments features --resume {folder}",
-                      flush=True)
-                return 3
-            cols = list(values)
-            atomic_write_text(values_path, _csv_text(cols, zip(*[[f"{v:.8g}" for v in values[c]] for c in cols])))
-            partial.unlink(missing_ok=True)
-        results[name] = values
-        if cfg.get("calibrate"):
-            w = int(cfg["calibrate_window"])
-            calib_values.append(np.stack([values[f"{f}_{w}"] for f in FEATURES], -1)[values["traversable"] > 0])
-    if not results:
-        print("no generator available", flush=True)
-        return 1
-    names = [f"{f}_{w}" for f in FEATURES for w in windows] + list(cfg.get("extra_descriptors") or []) + ["difficulty"]
+    for name, values in results.items():
+        cols = list(values)
+        atomic_write_text(folder / f"values_{name}.csv",
+                          _csv_text(cols, zip(*[[f"{v:.8g}" for v in values[c]] for c in cols])))
+
+
+def write_correlations(results: dict, cfg: dict, folder: Path) -> None:
+    """``correlations.csv`` (generator, feature_a, feature_b, r) of every feature at every window, the extra
+    descriptors and difficulty; ``correlation_<generator>.png`` and ``correlations.png`` (all side by side)."""
+    import matplotlib.pyplot as plt
+
+    from jaxterrain.io import atomic_write_text
+
+    names = ([f"{f}_{int(w)}" for f in FEATURES for w in cfg["windows"]] + list(cfg.get("extra_descriptors") or [])
+             + ["difficulty"])
     rows = []
     fig, axes = plt.subplots(1, len(results), figsize=(6.5 * len(results), 6), squeeze=False)
     for ax, (gname, values) in zip(axes[0], results.items()):
@@ -257,14 +299,48 @@ def main(args) -> int:
     fig.colorbar(img, ax=axes[0].tolist(), shrink=0.8)
     common.save_figure(fig, folder / "correlations.png", dpi=150)
     atomic_write_text(folder / "correlations.csv", _csv_text(["generator", "feature_a", "feature_b", "r"], rows))
+
+
+def write_ranges(results: dict, cfg: dict, folder: Path) -> None:
+    """``ranges.json``: the [0.5, 99.5] percentiles of TRI, TPI and roughness at ``calibrate_window`` over the
+    traversable terrains of every generator (the recipe of ``jaxterrain.archive.DEFAULT_RANGES``)."""
+    import numpy as np
+
+    from jaxterrain.io import atomic_write_text
+
+    w = int(cfg["calibrate_window"])
+    allv = np.concatenate([np.stack([values[f"{f}_{w}"] for f in FEATURES], -1)[values["traversable"] > 0]
+                           for values in results.values()])
+    ranges = {}
+    for j, f in enumerate(FEATURES):
+        lo, hi = np.percentile(allv[:, j], [0.5, 99.5])
+        ranges[f] = {"p0.5": float(lo), "p99.5": float(hi), "n": int(allv.shape[0])}
+    atomic_write_text(folder / "ranges.json", json.dumps(ranges, indent=2) + "\n")
+    print(f"descriptor percentiles at window {w}: {ranges}", flush=True)
+
+
+def main(args) -> int:
+    import jax
+    import matplotlib
+
+    matplotlib.use("Agg")
+
+    folder, cfg = common.setup_resumable_run("features", args, PRESETS, "smoke", overrides(args))
+    key = jax.random.key(int(cfg["seed"]))
+    plans = plan(cfg, key)
+    if not plans:
+        print("no generator available", flush=True)
+        return 1
+    fitness_fn = jax.jit(common.fitness_function(cfg["fitness"], int(cfg["attempts"]), int(cfg["best"]),
+                                                 int(cfg["size"])))
+    results = measure_all(plans, cfg, key, fitness_fn, folder, args.resume is not None, args.time_limit)
+    if results is None:
+        print(f"time limit reached; continue with: python -m experiments features --resume {folder}", flush=True)
+        return 3
+    write_values(results, folder)
+    write_correlations(results, cfg, folder)
     figure4(results, cfg, folder)
-    if cfg.get("calibrate") and calib_values:
-        allv = np.concatenate(calib_values)
-        ranges = {}
-        for j, f in enumerate(FEATURES):
-            lo, hi = np.percentile(allv[:, j], [0.5, 99.5])
-            ranges[f] = {"p0.5": float(lo), "p99.5": float(hi), "n": int(allv.shape[0])}
-        atomic_write_text(folder / "ranges.json", json.dumps(ranges, indent=2) + "\n")
-        print(f"descriptor percentiles at window {cfg['calibrate_window']}: {ranges}", flush=True)
+    if cfg.get("calibrate"):
+        write_ranges(results, cfg, folder)
     print(f"done -> {folder}", flush=True)
     return 0

@@ -264,16 +264,6 @@ def _log_metrics(say, log_path: Path, step: int, total: int, start: int, t0: flo
     return m
 
 
-def _say(line: str) -> None:
-    """Print ``line`` above the driver's progress bar (tqdm.write), or plainly."""
-    try:
-        from tqdm.auto import tqdm
-
-        tqdm.write(line, file=sys.stdout)
-    except ImportError:  # pragma: no cover
-        print(line, flush=True)
-
-
 def make_chunk(cfg: dict, run_dir: Path, config, tiles, start: int):
     """The ``jaxterrain.driver`` chunk ``(state, a, b) -> (state, metrics [b - a])``: steps ``a + 1 .. b`` of the
     jitted train step, with log lines and sample grids at their intervals (``start``: where this process began)."""
@@ -294,7 +284,7 @@ def make_chunk(cfg: dict, run_dir: Path, config, tiles, start: int):
             state, metrics = step_fn(state, tiles)
             done.append(metrics)
             if step % log_every == 0 or step == steps:
-                _log_metrics(_say, run_dir / "log.jsonl", step, steps, start, t0, metrics)
+                _log_metrics(common.say, run_dir / "log.jsonl", step, steps, start, t0, metrics)
             if step % sample_every == 0 or step == steps:
                 save_grid(run_dir / "samples" / f"step_{step:08d}.png", sample_fn(state.g_params, state.g_stats))
         return state, {k: jnp.stack([m[k] for m in done]) for k in done[0]}
@@ -324,7 +314,7 @@ def train(cfg: dict, run_dir: Path, config, tiles, resume: bool = False, time_li
         desc="train-gan", meta={"command": "train-gan", "config": config.to_json()})
     wall = time.time() - t0
     if start < done:
-        _say(f"trained {done - start} steps in {wall:.1f} s")
+        common.say(f"trained {done - start} steps in {wall:.1f} s")
     last = {k: v[-1] for k, v in history.items() if v} or None
     return TrainOutcome(state, done, wall, last)
 

@@ -75,16 +75,21 @@ def test_features_smoke(tmp_path):
     assert (out / "correlations.png").exists() and (out / "correlation_perlin.png").exists()
 
 
-def test_features_time_limit_stops_between_batches_and_resumes_to_the_same_values(tmp_path):
+def test_features_time_limit_stops_between_batches_and_resumes_to_the_same_values(tmp_path, capsys):
     args = ["features", "--preset", "smoke", "--generators", "perlin", "--samples", "12", "--mutation-steps", "1",
             "--windows", "5"]
     assert cli(*args, "--out", str(tmp_path / "whole")) == 0
     out = tmp_path / "cut"
     assert cli(*args, "--out", str(out), "--time-limit", "1e-6") == 3  # after the first of two batches of 12 terrains
-    assert (out / "values_perlin.partial.npz").exists() and not (out / "values_perlin.csv").exists()
+    assert (out / "checkpoint.npz").exists() and not (out / "values_perlin.csv").exists()
+    assert len((out / "metrics.csv").read_text().splitlines()) == 1 + 1  # the driver's log: one batch measured
+    capsys.readouterr()
     assert cli("features", "--resume", str(out)) == 0
-    assert not (out / "values_perlin.partial.npz").exists()
+    printed = capsys.readouterr().out
+    assert "resumed after 1 of 2 batches" in printed and "12/24 terrains measured" not in printed  # not measured again
+    assert "24/24 terrains measured" in printed and len((out / "metrics.csv").read_text().splitlines()) == 1 + 2
     assert (out / "values_perlin.csv").read_text() == (tmp_path / "whole" / "values_perlin.csv").read_text()
+    assert (out / "metrics.csv").read_text() == (tmp_path / "whole" / "metrics.csv").read_text()
 
 
 @pytest.mark.slow
