@@ -281,7 +281,7 @@ def main(args) -> int:
     from jaxterrain.io import atomic_write_text
     from jaxterrain.provenance import device
 
-    folder, cfg = common.setup_run("train-traversability", args, PRESETS, "cpu", overrides(args))
+    folder, cfg = common.setup_resumable_run("train-traversability", args, PRESETS, "cpu", overrides(args))
     print(f"train-traversability: {folder}  device {device()}", flush=True)
     key = jax.random.key(int(cfg["seed"]))
     clock = common.Clock(args.time_limit)

@@ -29,6 +29,37 @@ def test_slope_fitness_values():
     np.testing.assert_allclose(f, [1.0, 1.0 - 0.5 * 0.5], atol=1e-6)  # (|dx| + |dy|) / 2 = (0.5 + 0) / 2
 
 
+def test_setup_resumable_run_names_one_run_and_changes_only_what_may_change(tmp_path, monkeypatch, capsys):
+    """--resume FOLDER / --out RUN --resume / --resume alone (the newest run); the saved config is the run's, except
+    the extendable keys given, which are checked and saved; --resume and --out naming two runs is an error."""
+    import argparse
+
+    monkeypatch.chdir(tmp_path)
+    presets = {"p": {"steps": 3, "size": 8}}
+    parser = argparse.ArgumentParser()
+    common.add_run_arguments(parser, presets, "p")
+
+    def setup(argv, steps=None, size=None):
+        return common.setup_resumable_run("cmd", parser.parse_args(argv), presets, "p", {"steps": steps, "size": size},
+                                          extendable=("steps",))
+
+    folder, cfg = setup(["--out", "runs/cmd-1"], size=16)
+    assert folder == Path("runs/cmd-1") and cfg == {"steps": 3, "size": 16, "preset": "p", "seed": 0, "command": "cmd"}
+    assert common.load_config(folder) == cfg
+    capsys.readouterr()
+    folder, cfg = setup(["--out", "runs/cmd-1", "--resume"], steps=5, size=32)
+    assert folder == Path("runs/cmd-1") and (cfg["steps"], cfg["size"]) == (5, 16)
+    assert "ignoring ['size']" in capsys.readouterr().err
+    assert common.load_config(folder)["steps"] == 5
+    assert setup(["--resume"])[0] == Path("runs/cmd-1") == setup(["--resume", "runs/cmd-1"])[0]
+    assert setup(["--resume"])[1]["steps"] == 5
+    with pytest.raises(common.UsageError, match="name different runs"):
+        setup(["--resume", "runs/cmd-1", "--out", "runs/cmd-2"])
+    with pytest.raises(common.UsageError, match="--steps must be an integer >= 1"):
+        setup(["--resume", "runs/cmd-1"], steps=0)
+    assert common.load_config("runs/cmd-1")["steps"] == 5  # a refused value is not saved
+
+
 def test_evolve_smoke_config_and_resume(tmp_path):
     from jaxterrain import archive as A
 
