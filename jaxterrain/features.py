@@ -50,6 +50,7 @@ the CPU baseline of the benchmark.
 
 from __future__ import annotations
 
+import functools
 from typing import Callable, NamedTuple, Sequence
 
 import jax
@@ -300,10 +301,7 @@ def tri(heightmaps, window: int = 3, stride: int = 1, algorithm: str = "wilson")
       ``[B, H', W']`` float32 (``[H', W']`` for a single map), ``H' = (H - k) // stride + 1``.
     """
     algorithm = _check_algorithm(algorithm)
-    h, single = _as_batch(heightmaps)
-    window, stride = _check_window(h.shape, window, stride)
-    out = _tri_core(h, window, stride, algorithm)
-    return out[0] if single else out
+    return _per_pixel(functools.partial(_tri_core, algorithm=algorithm), heightmaps, window, stride)
 
 
 def tpi(heightmaps, window: int = 3, stride: int = 1) -> jax.Array:
@@ -311,10 +309,7 @@ def tpi(heightmaps, window: int = 3, stride: int = 1) -> jax.Array:
 
     ``[B, H, W]`` (or ``[H, W]``) -> ``[B, H', W']`` float32; window / stride as in :func:`tri`.
     """
-    h, single = _as_batch(heightmaps)
-    window, stride = _check_window(h.shape, window, stride)
-    out = _tpi_core(h, window, stride)
-    return out[0] if single else out
+    return _per_pixel(_tpi_core, heightmaps, window, stride)
 
 
 def roughness(heightmaps, window: int = 3, stride: int = 1) -> jax.Array:
@@ -322,9 +317,14 @@ def roughness(heightmaps, window: int = 3, stride: int = 1) -> jax.Array:
 
     ``[B, H, W]`` (or ``[H, W]``) -> ``[B, H', W']`` float32; window / stride as in :func:`tri`.
     """
+    return _per_pixel(_roughness_core, heightmaps, window, stride)
+
+
+def _per_pixel(core, heightmaps, window: int, stride: int) -> jax.Array:
+    """``core(h [B, H, W], window, stride)`` on checked heightmaps and window / stride; one map in, one map out."""
     h, single = _as_batch(heightmaps)
     window, stride = _check_window(h.shape, window, stride)
-    out = _roughness_core(h, window, stride)
+    out = core(h, window, stride)
     return out[0] if single else out
 
 
