@@ -12,15 +12,17 @@ Presets:
   ``jaxterrain.driver.run_chunks``, as in ``evolve``: after every chunk of 10 updates it writes ``checkpoint.npz``
   (the whole PPO state, env states included, so a resumed run is bit-identical to an uninterrupted one),
   ``metrics.csv`` and TensorBoard events (``tb/``); a run stopped by its budget (or ``--time-limit MIN``) or
-  killed (exit code 3 after a time-limit stop, as ``evolve``) continues with ``--resume RUN_DIR``, which takes the
-  run's saved settings (preset, seed, env steps, solver) for the options left out.
+  killed (exit code 3 after a time-limit stop, as ``evolve``) continues with ``--resume RUN_DIR`` and the settings
+  saved in its ``config.json`` (``experiments.common.setup_resumable_run``: ``--env-steps``, ``--time-budget``,
+  ``--updates-per-chunk``, ``--eval-attempts`` and ``--eval-best`` given with it replace the saved ones).
   Measured on one H100 (2026-11-21) under the default solver (``SOLVER_SOUND``, Newton 4 / 16): ~140 k env
   steps/s, 50.4 M env steps in about 6.5 min over two commands (the first stopped by its budget at 46.7 M);
   best-5 / all-20 flat distance 1.00 / 0.98. Under ``--solver fast`` (brax's Newton 1 / 4) an H200 did ~315 k env
   steps/s, 50 M in 218 s, but that policy walks only under the fast solver (``jaxterrain.walker.SOLVER_SOUND``).
 
-Writes into ``--out RUN_DIR``: ``config.json`` (command, preset, options, env and PPO config),
-``checkpoint.npz``, ``metrics.csv``, ``tb/``, ``policy/`` (``policy.msgpack`` + ``config.json``, loadable with
+Writes into ``--out RUN_DIR``: ``config.json`` (the settings, as in every command: ``--config RUN/config.json``
+re-runs them), ``run.json`` (the command lines that started and resumed it, the updates, the walker and PPO
+configs), ``checkpoint.npz``, ``metrics.csv``, ``tb/``, ``policy/`` (``policy.msgpack`` + ``config.json``, loadable with
 ``jaxterrain.rl.load_policy``) and, once training is complete, ``eval.json``: the normalised distance of the
 deterministic policy on flat ground over 20 attempts (random joint initialisations; ``jaxterrain.difficulty``'s
 rollouts): mean of the best 5 and mean of all 20 (bar for shipping: >= 0.9 and >= 0.7). ``--export-assets`` copies
@@ -33,19 +35,24 @@ import argparse
 from pathlib import Path
 from typing import Any, NamedTuple
 
-PRESETS = ("smoke", "gpu")
+from experiments import common
+
+# The options of each preset; its walker and PPO configs are :func:`configs`. env_steps: smoke 4 updates of
+# 8 envs x 5 steps, gpu 410 updates of PPOConfig().steps_per_update = 122 880 (41 whole chunks of 10; a shorter last
+# chunk would compile once more, ~25 s).
+PRESETS: dict[str, dict[str, Any]] = {
+    "smoke": dict(env_steps=4 * 40, time_budget=None, updates_per_chunk=2, num_envs=None, solver=None,
+                  eval_attempts=20, eval_best=5),
+    "gpu": dict(env_steps=410 * 122_880, time_budget=480.0, updates_per_chunk=10, num_envs=None, solver=None,
+                eval_attempts=20, eval_best=5),
+}
+# What ``--resume`` may change (how long the run lasts, how it is chunked, how it is evaluated); the rest is the run's.
+EXTENDABLE = ("env_steps", "time_budget", "updates_per_chunk", "eval_attempts", "eval_best")
+RUN_INFO = "run.json"
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--preset", choices=PRESETS, default=None,
-                        help="smoke (default) or gpu; with --resume: the run's")
-    parser.add_argument("--out", default=None, help="run folder (default runs/train-base-policy-<preset>-<time>)")
-    parser.add_argument("--resume", nargs="?", const="latest", default=None, metavar="FOLDER",
-                        help="continue the run in FOLDER from its checkpoint.npz (default: --out, else the newest "
-                             "runs/train-base-policy-*)")
-    parser.add_argument("--time-limit", type=float, default=None, metavar="MIN",
-                        help="stop cleanly after about MIN minutes of training (after a checkpoint)")
-    parser.add_argument("--seed", type=int, default=None, help="PRNG seed (default 0; with --resume: the run's)")
+    common.add_run_arguments(parser, PRESETS, "smoke")
     parser.add_argument("--env-steps", type=float, default=None,
                         help="total env steps to train (default: smoke 4 updates, gpu 410 updates = 50.4e6)")
     parser.add_argument("--time-budget", type=float, default=None,
@@ -60,8 +67,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "xml, or ITERATIONS,LS_ITERATIONS,EULERDAMP such as 4,16,0; recorded with the policy, and "
                              "difficulty.evaluate then walks it under the same options")
     parser.add_argument("--no-progress", action="store_true", help="one line per chunk instead of a progress bar")
-    parser.add_argument("--eval-attempts", type=int, default=20)
-    parser.add_argument("--eval-best", type=int, default=5)
+    parser.add_argument("--eval-attempts", type=int, default=None, help="flat-ground evaluation walks (default 20)")
+    parser.add_argument("--eval-best", type=int, default=None, help="of which the best are averaged (default 5)")
     parser.add_argument("--skip-eval", action="store_true")
     parser.add_argument("--export-assets", action="store_true",
                         help="write the trained policy to --assets-dir with PROVENANCE.md")
@@ -69,8 +76,14 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="where --export-assets writes (default jaxterrain/assets/base_policy/)")
 
 
-def presets():
-    """(WalkerConfig, PPOConfig, default env steps, default time budget, default updates per chunk) per preset."""
+def overrides(args: argparse.Namespace) -> dict:
+    """The settings given on the command line (None: not given)."""
+    return {name: getattr(args, name) for name in ("env_steps", "time_budget", "updates_per_chunk", "num_envs",
+                                                    "solver", "eval_attempts", "eval_best")}
+
+
+def configs():
+    """``{preset: (WalkerConfig, PPOConfig)}`` before the options of :data:`PRESETS` (``num_envs``, ``solver``)."""
     from jaxterrain.rl import PPOConfig
     from jaxterrain.walker import TerrainScale, WalkerConfig
 
@@ -78,11 +91,7 @@ def presets():
                              episode_length=30)
     smoke_ppo = PPOConfig(num_envs=8, unroll_length=5, num_unrolls=1, num_minibatches=2, update_epochs=2,
                           policy_hidden=(16, 16), value_hidden=(32, 32))
-    return {
-        "smoke": (smoke_env, smoke_ppo, 4 * smoke_ppo.steps_per_update, None, 2),
-        # 410 updates = 41 whole chunks of 10 (a shorter last chunk would compile once more, ~25 s)
-        "gpu": (WalkerConfig(), PPOConfig(), 410 * PPOConfig().steps_per_update, 480.0, 10),
-    }
+    return {"smoke": (smoke_env, smoke_ppo), "gpu": (WalkerConfig(), PPOConfig())}
 
 
 def _to_jsonable(x):
@@ -94,7 +103,7 @@ def _to_jsonable(x):
 
 
 class RunSettings(NamedTuple):
-    """The resolved settings of one run: the preset's defaults overridden by the command line."""
+    """The resolved settings of one run (:func:`resolve_settings` of its ``config.json``)."""
 
     env_config: Any  # jaxterrain.walker.WalkerConfig
     ppo_config: Any  # jaxterrain.rl.PPOConfig
@@ -109,7 +118,7 @@ class RunFolder(NamedTuple):
 
     path: Path  # the run folder (--out / --resume FOLDER)
     command: str  # this process's command line
-    config: dict  # what path / "config.json" holds
+    info: dict  # what path / "run.json" holds
 
 
 class TrainOrigin(NamedTuple):
@@ -126,60 +135,33 @@ class TrainOutcome(NamedTuple):
     stopped: bool
 
 
-def saved_options(args: argparse.Namespace) -> argparse.Namespace:
-    """Fill the options left out (``None``) from the run's ``config.json`` when resuming (``--resume FOLDER``
-    continues the run as it was started, as in ``evolve``), then from the defaults (preset smoke, seed 0)."""
-    import json
+def _solver(text: str):
+    """``jaxterrain.walker.parse_solver(text)``; SystemExit naming ``--solver`` when it is not one."""
+    from jaxterrain.walker import parse_solver
 
-    saved = {}
-    if args.resume is not None:
-        path = _run_path(args) / "config.json"
-        saved = json.loads(path.read_text()) if path.is_file() else {}
-    solver = (saved.get("walker_config") or {}).get("solver")
-    from_run = {"preset": saved.get("preset"), "seed": saved.get("seed"), "env_steps": saved.get("env_steps"),
-                "updates_per_chunk": saved.get("updates_per_chunk"),
-                "num_envs": (saved.get("ppo_config") or {}).get("num_envs"),
-                "solver": (f"{solver['iterations']},{solver['ls_iterations']},{int(solver['eulerdamp'])}"
-                           if isinstance(solver, dict) else None)}
-    for name, value in from_run.items():
-        if getattr(args, name) is None and value is not None:
-            setattr(args, name, value)
-    args.preset = args.preset or "smoke"
-    args.seed = 0 if args.seed is None else args.seed
-    return args
+    try:
+        return parse_solver(text)
+    except ValueError as err:
+        raise SystemExit(f"--solver: {err}") from None
 
 
-def resolve_settings(args: argparse.Namespace) -> RunSettings:
-    """The preset of ``--preset`` (default smoke) with the command-line overrides, checked (SystemExit names the
-    bad option)."""
+def resolve_settings(cfg: dict) -> RunSettings:
+    """The walker and PPO configs and the schedule of a run's settings ``cfg`` (a preset of :data:`PRESETS` with
+    the options given, see ``common.setup_resumable_run``). SystemExit names a bad ``--solver``."""
     import math
 
     from jaxterrain import rl
 
-    env_cfg, ppo_cfg, default_steps, default_budget, default_chunk = presets()[args.preset or "smoke"]
-    if args.solver is not None:
-        from jaxterrain.walker import parse_solver
-
-        try:
-            env_cfg = env_cfg._replace(solver=parse_solver(args.solver))
-        except ValueError as err:
-            raise SystemExit(f"--solver: {err}") from None
-    if args.num_envs is not None:
-        if args.num_envs < 1:
-            raise SystemExit("--num-envs must be >= 1")
-        ppo_cfg = ppo_cfg._replace(num_envs=args.num_envs)
+    env_cfg, ppo_cfg = configs()[cfg.get("preset") or "smoke"]
+    if cfg.get("solver") is not None:
+        env_cfg = env_cfg._replace(solver=_solver(cfg["solver"]))
+    if cfg.get("num_envs") is not None:
+        ppo_cfg = ppo_cfg._replace(num_envs=int(cfg["num_envs"]))
     rl.validate_config(ppo_cfg)
-    env_steps = int(args.env_steps if args.env_steps is not None else default_steps)
-    budget = args.time_budget if args.time_budget is not None else default_budget
-    upc = args.updates_per_chunk or default_chunk
-    if env_steps < 1:
-        raise SystemExit("--env-steps must be >= 1")
-    if upc < 1:
-        raise SystemExit("--updates-per-chunk must be >= 1")
-    if not 1 <= args.eval_best <= args.eval_attempts:
-        raise SystemExit("--eval-best must be in [1, --eval-attempts]")
+    env_steps = int(cfg["env_steps"])
+    budget = None if cfg.get("time_budget") is None else float(cfg["time_budget"])
     num_updates = math.ceil(env_steps / ppo_cfg.steps_per_update)
-    return RunSettings(env_cfg, ppo_cfg, env_steps, num_updates, budget, upc)
+    return RunSettings(env_cfg, ppo_cfg, env_steps, num_updates, budget, int(cfg["updates_per_chunk"]))
 
 
 def _command_line() -> str:
@@ -190,47 +172,28 @@ def _command_line() -> str:
         "train-base-policy"] else sys.argv[1:])
 
 
-def _run_path(args: argparse.Namespace) -> Path:
-    """``--resume FOLDER``; ``--resume`` alone: ``--out``, else the newest run; otherwise ``--out`` or a new
-    ``runs/train-base-policy-<preset>-<UTC time>``."""
-    from experiments.common import latest_run, run_folder
-
-    if args.resume not in (None, "latest"):
-        if args.out is not None and Path(args.out) != Path(args.resume):
-            raise SystemExit(f"--resume {args.resume} and --out {args.out} name different runs; give one of them")
-        return Path(args.resume)
-    if args.resume == "latest":
-        return Path(args.out) if args.out is not None else latest_run("train-base-policy")
-    return run_folder(f"train-base-policy-{args.preset}", args.out)
-
-
-def prepare_run_folder(args: argparse.Namespace, settings: RunSettings) -> RunFolder:
-    """Create the run folder and write its ``config.json``; on ``--resume`` check the checkpoint and config."""
+def write_run_info(folder: Path, settings: RunSettings, resumed: bool) -> RunFolder:
+    """Write ``run.json``: the command line that started the run (and, after ``--resume``, those that continued it),
+    the PPO updates and the walker and PPO configs. On ``--resume`` the configs must be those the run started with
+    (SystemExit otherwise: the library's defaults changed since)."""
     import json
 
-    from jaxterrain import driver
     from jaxterrain.io import atomic_write_text
 
-    run = _run_path(args)
-    if args.resume and not (run / driver.CHECKPOINT_NAME).is_file():
-        raise SystemExit(f"--resume: no checkpoint at {run / driver.CHECKPOINT_NAME}")
-    run.mkdir(parents=True, exist_ok=True)
     command = _command_line()
-    run_config = {
-        "command": "train-base-policy", "preset": args.preset, "seed": args.seed, "env_steps": settings.env_steps,
-        "num_updates": settings.num_updates, "updates_per_chunk": settings.updates_per_chunk,
-        "time_budget_s": settings.time_budget, "walker_config": _to_jsonable(settings.env_config),
-        "ppo_config": settings.ppo_config.to_json_dict(), "command_line": command,
-    }
-    if args.resume and (run / "config.json").is_file():
-        old = json.loads((run / "config.json").read_text())
-        for k in ("walker_config", "ppo_config", "seed"):
-            if old.get(k) != run_config[k]:
-                raise SystemExit(f"--resume: {k} differs from the run's config.json; resume with the same options")
-        run_config["command_line"] = old.get("command_line", command)  # the command that started the run
-        run_config["resumed_with"] = list(old.get("resumed_with", [])) + [command]
-    atomic_write_text(run / "config.json", json.dumps(run_config, indent=2) + "\n")
-    return RunFolder(run, command, run_config)
+    info = {"command_line": command, "num_updates": settings.num_updates,
+            "walker_config": _to_jsonable(settings.env_config), "ppo_config": settings.ppo_config.to_json_dict()}
+    path = folder / RUN_INFO
+    if resumed and path.is_file():
+        old = json.loads(path.read_text())
+        for k in ("walker_config", "ppo_config"):
+            if old.get(k) != info[k]:
+                raise SystemExit(f"--resume: {k} differs from the run's {RUN_INFO} (the library's defaults changed "
+                                 "since the run started?); resume it with the code that started it")
+        info["command_line"] = old.get("command_line", command)  # the command that started the run
+        info["resumed_with"] = list(old.get("resumed_with", [])) + [command]
+    atomic_write_text(path, json.dumps(info, indent=2) + "\n")
+    return RunFolder(folder, command, info)
 
 
 def _device_name() -> str:
@@ -243,15 +206,19 @@ def _device_name() -> str:
 
 def init_or_resume(key, env, ppo_cfg, terrain, run: Path, resume: bool):
     """``(state, updates done, metric history, checkpoint meta)``: a fresh PPO training state (``rl.init``), or
-    with ``resume`` the run's ``checkpoint.npz`` (``jaxterrain.driver`` format, env states included)."""
+    with ``resume`` the run's ``checkpoint.npz`` (``jaxterrain.driver`` format, env states included; none yet: a
+    fresh state)."""
     import jax
 
     from jaxterrain import driver, rl
 
     state = jax.jit(lambda k, t: rl.init(k, env, ppo_cfg, t))(key, terrain)
-    if not resume:
+    restored = driver.restore(run, like=state) if resume else None
+    if restored is None:
+        if resume:
+            print(f"--resume: no checkpoint in {run}; starting from scratch", flush=True)
         return state, 0, None, {}
-    state, done, history, meta = driver.restore(run, like=state)
+    state, done, history, meta = restored
     print(f"resumed at update {done}, {int(state.env_steps):,d} env steps", flush=True)
     return state, done, history, meta
 
@@ -281,7 +248,7 @@ def _print_chunk(steps_per_update: int):
 
 
 def train_with_checkpoints(env, terrain, state, start: int, history, args, settings: RunSettings, run: RunFolder,
-                           origin: TrainOrigin, t_start: float) -> TrainOutcome:
+                           origin: TrainOrigin, t_start: float, preset: str) -> TrainOutcome:
     """Train updates ``[start, num_updates)`` through ``jaxterrain.driver.run_chunks``: a checkpoint, metrics.csv
     and TensorBoard events after every chunk; stops after the chunk in which the time limit passes."""
     import time
@@ -294,7 +261,7 @@ def train_with_checkpoints(env, terrain, state, start: int, history, args, setti
         limits.append(max(settings.time_budget - (time.perf_counter() - t_start) - reserve, 1e-3))
     if args.time_limit is not None:
         limits.append(args.time_limit * 60.0)
-    meta = {"preset": args.preset, "train_devices": origin.devices, "train_commit": origin.commit,
+    meta = {"preset": preset, "train_devices": origin.devices, "train_commit": origin.commit,
             "command": "train-base-policy", "command_line": run.command}
     cfg = settings.ppo_config
     state, done, _ = driver.run_chunks(
@@ -369,7 +336,7 @@ def write_eval(run: Path, result: dict) -> None:
           flush=True)
 
 
-def build_provenance(args, run: RunFolder, state, origin: TrainOrigin, device_name: str, result: dict) -> dict:
+def build_provenance(cfg: dict, run: RunFolder, state, origin: TrainOrigin, device_name: str, result: dict) -> dict:
     """What ``PROVENANCE.md`` and the exported ``config.json`` record about the run and its evaluation."""
     import datetime
 
@@ -378,8 +345,8 @@ def build_provenance(args, run: RunFolder, state, origin: TrainOrigin, device_na
     from jaxterrain.provenance import git_commit
 
     return {
-        "command": run.config["command_line"], "resumed_with": run.config.get("resumed_with", []),
-        "preset": args.preset, "seed": args.seed, "env_steps": int(state.env_steps),
+        "command": run.info["command_line"], "resumed_with": run.info.get("resumed_with", []),
+        "preset": cfg["preset"], "seed": cfg["seed"], "env_steps": int(state.env_steps),
         "updates": int(state.update_step), "commit": origin.commit, "export_commit": git_commit(),
         "device": ", ".join(origin.devices) or "unknown", "eval_device": device_name, "jax": jax.__version__,
         "date": datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds"),
@@ -429,20 +396,24 @@ def main(args: argparse.Namespace) -> int:
     from jaxterrain import rl
     from jaxterrain.walker import WalkerEnv
 
-    settings = resolve_settings(saved_options(args))
-    run = prepare_run_folder(args, settings)
+    if args.solver is not None:
+        _solver(args.solver)  # a bad --solver stops before the run folder is made
+    folder, cfg = common.setup_resumable_run("train-base-policy", args, PRESETS, "smoke", overrides(args), EXTENDABLE)
+    settings = resolve_settings(cfg)
+    run = write_run_info(folder, settings, resumed=args.resume is not None)
     device_name = _device_name()
     ppo_cfg, total_steps = settings.ppo_config, settings.num_updates * settings.ppo_config.steps_per_update
-    print(f"train-base-policy: preset {args.preset}, device {device_name}, {ppo_cfg.num_envs} envs, "
+    print(f"train-base-policy: preset {cfg['preset']}, device {device_name}, {ppo_cfg.num_envs} envs, "
           f"{ppo_cfg.steps_per_update:,d} steps/update, target {settings.num_updates} updates "
           f"({total_steps:,d} env steps), run {run.path}", flush=True)
 
     env = WalkerEnv(settings.env_config)
     terrain = jnp.zeros(tuple(settings.env_config.terrain_shape), jnp.float32)  # flat ground
-    state, start, history, meta = init_or_resume(jax.random.PRNGKey(args.seed), env, ppo_cfg, terrain, run.path,
-                                                 bool(args.resume))
+    state, start, history, meta = init_or_resume(jax.random.PRNGKey(int(cfg["seed"])), env, ppo_cfg, terrain,
+                                                 run.path, args.resume is not None)
     origin = training_origin(meta, start, settings.num_updates, device_name)
-    outcome = train_with_checkpoints(env, terrain, state, start, history, args, settings, run, origin, t_start)
+    outcome = train_with_checkpoints(env, terrain, state, start, history, args, settings, run, origin, t_start,
+                                     cfg["preset"])
     state, steps_done, train_s = outcome.state, int(outcome.state.env_steps), time.perf_counter() - t_start
     save_run_policy(run.path / "policy", state, settings, env)
     if outcome.stopped:
@@ -453,11 +424,11 @@ def main(args: argparse.Namespace) -> int:
     if args.skip_eval:
         return 0
 
-    result = evaluate_policy(run.path / "policy", settings.env_config, args.seed, args.eval_attempts, args.eval_best,
-                             steps_done)
+    result = evaluate_policy(run.path / "policy", settings.env_config, int(cfg["seed"]), int(cfg["eval_attempts"]),
+                             int(cfg["eval_best"]), steps_done)
     write_eval(run.path, result)
     if args.export_assets:
         dest = Path(args.assets_dir) if args.assets_dir else rl.BASE_POLICY_DIR
-        provenance = build_provenance(args, run, state, origin, device_name, result)
+        provenance = build_provenance(cfg, run, state, origin, device_name, result)
         export_policy_assets(dest, run.path, state, settings, env, provenance, result)
     return 0

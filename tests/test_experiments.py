@@ -189,15 +189,24 @@ def test_help_lists_commands():
 
 
 def test_train_base_policy_solver_option():
-    import argparse
-
     from experiments import train_base_policy as tbp
     from jaxterrain.walker import SOLVER_SOUND, SolverOptions
 
-    parser = argparse.ArgumentParser()
-    tbp.add_arguments(parser)
-    settings = tbp.resolve_settings(parser.parse_args(["--preset", "smoke", "--solver", "2,8,0"]))
+    smoke = {**tbp.PRESETS["smoke"], "preset": "smoke"}
+    settings = tbp.resolve_settings({**smoke, "solver": "2,8,0"})
     assert settings.env_config.solver == SolverOptions("newton", 2, 8, False)
-    assert tbp.resolve_settings(parser.parse_args(["--preset", "smoke"])).env_config.solver == SOLVER_SOUND
+    assert tbp.resolve_settings(smoke).env_config.solver == SOLVER_SOUND
     with pytest.raises(SystemExit, match="--solver"):
-        tbp.resolve_settings(parser.parse_args(["--preset", "smoke", "--solver", "4,16"]))
+        tbp.resolve_settings({**smoke, "solver": "4,16"})
+
+
+def test_train_base_policy_presets_schedule():
+    """The presets' env steps are whole updates: smoke 4, gpu 410 (41 chunks of 10); num_envs scales an update."""
+    from experiments import train_base_policy as tbp
+
+    for name, updates, chunk, budget in (("smoke", 4, 2, None), ("gpu", 410, 10, 480.0)):
+        s = tbp.resolve_settings({**tbp.PRESETS[name], "preset": name})
+        assert s.env_steps == updates * s.ppo_config.steps_per_update and s.num_updates == updates
+        assert (s.updates_per_chunk, s.time_budget) == (chunk, budget)
+    s = tbp.resolve_settings({**tbp.PRESETS["smoke"], "preset": "smoke", "num_envs": 16})
+    assert s.ppo_config.num_envs == 16 and s.num_updates == 2  # 160 env steps of 16 x 5 per update

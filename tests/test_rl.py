@@ -308,7 +308,8 @@ def test_train_base_policy_resume_bit_identical(tmp_path):
     assert tbp.main(parser.parse_args(common + ["--out", str(tmp_path / "a")])) == 0
     assert tbp.main(parser.parse_args(common + ["--out", str(tmp_path / "b"), "--time-limit", "1e-6"])) == 3
     cfg_b = json.loads((tmp_path / "b" / "config.json").read_text())
-    assert cfg_b["command"] == "train-base-policy" and cfg_b["num_updates"] == 4
+    info_b = json.loads((tmp_path / "b" / tbp.RUN_INFO).read_text())
+    assert cfg_b["command"] == "train-base-policy" and info_b["num_updates"] == 4
     # --resume FOLDER alone continues the run with its saved settings (preset, seed, steps), as in evolve
     assert tbp.main(parser.parse_args(["--resume", str(tmp_path / "b"), "--skip-eval", "--no-progress"])) == 0
     for name in ("policy.msgpack", "config.json"):
@@ -317,14 +318,14 @@ def test_train_base_policy_resume_bit_identical(tmp_path):
     (sa, da, ha, _), (sb, db, hb, meta) = (driver.restore(tmp_path / r, like=like) for r in ("a", "b"))
     assert da == db == 4 and tree_equal(sa, sb) and ha == hb
     assert meta["command"] == "train-base-policy" and meta["train_devices"]
-    assert json.loads((tmp_path / "b" / "config.json").read_text())["resumed_with"]
+    assert json.loads((tmp_path / "b" / tbp.RUN_INFO).read_text())["resumed_with"]
 
 
 def _like_base_policy(tbp):
     """A fresh smoke-preset PPO state (the structure of a train-base-policy checkpoint)."""
     from jaxterrain.walker import WalkerEnv
 
-    env_cfg, ppo_cfg = tbp.presets()["smoke"][:2]
+    env_cfg, ppo_cfg = tbp.configs()["smoke"]
     env = WalkerEnv(env_cfg)
     return jax.jit(lambda k, t: rl.init(k, env, ppo_cfg, t))(
         jax.random.PRNGKey(0), jnp.zeros(tuple(env_cfg.terrain_shape), jnp.float32))
