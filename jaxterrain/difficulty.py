@@ -29,6 +29,12 @@ best 5), and every entry point takes ``protocol=``::
 
     fitness = difficulty.evaluate(heightmaps, key, protocol=difficulty.HEADINGS)   # 4 headings, see Protocol
     fit_fn = difficulty.fitness_fn(256, difficulty.HEADINGS, slots=16384)         # pure, for archive.evolve
+
+Several devices: ``evaluate(..., mesh=sharding.make_mesh())`` splits the terrains over the mesh's devices (padded
+to a multiple of the device count; the padding is never walked) and walks each terrain with its own key,
+``split(key, B)[b]`` (:func:`keyed_distances`), so the fitness does not depend on the number of devices (up to
+float rounding: XLA compiles another program per local batch). ``fitness_fn(...).keyed`` is the same per-row-key
+form for the sharded MAP-Elites scoring (:mod:`jaxterrain.scoring`), with one rollout pool of ``slots`` per device.
 """
 
 from __future__ import annotations
@@ -47,7 +53,7 @@ from jaxterrain.walker import SolverOptions, WalkerConfig, WalkerEnv
 __all__ = ["Protocol", "PAPER", "HEADINGS", "RULES", "HEADING_TURNS", "evaluate", "rollout_distances", "fitness_fn",
            "batched_distances", "protocol_distances", "rotate_headings", "aggregate", "best_of", "job_queue",
            "smoothness_priority", "validate_heightmaps", "default_policy", "default_env_config", "policy_solver",
-           "make_env", "protocol_env_config"]
+           "make_env", "protocol_env_config", "keyed_distances"]
 
 
 # ----------------------------------------------------------------------------------------------------------------
@@ -398,6 +404,39 @@ def _pooled_distances(env, act, terrains, keys, attempts: int, slots: int, refil
     return pool.distance.reshape(-1, attempts), pool.length.reshape(-1, attempts)
 
 
+def keyed_distances(env: WalkerEnv, policy: Callable, terrains: jax.Array, keys: jax.Array, protocol: Protocol,
+                    policy_params: Any = None, slots: Optional[int] = None, refill_every: int = 8,
+                    needed: Optional[jax.Array] = None,
+                    priority: Optional[jax.Array] = None) -> tuple[jax.Array, jax.Array]:
+    """:func:`protocol_distances` with ONE KEY PER TERRAIN: ``(distances, steps)``, each ``[B, attempts]``,
+    heading-major.
+
+    ``keys`` [B] (typed, or raw [B, 2]): terrain ``b``'s walks reset from ``split(keys[b], protocol.attempts)``, so
+    they do not depend on which other terrains share the call - the same walks whether a batch runs on one device
+    or is split over many (draw ``keys`` for the whole batch first: ``sharding.row_keys``). Every walk is a job of
+    one rollout pool (:func:`batched_distances` with ``slots``; ``slots=None``: one slot per walk, all at once):
+    ``needed`` [B] bool terrains are walked, the others never (distance and length 0); ``priority`` [B] orders the
+    queue (speed only). ``env.config.start_spread`` must equal ``protocol.start_spread``.
+    """
+    if float(env.config.start_spread) != float(protocol.start_spread):
+        raise ValueError(f"env.config.start_spread={env.config.start_spread} but protocol.start_spread="
+                         f"{protocol.start_spread}: build the env from protocol_env_config(config, protocol)")
+    if not refill_every >= 1:
+        raise ValueError(f"refill_every must be >= 1, got {refill_every}")
+    b, attempts = terrains.shape[0], protocol.attempts
+    jobs = b * attempts
+    job_keys = jax.vmap(lambda k: jax.random.split(k, attempts))(keys)  # [B, attempts]: job b * attempts + a
+    job_keys = job_keys.reshape((jobs,) + job_keys.shape[2:])
+    per_job = lambda v: jnp.repeat(jnp.asarray(v).reshape(b), attempts)  # noqa: E731
+    needed = jnp.ones(b, bool) if needed is None else jnp.asarray(needed, bool)
+    queue, queued = job_queue(per_job(needed), None if priority is None else per_job(priority))
+    act = (lambda obs: policy(obs)) if policy_params is None else (lambda obs: policy(policy_params, obs))
+    # job j walks turned map j // per_heading (terrain b, heading a // per_heading): rotate_headings' row order
+    d, n = _pooled_distances(env, act, rotate_headings(terrains, protocol.headings), job_keys, protocol.per_heading,
+                             jobs if slots is None else min(int(slots), jobs), int(refill_every), queue, queued)
+    return d.reshape(b, attempts), n.reshape(b, attempts)
+
+
 # ----------------------------------------------------------------------------------------------------------------
 # Host-level entry points
 # ----------------------------------------------------------------------------------------------------------------
@@ -504,6 +543,43 @@ def _policy_program(policy: Callable, policy_params: Any) -> tuple[Callable, Any
     return policy, None, False
 
 
+@functools.lru_cache(maxsize=16)
+def _keyed_program(config: WalkerConfig, attempts: int, headings: int, apply: Callable, with_params: bool,
+                   slots: Optional[int], smooth_first: bool, mesh):
+    """``(terrains_m [B, H, W], keys [B], params) -> distances [B, attempts]`` of :func:`keyed_distances`, the rows
+    split over ``mesh`` (``sharding.map_rows``: padded, the padding never walked); cached like :func:`_program`."""
+    from jaxterrain import sharding
+
+    env = make_env(config)
+    protocol = Protocol(attempts=attempts, best=1, headings=headings, start_spread=config.start_spread)
+
+    def rows(terrains_m, keys, params, mask):
+        priority = smoothness_priority(terrains_m) if smooth_first else None
+        return keyed_distances(env, apply, terrains_m, keys, protocol, params if with_params else None, slots,
+                               needed=mask, priority=priority)[0]
+
+    return sharding.map_rows(rows, mesh, replicated=(2,), mask=True)
+
+
+def _keyed_rollouts(terrains_m, key, env_config, protocol, apply, params, with_params, chunk, slots, smooth_first,
+                    mesh) -> jax.Array:
+    """:func:`rollout_distances` over a mesh: per-row keys ``split(key, B)``, ``chunk`` rows per call."""
+    from jaxterrain import sharding
+
+    fn = _keyed_program(env_config, protocol.attempts, protocol.headings, apply, bool(with_params),
+                        None if slots is None else int(slots), bool(smooth_first) and slots is not None, mesh)
+    b = terrains_m.shape[0]
+    keys = sharding.row_keys(key, b)
+    params = params if with_params else jnp.zeros((), jnp.float32)
+    step = b if chunk is None else min(chunk, b)
+    outs = []
+    for i in range(0, b, step):
+        n = min(step, b - i)
+        part = sharding.pad_rows((terrains_m[i:i + n], keys[i:i + n]), step)  # one compiled shape
+        outs.append(fn(part[0], part[1], params)[:n])
+    return jnp.concatenate(outs)
+
+
 def policy_solver(policy: Callable) -> Optional[SolverOptions]:
     """The solver options a policy was trained with, when it records them (``policy.meta["walker_config"]
     ["solver"]``, as :func:`jaxterrain.rl.load_policy` policies do), else None. A policy walks as trained only
@@ -551,7 +627,7 @@ def rollout_distances(heightmaps, key: jax.Array, attempts: Optional[int] = None
                       scale: Optional[TerrainScale] = None, env_config: Optional[WalkerConfig] = None,
                       policy_params: Any = None, chunk: Optional[int] = None,
                       slots: Optional[int] = None, smooth_first: bool = True,
-                      protocol: Optional[Protocol] = None) -> jax.Array:
+                      protocol: Optional[Protocol] = None, mesh=None) -> jax.Array:
     """Normalised distances ``[B, attempts]`` float32 in [0, 1] of the policy on ``heightmaps`` [B, H, W] in [0, 1].
 
     ``attempts`` (default 20) walks along +x, or the walks of ``protocol`` (:class:`Protocol`; its ``attempts``,
@@ -563,7 +639,10 @@ def rollout_distances(heightmaps, key: jax.Array, attempts: Optional[int] = None
     batches to bound device memory; ``slots`` (env slots fed from a queue of the rollouts, see
     :func:`batched_distances`) saves the slot-steps that ended rollouts would idle, and with ``smooth_first`` the
     pool starts the rollouts of the smoothest terrains first (:func:`smoothness_priority`; speed only). Failed
-    rollouts (invalid physics, NaN action) count 0.
+    rollouts (invalid physics, NaN action) count 0. ``mesh`` (a ``jax.sharding.Mesh``): the terrains split over its
+    devices, each walked with its own key ``split(key, B)[b]`` (:func:`keyed_distances`; ``slots`` per device;
+    a batch that does not divide is padded, the padding never walked), so the result does not depend on the number
+    of devices, nor on ``chunk``; without a mesh the batch's one key is split as before.
     """
     for name, value in (("chunk", chunk), ("slots", slots)):  # cheap checks before the env is built
         if value is not None and (not isinstance(value, int) or value < 1):
@@ -575,6 +654,9 @@ def rollout_distances(heightmaps, key: jax.Array, attempts: Optional[int] = None
     protocol = _protocol_from(protocol, attempts, None)
     terrains_m, env_config, policy = _resolve(heightmaps, protocol, policy, scale, env_config)
     apply, params, with_params = _policy_program(policy, policy_params)
+    if mesh is not None:
+        return _keyed_rollouts(terrains_m, key, env_config, protocol, apply, params, with_params, chunk, slots,
+                               smooth_first, mesh)
     fn = _program(env_config, protocol.attempts, protocol.headings, apply, with_params, slots, smooth_first)
     b = terrains_m.shape[0]
     if chunk is None or chunk >= b:
@@ -594,10 +676,12 @@ def rollout_distances(heightmaps, key: jax.Array, attempts: Optional[int] = None
 def evaluate(heightmaps, key: jax.Array, attempts: Optional[int] = None, best: Optional[int] = None,
              policy: Optional[Callable] = None, scale: Optional[TerrainScale] = None,
              env_config: Optional[WalkerConfig] = None, policy_params: Any = None, chunk: Optional[int] = None,
-             slots: Optional[int] = None, smooth_first: bool = True, protocol: Optional[Protocol] = None) -> jax.Array:
+             slots: Optional[int] = None, smooth_first: bool = True, protocol: Optional[Protocol] = None,
+             mesh=None) -> jax.Array:
     """Fitness ``[B]`` float32 in [0, 1] of ``heightmaps`` [B, H, W] (values in [0, 1]) under ``protocol``
     (default: the paper's, ``Protocol(attempts or 20, best or 5)``; with ``protocol`` given, ``attempts`` / ``best``
     must be None or equal to its fields): :func:`aggregate` of :func:`rollout_distances`. Difficulty = 1 - fitness.
+    ``mesh``: the terrains split over its devices with per-row keys (:func:`rollout_distances`).
     """
     if protocol is None:
         if attempts is not None and (not isinstance(attempts, int) or attempts < 1):
@@ -606,7 +690,7 @@ def evaluate(heightmaps, key: jax.Array, attempts: Optional[int] = None, best: O
             raise ValueError(f"best must be an int in [1, attempts={attempts or 20}], got {best!r}")
     protocol = _protocol_from(protocol, attempts, best)
     d = rollout_distances(heightmaps, key, None, policy, scale, env_config, policy_params, chunk, slots,
-                          smooth_first, protocol)
+                          smooth_first, protocol, mesh)
     return aggregate(d, protocol)
 
 
@@ -621,6 +705,10 @@ def fitness_fn(size: int, protocol: Protocol = PAPER, scale: Optional[TerrainSca
     (speed only); ``needed`` [B] bool: terrains to walk (the others get 0 and, with ``slots``, are never walked).
     For ``Protocol()`` this is the paper's computation, the one ``archive.difficulty_fitness`` had. The env and
     policy are built here on the host, once per arguments (cached: the same arguments give the same function).
+
+    The function's ``keyed`` attribute is its per-row-key form, ``(heightmaps [B, size, size], keys [B], needed=None)
+    -> [B]`` (:func:`keyed_distances`: terrain ``b`` walks from ``keys[b]``, one pool of ``slots`` per call), which
+    the sharded MAP-Elites scoring calls on each device's rows (``scoring.keyed_fitness``).
     """
     if not isinstance(size, int) or size < 4:
         raise ValueError(f"size must be an int >= 4 (heightmap side in pixels), got {size!r}")
@@ -643,4 +731,12 @@ def _fitness_fn_cached(size: int, protocol: Protocol, scale: TerrainScale, slots
                                           priority=priority)
         return aggregate(distances, protocol)
 
+    def keyed(heightmaps, keys, needed=None):
+        terrains = jnp.asarray(heightmaps, jnp.float32) * jnp.float32(scale.height)
+        priority = smoothness_priority(terrains) if smooth_first else None
+        distances, _ = keyed_distances(env, policy, terrains, keys, protocol, slots=slots, needed=needed,
+                                       priority=priority)
+        return aggregate(distances, protocol)
+
+    fitness.keyed = keyed
     return fitness
