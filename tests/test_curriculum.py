@@ -456,3 +456,17 @@ def test_curriculum_tables_put_the_papers_numbers_beside_ours(tmp_path):
     table = (tmp_path / "table2.csv").read_text().splitlines()
     assert table[1].startswith("cppn map,ours,40.0,120.0,,") and table[2].startswith("cppn map,paper,40,80,120")
     assert (tmp_path / "figure7a.png").stat().st_size > 0 and (tmp_path / "figure7b.png").stat().st_size > 0
+
+
+def test_learn_killed_by_its_time_limit_resumes_to_the_uninterrupted_curves(tmp_path, tiny_archive):
+    """Issue 13: a treatment stopped after its first block (``--time-limit``, as a killed run restarts from its last
+    checkpoint) and resumed ends with the same history, sequences and milestones as an uninterrupted one (same
+    device, same seed). The compiled block is shared with the other smoke runs of this module."""
+    archive = tiny_archive(4, "four.npz")
+    whole, parts = tmp_path / "whole", tmp_path / "parts"
+    assert cli("learn", "--preset", "smoke", "--archive", archive, "--out", str(whole)) == 0
+    assert cli("learn", "--preset", "smoke", "--archive", archive, "--out", str(parts), "--time-limit", "1e-6") == 3
+    assert not (parts / "summary.json").exists() and (parts / "checkpoint.npz").exists()
+    assert cli("learn", "--resume", str(parts)) == 0
+    for name in ("history.csv", "sequences.csv", "milestones.csv"):
+        assert (parts / name).read_text() == (whole / name).read_text(), name
