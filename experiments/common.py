@@ -36,7 +36,7 @@ _INT_MIN = {
     **dict.fromkeys(("n", "size", "samples", "generations", "batch_size", "initial_population", "bins", "attempts",
                      "best", "checkpoint_every", "rollout_slots", "steps", "sample_every", "ckpt_every", "log_every",
                      "updates_per_chunk", "num_envs", "eval_attempts", "eval_best", "batch", "stride",
-                     "calibrate_window"), 1),
+                     "calibrate_window", "devices"), 1),
     **dict.fromkeys(("window", "windows"), 2),
     **dict.fromkeys(("mutation_steps", "walk", "quality_samples"), 0),
 }
@@ -145,6 +145,25 @@ def add_run_arguments(parser: argparse.ArgumentParser, presets: dict[str, dict],
     parser.add_argument("--seed", type=int, default=None, help="PRNG seed")
     parser.add_argument("--time-limit", type=float, default=None, metavar="MIN",
                         help="stop cleanly after about MIN minutes (after a checkpoint); continue with --resume")
+
+
+def add_devices_argument(parser: argparse.ArgumentParser) -> None:
+    """Add ``--devices N``: the work of a long command split over devices (:func:`device_mesh`)."""
+    parser.add_argument("--devices", type=int, default=None, metavar="N",
+                        help="split the work over the first N devices of all processes (default: every visible "
+                             "device); several processes or hosts: the JAXTERRAIN_* variables of the README")
+
+
+def device_mesh(devices: int | None):
+    """The ``jax.sharding.Mesh`` of ``--devices``: ``jaxterrain.sharding.setup`` joins a multi-process run when
+    ``JAXTERRAIN_COORDINATOR`` / ``JAXTERRAIN_NUM_PROCESSES`` / ``JAXTERRAIN_PROCESS_ID`` are set, then takes the
+    first ``devices`` devices of all processes (None: all). More than exist is a :class:`UsageError`."""
+    from jaxterrain import sharding
+
+    try:
+        return sharding.setup(devices)
+    except ValueError as err:
+        raise UsageError(f"--devices: {err}") from None
 
 
 def timestamp() -> str:

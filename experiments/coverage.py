@@ -23,18 +23,12 @@ generation mutates every treatment's 20 offspring and scores all 15 x 20 = 300 t
 paper's deep lineages (5 000 mutations) cost 5 000 batched generations instead of 15 x 5 000 latency-bound ones. Its
 checkpoint (all treatments) is ``batched/checkpoint.npz``; ``--resume`` continues it.
 
-Several GPUs: the treatments are independent, so run one process per GPU on the same run folder, each with
-``--shard I/N`` (it takes the treatments ``t % N == I`` of the fixed order of :func:`treatments`; every treatment
-keeps the key it has in an unsharded run, so the archives do not depend on N), then write the tables::
-
-    for i in 0 1 2 3; do
-      CUDA_VISIBLE_DEVICES=$i python -m experiments coverage --preset gpu-short --out runs/cov --shard $i/4 &
-    done; wait
-    python -m experiments coverage --resume runs/cov      # reuses the finished archives, writes the tables
-
-Treatments differ in cost (CPPN's easy terrains walk longest), so for an even load give each process one treatment
-at a time: ``--shard t/T`` with T the number of treatments (15 by default) runs treatment t alone; a small queue
-that hands the next t to whichever GPU is free kept 4 GPUs busy for Table 1 (``docs/results/README.md``).
+Several devices: ``--devices N`` (default: every visible device) splits each generation's offspring over N
+devices in one process (``jaxterrain.evolution``; with ``--batched``, the offspring of all treatments), so one
+command uses every GPU of a host, or of several hosts (README, "Several devices"); the archives are the same for any
+N. ``--shard I/N`` still runs only the treatments ``t % N == I`` of the fixed order of :func:`treatments` (every
+treatment keeps the key it has in an unsharded run), to split Experiment 1b over independent jobs on the same run
+folder; ``--resume`` without ``--shard`` then reuses the finished archives and writes the tables.
 """
 
 from __future__ import annotations
@@ -74,6 +68,7 @@ PRESETS: dict[str, dict] = {
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     common.add_run_arguments(parser, PRESETS, "smoke")
+    common.add_devices_argument(parser)
     parser.add_argument("--generators", nargs="+", default=None, help=f"default: {' '.join(GENERATORS)}")
     parser.add_argument("--generations", type=int, default=None)
     parser.add_argument("--batch-size", type=int, default=None)
@@ -84,8 +79,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="evolve every treatment at once (one jitted generation, one fitness call on all "
                              "treatments' offspring; jaxterrain.archive.evolve_many); not with --shard")
     parser.add_argument("--shard", type=parse_shard, default=None, metavar="I/N",
-                        help="run only the treatments t with t %% N == I (one process per GPU, all with the same "
-                             "--out; see the module docstring); then --resume without --shard writes the tables")
+                        help="run only the treatments t with t %% N == I (independent jobs sharing one --out; see "
+                             "the module docstring); then --resume without --shard writes the tables")
 
 
 def parse_shard(text: str) -> tuple[int, int]:
@@ -135,7 +130,7 @@ def markdown_table(cov: dict, generators: list[str], pairs, skipped: dict) -> st
     return text
 
 
-def run_batched(cfg: dict, todo, pairs, gens, folder, clock, key) -> dict:
+def run_batched(cfg: dict, todo, pairs, gens, folder, clock, key, mesh=None) -> dict:
     """Every treatment of ``todo`` at once (``archive.evolve_many``), checkpointed in ``folder/batched``; each
     treatment keeps the key it has in an unbatched run. Returns ``{(generator, pair label): Archive}``; finished
     archives are written where :func:`experiments.evolve.run_treatment` writes them (and reused)."""
@@ -163,7 +158,8 @@ def run_batched(cfg: dict, todo, pairs, gens, folder, clock, key) -> dict:
 
     out = A.evolve_many(treatments, config, jax.random.fold_in(key, 2**31 - 1),
                         fitness_fn=evolve_cmd.fitness_fn(cfg["fitness"]), checkpoint_dir=folder / "batched",
-                        progress=progress, generator_options={"size": int(cfg["size"])}, ranges=cfg.get("ranges"))
+                        progress=progress, generator_options={"size": int(cfg["size"])}, ranges=cfg.get("ranges"),
+                        mesh=mesh)
     result = {}
     for (_, pair, g), arch in zip(todo, out):
         place(pair, g).mkdir(parents=True, exist_ok=True)
@@ -184,6 +180,7 @@ def main(args) -> int:
     from jaxterrain import archive as A
     from jaxterrain.io import atomic_write_text
 
+    mesh = common.device_mesh(args.devices)
     folder, cfg = common.setup_run("coverage", args, PRESETS, "smoke", overrides(args))
     clock = common.Clock(args.time_limit)
     key = jax.random.key(int(cfg["seed"]))
@@ -206,14 +203,15 @@ def main(args) -> int:
         raise SystemExit("--batched runs every treatment in one process; it cannot be combined with --shard")
     try:
         if cfg.get("batched"):
-            archives.update(run_batched(cfg, todo, pairs, gens, folder, clock, key))
+            archives.update(run_batched(cfg, todo, pairs, gens, folder, clock, key, mesh))
         for n, (k, pair, g) in enumerate([] if cfg.get("batched") else mine, 1):
             ranges = cfg.get("ranges")
             tcfg = dict(cfg, ranges=None if ranges is None else [ranges[pair[0]], ranges[pair[1]]])
             tkey = jax.random.fold_in(jax.random.fold_in(key, pairs.index(pair)), gens.index(g))
             archives[(g, pair_label(pair))] = evolve_cmd.run_treatment(
                 tcfg, g, pair, folder / "archives" / f"{g}__{pair_label(pair)}", clock, tkey,
-                label=f"({n}/{len(mine)}{'' if args.shard is None else f' of shard {shard_i}/{shard_n}'}) ")
+                label=f"({n}/{len(mine)}{'' if args.shard is None else f' of shard {shard_i}/{shard_n}'}) ",
+                mesh=mesh)
     except common.TimeUp:
         shard = "" if args.shard is None else f" --shard {shard_i}/{shard_n}"
         print(f"time limit reached; continue with: {resume_hint}{shard}", flush=True)

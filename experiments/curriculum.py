@@ -38,6 +38,7 @@ PRESETS = {name: {**{k: v for k, v in p.items() if k not in ("archive", "curricu
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     common.add_run_arguments(parser, PRESETS, "smoke")
+    common.add_devices_argument(parser)  # each treatment's trials split over the devices
     parser.add_argument("--archives", nargs="+", default=None, metavar="NAME=PATH",
                         help="archives of the map treatments (default: the perlin and cppn archives in docs/results)")
     parser.add_argument("--trials", type=int, default=None)
@@ -141,6 +142,7 @@ def write_sequences(folder: Path, done: list[tuple[str, Path]]) -> None:
 def main(args) -> int:
     over = dict(archives=parse_archives(args.archives), trials=args.trials, max_epochs=args.max_epochs,
                 baseline=args.baseline)
+    mesh = common.device_mesh(args.devices)
     folder, cfg = common.setup_run("curriculum", args, PRESETS, "smoke", over)
     start = time.perf_counter()
     limit = None if args.time_limit is None else 60.0 * args.time_limit
@@ -158,7 +160,7 @@ def main(args) -> int:
         tcfg = _treatment_cfg(cfg, path, curriculum)
         common.write_config(sub, tcfg)
         left = None if limit is None else max(limit - (time.perf_counter() - start), 1e-3)
-        summary = learn.run_treatment(tcfg, sub, left, desc=f"{name} {curriculum}")
+        summary = learn.run_treatment(tcfg, sub, left, desc=f"{name} {curriculum}", mesh=mesh)
         if summary is None:
             print(f"time limit reached; continue with: python -m experiments curriculum --resume {folder}", flush=True)
             return 3

@@ -21,6 +21,11 @@ Writes into the run folder: ``config.json``, ``checkpoint/checkpoint.npz`` (ever
 ``archive.npz`` (``jaxterrain.archive.save`` format), ``metrics.csv`` (one row per generation) and ``archive.png``.
 Re-run with ``--config <run>/config.json``; continue a killed or time-limited run with ``--resume <run>``.
 
+``--devices N`` (default: every visible device) splits each generation's offspring over N devices (render,
+descriptors, Algorithm 1, walks; the repertoire replicated; ``jaxterrain.evolution``): the same seed gives the same
+archive on any N, and a run may resume on another N. ``rollout_slots`` is the pool of EACH device. Several hosts:
+the same command in one process per host with the ``JAXTERRAIN_*`` variables (README, "Several devices").
+
 Example (GPU machine, one 10-minute command at a time)::
 
     python -m experiments evolve --preset gpu --generator perlin --descriptors roughness tpi \\
@@ -79,6 +84,7 @@ def evolve_config(cfg: dict):
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     common.add_run_arguments(parser, PRESETS, "smoke")
+    common.add_devices_argument(parser)
     parser.add_argument("--generator", default=None, help="registered generator name (default perlin)")
     parser.add_argument("--descriptors", nargs=2, default=None, metavar=("D0", "D1"),
                         help="descriptor pair, e.g. roughness tpi")
@@ -92,7 +98,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--attempts", type=int, default=None)
     parser.add_argument("--best", type=int, default=None)
     parser.add_argument("--rollout-slots", type=int, default=None,
-                        help="env slots of the difficulty rollout pool (speed only; gpu preset: 16384)")
+                        help="env slots of the difficulty rollout pool per device (speed only; gpu preset: 16384)")
     parser.add_argument("--no-heightmaps", dest="store_heightmaps", action="store_const", const=False, default=None,
                         help="do not store the elites' heightmaps in archive.npz (they can be re-rendered)")
 
@@ -105,8 +111,10 @@ def overrides(args) -> dict:
                 rollout_slots=args.rollout_slots)
 
 
-def run_treatment(cfg: dict, generator: str, descriptors, folder: Path, clock: common.Clock, key, label: str = ""):
-    """Evolve one archive into ``folder`` (checkpointed there); returns the Archive, or the saved one if done."""
+def run_treatment(cfg: dict, generator: str, descriptors, folder: Path, clock: common.Clock, key, label: str = "",
+                  mesh=None):
+    """Evolve one archive into ``folder`` (checkpointed there); returns the Archive, or the saved one if done.
+    ``mesh``: the devices each generation's offspring are split over (``archive.evolve``)."""
     from jaxterrain import archive as A
 
     folder = Path(folder)
@@ -124,7 +132,7 @@ def run_treatment(cfg: dict, generator: str, descriptors, folder: Path, clock: c
             clock.check()
 
     arch = A.evolve(generator, None, config, key, fitness_fn=fitness, checkpoint_dir=folder / "checkpoint",
-                    progress=progress, generator_options={"size": int(cfg["size"])})
+                    progress=progress, generator_options={"size": int(cfg["size"])}, mesh=mesh)
     A.save(done_path, arch)
     write_metrics_csv(folder / "metrics.csv", arch.metrics)
     return arch
@@ -179,10 +187,12 @@ def main(args) -> int:
 
     from jaxterrain import archive as A
 
+    mesh = common.device_mesh(args.devices)
     folder, cfg = common.setup_run("evolve", args, PRESETS, "smoke", overrides(args))
     clock = common.Clock(args.time_limit)
     try:
-        arch = run_treatment(cfg, cfg["generator"], cfg["descriptors"], folder, clock, jax.random.key(cfg["seed"]))
+        arch = run_treatment(cfg, cfg["generator"], cfg["descriptors"], folder, clock, jax.random.key(cfg["seed"]),
+                             mesh=mesh)
     except common.TimeUp:
         print(f"time limit reached; continue with: python -m experiments evolve --resume {folder}", flush=True)
         return 3

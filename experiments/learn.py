@@ -61,6 +61,7 @@ class BadInput(ValueError):
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     common.add_run_arguments(parser, PRESETS, "smoke")
+    common.add_devices_argument(parser)  # the trials are split over the devices (curriculum.make_runner)
     parser.add_argument("--archive", default=None, help=f"archive .npz (default {CPPN_ARCHIVE})")
     parser.add_argument("--curriculum", choices=["map", "roughness", "random"], default=None)
     parser.add_argument("--trials", type=int, default=None, help="trials run together (paper: 10)")
@@ -198,9 +199,10 @@ def chunk_metrics(states, start: int, stop: int) -> dict:
 _PROGRAMS: dict = {}  # (config, ppo, walker, trials, bank shape, fast) -> (init, block): treatments share them
 
 
-def setup(cfg: dict, config, arch, policy, env):
+def setup(cfg: dict, config, arch, policy, env, mesh=None):
     """Bank, the compiled block ``(states, bank, n) -> states`` and the initial (stripped) trial states. Compiled
-    programs are reused by later treatments with the same settings and bank shape (``experiments curriculum``)."""
+    programs are reused by later treatments with the same settings and bank shape (``experiments curriculum``).
+    ``mesh``: the trials split over its devices (``sharding.map_rows``: padded, the bank replicated)."""
     import jax
 
     from jaxterrain import bank as B
@@ -212,19 +214,25 @@ def setup(cfg: dict, config, arch, policy, env):
     fast = bool(cfg.get("fast_compile", False))
     start = W.start_state(env, ppo, policy, bank.heightmaps.shape[1:])
     keys = jax.random.split(jax.random.fold_in(jax.random.key(int(cfg["seed"])), 2), int(cfg["trials"]))
-    sig = (config, ppo, env.config, int(cfg["trials"]), tuple(bank.heightmaps.shape), fast)
+    sig = (config, ppo, env.config, int(cfg["trials"]), tuple(bank.heightmaps.shape), fast, mesh)
     if sig not in _PROGRAMS:
         harness = W.walker_harness(env, ppo, config)
         init = compiled(lambda k, b, s: strip_envs(C.init_trials(k, b, s, config=config, harness=harness)), fast,
                         keys, bank, start)
         like = init(keys, bank, start)
-        block = compiled(make_block(config, harness, start.env_state), fast, like, bank, jax.numpy.int32(1))
+        block = make_block(config, harness, start.env_state)
+        if mesh is not None:
+            from jaxterrain import sharding
+
+            block = sharding.map_rows(block, mesh, replicated=(1, 2))
+        block = compiled(block, fast, like, bank, jax.numpy.int32(1))
         _PROGRAMS[sig] = (init, block)
     init, block = _PROGRAMS[sig]
     return bank, lambda s, b, n: block(s, b, jax.numpy.int32(n)), init(keys, bank, start)
 
 
-def run_treatment(cfg: dict, folder: Path, time_limit_s: float | None = None, desc: str = "") -> dict | None:
+def run_treatment(cfg: dict, folder: Path, time_limit_s: float | None = None, desc: str = "",
+                  mesh=None) -> dict | None:
     """Run (or continue) one treatment in ``folder``; its summary dict when finished, None when the time limit
     stopped it (checkpointed; call again to continue). Raises :class:`BadInput` before compiling anything."""
     import numpy as np
@@ -236,7 +244,7 @@ def run_treatment(cfg: dict, folder: Path, time_limit_s: float | None = None, de
         return json.loads((folder / "summary.json").read_text())
     config, arch, policy, env = validate(cfg)
     t0 = time.perf_counter()
-    bank, block, states = setup(cfg, config, arch, policy, env)
+    bank, block, states = setup(cfg, config, arch, policy, env, mesh)
     restored = driver.restore(folder, like=states)
     done, history = 0, None
     if restored is not None:
@@ -380,6 +388,7 @@ def write_outputs(folder: Path, cfg: dict, config, bank, states, seconds: float)
 
 
 def main(args) -> int:
+    mesh = common.device_mesh(args.devices)
     folder, cfg = common.setup_run("learn", args, PRESETS, "smoke", overrides(args))
     try:
         validate(cfg)  # cheap: files and values, before the run folder fills up or anything compiles
@@ -389,7 +398,7 @@ def main(args) -> int:
             shutil.rmtree(folder)
         return 2
     limit = None if args.time_limit is None else 60.0 * args.time_limit
-    summary = run_treatment(cfg, folder, limit)
+    summary = run_treatment(cfg, folder, limit, mesh=mesh)
     if summary is None:
         print(f"time limit reached; continue with: python -m experiments learn --resume {folder}", flush=True)
         return 3

@@ -53,6 +53,7 @@ RUN_INFO = "run.json"
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     common.add_run_arguments(parser, PRESETS, "smoke")
+    common.add_devices_argument(parser)  # data parallel: envs split over the devices, gradients summed
     parser.add_argument("--env-steps", type=float, default=None,
                         help="total env steps to train (default: smoke 4 updates, gpu 410 updates = 50.4e6)")
     parser.add_argument("--time-budget", type=float, default=None,
@@ -248,9 +249,10 @@ def _print_chunk(steps_per_update: int):
 
 
 def train_with_checkpoints(env, terrain, state, start: int, history, args, settings: RunSettings, run: RunFolder,
-                           origin: TrainOrigin, t_start: float, preset: str) -> TrainOutcome:
+                           origin: TrainOrigin, t_start: float, preset: str, mesh=None) -> TrainOutcome:
     """Train updates ``[start, num_updates)`` through ``jaxterrain.driver.run_chunks``: a checkpoint, metrics.csv
-    and TensorBoard events after every chunk; stops after the chunk in which the time limit passes."""
+    and TensorBoard events after every chunk; stops after the chunk in which the time limit passes. ``mesh``:
+    data parallel over its devices (``rl.update``)."""
     import time
 
     from jaxterrain import driver, rl
@@ -265,7 +267,8 @@ def train_with_checkpoints(env, terrain, state, start: int, history, args, setti
             "command": "train-base-policy", "command_line": run.command}
     cfg = settings.ppo_config
     state, done, _ = driver.run_chunks(
-        rl.chunk_fn(env, cfg, terrain), state, total=settings.num_updates, every=settings.updates_per_chunk,
+        rl.chunk_fn(env, cfg, terrain, mesh=mesh), state, total=settings.num_updates,
+        every=settings.updates_per_chunk,
         start=start, history=history, run_dir=run.path, key_metric="episode_return",
         time_limit_s=min(limits) if limits else None,
         progress=_print_chunk(cfg.steps_per_update) if args.no_progress else True,
@@ -398,6 +401,7 @@ def main(args: argparse.Namespace) -> int:
 
     if args.solver is not None:
         _solver(args.solver)  # a bad --solver stops before the run folder is made
+    mesh = common.device_mesh(args.devices)
     folder, cfg = common.setup_resumable_run("train-base-policy", args, PRESETS, "smoke", overrides(args), EXTENDABLE)
     settings = resolve_settings(cfg)
     run = write_run_info(folder, settings, resumed=args.resume is not None)
@@ -413,7 +417,7 @@ def main(args: argparse.Namespace) -> int:
                                                  run.path, args.resume is not None)
     origin = training_origin(meta, start, settings.num_updates, device_name)
     outcome = train_with_checkpoints(env, terrain, state, start, history, args, settings, run, origin, t_start,
-                                     cfg["preset"])
+                                     cfg["preset"], mesh=mesh)
     state, steps_done, train_s = outcome.state, int(outcome.state.env_steps), time.perf_counter() - t_start
     save_run_policy(run.path / "policy", state, settings, env)
     if outcome.stopped:

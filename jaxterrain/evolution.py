@@ -6,16 +6,17 @@ walker fitness), run :mod:`jaxterrain.map_elites` in jitted ``lax.scan`` chunks 
 generations, and return host :class:`~jaxterrain.archive.Archive` s. Re-exported by :mod:`jaxterrain.archive`.
 
 The loop and the checkpoints are :func:`jaxterrain.driver.run_chunks`'s. Compiled programs: a run compiles its
-init and one chunk per chunk length.
+init and one chunk per chunk length. Pass ``compile_cache={}`` (any dict the caller owns) to reuse them across runs
+of the same problem; nothing is cached behind the caller's back.
 
 Several devices: ``mesh=sharding.make_mesh()`` (``--devices`` of the commands) splits every generation's offspring
 batch over the mesh's devices (render, descriptors, Algorithm 1 and the walker's rollouts, each device its own
 rows; a batch that does not divide is padded and the padding masked out, see :mod:`jaxterrain.scoring`) while the
 repertoire stays replicated on every device (selection, mutation and insertion run on each, identically). Rows
-are scored with per-row keys, so the same key gives the same archive on 1 and on N devices (bit for bit on CPU with
-a per-row deterministic fitness; the walker's rollouts up to float rounding). ``mesh=None`` keeps the one-device
-program and its one key per batch (archives made before sharding reproduce). Pass ``compile_cache={}`` (any dict the
-caller owns) to reuse them across runs of the same problem; nothing is cached behind the caller's back.
+are scored with per-row keys, so the same key gives the same archive on 1 and on N devices up to float rounding
+(bit for bit when the functions compile the same for any batch size, as the tests' fakes do; XLA may round a
+reduction, e.g. a descriptor's mean, one bit differently at another local batch size: :mod:`jaxterrain.scoring`).
+``mesh=None`` keeps the one-device program and its one key per batch (archives made before sharding reproduce).
 """
 
 from __future__ import annotations

@@ -32,10 +32,11 @@ the whole batch first, so that row ``i`` is scored with the same key on 1 or N d
 the function's own ``keyed`` attribute when it has one, as ``difficulty.fitness_fn``'s walker fitness does, else
 :func:`keyed_rows`). A batch that does not divide over the devices is PADDED with copies of its last row; the
 padding is never walked (``needed`` False) and is cut off before the counts and the insertion, so it never enters.
-With a per-row deterministic fitness, results are the same on any number of devices, bit for bit on CPU; the
-walker's rollouts are the same up to float rounding (XLA compiles another program per local batch), which its
-chaotic dynamics can grow into a different outcome of a single walk. Without a mesh the fitness gets the batch's
-one key, as before.
+The device count then changes results only through float rounding: XLA compiles another program per local batch
+size and may round a reduction differently (on CPU, a map's mean over [4, 32, 32] differs in the last bit from the
+same maps one at a time), which can change a tie in a cell or, through the walker's chaotic dynamics, a walk.
+Functions whose compiled code does not depend on the batch size (the tests' fakes) give the same archive on 1 and
+N devices bit for bit. Without a mesh the fitness gets the batch's one key, as before.
 """
 
 from __future__ import annotations

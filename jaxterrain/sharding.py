@@ -137,10 +137,11 @@ def map_rows(fn: Callable, mesh: Mesh, replicated: tuple[int, ...] = (), mask: b
     ``fn`` maps batched arguments to a batched result (a pytree of arrays whose leading axis is the rows) and must
     treat rows independently; arguments whose positions are in ``replicated`` (e.g. policy parameters) are passed
     whole to every device. The returned function pads the rows to a multiple of the device count, runs ``fn`` on
-    each device's rows under ``jax.shard_map`` inside one ``jit``, and returns the real rows only. With ``mask``,
-    ``fn`` gets one more, last argument: ``[rows] bool``, False on the padding rows (e.g. to skip their work).
+    each device's rows under ``jax.shard_map`` inside one ``jit``, and returns the real rows only, whole on every
+    device (replicated: any process of a multi-host run can read them). With ``mask``, ``fn`` gets one more, last
+    argument: ``[rows] bool``, False on the padding rows (e.g. to skip their work).
     """
-    replicated = frozenset(replicated)
+    replicated, whole = frozenset(replicated), NamedSharding(mesh, P())
 
     def run(*args):
         batched = [a for i, a in enumerate(args) if i not in replicated]
@@ -153,4 +154,4 @@ def map_rows(fn: Callable, mesh: Mesh, replicated: tuple[int, ...] = (), mask: b
         out = jax.shard_map(fn, mesh=mesh, in_specs=specs, out_specs=P(AXIS), check_vma=False)(*padded)
         return jax.tree.map(lambda x: x[:n], out)
 
-    return jax.jit(run)
+    return jax.jit(run, out_shardings=whole)

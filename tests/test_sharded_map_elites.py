@@ -7,6 +7,7 @@ from __future__ import annotations
 import textwrap
 from pathlib import Path
 
+import pytest
 from test_sharding import run_on_devices
 
 TESTS = str(Path(__file__).parent)
@@ -82,3 +83,17 @@ _SCRIPT = textwrap.dedent("""
 
 def test_sharded_map_elites_equals_one_device_and_masks_the_padding():
     assert run_on_devices(_SCRIPT).strip().endswith("ok")
+
+
+@pytest.mark.parametrize("command", ["evolve", "coverage", "learn", "curriculum", "train-base-policy"])
+def test_devices_flag_of_every_long_command(command, tmp_path, capsys):
+    """``--devices N`` exists on every long command; more devices than visible, or fewer than 1, is a one-line
+    usage error (exit 2) before any run folder is made."""
+    from experiments.__main__ import main
+
+    for n, message in (("99", "--devices: num_devices must be an integer in [1, "),
+                       ("0", "--devices must be an integer >= 1")):
+        with pytest.raises(SystemExit) as exit_:
+            main([command, "--devices", n, "--out", str(tmp_path / "run")])
+        assert exit_.value.code == 2 and message in capsys.readouterr().err
+        assert not (tmp_path / "run").exists()
