@@ -219,16 +219,22 @@ def setup(cfg: dict, config, arch, policy, env, mesh=None):
         harness = W.walker_harness(env, ppo, config)
         init = compiled(lambda k, b, s: strip_envs(C.init_trials(k, b, s, config=config, harness=harness)), fast,
                         keys, bank, start)
-        like = init(keys, bank, start)
+        like, bank_like = init(keys, bank, start), bank
         block = make_block(config, harness, start.env_state)
-        if mesh is not None:
+        if mesh is not None:  # the trials split over the devices; inputs whole on the mesh (whence the init's)
             from jaxterrain import sharding
 
             block = sharding.map_rows(block, mesh, replicated=(1, 2))
-        block = compiled(block, fast, like, bank, jax.numpy.int32(1))
+            like, bank_like = sharding.replicate((like, bank), mesh)
+        block = compiled(block, fast, like, bank_like, jax.numpy.int32(1))
         _PROGRAMS[sig] = (init, block)
     init, block = _PROGRAMS[sig]
-    return bank, lambda s, b, n: block(s, b, jax.numpy.int32(n)), init(keys, bank, start)
+    if mesh is None:
+        return bank, lambda s, b, n: block(s, b, jax.numpy.int32(n)), init(keys, bank, start)
+    from jaxterrain import sharding
+
+    run = lambda s, b, n: block(*sharding.replicate((s, b), mesh), jax.numpy.int32(n))  # noqa: E731
+    return sharding.replicate(bank, mesh), run, sharding.replicate(init(keys, bank, start), mesh)
 
 
 def run_treatment(cfg: dict, folder: Path, time_limit_s: float | None = None, desc: str = "",

@@ -138,8 +138,9 @@ def map_rows(fn: Callable, mesh: Mesh, replicated: tuple[int, ...] = (), mask: b
     treat rows independently; arguments whose positions are in ``replicated`` (e.g. policy parameters) are passed
     whole to every device. The returned function pads the rows to a multiple of the device count, runs ``fn`` on
     each device's rows under ``jax.shard_map`` inside one ``jit``, and returns the real rows only, whole on every
-    device (replicated: any process of a multi-host run can read them). With ``mask``, ``fn`` gets one more, last
-    argument: ``[rows] bool``, False on the padding rows (e.g. to skip their work).
+    device (replicated: any process of a multi-host run can read them). Arguments already placed elsewhere (e.g.
+    the output of a program compiled for one device) are first put whole on the mesh. With ``mask``, ``fn`` gets
+    one more, last argument: ``[rows] bool``, False on the padding rows (e.g. to skip their work).
     """
     replicated, whole = frozenset(replicated), NamedSharding(mesh, P())
 
@@ -154,4 +155,9 @@ def map_rows(fn: Callable, mesh: Mesh, replicated: tuple[int, ...] = (), mask: b
         out = jax.shard_map(fn, mesh=mesh, in_specs=specs, out_specs=P(AXIS), check_vma=False)(*padded)
         return jax.tree.map(lambda x: x[:n], out)
 
-    return jax.jit(run, out_shardings=whole)
+    jitted = jax.jit(run, out_shardings=whole)
+
+    def call(*args):
+        return jitted(*jax.device_put(args, whole))
+
+    return call

@@ -475,7 +475,13 @@ def chunk_fn(env: EnvLike, config: PPOConfig, terrains: jax.Array, batched: bool
 
     def chunk(state: TrainState, start: int, stop: int):
         fn = compiled_chunk(env, config, stop - start, batched, terrain_seed_axis, mesh)
-        state, metrics = fn(state, terrains)
+        if mesh is not None:  # a state or terrains placed on one device (e.g. a jitted init's) go whole on the mesh
+            from jaxterrain import sharding
+
+            state, data = sharding.replicate((state, terrains), mesh)
+        else:
+            data = terrains
+        state, metrics = fn(state, data)
         return state, jax.tree_util.tree_map(np.asarray, metrics)
 
     return chunk
