@@ -5,7 +5,11 @@ The env is duck-typed (see :class:`EnvLike`): ``env.reset(key, terrain[H, W]) ->
 optionally ``s.truncation []`` (1.0 when the end was a time limit) - the convention of
 ``jaxterrain.walker.WalkerEnv``. Terrains are DATA: ``terrains`` is either ``[num_envs, H, W]`` (one per env) or
 ``[H, W]`` (shared), passed on every call, so a curriculum can swap them between (or inside) jitted calls without
-re-compiling.
+re-compiling. On a tiled walker (``WalkerConfig(tiles=T)``, the only layout MJX-Warp runs) ``terrains`` is a
+:class:`~jaxterrain.walker.Tile` instead: ``bank.at(i)`` (index [], one tile shared by all envs) or ``bank.at(idx)``
+(index [num_envs] int32, a tile per env; vmapped with ``walker.TILE_AXES``). Finished envs are replaced by fresh
+ones with ``env.select(mask, new, old)`` when the env has it (MJX-Warp's states must be merged that way), else by a
+``jnp.where`` per leaf; both give the same values.
 
 Typical use::
 
@@ -19,6 +23,7 @@ Typical use::
 from __future__ import annotations
 
 import functools
+import sys
 import time
 from typing import Any, Callable, NamedTuple, Optional, Protocol
 
@@ -100,8 +105,26 @@ def make_optimizer(config: PPOConfig) -> optax.GradientTransformation:
     return optax.chain(optax.clip_by_global_norm(config.max_grad_norm), adam)
 
 
-def _terrain_axis(terrains: jax.Array, num_envs: int) -> Optional[int]:
-    """0 for per-env terrains [N, H, W], None for a shared [H, W]; ValueError otherwise (host-side: static shapes)."""
+def _tile_type():
+    """``walker.Tile`` when :mod:`jaxterrain.walker.tiles` is loaded (no Tile exists otherwise), else None: keeps
+    ``rl`` free of the MuJoCo import for duck-typed envs."""
+    tiles = sys.modules.get("jaxterrain.walker.tiles")
+    return None if tiles is None else tiles.Tile
+
+
+def _terrain_axis(terrains, num_envs: int):
+    """The ``in_axes`` of ``terrains`` over the envs: 0 for per-env terrains [N, H, W], None for a shared [H, W]
+    or a shared ``Tile`` (index []), ``TILE_AXES`` for a ``Tile`` per env (index [N]); ValueError otherwise
+    (host-side: static shapes)."""
+    tile = _tile_type()
+    if tile is not None and isinstance(terrains, tile):
+        shape = tuple(jnp.shape(terrains.index))
+        if shape == ():
+            return None
+        if shape == (num_envs,):
+            return tile(None, 0)  # walker.TILE_AXES: the bank shared, one index per env
+        raise ValueError(f"terrains: a walker.Tile's index must be [] (shared) or [num_envs={num_envs}], "
+                         f"got shape {shape}")
     if terrains.ndim == 2:
         return None
     if terrains.ndim == 3:
@@ -140,6 +163,14 @@ def _select(mask: jax.Array, on_true, on_false):
     return jax.tree_util.tree_map(sel, on_true, on_false)
 
 
+def _select_envs(env, mask: jax.Array, on_true, on_false):
+    """Batched env states: ``env.select(mask, on_true, on_false)`` when the env has it (the walker: MJX-Warp's
+    ``Data`` holds contact buffers shared by all envs, which a per-leaf ``where`` would split), else :func:`_select`
+    (the same values)."""
+    select = getattr(env, "select", None)
+    return _select(mask, on_true, on_false) if select is None else select(mask, on_true, on_false)
+
+
 def _zero_episode(num_envs: int) -> EpisodeStats:
     z = jnp.zeros((num_envs,), jnp.float32)
     return EpisodeStats(z, z, z, z, z)
@@ -156,7 +187,8 @@ def init(key: jax.Array, env: EnvLike, config: PPOConfig, terrains: jax.Array, p
       key: PRNG key (raw [2] uint32 or typed).
       env: duck-typed env (see module docstring).
       config: :class:`PPOConfig` (validated here, ``ValueError`` on bad fields).
-      terrains: [num_envs, H, W] or [H, W] float32 heightfields in metres.
+      terrains: [num_envs, H, W] or [H, W] float32 heightfields in metres, or a ``walker.Tile`` of a tiled env
+        (index [] shared, or [num_envs]: see the module docstring).
       params: optional ``{"policy", "value"}`` params to continue from (e.g. ``load_policy().params``).
       normaliser: optional :class:`RunningStats` matching ``params`` (e.g. ``load_policy().normaliser``).
 
@@ -186,7 +218,8 @@ def init(key: jax.Array, env: EnvLike, config: PPOConfig, terrains: jax.Array, p
 
 def reset_envs(state: TrainState, key: jax.Array, terrains: jax.Array, *, env: EnvLike,
                config: PPOConfig) -> TrainState:
-    """Restart every env on ``terrains`` (e.g. after a curriculum switch) and clear running episode counters."""
+    """Restart every env on ``terrains`` (as in :func:`init`: arrays or a ``walker.Tile``; e.g. after a curriculum
+    switch) and clear running episode counters."""
     env_state = _batched_reset(env, _raw_key(key), terrains, config.num_envs)
     ep = state.episode
     zero = jnp.zeros_like(ep.ret)
@@ -230,7 +263,7 @@ def _collect(state: TrainState, key, terrains, env, config):
             last_length=jnp.where(ended, length, ep.last_length),
             count=ep.count + done,
         )
-        next_state = _select(ended, pool, next_state)
+        next_state = _select_envs(env, ended, pool, next_state)
         return (next_state, ep), Transition(obs, raw, logp, reward, done, trunc)
 
     def unroll(carry, unroll_key):
@@ -286,7 +319,8 @@ def update(state: TrainState, key: jax.Array, terrains: jax.Array, *, env: EnvLi
     ``update_epochs`` x ``num_minibatches`` Adam steps on the clipped objective.
 
     A pure function of ``(state, key, terrains)`` (bind ``env``/``config`` with ``functools.partial``); jit it,
-    scan it, vmap it over seeds. ``terrains``: [num_envs, H, W] or [H, W] float32; new values of the same shape
+    scan it, vmap it over seeds. ``terrains``: [num_envs, H, W] or [H, W] float32, or a ``walker.Tile`` (index []
+    or [num_envs]) of a tiled env; new values of the same shape (another bank, other indices)
     do not re-compile. Returns ``(state, metrics)``, metrics a dict of [] float32 (losses averaged over all
     minibatch steps; ``episode_return``: mean over envs of the last finished episode's return, unscaled, over envs
     that finished one; ``episodes``: episodes finished during this update).
@@ -400,7 +434,10 @@ def _split_envs(state: TrainState, terrains: jax.Array, config: PPOConfig, mesh)
 
     rows = lambda tree: jax.lax.with_sharding_constraint(tree, sharding.rows(mesh))  # noqa: E731
     state = state._replace(env_state=rows(state.env_state), episode=rows(state.episode))
-    return state, (rows(terrains) if _terrain_axis(terrains, config.num_envs) == 0 else terrains)
+    axis = _terrain_axis(terrains, config.num_envs)
+    if axis == 0:
+        return state, rows(terrains)
+    return state, (terrains._replace(index=rows(terrains.index)) if axis is not None else terrains)  # per-env tiles
 
 
 def run_updates(state: TrainState, terrains: jax.Array, *, env: EnvLike, config: PPOConfig, num_updates: int,
@@ -500,7 +537,8 @@ def train(key: jax.Array, env: EnvLike, config: PPOConfig, num_updates: int, ter
         trains S seeds at once under vmap; the returned state and metrics then lead with [S].
       env, config: the env and :class:`PPOConfig`.
       num_updates: updates to run (env steps = num_updates * config.steps_per_update).
-      terrains: [num_envs, H, W] or [H, W], shared by all seeds ([S, num_envs, H, W] gives each seed its own).
+      terrains: [num_envs, H, W] or [H, W], shared by all seeds ([S, num_envs, H, W] gives each seed its own), or
+        a ``walker.Tile`` of a tiled env (index [] or [num_envs], shared by all seeds).
       state: continue from this :class:`TrainState` (e.g. a loaded checkpoint).
       callback: ``callback(state, metrics)`` on the host after every chunk, metrics a dict of numpy arrays
         [chunk] (or [S, chunk]).
@@ -520,11 +558,13 @@ def train(key: jax.Array, env: EnvLike, config: PPOConfig, num_updates: int, ter
     if not isinstance(updates_per_chunk, int) or updates_per_chunk < 1:
         raise ValueError(f"updates_per_chunk must be an integer >= 1, got {updates_per_chunk!r}")
     validate_config(config)
-    terrains = jnp.asarray(terrains, jnp.float32)
+    is_tile = _tile_type() is not None and isinstance(terrains, _tile_type())
+    if not is_tile:
+        terrains = jnp.asarray(terrains, jnp.float32)
     batched = _is_seed_batch(key) if state is None else state.update_step.ndim == 1
     if batched and mesh is not None:
         raise ValueError("train: mesh (data parallel) takes one seed; got a batch of seeds")
-    terrain_seed_axis = 0 if (batched and terrains.ndim == 4) else None
+    terrain_seed_axis = 0 if (batched and not is_tile and terrains.ndim == 4) else None
     if state is None:
         init_fn = lambda k, tr: init(k, env, config, tr)  # noqa: E731
         if batched:
