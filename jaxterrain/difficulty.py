@@ -23,6 +23,13 @@ With ``slots=S`` the rollouts are jobs queued on ``S`` env slots that refill as 
 (:func:`batched_distances`); the queue starts the smoothest terrains first (:func:`smoothness_priority`,
 :func:`job_queue`), which shortens the tail in which the last long rollouts run on an otherwise idle pool.
 
+Physics backend: the env config's ``backend`` (MJX-JAX by default; ``"warp"``: MuJoCo Warp, whose envs walk on the
+tiles of one heightfield, sized to each call). The rollout loops live in :mod:`jaxterrain.rollout`::
+
+    cfg = difficulty.default_env_config((256, 256), backend="warp")
+    fitness = difficulty.evaluate(heightmaps, key, env_config=cfg)
+    fit_fn = difficulty.fitness_fn(256, slots=16384, backend="warp")
+
 The protocol (how many walks, which of them count, in which directions, from where) is one typed config,
 :class:`Protocol`; ``Protocol()`` is the paper's (20 attempts along +x from the centre of the start edge, mean of the
 best 5), and every entry point takes ``protocol=``::
@@ -47,8 +54,16 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from jaxterrain.rollout import (  # the rollout loops, re-exported (they lived here)
+    _pooled_distances,
+    batched_distances,
+    is_tiled,
+    job_queue,
+    make_env,
+    smoothness_priority,
+)
 from jaxterrain.terrain import TerrainScale, validate_scale
-from jaxterrain.walker import SolverOptions, WalkerConfig, WalkerEnv
+from jaxterrain.walker import BACKENDS, SolverOptions, WalkerConfig, WalkerEnv
 
 __all__ = ["Protocol", "PAPER", "HEADINGS", "RULES", "HEADING_TURNS", "evaluate", "rollout_distances", "fitness_fn",
            "batched_distances", "protocol_distances", "rotate_headings", "aggregate", "best_of", "job_queue",
@@ -240,170 +255,6 @@ def protocol_distances(env: WalkerEnv, policy: Callable, terrains: jax.Array, ke
     return d.reshape(b, protocol.attempts), n.reshape(b, protocol.attempts)
 
 
-def batched_distances(env: WalkerEnv, policy: Callable, terrains: jax.Array, key: jax.Array, attempts: int,
-                      policy_params: Any = None, slots: Optional[int] = None, refill_every: int = 8,
-                      needed: Optional[jax.Array] = None,
-                      priority: Optional[jax.Array] = None) -> tuple[jax.Array, jax.Array]:
-    """Roll out ``attempts`` episodes on each of ``terrains`` [B, H, W] (metres) until all have ended.
-
-    ``policy(obs)`` (or ``policy(policy_params, obs)`` when ``policy_params`` is not None) maps one observation
-    [O] to one action [A]. Returns ``(distances [B, attempts] float32 in [0, 1], steps [B, attempts] int32)``:
-    the normalised distance at each rollout's end (0 where the rollout failed: invalid physics / action) and its
-    length in env steps.
-
-    ``slots=None`` (or ``>= B * attempts``) runs every rollout at once until the longest has ended: a rollout that
-    ended early keeps its slot idle until then. With ``slots=S`` the ``B * attempts`` rollouts are jobs queued on
-    ``S`` env slots: every ``refill_every`` env steps the slots whose episode ended take the next jobs (in job
-    order, terrain-major). The rollouts are the same (same keys, terrains and policy) up to the floating-point
-    effects of another batch size, which the walker's chaotic dynamics can grow into a different outcome of a single
-    rollout: fitness is then the same in distribution, not bit for bit (a given ``slots`` is deterministic). Pooling
-    saves the slot-steps that ended rollouts would idle, worth it when episode lengths vary a lot, at the cost of a
-    smaller batch.
-
-    ``needed`` [B] bool (optional): terrains whose distances are wanted; the others get distance 0 and length 0.
-    With ``slots`` their rollouts are never started (MAP-Elites passes Algorithm 1's verdict: a rejected terrain
-    never enters the archive, so walking it is wasted); without, they run but end the loop no later.
-
-    ``priority`` [B] float (optional, only with ``slots``): the queue takes the rollouts of higher-priority terrains
-    first (ties in job order). The loop lasts until the last-started rollout ends, so starting the long rollouts
-    first shortens it (longest-first scheduling): :func:`smoothness_priority` ranks terrains the walker is likely
-    to walk far (smooth ones) first. The results do not depend on the order, only the time does.
-    """
-    b = terrains.shape[0]
-    jobs = b * attempts
-    reset_keys = jax.random.split(key, (b, attempts))
-    del key
-    act = (lambda obs: policy(obs)) if policy_params is None else (lambda obs: policy(policy_params, obs))
-    needed = jnp.ones(b, bool) if needed is None else jnp.asarray(needed, bool).reshape(b)
-    if slots is not None and slots < jobs:
-        if not refill_every >= 1:
-            raise ValueError(f"refill_every must be >= 1, got {refill_every}")
-        queue, queued = job_queue(jnp.repeat(needed, attempts),
-                                  None if priority is None else jnp.repeat(jnp.asarray(priority).reshape(b), attempts))
-        return _pooled_distances(env, act, terrains, reset_keys.reshape(jobs, *reset_keys.shape[2:]), attempts,
-                                 int(slots), int(refill_every), queue, queued)
-    reset = jax.vmap(jax.vmap(env.reset, in_axes=(0, None)), in_axes=(0, 0))
-    step = jax.vmap(jax.vmap(env.step, in_axes=(0, 0, None)), in_axes=(0, 0, 0))
-    act = jax.vmap(jax.vmap(act))
-    horizon = env.config.episode_length
-
-    state = reset(reset_keys, terrains)
-    ended = jnp.broadcast_to(~needed[:, None], (b, attempts))
-    final = jnp.zeros((b, attempts), jnp.float32)
-    length = jnp.zeros((b, attempts), jnp.int32)
-
-    def cond(carry):
-        t, _, ended, _, _ = carry
-        return (t < horizon) & ~jnp.all(ended)
-
-    def body(carry):
-        t, state, ended, final, length = carry
-        state = step(state, act(state.obs), terrains)
-        dist = jnp.where(state.failed > 0, 0.0, state.distance)
-        final = jnp.where(ended, final, dist)
-        length = jnp.where(ended, length, state.steps)
-        ended = ended | (state.done > 0)
-        return t + 1, state, ended, final, length
-
-    _, _, _, final, length = jax.lax.while_loop(cond, body, (jnp.int32(0), state, ended, final, length))
-    return final, length
-
-
-class _Pool(NamedTuple):
-    """Loop carry of :func:`_pooled_distances` (S slots, J jobs)."""
-
-    state: Any  # WalkerState with leading [S]
-    terrain: jax.Array  # [S, H, W] metres, the terrain of each slot's job
-    job: jax.Array  # [S] int32, the job in the slot (J when none)
-    active: jax.Array  # [S] bool, the slot's episode has not ended yet
-    next_job: jax.Array  # [] int32, queue position of the first job not started yet
-    distance: jax.Array  # [J] float32 results
-    length: jax.Array  # [J] int32 results
-
-
-def job_queue(needed: jax.Array, priority: Optional[jax.Array] = None) -> tuple[jax.Array, jax.Array]:
-    """The order in which a rollout pool starts ``J`` jobs: ``(queue [J] int32, queued [] int32)``.
-
-    ``needed`` [J] bool; ``priority`` [J] float or None. ``queue[:queued]`` are the needed jobs, highest priority
-    first, ties (and ``priority=None``) in job order; the rest of ``queue`` are the jobs never started. NaN
-    priority counts as lowest.
-    """
-    needed = jnp.asarray(needed, bool)
-    if priority is None:
-        queue = jnp.argsort(~needed, stable=True)
-    else:
-        p = jnp.nan_to_num(jnp.asarray(priority, jnp.float32), nan=-jnp.inf)
-        queue = jnp.lexsort((-p, ~needed))  # primary key last: needed first, then descending priority (stable)
-    return queue.astype(jnp.int32), jnp.sum(needed, dtype=jnp.int32)
-
-
-def smoothness_priority(terrains: jax.Array) -> jax.Array:
-    """``[B, H, W]`` -> ``[B]`` float32: minus the mean absolute height step between neighbouring cells.
-
-    A cheap guess at which terrains the walker will walk longest (smooth ones), to start their rollouts first
-    (``batched_distances(priority=...)``); only the speed of a pooled evaluation depends on it.
-    """
-    t = jnp.asarray(terrains, jnp.float32)
-    dx = jnp.mean(jnp.abs(jnp.diff(t, axis=-1)), axis=(-2, -1))
-    dy = jnp.mean(jnp.abs(jnp.diff(t, axis=-2)), axis=(-2, -1))
-    return -(dx + dy)
-
-
-def _pooled_distances(env, act, terrains, keys, attempts: int, slots: int, refill_every: int, queue, queued):
-    """:func:`batched_distances` with ``slots`` env slots fed from a queue of ``J = B * attempts`` jobs.
-
-    ``keys`` [J] (job ``j`` is attempt ``j % attempts`` on terrain ``j // attempts``); ``queue`` [J] / ``queued``
-    from :func:`job_queue`: jobs ``queue[:queued]`` are started in that order, the others never. An outer ``while_loop``
-    (until no slot is active and no job waits) runs ``refill_every`` env steps (a ``fori_loop``; a slot's result is
-    written when its episode ends) and then refills the ended slots (a ``cond``, skipped when nothing changes).
-    """
-    jobs = keys.shape[0]
-    reset = jax.vmap(env.reset)
-    step = jax.vmap(env.step)
-    act = jax.vmap(act)
-
-    def start(job):  # [S] job ids (J = none) -> (state, terrain) of their first step
-        j = jnp.minimum(job, jobs - 1)
-        terrain = terrains[j // attempts]
-        return reset(keys[j], terrain), terrain
-
-    def run_steps(p: _Pool) -> _Pool:
-        def one(_, p: _Pool) -> _Pool:
-            state = step(p.state, act(p.state.obs), p.terrain)
-            ended = p.active & (state.done > 0)
-            where = jnp.where(ended, p.job, jobs)  # out of range -> dropped
-            distance = p.distance.at[where].set(jnp.where(state.failed > 0, 0.0, state.distance), mode="drop")
-            length = p.length.at[where].set(state.steps, mode="drop")
-            return p._replace(state=state, active=p.active & ~ended, distance=distance, length=length)
-
-        return jax.lax.fori_loop(0, refill_every, one, p)
-
-    def refill(p: _Pool) -> _Pool:
-        free = ~p.active
-        position = p.next_job + jnp.cumsum(free, dtype=jnp.int32) - 1
-        take = free & (position < queued)
-        new_job = jnp.where(take, queue[jnp.minimum(position, jobs - 1)], jobs)
-        state, terrain = start(new_job)
-        pick = lambda new, old: jnp.where(take.reshape((-1,) + (1,) * (new.ndim - 1)), new, old)  # noqa: E731
-        return p._replace(state=jax.tree.map(pick, state, p.state), terrain=pick(terrain, p.terrain),
-                          job=jnp.where(take, new_job, jnp.where(p.active, p.job, jobs)), active=p.active | take,
-                          next_job=p.next_job + jnp.sum(take, dtype=jnp.int32))
-
-    def body(p: _Pool) -> _Pool:
-        p = run_steps(p)
-        can_start = jnp.any(~p.active) & (p.next_job < queued)
-        return jax.lax.cond(can_start, refill, lambda p: p, p)
-
-    position0 = jnp.arange(slots, dtype=jnp.int32)
-    take0 = position0 < queued
-    job0 = jnp.where(take0, queue[position0], jobs)
-    state, terrain = start(job0)
-    pool = _Pool(state=state, terrain=terrain, job=job0, active=take0, next_job=jnp.minimum(jnp.int32(slots), queued),
-                 distance=jnp.zeros(jobs, jnp.float32), length=jnp.zeros(jobs, jnp.int32))
-    pool = jax.lax.while_loop(lambda p: jnp.any(p.active), body, pool)
-    return pool.distance.reshape(-1, attempts), pool.length.reshape(-1, attempts)
-
-
 def keyed_distances(env: WalkerEnv, policy: Callable, terrains: jax.Array, keys: jax.Array, protocol: Protocol,
                     policy_params: Any = None, slots: Optional[int] = None, refill_every: int = 8,
                     needed: Optional[jax.Array] = None,
@@ -454,12 +305,6 @@ def validate_heightmaps(heightmaps, name: str = "heightmaps") -> jax.Array:
     if lo < 0.0 or hi > 1.0:
         raise ValueError(f"{name} values must lie in [0, 1] (heightmap units), got min {lo:.4g}, max {hi:.4g}")
     return h
-
-
-@functools.lru_cache(maxsize=16)
-def make_env(config: WalkerConfig) -> WalkerEnv:
-    """A cached :class:`WalkerEnv` per config (building one compiles the MuJoCo model)."""
-    return WalkerEnv(config)
 
 
 @functools.lru_cache(maxsize=1)
@@ -588,11 +433,21 @@ def policy_solver(policy: Callable) -> Optional[SolverOptions]:
     return None if solver is None else SolverOptions(**solver)
 
 
-def default_env_config(shape: tuple[int, int], scale: TerrainScale, policy: Callable) -> WalkerConfig:
-    """``WalkerConfig(terrain_shape=shape, scale=scale)`` with the policy's own solver options when it records them."""
-    solver = policy_solver(policy)
-    config = WalkerConfig(terrain_shape=tuple(shape), scale=scale)
-    return config if solver is None else config._replace(solver=solver)
+def default_env_config(shape: tuple[int, int], scale: Optional[TerrainScale] = None, policy: Optional[Callable] = None,
+                       backend: str = "jax") -> WalkerConfig:
+    """``WalkerConfig(terrain_shape=shape, scale=scale)`` with the policy's own solver options when it records them
+    (``scale`` None: ``TerrainScale()``; ``policy`` None: the shipped base policy).
+
+    ``backend``: ``"jax"`` (MJX-JAX, the classic layout: one heightfield per env) or ``"warp"`` (MuJoCo Warp, on
+    tiles: ``tiles=1``, which the rollout loops size to each call, :mod:`jaxterrain.rollout`). Pass the result as
+    ``env_config`` to :func:`evaluate` / :func:`rollout_distances`; ``fitness_fn(..., backend=)`` takes the name.
+    For MJX-JAX on tiles set ``tiles=1`` yourself (``config._replace(tiles=1)``)."""
+    if backend not in BACKENDS:
+        raise ValueError(f"backend must be one of {BACKENDS}, got {backend!r}")
+    solver = policy_solver(default_policy() if policy is None else policy)
+    config = WalkerConfig(terrain_shape=tuple(shape), scale=TerrainScale() if scale is None else scale)
+    config = config if solver is None else config._replace(solver=solver)
+    return config if backend == "jax" else config._replace(backend=backend, tiles=1)
 
 
 def _resolve(heightmaps, protocol: Protocol, policy, scale, env_config):
@@ -614,6 +469,8 @@ def _resolve(heightmaps, protocol: Protocol, policy, scale, env_config):
         if scale is not None and tuple(scale) != tuple(env_config.scale):
             raise ValueError(f"scale {scale} differs from env_config.scale {env_config.scale}; pass one of them")
     env_config = protocol_env_config(env_config, protocol)
+    if is_tiled(env_config) and not env_config.tiles:  # WalkerConfig(backend="warp"): tiles, sized per call
+        env_config = env_config._replace(tiles=1)
     obs_size = getattr(policy, "observation_size", None)
     env = make_env(env_config)
     if obs_size is not None and int(obs_size) != env.observation_size:
@@ -634,7 +491,9 @@ def rollout_distances(heightmaps, key: jax.Array, attempts: Optional[int] = None
     heading-major: attempt ``a`` on heading ``a // protocol.per_heading``; ``attempts`` must then be None or equal).
     Heightmaps become metres by ``scale`` (default :class:`~jaxterrain.terrain.TerrainScale`); the env is
     ``env_config`` (default ``WalkerConfig(terrain_shape=(H, W), scale=scale)`` with the policy's solver) plus the
-    protocol's ``start_spread``. All ``B x attempts`` rollouts are one jit-compiled batched call (cached per env
+    protocol's ``start_spread``; its ``backend`` / ``tiles`` choose the physics and the terrain layout
+    (``default_env_config(shape, backend="warp")``: MuJoCo Warp on tiles; :mod:`jaxterrain.rollout`). All
+    ``B x attempts`` rollouts are one jit-compiled batched call (cached per env
     config / rollout counts / policy function, :func:`_program`); ``chunk`` (terrains per call) splits very large
     batches to bound device memory; ``slots`` (env slots fed from a queue of the rollouts, see
     :func:`batched_distances`) saves the slot-steps that ended rollouts would idle, and with ``smooth_first`` the
@@ -695,7 +554,7 @@ def evaluate(heightmaps, key: jax.Array, attempts: Optional[int] = None, best: O
 
 
 def fitness_fn(size: int, protocol: Protocol = PAPER, scale: Optional[TerrainScale] = None,
-               slots: Optional[int] = None, smooth_first: bool = True) -> Callable:
+               slots: Optional[int] = None, smooth_first: bool = True, backend: str = "jax") -> Callable:
     """Terrain fitness as a pure function, for use inside jit / scan (e.g. ``archive.evolve(fitness_fn=...)``):
     ``fitness(heightmaps [B, size, size] in [0, 1], key, needed=None) -> [B]`` float32 in [0, 1].
 
@@ -705,6 +564,8 @@ def fitness_fn(size: int, protocol: Protocol = PAPER, scale: Optional[TerrainSca
     (speed only); ``needed`` [B] bool: terrains to walk (the others get 0 and, with ``slots``, are never walked).
     For ``Protocol()`` this is the paper's computation, the one ``archive.difficulty_fitness`` had. The env and
     policy are built here on the host, once per arguments (cached: the same arguments give the same function).
+    ``backend``: ``"jax"`` (MJX-JAX, one heightfield per env, as always) or ``"warp"`` (MuJoCo Warp on a bank of
+    tiles, :func:`default_env_config`; the same walks up to Warp's solver arithmetic, fitness within 0.03).
 
     The function's ``keyed`` attribute is its per-row-key form, ``(heightmaps [B, size, size], keys [B], needed=None)
     -> [B]`` (:func:`keyed_distances`: terrain ``b`` walks from ``keys[b]``, one pool of ``slots`` per call), which
@@ -714,15 +575,18 @@ def fitness_fn(size: int, protocol: Protocol = PAPER, scale: Optional[TerrainSca
         raise ValueError(f"size must be an int >= 4 (heightmap side in pixels), got {size!r}")
     if slots is not None and (not isinstance(slots, int) or slots < 1):
         raise ValueError(f"slots must be an int >= 1 or None, got {slots!r}")
+    if backend not in BACKENDS:
+        raise ValueError(f"backend must be one of {BACKENDS}, got {backend!r}")
     protocol = _protocol_from(protocol, None, None)
     scale = validate_scale(TerrainScale() if scale is None else scale)
-    return _fitness_fn_cached(size, protocol, scale, slots, bool(smooth_first) and slots is not None)
+    return _fitness_fn_cached(size, protocol, scale, slots, bool(smooth_first) and slots is not None, backend)
 
 
 @functools.lru_cache(maxsize=16)
-def _fitness_fn_cached(size: int, protocol: Protocol, scale: TerrainScale, slots, smooth_first: bool) -> Callable:
+def _fitness_fn_cached(size: int, protocol: Protocol, scale: TerrainScale, slots, smooth_first: bool,
+                       backend: str = "jax") -> Callable:
     policy = default_policy()
-    env = make_env(protocol_env_config(default_env_config((size, size), scale, policy), protocol))
+    env = make_env(protocol_env_config(default_env_config((size, size), scale, policy, backend), protocol))
 
     def fitness(heightmaps, key, needed=None):
         terrains = jnp.asarray(heightmaps, jnp.float32) * jnp.float32(scale.height)

@@ -1,0 +1,287 @@
+"""The walker's batched rollout loops (the core of :mod:`jaxterrain.difficulty`), on either terrain layout.
+
+    d, n = rollout.batched_distances(env, policy, terrains, key, attempts)           # [B, attempts] each
+    d, n = rollout.batched_distances(env, policy, terrains, key, attempts, slots=S)  # a pool of S env slots
+
+``terrains`` is ``[B, H, W]`` metres for every env. What the env does with them is its layout
+(:mod:`jaxterrain.walker.env`):
+
+- classic (``config.tiles = 0``, ``backend="jax"``): every env carries its own ``[H, W]`` heightfield in a batched
+  model field (vmap ``in_axes=0``). The programs are exactly those :mod:`jaxterrain.difficulty` always had.
+- tiled (``config.tiles >= 1``, required by ``backend="warp"``): the ``B`` terrains become ONE
+  :class:`~jaxterrain.walker.TileBank` (``env.make_bank``) and terrain ``b``'s walks run on ``bank.at(b)``
+  (vmap ``in_axes=TILE_AXES``); a pool's refill merges states with ``env.select`` (MuJoCo Warp's shared contact
+  buffers). The walks are those of the classic layout up to float32 rounding of the shifted world coordinates
+  (``tests/test_tiles_difficulty.py`` measures it), and, under ``backend="warp"``, up to MuJoCo Warp's own solver
+  arithmetic.
+
+A tiled env's ``tiles`` and ``warp_worlds`` are sized to each call by :func:`sized_env`: ``tiles`` = the call's
+terrains, ``warp_worlds`` = the envs it steps together (``B * attempts``, or ``slots``), so any tiled env (e.g.
+``WalkerConfig(tiles=1, backend="warp")``, :func:`jaxterrain.difficulty.default_env_config` with
+``backend="warp"``) serves every batch size; the sized envs are built once per size (:func:`make_env`'s cache),
+also while a caller's ``jit`` traces. An env whose ``tiles`` already equal the call's terrains (and, warp, whose
+``warp_worlds`` is at least the envs stepped) is used as it is: build one so when you ``vmap`` these functions
+yourself, since MuJoCo Warp counts the envs over ALL vmap axes (``warp_worlds`` >= the total).
+
+Re-exported by :mod:`jaxterrain.difficulty` (``difficulty.batched_distances`` etc.), whose docstring describes the
+protocol these loops serve.
+"""
+
+from __future__ import annotations
+
+import functools
+from typing import Any, Callable, NamedTuple, Optional
+
+import jax
+import jax.numpy as jnp
+
+from jaxterrain.walker import TILE_AXES, WalkerConfig, WalkerEnv
+
+__all__ = ["batched_distances", "job_queue", "smoothness_priority", "make_env", "env_for", "sized_env", "is_tiled",
+           "terrain_batch"]
+
+
+# ----------------------------------------------------------------------------------------------------------------
+# Envs per layout and call size
+# ----------------------------------------------------------------------------------------------------------------
+@functools.lru_cache(maxsize=32)
+def make_env(config: WalkerConfig) -> WalkerEnv:
+    """A cached :class:`WalkerEnv` per config (building one compiles the MuJoCo model)."""
+    return WalkerEnv(config)
+
+
+def is_tiled(config: WalkerConfig) -> bool:
+    """Whether ``config`` walks on tiles: ``tiles >= 1``, or ``backend="warp"`` (which has no other layout)."""
+    return int(config.tiles) >= 1 or config.backend == "warp"
+
+
+def env_for(config: WalkerConfig, terrains: int, envs: int) -> WalkerEnv:
+    """The cached env of ``config`` for a call that walks ``terrains`` maps with ``envs`` envs stepped together:
+    ``make_env(config)`` for the classic layout; for a tiled one (:func:`is_tiled`) the env of ``config`` with
+    ``tiles=terrains`` and, under ``backend="warp"``, ``warp_worlds=envs``. Safe to call while a ``jit`` traces
+    (the env's arrays are made outside the trace, ``jax.ensure_compile_time_eval``)."""
+    if not is_tiled(config):
+        return make_env(config)
+    if int(terrains) < 1 or int(envs) < 1:
+        raise ValueError(f"terrains and envs must be >= 1, got {terrains}, {envs}")
+    config = config._replace(tiles=int(terrains))
+    if config.backend == "warp":
+        config = config._replace(warp_worlds=int(envs))
+    with jax.ensure_compile_time_eval():
+        return make_env(config)
+
+
+def sized_env(env: WalkerEnv, terrains: int, envs: int) -> WalkerEnv:
+    """``env`` itself when it can walk ``terrains`` maps with ``envs`` envs stepped together as they are (classic
+    layout; or ``env.tiles == terrains`` and, under warp, ``warp_worlds >= envs``), else :func:`env_for` of its
+    config (the module docstring says why)."""
+    if not env.tiles:
+        return env
+    if env.tiles == int(terrains) and (env.backend != "warp" or env.config.warp_worlds >= int(envs)):
+        return env
+    return env_for(env.config, terrains, envs)
+
+
+def _world(env: WalkerEnv, terrains: jax.Array):
+    """``(bank, axes)``: ``(None, 0)`` for the classic layout (the terrains go to the envs as they are), or the
+    :class:`~jaxterrain.walker.TileBank` of ``terrains`` [B, H, W] (``env.tiles == B``) and ``TILE_AXES``."""
+    if not env.tiles:
+        return None, 0
+    if env.tiles != terrains.shape[0]:
+        raise ValueError(f"a tiled env walks one tile per terrain: env.tiles={env.tiles} but {terrains.shape[0]} "
+                         "terrains (size it with rollout.sized_env)")
+    return env.make_bank(terrains), TILE_AXES
+
+
+def terrain_batch(env: WalkerEnv, terrains: jax.Array):
+    """``(world, axes)``: the terrain arguments of ``B`` envs, one per map of ``terrains`` [B, H, W] metres, and
+    their ``in_axes`` for ``jax.vmap(env.reset, in_axes=(0, axes))`` / ``jax.vmap(env.step, in_axes=(0, 0, axes))``:
+    ``(terrains, 0)`` for the classic layout, ``(bank.at(arange(B)), TILE_AXES)`` for a tiled env with
+    ``env.tiles == B`` (:func:`sized_env`). Under a tiled env ``qpos[..., :2]`` are world coordinates: subtract
+    ``env.tile_origin(index)`` for positions on the map."""
+    bank, axes = _world(env, terrains)
+    return (terrains, axes) if bank is None else (bank.at(jnp.arange(terrains.shape[0], dtype=jnp.int32)), axes)
+
+
+def _check_worlds(env: WalkerEnv, envs: int) -> None:
+    """MuJoCo Warp drops the contacts of envs beyond ``warp_worlds`` (their steps fail): refuse such a call."""
+    if env.backend == "warp" and envs > env.config.warp_worlds:
+        raise ValueError(f"{envs} envs stepped together but warp_worlds={env.config.warp_worlds}: build the env "
+                         "with warp_worlds >= the envs of every vmap axis (rollout.sized_env sizes it per call)")
+
+
+# ----------------------------------------------------------------------------------------------------------------
+# All rollouts at once, or a pool
+# ----------------------------------------------------------------------------------------------------------------
+def batched_distances(env: WalkerEnv, policy: Callable, terrains: jax.Array, key: jax.Array, attempts: int,
+                      policy_params: Any = None, slots: Optional[int] = None, refill_every: int = 8,
+                      needed: Optional[jax.Array] = None,
+                      priority: Optional[jax.Array] = None) -> tuple[jax.Array, jax.Array]:
+    """Roll out ``attempts`` episodes on each of ``terrains`` [B, H, W] (metres) until all have ended.
+
+    ``policy(obs)`` (or ``policy(policy_params, obs)`` when ``policy_params`` is not None) maps one observation
+    [O] to one action [A]. Returns ``(distances [B, attempts] float32 in [0, 1], steps [B, attempts] int32)``:
+    the normalised distance at each rollout's end (0 where the rollout failed: invalid physics / action) and its
+    length in env steps. ``env`` of either layout (module docstring); a tiled one is sized to the call.
+
+    ``slots=None`` (or ``>= B * attempts``) runs every rollout at once until the longest has ended: a rollout that
+    ended early keeps its slot idle until then. With ``slots=S`` the ``B * attempts`` rollouts are jobs queued on
+    ``S`` env slots: every ``refill_every`` env steps the slots whose episode ended take the next jobs (in job
+    order, terrain-major). The rollouts are the same (same keys, terrains and policy) up to the floating-point
+    effects of another batch size, which the walker's chaotic dynamics can grow into a different outcome of a single
+    rollout: fitness is then the same in distribution, not bit for bit (a given ``slots`` is deterministic). Pooling
+    saves the slot-steps that ended rollouts would idle, worth it when episode lengths vary a lot, at the cost of a
+    smaller batch.
+
+    ``needed`` [B] bool (optional): terrains whose distances are wanted; the others get distance 0 and length 0.
+    With ``slots`` their rollouts are never started (MAP-Elites passes Algorithm 1's verdict: a rejected terrain
+    never enters the archive, so walking it is wasted); without, they run but end the loop no later.
+
+    ``priority`` [B] float (optional, only with ``slots``): the queue takes the rollouts of higher-priority terrains
+    first (ties in job order). The loop lasts until the last-started rollout ends, so starting the long rollouts
+    first shortens it (longest-first scheduling): :func:`smoothness_priority` ranks terrains the walker is likely
+    to walk far (smooth ones) first. The results do not depend on the order, only the time does.
+    """
+    b = terrains.shape[0]
+    jobs = b * attempts
+    reset_keys = jax.random.split(key, (b, attempts))
+    del key
+    act = (lambda obs: policy(obs)) if policy_params is None else (lambda obs: policy(policy_params, obs))
+    needed = jnp.ones(b, bool) if needed is None else jnp.asarray(needed, bool).reshape(b)
+    if slots is not None and slots < jobs:
+        if not refill_every >= 1:
+            raise ValueError(f"refill_every must be >= 1, got {refill_every}")
+        queue, queued = job_queue(jnp.repeat(needed, attempts),
+                                  None if priority is None else jnp.repeat(jnp.asarray(priority).reshape(b), attempts))
+        return _pooled_distances(env, act, terrains, reset_keys.reshape(jobs, *reset_keys.shape[2:]), attempts,
+                                 int(slots), int(refill_every), queue, queued)
+    env = sized_env(env, b, jobs)
+    _check_worlds(env, jobs)
+    world, axes = terrain_batch(env, terrains)
+    reset = jax.vmap(jax.vmap(env.reset, in_axes=(0, None)), in_axes=(0, axes))
+    step = jax.vmap(jax.vmap(env.step, in_axes=(0, 0, None)), in_axes=(0, 0, axes))
+    act = jax.vmap(jax.vmap(act))
+    horizon = env.config.episode_length
+
+    state = reset(reset_keys, world)
+    ended = jnp.broadcast_to(~needed[:, None], (b, attempts))
+    final = jnp.zeros((b, attempts), jnp.float32)
+    length = jnp.zeros((b, attempts), jnp.int32)
+
+    def cond(carry):
+        t, _, ended, _, _ = carry
+        return (t < horizon) & ~jnp.all(ended)
+
+    def body(carry):
+        t, state, ended, final, length = carry
+        state = step(state, act(state.obs), world)
+        dist = jnp.where(state.failed > 0, 0.0, state.distance)
+        final = jnp.where(ended, final, dist)
+        length = jnp.where(ended, length, state.steps)
+        ended = ended | (state.done > 0)
+        return t + 1, state, ended, final, length
+
+    _, _, _, final, length = jax.lax.while_loop(cond, body, (jnp.int32(0), state, ended, final, length))
+    return final, length
+
+
+class _Pool(NamedTuple):
+    """Loop carry of :func:`_pooled_distances` (S slots, J jobs)."""
+
+    state: Any  # WalkerState with leading [S]
+    terrain: jax.Array  # the terrain of each slot's job: [S, H, W] metres (classic), [S] int32 tile index (tiled)
+    job: jax.Array  # [S] int32, the job in the slot (J when none)
+    active: jax.Array  # [S] bool, the slot's episode has not ended yet
+    next_job: jax.Array  # [] int32, queue position of the first job not started yet
+    distance: jax.Array  # [J] float32 results
+    length: jax.Array  # [J] int32 results
+
+
+def job_queue(needed: jax.Array, priority: Optional[jax.Array] = None) -> tuple[jax.Array, jax.Array]:
+    """The order in which a rollout pool starts ``J`` jobs: ``(queue [J] int32, queued [] int32)``.
+
+    ``needed`` [J] bool; ``priority`` [J] float or None. ``queue[:queued]`` are the needed jobs, highest priority
+    first, ties (and ``priority=None``) in job order; the rest of ``queue`` are the jobs never started. NaN
+    priority counts as lowest.
+    """
+    needed = jnp.asarray(needed, bool)
+    if priority is None:
+        queue = jnp.argsort(~needed, stable=True)
+    else:
+        p = jnp.nan_to_num(jnp.asarray(priority, jnp.float32), nan=-jnp.inf)
+        queue = jnp.lexsort((-p, ~needed))  # primary key last: needed first, then descending priority (stable)
+    return queue.astype(jnp.int32), jnp.sum(needed, dtype=jnp.int32)
+
+
+def smoothness_priority(terrains: jax.Array) -> jax.Array:
+    """``[B, H, W]`` -> ``[B]`` float32: minus the mean absolute height step between neighbouring cells.
+
+    A cheap guess at which terrains the walker will walk longest (smooth ones), to start their rollouts first
+    (``batched_distances(priority=...)``); only the speed of a pooled evaluation depends on it.
+    """
+    t = jnp.asarray(terrains, jnp.float32)
+    dx = jnp.mean(jnp.abs(jnp.diff(t, axis=-1)), axis=(-2, -1))
+    dy = jnp.mean(jnp.abs(jnp.diff(t, axis=-2)), axis=(-2, -1))
+    return -(dx + dy)
+
+
+def _pooled_distances(env, act, terrains, keys, attempts: int, slots: int, refill_every: int, queue, queued):
+    """:func:`batched_distances` with ``slots`` env slots fed from a queue of ``J = B * attempts`` jobs.
+
+    ``keys`` [J] (job ``j`` is attempt ``j % attempts`` on terrain ``j // attempts``); ``queue`` [J] / ``queued``
+    from :func:`job_queue`: jobs ``queue[:queued]`` are started in that order, the others never. An outer ``while_loop``
+    (until no slot is active and no job waits) runs ``refill_every`` env steps (a ``fori_loop``; a slot's result is
+    written when its episode ends) and then refills the ended slots (a ``cond``, skipped when nothing changes).
+    A tiled env (sized to ``B`` tiles and ``slots`` envs) keeps each slot's tile index; the refill merges states
+    with ``env.select``.
+    """
+    jobs = keys.shape[0]
+    env = sized_env(env, terrains.shape[0], slots)
+    _check_worlds(env, slots)
+    bank, axes = _world(env, terrains)
+    reset = jax.vmap(env.reset, in_axes=(0, axes))
+    step = jax.vmap(env.step, in_axes=(0, 0, axes))
+    act = jax.vmap(act)
+    world = (lambda terrain: terrain) if bank is None else bank.at  # noqa: E731 - a slot's terrain argument
+
+    def start(job):  # [S] job ids (J = none) -> (state, terrain) of their first step
+        j = jnp.minimum(job, jobs - 1)
+        terrain = terrains[j // attempts] if bank is None else (j // attempts).astype(jnp.int32)
+        return reset(keys[j], world(terrain)), terrain
+
+    def run_steps(p: _Pool) -> _Pool:
+        def one(_, p: _Pool) -> _Pool:
+            state = step(p.state, act(p.state.obs), world(p.terrain))
+            ended = p.active & (state.done > 0)
+            where = jnp.where(ended, p.job, jobs)  # out of range -> dropped
+            distance = p.distance.at[where].set(jnp.where(state.failed > 0, 0.0, state.distance), mode="drop")
+            length = p.length.at[where].set(state.steps, mode="drop")
+            return p._replace(state=state, active=p.active & ~ended, distance=distance, length=length)
+
+        return jax.lax.fori_loop(0, refill_every, one, p)
+
+    def refill(p: _Pool) -> _Pool:
+        free = ~p.active
+        position = p.next_job + jnp.cumsum(free, dtype=jnp.int32) - 1
+        take = free & (position < queued)
+        new_job = jnp.where(take, queue[jnp.minimum(position, jobs - 1)], jobs)
+        state, terrain = start(new_job)
+        pick = lambda new, old: jnp.where(take.reshape((-1,) + (1,) * (new.ndim - 1)), new, old)  # noqa: E731
+        state = jax.tree.map(pick, state, p.state) if bank is None else env.select(take, state, p.state)
+        return p._replace(state=state, terrain=pick(terrain, p.terrain),
+                          job=jnp.where(take, new_job, jnp.where(p.active, p.job, jobs)), active=p.active | take,
+                          next_job=p.next_job + jnp.sum(take, dtype=jnp.int32))
+
+    def body(p: _Pool) -> _Pool:
+        p = run_steps(p)
+        can_start = jnp.any(~p.active) & (p.next_job < queued)
+        return jax.lax.cond(can_start, refill, lambda p: p, p)
+
+    position0 = jnp.arange(slots, dtype=jnp.int32)
+    take0 = position0 < queued
+    job0 = jnp.where(take0, queue[position0], jobs)
+    state, terrain = start(job0)
+    pool = _Pool(state=state, terrain=terrain, job=job0, active=take0, next_job=jnp.minimum(jnp.int32(slots), queued),
+                 distance=jnp.zeros(jobs, jnp.float32), length=jnp.zeros(jobs, jnp.int32))
+    pool = jax.lax.while_loop(lambda p: jnp.any(p.active), body, pool)
+    return pool.distance.reshape(-1, attempts), pool.length.reshape(-1, attempts)
