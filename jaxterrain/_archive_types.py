@@ -57,6 +57,10 @@ class EvolveConfig(NamedTuple):
         another value.
       scale: the ONE :class:`~jaxterrain.terrain.TerrainScale` (metres per pixel and per heightmap unit) of both
         Algorithm 1 and the walker fitness (default ``TerrainScale()``: 0.04 m, 1.0 m).
+      rollout_backend: RUN SETTING: the walker fitness's physics, ``"jax"`` (MJX-JAX) or ``"warp"`` (MuJoCo Warp on
+        a bank of terrain tiles, ``difficulty.fitness_fn(backend=)``). The same walks up to the physics
+        implementation's float arithmetic (fitness within 0.03, ``benchmarks/rollouts.py``'s backend check), so,
+        like ``rollout_slots``, a run may resume with another value.
 
     The run settings (and ``generations``) stay here so that config files and archive headers keep one shape; they
     are the host driver's, not the algorithm's.
@@ -79,6 +83,7 @@ class EvolveConfig(NamedTuple):
     store_heightmaps: bool = True
     rollout_slots: int | None = None
     scale: TerrainScale = TerrainScale()
+    rollout_backend: str = "jax"
 
 
 class Archive(NamedTuple):
@@ -133,6 +138,8 @@ def resolve_config(config: EvolveConfig) -> EvolveConfig:
         raise ValueError(f"EvolveConfig.out_of_range must be 'clip' or 'reject'; got {config.out_of_range!r}")
     if config.rollout_slots is not None:
         positive("rollout_slots", config.rollout_slots)
+    if config.rollout_backend not in ("jax", "warp"):
+        raise ValueError(f"EvolveConfig.rollout_backend must be 'jax' or 'warp'; got {config.rollout_backend!r}")
     if config.robot_height is not None and not config.robot_height > 0:
         raise ValueError(f"EvolveConfig.robot_height must be > 0 metres or None; got {config.robot_height!r}")
     scale = config.scale
