@@ -127,22 +127,33 @@ class Walks(NamedTuple):
 def walk_fn(env, policy: Callable, attempts: int, horizon: int) -> Callable:
     """A pure ``rollout(terrains_m [B, H, W] metres, key) -> Walks`` (jit it) of ``attempts`` walks per terrain
     along +x, at most ``horizon`` env steps, the pattern of :func:`jaxterrain.difficulty.batched_distances`:
-    vmap over terrains and attempts, a ``while_loop`` over time that stops once every walk has ended."""
-    reset = jax.vmap(jax.vmap(env.reset, in_axes=(0, None)), in_axes=(0, 0))
-    step = jax.vmap(jax.vmap(env.step, in_axes=(0, 0, None)), in_axes=(0, 0, 0))
+    vmap over terrains and attempts, a ``while_loop`` over time that stops once every walk has ended. ``env`` of
+    either layout (:mod:`jaxterrain.rollout`: a tiled env is sized to the call); ``Walks.xy`` are positions on the
+    map either way (a tiled env's tile origin subtracted)."""
+    from jaxterrain.rollout import sized_env, terrain_batch
+
     act = jax.vmap(jax.vmap(policy))
 
     def rollout(terrains_m, key):
         b = terrains_m.shape[0]
-        state = reset(jax.random.split(key, (b, attempts)), terrains_m)
-        buf = jnp.zeros((horizon + 1, b, attempts, 2), jnp.float32).at[0].set(state.data.qpos[..., :2])
+        e = sized_env(env, b, b * attempts)
+        world, axes = terrain_batch(e, terrains_m)
+        reset = jax.vmap(jax.vmap(e.reset, in_axes=(0, None)), in_axes=(0, axes))
+        step = jax.vmap(jax.vmap(e.step, in_axes=(0, 0, None)), in_axes=(0, 0, axes))
+        if e.tiles:  # world -> map coordinates
+            origin = jnp.stack(e.tile_origin(jnp.arange(b)), -1)[:, None, :]  # [B, 1, 2]
+            local = lambda state: state.data.qpos[..., :2] - origin  # noqa: E731
+        else:
+            local = lambda state: state.data.qpos[..., :2]  # noqa: E731
+        state = reset(jax.random.split(key, (b, attempts)), world)
+        buf = jnp.zeros((horizon + 1, b, attempts, 2), jnp.float32).at[0].set(local(state))
         ended = jnp.zeros((b, attempts), bool)
         end = jnp.full((b, attempts), horizon, jnp.int32)
 
         def body(c):
             t, state, ended, end, fell, buf = c
-            state = step(state, act(state.obs), terrains_m)
-            xy = jnp.where(ended[..., None], buf[t], state.data.qpos[..., :2])
+            state = step(state, act(state.obs), world)
+            xy = jnp.where(ended[..., None], buf[t], local(state))
             buf = lax.dynamic_update_index_in_dim(buf, xy, t + 1, 0)
             now = ~ended & (state.done > 0)
             fell = fell | (now & (state.truncation == 0))
@@ -159,27 +170,33 @@ def walk_fn(env, policy: Callable, attempts: int, horizon: int) -> Callable:
 
 
 @functools.lru_cache(maxsize=8)
-def _walk_program(shape: tuple[int, int], scale: TerrainScale, attempts: int, horizon: int, start_spread: float):
+def _walk_program(shape: tuple[int, int], scale: TerrainScale, attempts: int, horizon: int, start_spread: float,
+                  backend: str = "jax"):
     from jaxterrain import difficulty
 
     policy = difficulty.default_policy()
-    config = difficulty.default_env_config(shape, scale, policy)._replace(start_spread=float(start_spread))
+    config = difficulty.default_env_config(shape, scale, policy, backend)._replace(start_spread=float(start_spread))
     return jax.jit(walk_fn(difficulty.make_env(config), policy, attempts, horizon))
 
 
 def walk(key: jax.Array, heightmaps, attempts: int = 4, horizon: int = 300, scale: TerrainScale = TerrainScale(),
-         start_spread: float = 0.0) -> Walks:
+         start_spread: float = 0.0, backend: str = "jax") -> Walks:
     """The shipped base policy's walks on ``heightmaps`` ``[B, H, W]`` in [0, 1] (metres by ``scale``), along +x
-    from the start edge, at lateral offsets uniform in ``[-start_spread, start_spread]`` m. One compiled program per
-    (shape, scale, attempts, horizon, start_spread), reused across calls. Returns :class:`Walks`."""
+    from the start edge, at lateral offsets uniform in ``[-start_spread, start_spread]`` m, under the physics
+    ``backend`` (``"jax"`` or ``"warp"``: MuJoCo Warp on tiles, :func:`jaxterrain.difficulty.default_env_config`).
+    One compiled program per (shape, scale, attempts, horizon, start_spread, backend), reused across calls. Returns
+    :class:`Walks`."""
     from jaxterrain import difficulty
+    from jaxterrain.walker import BACKENDS
 
     h = difficulty.validate_heightmaps(heightmaps)
     for name, v in (("attempts", attempts), ("horizon", horizon)):
         if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < 1:
             raise ValueError(f"{name} must be an int >= 1, got {v!r}")
+    if backend not in BACKENDS:
+        raise ValueError(f"backend must be one of {BACKENDS}, got {backend!r}")
     scale = validate_scale(scale)
-    fn = _walk_program(tuple(h.shape[1:]), scale, int(attempts), int(horizon), float(start_spread))
+    fn = _walk_program(tuple(h.shape[1:]), scale, int(attempts), int(horizon), float(start_spread), backend)
     return fn(h * jnp.float32(scale.height), key)
 
 

@@ -214,27 +214,42 @@ def _compiled_walk(env_config, steps: int, policy: Callable):
 
     from jaxterrain import difficulty
 
+    from jaxterrain.rollout import sized_env, terrain_batch
+
     env = difficulty.make_env(env_config)
 
-    def one(key, terrain):
-        state = env.reset(key, terrain)
+    def walks(keys, terrains):  # a tiled env (jaxterrain.rollout) walks terrain b on tile b
+        e = sized_env(env, terrains.shape[0], terrains.shape[0])
+        world, axes = terrain_batch(e, terrains)
 
-        def body(carry, _):
-            state, ended, length, dist, fell = carry
-            nxt = env.step(state, policy(state.obs), terrain)
-            done = nxt.done > 0
-            dist = jnp.where(ended, dist, jnp.where(nxt.failed > 0, 0.0, nxt.distance))
-            fell = jnp.where(ended, fell, done & (nxt.truncation <= 0))
-            length = jnp.where(ended, length, nxt.steps)
-            ended = ended | done
-            nxt = jax.tree.map(lambda a, b: jnp.where(ended & ~done, a, b), state, nxt)  # freeze after the end
-            return (nxt, ended, length, dist, fell), nxt.data.qpos
+        def one(key, terrain):
+            state = e.reset(key, terrain)
+            ox, oy = e.tile_origin(terrain.index) if e.tiles else (0.0, 0.0)
 
-        carry = (state, jnp.bool_(False), jnp.int32(0), jnp.float32(0.0), jnp.bool_(False))
-        (_, _, length, dist, fell), qpos = jax.lax.scan(body, carry, None, length=steps)
-        return jnp.concatenate([state.data.qpos[None], qpos]), length, dist, fell
+            def body(carry, _):
+                state, ended, length, dist, fell = carry
+                nxt = e.step(state, policy(state.obs), terrain)
+                done = nxt.done > 0
+                dist = jnp.where(ended, dist, jnp.where(nxt.failed > 0, 0.0, nxt.distance))
+                fell = jnp.where(ended, fell, done & (nxt.truncation <= 0))
+                length = jnp.where(ended, length, nxt.steps)
+                ended = ended | done
+                if e.tiles:  # freeze after the end (env.select keeps MuJoCo Warp's shared buffers shared)
+                    nxt = e.select(ended & ~done, state, nxt)
+                else:
+                    nxt = jax.tree.map(lambda a, b: jnp.where(ended & ~done, a, b), state, nxt)
+                return (nxt, ended, length, dist, fell), nxt.data.qpos
 
-    return env, jax.jit(jax.vmap(one))
+            carry = (state, jnp.bool_(False), jnp.int32(0), jnp.float32(0.0), jnp.bool_(False))
+            (_, _, length, dist, fell), qpos = jax.lax.scan(body, carry, None, length=steps)
+            qpos = jnp.concatenate([state.data.qpos[None], qpos])
+            if e.tiles:  # positions on the map, as the single-terrain render model draws them
+                qpos = qpos.at[:, 0].add(-ox).at[:, 1].add(-oy)
+            return qpos, length, dist, fell
+
+        return jax.vmap(one, in_axes=(0, axes))(keys, world)
+
+    return env, jax.jit(walks)
 
 
 def record_walks(heightmaps, key, steps: int = 1000, policy: Optional[Callable] = None, scale=None,
@@ -243,8 +258,10 @@ def record_walks(heightmaps, key, steps: int = 1000, policy: Optional[Callable] 
 
     ``policy`` (default: the shipped base policy) maps one observation to one action; ``scale`` (default
     ``TerrainScale()``) turns heights into metres; ``env_config`` defaults to the one
-    :func:`jaxterrain.difficulty.evaluate` uses for this shape (the policy's own solver options). One reset key per
-    terrain (``split(key, B)``). Returns one :class:`Walk` per terrain.
+    :func:`jaxterrain.difficulty.evaluate` uses for this shape (the policy's own solver options); a tiled or MuJoCo
+    Warp one (``difficulty.default_env_config(shape, backend="warp")``) walks terrain ``b`` on tile ``b`` and records
+    ``qpos`` on the map (the tile's origin subtracted). One reset key per terrain (``split(key, B)``). Returns one
+    :class:`Walk` per terrain.
     """
     import jax
     import jax.numpy as jnp
@@ -264,6 +281,8 @@ def record_walks(heightmaps, key, steps: int = 1000, policy: Optional[Callable] 
         scale = validate_scale(TerrainScale() if scale is None else scale)
         env_config = difficulty.default_env_config(maps.shape[1:], scale, policy)
     steps = min(steps, int(env_config.episode_length))
+    if env_config.backend == "warp" and not env_config.tiles:  # MuJoCo Warp walks on tiles, sized per call
+        env_config = env_config._replace(tiles=1)
     env, fn = _compiled_walk(env_config, steps, policy)
     terrains = maps * np.float32(env_config.scale.height)
     qpos, length, dist, fell = jax.device_get(fn(jax.random.split(key, maps.shape[0]), jnp.asarray(terrains)))
