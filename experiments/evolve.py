@@ -79,6 +79,7 @@ def evolve_config(cfg: dict):
         checkpoint_every=int(cfg["checkpoint_every"]), robot_height=cfg.get("robot_height"),
         out_of_range=cfg.get("out_of_range", "clip"), store_heightmaps=bool(cfg.get("store_heightmaps", True)),
         rollout_slots=None if cfg.get("rollout_slots") is None else int(cfg["rollout_slots"]),
+        rollout_backend=str(cfg.get("rollout_backend", "jax")),
     )
 
 
@@ -99,6 +100,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--best", type=int, default=None)
     parser.add_argument("--rollout-slots", type=int, default=None,
                         help="env slots of the difficulty rollout pool per device (speed only; gpu preset: 16384)")
+    parser.add_argument("--rollout-backend", choices=["jax", "warp"], default=None,
+                        help="walker physics of the difficulty rollouts: jax (MJX, default) or warp (MuJoCo Warp)")
     parser.add_argument("--no-heightmaps", dest="store_heightmaps", action="store_const", const=False, default=None,
                         help="do not store the elites' heightmaps in archive.npz (they can be re-rendered)")
 
@@ -108,7 +111,7 @@ def overrides(args) -> dict:
                 batch_size=args.batch_size, initial_population=args.initial_population, bins=args.bins,
                 size=args.size, checkpoint_every=args.checkpoint_every, fitness=args.fitness,
                 attempts=args.attempts, best=args.best, store_heightmaps=args.store_heightmaps,
-                rollout_slots=args.rollout_slots)
+                rollout_slots=args.rollout_slots, rollout_backend=args.rollout_backend)
 
 
 def run_treatment(cfg: dict, generator: str, descriptors, folder: Path, clock: common.Clock, key, label: str = "",
