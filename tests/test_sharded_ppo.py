@@ -21,9 +21,9 @@ _SCRIPT = textwrap.dedent("""
     assert len(jax.devices()) == 4
     env, config = PointEnv(), CFG._replace(num_envs=6, num_minibatches=2, update_epochs=2)
     assert config.minibatch_segments == 6
-    one, m1 = rl.train(jax.random.PRNGKey(0), env, config, 1, TERRAIN)
-    four, m4 = rl.train(jax.random.PRNGKey(0), env, config, 1, TERRAIN, mesh=SH.make_mesh())
-    start = jax.jit(lambda k: rl.init(k, env, config, TERRAIN))(jax.random.PRNGKey(0))
+    start = jax.jit(lambda k: rl.init(k, env, config, TERRAIN))(jax.random.PRNGKey(0))  # one init for both
+    one, m1 = rl.train(None, env, config, 1, TERRAIN, state=start)
+    four, m4 = rl.train(None, env, config, 1, TERRAIN, state=start, mesh=SH.make_mesh())
     for a, b, s in zip(jax.tree.leaves(one.params), jax.tree.leaves(four.params), jax.tree.leaves(start.params)):
         assert np.max(np.abs(np.asarray(a) - np.asarray(s))) > 1e-3  # the update moved the parameters ...
         np.testing.assert_allclose(np.asarray(b), np.asarray(a), rtol=1e-5, atol=1e-6)  # ... the same way
