@@ -41,8 +41,9 @@ _SCRIPT = textwrap.dedent("""
     np.testing.assert_array_equal(a.genomes[0].u, b.genomes[0].u)
 
     env, ppo = PointEnv(), CFG._replace(num_envs=6, num_minibatches=2, update_epochs=2)
-    two, m2 = rl.train(jax.random.PRNGKey(0), env, ppo, 1, TERRAIN, mesh=both)
-    one, m1 = rl.train(jax.random.PRNGKey(0), env, ppo, 1, TERRAIN)
+    start = jax.jit(lambda k: rl.init(k, env, ppo, TERRAIN))(jax.random.PRNGKey(0))
+    two, m2 = rl.train(None, env, ppo, 1, TERRAIN, state=start, mesh=both)
+    one, m1 = rl.train(None, env, ppo, 1, TERRAIN, state=start)
     for x, y in zip(jax.tree.leaves(two.params), jax.tree.leaves(one.params)):
         np.testing.assert_allclose(np.asarray(x), np.asarray(y), rtol=1e-5, atol=1e-6)
     np.testing.assert_allclose(m2["loss"], m1["loss"], rtol=1e-5)
