@@ -11,6 +11,12 @@ block of ``chunks_per_call`` chunks (a chunk = 40 epochs of 4 000 env steps + on
 choices: ``jaxterrain.curriculum.config``). At the start of every block each trial's envs restart on its current
 terrain, so a checkpoint needs no physics state of thousands of envs and a resumed run equals an uninterrupted one.
 
+``--backend``: the walker's physics, ``jax`` (MJX; every trial's envs on their own ``[H, W]`` heightfield, the
+default for now) or ``warp`` (MuJoCo Warp, ``pip install 'jaxterrain[warp]'``; Warp shares one heightfield across all
+envs, so the walker holds one tile per trial, ``WalkerConfig(tiles=trials)``, rebuilt from the trials' current
+terrains at every chunk, and contact buffers for ``trials x max(num_envs, attempts)`` envs; see
+``jaxterrain.curriculum.walker``). It is saved in ``config.json``, so ``--resume`` keeps it.
+
 Presets: ``paper`` (30 000 epochs, the paper's budget), ``gpu-short`` (3 000 epochs, a tenth), ``smoke`` (CPU,
 about a minute after compiling: 2 trials of 4 one-epoch chunks of 80 env steps on 4 envs, 2 walks per evaluation,
 100-step episodes; the archive's terrains are used as they are).
@@ -41,7 +47,7 @@ _PAPER = dict(archive=CPPN_ARCHIVE, curriculum="map", trials=10, descriptors=["r
               gp_evaluation="final", removal_margin=0.05, removal_ties="nearer", credit="threshold",
               distance_origin="origin", roughness_stride=5, max_observations=None, num_envs=500, unroll_length=10,
               num_unrolls=8, num_minibatches=8, update_epochs=8, learning_rate=3e-4, episode_length=1000,
-              chunks_per_call=25, fast_compile=False)
+              chunks_per_call=25, fast_compile=False, backend="jax")
 PRESETS: dict[str, dict] = {
     "paper": _PAPER,
     "gpu-short": {**_PAPER, "max_epochs": 3000},
@@ -70,12 +76,14 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--policy", default=None, help="policy folder to start from (default: the base policy)")
     parser.add_argument("--chunks-per-call", type=int, default=None, help="chunks per jitted call / checkpoint")
     parser.add_argument("--num-envs", type=int, default=None, help="PPO envs per trial (all on its terrain)")
+    parser.add_argument("--backend", choices=["jax", "warp"], default=None,
+                        help="walker physics: jax (MJX, default) or warp (MuJoCo Warp on one tile per trial)")
 
 
 def overrides(args) -> dict:
     return dict(archive=args.archive, curriculum=args.curriculum, trials=args.trials, threshold=args.threshold,
                 max_epochs=args.max_epochs, policy=args.policy, chunks_per_call=args.chunks_per_call,
-                num_envs=args.num_envs)
+                num_envs=args.num_envs, backend=args.backend)
 
 
 # ----------------------------------------------------------------------------------------------------------------
@@ -109,6 +117,25 @@ def load_archive(path, descriptors):
     return arch
 
 
+def walker_layout(cfg: dict) -> dict:
+    """The walker's ``backend`` / ``tiles`` / ``worlds`` of a learn config (a config saved before ``--backend``
+    existed runs on "jax"): warp walks on one tile per trial with contact buffers for every env stepped at once
+    (``trials x max(num_envs, attempts)``: the PPO envs, then the evaluation walks). :class:`BadInput` for an
+    unknown backend, or warp where MuJoCo Warp does not import."""
+    backend = cfg.get("backend", "jax")
+    if backend == "jax":
+        return {}
+    if backend != "warp":
+        raise BadInput(f"--backend must be jax or warp, got {backend!r}")
+    from jaxterrain.walker import warp_available
+
+    ok, why = warp_available()
+    if not ok:
+        raise BadInput(f"--backend warp: {why}")
+    trials = int(cfg["trials"])
+    return dict(backend="warp", tiles=trials, worlds=trials * max(int(cfg["num_envs"]), int(cfg["attempts"])))
+
+
 def validate(cfg: dict):
     """``(CurriculumConfig, archive, policy, env)`` or :class:`BadInput` naming the parameter or file."""
     from jaxterrain.curriculum import walker as W
@@ -129,7 +156,7 @@ def validate(cfg: dict):
     except ValueError as err:
         raise BadInput(f"--policy: {err}") from None
     shape = (256, 256) if arch.heightmaps is None else tuple(arch.heightmaps.shape[1:])
-    env = W.walker_env(policy, shape, TerrainScale(), cfg["episode_length"])
+    env = W.walker_env(policy, shape, TerrainScale(), cfg["episode_length"], **walker_layout(cfg))
     try:
         W.check_policy(policy, env)
     except ValueError as err:
@@ -167,7 +194,8 @@ def make_block(config, harness, env_like):
 
     def block(states, bank, n):
         trials = states.done.shape[0]
-        envs = jax.tree.map(lambda x: jnp.zeros((trials,) + x.shape, x.dtype), env_like)
+        zeros = jax.tree.map(jnp.zeros_like, env_like)  # vmap broadcasts (MuJoCo Warp's shared buffers stay shared)
+        envs = jax.vmap(lambda _: zeros)(jnp.arange(trials))
         states = states._replace(policy=states.policy._replace(env_state=envs),
                                  restart=jnp.ones_like(states.restart))  # envs restart on the current terrains
         states = C.run_trials(states, bank, jnp.asarray(n, jnp.int32), config=config, harness=harness)

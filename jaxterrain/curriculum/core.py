@@ -16,6 +16,18 @@ and marks the envs for a restart on it (``restart``: ``harness.reset`` runs at t
 one place a reset is compiled). Everything is data (indices and masks, ``jnp.where``): the same code
 runs under ``vmap`` over trials, a trial that is done keeps its state unchanged, and nothing re-compiles when the
 terrain changes (the terrain is an index into the bank). Decisions and their reasons: :mod:`.config`.
+
+Terrain layouts. By default every trial indexes the bank inside its own (vmapped) step and hands the harness one
+``[H, W]`` map. A walker whose heightfield is shared by every env (MuJoCo Warp: one bank of tiles, see
+:mod:`jaxterrain.walker.tiles`) cannot take per-trial maps; its harness sets ``Harness.layout`` instead:
+
+    terrain, in_axes = harness.layout(bank.heightmaps[states.terrain])    # [T, H, W] -> e.g. Tile(bank of T, [T])
+    jax.vmap(step, in_axes=(0, ..., in_axes))(states, ..., terrain)       # trial i gets terrain i (bank.at(i))
+
+:func:`run_trials` does this once per chunk, OUTSIDE the trial vmap, so the T trials' current terrains become
+one small bank rebuilt every chunk; ``step`` on a single trial still works (``layout(heightmaps[terrain][None])``,
+trial 0 of it). ``Harness.where`` merges two policy states where a per-leaf ``jnp.where`` would not do (the
+walker's env states under MuJoCo Warp).
 """
 
 from __future__ import annotations
@@ -43,11 +55,19 @@ class Harness(NamedTuple):
     evaluate: ``(policy_state, key, terrain [H, W]) -> fitness []`` float32 in [0, 1].
     reset: ``(policy_state, key, terrain [H, W]) -> policy_state``, restart the envs on a new terrain (None: the
       state is kept as it is).
+    layout: ``terrains [T, H, W] -> (terrain, in_axes)`` (None: the classic layout, ``terrain`` = one ``[H, W]`` map
+      per trial): the T trials' current terrains as ONE pytree, and its ``jax.vmap`` in_axes over the trials;
+      trial i's slice is the ``terrain`` that train / evaluate / reset receive (the walker's: ``bank.at(i)``, a
+      :class:`~jaxterrain.walker.Tile` of a bank of the T terrains). Called once per chunk outside the trial vmap.
+    where: ``(pred [] bool, on_true, on_false) -> policy_state`` merging two policy states (None: ``jnp.where``
+      leaf by leaf; the walker's merges its env states with ``env.select``).
     """
 
     train: Callable
     evaluate: Callable
     reset: Optional[Callable] = None
+    layout: Optional[Callable] = None
+    where: Optional[Callable] = None
 
 
 class History(NamedTuple):
@@ -158,6 +178,29 @@ def _where_tree(pred, on_true, on_false):
     return jax.tree.map(lambda a, b: jnp.where(pred, a, b), on_true, on_false)
 
 
+def _where_policy(harness: Harness, pred, on_true, on_false):
+    """Two policy states merged by ``pred`` []: ``harness.where`` when set, else :func:`_where_tree`."""
+    if harness.where is None:
+        return _where_tree(pred, on_true, on_false)
+    return harness.where(pred, on_true, on_false)
+
+
+def _take(tree, axes, i: int):
+    """Element ``i`` along ``axes`` (a vmap ``in_axes`` prefix of ``tree``; None = shared, kept whole)."""
+    return jax.tree.map(lambda a, x: x if a is None else jax.tree.map(lambda v: jnp.take(v, i, axis=a), x), axes,
+                        tree, is_leaf=lambda a: a is None)
+
+
+def _current_terrain(bank: TerrainBank, index, harness: Harness):
+    """One trial's terrain argument for the harness: ``bank.heightmaps[index]`` [H, W], or with ``harness.layout``
+    trial 0 of ``layout(bank.heightmaps[index][None])``."""
+    maps = bank.heightmaps[index]
+    if harness.layout is None:
+        return maps
+    terrain, axes = harness.layout(maps[None])
+    return _take(terrain, axes, 0)
+
+
 def _raw(key):
     return jax.random.key_data(key) if jnp.issubdtype(key.dtype, jax.dtypes.prng_key) else key
 
@@ -218,16 +261,22 @@ def _next_terrain(state: State, bank: TerrainBank, config: CurriculumConfig, key
     return available, select(score, available, hardness)
 
 
-def step(state: State, key: jax.Array, bank: TerrainBank, *, config: CurriculumConfig, harness: Harness) -> State:
-    """One chunk of one trial (pure; see the module docstring). A trial that is ``done`` is returned unchanged."""
+def step(state: State, key: jax.Array, bank: TerrainBank, *, config: CurriculumConfig, harness: Harness,
+         terrain: Any = None) -> State:
+    """One chunk of one trial (pure; see the module docstring). A trial that is ``done`` is returned unchanged.
+
+    ``terrain``: the current terrain ``state.terrain`` as the harness takes it; None (the default) builds it here,
+    ``bank.heightmaps[state.terrain]`` [H, W] (through ``harness.layout`` when set). :func:`run_trials` passes
+    trial i's slice of the layout of all trials' terrains."""
     train_key, eval_key, select_key, reset_key = jax.random.split(_typed(key), 4)
     del key
     hardness = terrain_hardness(bank, config.distance_origin)
     t = state.terrain
-    terrain = bank.heightmaps[t]
+    if terrain is None:
+        terrain = _current_terrain(bank, t, harness)
     policy = state.policy
     if harness.reset is not None:
-        policy = _where_tree(state.restart, harness.reset(policy, reset_key, terrain), policy)
+        policy = _where_policy(harness, state.restart, harness.reset(policy, reset_key, terrain), policy)
     policy = harness.train(policy, train_key, terrain)
     fitness = jnp.asarray(harness.evaluate(policy, eval_key, terrain), jnp.float32).reshape(())
     evals = state.terrain_evals + 1
@@ -257,12 +306,15 @@ def step(state: State, key: jax.Array, bank: TerrainBank, *, config: CurriculumC
                 terrain_best=jnp.where(finished, -jnp.inf, best), chunk=c + 1, epoch=epoch,
                 env_steps=state.env_steps + config.steps_per_chunk, hardest=hardest, done=done, restart=switch,
                 history=history)
-    return _where_tree(state.done, state, new)
+    kept = _where_tree(state.done, state._replace(policy=None), new._replace(policy=None))
+    return kept._replace(policy=_where_policy(harness, state.done, state.policy, new.policy))
 
 
-def _chunk(state: State, bank: TerrainBank, config: CurriculumConfig, harness: Harness) -> State:
+def _chunk(state: State, bank: TerrainBank, terrain: Any = None, *, config: CurriculumConfig,
+           harness: Harness) -> State:
     """:func:`step` with the trial's own key for this chunk, ``fold_in(state.key, state.chunk)``."""
-    return step(state, jax.random.fold_in(_typed(state.key), state.chunk), bank, config=config, harness=harness)
+    return step(state, jax.random.fold_in(_typed(state.key), state.chunk), bank, config=config, harness=harness,
+                terrain=terrain)
 
 
 # ----------------------------------------------------------------------------------------------------------------
@@ -278,8 +330,18 @@ def init_trials(keys: jax.Array, bank: TerrainBank, policy: Any, *, config: Curr
 def run_trials(states: State, bank: TerrainBank, num_chunks: jax.Array, *, config: CurriculumConfig,
                harness: Harness) -> State:
     """Up to ``num_chunks`` chunks of every trial ([T]-batched ``states``), all trials in one vmapped step per
-    chunk; stops early once every trial is done. ``num_chunks`` may be traced (no re-compile per value). Pure."""
-    chunk = jax.vmap(functools.partial(_chunk, config=config, harness=harness), in_axes=(0, None))
+    chunk; stops early once every trial is done. ``num_chunks`` may be traced (no re-compile per value). Pure.
+
+    With ``harness.layout`` every chunk first lays out the T trials' current terrains (``bank.heightmaps
+    [states.terrain]`` [T, H, W] -> one terrain pytree, e.g. a bank of T tiles) and trial i trains and is evaluated
+    on its slice i."""
+    one = functools.partial(_chunk, config=config, harness=harness)
+    if harness.layout is None:
+        chunk = jax.vmap(one, in_axes=(0, None))
+    else:
+        def chunk(s, bank):
+            terrain, axes = harness.layout(bank.heightmaps[s.terrain])
+            return jax.vmap(one, in_axes=(0, None, axes))(s, bank, terrain)
 
     def cond(carry):
         i, s = carry

@@ -12,6 +12,16 @@
 ``harness.evaluate`` walks the updated deterministic policy ``attempts`` times on it
 (``difficulty.batched_distances``) and returns the mean of the ``best`` distances; ``harness.reset`` restarts the envs
 on a new terrain (``rl.reset_envs``).
+
+On tiles (MuJoCo Warp, whose heightfield every env shares): build the walker with one tile per trial and enough
+Warp worlds for the envs stepped together, then the harness lays the trials' terrains out as tiles::
+
+    env = walker_env(policy, shape, scale, backend="warp", trials=T, worlds=T * max(num_envs, attempts))
+    harness = walker_harness(env, ppo, config)      # layout: [T, H, W] -> (env.make_bank(...).at(arange(T)), TILE_AXES)
+
+Every chunk, :func:`jaxterrain.curriculum.run_trials` gathers the T trials' current terrains (``[T, H, W]``) into
+ONE bank of T tiles outside the trial vmap; trial i trains, restarts and is evaluated on ``bank.at(i)`` (its PPO envs
+and its ``attempts`` walks all on tile i); policy states are merged with ``env.select`` (``Harness.where``).
 """
 
 from __future__ import annotations
@@ -26,21 +36,36 @@ from jaxterrain import difficulty, rl
 from jaxterrain.curriculum.config import CurriculumConfig
 from jaxterrain.curriculum.core import Harness
 from jaxterrain.terrain import TerrainScale
+from jaxterrain.walker import TILE_AXES, Tile, TileBank
 
-__all__ = ["walker_env_config", "walker_env", "check_policy", "walker_harness", "start_state"]
+__all__ = ["walker_env_config", "walker_env", "check_policy", "walker_harness", "tile_layout", "select_policy",
+           "tile_distances", "start_state"]
 
 
-def walker_env_config(policy, shape: tuple[int, int], scale: TerrainScale, episode_length: Optional[int] = None):
+def walker_env_config(policy, shape: tuple[int, int], scale: TerrainScale, episode_length: Optional[int] = None,
+                      backend: str = "jax", tiles: int = 0, worlds: Optional[int] = None):
     """The :class:`~jaxterrain.walker.WalkerConfig` of the curriculum: the bank's terrain shape and scale, the
-    contact solver the policy was trained with, and (optionally) a shorter ``episode_length``."""
+    contact solver the policy was trained with, and (optionally) a shorter ``episode_length``.
+
+    ``backend``: "jax" (MJX) or "warp" (MuJoCo Warp, needs ``tiles >= 1``). ``tiles``: 0 for the classic layout (a
+    ``[H, W]`` terrain per trial), else the trials run together (one tile each). ``worlds``: MuJoCo Warp's contact
+    buffers, for at least this many envs stepped together (trials x max(PPO envs, evaluation walks)); None keeps
+    the walker's default."""
     config = difficulty.default_env_config(tuple(shape), scale, policy)
-    return config if episode_length is None else config._replace(episode_length=int(episode_length))
+    if episode_length is not None:
+        config = config._replace(episode_length=int(episode_length))
+    if backend != "jax" or tiles:
+        config = config._replace(backend=backend, tiles=int(tiles))
+    if worlds is not None:
+        config = config._replace(warp_worlds=int(worlds))
+    return config
 
 
-def walker_env(policy, shape: tuple[int, int], scale: TerrainScale, episode_length: Optional[int] = None):
+def walker_env(policy, shape: tuple[int, int], scale: TerrainScale, episode_length: Optional[int] = None,
+               backend: str = "jax", tiles: int = 0, worlds: Optional[int] = None):
     """The cached :class:`~jaxterrain.walker.WalkerEnv` of :func:`walker_env_config` (builds the MuJoCo model;
     compiles nothing)."""
-    return difficulty.make_env(walker_env_config(policy, shape, scale, episode_length))
+    return difficulty.make_env(walker_env_config(policy, shape, scale, episode_length, backend, tiles, worlds))
 
 
 def check_policy(policy, env) -> None:
@@ -83,22 +108,112 @@ def walker_harness(env, ppo: rl.PPOConfig, config: CurriculumConfig) -> Harness:
         return rl.run_updates(state, terrain, env=env, config=ppo, num_updates=updates)[0]
 
     def evaluate(state: rl.TrainState, key, terrain):
-        d, _ = difficulty.batched_distances(env, act, terrain[None], key, attempts,
-                                            policy_params=(state.params, state.normaliser))
+        params = (state.params, state.normaliser)
+        if env.tiles:
+            d = tile_distances(env, act, terrain, key, attempts, params)[None]
+        else:
+            d, _ = difficulty.batched_distances(env, act, terrain[None], key, attempts, policy_params=params)
         return difficulty.best_of(d, best)[0]
 
     def reset(state: rl.TrainState, key, terrain):
         return rl.reset_envs(state, key, terrain, env=env, config=ppo)
 
-    return Harness(train=train, evaluate=evaluate, reset=reset)
+    if not env.tiles:
+        return Harness(train=train, evaluate=evaluate, reset=reset)
+    return Harness(train=train, evaluate=evaluate, reset=reset, layout=tile_layout(env),
+                   where=lambda pred, a, b: select_policy(env, pred, a, b))
+
+
+def tile_layout(env):
+    """The ``Harness.layout`` of a tiled walker (``env.tiles >= 1``): ``terrains [k, H, W]`` metres (the current
+    terrains of k <= ``env.tiles`` trials, e.g. one device's share) -> ``(env.make_bank(terrains).at(arange(k)),
+    TILE_AXES)``: trial i on tile i of one bank (tiles past k flat). Jit-able; ``ValueError`` when k > tiles."""
+
+    def layout(terrains):
+        k = terrains.shape[0]
+        if k > env.tiles:
+            raise ValueError(f"{k} trials run together but the walker has tiles={env.tiles}: build it with one tile "
+                             "per trial (walker_env(..., tiles=trials))")
+        if k < env.tiles:
+            terrains = jnp.concatenate([terrains, jnp.zeros((env.tiles - k,) + terrains.shape[1:], terrains.dtype)])
+        return env.make_bank(terrains).at(jnp.arange(k, dtype=jnp.int32)), TILE_AXES
+
+    return layout
+
+
+def select_policy(env, pred, on_true: rl.TrainState, on_false: rl.TrainState) -> rl.TrainState:
+    """``on_true`` where ``pred`` ([] bool) else ``on_false``, the env states merged by ``env.select`` (MuJoCo
+    Warp's contact buffers are shared by every env and stay so), every other leaf by ``jnp.where``."""
+    rest = jax.tree.map(lambda a, b: jnp.where(pred, a, b), on_true._replace(env_state=None),
+                        on_false._replace(env_state=None))
+    return rest._replace(env_state=env.select(pred, on_true.env_state, on_false.env_state))
+
+
+def tile_distances(env, policy, tile, key, attempts: int, policy_params=None) -> jax.Array:
+    """``[attempts]`` normalised distances (0 where a walk failed) of ``attempts`` walks of ``policy(obs)`` (or
+    ``policy(policy_params, obs)``) on ``tile`` (a :class:`~jaxterrain.walker.Tile`, index []) of a tiled ``env``,
+    until every walk has ended or the episode limit: the loop of ``difficulty.batched_distances`` for one terrain
+    (keys ``split(key, (1, attempts))``, the same vmap nesting) with the tile in place of ``terrain[None]``.
+
+    Under ``jax.vmap`` (the curriculum's trials; the bank shared, one tile index per trial) a custom batching rule
+    runs ONE loop over all trials' walks until every walk of every trial has ended: a plain while loop would get a
+    per-trial predicate, which ``jax.vmap`` turns into a per-leaf select of the loop state, and that splits MuJoCo
+    Warp's contact buffers (shared by all envs). Walks that ended keep their distance, so the distances are those of
+    the per-trial loops. Supports one level of vmap."""
+    act = (lambda p, obs: policy(obs)) if policy_params is None else policy
+    params = () if policy_params is None else policy_params
+
+    @jax.custom_batching.custom_vmap
+    def walks(data, index, key, params):
+        return _tile_walks(env, act, attempts, data, index[None], key[None], params, None)[0]
+
+    @walks.def_vmap
+    def walks_batched(axis_size, in_batched, data, index, key, params):
+        data_b, index_b, key_b, params_b = in_batched
+        if data_b:
+            raise ValueError("tile_distances under vmap: the tile bank must be shared (in_axes TILE_AXES), one "
+                             "heightfield for every env")
+        index = index if index_b else jnp.broadcast_to(index, (axis_size,))
+        key = key if key_b else jnp.broadcast_to(key, (axis_size,) + key.shape)
+        axes = jax.tree.map(lambda b: 0 if b else None, params_b)
+        return _tile_walks(env, act, attempts, data, index, key, params, axes), True
+
+    return walks(tile.bank.data, jnp.asarray(tile.index, jnp.int32), key, params)
+
+
+def _tile_walks(env, act, attempts: int, data, index, keys, params, params_axes) -> jax.Array:
+    """``[B, attempts]`` distances of ``attempts`` walks of ``act(params_b, obs)`` on tiles ``index`` [B] of the
+    bank ``data``, trial b's walks keyed ``split(keys[b], (1, attempts))[0]``; ``params_axes``: vmap axes of
+    ``params`` over B (None: shared)."""
+    reset_keys = jax.vmap(lambda k: jax.random.split(k, (1, attempts))[0])(keys)
+    world = Tile(TileBank(data), index)
+    reset = jax.vmap(jax.vmap(env.reset, in_axes=(0, None)), in_axes=(0, TILE_AXES))
+    step = jax.vmap(jax.vmap(env.step, in_axes=(0, 0, None)), in_axes=(0, 0, TILE_AXES))
+    policy = jax.vmap(jax.vmap(act, in_axes=(None, 0)), in_axes=(params_axes, 0))
+    horizon = env.config.episode_length
+
+    def cond(carry):
+        t, _, ended, _ = carry
+        return (t < horizon) & ~jnp.all(ended)
+
+    def body(carry):
+        t, state, ended, final = carry
+        state = step(state, policy(params, state.obs), world)
+        final = jnp.where(ended, final, jnp.where(state.failed > 0, 0.0, state.distance))
+        return t + 1, state, ended | (state.done > 0), final
+
+    zeros = jnp.zeros(reset_keys.shape[:2], jnp.float32)
+    carry = (jnp.int32(0), reset(reset_keys, world), zeros > 0, zeros)
+    return jax.lax.while_loop(cond, body, carry)[3]
 
 
 def start_state(env, ppo: rl.PPOConfig, policy, shape: tuple[int, int]) -> rl.TrainState:
     """The starting ``rl.TrainState``: the policy's params (policy AND value net) and normaliser, a fresh Adam state,
     and zeros for the ``ppo.num_envs`` env states (only their structure counts: the curriculum restarts the envs on
-    its first terrain before training). Traces the env once (``jax.eval_shape``); compiles nothing."""
-    like = jax.eval_shape(lambda k, t: rl.init(k, env, ppo, t), jax.random.key(0),
-                          jax.ShapeDtypeStruct(tuple(shape), jnp.float32))
+    its first terrain before training). Traces the env once (``jax.eval_shape``); compiles nothing. A tiled env's
+    (its envs on one tile) has the same structure; MuJoCo Warp's shared contact buffers stay unbatched."""
+    terrain = (lambda: env.flat_bank().at(0)) if env.tiles else (lambda: jnp.zeros(tuple(shape), jnp.float32))
+    like = jax.eval_shape(lambda k: rl.init(k, env, ppo, terrain()), jax.random.key(0))
     zeros = jax.tree.map(lambda x: jnp.zeros(x.shape, x.dtype), like)
     params = jax.tree.map(jnp.asarray, policy.params)
     return zeros._replace(params=params, normaliser=policy.normaliser,

@@ -34,9 +34,12 @@ Not yet migrated (the classic ``terrain [H, W]`` API still serves them; what eac
   TILE_AXES)`` for reset and ``(0, 0, TILE_AXES)`` for step (``benchmarks/rollouts.py``'s ``tiled_distances`` is
   exactly this loop). ``_pooled_distances``: the pool's terrain becomes a ``Tile`` (``bank.at(j // attempts)``) and
   the refill merges states with ``env.select(take, new, old)`` and ``index=jnp.where(take, new.index, old.index)``.
-* ``rl.ppo``: per-env terrains ``bank.at(idx)`` under ``TILE_AXES`` (or one shared ``bank.at(0)``), the auto-reset's
-  ``_select`` -> ``env.select``; ``warp_worlds`` >= seeds x ``num_envs``.
 * ``traversability`` and ``report.render``: subtract ``env.tile_origin(index)`` from ``qpos[..., :2]``.
+
+Migrated: ``rl.ppo`` (the terrain may be ``bank.at(i)`` shared by all envs or ``bank.at(idx)`` per env under
+``TILE_AXES``; the auto-reset merges with ``env.select``; ``warp_worlds`` >= seeds x ``num_envs``) and the curriculum
+(``curriculum.walker``: ``Harness.layout`` makes one bank of the trials' current terrains per chunk, trial i on tile
+i; ``tile_distances`` evaluates on a tile; ``warp_worlds`` >= trials x max(``num_envs``, ``attempts``)).
 """
 
 from __future__ import annotations
