@@ -230,3 +230,32 @@ def test_walker_ppo_on_shifted_tiles_equals_per_env_terrains_within_rounding():
     # per-env terrains: the envs on tile 1 (0.3 m higher) stand higher
     z = np.asarray(st.env_state.data.qpos[:, 2])
     assert abs((z[1] + z[2]) / 2 - (z[0] + z[3]) / 2) > 0.2
+
+
+_MESH_SCRIPT = """
+import sys
+sys.path.insert(0, TESTS)
+import jax, jax.numpy as jnp, numpy as np
+from jaxterrain import rl, sharding as SH
+from test_tiles_ppo import CFG, TilePointEnv, _terrains
+
+assert len(jax.devices()) == 4
+env, config = TilePointEnv(tiles=2), CFG._replace(num_envs=6)
+bank = env.walker.make_bank(_terrains())
+tiles = bank.at(jnp.array([0, 1, 1, 0, 1, 0], jnp.int32))
+one, m1 = rl.train(jax.random.PRNGKey(0), env, config, 1, tiles)
+four, m4 = rl.train(jax.random.PRNGKey(0), env, config, 1, tiles, mesh=SH.make_mesh())
+for a, b in zip(jax.tree.leaves(one), jax.tree.leaves(four)):
+    np.testing.assert_allclose(np.asarray(b), np.asarray(a), rtol=1e-5, atol=1e-6)
+np.testing.assert_allclose(m4["loss"], m1["loss"], rtol=1e-5, atol=1e-6)
+print("ok")
+""".replace("TESTS", repr(str(__import__("pathlib").Path(__file__).parent)))
+
+
+@pytest.mark.slow
+def test_per_env_tiles_data_parallel_equal_one_device():
+    """rl.train(mesh=) with a Tile per env (index [6] split over 4 forced CPU devices, padded) equals one device up
+    to float rounding (the minibatch gradients are summed across devices)."""
+    from test_sharding import run_on_devices
+
+    assert run_on_devices(_MESH_SCRIPT).strip().endswith("ok")
