@@ -126,9 +126,32 @@ def shard_rows(tree: Any, mesh: Mesh) -> tuple[Any, jax.Array]:
     return tree, mask
 
 
+def _elsewhere(x: Any, sharding: NamedSharding) -> bool:
+    """Whether ``x`` is an array committed to devices other than ``sharding``'s (a jitted program over the mesh
+    refuses it; uncommitted arrays, NumPy values and tracers it takes as they are)."""
+    return (isinstance(x, jax.Array) and not isinstance(x, jax.core.Tracer) and getattr(x, "committed", False)
+            and x.sharding.device_set != sharding.device_set)
+
+
+def _put(x: Any, sharding: NamedSharding) -> Any:
+    """``jax.device_put(x, sharding)``; across processes, an array held by this process's devices alone goes
+    through the host first (``device_put`` sends only host values, and uncommitted arrays other than PRNG keys, to
+    other processes' devices)."""
+    local = (isinstance(x, jax.Array) and not isinstance(x, jax.core.Tracer) and x.is_fully_addressable
+             and x.sharding.device_set != sharding.device_set)
+    if sharding.is_fully_addressable or not local:
+        return jax.device_put(x, sharding)
+    if jnp.issubdtype(x.dtype, jax.dtypes.prng_key):
+        data = jax.device_put(np.asarray(jax.random.key_data(x)), sharding)
+        return jax.random.wrap_key_data(data, impl=jax.random.key_impl(x))
+    return jax.device_put(np.asarray(x), sharding)
+
+
 def replicate(tree: Any, mesh: Mesh) -> Any:
-    """Place every leaf of ``tree`` whole on every device of the mesh."""
-    return jax.device_put(tree, NamedSharding(mesh, P()))
+    """Place every leaf of ``tree`` whole on every device of the mesh (of every process; each process passes the
+    same values)."""
+    whole = NamedSharding(mesh, P())
+    return jax.tree.map(lambda x: _put(x, whole), tree)
 
 
 def map_rows(fn: Callable, mesh: Mesh, replicated: tuple[int, ...] = (), mask: bool = False) -> Callable:
@@ -158,6 +181,6 @@ def map_rows(fn: Callable, mesh: Mesh, replicated: tuple[int, ...] = (), mask: b
     jitted = jax.jit(run, out_shardings=whole)
 
     def call(*args):
-        return jitted(*jax.device_put(args, whole))
+        return jitted(*jax.tree.map(lambda x: _put(x, whole) if _elsewhere(x, whole) else x, args))
 
     return call

@@ -47,6 +47,12 @@ _SCRIPT = textwrap.dedent("""
     for x, y in zip(jax.tree.leaves(two.params), jax.tree.leaves(one.params)):
         np.testing.assert_allclose(np.asarray(x), np.asarray(y), rtol=1e-5, atol=1e-6)
     np.testing.assert_allclose(m2["loss"], m1["loss"], rtol=1e-5)
+    # values held by this process's devices alone (a jitted init's, a typed key) are replicated over both processes
+    local = (jax.device_put(np.arange(6.0), jax.local_devices()[1]), jax.random.key(7))
+    placed = SH.replicate(local, both)
+    assert all(x.sharding.device_set == set(jax.devices()) for x in jax.tree.leaves(placed))
+    np.testing.assert_array_equal(np.asarray(placed[0]), np.arange(6.0))
+    assert np.array_equal(jax.random.key_data(placed[1]), jax.random.key_data(jax.random.key(7)))
     print("ok", jax.process_index())
 """).replace("TESTS", repr(TESTS))
 
