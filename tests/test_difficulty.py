@@ -1,5 +1,7 @@
-"""difficulty.evaluate on CPU: 32 x 32 heightmaps at 0.2 m cells, 60-step episodes, ONE compiled rollout shared by
-every test (the policy takes its parameters as data: NaN / huge / zero actions do not re-compile)."""
+"""difficulty.evaluate on CPU: 32 x 32 heightmaps at 0.2 m cells, 300-step episodes, ONE compiled rollout per policy
+kind shared by every test (MJX compiles slowly on a CPU: each distinct rollout program costs ~30 s): the linear policy
+takes its parameters as data (NaN / huge / zero actions do not re-compile), and the shipped policy's four-heading walks
+serve both the flat-ground and the wall tests (one module fixture)."""
 
 from __future__ import annotations
 
@@ -13,7 +15,8 @@ from jaxterrain.terrain import TerrainScale
 from jaxterrain.walker import WalkerConfig
 
 SCALE = TerrainScale(cell_size=0.2, height=0.5)
-CFG = WalkerConfig(terrain_shape=(32, 32), scale=SCALE, episode_length=60)
+# 300 steps = 4.5 s: the shipped policy walks ~2.9 m/s, the track is 5.2 m; walkers that fall end earlier
+CFG = WalkerConfig(terrain_shape=(32, 32), scale=SCALE, episode_length=300)
 ATTEMPTS, BEST = 4, 2
 
 
@@ -84,7 +87,7 @@ def test_distances_deterministic_and_terrain_height_invariant(flat_pair):
     high = np.asarray(_run(flat_pair + 1.0, _params()))
     np.testing.assert_allclose(high, low, atol=2e-3)
     assert np.all((low >= 0) & (low <= 1))
-    # the zero-torque walker collapses within 60 steps: it does not reach the far edge
+    # the zero-torque walker collapses (the episode ends when it falls): it does not reach the far edge
     assert np.all(low < 0.2)
     other = np.asarray(_run(flat_pair, _params(), key=1))
     assert not np.array_equal(other, low)  # random joint initialisations differ per key
@@ -144,15 +147,18 @@ def test_job_queue_and_smoothness_priority():
     np.testing.assert_allclose(np.asarray(p), [0.0, -1.0 / 7.0, -2.0 / 7.0], rtol=1e-6)
 
 
-def test_shipped_base_policy_walks_across_flat_ground():
-    """The shipped policy (the default of evaluate) crosses a flat 6.2 m map; standing still does not."""
-    cfg = CFG._replace(episode_length=300)  # 4.5 s: the policy walks ~2.9 m/s, the track is 5.2 m
-    flat = jnp.zeros((1, 32, 32))
-    fitness = difficulty.evaluate(flat, jax.random.PRNGKey(0), attempts=ATTEMPTS, best=BEST, env_config=cfg)
-    assert float(fitness[0]) >= 0.9
-    still = difficulty.evaluate(flat, jax.random.PRNGKey(0), attempts=ATTEMPTS, best=BEST, env_config=cfg,
-                                policy=linear_policy, policy_params=_params())
-    assert float(still[0]) < 0.2
+def test_shipped_base_policy_walks_across_flat_ground(wall_and_flat, flat_pair):
+    """The shipped policy (the default of evaluate) crosses a flat 6.2 m map, along +x and in every other heading;
+    standing still does not (same 300-step episodes)."""
+    maps, d = wall_and_flat
+    fitness = difficulty.evaluate(maps, jax.random.PRNGKey(0), protocol=HEADINGS4, env_config=CFG)  # fixture's program
+    np.testing.assert_array_equal(np.asarray(fitness), np.asarray(difficulty.aggregate(d, HEADINGS4)))
+    assert float(fitness[1]) >= 0.9
+    assert float(difficulty.heading_scores(d, HEADINGS4)[1, 0]) >= 0.9  # +x (the paper's heading): both walks
+    still = difficulty.evaluate(flat_pair, jax.random.PRNGKey(0), attempts=ATTEMPTS, best=BEST, env_config=CFG,
+                                policy=linear_policy, policy_params=_params())  # the with-params program
+    assert np.all(np.asarray(still) < 0.2)
+
 
 def test_default_env_uses_the_policys_solver():
     from jaxterrain.walker import SOLVER_FAST, SOLVER_SOUND, SOLVER_XML, SolverOptions, parse_solver
@@ -185,6 +191,17 @@ def _wall_map():
     m = np.zeros((32, 32), np.float32)
     m[:, 21:24] = 1.0
     return m
+
+
+HEADINGS4 = difficulty.Protocol(attempts=8, best=2, headings=4)
+
+
+@pytest.fixture(scope="module")
+def wall_and_flat():
+    """``(maps, distances)``: the shipped policy's walks under :data:`HEADINGS4` on [wall map, flat map] (300-step
+    episodes): one compiled program, shared by the flat-ground and the wall tests."""
+    maps = jnp.stack([jnp.asarray(_wall_map()), jnp.zeros((32, 32))])
+    return maps, difficulty.rollout_distances(maps, jax.random.PRNGKey(0), env_config=CFG, protocol=HEADINGS4)
 
 
 def test_protocol_defaults_and_validation():
@@ -282,13 +299,11 @@ def test_fitness_fn_is_the_paper_computation():
     assert float(new[0]) > 0.9 and float(new[1]) < float(new[0])
 
 
-def test_four_headings_see_a_wall_across_x():
+def test_four_headings_see_a_wall_across_x(wall_and_flat):
     """The shipped policy under 4 headings: the wall across x stops the walks of headings 0 (+x) and 2 (-x), not
     those along y; flat ground is easy in every heading."""
-    cfg = CFG._replace(episode_length=300)
-    protocol = difficulty.Protocol(attempts=8, best=2, headings=4)
-    maps = jnp.stack([jnp.asarray(_wall_map()), jnp.zeros((32, 32))])
-    d = difficulty.rollout_distances(maps, jax.random.PRNGKey(0), env_config=cfg, protocol=protocol)
+    protocol = HEADINGS4
+    _, d = wall_and_flat
     scores = np.asarray(difficulty.heading_scores(d, protocol))  # [2 maps, 4 headings]
     assert np.all(scores[0, [0, 2]] < 0.8) and np.all(scores[0, [1, 3]] >= 0.9), scores  # the wall is at 0.71-0.79
     assert scores[0, 2] < scores[0, 0]  # the wall is 1.1 m after the start going -x, 3.7 m going +x
