@@ -145,7 +145,7 @@ def test_coverage_shards_partition_the_treatments_and_resume_writes_the_tables(t
 
     calls = []
 
-    def fake_treatment(cfg, generator, descriptors, folder, clock, key, label=""):
+    def fake_treatment(cfg, generator, descriptors, folder, clock, key, label="", mesh=None):
         done = folder / "archive.npz"
         if done.exists():
             return A.load(done)
