@@ -14,7 +14,7 @@ treatments are kept, so ``--resume`` continues where the time limit stopped.
 Writes ``figure7a.png`` (hardest terrain traversed vs epoch, every map treatment, mean +- 1 standard error),
 ``figure7b.png`` (CPPN: map vs standard CL), ``table2.csv`` / ``table2.md`` (epochs to first traverse a terrain at
 5 %, ..., 50 % of 70.71, ours beside the paper's), ``sequences.csv`` (every trial's terrains in order, all
-treatments) and ``config.json``. Presets: those of ``learn`` (smoke, gpu-short, paper). ``--backend jax|warp``: the
+treatments) and ``config.json``. Presets: those of ``learn`` (smoke, gpu-short, paper). ``--backend auto|jax|warp``: the
 walker's physics of every treatment (``learn``'s flag; saved in ``config.json``, kept by ``--resume``).
 """
 
@@ -46,8 +46,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--max-epochs", type=int, default=None)
     parser.add_argument("--baseline", choices=["roughness", "random"], default=None,
                         help="the baseline run on the cppn archive (Figure 7b; default roughness)")
-    parser.add_argument("--backend", choices=["jax", "warp"], default=None,
-                        help="walker physics of every treatment: jax (MJX, default) or warp (MuJoCo Warp on tiles)")
+    parser.add_argument("--backend", choices=["auto", "jax", "warp"], default=None,
+                        help="walker physics of every treatment: auto (default: warp on a GPU where it imports, else "
+                             "jax), jax (MJX) or warp (MuJoCo Warp on tiles)")
 
 
 def parse_archives(items) -> dict | None:

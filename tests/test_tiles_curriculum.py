@@ -240,7 +240,11 @@ def test_learn_backend_builds_the_walker_and_refuses_a_missing_warp(tmp_path, ti
     from experiments import learn
 
     cfg = {**learn.PRESETS["smoke"], "archive": tiny_archive, "seed": 0}
-    assert learn.validate(cfg)[3].config.tiles == 0 and learn.PRESETS["smoke"]["backend"] == "jax"
+    assert learn.validate(cfg)[3].config.tiles == 0 and learn.PRESETS["smoke"]["backend"] == "auto"
+    assert learn.resolve_backend("auto") == "jax"  # on a CPU; "warp" on a GPU where MuJoCo Warp imports
+    monkeypatch.setattr(jax, "default_backend", lambda: "gpu")
+    assert learn.resolve_backend("auto") == ("warp" if WARP_OK else "jax") and learn.resolve_backend("jax") == "jax"
+    monkeypatch.undo()
     old = {k: v for k, v in cfg.items() if k != "backend"}
     assert learn.validate(old)[3].config == learn.validate(cfg)[3].config
     if WARP_OK:
