@@ -27,19 +27,18 @@ its edge), and MuJoCo's heightfield ``base_z`` box is one box under all tiles. T
 torso is ``side_margin`` (0.3 m) from a side edge or ``goal_margin`` (0.5 m) from the front edge, so a foot can
 only reach the seam near an episode's end.
 
-Not yet migrated (the classic ``terrain [H, W]`` API still serves them; what each must change to walk on tiles):
+Callers that walk on tiles (each also keeps the classic ``terrain [H, W]`` layout, ``tiles = 0``):
 
-* ``difficulty.batched_distances``: an env built with ``tiles=B`` (and ``warp_worlds=B * attempts`` or ``slots``);
-  ``tiles = env.make_bank(terrains).at(jnp.arange(B))`` in place of ``terrains``; outer ``in_axes`` ``(0,
-  TILE_AXES)`` for reset and ``(0, 0, TILE_AXES)`` for step (``benchmarks/rollouts.py``'s ``tiled_distances`` is
-  exactly this loop). ``_pooled_distances``: the pool's terrain becomes a ``Tile`` (``bank.at(j // attempts)``) and
-  the refill merges states with ``env.select(take, new, old)`` and ``index=jnp.where(take, new.index, old.index)``.
-* ``traversability`` and ``report.render``: subtract ``env.tile_origin(index)`` from ``qpos[..., :2]``.
-
-Migrated: ``rl.ppo`` (the terrain may be ``bank.at(i)`` shared by all envs or ``bank.at(idx)`` per env under
-``TILE_AXES``; the auto-reset merges with ``env.select``; ``warp_worlds`` >= seeds x ``num_envs``) and the curriculum
-(``curriculum.walker``: ``Harness.layout`` makes one bank of the trials' current terrains per chunk, trial i on tile
-i; ``tile_distances`` evaluates on a tile; ``warp_worlds`` >= trials x max(``num_envs``, ``attempts``)).
+* ``difficulty`` / ``rollout`` (``batched_distances`` and the rollout pool): with ``env.config.tiles >= 1`` or
+  ``backend="warp"`` the ``[B, H, W]`` terrains become one bank and each walk gets ``bank.at(i)`` (the pool keeps each
+  slot's tile index and merges states with ``env.select``); the env is sized per call (tiles = terrains,
+  ``warp_worlds`` = the envs stepped together).
+* ``rl.ppo``: the terrain may be ``bank.at(i)`` shared by all envs or ``bank.at(idx)`` per env under ``TILE_AXES``;
+  the auto-reset merges with ``env.select``; ``warp_worlds`` >= seeds x ``num_envs``.
+* the curriculum (``curriculum.walker``): ``Harness.layout`` makes one bank of the trials' current terrains per
+  chunk, trial i on tile i; ``tile_distances`` evaluates on a tile; ``warp_worlds`` >= trials x max(``num_envs``,
+  ``attempts``).
+* ``traversability.walk`` and ``report.render``: positions are read relative to ``env.tile_origin(index)``.
 """
 
 from __future__ import annotations
