@@ -189,19 +189,10 @@ def _programs(scoring: S.Scoring, emitter: ME.Emitter, cache: dict | None):
 # ----------------------------------------------------------------------------------------------------------------
 
 
-def evolve(
-    generator,
-    descriptors,
-    config: A.EvolveConfig,
-    key: jax.Array,
-    fitness_fn: A.FitnessFn | None = None,
-    checkpoint_dir: str | os.PathLike | None = None,
-    progress: bool | Callable[[dict], None] = True,
-    traversable_fn: Callable[[jax.Array], jax.Array] | None = None,
-    generator_options: dict | None = None,
-    compile_cache: dict | None = None,
-    mesh=None,
-) -> A.Archive:
+def evolve(generator, descriptors, config: A.EvolveConfig, key: jax.Array, fitness_fn: A.FitnessFn | None = None,
+           checkpoint_dir: str | os.PathLike | None = None, progress: bool | Callable[[dict], None] = True,
+           traversable_fn: Callable[[jax.Array], jax.Array] | None = None, generator_options: dict | None = None,
+           compile_cache: dict | None = None, mesh=None) -> A.Archive:
     """Run MAP-Elites for one generator and one descriptor pair; returns the final :class:`~jaxterrain.archive.Archive`.
 
     Args:
@@ -233,6 +224,31 @@ def evolve(
         gives the same archive on any number of devices (module docstring). Speed only: a run may resume on
         another device count.
     """
+    generator, descriptors, config = _resolve_one(generator, descriptors, config, generator_options)
+    scoring, emitter = problem(generator, descriptors, config, fitness_fn, traversable_fn, mesh=mesh)
+    init, chunk = _programs(scoring, emitter, compile_cache)
+    meta = {"generator": generator.name, "config": _resume_signature(config), "key": _key_data(key).tolist()}
+    run_dir = None if checkpoint_dir is None else Path(checkpoint_dir)
+    restored = None if run_dir is None else _restore(run_dir, _template(key, scoring, emitter, config), meta,
+                                                     config.generations)
+    report = _progress(progress, generator.name, config)
+    if restored is None:
+        state, history = _start(init, key, scoring.task, config, run_dir, meta, report)
+    else:
+        state, done, history, _ = restored
+        if callable(report):
+            report({"event": "resume", "generation": done})
+    chunk_fn, on_chunk = _chunk_callbacks(chunk, key, config, history, report)
+    state, _, history = driver.run_chunks(
+        chunk_fn, state, total=config.generations, every=config.checkpoint_every, start=int(state.generation),
+        history=history, run_dir=run_dir, key_metric="coverage", progress=on_chunk if callable(report) else report,
+        desc=generator.name, unit="gen", meta=meta)
+    return to_archive(generator, state.repertoire, config, history)
+
+
+def _resolve_one(generator, descriptors, config: A.EvolveConfig, generator_options: dict | None):
+    """``(generator, descriptors, config)`` of :func:`evolve`'s arguments: a generator name looked up, a pair of
+    descriptor names moved into the config (descriptors then None), the config resolved."""
     if isinstance(generator, str):
         from jaxterrain import generators as _generators
 
@@ -240,31 +256,40 @@ def evolve(
     if descriptors is not None and not callable(descriptors):
         config = config._replace(descriptors=tuple(descriptors))
         descriptors = None
-    config = A.resolve_config(config)
-    scoring, emitter = problem(generator, descriptors, config, fitness_fn, traversable_fn, mesh=mesh)
-    init, chunk = _programs(scoring, emitter, compile_cache)
-    meta = {"generator": generator.name, "config": _resume_signature(config), "key": _key_data(key).tolist()}
-    run_dir = None if checkpoint_dir is None else Path(checkpoint_dir)
-    restored = None
-    if run_dir is not None:
-        restored = driver.restore(run_dir, like=_template(key, scoring, emitter, config))
-        if restored is not None:
-            _check_meta(run_dir, restored[3], meta, restored[1], config.generations)
-    report = _progress(progress, generator.name, config)
-    if restored is None:
-        t0 = time.perf_counter()
-        state, metrics0 = init(key, A.centroids_for(config), scoring.task)
-        history = {k: [float(v)] for k, v in jax.device_get(metrics0).items()}
-        if run_dir is not None:
-            run_dir.mkdir(parents=True, exist_ok=True)
-            driver.save_checkpoint(run_dir / driver.CHECKPOINT_NAME, state, done=0, history=history, meta=meta)
-        if callable(report):
-            report(_line(0, config.generations, history, time.perf_counter() - t0, config.initial_population))
-    else:
-        state, done, history, _ = restored
-        if callable(report):
-            report({"event": "resume", "generation": done})
+    return generator, descriptors, A.resolve_config(config)
 
+
+def _restore(run_dir: Path, like, meta: dict, generations: int):
+    """``driver.restore(run_dir, like)`` (None when the folder holds no checkpoint); a checkpoint of another run
+    (``meta`` differs, or it is past ``generations``) is refused with a ``ValueError``."""
+    restored = driver.restore(run_dir, like=like)
+    if restored is not None:
+        _check_meta(run_dir, restored[3], meta, restored[1], generations)
+    return restored
+
+
+def _save_first(run_dir: Path | None, state, history: dict, meta: dict) -> None:
+    """Generation 0's checkpoint in ``run_dir`` (created); nothing without a folder."""
+    if run_dir is not None:
+        run_dir.mkdir(parents=True, exist_ok=True)
+        driver.save_checkpoint(run_dir / driver.CHECKPOINT_NAME, state, done=0, history=history, meta=meta)
+
+
+def _start(init, key, task, config: A.EvolveConfig, run_dir: Path | None, meta: dict, report):
+    """Generation 0 of :func:`evolve`: ``(state, history)``, checkpointed and, with a callable ``report``, reported
+    (its seconds include the checkpoint)."""
+    t0 = time.perf_counter()
+    state, metrics0 = init(key, A.centroids_for(config), task)
+    history = {k: [float(v)] for k, v in jax.device_get(metrics0).items()}
+    _save_first(run_dir, state, history, meta)
+    if callable(report):
+        report(_line(0, config.generations, history, time.perf_counter() - t0, config.initial_population))
+    return state, history
+
+
+def _chunk_callbacks(chunk, key, config: A.EvolveConfig, history: dict, report):
+    """:func:`evolve`'s ``chunk_fn(state, start, stop)`` and ``on_chunk(info)`` for ``driver.run_chunks``: the jitted
+    chunk, whose metrics are kept for the per-chunk :func:`_line` dicts that ``on_chunk`` passes to ``report``."""
     seen = {k: list(v) for k, v in history.items()}  # for the per-chunk lines (the driver keeps its own copy)
 
     def chunk_fn(state, start, stop):
@@ -277,11 +302,7 @@ def evolve(
         evaluations = round(info["steps_per_s"] * info["seconds"]) * config.batch_size
         report(_line(info["done"], config.generations, seen, info["seconds"], evaluations))
 
-    state, done, history = driver.run_chunks(
-        chunk_fn, state, total=config.generations, every=config.checkpoint_every, start=int(state.generation),
-        history=history, run_dir=run_dir, key_metric="coverage", progress=on_chunk if callable(report) else report,
-        desc=generator.name, unit="gen", meta=meta)
-    return to_archive(generator, state.repertoire, config, history)
+    return chunk_fn, on_chunk
 
 
 class Treatment(NamedTuple):
@@ -296,19 +317,11 @@ def _stack(trees):
     return jax.tree.map(lambda *xs: jnp.stack(xs), *trees)
 
 
-def evolve_many(
-    treatments: Sequence[Treatment],
-    config: A.EvolveConfig,
-    key: jax.Array,
-    fitness_fn: A.FitnessFn | None = None,
-    checkpoint_dir: str | os.PathLike | None = None,
-    progress: bool | Callable[[dict], None] = True,
-    traversable_fn: Callable[[jax.Array], jax.Array] | None = None,
-    generator_options: dict | None = None,
-    ranges: dict | None = None,
-    compile_cache: dict | None = None,
-    mesh=None,
-) -> list[A.Archive]:
+def evolve_many(treatments: Sequence[Treatment], config: A.EvolveConfig, key: jax.Array,
+                fitness_fn: A.FitnessFn | None = None, checkpoint_dir: str | os.PathLike | None = None,
+                progress: bool | Callable[[dict], None] = True,
+                traversable_fn: Callable[[jax.Array], jax.Array] | None = None, generator_options: dict | None = None,
+                ranges: dict | None = None, compile_cache: dict | None = None, mesh=None) -> list[A.Archive]:
     """Evolve several treatments at once: one jitted generation steps them all (:func:`map_elites.multi_step`).
 
     Treatments of one generator form a batch (``vmap``; their descriptor pairs are indices into one descriptor
@@ -338,6 +351,35 @@ def evolve_many(
     Returns:
       one :class:`~jaxterrain.archive.Archive` per treatment, in order.
     """
+    treatments, names, gens, size, configs = _resolve_many(treatments, config, generator_options, ranges)
+    config = configs[0]
+    fitness = default_fitness(size, config) if fitness_fn is None else fitness_fn
+    groups, scorings, emitters, states, keys, history = _init_many(treatments, configs, names, gens, fitness,
+                                                                   traversable_fn, compile_cache, mesh)
+    history["coverage"] = [float(np.mean([history[f"coverage/{i}"][0] for i in range(len(treatments))]))]
+    meta = {"treatments": [[t.generator, list(t.descriptors), _key_data(t.key).tolist()] for t in treatments],
+            "config": _resume_signature(config._replace(descriptors=("-", "-"), ranges=((0, 1), (0, 1)))),
+            "key": _key_data(key).tolist(), "ranges": ranges and {k: list(v) for k, v in ranges.items()}}
+    run_dir = None if checkpoint_dir is None else Path(checkpoint_dir)
+    restored = None if run_dir is None else _restore(run_dir, states, meta, config.generations)
+    done = 0
+    if restored is not None:
+        states, done, history, _ = restored
+    else:
+        _save_first(run_dir, states, history, meta)
+    chunk = _many_program(scorings, emitters, fitness, mesh, compile_cache)
+    chunk_fn, on_chunk = _many_callbacks(chunk, keys, key, groups, config, len(treatments), progress)
+    states, done, history = driver.run_chunks(
+        chunk_fn, states, total=config.generations, every=config.checkpoint_every, start=done, history=history,
+        run_dir=run_dir, key_metric="coverage", progress=on_chunk if callable(progress) else bool(progress),
+        desc=f"{len(treatments)} treatments", unit="gen", meta=meta)
+    return _many_archives(states, groups, gens, configs, history)
+
+
+def _resolve_many(treatments, config: A.EvolveConfig, generator_options: dict | None, ranges: dict | None):
+    """``(treatments, names, {generator name: Generator}, size, configs)`` of :func:`evolve_many`'s arguments:
+    ``names`` is the union of the treatments' descriptor names (first seen first), ``size`` the one size every
+    generator renders, ``configs`` one resolved config per treatment (its pair and ranges)."""
     from jaxterrain import generators as _generators
 
     treatments = [Treatment(t[0], tuple(t[1]), t[2]) for t in treatments]
@@ -352,27 +394,19 @@ def evolve_many(
     for t in treatments:
         r = None if ranges is None else tuple(tuple(ranges[n]) for n in t.descriptors)
         configs.append(A.resolve_config(config._replace(descriptors=t.descriptors, ranges=r)))
-    config = configs[0]
-    fitness = default_fitness(sizes.pop(), config) if fitness_fn is None else fitness_fn
-    groups, scorings, emitters, states, keys, history = _init_many(treatments, configs, names, gens, fitness,
-                                                                   traversable_fn, compile_cache, mesh)
-    history["coverage"] = [float(np.mean([history[f"coverage/{i}"][0] for i in range(len(treatments))]))]
-    meta = {"treatments": [[t.generator, list(t.descriptors), _key_data(t.key).tolist()] for t in treatments],
-            "config": _resume_signature(config._replace(descriptors=("-", "-"), ranges=((0, 1), (0, 1)))),
-            "key": _key_data(key).tolist(), "ranges": ranges and {k: list(v) for k, v in ranges.items()}}
-    run_dir = None if checkpoint_dir is None else Path(checkpoint_dir)
-    done = 0
-    if run_dir is not None:
-        restored = driver.restore(run_dir, like=states)
-        if restored is not None:
-            _check_meta(run_dir, restored[3], meta, restored[1], config.generations)
-            states, done, history, _ = restored
-        else:
-            run_dir.mkdir(parents=True, exist_ok=True)
-            driver.save_checkpoint(run_dir / driver.CHECKPOINT_NAME, states, done=0, history=history, meta=meta)
+    return treatments, names, gens, sizes.pop(), configs
+
+
+def _many_program(scorings, emitters, fitness, mesh, cache: dict | None):
+    """The jitted chunk of :func:`evolve_many` (:func:`_many_chunk`), kept in ``cache`` under what determines it."""
     fns = tuple((s.render_one, s.descriptor_fn, s.traversable_fn) for s in scorings)
-    chunk = _compiled(compile_cache, ("many", fns, tuple(emitters), fitness, mesh),
-                      lambda: _many_chunk(tuple(scorings), tuple(emitters), fitness, mesh))
+    return _compiled(cache, ("many", fns, tuple(emitters), fitness, mesh),
+                     lambda: _many_chunk(tuple(scorings), tuple(emitters), fitness, mesh))
+
+
+def _many_callbacks(chunk, keys, key, groups: dict, config: A.EvolveConfig, count: int, progress):
+    """:func:`evolve_many`'s ``chunk_fn(states, start, stop)`` (metrics per group -> ``<metric>/<treatment index>``
+    columns plus the mean ``coverage``) and ``on_chunk(info)`` (a dict per chunk to a callable ``progress``)."""
     order = [i for members in groups.values() for i in members]
 
     def chunk_fn(states, start, stop):
@@ -386,15 +420,10 @@ def evolve_many(
 
     def on_chunk(info):
         progress({"event": "chunk", "generation": info["done"], "generations": config.generations,
-                  "seconds": info["seconds"],
-                  "evaluations_per_s": info["steps_per_s"] * config.batch_size * len(treatments),
-                  "coverage": [info[f"coverage/{i}"] for i in range(len(treatments))]})
+                  "seconds": info["seconds"], "evaluations_per_s": info["steps_per_s"] * config.batch_size * count,
+                  "coverage": [info[f"coverage/{i}"] for i in range(count)]})
 
-    states, done, history = driver.run_chunks(
-        chunk_fn, states, total=config.generations, every=config.checkpoint_every, start=done, history=history,
-        run_dir=run_dir, key_metric="coverage", progress=on_chunk if callable(progress) else bool(progress),
-        desc=f"{len(treatments)} treatments", unit="gen", meta=meta)
-    return _many_archives(states, groups, gens, configs, history)
+    return chunk_fn, on_chunk
 
 
 def _init_many(treatments, configs, names, gens, fitness, traversable, cache, mesh=None):
