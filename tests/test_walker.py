@@ -21,8 +21,10 @@ def env():
     return WalkerEnv(CFG)
 
 
-# cheaper XLA CPU compiles (these tiny runs need no optimised code): ~35 % less compile CPU time
-FAST_COMPILE = {"xla_backend_optimization_level": 0, "xla_llvm_disable_expensive_passes": True}
+# cheaper XLA CPU compiles (these tiny runs need no optimised code): lowest backend optimisation and the classic
+# elemental emitter instead of the fusion emitters, every program of this module compiled alike
+FAST_COMPILE = {"xla_backend_optimization_level": 0, "xla_llvm_disable_expensive_passes": True,
+                "xla_cpu_use_fusion_emitters": False}
 
 
 @pytest.fixture(scope="module")
