@@ -420,10 +420,18 @@ def test_learn_rejects_bad_input_with_one_line_naming_it(tmp_path, tiny_archive,
     assert "observations 53" in err[0]
 
 
-def test_learn_smoke_end_to_end(tmp_path, tiny_archive):
-    out = tmp_path / "learn"
+@pytest.fixture(scope="module")
+def learn_smoke(tmp_path_factory, tiny_archive):
+    """``(archive, run folder)``: ONE uninterrupted ``learn --preset smoke`` run on the 4-terrain archive, shared by
+    the end-to-end test and the time-limit test (its uninterrupted reference)."""
     archive = tiny_archive(4, "four.npz")
+    out = tmp_path_factory.mktemp("learn") / "whole"
     assert cli("learn", "--preset", "smoke", "--archive", archive, "--out", str(out)) == 0
+    return archive, out
+
+
+def test_learn_smoke_end_to_end(learn_smoke):
+    _, out = learn_smoke
     cfg = json.loads((out / "config.json").read_text())
     assert cfg["trials"] == 2 and cfg["curriculum"] == "map" and cfg["command"] == "learn"
     summary = json.loads((out / "summary.json").read_text())
@@ -458,13 +466,13 @@ def test_curriculum_tables_put_the_papers_numbers_beside_ours(tmp_path):
     assert (tmp_path / "figure7a.png").stat().st_size > 0 and (tmp_path / "figure7b.png").stat().st_size > 0
 
 
-def test_learn_killed_by_its_time_limit_resumes_to_the_uninterrupted_curves(tmp_path, tiny_archive):
+def test_learn_killed_by_its_time_limit_resumes_to_the_uninterrupted_curves(tmp_path, learn_smoke):
     """Issue 13: a treatment stopped after its first block (``--time-limit``, as a killed run restarts from its last
     checkpoint) and resumed ends with the same history, sequences and milestones as an uninterrupted one (same
-    device, same seed). The compiled block is shared with the other smoke runs of this module."""
-    archive = tiny_archive(4, "four.npz")
-    whole, parts = tmp_path / "whole", tmp_path / "parts"
-    assert cli("learn", "--preset", "smoke", "--archive", archive, "--out", str(whole)) == 0
+    device, same seed: the module's smoke run). The compiled block is shared with the other smoke runs of this
+    module."""
+    archive, whole = learn_smoke
+    parts = tmp_path / "parts"
     assert cli("learn", "--preset", "smoke", "--archive", archive, "--out", str(parts), "--time-limit", "1e-6") == 3
     assert not (parts / "summary.json").exists() and (parts / "checkpoint.npz").exists()
     assert cli("learn", "--resume", str(parts)) == 0
