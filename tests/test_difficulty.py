@@ -105,40 +105,28 @@ def test_chunked_matches_compiled_shape(flat_pair):
     np.testing.assert_array_equal(d[2], run(jnp.stack([three[2], three[2]]), keys[1])[0])
 
 
-# Cheaper XLA CPU compiles for the programs these tests compile themselves (never compared with a program compiled
-# otherwise): lowest backend optimisation, and the classic elemental emitter instead of the fusion emitters. The
-# walker's rollout programs compile ~3x faster and run ~5x slower, a win for programs run a few times.
-FAST_COMPILE = {"xla_backend_optimization_level": 0, "xla_llvm_disable_expensive_passes": True,
-                "xla_cpu_use_fusion_emitters": False}
-
-
 def test_pooled_slots_give_the_same_rollouts(flat_pair):
     """3 env slots fed from the queue of the needed rollouts (refills after episodes of different lengths) give each
-    rollout's distance and length as the all-at-once call does; terrains not needed are never walked (0, 0).
-    Both loops are in ONE program compiled here (each result is compared with the other of the same call)."""
+    rollout's distance and length as the all-at-once call does; terrains not needed are never walked (0, 0)."""
     bumpy = jnp.asarray(np.random.default_rng(0).random((32, 32)), jnp.float32) * 0.6
     terrains = jnp.stack([flat_pair[0], bumpy]) * SCALE.height
     params = _params(gain=0.8, bias=0.05)
     key = jax.random.PRNGKey(3)
+    d_all, n_all = difficulty._compiled(CFG, ATTEMPTS, linear_policy, True, None)(terrains, key, params)  # shared
     env = difficulty.make_env(CFG)
-
-    def pooled_and_all(t, k, p, needed, priority):
-        pooled = difficulty.batched_distances(env, linear_policy, t, k, ATTEMPTS, p, slots=3, needed=needed,
-                                              priority=priority)
-        return pooled, difficulty.batched_distances(env, linear_policy, t, k, ATTEMPTS, p)  # all at once
-
-    args = (terrains, key, params, jnp.array([False, True]), jnp.zeros(2))
-    both = jax.jit(pooled_and_all).lower(*args).compile(FAST_COMPILE)
-    (d_pool, n_pool), (d_all, n_all) = both(*args)
+    pooled = jax.jit(lambda t, k, p, needed, priority: difficulty.batched_distances(
+        env, linear_policy, t, k, ATTEMPTS, p, slots=3, needed=needed, priority=priority))
+    d_pool, n_pool = pooled(terrains, key, params, jnp.array([False, True]), jnp.zeros(2))
     assert len(set(np.asarray(n_all[1]).tolist())) > 1  # the episodes really end at different steps
     np.testing.assert_array_equal(np.asarray(n_pool[1]), np.asarray(n_all[1]))
     np.testing.assert_allclose(np.asarray(d_pool[1]), np.asarray(d_all[1]), atol=1e-5)
     np.testing.assert_array_equal(np.asarray(n_pool[0]), 0)
     np.testing.assert_array_equal(np.asarray(d_pool[0]), 0.0)
     # both terrains walked, in two queue orders (terrain 1 first, then terrain 0 first): same rollouts either way
-    both_needed = jnp.array([True, True])
-    for priority in (jnp.array([0.0, 1.0]), difficulty.smoothness_priority(terrains)):  # the second: flat first
-        (d, n), (d_all, n_all) = both(terrains, key, params, both_needed, priority)
+    both = jnp.array([True, True])
+    d1, n1 = pooled(terrains, key, params, both, jnp.array([0.0, 1.0]))
+    d0, n0 = pooled(terrains, key, params, both, difficulty.smoothness_priority(terrains))  # flat first
+    for d, n in ((d1, n1), (d0, n0)):
         np.testing.assert_array_equal(np.asarray(n), np.asarray(n_all))
         np.testing.assert_allclose(np.asarray(d), np.asarray(d_all), atol=1e-5)
     with pytest.raises(ValueError, match="slots"):
@@ -286,6 +274,12 @@ def test_default_protocol_is_the_existing_computation(flat_pair):
     got = difficulty.evaluate(bumpy, key, protocol=difficulty.Protocol(ATTEMPTS, BEST), **kw)
     np.testing.assert_array_equal(np.asarray(got), want)
     np.testing.assert_array_equal(np.asarray(difficulty.evaluate(bumpy, key, ATTEMPTS, BEST, **kw)), want)
+
+
+# cheaper XLA CPU compiles for a program only compared with itself (as in test_walker.py): lowest backend
+# optimisation, and the classic elemental emitter instead of the fusion emitters
+FAST_COMPILE = {"xla_backend_optimization_level": 0, "xla_llvm_disable_expensive_passes": True,
+                "xla_cpu_use_fusion_emitters": False}
 
 
 def test_fitness_fn_is_the_paper_computation():
