@@ -442,7 +442,7 @@ def test_worley_tiled_equals_bracket_and_falls_back_on_overflow(monkeypatch):
         lo, hi, _ = worley_mod._bracket_bounds(dy2, dx2, jnp.round(g[2]))
         return worley_mod._tile_lists(dy2, dx2, lo, hi, worley_mod._TILE, 8)[3]
 
-    flags = np.asarray(jax.vmap(overflow)(genomes))
+    flags = np.asarray(jax.jit(jax.vmap(overflow))(genomes))  # one compile, not one per operation
     assert flags.any() and not flags.all(), flags  # a mixed batch: both paths are exercised
     np.testing.assert_array_equal(run("tiled"), bracket)
 
@@ -466,7 +466,7 @@ def test_worley_pallas_equals_sort_bit_for_bit(monkeypatch):
         lo, hi, _ = worley_mod._bracket_bounds(dy2, dx2, jnp.round(g[2]))
         return worley_mod._tile_lists(dy2, dx2, lo, hi, worley_mod._TILE, 96, pallas)
 
-    xla, ker = (jax.vmap(lambda g, p=p: lists(g, p))(genomes) for p in (False, True))
+    xla, ker = (jax.jit(jax.vmap(lambda g, p=p: lists(g, p)))(genomes) for p in (False, True))  # one compile each
     flags = np.asarray(xla[3])
     assert flags.any() and not flags.all(), flags  # a mixed batch: the fallback and the lists are both exercised
     for a, b in zip(xla[1:], ker[1:]):  # n_cand, inside, overflow
