@@ -258,7 +258,8 @@ def test_combined_generators_step_equals_separate_steps():
     scorings, emitters, states = [], [], []
     for g, gen in enumerate(gens):
         scoring, emitter = problem(gen, smooth, configs[0], (0, 1))
-        group = [ME.init(keys[g][t], scoring, emitter, A.centroids_for(c), S.task_for(c, p))[0]
+        init = jax.jit(lambda k, c, task, scoring=scoring, emitter=emitter: ME.init(k, scoring, emitter, c, task)[0])
+        group = [init(keys[g][t], A.centroids_for(c), S.task_for(c, p))  # one compile per generator
                  for t, (c, p) in enumerate(zip(configs, PAIRS))]
         scorings.append(scoring)
         emitters.append(emitter)
