@@ -134,9 +134,14 @@ def _terrain_axis(terrains, num_envs: int):
     raise ValueError(f"terrains must be [H, W] (shared) or [num_envs, H, W], got shape {terrains.shape}")
 
 
-def _batched_reset(env, key, terrains, num_envs):
+def _batched_reset(env, key, terrains, num_envs, rows=None):
+    """``num_envs`` reset envs keyed ``split(key, num_envs)``; ``rows = (start, total)``: envs ``start ..
+    start + num_envs`` of a batch of ``total`` (keys ``split(key, total)[start:start + num_envs]``)."""
     axis = _terrain_axis(terrains, num_envs)
-    keys = jax.random.split(key, num_envs)
+    if rows is None:
+        keys = jax.random.split(key, num_envs)
+    else:
+        keys = jax.lax.dynamic_slice_in_dim(jax.random.split(key, rows[1]), rows[0], num_envs)
     return jax.vmap(env.reset, in_axes=(0, axis))(keys, terrains)
 
 
@@ -227,25 +232,31 @@ def reset_envs(state: TrainState, key: jax.Array, terrains: jax.Array, *, env: E
 # ----------------------------------------------------------------------------------------------------------------
 # update = collect + GAE + epochs of minibatch SGD
 # ----------------------------------------------------------------------------------------------------------------
-def _collect(state: TrainState, key, terrains, env, config):
+def _collect(state: TrainState, key, terrains, env, config, rows=None):
     """``num_unrolls`` x ``unroll_length`` steps of all envs with auto-reset.
 
     Returns (env_state, episode, data: Transition [K, T, N, ...], bootstrap_obs [K, N, O]).
     Envs that finish reset into a pool of fresh ``env.reset`` states drawn once per update (one reset per env
-    per update instead of one per step). Non-finite observations end the episode (NaN-safety).
+    per update instead of one per step). Non-finite observations end the episode (NaN-safety). ``rows = (start,
+    total)``: these N envs are rows ``start .. start + N`` of a batch of ``total`` (one device's share, see
+    :func:`_collect_split`), and every random draw is that slice of the whole batch's draw.
     """
     n, dist = config.num_envs, config.action_distribution
     axis = _terrain_axis(terrains, n)
     v_step = jax.vmap(env.step, in_axes=(0, 0, axis))
     pool_key, unroll_key = jax.random.split(key)
     del key
-    pool = _batched_reset(env, pool_key, terrains, n)
+    pool = _batched_reset(env, pool_key, terrains, n, rows)
 
     def env_step(carry, step_key):
         env_state, ep = carry
         obs = env_state.obs
         loc, scale = nets.policy_apply(config, env.action_size, state.params, state.normaliser, obs)
-        raw = nets.sample_raw(step_key, loc, scale)
+        if rows is None:
+            raw = nets.sample_raw(step_key, loc, scale)
+        else:  # this device's rows of the whole batch's normal draw
+            noise = jax.random.normal(step_key, (rows[1],) + loc.shape[1:], loc.dtype)
+            raw = loc + scale * jax.lax.dynamic_slice_in_dim(noise, rows[0], n)
         logp = nets.log_prob(dist, loc, scale, raw)
         next_state = v_step(env_state, nets.postprocess(dist, raw), terrains)
         finite = jnp.all(jnp.isfinite(next_state.obs), axis=-1)
@@ -324,7 +335,8 @@ def update(state: TrainState, key: jax.Array, terrains: jax.Array, *, env: EnvLi
     that finished one; ``episodes``: episodes finished during this update).
 
     ``mesh`` (a ``jax.sharding.Mesh``, data parallel): the envs (and per-env terrains) are split over its devices,
-    each device steps its own; the policy, value net, normaliser and optimiser state are replicated. Every epoch
+    each device steps its own (under ``jax.shard_map`` when ``num_envs`` divides over the devices, so that
+    an opaque physics call such as MuJoCo Warp's runs per device; else XLA partitions the batched steps); the policy, value net, normaliser and optimiser state are replicated. Every epoch
     draws the same permutation as without a mesh, and each minibatch is split over the devices (padded to a
     multiple of the device count, the padding weighted 0): every device computes the gradient of its share of the
     minibatch loss, the gradients are summed (``psum``: their mean over the devices weighted by their rows) and
@@ -335,9 +347,12 @@ def update(state: TrainState, key: jax.Array, terrains: jax.Array, *, env: EnvLi
     key = _raw_key(key)
     collect_key, sgd_key = jax.random.split(key)
     del key
-    if mesh is not None:
-        state, terrains = _split_envs(state, terrains, config, mesh)
-    env_state, episode, data, bootstrap_obs = _collect(state, collect_key, terrains, env, config)
+    if mesh is not None and config.num_envs % mesh.devices.size == 0:
+        env_state, episode, data, bootstrap_obs = _collect_split(state, collect_key, terrains, env, config, mesh)
+    else:
+        if mesh is not None:  # envs that do not divide over the devices: XLA partitions the batched steps
+            state, terrains = _split_envs(state, terrains, config, mesh)
+        env_state, episode, data, bootstrap_obs = _collect(state, collect_key, terrains, env, config)
 
     normaliser = state.normaliser
     if config.normalize_observations:
@@ -424,6 +439,57 @@ def _sgd(params, opt_state, normaliser, segments: Transition, boots, key, *, con
 
     return jax.shard_map(epochs, mesh=mesh, in_specs=P(), out_specs=P(), check_vma=False)(
         params, opt_state, segments, boots, key)
+
+
+def _collect_split(state: TrainState, key, terrains, env, config: PPOConfig, mesh):
+    """:func:`_collect` with the envs split over ``mesh``'s devices under ``jax.shard_map``: each device steps its
+    own ``num_envs / devices`` envs (an opaque physics call such as MuJoCo Warp's runs per device, which XLA's
+    partitioner cannot split) with its slice of the one-device random draws, so the data equal :func:`_collect`'s
+    up to float rounding. ``num_envs`` must divide over the devices. Outputs split along their env axis."""
+    from jax.sharding import PartitionSpec as P
+
+    from jaxterrain import sharding
+
+    d, n = mesh.devices.size, config.num_envs
+    local = n // d
+    axis = _terrain_axis(terrains, n)
+    rows_spec = P(sharding.AXIS)
+    whole = jax.tree_util.tree_map(lambda _: P(), state)
+    state_spec = whole._replace(env_state=_env_specs(env, terrains, axis, rows_spec),
+                                episode=jax.tree_util.tree_map(lambda _: rows_spec, state.episode))
+    if axis is None:
+        terrain_spec = jax.tree_util.tree_map(lambda _: P(), terrains)
+    elif axis == 0:
+        terrain_spec = rows_spec
+    else:  # a Tile per env: the bank whole on every device, the indices split
+        terrain_spec = terrains._replace(bank=jax.tree_util.tree_map(lambda _: P(), terrains.bank), index=rows_spec)
+
+    def collect(state, key, terrains):
+        start = jax.lax.axis_index(sharding.AXIS) * local
+        return _collect(state, key, terrains, env, config._replace(num_envs=local), rows=(start, n))
+
+    out_specs = (state_spec.env_state, rows_spec, P(None, None, sharding.AXIS), P(None, sharding.AXIS))
+    return jax.shard_map(collect, mesh=mesh, in_specs=(state_spec, P(), terrain_spec), out_specs=out_specs,
+                         check_vma=False)(state, key, terrains)
+
+
+def _env_specs(env, terrains, axis, rows_spec):
+    """The ``PartitionSpec`` of every leaf of a batched env state: ``rows_spec`` for per-env leaves, ``P()`` for
+    leaves the batch shares (MuJoCo Warp's contact counters and buffers, whose values each step recomputes). Told
+    apart by their shapes (``jax.eval_shape``, nothing runs) at two batch sizes."""
+    from jax.sharding import PartitionSpec as P
+
+    if axis is None:
+        one = terrains
+    elif axis == 0:
+        one = terrains[0]
+    else:
+        one = terrains._replace(index=terrains.index[0])
+
+    def shapes(n):
+        return jax.eval_shape(lambda k, t: _batched_reset(env, k, t, n), jax.random.PRNGKey(0), one)
+
+    return jax.tree_util.tree_map(lambda a, b: rows_spec if a.shape[:1] != b.shape[:1] else P(), shapes(2), shapes(3))
 
 
 def _split_envs(state: TrainState, terrains: jax.Array, config: PPOConfig, mesh):
