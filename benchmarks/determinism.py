@@ -5,6 +5,8 @@
 Runs itself twice in child processes, once with XLA's default GPU kernels and once with
 ``XLA_FLAGS=--xla_gpu_deterministic_ops=true`` (deterministic scatter / reduction algorithms), and in each:
 
+``--backend warp``: the walker on MuJoCo Warp (tiles); its kernels are Warp's, which XLA's flag does not reach.
+
 1. ``difficulty.evaluate`` (the paper's protocol: 20 attempts, best 5) on ``--terrains`` Perlin terrains, twice with
    the same key: the largest fitness difference, the number of terrains that differ, and the seconds per call
    (median of ``--repeats`` after a compile call);
@@ -38,14 +40,19 @@ def child(args) -> dict:
     import jax.numpy as jnp
     import numpy as np
 
-    from jaxterrain import difficulty, generators
+    from jaxterrain import difficulty, generators, walker
     from jaxterrain.terrain import TerrainScale
 
     gen = generators.get("perlin")
     hm = gen.render(gen.sample(jax.random.key(3), args.terrains))
     hm = jax.image.resize(hm, (hm.shape[0], args.size, args.size), "linear") if hm.shape[1] != args.size else hm
     key = jax.random.key(7)
-    fn = difficulty.evaluate  # validates on the host, compiles its rollout once per shape
+    policy = difficulty.default_policy()
+    cfg = difficulty.default_env_config((args.size, args.size), TerrainScale(), policy, backend=args.backend)
+
+    def fn(h, k):  # validates on the host, compiles its rollout once per shape
+        return difficulty.evaluate(h, k, env_config=cfg)
+
     a = np.asarray(fn(hm, key))  # compile + first call
     times, runs = [], []
     for _ in range(args.repeats):
@@ -53,23 +60,24 @@ def child(args) -> dict:
         runs.append(np.asarray(jax.block_until_ready(fn(hm, key))))
         times.append(time.perf_counter() - t0)
     diffs = [np.abs(r - a) for r in runs]
-    out = {"flags": os.environ.get("XLA_FLAGS", ""), "device": str(jax.devices()[0].device_kind),
+    out = {"backend": args.backend, "flags": os.environ.get("XLA_FLAGS", ""), "device": str(jax.devices()[0].device_kind),
            "seconds_per_call": float(np.median(times)), "fitness_mean": float(a.mean()),
            "max_fitness_diff": float(max(d.max() for d in diffs)),
            "terrains_differing": int(max((d > 0).sum() for d in diffs))}
 
     # physics alone: same states, same actions, twice
-    policy = difficulty.default_policy()
-    env = difficulty.make_env(difficulty.default_env_config((args.size, args.size), TerrainScale(),
-                                                            policy))
-    terrains = hm * 1.0
+    if cfg.tiles:  # MuJoCo Warp: the terrains are tiles of one bank, one env per tile
+        cfg = cfg._replace(tiles=args.terrains, warp_worlds=args.terrains)
+    env = difficulty.make_env(cfg)
+    terrains, axes = (env.make_bank(hm * 1.0).at(jnp.arange(args.terrains)), walker.TILE_AXES) if cfg.tiles else (
+        hm * 1.0, 0)
     keys = jax.random.split(jax.random.key(1), args.terrains)
-    states = jax.jit(jax.vmap(env.reset))(keys, terrains)
+    states = jax.jit(jax.vmap(env.reset, in_axes=(0, axes)))(keys, terrains)
     acts = jax.random.uniform(jax.random.key(2), (args.terrains, env.action_size), minval=-1, maxval=1)
 
     @jax.jit
     def walk(s, n):
-        step = jax.vmap(env.step)
+        step = jax.vmap(env.step, in_axes=(0, 0, axes))
         return jax.lax.fori_loop(0, n, lambda i, s: step(s, acts, terrains), s)
 
     for n in (1, 10, 100):
@@ -88,6 +96,7 @@ def main() -> None:
     p.add_argument("--terrains", type=int, default=64)
     p.add_argument("--size", type=int, default=256)
     p.add_argument("--repeats", type=int, default=3)
+    p.add_argument("--backend", default="jax", choices=("jax", "warp"), help="walker physics (warp: MuJoCo Warp)")
     p.add_argument("--out", default=None)
     p.add_argument("--child", action="store_true", help=argparse.SUPPRESS)
     args = p.parse_args()
@@ -104,7 +113,7 @@ def main() -> None:
         e = dict(os.environ)
         e["XLA_FLAGS"] = (e.get("XLA_FLAGS", "") + " " + flags).strip()
         cmd = [sys.executable, __file__, "--child", "--terrains", str(args.terrains), "--size", str(args.size),
-               "--repeats", str(args.repeats)]
+               "--repeats", str(args.repeats), "--backend", args.backend]
         res = subprocess.run(cmd, env=e, capture_output=True, text=True)
         if res.returncode:
             print(res.stderr[-3000:], flush=True)
@@ -114,7 +123,7 @@ def main() -> None:
         rows.append(row)
         print(row, flush=True)
     rows[1]["cost_vs_default"] = rows[1]["seconds_per_call"] / rows[0]["seconds_per_call"]
-    cols = ["mode", "seconds_per_call", "cost_vs_default", "max_fitness_diff", "terrains_differing",
+    cols = ["backend", "mode", "seconds_per_call", "cost_vs_default", "max_fitness_diff", "terrains_differing",
             "physics_max_qpos_diff_after_1", "physics_max_qpos_diff_after_10", "physics_max_qpos_diff_after_100",
             "policy_max_action_diff"]
     print()
