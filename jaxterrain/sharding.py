@@ -23,7 +23,7 @@ import jax.numpy as jnp
 import numpy as np
 from jax.sharding import Mesh, NamedSharding, PartitionSpec as P
 
-__all__ = ["AXIS", "initialize", "make_mesh", "setup", "map_rows", "pad_rows", "padded_length", "replicate",
+__all__ = ["AXIS", "SPLITS", "default_split", "initialize", "make_mesh", "setup", "map_rows", "pad_rows", "padded_length", "replicate",
            "replicated", "rows", "row_keys", "shard_rows"]
 
 AXIS = "batch"
@@ -154,7 +154,27 @@ def replicate(tree: Any, mesh: Mesh) -> Any:
     return jax.tree.map(lambda x: _put(x, whole), tree)
 
 
-def map_rows(fn: Callable, mesh: Mesh, replicated: tuple[int, ...] = (), mask: bool = False) -> Callable:
+SPLITS = ("shard_map", "dispatch")
+
+
+def default_split(mesh: Mesh) -> str:
+    """How :func:`map_rows` splits rows over ``mesh`` unless told: ``$JAXTERRAIN_SPLIT`` when set (one of
+    :data:`SPLITS`), else ``"dispatch"`` for a mesh of this process's GPUs and ``"shard_map"`` otherwise (CPU,
+    several processes). Why GPUs dispatch: JAX 0.11.2's CUDA plugin crashes compiling the walker's physics step
+    inside ``shard_map`` (a segfault in Shardy's ``ManualComputationUnusedInputsPattern``; under GSPMD a failed
+    ``!IsManualLeaf()`` check), measured on 2 H200s on 2026-11-23 (benchmarks/RESULTS.md)."""
+    how = os.environ.get("JAXTERRAIN_SPLIT")
+    if how:
+        if how not in SPLITS:
+            raise ValueError(f"JAXTERRAIN_SPLIT must be one of {SPLITS}, got {how!r}")
+        return how
+    devices = list(mesh.devices.flat)
+    local = all(d.process_index == jax.process_index() for d in devices)
+    return "dispatch" if local and len(devices) > 1 and devices[0].platform == "gpu" else "shard_map"
+
+
+def map_rows(fn: Callable, mesh: Mesh, replicated: tuple[int, ...] = (), mask: bool = False,
+             split: Optional[str] = None) -> Callable:
     """``fn(*args)`` with the rows (leading axis) of every argument split over the mesh's devices.
 
     ``fn`` maps batched arguments to a batched result (a pytree of arrays whose leading axis is the rows) and must
@@ -164,7 +184,17 @@ def map_rows(fn: Callable, mesh: Mesh, replicated: tuple[int, ...] = (), mask: b
     device (replicated: any process of a multi-host run can read them). Arguments already placed elsewhere (e.g.
     the output of a program compiled for one device) are first put whole on the mesh. With ``mask``, ``fn`` gets
     one more, last argument: ``[rows] bool``, False on the padding rows (e.g. to skip their work).
+
+    ``split`` (None: :func:`default_split`): ``"shard_map"`` compiles ONE program over the mesh (any number of
+    processes); ``"dispatch"`` (this process's devices only) compiles ``jax.jit(fn)`` once per device, sends each
+    device its rows and lets JAX's asynchronous dispatch run them all at once, then gathers the real rows on the
+    mesh's first device. Both give the same values: the rows are independent.
     """
+    split = default_split(mesh) if split is None else split
+    if split not in SPLITS:
+        raise ValueError(f"split must be one of {SPLITS}, got {split!r}")
+    if split == "dispatch":
+        return _dispatch_rows(fn, mesh, frozenset(replicated), mask)
     replicated, whole = frozenset(replicated), NamedSharding(mesh, P())
 
     def run(*args):
@@ -182,5 +212,40 @@ def map_rows(fn: Callable, mesh: Mesh, replicated: tuple[int, ...] = (), mask: b
 
     def call(*args):
         return jitted(*jax.tree.map(lambda x: _put(x, whole) if _elsewhere(x, whole) else x, args))
+
+    return call
+
+
+def _dispatch_rows(fn: Callable, mesh: Mesh, replicated: frozenset, mask: bool) -> Callable:
+    """:func:`map_rows` with ``split="dispatch"``: one single-device program per device of ``mesh`` (this
+    process's), each device's rows sent to it, the calls issued from one thread per device (their first calls
+    compile at the same time; later calls only enqueue work), the real rows gathered on the first device."""
+    from concurrent.futures import ThreadPoolExecutor
+
+    devices = list(mesh.devices.flat)
+    if any(d.process_index != jax.process_index() for d in devices):
+        raise ValueError("map_rows(split='dispatch') needs a mesh of this process's devices; use 'shard_map'")
+    jitted, d = jax.jit(fn), len(devices)
+
+    def call(*args):
+        batched = [a for i, a in enumerate(args) if i not in replicated]
+        n = jax.tree.leaves(batched)[0].shape[0]
+        length = padded_length(n, mesh)
+        local = length // d
+        padded = [a if i in replicated else pad_rows(a, length) for i, a in enumerate(args)]
+        if mask:
+            padded.append(jnp.arange(length) < n)
+        rows = [i not in replicated for i in range(len(args))] + ([True] if mask else [])
+
+        def part(k: int):
+            dev = devices[k]
+            mine = [jax.device_put(jax.tree.map(lambda x: x[k * local:(k + 1) * local], a) if r else a, dev)
+                    for a, r in zip(padded, rows)]
+            return jitted(*mine)
+
+        with ThreadPoolExecutor(d) as pool:
+            outs = list(pool.map(part, range(d)))
+        first = devices[0]
+        return jax.tree.map(lambda *xs: jnp.concatenate([jax.device_put(x, first) for x in xs])[:n], *outs)
 
     return call

@@ -347,7 +347,7 @@ def update(state: TrainState, key: jax.Array, terrains: jax.Array, *, env: EnvLi
     key = _raw_key(key)
     collect_key, sgd_key = jax.random.split(key)
     del key
-    if mesh is not None and config.num_envs % mesh.devices.size == 0:
+    if mesh is not None and _collect_mode(mesh, config) == "shard_map":
         env_state, episode, data, bootstrap_obs = _collect_split(state, collect_key, terrains, env, config, mesh)
     else:
         if mesh is not None:  # envs that do not divide over the devices: XLA partitions the batched steps
@@ -439,6 +439,26 @@ def _sgd(params, opt_state, normaliser, segments: Transition, boots, key, *, con
 
     return jax.shard_map(epochs, mesh=mesh, in_specs=P(), out_specs=P(), check_vma=False)(
         params, opt_state, segments, boots, key)
+
+
+def _collect_mode(mesh, config: PPOConfig) -> str:
+    """How a data-parallel update splits its env steps: ``"shard_map"`` (:func:`_collect_split`, each device its
+    own envs) or ``"partition"`` (sharding constraints; XLA partitions the batched steps). ``$JAXTERRAIN_PPO_COLLECT``
+    when set; else ``"partition"`` when ``num_envs`` does not divide over the devices or on GPUs (JAX 0.11.2's CUDA
+    plugin crashes compiling the walker's step inside ``shard_map``: ``sharding.default_split``), else
+    ``"shard_map"``."""
+    import os
+
+    from jaxterrain import sharding
+
+    mode = os.environ.get("JAXTERRAIN_PPO_COLLECT")
+    if mode not in (None, "", "shard_map", "partition"):
+        raise ValueError(f"JAXTERRAIN_PPO_COLLECT must be shard_map or partition, got {mode!r}")
+    if config.num_envs % mesh.devices.size:
+        return "partition"
+    if mode:
+        return mode
+    return "partition" if sharding.default_split(mesh) == "dispatch" else "shard_map"
 
 
 def _collect_split(state: TrainState, key, terrains, env, config: PPOConfig, mesh):
