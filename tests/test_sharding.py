@@ -18,12 +18,21 @@ _SCRIPT = textwrap.dedent("""
     mesh = S.make_mesh()
     def f(x, k, w):
         return {"y": jnp.sin(x).sum(-1) * w + jax.vmap(jax.random.uniform)(k)}
-    for n in (1, 4, 7, 9):  # uneven batches are padded, never an error
-        x = jnp.arange(n * 3, dtype=jnp.float32).reshape(n, 3)
-        keys = jax.random.split(jax.random.key(0), n)
-        got = S.map_rows(f, mesh, replicated=(2,))(x, keys, jnp.float32(2.0))["y"]
-        want = f(x, keys, 2.0)["y"]
-        assert got.shape == (n,) and np.array_equal(np.asarray(got), np.asarray(want)), (n, got, want)
+    assert S.default_split(mesh) == "shard_map"  # CPU devices; GPUs dispatch (JAX 0.11.2's shard_map crash)
+    for split in ("shard_map", "dispatch"):
+        for n in (1, 4, 7, 9):  # uneven batches are padded, never an error
+            x = jnp.arange(n * 3, dtype=jnp.float32).reshape(n, 3)
+            keys = jax.random.split(jax.random.key(0), n)
+            got = S.map_rows(f, mesh, replicated=(2,), split=split)(x, keys, jnp.float32(2.0))["y"]
+            want = f(x, keys, 2.0)["y"]
+            assert got.shape == (n,) and np.array_equal(np.asarray(got), np.asarray(want)), (split, n, got, want)
+        masked = S.map_rows(lambda x, m: jnp.where(m, x, -1.0), mesh, mask=True, split=split)(jnp.arange(5.0))
+        assert np.asarray(masked).tolist() == [0.0, 1.0, 2.0, 3.0, 4.0], (split, masked)  # padding cut off
+    try:
+        S.map_rows(f, mesh, split="threads")
+        raise AssertionError("an unknown split was accepted")
+    except ValueError as err:
+        assert "split must be one of" in str(err)
     t, m = S.shard_rows(jnp.ones((7, 2)), mesh)
     assert t.shape == (8, 2) and np.asarray(m).tolist() == [True] * 7 + [False]
     assert S.padded_length(9, mesh) == 12 and S.make_mesh(2).devices.size == 2

@@ -347,7 +347,7 @@ def update(state: TrainState, key: jax.Array, terrains: jax.Array, *, env: EnvLi
     key = _raw_key(key)
     collect_key, sgd_key = jax.random.split(key)
     del key
-    if mesh is not None and _collect_mode(mesh, config) == "shard_map":
+    if mesh is not None and _collect_mode(mesh, config, env) == "shard_map":
         env_state, episode, data, bootstrap_obs = _collect_split(state, collect_key, terrains, env, config, mesh)
     else:
         if mesh is not None:  # envs that do not divide over the devices: XLA partitions the batched steps
@@ -441,12 +441,14 @@ def _sgd(params, opt_state, normaliser, segments: Transition, boots, key, *, con
         params, opt_state, segments, boots, key)
 
 
-def _collect_mode(mesh, config: PPOConfig) -> str:
+def _collect_mode(mesh, config: PPOConfig, env=None) -> str:
     """How a data-parallel update splits its env steps: ``"shard_map"`` (:func:`_collect_split`, each device its
     own envs) or ``"partition"`` (sharding constraints; XLA partitions the batched steps). ``$JAXTERRAIN_PPO_COLLECT``
     when set; else ``"partition"`` when ``num_envs`` does not divide over the devices or on GPUs (JAX 0.11.2's CUDA
     plugin crashes compiling the walker's step inside ``shard_map``: ``sharding.default_split``), else
-    ``"shard_map"``."""
+    ``"shard_map"``. MuJoCo Warp's step is one opaque call that XLA cannot partition, so a Warp env on GPUs is a
+    ``ValueError`` unless ``$JAXTERRAIN_PPO_COLLECT=shard_map`` asks for the path that JAX 0.11.2 fails to compile
+    (segfault, measured on 2 H200s, 2026-11-23)."""
     import os
 
     from jaxterrain import sharding
@@ -458,7 +460,13 @@ def _collect_mode(mesh, config: PPOConfig) -> str:
         return "partition"
     if mode:
         return mode
-    return "partition" if sharding.default_split(mesh) == "dispatch" else "shard_map"
+    if sharding.default_split(mesh) != "dispatch":
+        return "shard_map"
+    if getattr(env, "backend", None) == "warp":
+        raise ValueError("data-parallel PPO (mesh=) on MuJoCo Warp over several GPUs needs shard_map, which JAX "
+                         "0.11.2's CUDA plugin fails to compile; train on one device, or use backend='jax', or set "
+                         "JAXTERRAIN_PPO_COLLECT=shard_map to try this JAX")
+    return "partition"
 
 
 def _collect_split(state: TrainState, key, terrains, env, config: PPOConfig, mesh):
