@@ -38,10 +38,13 @@ _SCRIPT = textwrap.dedent("""
 
 
 @pytest.mark.slow
-def test_sharded_difficulty_equals_one_device():
+@pytest.mark.parametrize("split", ["shard_map", "dispatch"])
+def test_sharded_difficulty_equals_one_device(split):
+    """Both ways of splitting rows (``sharding.map_rows``): one program over the mesh, and one program per device
+    dispatched together (the default on GPUs)."""
     flags = ("--xla_force_host_platform_device_count=4 --xla_backend_optimization_level=0 "
              "--xla_llvm_disable_expensive_passes=true")
-    env = dict(os.environ, XLA_FLAGS=flags, JAX_PLATFORMS="cpu")
+    env = dict(os.environ, XLA_FLAGS=flags, JAX_PLATFORMS="cpu", JAXTERRAIN_SPLIT=split)
     out = subprocess.run([sys.executable, "-c", _SCRIPT], env=env, capture_output=True, text=True, timeout=1200)
     assert out.returncode == 0, out.stderr[-3000:]
     assert out.stdout.strip().endswith("ok")
