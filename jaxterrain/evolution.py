@@ -170,6 +170,8 @@ def _programs(scoring: S.Scoring, emitter: ME.Emitter, cache: dict | None):
     their outputs (the repertoire, the metrics) are replicated on its devices."""
     fns = (scoring.render_one, scoring.descriptor_fn, scoring.traversable_fn, scoring.fitness_fn, emitter,
            scoring.mesh)
+    if _dispatching(scoring.mesh):
+        return _compiled(cache, ("host",) + fns, lambda: _host_programs(scoring, emitter))
     out = _replicated(scoring.mesh)
 
     def build_init():
@@ -462,7 +464,47 @@ def _many_archives(states, groups, gens, configs, history) -> list[A.Archive]:
     return out
 
 
+def _dispatching(mesh) -> bool:
+    """Whether ``mesh`` splits rows by dispatching one program per device (``sharding.default_split``: GPUs), which
+    a ``jit``-compiled chunk cannot do: the chunk is then a host loop over generations (:func:`_host_programs`)."""
+    if mesh is None:
+        return False
+    from jaxterrain import sharding
+
+    return sharding.default_split(mesh) == "dispatch"
+
+
+def _host_programs(scoring: S.Scoring, emitter: ME.Emitter):
+    """:func:`_programs` on a dispatching mesh: ``init`` and ``chunk`` as host loops of jitted parts (offspring,
+    finish) around the scoring, whose rows go to every device from the host (``sharding.map_rows``)."""
+    make = jax.jit(lambda key, n: emitter.sample(key, n), static_argnums=1)
+    empty = jax.jit(ME.empty_repertoire)
+    children = jax.jit(lambda state, key: ME.offspring(state, key, emitter))
+    finish = jax.jit(ME.finish)
+
+    def init(key, centroids, task):
+        sample_key, _, eval_key = ME.generation_keys(key, 0)
+        genomes = make(sample_key, emitter.initial_population)
+        repertoire = empty(jax.tree.map(lambda x: x[0], genomes), centroids)
+        state = ME.MapElitesState(repertoire, jnp.zeros((), jnp.int32), task)
+        new, m = finish(state, genomes, scoring(genomes, eval_key, task))
+        return state._replace(repertoire=new.repertoire), m
+
+    def chunk(state, key, n):
+        history = []
+        for _ in range(n):
+            genomes, eval_key = children(state, key)
+            state, m = finish(state, genomes, scoring(genomes, eval_key, state.task))
+            history.append(m)
+        return state, jax.tree.map(lambda *xs: jnp.stack(xs), *history)
+
+    return init, chunk
+
+
 def _many_chunk(scorings, emitters, fitness, mesh=None):
+    if _dispatching(mesh):
+        return _many_host_chunk(scorings, emitters, fitness)
+
     def chunk(states, keys, key, n):
         def body(st, _):
             fitness_key = jax.random.fold_in(key, st[0].generation[0])
@@ -471,6 +513,25 @@ def _many_chunk(scorings, emitters, fitness, mesh=None):
         return jax.lax.scan(body, states, None, length=n)
 
     return jax.jit(chunk, static_argnums=3, **_replicated(mesh))
+
+
+def _many_host_chunk(scorings, emitters, fitness):
+    """:func:`_many_chunk` on a dispatching mesh: a host loop over generations of the jitted offspring and finish
+    parts of ``map_elites.multi_step`` around its scoring, whose rows go to every device from the host."""
+    children = jax.jit(lambda states, keys: ME.many_offspring(states, keys, emitters))
+    finish = jax.jit(ME.many_finish)
+
+    def chunk(states, keys, key, n):
+        history = []
+        for _ in range(n):
+            fitness_key = jax.random.fold_in(key, states[0].generation[0])
+            kids = children(states, keys)
+            made, parts = ME.many_scores(states, kids, fitness_key, scorings, fitness)
+            states, m = finish(states, kids, made, parts)
+            history.append(m)
+        return states, jax.tree.map(lambda *xs: jnp.stack(xs), *history)
+
+    return chunk
 
 
 def to_archive(generator, repertoire, config: A.EvolveConfig, history: dict) -> A.Archive:

@@ -47,8 +47,8 @@ import jax.numpy as jnp
 
 from jaxterrain import scoring as S
 
-__all__ = ["Emitter", "MapElitesState", "METRIC_NAMES", "init", "step", "insert", "metrics", "generation_keys",
-           "empty_repertoire", "multi_step"]
+__all__ = ["Emitter", "MapElitesState", "METRIC_NAMES", "init", "step", "offspring", "finish", "insert", "metrics",
+           "generation_keys", "empty_repertoire", "multi_step", "many_offspring", "many_scores", "many_finish"]
 
 METRIC_NAMES = ("coverage", "qd_score", "max_fitness", "mean_fitness", "rejected", "out_of_range", "nan", "inserted")
 
@@ -191,7 +191,7 @@ def init(key, scoring: S.Scoring, emitter: Emitter, centroids: jax.Array, task: 
     return state._replace(repertoire=repertoire), m
 
 
-def _offspring(state: MapElitesState, key, emitter: Emitter):
+def offspring(state: MapElitesState, key, emitter: Emitter):
     """Parents uniform over the filled cells, mutated; fresh random genomes while the archive is empty.
     Returns (offspring, evaluation key)."""
     select_key, mutate_key, eval_key = generation_keys(key, state.generation)
@@ -215,8 +215,15 @@ def step(state: MapElitesState, key, scoring: S.Scoring, emitter: Emitter):
     Returns:
       ``(state, metrics)`` with ``state.generation`` one higher and a dict of scalar metrics.
     """
-    offspring, eval_key = _offspring(state, key, emitter)
-    repertoire, m = _finish(state, offspring, scoring(offspring, eval_key, state.task))
+    genomes, eval_key = offspring(state, key, emitter)
+    return finish(state, genomes, scoring(genomes, eval_key, state.task))
+
+
+def finish(state: MapElitesState, genomes, scored):
+    """:func:`step`'s last part (pure): insert the scored ``genomes`` (``scored`` = the scoring's ``(fitness,
+    cells, extras)``) and count a generation. ``step = finish(state, g, scoring(g, k, task))`` with ``(g, k) =
+    offspring(state, key, emitter)``; the parts let a host loop call the scoring outside ``jit``."""
+    repertoire, m = _finish(state, genomes, scored)
     return MapElitesState(repertoire, state.generation + 1, state.task), m
 
 
@@ -247,8 +254,22 @@ def multi_step(states: Sequence[MapElitesState], keys: Sequence[jax.Array], fitn
     mesh = scorings[0].mesh
     if any(s.mesh != mesh for s in scorings):
         raise ValueError("multi_step: every scoring must carry the same mesh (or none)")
-    children = [jax.vmap(lambda st, k, em=emitter: _offspring(st, k, em))(state, keys_i)[0]
-                for state, keys_i, emitter in zip(states, keys, emitters)]
+    children = many_offspring(states, keys, emitters)
+    made, parts = many_scores(states, children, fitness_key, scorings, fitness_fn)
+    return many_finish(states, children, made, parts)
+
+
+def many_offspring(states, keys, emitters) -> list:
+    """:func:`multi_step`'s first part (pure, jittable): every group's offspring ``[T_i, B_i, ...]``."""
+    return [jax.vmap(lambda st, k, em=emitter: offspring(st, k, em))(state, keys_i)[0]
+            for state, keys_i, emitter in zip(states, keys, emitters)]
+
+
+def many_scores(states, children, fitness_key, scorings, fitness_fn) -> tuple[list, list]:
+    """:func:`multi_step`'s scoring: ``(pendings, fitness)`` per group, ``[T_i, B_i]``. With the scorings' mesh
+    the rows go over its devices (:func:`_sharded_scores`); called outside ``jit`` on a mesh whose split is
+    ``"dispatch"`` (``sharding.default_split``: GPUs) each device runs its own program."""
+    mesh = scorings[0].mesh
     if mesh is None:
         made = [jax.vmap(scoring.prepare)(offspring, state.task)
                 for state, scoring, offspring in zip(states, scorings, children)]
@@ -263,6 +284,11 @@ def multi_step(states: Sequence[MapElitesState], keys: Sequence[jax.Array], fitn
             start += t * b
     else:
         made, parts = _sharded_scores(children, [s.task for s in states], fitness_key, scorings, fitness_fn, mesh)
+    return made, parts
+
+
+def many_finish(states, children, made, parts):
+    """:func:`multi_step`'s last part (pure, jittable): complete the scores, insert, count a generation."""
     out_states, out_metrics = [], []
     for state, offspring, pending, part in zip(states, children, made, parts):
 
@@ -280,8 +306,6 @@ def multi_step(states: Sequence[MapElitesState], keys: Sequence[jax.Array], fitn
 def _sharded_scores(children, tasks, fitness_key, scorings, fitness_fn, mesh):
     """:func:`multi_step`'s scoring over a mesh: ``(pendings, fitness)`` per group, shaped ``[T_i, B_i]`` (the
     pendings without heightmaps, which stay on their devices)."""
-    from jax.sharding import PartitionSpec as P
-
     from jaxterrain import sharding as SH
 
     rows, shapes = [], []
@@ -311,7 +335,7 @@ def _sharded_scores(children, tasks, fitness_key, scorings, fitness_fn, mesh):
             begin += nd.shape[0]
         return out
 
-    scored = jax.shard_map(local, mesh=mesh, in_specs=(P(SH.AXIS),), out_specs=P(SH.AXIS), check_vma=False)(groups)
+    scored = SH.split_rows(local, mesh)(groups)
     made, parts = [], []
     for (pending, fitness), (t, b) in zip(scored, shapes):
         made.append(jax.tree.map(lambda x, t=t, b=b: x[:t * b].reshape((t, b) + x.shape[1:]), pending))

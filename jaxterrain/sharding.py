@@ -23,7 +23,8 @@ import jax.numpy as jnp
 import numpy as np
 from jax.sharding import Mesh, NamedSharding, PartitionSpec as P
 
-__all__ = ["AXIS", "SPLITS", "default_split", "initialize", "make_mesh", "setup", "map_rows", "pad_rows", "padded_length", "replicate",
+__all__ = ["AXIS", "SPLITS", "default_split", "initialize", "make_mesh", "setup", "map_rows", "split_rows", "tracing",
+           "pad_rows", "padded_length", "replicate",
            "replicated", "rows", "row_keys", "shard_rows"]
 
 AXIS = "batch"
@@ -189,13 +190,68 @@ def map_rows(fn: Callable, mesh: Mesh, replicated: tuple[int, ...] = (), mask: b
     processes); ``"dispatch"`` (this process's devices only) compiles ``jax.jit(fn)`` once per device, sends each
     device its rows and lets JAX's asynchronous dispatch run them all at once, then gathers the real rows on the
     mesh's first device. Both give the same values: the rows are independent.
+    Inside a ``jit`` trace (tracer arguments) there is nothing to dispatch: the call takes the ``shard_map`` path.
     """
     split = default_split(mesh) if split is None else split
     if split not in SPLITS:
         raise ValueError(f"split must be one of {SPLITS}, got {split!r}")
-    if split == "dispatch":
-        return _dispatch_rows(fn, mesh, frozenset(replicated), mask)
-    replicated, whole = frozenset(replicated), NamedSharding(mesh, P())
+    sharded = _shard_map_rows(fn, mesh, frozenset(replicated), mask)
+    if split == "shard_map":
+        return sharded
+    dispatched = _dispatch_rows(fn, mesh, frozenset(replicated), mask)
+    return lambda *args: (sharded if tracing(args) else dispatched)(*args)
+
+
+def tracing(tree: Any) -> bool:
+    """Whether any leaf of ``tree`` is a tracer (the call is being traced by ``jit``, ``vmap``, ...)."""
+    return any(isinstance(x, jax.core.Tracer) for x in jax.tree.leaves(tree))
+
+
+def split_rows(fn: Callable, mesh: Mesh, split: Optional[str] = None) -> Callable:
+    """``fn(tree)`` run on each device's share of ``tree``: every leaf's leading axis (a multiple of the device
+    count, e.g. padded with :func:`pad_rows`) cut into equal consecutive parts, part ``i`` on device ``i``; the
+    outputs' leading axes concatenated in device order. ``split`` as in :func:`map_rows` (``"dispatch"`` only
+    outside a trace)."""
+    split = default_split(mesh) if split is None else split
+    if split not in SPLITS:
+        raise ValueError(f"split must be one of {SPLITS}, got {split!r}")
+    sharded = jax.shard_map(fn, mesh=mesh, in_specs=(P(AXIS),), out_specs=P(AXIS), check_vma=False)
+    if split == "shard_map":
+        return sharded
+    devices, jitted = list(mesh.devices.flat), jax.jit(fn)
+
+    def dispatched(tree):
+        parts = _per_device(devices, lambda k, dev: jitted(jax.device_put(
+            jax.tree.map(lambda x: _part(x, k, len(devices)), tree), dev)))
+        return _gather(parts, devices[0])
+
+    return lambda tree: sharded(tree) if tracing(tree) else dispatched(tree)
+
+
+def _part(x, k: int, d: int):
+    n = x.shape[0] // d
+    return x[k * n:(k + 1) * n]
+
+
+def _per_device(devices, call: Callable) -> list:
+    """``[call(k, device_k)]``: one thread per device, so that first calls compile at the same time and later calls
+    only enqueue work (JAX runs the devices' programs at once)."""
+    from concurrent.futures import ThreadPoolExecutor
+
+    if any(d.process_index != jax.process_index() for d in devices):
+        raise ValueError("split='dispatch' needs a mesh of this process's devices; use 'shard_map'")
+    with ThreadPoolExecutor(len(devices)) as pool:
+        return list(pool.map(lambda k: call(k, devices[k]), range(len(devices))))
+
+
+def _gather(parts: list, device) -> Any:
+    """The parts' leaves concatenated along axis 0 on ``device``."""
+    return jax.tree.map(lambda *xs: jnp.concatenate([jax.device_put(x, device) for x in xs]), *parts)
+
+
+def _shard_map_rows(fn: Callable, mesh: Mesh, replicated: frozenset, mask: bool) -> Callable:
+    """:func:`map_rows` with ``split="shard_map"``."""
+    whole = NamedSharding(mesh, P())
 
     def run(*args):
         batched = [a for i, a in enumerate(args) if i not in replicated]
@@ -218,34 +274,23 @@ def map_rows(fn: Callable, mesh: Mesh, replicated: tuple[int, ...] = (), mask: b
 
 def _dispatch_rows(fn: Callable, mesh: Mesh, replicated: frozenset, mask: bool) -> Callable:
     """:func:`map_rows` with ``split="dispatch"``: one single-device program per device of ``mesh`` (this
-    process's), each device's rows sent to it, the calls issued from one thread per device (their first calls
-    compile at the same time; later calls only enqueue work), the real rows gathered on the first device."""
-    from concurrent.futures import ThreadPoolExecutor
-
-    devices = list(mesh.devices.flat)
-    if any(d.process_index != jax.process_index() for d in devices):
-        raise ValueError("map_rows(split='dispatch') needs a mesh of this process's devices; use 'shard_map'")
-    jitted, d = jax.jit(fn), len(devices)
+    process's), each device's rows sent to it (:func:`_per_device`), the real rows gathered on the first device."""
+    devices, jitted = list(mesh.devices.flat), jax.jit(fn)
+    d = len(devices)
 
     def call(*args):
         batched = [a for i, a in enumerate(args) if i not in replicated]
         n = jax.tree.leaves(batched)[0].shape[0]
         length = padded_length(n, mesh)
-        local = length // d
         padded = [a if i in replicated else pad_rows(a, length) for i, a in enumerate(args)]
+        rows = [i not in replicated for i in range(len(args))]
         if mask:
-            padded.append(jnp.arange(length) < n)
-        rows = [i not in replicated for i in range(len(args))] + ([True] if mask else [])
+            padded, rows = padded + [jnp.arange(length) < n], rows + [True]
 
-        def part(k: int):
-            dev = devices[k]
-            mine = [jax.device_put(jax.tree.map(lambda x: x[k * local:(k + 1) * local], a) if r else a, dev)
-                    for a, r in zip(padded, rows)]
-            return jitted(*mine)
+        def part(k: int, dev):
+            return jitted(*[jax.device_put(jax.tree.map(lambda x: _part(x, k, d), a) if r else a, dev)
+                            for a, r in zip(padded, rows)])
 
-        with ThreadPoolExecutor(d) as pool:
-            outs = list(pool.map(part, range(d)))
-        first = devices[0]
-        return jax.tree.map(lambda *xs: jnp.concatenate([jax.device_put(x, first) for x in xs])[:n], *outs)
+        return jax.tree.map(lambda x: x[:n], _gather(_per_device(devices, part), devices[0]))
 
     return call

@@ -40,8 +40,9 @@ _SCRIPT = textwrap.dedent("""
 """)
 
 
-def run_on_devices(script: str, devices: int = 4, timeout: int = 300) -> str:
-    env = dict(os.environ, XLA_FLAGS=f"--xla_force_host_platform_device_count={devices}", JAX_PLATFORMS="cpu")
+def run_on_devices(script: str, devices: int = 4, timeout: int = 300, **environ: str) -> str:
+    env = dict(os.environ, XLA_FLAGS=f"--xla_force_host_platform_device_count={devices}", JAX_PLATFORMS="cpu",
+               **environ)
     out = subprocess.run([sys.executable, "-c", script], env=env, capture_output=True, text=True, timeout=timeout)
     assert out.returncode == 0, out.stderr[-3000:]
     return out.stdout
