@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # One GPU-machine command that runs the stage benchmarks and leaves JSON + logs under $OUT (or ./bench-out).
 # Usage (on the device, after installing the wheels): bash benchmarks/run_all.sh [stage ...]
-# stages: generators features rollouts map_elites (default: generators features)
+# stages: any benchmarks/<stage>.py, e.g. generators features rollouts map_elites scaling (default: generators features)
 set -uo pipefail
 out=${OUT:-bench-out}; mkdir -p "$out"
 export PYTHONUNBUFFERED=1 XLA_PYTHON_CLIENT_PREALLOCATE=false
