@@ -7,8 +7,10 @@ Every command works the same way:
   nothing);
 * it writes them to ``<run folder>/config.json`` before doing any work, so ``--config <run folder>/config.json``
   re-runs it exactly;
-* ``--resume [FOLDER]`` continues the run in FOLDER (default: the newest ``runs/<command>-*``) with the config saved
-  there; finished pieces (archives, checkpoints) are reused.
+* ``--resume [FOLDER]`` continues the run in FOLDER with the config saved there; finished pieces (archives,
+  checkpoints) are reused. The folder is FOLDER, else ``--out`` (``--out RUN --resume`` continues RUN), else the
+  newest ``runs/<command>-*``; ``--resume A --out B`` (two runs), a folder without ``config.json`` (no run to
+  continue) and another command's run are one-line usage errors (:func:`resume_folder`), the same in every command.
 """
 
 from __future__ import annotations
@@ -57,9 +59,10 @@ def _bad(where: str, what: str, value: Any) -> UsageError:
 def check_values(values: dict, where=flag) -> None:
     """Check option values by name (see ``_INT_MIN`` and friends; unknown names and ``None`` pass).
 
-    ``where(key)`` names a value in the message (default: its flag). Generator names are checked against the
-    registry (importing the library, running nothing). Descriptor names are not: a command may register its own
-    (e.g. a learned model) before it needs them. Raises :class:`UsageError`."""
+    ``where(key)`` names a value in the message (default: its flag). Fitness names are checked against
+    :data:`FITNESSES`, generator names against the registry (importing the library, running nothing). Descriptor
+    names are not: a command may register its own (e.g. a learned model) before it needs them. Raises
+    :class:`UsageError`."""
     for key, value in values.items():
         if value is None:
             continue
@@ -77,6 +80,8 @@ def check_values(values: dict, where=flag) -> None:
                 if not math.isfinite(v) or (v <= 0 if positive else v < 0):
                     raise _bad(where(key), f"{'finite numbers' if isinstance(value, list) else 'a finite number'} "
                                            f"{'> 0' if positive else '>= 0'}", value)
+        elif key == "fitness" and (not isinstance(value, str) or value not in FITNESSES):
+            raise UsageError(f"{where(key)}: unknown fitness {value!r}; choose from {', '.join(FITNESSES)}")
         elif key in ("generator", "generators") and items:
             from jaxterrain import generators
 
@@ -100,34 +105,39 @@ def check_out(out: Any, where: str = "--out") -> None:
             raise UsageError(f"{where} {str(path)!r} {what}; give a new or existing run folder")
 
 
-def check_resume(command: str, resume: Any) -> None:
+def check_resume(command: str, resume: Any, flags: str | None = None) -> None:
     """``--resume FOLDER`` must not be a file, nor a run folder whose ``config.json`` names another command (a
-    folder without one is the command's to judge: some start a fresh run there)."""
+    folder without one: :func:`resume_folder`). ``flags`` names the folder in the message (default
+    ``--resume 'FOLDER'``)."""
     if not isinstance(resume, (str, Path)) or resume == "latest":
         return  # a flag (store_true) or the newest run (``latest_run`` checks it)
     folder = Path(resume)
+    flags = flags or f"--resume {str(folder)!r}"
     if folder.exists() and not folder.is_dir():
-        raise UsageError(f"--resume {str(folder)!r} is a file; give a run folder")
+        raise UsageError(f"{flags} is a file; give a run folder")
     config_path = folder / CONFIG_NAME
     if not config_path.is_file():
         return
     try:
         saved = json.loads(config_path.read_text())
     except (OSError, ValueError) as err:
-        raise UsageError(f"--resume {str(folder)!r}: cannot read {config_path} ({err})") from None
+        raise UsageError(f"{flags}: cannot read {config_path} ({err})") from None
     other = saved.get("command") if isinstance(saved, dict) else None
     if isinstance(other, str) and other != command:
-        raise UsageError(f"--resume {str(folder)!r} is a run of {other!r}, not of {command!r}")
+        raise UsageError(f"{flags} is a run of {other!r}, not of {command!r}")
 
 
 def check_args(command: str, args: argparse.Namespace) -> None:
     """Check a parsed command line before the command runs (``python -m experiments`` calls this): numbers by
-    option name (sizes, counts >= 1, ...), generator names, ``--out`` (not a file), ``--resume`` (a run folder of
-    this command), ``--config`` and ``--data`` (exist). Raises :class:`UsageError` naming the flag."""
+    option name (sizes, counts >= 1, ...), fitness and generator names, ``--out`` (not a file), ``--resume`` (with
+    ``--out``: one run folder of this command, :func:`resume_folder`), ``--config`` and ``--data`` (exist). Raises
+    :class:`UsageError` naming the flag."""
     values = vars(args)
     check_values(values)
     check_out(values.get("out"))
     check_resume(command, values.get("resume"))
+    if values.get("resume") is not None:
+        resume_folder(command, values["resume"], values.get("out"))
     for key in ("config", "data", "quality_only"):
         path = values.get(key)
         if isinstance(path, (str, Path)) and not Path(path).exists():
@@ -179,7 +189,7 @@ def run_folder(name: str, out: str | Path | None = None) -> Path:
 def latest_run(command: str, root: Path = Path("runs")) -> Path:
     runs = sorted(p for p in root.glob(f"{command}-*") if (p / CONFIG_NAME).exists())
     if not runs:
-        raise SystemExit(f"--resume: no run of {command!r} with a {CONFIG_NAME} under {root}/")
+        raise UsageError(f"--resume: no run of {command!r} with a {CONFIG_NAME} under {root}/; give its folder")
     return runs[-1]
 
 
@@ -217,20 +227,17 @@ def save_figure(fig, path: str | Path, dpi: int = 120) -> Path:
 
 
 def setup_run(command: str, args: argparse.Namespace, presets: dict[str, dict], default_preset: str,
-              overrides: dict[str, Any]) -> tuple[Path, dict]:
+              overrides: dict[str, Any], extendable: tuple[str, ...] = ()) -> tuple[Path, dict]:
     """Resolve the settings and the run folder; write the config there. Returns ``(folder, config)``.
 
-    ``overrides`` maps config keys to the values given on the command line (``None`` = not given).
+    ``overrides`` maps config keys to the values given on the command line (``None`` = not given). ``--resume``
+    continues the run in :func:`resume_folder` (``--resume FOLDER``, or ``--out RUN --resume``, or the newest run)
+    with the config saved there; options given on the command line are ignored (a note on stderr says which),
+    except the keys of ``extendable`` (how long the run lasts and how often it logs, e.g. ``steps``): those replace
+    the saved values, are checked as a fresh config is, and are written back to the run's ``config.json``.
     """
     if args.resume is not None:
-        check_resume(command, args.resume)
-        folder = latest_run(command) if args.resume == "latest" else Path(args.resume)
-        config = load_config(folder)
-        given = {k: v for k, v in overrides.items() if v is not None}
-        if given:
-            print(f"--resume: ignoring {sorted(given)}; the run continues with its saved config", file=sys.stderr)
-        print(f"resuming {folder}", flush=True)
-        return folder, config
+        return _resume_run(command, args, overrides, extendable)
     if args.config is not None:
         config = load_config(args.config)
         if args.preset is not None:
@@ -279,11 +286,13 @@ class Clock:
             raise TimeUp
 
 
-def slope_fitness(heightmaps, key=None):
+def slope_fitness(heightmaps, key=None, needed=None):
     """Cheap stand-in fitness for smoke runs, tests and benchmarks: ``1 - mean slope`` in [0, 1].
 
     ``heightmaps [B, H, W]`` in [0, 1] are scaled to metres with the default ``TerrainScale``; the slope of a pixel is
-    ``(|dz/dx| + |dz/dy|) / 2`` (rise over run), clipped to 1. Returns ``[B]`` float32.
+    ``(|dz/dx| + |dz/dy|) / 2`` (rise over run), clipped to 1. Returns ``[B]`` float32. ``key`` and ``needed`` are
+    not used (every terrain is scored), so it fits both ``(heightmaps, key)`` and ``archive.evolve``'s
+    ``(heightmaps, key, needed)``.
     """
     import jax.numpy as jnp
 
@@ -296,16 +305,31 @@ def slope_fitness(heightmaps, key=None):
     return 1.0 - jnp.clip(-smoothness_priority(h) / 2.0, 0.0, 1.0)
 
 
-def fitness_function(name: str, attempts: int, best: int, size: int, slots: int | None = None):
-    """Traceable ``(heightmaps[B, size, size], key) -> [B]``: ``"difficulty"`` (the walker's base policy, pure
-    version of ``difficulty.evaluate``; ``slots``: its rollout pool) or ``"slope"`` (cheap, :func:`slope_fitness`)."""
-    if name == "slope":
-        return slope_fitness
-    if name == "difficulty":
-        from jaxterrain.archive import difficulty_fitness
+# ``--fitness NAME`` of every command that scores terrains (evolve, coverage, features): the one table of fitness
+# names. A function is a traceable ``(heightmaps [B, H, W] in [0, 1], key, needed=None) -> [B]``; None is the walker's
+# fitness (the shipped base policy's walks, ``jaxterrain.difficulty.fitness_fn``), which ``archive.evolve`` builds
+# from its config (attempts, best, rollout slots and backend, and the ONE scale that Algorithm 1 uses too) and
+# :func:`fitness_function` from its arguments.
+FITNESSES: dict[str, Any] = {"difficulty": None, "slope": slope_fitness}
 
-        return difficulty_fitness(size, attempts, best, slots=slots)
-    raise SystemExit(f"unknown fitness {name!r}; choose difficulty or slope")
+
+def fitness_of(name: str):
+    """``FITNESSES[name]``; an unknown name is a :class:`UsageError` naming ``--fitness``."""
+    if name not in FITNESSES:
+        raise UsageError(f"--fitness: unknown fitness {name!r}; choose from {', '.join(FITNESSES)}")
+    return FITNESSES[name]
+
+
+def fitness_function(name: str, attempts: int, best: int, size: int, slots: int | None = None):
+    """``--fitness NAME`` as a traceable ``(heightmaps [B, size, size], key, needed=None) -> [B]``: the function of
+    :data:`FITNESSES`, or for ``"difficulty"`` ``difficulty.fitness_fn(size, Protocol(attempts, best), slots=slots)``
+    (``slots``: its rollout pool)."""
+    fn = fitness_of(name)
+    if fn is not None:
+        return fn
+    from jaxterrain import difficulty
+
+    return difficulty.fitness_fn(int(size), difficulty.Protocol(int(attempts), int(best)), slots=slots)
 
 
 def generator_available(name: str, size: int) -> tuple[bool, str]:
@@ -324,30 +348,36 @@ def generator_available(name: str, size: int) -> tuple[bool, str]:
 
 
 def resume_folder(command: str, resume: Any, out: Any = None) -> Path:
-    """The run folder that ``--resume`` names: ``--resume FOLDER`` is FOLDER (with an ``--out`` naming another folder
-    it is a :class:`UsageError`: the two name different runs); ``--resume`` alone is ``--out`` when given, else the
-    newest run of ``command`` (:func:`latest_run`)."""
+    """The run folder that ``--resume`` names, the same rule in every command: ``--resume FOLDER`` is FOLDER;
+    ``--resume`` alone is ``--out`` when given (``--out RUN --resume`` continues RUN), else the newest run of
+    ``command`` (:func:`latest_run`). A :class:`UsageError` (one line naming the flags) when ``--resume FOLDER`` and
+    ``--out`` name two folders, when the folder holds no ``config.json`` (no run to continue: start one with
+    ``--out`` alone) or when it is a file or another command's run (:func:`check_resume`)."""
     if resume not in (None, "latest"):
-        if out is not None and Path(out) != Path(resume):
+        if out is not None and Path(out).resolve() != Path(resume).resolve():
             raise UsageError(f"--resume {resume} and --out {out} name different runs; give one of them")
-        return Path(resume)
-    return Path(out) if out is not None else latest_run(command)
+        folder, flags = Path(resume), f"--resume {str(resume)!r}"
+    elif out is not None:
+        folder, flags = Path(out), f"--out {str(out)!r} --resume"
+    else:
+        return latest_run(command)
+    check_resume(command, folder, flags)
+    if not (folder / CONFIG_NAME).is_file():
+        raise UsageError(f"{flags}: no {CONFIG_NAME} in {str(folder)!r}, so no run to continue; start one with "
+                         f"--out {folder} (without --resume)")
+    return folder
 
 
 def setup_resumable_run(command: str, args: argparse.Namespace, presets: dict[str, dict], default_preset: str,
                         overrides: dict[str, Any], extendable: tuple[str, ...] = ()) -> tuple[Path, dict]:
-    """:func:`setup_run` for the training commands (``train-gan``, ``train-base-policy``, ``train-traversability``,
-    ``features``). Returns ``(folder, config)``.
+    """:func:`setup_run` (its name in the training commands: ``train-gan``, ``train-base-policy``,
+    ``train-traversability``, ``features``)."""
+    return setup_run(command, args, presets, default_preset, overrides, extendable)
 
-    A fresh run is exactly :func:`setup_run`. ``--resume`` continues the run in :func:`resume_folder` (so
-    ``--out RUN --resume`` continues RUN) with the config saved there; options given on the command line are
-    ignored (a note on stderr says which), except the keys of ``extendable`` (how long the run lasts and how often
-    it logs, e.g. ``steps``): those replace the saved values, are checked as a fresh config is, and are written
-    back to the run's ``config.json``.
-    """
-    if args.resume is None:
-        return setup_run(command, args, presets, default_preset, overrides)
-    check_resume(command, args.resume)
+
+def _resume_run(command: str, args: argparse.Namespace, overrides: dict[str, Any],
+                extendable: tuple[str, ...]) -> tuple[Path, dict]:
+    """The ``--resume`` half of :func:`setup_run`."""
     folder = resume_folder(command, args.resume, getattr(args, "out", None))
     config = load_config(folder)
     given = {k: v for k, v in overrides.items() if v is not None}

@@ -95,7 +95,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--bins", type=int, default=None, help="cells per descriptor")
     parser.add_argument("--size", type=int, default=None, help="heightmap side in pixels")
     parser.add_argument("--checkpoint-every", type=int, default=None)
-    parser.add_argument("--fitness", choices=["difficulty", "slope"], default=None)
+    parser.add_argument("--fitness", choices=common.FITNESSES, default=None)
     parser.add_argument("--attempts", type=int, default=None)
     parser.add_argument("--best", type=int, default=None)
     parser.add_argument("--rollout-slots", type=int, default=None,
@@ -142,16 +142,10 @@ def run_treatment(cfg: dict, generator: str, descriptors, folder: Path, clock: c
 
 
 def fitness_fn(name: str):
-    """The fitness of ``--fitness NAME`` in the contract ``(heightmaps, key, needed) -> [B]``: None for
-    ``"difficulty"`` (``archive.evolve`` then builds the walker fitness from the config: attempts, best, rollout
-    slots and the ONE scale that Algorithm 1 uses too), the slope fitness for ``"slope"``."""
-    from jaxterrain import scoring
-
-    if name == "difficulty":
-        return None
-    if name == "slope":
-        return scoring.ignore_needed(common.slope_fitness)
-    raise SystemExit(f"unknown fitness {name!r}; choose difficulty or slope")
+    """The ``fitness_fn`` of ``archive.evolve`` for ``--fitness NAME``: ``common.FITNESSES[name]``, where None (the
+    walker, ``"difficulty"``) lets ``archive.evolve`` build it from the config (attempts, best, rollout slots and
+    the ONE scale that Algorithm 1 uses too)."""
+    return common.fitness_of(name)
 
 
 def write_metrics_csv(path: Path, metrics: dict) -> None:

@@ -56,10 +56,6 @@ PRESETS: dict[str, dict] = {
               "attempts": 2, "best": 1, "num_envs": 4, "num_unrolls": 2, "num_minibatches": 2, "update_epochs": 1,
               "episode_length": 100, "chunks_per_call": 2, "fast_compile": True},
 }
-CURRICULUM_KEYS = ("epochs_per_chunk", "steps_per_epoch", "max_epochs", "threshold", "max_fitness", "max_evals",
-                   "attempts", "best", "kappa", "rho", "sigma_f", "noise", "gp_evaluation", "removal_margin",
-                   "removal_ties", "credit", "distance_origin", "roughness_stride", "max_observations", "num_envs",
-                   "unroll_length", "num_unrolls", "num_minibatches", "update_epochs", "learning_rate")
 
 
 class BadInput(ValueError):
@@ -92,12 +88,15 @@ def overrides(args) -> dict:
 # Validation (before anything is compiled)
 # ----------------------------------------------------------------------------------------------------------------
 def curriculum_config(cfg: dict):
-    """The :class:`jaxterrain.curriculum.CurriculumConfig` of a learn config dict (validated)."""
+    """The :class:`jaxterrain.curriculum.CurriculumConfig` of a learn config dict (validated). The dict is flat: the
+    curriculum's fields and its fine-tuning PPO's (``num_envs``, ..., ``learning_rate``: ``CurriculumConfig.ppo``)
+    side by side, with ``curriculum`` as the selector; ``CurriculumConfig.from_json_dict`` reads that layout."""
     from jaxterrain.curriculum import CurriculumConfig, validate_config
+    from jaxterrain.curriculum.config import FINE_TUNED
 
-    fields = {k: cfg[k] for k in CURRICULUM_KEYS}
+    fields = {k: v for k, v in cfg.items() if k in FINE_TUNED or (k in CurriculumConfig._fields and k != "ppo")}
     try:
-        return validate_config(CurriculumConfig(selector=cfg["curriculum"], **fields))
+        return validate_config(CurriculumConfig.from_json_dict({**fields, "selector": cfg["curriculum"]}))
     except (ValueError, TypeError) as err:
         raise BadInput(str(err)) from None
 

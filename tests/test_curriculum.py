@@ -72,7 +72,7 @@ def tree_equal(a, b) -> bool:
 def small(selector="map", **kw) -> C.CurriculumConfig:
     base = dict(selector=selector, epochs_per_chunk=1, steps_per_epoch=8, max_epochs=40, max_evals=3,
                 num_envs=2, unroll_length=2, num_unrolls=2, num_minibatches=1)
-    return C.validate_config(C.CurriculumConfig(**{**base, **kw}))
+    return C.validate_config(C.CurriculumConfig.from_json_dict({**base, **kw}))  # the PPO fields flat, as learn
 
 
 # ---------------------------------------------------------------------------------------------------------------
@@ -350,8 +350,44 @@ def test_config_validation_names_the_field():
     with pytest.raises(ValueError, match="selector"):
         C.validate_config(C.CurriculumConfig(selector="easy"))
     with pytest.raises(ValueError, match="must divide"):
-        C.validate_config(C.CurriculumConfig(num_envs=3000))
+        C.validate_config(C.CurriculumConfig(ppo=C.CurriculumConfig().ppo._replace(num_envs=3000)))
     assert C.validate_config(C.CurriculumConfig()).updates_per_chunk == 4
+
+
+def test_config_fine_tuning_ppo_is_one_ppo_config():
+    """The fine-tuning PPO is ``CurriculumConfig.ppo`` (a PPOConfig): its six FINE_TUNED fields replace the base
+    policy's, nothing else may be set there (not silently ignored), and the JSON reads nested or flat."""
+    from jaxterrain import rl
+    from jaxterrain.curriculum.config import FINE_TUNED
+
+    config = C.CurriculumConfig()
+    assert FINE_TUNED == ("num_envs", "unroll_length", "num_unrolls", "num_minibatches", "update_epochs",
+                          "learning_rate")
+    assert [getattr(config.ppo, k) for k in FINE_TUNED] == [500, 10, 8, 8, 8, 3e-4]  # the paper-run values
+    assert config.steps_per_update == 40_000 and config.updates_per_chunk == 4
+    base = rl.PPOConfig(gamma=0.99, policy_hidden=(8,), num_envs=7, learning_rate=1.0)
+    assert config.ppo_config(base) == base._replace(num_envs=500, unroll_length=10, num_unrolls=8, num_minibatches=8,
+                                                    update_epochs=8, learning_rate=3e-4)
+    with pytest.raises(ValueError, match=r"CurriculumConfig\.ppo\.gamma must keep PPOConfig's default"):
+        C.validate_config(config._replace(ppo=config.ppo._replace(gamma=0.9)))
+    with pytest.raises(ValueError, match=r"CurriculumConfig\.ppo: PPOConfig\.num_minibatches"):
+        C.validate_config(config._replace(ppo=config.ppo._replace(num_minibatches=3)))
+    with pytest.raises(ValueError, match=r"CurriculumConfig\.ppo: PPOConfig\.learning_rate"):
+        C.validate_config(config._replace(ppo=config.ppo._replace(learning_rate=float("inf"))))
+    with pytest.raises(ValueError, match="must be a jaxterrain.rl.PPOConfig"):
+        C.validate_config(config._replace(ppo={"num_envs": 4}))
+    small_ppo = config._replace(selector="random", ppo=config.ppo._replace(num_envs=4, update_epochs=1))
+    d = json.loads(json.dumps(small_ppo.to_json_dict()))
+    assert d["ppo"] == {"num_envs": 4, "unroll_length": 10, "num_unrolls": 8, "num_minibatches": 8,
+                        "update_epochs": 1, "learning_rate": 3e-4}
+    assert C.CurriculumConfig.from_json_dict(d) == small_ppo
+    flat = {**{k: v for k, v in d.items() if k != "ppo"}, **d["ppo"]}  # learn's config.json layout
+    assert C.CurriculumConfig.from_json_dict(flat) == small_ppo
+    assert C.CurriculumConfig.from_json_dict({"num_envs": 4, "update_epochs": 1, "selector": "random"}) == small_ppo
+    with pytest.raises(ValueError, match=r"CurriculumConfig\.ppo: unknown fields \['gamma'\]"):
+        C.CurriculumConfig.from_json_dict({"ppo": {"gamma": 0.9}})
+    with pytest.raises(ValueError, match=r"CurriculumConfig: unknown fields \['kapa'\]"):
+        C.CurriculumConfig.from_json_dict({"kapa": 0.1})
 
 
 # ---------------------------------------------------------------------------------------------------------------

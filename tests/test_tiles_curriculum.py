@@ -82,7 +82,7 @@ START = {"skill": jnp.zeros((), jnp.float32), "resets": jnp.zeros((), jnp.int32)
 def small(selector="random", **kw) -> C.CurriculumConfig:
     base = dict(selector=selector, epochs_per_chunk=1, steps_per_epoch=8, max_epochs=40, max_evals=3,
                 num_envs=2, unroll_length=2, num_unrolls=2, num_minibatches=1)
-    return C.validate_config(C.CurriculumConfig(**{**base, **kw}))
+    return C.validate_config(C.CurriculumConfig.from_json_dict({**base, **kw}))  # the PPO fields flat, as learn
 
 
 def tree_equal(a, b) -> bool:
@@ -168,7 +168,7 @@ def _walker_run(backend: str, trials: int, tiles: int, chunks: int = 1, episode_
     policy = W.load_policy(None)
     config = small("map", num_envs=2, attempts=2, best=1, max_evals=2, update_epochs=1)
     env = W.walker_env(policy, SHAPE, WALK, episode_length, backend=backend, tiles=tiles,
-                       worlds=trials * max(config.num_envs, config.attempts))
+                       worlds=trials * max(config.ppo.num_envs, config.attempts))
     ppo = config.ppo_config(policy.config)
     harness = W.walker_harness(env, ppo, config)
     bank = toy_bank(2)._replace(heightmaps=toy_bank(2).heightmaps * 0.5)  # steps of up to 0.19 m

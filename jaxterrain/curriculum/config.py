@@ -11,14 +11,15 @@ terrains predicted easier than the one just trained are removed, the run ends wh
   one observation per trial too. Adding every chunk's evaluation would put up to 100 observations of a changing
   policy at the SAME point (a stale, nearly singular kernel matrix). ``"best"`` adds the best evaluation instead.
 
-``num_envs = 500, unroll_length = 10, num_unrolls = 8, num_minibatches = 8, update_epochs = 8, learning_rate =
-  3e-4`` - PPO for fine-tuning, with all envs on the one current terrain. The paper used SpinningUp's PPO defaults
-  (one env, 4 000 steps per epoch); we keep the recipe the base policy was trained with (brax's MJX humanoid PPO: its
-  networks, normaliser, clipping, discount, learning rate), so that its value net and normaliser carry over, and size
-  one update as 10 epochs (500 x 10 x 8 = 40 000 env steps; 4 updates per 40-epoch chunk, 64 Adam steps per update:
-  about brax's ratio of Adam steps to env steps). 500 envs make each env walk 320 steps per chunk, longer than one
-  traversal (about 210 steps at the base policy's 2.9 m/s), so the first chunk on a new terrain already sees whole
-  walks; 10 trials x 500 envs fill a GPU. Adam's state starts fresh (none is shipped with the base policy).
+``ppo = FINE_TUNING``: ``num_envs = 500, unroll_length = 10, num_unrolls = 8, num_minibatches = 8, update_epochs = 8,
+  learning_rate = 3e-4`` (the :data:`FINE_TUNED` fields of a ``PPOConfig``) - PPO for fine-tuning, with all envs on
+  the one current terrain. The paper used SpinningUp's PPO defaults (one env, 4 000 steps per epoch); we keep the
+  recipe the base policy was trained with (brax's MJX humanoid PPO: its networks, normaliser, clipping, discount,
+  learning rate), so that its value net and normaliser carry over, and size one update as 10 epochs (500 x 10 x 8 =
+  40 000 env steps; 4 updates per 40-epoch chunk, 64 Adam steps per update: about brax's ratio of Adam steps to env
+  steps). 500 envs make each env walk 320 steps per chunk, longer than one traversal (about 210 steps at the base
+  policy's 2.9 m/s), so the first chunk on a new terrain already sees whole walks; 10 trials x 500 envs fill a GPU.
+  Adam's state starts fresh (none is shipped with the base policy).
 
 ``max_fitness = 1.0`` - "maximum fitness" is the maximum of the normalised distance (the far edge), so the threshold
   is fitness >= 0.9. (IT&E's own stop rule compares with the GP's maximum mean; that is a different quantity.)
@@ -56,14 +57,21 @@ import math
 from typing import NamedTuple, Optional
 
 from jaxterrain._validate import int_at_least, known_fields, one_of
+from jaxterrain.rl.config import PPOConfig
+from jaxterrain.rl.config import validate_config as validate_ppo_config
 
-__all__ = ["CurriculumConfig", "validate_config", "SELECTORS"]
+__all__ = ["CurriculumConfig", "validate_config", "SELECTORS", "FINE_TUNED", "FINE_TUNING"]
 
 SELECTORS = ("map", "roughness", "random")
 GP_EVALUATIONS = ("final", "best")
 REMOVAL_TIES = ("nearer", "keep", "remove")
 CREDITS = ("threshold", "finished")
 DISTANCE_ORIGINS = ("origin", "top_right")
+# The PPOConfig fields that fine-tuning sets (how much is collected per update, how it is trained on); every other
+# field (networks, normaliser, clipping, discount, ...) is the base policy's, whose params and normaliser carry over.
+FINE_TUNED = ("num_envs", "unroll_length", "num_unrolls", "num_minibatches", "update_epochs", "learning_rate")
+FINE_TUNING = PPOConfig(num_envs=500, unroll_length=10, num_unrolls=8, num_minibatches=8, update_epochs=8,
+                        learning_rate=3e-4)
 
 
 class CurriculumConfig(NamedTuple):
@@ -90,9 +98,11 @@ class CurriculumConfig(NamedTuple):
       roughness_stride: the roughness baseline trains every ``roughness_stride``-th terrain (paper: 5).
       max_observations: GP observation slots ``M``; None = ``min(N terrains, max chunks)``, which can never fill up
         (one observation per finished terrain, each terrain finished at most once).
-      num_envs, unroll_length, num_unrolls, num_minibatches, update_epochs, learning_rate: PPO for fine-tuning
-        (the base policy's recipe otherwise); ``num_envs x unroll_length x num_unrolls`` must divide a chunk's env
-        steps.
+      ppo: a :class:`jaxterrain.rl.PPOConfig` whose :data:`FINE_TUNED` fields (``num_envs, unroll_length,
+        num_unrolls, num_minibatches, update_epochs, learning_rate``) are the fine-tuning PPO's (the base policy's
+        recipe otherwise, :meth:`ppo_config`); its other fields must keep ``PPOConfig``'s defaults. Default
+        :data:`FINE_TUNING`; e.g. ``ppo=FINE_TUNING._replace(num_envs=64)``. ``steps_per_update`` (``num_envs x
+        unroll_length x num_unrolls``) must divide a chunk's env steps.
     """
 
     selector: str = "map"
@@ -115,12 +125,7 @@ class CurriculumConfig(NamedTuple):
     distance_origin: str = "origin"
     roughness_stride: int = 5
     max_observations: Optional[int] = None
-    num_envs: int = 500
-    unroll_length: int = 10
-    num_unrolls: int = 8
-    num_minibatches: int = 8
-    update_epochs: int = 8
-    learning_rate: float = 3e-4
+    ppo: PPOConfig = FINE_TUNING
 
     @property
     def max_chunks(self) -> int:
@@ -135,7 +140,7 @@ class CurriculumConfig(NamedTuple):
     @property
     def steps_per_update(self) -> int:
         """Env steps of one PPO update."""
-        return self.num_envs * self.unroll_length * self.num_unrolls
+        return self.ppo.steps_per_update
 
     @property
     def updates_per_chunk(self) -> int:
@@ -148,19 +153,27 @@ class CurriculumConfig(NamedTuple):
             return int(self.max_observations)
         return max(1, min(int(num_terrains), self.max_chunks))
 
-    def ppo_config(self, base):
-        """The fine-tuning :class:`jaxterrain.rl.PPOConfig`: ``base`` (the base policy's) with this config's sizes."""
-        return base._replace(num_envs=self.num_envs, unroll_length=self.unroll_length, num_unrolls=self.num_unrolls,
-                             num_minibatches=self.num_minibatches, update_epochs=self.update_epochs,
-                             learning_rate=self.learning_rate)
+    def ppo_config(self, base: PPOConfig) -> PPOConfig:
+        """The fine-tuning :class:`jaxterrain.rl.PPOConfig`: ``base`` (the base policy's) with the :data:`FINE_TUNED`
+        fields of :attr:`ppo`."""
+        return base._replace(**{name: getattr(self.ppo, name) for name in FINE_TUNED})
 
     def to_json_dict(self) -> dict:
-        return dict(self._asdict())
+        """A JSON-serialisable dict: the fields, with ``ppo`` as ``{name: value}`` of its :data:`FINE_TUNED` fields
+        (the only ones it may set)."""
+        return {**self._asdict(), "ppo": {name: getattr(self.ppo, name) for name in FINE_TUNED}}
 
     @classmethod
     def from_json_dict(cls, d: dict) -> "CurriculumConfig":
+        """Inverse of :meth:`to_json_dict`; also reads the flat layout (the :data:`FINE_TUNED` fields beside the
+        others, as ``experiments learn``'s ``config.json`` and configs written before ``ppo`` existed hold them).
+        Missing fields take their defaults; unknown keys raise ``ValueError``."""
+        d = dict(d)
+        ppo = {name: d.pop(name) for name in FINE_TUNED if name in d}
+        nested = d.pop("ppo", None) or {}
+        known_fields("CurriculumConfig.ppo", FINE_TUNED, nested)
         known_fields("CurriculumConfig", cls._fields, d)
-        return cls(**d)
+        return cls(**d, ppo=FINE_TUNING._replace(**{**ppo, **nested}))
 
 
 def _float_in(config, name: str, lo: float, hi: Optional[float], lo_open: bool, hi_open: bool = False) -> None:
@@ -188,7 +201,7 @@ def validate_config(config: CurriculumConfig) -> CurriculumConfig:
     """Raise ``ValueError`` naming the first bad field and its allowed range; return ``config`` unchanged."""
     _choice(config, "selector", SELECTORS)
     for name in ("epochs_per_chunk", "steps_per_epoch", "max_epochs", "max_evals", "attempts", "best",
-                 "roughness_stride", "num_envs", "unroll_length", "num_unrolls", "num_minibatches", "update_epochs"):
+                 "roughness_stride"):
         _int_at_least(config, name, 1)
     if config.best > config.attempts:
         raise ValueError(f"CurriculumConfig.best must be <= attempts ({config.attempts}), got {config.best}")
@@ -199,18 +212,30 @@ def validate_config(config: CurriculumConfig) -> CurriculumConfig:
     _float_in(config, "sigma_f", 0.0, None, lo_open=True)
     _float_in(config, "noise", 0.0, None, lo_open=True)
     _float_in(config, "removal_margin", 0.0, None, lo_open=False)
-    _float_in(config, "learning_rate", 0.0, None, lo_open=True)
     _choice(config, "gp_evaluation", GP_EVALUATIONS)
     _choice(config, "removal_ties", REMOVAL_TIES)
     _choice(config, "credit", CREDITS)
     _choice(config, "distance_origin", DISTANCE_ORIGINS)
     if config.max_observations is not None:
         _int_at_least(config, "max_observations", 1)
+    _check_ppo(config.ppo)
     if config.steps_per_chunk % config.steps_per_update:
         raise ValueError(
-            f"CurriculumConfig.num_envs x unroll_length x num_unrolls ({config.steps_per_update}) must divide "
+            f"CurriculumConfig.ppo: num_envs x unroll_length x num_unrolls ({config.steps_per_update}) must divide "
             f"epochs_per_chunk x steps_per_epoch ({config.steps_per_chunk})")
-    if (config.num_envs * config.num_unrolls) % config.num_minibatches:
-        raise ValueError(f"CurriculumConfig.num_minibatches ({config.num_minibatches}) must divide num_envs x "
-                         f"num_unrolls ({config.num_envs * config.num_unrolls})")
     return config
+
+
+def _check_ppo(ppo) -> None:
+    """``CurriculumConfig.ppo``: a valid ``PPOConfig`` that sets nothing but the :data:`FINE_TUNED` fields."""
+    if not isinstance(ppo, PPOConfig):
+        raise ValueError(f"CurriculumConfig.ppo must be a jaxterrain.rl.PPOConfig, got {type(ppo).__name__}")
+    try:
+        validate_ppo_config(ppo)
+    except ValueError as err:
+        raise ValueError(f"CurriculumConfig.ppo: {err}") from None
+    for name in PPOConfig._fields:
+        if name not in FINE_TUNED and getattr(ppo, name) != PPOConfig._field_defaults[name]:
+            raise ValueError(f"CurriculumConfig.ppo.{name} must keep PPOConfig's default "
+                             f"({PPOConfig._field_defaults[name]!r}): fine-tuning uses the base policy's; only "
+                             f"{', '.join(FINE_TUNED)} are set here, got {getattr(ppo, name)!r}")

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 from typing import NamedTuple, Optional, Tuple
 
 from jaxterrain._validate import int_at_least, known_fields, one_of
@@ -121,11 +122,11 @@ def validate_config(config: PPOConfig) -> PPOConfig:
     }
     for name, (lo, hi, lo_inclusive) in ranges.items():
         v = float(getattr(config, name))
-        ok = (v >= lo if lo_inclusive else v > lo) and (hi is None or v <= hi)
+        ok = math.isfinite(v) and (v >= lo if lo_inclusive else v > lo) and (hi is None or v <= hi)
         if not ok:
             lo_s = f"{'>=' if lo_inclusive else '>'} {lo}"
             hi_s = f" and <= {hi}" if hi is not None else ""
-            raise ValueError(f"PPOConfig.{name} must be {lo_s}{hi_s}, got {v!r}")
+            raise ValueError(f"PPOConfig.{name} must be a finite number {lo_s}{hi_s}, got {v!r}")
     for name in ("entropy_coef", "vf_coef"):
         if float(getattr(config, name)) < 0:
             raise ValueError(f"PPOConfig.{name} must be >= 0, got {getattr(config, name)!r}")
