@@ -24,6 +24,7 @@ targets on 2 GPUs: evaluation >= 1.8x, PPO >= 1.7x). On CPU, force devices with
 from __future__ import annotations
 
 import argparse
+import functools
 import sys
 import time
 from pathlib import Path
@@ -69,8 +70,8 @@ def bench_eval(backend: str, heightmaps, devices: list[int], slots, repeats: int
     key, rows, base = jax.random.key(7), [], None
     for n in devices:
         mesh = sharding.make_mesh(n)
-        first, t, fit = timed_calls(lambda: difficulty.evaluate(heightmaps, key, env_config=cfg, slots=slots,  # noqa: B023
-                                                                 mesh=mesh), repeats)  # noqa: B023
+        call = functools.partial(difficulty.evaluate, heightmaps, key, env_config=cfg, slots=slots, mesh=mesh)
+        first, t, fit = timed_calls(call, repeats)
         fit = np.asarray(fit)
         base = fit if base is None else base
         row = {"part": "eval", "backend": backend, "devices": n, "terrains": int(heightmaps.shape[0]),

@@ -490,15 +490,21 @@ def _host_programs(scoring: S.Scoring, emitter: ME.Emitter):
         new, m = finish(state, genomes, scoring(genomes, eval_key, task))
         return state._replace(repertoire=new.repertoire), m
 
-    def chunk(state, key, n):
-        history = []
-        for _ in range(n):
-            genomes, eval_key = children(state, key)
-            state, m = finish(state, genomes, scoring(genomes, eval_key, state.task))
-            history.append(m)
-        return state, jax.tree.map(lambda *xs: jnp.stack(xs), *history)
+    def generation(state, key):
+        genomes, eval_key = children(state, key)
+        return finish(state, genomes, scoring(genomes, eval_key, state.task))
 
-    return init, chunk
+    return init, functools.partial(_host_loop, generation)
+
+
+def _host_loop(generation: Callable, state, key, n: int):
+    """``n`` calls of ``state, metrics = generation(state, key)`` from the host; the metrics stacked ``[n, ...]``
+    (what a ``lax.scan`` of them returns)."""
+    history = []
+    for _ in range(n):
+        state, m = generation(state, key)
+        history.append(m)
+    return state, jax.tree.map(lambda *xs: jnp.stack(xs), *history)
 
 
 def _many_chunk(scorings, emitters, fitness, mesh=None):
@@ -521,17 +527,13 @@ def _many_host_chunk(scorings, emitters, fitness):
     children = jax.jit(lambda states, keys: ME.many_offspring(states, keys, emitters))
     finish = jax.jit(ME.many_finish)
 
-    def chunk(states, keys, key, n):
-        history = []
-        for _ in range(n):
-            fitness_key = jax.random.fold_in(key, states[0].generation[0])
-            kids = children(states, keys)
-            made, parts = ME.many_scores(states, kids, fitness_key, scorings, fitness)
-            states, m = finish(states, kids, made, parts)
-            history.append(m)
-        return states, jax.tree.map(lambda *xs: jnp.stack(xs), *history)
+    def generation(states, run):
+        keys, key = run
+        kids = children(states, keys)
+        fitness_key = jax.random.fold_in(key, states[0].generation[0])
+        return finish(states, kids, *ME.many_scores(states, kids, fitness_key, scorings, fitness))
 
-    return chunk
+    return lambda states, keys, key, n: _host_loop(generation, states, (keys, key), n)
 
 
 def to_archive(generator, repertoire, config: A.EvolveConfig, history: dict) -> A.Archive:

@@ -192,9 +192,7 @@ def map_rows(fn: Callable, mesh: Mesh, replicated: tuple[int, ...] = (), mask: b
     mesh's first device. Both give the same values: the rows are independent.
     Inside a ``jit`` trace (tracer arguments) there is nothing to dispatch: the call takes the ``shard_map`` path.
     """
-    split = default_split(mesh) if split is None else split
-    if split not in SPLITS:
-        raise ValueError(f"split must be one of {SPLITS}, got {split!r}")
+    split = _resolve_split(mesh, split)
     sharded = _shard_map_rows(fn, mesh, frozenset(replicated), mask)
     if split == "shard_map":
         return sharded
@@ -212,41 +210,43 @@ def split_rows(fn: Callable, mesh: Mesh, split: Optional[str] = None) -> Callabl
     count, e.g. padded with :func:`pad_rows`) cut into equal consecutive parts, part ``i`` on device ``i``; the
     outputs' leading axes concatenated in device order. ``split`` as in :func:`map_rows` (``"dispatch"`` only
     outside a trace)."""
-    split = default_split(mesh) if split is None else split
-    if split not in SPLITS:
-        raise ValueError(f"split must be one of {SPLITS}, got {split!r}")
+    split = _resolve_split(mesh, split)
     sharded = jax.shard_map(fn, mesh=mesh, in_specs=(P(AXIS),), out_specs=P(AXIS), check_vma=False)
     if split == "shard_map":
         return sharded
     devices, jitted = list(mesh.devices.flat), jax.jit(fn)
-
-    def dispatched(tree):
-        parts = _per_device(devices, lambda k, dev: jitted(jax.device_put(
-            jax.tree.map(lambda x: _part(x, k, len(devices)), tree), dev)))
-        return _gather(parts, devices[0])
-
-    return lambda tree: sharded(tree) if tracing(tree) else dispatched(tree)
+    return lambda tree: sharded(tree) if tracing(tree) else _dispatch(jitted, devices, [tree], [True])
 
 
-def _part(x, k: int, d: int):
-    n = x.shape[0] // d
-    return x[k * n:(k + 1) * n]
+def _resolve_split(mesh: Mesh, split: Optional[str]) -> str:
+    split = default_split(mesh) if split is None else split
+    if split not in SPLITS:
+        raise ValueError(f"split must be one of {SPLITS}, got {split!r}")
+    return split
 
 
-def _per_device(devices, call: Callable) -> list:
-    """``[call(k, device_k)]``: one thread per device, so that first calls compile at the same time and later calls
-    only enqueue work (JAX runs the devices' programs at once)."""
+def _dispatch(jitted: Callable, devices: list, args: list, split: list) -> Any:
+    """``jitted`` called on every device at once: ``args[i]`` cut along its leading axis into ``len(devices)``
+    equal consecutive parts where ``split[i]`` (part ``k`` to device ``k``), else passed whole; the outputs'
+    leaves concatenated along axis 0 on the first device. One thread per device, so that first calls compile at
+    the same time and later calls only enqueue work (JAX runs the devices' programs at once)."""
     from concurrent.futures import ThreadPoolExecutor
 
     if any(d.process_index != jax.process_index() for d in devices):
         raise ValueError("split='dispatch' needs a mesh of this process's devices; use 'shard_map'")
-    with ThreadPoolExecutor(len(devices)) as pool:
-        return list(pool.map(lambda k: call(k, devices[k]), range(len(devices))))
+    d = len(devices)
 
+    def part(x, k):
+        n = x.shape[0] // d
+        return x[k * n:(k + 1) * n]
 
-def _gather(parts: list, device) -> Any:
-    """The parts' leaves concatenated along axis 0 on ``device``."""
-    return jax.tree.map(lambda *xs: jnp.concatenate([jax.device_put(x, device) for x in xs]), *parts)
+    def call(k):
+        mine = [jax.tree.map(lambda x: part(x, k), a) if cut else a for a, cut in zip(args, split)]
+        return jitted(*jax.device_put(mine, devices[k]))
+
+    with ThreadPoolExecutor(d) as pool:
+        outs = list(pool.map(call, range(d)))
+    return jax.tree.map(lambda *xs: jnp.concatenate([jax.device_put(x, devices[0]) for x in xs]), *outs)
 
 
 def _shard_map_rows(fn: Callable, mesh: Mesh, replicated: frozenset, mask: bool) -> Callable:
@@ -274,9 +274,8 @@ def _shard_map_rows(fn: Callable, mesh: Mesh, replicated: frozenset, mask: bool)
 
 def _dispatch_rows(fn: Callable, mesh: Mesh, replicated: frozenset, mask: bool) -> Callable:
     """:func:`map_rows` with ``split="dispatch"``: one single-device program per device of ``mesh`` (this
-    process's), each device's rows sent to it (:func:`_per_device`), the real rows gathered on the first device."""
+    process's), each device's rows sent to it (:func:`_dispatch`), the real rows gathered on the first device."""
     devices, jitted = list(mesh.devices.flat), jax.jit(fn)
-    d = len(devices)
 
     def call(*args):
         batched = [a for i, a in enumerate(args) if i not in replicated]
@@ -286,11 +285,6 @@ def _dispatch_rows(fn: Callable, mesh: Mesh, replicated: frozenset, mask: bool) 
         rows = [i not in replicated for i in range(len(args))]
         if mask:
             padded, rows = padded + [jnp.arange(length) < n], rows + [True]
-
-        def part(k: int, dev):
-            return jitted(*[jax.device_put(jax.tree.map(lambda x: _part(x, k, d), a) if r else a, dev)
-                            for a, r in zip(padded, rows)])
-
-        return jax.tree.map(lambda x: x[:n], _gather(_per_device(devices, part), devices[0]))
+        return jax.tree.map(lambda x: x[:n], _dispatch(jitted, devices, padded, rows))
 
     return call

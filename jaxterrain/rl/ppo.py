@@ -335,8 +335,9 @@ def update(state: TrainState, key: jax.Array, terrains: jax.Array, *, env: EnvLi
     that finished one; ``episodes``: episodes finished during this update).
 
     ``mesh`` (a ``jax.sharding.Mesh``, data parallel): the envs (and per-env terrains) are split over its devices,
-    each device steps its own (under ``jax.shard_map`` when ``num_envs`` divides over the devices, so that
-    an opaque physics call such as MuJoCo Warp's runs per device; else XLA partitions the batched steps); the policy, value net, normaliser and optimiser state are replicated. Every epoch
+    each device steps its own (:func:`_collect_mode`: under ``jax.shard_map`` on CPUs when ``num_envs`` divides
+    over the devices, so that an opaque physics call such as MuJoCo Warp's runs per device; else XLA partitions
+    the batched steps); the policy, value net, normaliser and optimiser state are replicated. Every epoch
     draws the same permutation as without a mesh, and each minibatch is split over the devices (padded to a
     multiple of the device count, the padding weighted 0): every device computes the gradient of its share of the
     minibatch loss, the gradients are summed (``psum``: their mean over the devices weighted by their rows) and
