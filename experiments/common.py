@@ -402,3 +402,14 @@ def say(line: str) -> None:
         tqdm.write(line, file=sys.stdout)
     except ImportError:  # pragma: no cover
         print(line, flush=True)
+
+
+def parse_shard(text: str) -> tuple[int, int]:
+    """``"I/N"`` -> ``(I, N)`` with ``0 <= I < N``; anything else is an argparse error naming ``--shard``."""
+    try:
+        i, n = (int(v) for v in text.split("/"))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"--shard must be I/N (two integers), got {text!r}") from None
+    if not (n >= 1 and 0 <= i < n):
+        raise argparse.ArgumentTypeError(f"--shard I/N needs N >= 1 and 0 <= I < N, got {text!r}")
+    return i, n

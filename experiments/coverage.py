@@ -78,20 +78,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--batched", action="store_const", const=True, default=None,
                         help="evolve every treatment at once (one jitted generation, one fitness call on all "
                              "treatments' offspring; jaxterrain.archive.evolve_many); not with --shard")
-    parser.add_argument("--shard", type=parse_shard, default=None, metavar="I/N",
+    parser.add_argument("--shard", type=common.parse_shard, default=None, metavar="I/N",
                         help="run only the treatments t with t %% N == I (independent jobs sharing one --out; see "
                              "the module docstring); then --resume without --shard writes the tables")
-
-
-def parse_shard(text: str) -> tuple[int, int]:
-    """``"I/N"`` -> ``(I, N)`` with ``0 <= I < N``; anything else is an argparse error naming ``--shard``."""
-    try:
-        i, n = (int(v) for v in text.split("/"))
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"--shard must be I/N (two integers), got {text!r}") from None
-    if not (n >= 1 and 0 <= i < n):
-        raise argparse.ArgumentTypeError(f"--shard I/N needs N >= 1 and 0 <= I < N, got {text!r}")
-    return i, n
 
 
 def treatments(pairs, generators) -> list[tuple[int, tuple, str]]:

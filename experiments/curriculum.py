@@ -9,7 +9,10 @@ Treatments (each one ``learn`` run, ``--trials`` trials together, in ``<run>/<na
 curriculum on every archive given (``NAME=PATH``; names as in the paper's Table 2: cppn, gan, perlin, worley,
 diamond_square), on their combination (``archive.combine``: the fitter elite per cell; ``<run>/combined_archive.npz``;
 skipped with one archive), and the roughness-sorted standard CL on the ``cppn`` archive (Figure 7b). Finished
-treatments are kept, so ``--resume`` continues where the time limit stopped.
+treatments are kept, so ``--resume`` continues where the time limit stopped. ``--shard I/N`` runs only the
+treatments ``t % N == I`` of that order, so that independent processes (e.g. one per GPU:
+``CUDA_VISIBLE_DEVICES=I ... --out RUN --shard I/N``) share one run folder; ``--resume RUN`` without ``--shard``
+then reuses the finished treatments and writes the tables.
 
 Writes ``figure7a.png`` (hardest terrain traversed vs epoch, every map treatment, mean +- 1 standard error),
 ``figure7b.png`` (CPPN: map vs standard CL), ``table2.csv`` / ``table2.md`` (epochs to first traverse a terrain at
@@ -46,6 +49,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--max-epochs", type=int, default=None)
     parser.add_argument("--baseline", choices=["roughness", "random"], default=None,
                         help="the baseline run on the cppn archive (Figure 7b; default roughness)")
+    parser.add_argument("--shard", type=common.parse_shard, default=None, metavar="I/N",
+                        help="run only the treatments t % N == I of the fixed order (independent processes, e.g. one "
+                             "per GPU, on one run folder); then --resume without --shard writes the tables")
     parser.add_argument("--backend", choices=["auto", "jax", "warp"], default=None,
                         help="walker physics of every treatment: auto (default: warp on a GPU where it imports, else "
                              "jax), jax (MJX) or warp (MuJoCo Warp on tiles)")
@@ -158,7 +164,11 @@ def main(args) -> int:
         print(f"curriculum: {err}", file=sys.stderr)
         return 2
     rows, done = [], []
-    for name, path, curriculum in plan:
+    shard_i, shard_n = args.shard or (0, 1)
+    shard = "" if args.shard is None else f" --shard {shard_i}/{shard_n}"
+    for t, (name, path, curriculum) in enumerate(plan):
+        if t % shard_n != shard_i:
+            continue
         sub = folder / f"{name}-{curriculum}"
         sub.mkdir(parents=True, exist_ok=True)
         tcfg = _treatment_cfg(cfg, path, curriculum)
@@ -166,10 +176,15 @@ def main(args) -> int:
         left = None if limit is None else max(limit - (time.perf_counter() - start), 1e-3)
         summary = learn.run_treatment(tcfg, sub, left, desc=f"{name} {curriculum}", mesh=mesh)
         if summary is None:
-            print(f"time limit reached; continue with: python -m experiments curriculum --resume {folder}", flush=True)
+            print(f"time limit reached; continue with: python -m experiments curriculum --resume {folder}{shard}",
+                  flush=True)
             return 3
         rows.append((f"{name} {curriculum}", summary))
         done.append((f"{name} {curriculum}", sub))
+    if args.shard is not None:
+        print(f"shard {shard_i}/{shard_n} done ({len(rows)} of {len(plan)} treatments); when every shard is, write the "
+              f"tables with: python -m experiments curriculum --resume {folder}", flush=True)
+        return 0
     write_table(folder, rows, int(cfg["trials"]))
     write_figures(folder, rows, cfg["baseline"])
     write_sequences(folder, done)

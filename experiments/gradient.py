@@ -26,7 +26,10 @@ Writes into the run folder (``runs/gradient-<time>/`` or ``--out``): ``config.js
 archive, protocol, distance measure and band), ``gradient_summary.csv`` (one row per archive and protocol:
 correlations, shares, cost), ``gradient.md``, ``gradient.png`` and, when walked, ``<archive>_walks.npz`` (cells,
 distances, stored fitness and every rollout's distance and length, heading-major), so other rules can be
-computed without walking again.
+computed without walking again. ``--reseat`` (with ``--protocol``, every elite) also writes
+``<archive>_reseated.npz``: ``jaxterrain.archive.reseat`` with the fitness walked here, i.e. every genome its
+generator accepts, in the cell its own terrain falls in, with its own fitness (for the archives evolved before the
+fix of tied insertions, ``docs/results/insertion_bug.md``).
 
 Example (GPU)::
 
@@ -48,7 +51,7 @@ from experiments import common
 PRESETS: dict[str, dict] = {
     "default": dict(archives=[], protocol=None, attempts=None, best=None, headings=None, start_spread=None,
                     rule=None, slots="auto", chunk=None, sample=None, band_width=10.0, threshold=0.9,
-                    distance="corner"),
+                    distance="corner", reseat=False),
 }
 PROTOCOLS = ("paper", "headings")
 DISTANCES = ("corner", "index")
@@ -163,13 +166,16 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--threshold", type=float, default=None, help="'easy' fitness threshold (default 0.9)")
     parser.add_argument("--distance", choices=DISTANCES, default=None,
                         help="distance measure of the figure and summary (default corner; the CSV has both)")
+    parser.add_argument("--reseat", action="store_true", default=None,
+                        help="with --protocol (no --sample): also write <archive>_reseated.npz, every valid genome "
+                             "in its own terrain's cell with the fitness walked here (jaxterrain.archive.reseat)")
 
 
 def overrides(args) -> dict:
     return dict(archives=list(args.archives) or None, protocol=args.protocol, attempts=args.attempts, best=args.best,
                 headings=args.headings, start_spread=args.start_spread, rule=args.rule, slots=args.slots,
                 chunk=args.chunk, sample=args.sample, band_width=args.band_width, threshold=args.threshold,
-                distance=args.distance)
+                distance=args.distance, reseat=args.reseat)
 
 
 def resolve_protocol(cfg: dict):
@@ -422,6 +428,8 @@ def main(args) -> int:
         raise SystemExit(f"distance must be one of {DISTANCES}, got {cfg['distance']!r}")
     protocol = resolve_protocol(cfg)
     slots = resolve_slots(cfg.get("slots"))
+    if cfg.get("reseat") and (protocol is None or cfg.get("sample") is not None):
+        raise SystemExit("--reseat needs --protocol (every elite walked again) and no --sample")
     key = jax.random.key(int(cfg["seed"]))
     all_bands, all_summary, results = [], [], []
     for i, path in enumerate(cfg["archives"]):
@@ -434,6 +442,8 @@ def main(args) -> int:
                                   cfg.get("sample"))
             save_walks(folder / f"{elites['name']}_walks.npz", elites, walked, protocol)
             print(f"  compile {walked['compile_s']:.1f} s, walk {walked['walk_s']:.1f} s", flush=True)
+            if cfg.get("reseat"):
+                write_reseated(folder / f"{elites['name']}_reseated.npz", elites, walked)
         series = series_of(elites, walked, protocol)
         bands, summary = table_rows(elites["name"], elites, series, cfg)
         all_bands += bands
@@ -450,6 +460,20 @@ def main(args) -> int:
     plot(folder / "gradient.png", results, cfg)
     print(f"done -> {folder}", flush=True)
     return 0
+
+
+def write_reseated(path: Path, elites: dict, walked: dict) -> dict:
+    """``jaxterrain.archive.reseat`` of the walked archive (fitness = the walk's, per filled cell) saved at
+    ``path``; prints and returns its counts."""
+    from jaxterrain import archive as A
+
+    arch = elites["archive"]
+    fitness = np.full(arch.fitness.shape[0], np.nan, np.float32)
+    fitness[elites["cells"][walked["rows"]]] = walked["fitness"]
+    reseated, counts = A.reseat(arch, fitness)
+    A.save(path, reseated)
+    print(f"  reseated -> {path.name}: " + ", ".join(f"{k} {v}" for k, v in counts.items()), flush=True)
+    return counts
 
 
 def save_walks(path: Path, elites: dict, walked: dict, protocol) -> None:

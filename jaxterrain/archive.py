@@ -172,6 +172,84 @@ def check_cells(archive: Archive, generator_options: dict | None = None, batch: 
     return (archive.source < 0) | (cells == np.arange(cells.shape[0]))
 
 
+def refused(archive: Archive, generator_options: dict | None = None, gens: dict | None = None) -> np.ndarray:
+    """``[cells]`` bool: True where the stored genome is one its generator's ``validate`` refuses (e.g. a mixture
+    of several offspring's leaves left by the tie bug of QDax 0.5.0's insertion); False for valid and empty
+    cells. Each filled cell's genome is checked alone, on the host."""
+    from jaxterrain import generators
+
+    out = np.zeros(archive.fitness.shape[0], bool)
+    for g, name in enumerate(archive.generator_names):
+        gen = gens[name] if gens is not None and name in gens else generators.get(name, **(generator_options or {}))
+        for i in np.flatnonzero(archive.source == g):
+            try:
+                gen.validate(jax.tree.map(lambda x: x[i:i + 1], archive.genomes[g]))
+            except ValueError:
+                out[i] = True
+    return out
+
+
+def reseat(archive: Archive, fitness: np.ndarray, generator_options: dict | None = None, batch: int = 64,
+           gens: dict | None = None, descriptor_fn=None) -> tuple[Archive, dict]:
+    """A sound archive from the STORED genomes of ``archive``: each one in the cell its own terrain falls in, with a
+    fitness measured on that terrain.
+
+    For archives whose cells, descriptors or fitness may not belong to their genomes (those evolved before the fix
+    of tied insertions, ``docs/results/insertion_bug.md``), short of evolving them again. Every filled cell's genome
+    is checked with its generator's ``validate`` (:func:`refused` ones are dropped), re-derived
+    (:func:`rederive_cells`: rendered, described, clipped, nearest centroid) and inserted into an empty grid of the
+    same config with ``fitness[cell]``: per target cell the highest fitness wins, ties to the lowest source cell,
+    as :func:`jaxterrain.map_elites.insert` does. A NaN fitness (not measured) drops the elite.
+
+    Args:
+      archive: the archive to reseat.
+      fitness: [cells] float, a fitness per source cell measured on the terrain of its stored genome (e.g. walked
+        again under a :class:`jaxterrain.difficulty.Protocol`); read at filled cells only.
+      generator_options, batch, gens, descriptor_fn: as :func:`rederive_cells`.
+
+    Returns:
+      ``(reseated, counts)``: the new archive (``heightmaps`` None: render them with ``bank.from_archive``;
+      ``metrics`` empty) and ``{"elites", "refused", "unmeasured", "moved", "displaced", "kept"}``: filled cells
+      in, genomes refused, elites without a fitness, elites whose cell changed, elites that lost their target cell
+      to a fitter (or equal, earlier) one, and elites in the result.
+    """
+    n_cells = archive.fitness.shape[0]
+    fitness = np.asarray(fitness, np.float32).reshape(-1)
+    if fitness.shape[0] != n_cells:
+        raise ValueError(f"reseat: fitness must have shape [cells={n_cells}]; got {fitness.shape}")
+    bad = refused(archive, generator_options, gens)
+    cells, raw = rederive_cells(archive, generator_options, batch, gens, descriptor_fn)
+    filled = archive.source >= 0
+    ok = filled & ~bad & np.isfinite(fitness)
+    rows = np.flatnonzero(ok)
+    order = rows[np.lexsort((rows, -fitness[rows]))]  # fittest first, ties to the lowest source cell
+    _, first = np.unique(cells[order], return_index=True)
+    winners = order[first]  # one source row per target cell
+    target = cells[winners]
+    source = np.full(n_cells, -1, np.int32)
+    source[target] = archive.source[winners]
+    fit = np.full(n_cells, -np.inf, np.float32)
+    fit[target] = fitness[winners]
+    desc = np.zeros_like(archive.descriptors)
+    desc[target] = raw[winners]
+    genomes = []
+    for g, genome in enumerate(archive.genomes):
+        mine = winners[archive.source[winners] == g]
+
+        def move(x, mine=mine):
+            out = np.zeros_like(x)
+            out[cells[mine]] = x[mine]
+            return out
+
+        genomes.append(jax.tree.map(move, genome))
+    counts = {"elites": int(filled.sum()), "refused": int((filled & bad).sum()),
+              "unmeasured": int((filled & ~bad & ~np.isfinite(fitness)).sum()),
+              "moved": int((ok & (cells != np.arange(n_cells))).sum()), "displaced": int(rows.size - winners.size),
+              "kept": int(winners.size)}
+    return Archive(tuple(genomes), archive.generator_names, source, fit, desc, archive.centroids.copy(), None,
+                   archive.config, {}), counts
+
+
 def heightmaps(archive: Archive) -> np.ndarray:
     """The elites' heightmaps as float32 [cells, H, W] in [0, 1] (zeros for empty cells)."""
     if archive.heightmaps is None:

@@ -502,6 +502,29 @@ def test_curriculum_tables_put_the_papers_numbers_beside_ours(tmp_path):
     assert (tmp_path / "figure7a.png").stat().st_size > 0 and (tmp_path / "figure7b.png").stat().st_size > 0
 
 
+def test_curriculum_shards_share_one_run_folder_and_resume_writes_the_tables(tmp_path, tiny_archive, capsys):
+    """``curriculum --shard I/N`` runs only treatments ``t % N == I``; ``--resume`` without it reuses the finished
+    treatments (here finished by hand, so nothing compiles) and writes Table 2 and the figures."""
+    archive = tiny_archive(4, "four.npz")
+    run = tmp_path / "exp2"
+    fake = {"milestone_epochs": [40.0] + [None] * 9, "milestone_trials": [2] + [0] * 9, "hardest_mean": 3.0,
+            "curve": {"epoch": [0, 40], "mean": [0.0, 3.0], "se": [0.0, 0.5]}}
+    for sub in ("cppn-map", "cppn-roughness"):  # the plan of one cppn archive: map (t = 0), then the baseline
+        (run / sub).mkdir(parents=True)
+        (run / sub / "summary.json").write_text(json.dumps(fake))
+        (run / sub / "sequences.csv").write_text("trial,order,terrain\n0,0,1\n")
+    base = ("curriculum", "--preset", "smoke", "--archives", f"cppn={archive}")
+    assert cli(*base, "--out", str(run), "--shard", "1/2") == 0
+    out = capsys.readouterr().out
+    assert "shard 1/2 done (1 of 2 treatments)" in out and not (run / "table2.md").exists()
+    with pytest.raises(SystemExit):
+        cli(*base, "--out", str(run / "bad"), "--shard", "2/2")
+    assert cli("curriculum", "--resume", str(run)) == 0
+    md = (run / "table2.md").read_text()
+    assert "| cppn map (ours) | 40 |" in md and "| cppn roughness (ours) | 40 |" in md
+    assert (run / "figure7b.png").exists() and (run / "sequences.csv").read_text().count("cppn") == 2
+
+
 def test_learn_killed_by_its_time_limit_resumes_to_the_uninterrupted_curves(tmp_path, learn_smoke):
     """Issue 13: a treatment stopped after its first block (``--time-limit``, as a killed run restarts from its last
     checkpoint) and resumed ends with the same history, sequences and milestones as an uninterrupted one (same

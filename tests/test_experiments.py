@@ -178,7 +178,7 @@ def test_coverage_shards_partition_the_treatments_and_resume_writes_the_tables(t
     for bad in ("4/4", "1", "a/b", "0/0"):
         with pytest.raises(SystemExit):
             cli(*base, "--out", str(tmp_path / "bad"), "--shard", bad)
-    assert coverage.parse_shard("2/3") == (2, 3)
+    assert common.parse_shard("2/3") == (2, 3)
 
 
 def test_help_lists_commands():

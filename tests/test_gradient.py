@@ -97,3 +97,21 @@ def G_args(argv):
     parser = argparse.ArgumentParser()
     G.add_arguments(parser)
     return parser.parse_args(argv)
+
+
+def test_reseat_of_the_shipped_cppn_archive_matches_insertion_bug_counts(tmp_path):
+    """``write_reseated`` (``--reseat``) on the pre-fix CPPN archive, fed its stored fitness instead of a walk: the
+    289 genomes ``validate`` refuses (docs/results/insertion_bug.md) are dropped, every kept elite re-derives to its
+    cell, and the file loads as an archive. The walk itself is the command's GPU part (not run here)."""
+    from jaxterrain import archive as A
+
+    elites = G.load_elites(str(RESULTS / "exp1b_gpu_sound_cppn_archive.npz"))
+    walked = {"rows": np.arange(elites["cells"].size), "fitness": elites["fitness"]}
+    counts = G.write_reseated(tmp_path / "cppn_reseated.npz", elites, walked)
+    assert counts["elites"] == 1096 and counts["refused"] == 289
+    assert counts["kept"] == 1096 - 289 - counts["displaced"] and counts["moved"] >= counts["displaced"] > 0
+    out = A.load(tmp_path / "cppn_reseated.npz")
+    assert int(out.filled.sum()) == counts["kept"] and A.check_cells(out).all()
+    with pytest.raises(SystemExit, match="--reseat needs --protocol"):
+        G.main(G_args([str(RESULTS / "exp1b_gpu_sound_perlin_archive.npz"), "--reseat", "--out",
+                       str(tmp_path / "run")]))

@@ -201,6 +201,43 @@ def test_check_cells_flags_a_mixed_genome():
     assert not ok[i] and ok.sum() == arch.fitness.size - 1
 
 
+def test_reseat_moves_refuses_and_resolves_collisions_like_insert():
+    c = cfg(generations=3, batch_size=16, initial_population=32)
+    arch = A.evolve(uv_gen(), desc2, c, jax.random.key(2), fitness_fn=smooth, traversable_fn=always, progress=False)
+    filled = np.flatnonzero(arch.filled)
+    assert filled.size >= 4
+    i, j, k = (int(x) for x in filled[:3])
+    u, v = arch.genomes[0].u.copy(), arch.genomes[0].v.copy()
+    u[i], v[i] = u[j], v[j]  # cell i holds a copy of cell j's genome: it belongs in cell j
+    v[k] = 7.0  # cell k's genome is refused (out of range for this generator)
+
+    def validate(g):
+        if np.any(np.asarray(g.v) > 1.0):
+            raise ValueError("v out of range")
+
+    gen = uv_gen()._replace(validate=validate)
+    broken = arch._replace(genomes=(UV(u, v),))
+    fitness = np.where(arch.filled, 0.5, np.nan).astype(np.float32)
+    fitness[i] = 0.9  # the copy in cell i is fitter than the original in cell j: it wins cell j
+    out, counts = A.reseat(broken, fitness, gens={"uv": gen}, descriptor_fn=desc2)
+    assert counts == {"elites": filled.size, "refused": 1, "unmeasured": 0, "moved": 1, "displaced": 1,
+                      "kept": filled.size - 2}
+    assert out.source[i] == -1 and out.source[k] == -1 and out.fitness[j] == np.float32(0.9)
+    assert out.genomes[0].u[j] == u[j] and out.genomes[0].v[j] == v[j]
+    assert A.check_cells(out, gens={"uv": gen}, descriptor_fn=desc2).all()
+    rest = [int(x) for x in filled if int(x) not in (i, j, k)]
+    np.testing.assert_array_equal(out.fitness[rest], 0.5)
+    np.testing.assert_allclose(out.descriptors[rest], arch.descriptors[rest], atol=1e-6)
+    # ties: an equal copy loses to the lower source cell; a NaN fitness is not measured and drops the elite
+    fitness[i] = 0.5
+    fitness[rest[0]] = np.nan
+    out2, counts2 = A.reseat(broken, fitness, gens={"uv": gen}, descriptor_fn=desc2)
+    assert counts2["unmeasured"] == 1 and out2.source[rest[0]] == -1
+    np.testing.assert_array_equal(out2.source[j], 0)  # the winner of cell j is min(i, j)'s genome; both equal
+    with pytest.raises(ValueError, match="fitness must have shape"):
+        A.reseat(broken, fitness[:3], gens={"uv": gen}, descriptor_fn=desc2)
+
+
 # ----------------------------------------------------------------------------------------------------------------
 # several treatments
 # ----------------------------------------------------------------------------------------------------------------
