@@ -70,10 +70,14 @@ def parse_archives(items) -> dict | None:
 
 
 def treatments(cfg: dict, folder: Path) -> list[tuple[str, str, str]]:
-    """``[(name, archive path, curriculum)]`` in run order; writes the combined archive when needed."""
+    """``[(name, archive path, curriculum)]`` in run order; writes the combined archive when needed.
+
+    The map treatments go in the order of the archives' NAMES, whatever order ``--archives`` gave them in:
+    ``config.json`` stores them with sorted keys, so a resumed run (and every ``--shard``) must see the order a fresh
+    one does."""
     from jaxterrain import archive as A
 
-    archives = dict(cfg["archives"])
+    archives = dict(sorted(cfg["archives"].items()))
     out = [(name, path, "map") for name, path in archives.items()]
     if len(archives) > 1:
         combined = folder / "combined_archive.npz"

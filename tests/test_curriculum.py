@@ -505,6 +505,8 @@ def test_curriculum_tables_put_the_papers_numbers_beside_ours(tmp_path):
 def test_curriculum_shards_share_one_run_folder_and_resume_writes_the_tables(tmp_path, tiny_archive, capsys):
     """``curriculum --shard I/N`` runs only treatments ``t % N == I``; ``--resume`` without it reuses the finished
     treatments (here finished by hand, so nothing compiles) and writes Table 2 and the figures."""
+    from experiments import curriculum as exp
+
     archive = tiny_archive(4, "four.npz")
     run = tmp_path / "exp2"
     fake = {"milestone_epochs": [40.0] + [None] * 9, "milestone_trials": [2] + [0] * 9, "hardest_mean": 3.0,
@@ -523,6 +525,13 @@ def test_curriculum_shards_share_one_run_folder_and_resume_writes_the_tables(tmp
     md = (run / "table2.md").read_text()
     assert "| cppn map (ours) | 40 |" in md and "| cppn roughness (ours) | 40 |" in md
     assert (run / "figure7b.png").exists() and (run / "sequences.csv").read_text().count("cppn") == 2
+    # the plan follows the archives' names, not the order given: a fresh shard and a resumed one (config.json has
+    # sorted keys) must agree on which treatment is t
+    one = exp.treatments({"archives": {"perlin": archive, "cppn": archive}, "descriptors": ["roughness", "tpi"],
+                          "baseline": "roughness"}, tmp_path / "p1")
+    two = exp.treatments({"archives": {"cppn": archive, "perlin": archive}, "descriptors": ["roughness", "tpi"],
+                          "baseline": "roughness"}, tmp_path / "p2")
+    assert [t[0] for t in one] == [t[0] for t in two] == ["cppn", "perlin", "combined", "cppn"]
 
 
 def test_learn_killed_by_its_time_limit_resumes_to_the_uninterrupted_curves(tmp_path, learn_smoke):

@@ -1,4 +1,4 @@
-"""The host-side PPO driver: chunks of jitted ``lax.scan``\ s of :func:`~jaxterrain.rl.ppo.run_updates`, a
+r"""The host-side PPO driver: chunks of jitted ``lax.scan``\ s of :func:`~jaxterrain.rl.ppo.run_updates`, a
 callback between chunks (progress, checkpoints) through ``jaxterrain.driver.run_chunks``: :func:`compiled_chunk`,
 :func:`chunk_fn`, :func:`train` and the :class:`Progress` callback. Part of :mod:`jaxterrain.rl.ppo`; import the
 names from there (or from :mod:`jaxterrain.rl`)."""
