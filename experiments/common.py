@@ -92,6 +92,15 @@ def check_values(values: dict, where=flag) -> None:
         v, b = values.get(key), values.get(bound)
         if isinstance(v, int) and isinstance(b, int) and not isinstance(v, bool) and v > b:
             raise UsageError(f"{where(key)} must be <= {where(bound)} ({b}); got {v}")
+    heads, attempts, best = values.get("headings"), values.get("attempts"), values.get("best")
+    if heads is not None:  # the walker protocol: attempts in total over the headings, best per heading
+        if heads not in (1, 2, 4) or isinstance(heads, bool):
+            raise _bad(where("headings"), "1, 2 or 4", heads)
+        if isinstance(attempts, int) and attempts % heads:
+            raise UsageError(f"{where('attempts')} must be a multiple of {where('headings')} ({heads}); got {attempts}")
+        if isinstance(attempts, int) and isinstance(best, int) and best > attempts // heads:
+            raise UsageError(f"{where('best')} must be <= {where('attempts')} / {where('headings')} "
+                             f"({attempts // heads}); got {best}")
 
 
 def check_out(out: Any, where: str = "--out") -> None:
@@ -413,3 +422,25 @@ def parse_shard(text: str) -> tuple[int, int]:
     if not (n >= 1 and 0 <= i < n):
         raise argparse.ArgumentTypeError(f"--shard I/N needs N >= 1 and 0 <= I < N, got {text!r}")
     return i, n
+
+
+PROTOCOLS = {"paper": dict(attempts=20, best=5, headings=1), "headings": dict(attempts=80, best=5, headings=4)}
+"""``--protocol`` names: the walker fitness's ``attempts`` (in total), ``best`` (per heading) and ``headings``
+(``difficulty.PAPER`` and ``difficulty.HEADINGS``)."""
+
+
+def add_protocol_argument(parser: argparse.ArgumentParser) -> None:
+    """``--protocol paper|headings``: sets ``attempts``, ``best`` and ``headings`` together (:data:`PROTOCOLS`);
+    ``--attempts`` / ``--best`` / ``--headings``, where the command has them, override single fields."""
+    parser.add_argument("--protocol", choices=sorted(PROTOCOLS), default=None,
+                        help="the walker fitness: paper (20 walks along +x, best 5) or headings (20 walks in each "
+                             "of 4 headings, best 5 per heading, mean over headings)")
+
+
+def protocol_overrides(args: argparse.Namespace) -> dict:
+    """The config overrides of ``--protocol`` and of the single-field flags the command has (given ones win)."""
+    out = dict(PROTOCOLS.get(getattr(args, "protocol", None), {}))
+    for key in ("attempts", "best", "headings"):
+        if getattr(args, key, None) is not None:
+            out[key] = getattr(args, key)
+    return out

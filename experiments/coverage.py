@@ -74,7 +74,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--batch-size", type=int, default=None)
     parser.add_argument("--size", type=int, default=None)
     parser.add_argument("--bins", type=int, default=None)
-    parser.add_argument("--fitness", choices=["difficulty", "slope"], default=None)
+    parser.add_argument("--fitness", choices=common.FITNESSES, default=None)
+    common.add_protocol_argument(parser)
     parser.add_argument("--batched", action="store_const", const=True, default=None,
                         help="evolve every treatment at once (one jitted generation, one fitness call on all "
                              "treatments' offspring; jaxterrain.archive.evolve_many); not with --shard")
@@ -91,7 +92,8 @@ def treatments(pairs, generators) -> list[tuple[int, tuple, str]]:
 
 def overrides(args) -> dict:
     return dict(generators=args.generators, generations=args.generations, batch_size=args.batch_size,
-                size=args.size, bins=args.bins, fitness=args.fitness, batched=args.batched)
+                size=args.size, bins=args.bins, fitness=args.fitness, batched=args.batched,
+                **common.protocol_overrides(args))
 
 
 def pair_label(pair) -> str:

@@ -49,6 +49,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--max-epochs", type=int, default=None)
     parser.add_argument("--baseline", choices=["roughness", "random"], default=None,
                         help="the baseline run on the cppn archive (Figure 7b; default roughness)")
+    common.add_protocol_argument(parser)  # default: each archive's own protocol (learn's)
     parser.add_argument("--shard", type=common.parse_shard, default=None, metavar="I/N",
                         help="run only the treatments t % N == I of the fixed order (independent processes, e.g. one "
                              "per GPU, on one run folder); then --resume without --shard writes the tables")
@@ -155,7 +156,7 @@ def write_sequences(folder: Path, done: list[tuple[str, Path]]) -> None:
 
 def main(args) -> int:
     over = dict(archives=parse_archives(args.archives), trials=args.trials, max_epochs=args.max_epochs,
-                baseline=args.baseline, backend=args.backend)
+                baseline=args.baseline, backend=args.backend, **common.protocol_overrides(args))
     mesh = common.device_mesh(args.devices)
     folder, cfg = common.setup_run("curriculum", args, PRESETS, "smoke", over)
     start = time.perf_counter()

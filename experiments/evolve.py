@@ -43,19 +43,19 @@ from experiments import common
 
 PRESETS: dict[str, dict] = {
     "paper": dict(generator="perlin", descriptors=["roughness", "tpi"], generations=5000, batch_size=20,
-                  initial_population=100, bins=50, size=256, window=30, stride=2, attempts=20, best=5,
+                  initial_population=100, bins=50, size=256, window=30, stride=2, attempts=20, best=5, headings=1,
                   checkpoint_every=250, fitness="difficulty", robot_height=None, out_of_range="clip", ranges=None,
                   store_heightmaps=True, rollout_slots=None),
     "gpu": dict(generator="perlin", descriptors=["roughness", "tpi"], generations=25, batch_size=4000,
-                initial_population=100, bins=50, size=256, window=30, stride=2, attempts=20, best=5,
+                initial_population=100, bins=50, size=256, window=30, stride=2, attempts=20, best=5, headings=1,
                 checkpoint_every=1, fitness="difficulty", robot_height=None, out_of_range="clip", ranges=None,
                 store_heightmaps=True, rollout_slots=16384),
     "gpu-short": dict(generator="perlin", descriptors=["roughness", "tpi"], generations=5, batch_size=2000,
-                      initial_population=100, bins=50, size=256, window=30, stride=2, attempts=20, best=5,
+                      initial_population=100, bins=50, size=256, window=30, stride=2, attempts=20, best=5, headings=1,
                       checkpoint_every=1, fitness="difficulty", robot_height=None, out_of_range="clip", ranges=None,
                       store_heightmaps=False, rollout_slots=8192),
     "smoke": dict(generator="perlin", descriptors=["roughness", "tpi"], generations=4, batch_size=8,
-                  initial_population=16, bins=10, size=32, window=8, stride=2, attempts=2, best=1,
+                  initial_population=16, bins=10, size=32, window=8, stride=2, attempts=2, best=1, headings=1,
                   checkpoint_every=2, fitness="slope", robot_height=None, out_of_range="clip",
                   ranges=[[0.0, 0.5], [-0.02, 0.02]], store_heightmaps=True, rollout_slots=None),
 }
@@ -76,7 +76,7 @@ def evolve_config(cfg: dict):
         descriptors=tuple(cfg["descriptors"]),
         ranges=None if ranges is None else tuple(tuple(map(float, r)) for r in ranges),
         window=int(cfg["window"]), stride=int(cfg["stride"]), attempts=int(cfg["attempts"]), best=int(cfg["best"]),
-        checkpoint_every=int(cfg["checkpoint_every"]), robot_height=cfg.get("robot_height"),
+        headings=int(cfg.get("headings", 1)), checkpoint_every=int(cfg["checkpoint_every"]), robot_height=cfg.get("robot_height"),
         out_of_range=cfg.get("out_of_range", "clip"), store_heightmaps=bool(cfg.get("store_heightmaps", True)),
         rollout_slots=None if cfg.get("rollout_slots") is None else int(cfg["rollout_slots"]),
         rollout_backend=str(cfg.get("rollout_backend", "jax")),
@@ -96,8 +96,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--size", type=int, default=None, help="heightmap side in pixels")
     parser.add_argument("--checkpoint-every", type=int, default=None)
     parser.add_argument("--fitness", choices=common.FITNESSES, default=None)
-    parser.add_argument("--attempts", type=int, default=None)
-    parser.add_argument("--best", type=int, default=None)
+    parser.add_argument("--attempts", type=int, default=None, help="walks per terrain in total")
+    parser.add_argument("--best", type=int, default=None, help="best walks averaged per heading")
+    parser.add_argument("--headings", type=int, choices=(1, 2, 4), default=None,
+                        help="headings of the walks (1: the paper's +x; 4: +x, +y, -x, -y; mean over headings)")
+    common.add_protocol_argument(parser)
     parser.add_argument("--rollout-slots", type=int, default=None,
                         help="env slots of the difficulty rollout pool per device (speed only; gpu preset: 16384)")
     parser.add_argument("--rollout-backend", choices=["jax", "warp"], default=None,
@@ -110,7 +113,7 @@ def overrides(args) -> dict:
     return dict(generator=args.generator, descriptors=args.descriptors, generations=args.generations,
                 batch_size=args.batch_size, initial_population=args.initial_population, bins=args.bins,
                 size=args.size, checkpoint_every=args.checkpoint_every, fitness=args.fitness,
-                attempts=args.attempts, best=args.best, store_heightmaps=args.store_heightmaps,
+                **common.protocol_overrides(args), store_heightmaps=args.store_heightmaps,
                 rollout_slots=args.rollout_slots, rollout_backend=args.rollout_backend)
 
 

@@ -430,6 +430,9 @@ def main(args) -> int:
     slots = resolve_slots(cfg.get("slots"))
     if cfg.get("reseat") and (protocol is None or cfg.get("sample") is not None):
         raise SystemExit("--reseat needs --protocol (every elite walked again) and no --sample")
+    if cfg.get("reseat") and (protocol.start_spread != 0.0 or protocol.rule != "mean"):
+        raise SystemExit("--reseat: an archive records the protocol's attempts, best and headings only; not with "
+                         "--start-spread or --rule min")
     key = jax.random.key(int(cfg["seed"]))
     all_bands, all_summary, results = [], [], []
     for i, path in enumerate(cfg["archives"]):
@@ -443,7 +446,7 @@ def main(args) -> int:
             save_walks(folder / f"{elites['name']}_walks.npz", elites, walked, protocol)
             print(f"  compile {walked['compile_s']:.1f} s, walk {walked['walk_s']:.1f} s", flush=True)
             if cfg.get("reseat"):
-                write_reseated(folder / f"{elites['name']}_reseated.npz", elites, walked)
+                write_reseated(folder / f"{elites['name']}_reseated.npz", elites, walked, protocol)
         series = series_of(elites, walked, protocol)
         bands, summary = table_rows(elites["name"], elites, series, cfg)
         all_bands += bands
@@ -462,15 +465,15 @@ def main(args) -> int:
     return 0
 
 
-def write_reseated(path: Path, elites: dict, walked: dict) -> dict:
-    """``jaxterrain.archive.reseat`` of the walked archive (fitness = the walk's, per filled cell) saved at
-    ``path``; prints and returns its counts."""
+def write_reseated(path: Path, elites: dict, walked: dict, protocol=None) -> dict:
+    """``jaxterrain.archive.reseat`` of the walked archive (fitness = the walk's, per filled cell, under
+    ``protocol``, which the archive then records) saved at ``path``; prints and returns its counts."""
     from jaxterrain import archive as A
 
     arch = elites["archive"]
     fitness = np.full(arch.fitness.shape[0], np.nan, np.float32)
     fitness[elites["cells"][walked["rows"]]] = walked["fitness"]
-    reseated, counts = A.reseat(arch, fitness)
+    reseated, counts = A.reseat(arch, fitness, protocol=protocol)
     A.save(path, reseated)
     print(f"  reseated -> {path.name}: " + ", ".join(f"{k} {v}" for k, v in counts.items()), flush=True)
     return counts

@@ -18,6 +18,12 @@ envs, so the walker holds one tile per trial, ``WalkerConfig(tiles=trials)``, re
 terrains at every chunk, and contact buffers for ``trials x max(num_envs, attempts)`` envs; see
 ``jaxterrain.curriculum.walker``). It is saved in ``config.json``, so ``--resume`` keeps it.
 
+Evaluation protocol: each evaluation walks under the protocol the archive's fitness was measured under (its
+``EvolveConfig``'s ``attempts`` / ``best`` / ``headings``: 20 / 5 / 1 for the paper's, 80 / 5 / 4 for an archive evolved
+or reseated under ``difficulty.HEADINGS``), so the GP's prior and its observations agree; ``--protocol paper|headings``
+or ``--attempts`` / ``--best`` / ``--headings`` override it. With several headings the PPO envs also train in every
+heading (``jaxterrain.curriculum.walker``).
+
 Presets: ``paper`` (30 000 epochs, the paper's budget), ``gpu-short`` (3 000 epochs, a tenth), ``smoke`` (CPU,
 about a minute after compiling: 2 trials of 4 one-epoch chunks of 80 env steps on 4 envs, 2 walks per evaluation,
 100-step episodes; the archive's terrains are used as they are).
@@ -44,7 +50,7 @@ from experiments import common
 CPPN_ARCHIVE = "docs/results/exp1b_gpu_sound_cppn_archive.npz"
 _PAPER = dict(archive=CPPN_ARCHIVE, curriculum="map", trials=10, descriptors=["roughness", "tpi"], policy=None,
               epochs_per_chunk=40, steps_per_epoch=4000, max_epochs=30000, threshold=0.9, max_fitness=1.0,
-              max_evals=100, attempts=20, best=5, kappa=0.05, rho=0.4, sigma_f=1.0, noise=0.001,
+              max_evals=100, attempts=None, best=None, headings=None, kappa=0.05, rho=0.4, sigma_f=1.0, noise=0.001,
               gp_evaluation="final", removal_margin=0.05, removal_ties="nearer", credit="threshold",
               distance_origin="origin", roughness_stride=5, max_observations=None, num_envs=500, unroll_length=10,
               num_unrolls=8, num_minibatches=8, update_epochs=8, learning_rate=3e-4, episode_length=1000,
@@ -73,6 +79,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--policy", default=None, help="policy folder to start from (default: the base policy)")
     parser.add_argument("--chunks-per-call", type=int, default=None, help="chunks per jitted call / checkpoint")
     parser.add_argument("--num-envs", type=int, default=None, help="PPO envs per trial (all on its terrain)")
+    parser.add_argument("--attempts", type=int, default=None,
+                        help="evaluation walks in total (default: the archive's protocol, e.g. 20)")
+    parser.add_argument("--best", type=int, default=None, help="best walks averaged per heading (default: archive's)")
+    parser.add_argument("--headings", type=int, choices=(1, 2, 4), default=None,
+                        help="evaluation headings (default: the archive's protocol: 1 = the paper's +x)")
+    common.add_protocol_argument(parser)
     parser.add_argument("--backend", choices=BACKENDS, default=None,
                         help="walker physics: auto (default: warp on a GPU where it imports, else jax), jax (MJX) or "
                              "warp (MuJoCo Warp on one tile per trial)")
@@ -81,7 +93,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 def overrides(args) -> dict:
     return dict(archive=args.archive, curriculum=args.curriculum, trials=args.trials, threshold=args.threshold,
                 max_epochs=args.max_epochs, policy=args.policy, chunks_per_call=args.chunks_per_call,
-                num_envs=args.num_envs, backend=args.backend)
+                num_envs=args.num_envs, backend=args.backend, **common.protocol_overrides(args))
 
 
 # ----------------------------------------------------------------------------------------------------------------
@@ -99,6 +111,14 @@ def curriculum_config(cfg: dict):
         return validate_config(CurriculumConfig.from_json_dict({**fields, "selector": cfg["curriculum"]}))
     except (ValueError, TypeError) as err:
         raise BadInput(str(err)) from None
+
+
+def with_protocol(cfg: dict, arch) -> dict:
+    """``cfg`` with the evaluation protocol's ``attempts`` / ``best`` / ``headings`` that are None (the presets'
+    "the archive's") taken from the archive's config: the curriculum then evaluates under the protocol its prior,
+    the archive's fitness, was measured under."""
+    fields = {k: getattr(arch.config, k, 1 if k == "headings" else None) for k in ("attempts", "best", "headings")}
+    return {**cfg, **{k: int(v) for k, v in fields.items() if cfg.get(k) is None}}
 
 
 def load_archive(path, descriptors):
@@ -148,8 +168,9 @@ def walker_layout(cfg: dict) -> dict:
     ok, why = warp_available()
     if not ok:
         raise BadInput(f"--backend warp: {why}")
-    trials = int(cfg["trials"])
-    return dict(backend="warp", tiles=trials, worlds=trials * max(int(cfg["num_envs"]), int(cfg["attempts"])))
+    trials, headings = int(cfg["trials"]), int(cfg.get("headings") or 1)
+    return dict(backend="warp", tiles=trials * headings,
+                worlds=trials * max(int(cfg["num_envs"]), int(cfg["attempts"])))
 
 
 def validate(cfg: dict):
@@ -165,8 +186,9 @@ def validate(cfg: dict):
         raise BadInput(f"--chunks-per-call must be an integer >= 1, got {chunks!r}")
     if not isinstance(cfg.get("episode_length"), int) or cfg["episode_length"] < 1:
         raise BadInput(f"episode_length must be an integer >= 1, got {cfg.get('episode_length')!r}")
-    config = curriculum_config(cfg)
     arch = load_archive(cfg["archive"], cfg["descriptors"])
+    cfg = with_protocol(cfg, arch)
+    config = curriculum_config(cfg)
     try:
         policy = W.load_policy(cfg.get("policy"))
     except ValueError as err:

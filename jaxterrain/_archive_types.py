@@ -43,7 +43,12 @@ class EvolveConfig(NamedTuple):
       descriptors: the two descriptor names (``features.descriptors`` names).
       ranges: ``((lo, hi), (lo, hi))`` grid ranges of the two descriptors, or None for :data:`DEFAULT_RANGES`.
       window, stride: descriptor kernel size and stride (paper: 30 and 2).
-      attempts, best: walker attempts per terrain and how many of the best are averaged (paper: 20 and 5).
+      attempts, best: walker attempts per terrain IN TOTAL and how many of the best are averaged PER HEADING
+        (paper: 20 and 5).
+      headings: 1 (the paper: every walk along +x), 2 or 4: the walker fitness is
+        ``difficulty.Protocol(attempts, best, headings)`` (``attempts // headings`` walks per heading, the mean over
+        headings of each heading's best ``best``); ``difficulty.HEADINGS`` is ``attempts=80, best=5, headings=4``.
+        The archive records it, so a curriculum can evaluate under the protocol its fitness came from.
       checkpoint_every: RUN SETTING: generations per jitted chunk (and between checkpoints when a checkpoint folder
         is given); does not change the archive.
       robot_height: robot height in metres for Algorithm 1 (threshold robot_height / 3); None: the features
@@ -84,6 +89,7 @@ class EvolveConfig(NamedTuple):
     rollout_slots: int | None = None
     scale: TerrainScale = TerrainScale()
     rollout_backend: str = "jax"
+    headings: int = 1
 
 
 class Archive(NamedTuple):
@@ -129,8 +135,14 @@ def resolve_config(config: EvolveConfig) -> EvolveConfig:
     for name in ("batch_size", "initial_population", "bins", "window", "stride", "attempts", "best",
                  "checkpoint_every", "traversable_window"):
         positive(name, getattr(config, name))
-    if config.best > config.attempts:
-        raise ValueError(f"EvolveConfig.best must be in [1, attempts={config.attempts}]; got {config.best}")
+    if config.headings not in (1, 2, 4):
+        raise ValueError(f"EvolveConfig.headings must be 1, 2 or 4; got {config.headings!r}")
+    if config.attempts % config.headings:
+        raise ValueError(f"EvolveConfig.attempts must be a multiple of headings={config.headings}; got "
+                         f"{config.attempts}")
+    if config.best > config.attempts // config.headings:
+        raise ValueError(f"EvolveConfig.best must be in [1, attempts / headings = {config.attempts // config.headings}]"
+                         f"; got {config.best}")
     names = tuple(config.descriptors)
     if len(names) != 2 or len(set(names)) != 2:
         raise ValueError(f"EvolveConfig.descriptors must be two different descriptor names; got {names!r}")

@@ -190,7 +190,7 @@ def refused(archive: Archive, generator_options: dict | None = None, gens: dict 
 
 
 def reseat(archive: Archive, fitness: np.ndarray, generator_options: dict | None = None, batch: int = 64,
-           gens: dict | None = None, descriptor_fn=None) -> tuple[Archive, dict]:
+           gens: dict | None = None, descriptor_fn=None, protocol=None) -> tuple[Archive, dict]:
     """A sound archive from the STORED genomes of ``archive``: each one in the cell its own terrain falls in, with a
     fitness measured on that terrain.
 
@@ -206,6 +206,9 @@ def reseat(archive: Archive, fitness: np.ndarray, generator_options: dict | None
       fitness: [cells] float, a fitness per source cell measured on the terrain of its stored genome (e.g. walked
         again under a :class:`jaxterrain.difficulty.Protocol`); read at filled cells only.
       generator_options, batch, gens, descriptor_fn: as :func:`rederive_cells`.
+      protocol: the :class:`jaxterrain.difficulty.Protocol` ``fitness`` was measured under, recorded in the new
+        archive's config (``attempts``, ``best``, ``headings``; ``start_spread`` 0 and ``rule`` "mean" only, which
+        the config implies); None keeps the archive's.
 
     Returns:
       ``(reseated, counts)``: the new archive (``heightmaps`` None: render them with ``bank.from_archive``;
@@ -217,6 +220,13 @@ def reseat(archive: Archive, fitness: np.ndarray, generator_options: dict | None
     fitness = np.asarray(fitness, np.float32).reshape(-1)
     if fitness.shape[0] != n_cells:
         raise ValueError(f"reseat: fitness must have shape [cells={n_cells}]; got {fitness.shape}")
+    config = archive.config
+    if protocol is not None:
+        if float(protocol.start_spread) != 0.0 or protocol.rule != "mean":
+            raise ValueError("reseat: an archive records a protocol's attempts, best and headings only; got "
+                             f"start_spread={protocol.start_spread}, rule={protocol.rule!r} (need 0.0 and 'mean')")
+        config = resolve_config(config._replace(attempts=int(protocol.attempts), best=int(protocol.best),
+                                                headings=int(protocol.headings)))
     bad = refused(archive, generator_options, gens)
     cells, raw = rederive_cells(archive, generator_options, batch, gens, descriptor_fn)
     filled = archive.source >= 0
@@ -247,7 +257,7 @@ def reseat(archive: Archive, fitness: np.ndarray, generator_options: dict | None
               "moved": int((ok & (cells != np.arange(n_cells))).sum()), "displaced": int(rows.size - winners.size),
               "kept": int(winners.size)}
     return Archive(tuple(genomes), archive.generator_names, source, fit, desc, archive.centroids.copy(), None,
-                   archive.config, {}), counts
+                   config, {}), counts
 
 
 def heightmaps(archive: Archive) -> np.ndarray:

@@ -79,18 +79,22 @@ def _traversable_fn(robot_height, window, scale) -> Callable:
 
 
 def difficulty_fitness(size: int, attempts: int = 20, best: int = 5, scale=None,
-                       slots: int | None = None, smooth_first: bool = True, backend: str = "jax") -> A.FitnessFn:
+                       slots: int | None = None, smooth_first: bool = True, backend: str = "jax",
+                       headings: int = 1) -> A.FitnessFn:
     """The paper's fitness as a pure ``(heightmaps [B, size, size], key, needed [B] bool) -> [B]``: an alias of
-    ``difficulty.fitness_fn(size, Protocol(attempts, best), scale, slots, smooth_first)`` (the shipped base policy,
-    ``attempts`` rollouts per terrain, mean of the ``best`` distances; cached there per argument values).
+    ``difficulty.fitness_fn(size, Protocol(attempts, best, headings), scale, slots, smooth_first)`` (the shipped base
+    policy, ``attempts`` rollouts per terrain, mean of the ``best`` distances per heading, mean over ``headings``;
+    cached there per argument values).
     ``slots``: env slots of a rollout pool (None = all at once; terrains not ``needed`` are never walked);
     ``smooth_first``: the pool starts the smoothest terrains' rollouts first (speed only); ``backend``: the
     walker's physics, ``"jax"`` or ``"warp"`` (MuJoCo Warp on terrain tiles)."""
     from jaxterrain import difficulty
 
     if hasattr(difficulty, "fitness_fn"):
-        return difficulty.fitness_fn(int(size), difficulty.Protocol(attempts, best), scale, slots, smooth_first,
-                                     backend)
+        return difficulty.fitness_fn(int(size), difficulty.Protocol(attempts, best, headings), scale, slots,
+                                     smooth_first, backend)
+    if headings != 1:
+        raise ValueError("headings > 1 needs difficulty.fitness_fn")
     return _difficulty_fitness(int(size), attempts, best, scale, slots, smooth_first)
 
 
@@ -115,10 +119,10 @@ def _difficulty_fitness(size, attempts, best, scale, slots, smooth_first):
 
 
 def default_fitness(size: int, config: A.EvolveConfig) -> A.FitnessFn:
-    """The walker fitness of a config: :func:`difficulty_fitness` at the config's attempts, best, scale, slots and
-    backend."""
+    """The walker fitness of a config: :func:`difficulty_fitness` at the config's attempts, best, headings, scale,
+    slots and backend."""
     return difficulty_fitness(int(size), config.attempts, config.best, config.scale, config.rollout_slots,
-                              backend=config.rollout_backend)
+                              backend=config.rollout_backend, headings=config.headings)
 
 
 def problem(generator, descriptors, config: A.EvolveConfig, fitness_fn=None, traversable=None, names=None,

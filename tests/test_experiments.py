@@ -210,3 +210,29 @@ def test_train_base_policy_presets_schedule():
         assert (s.updates_per_chunk, s.time_budget) == (chunk, budget)
     s = tbp.resolve_settings({**tbp.PRESETS["smoke"], "preset": "smoke", "num_envs": 16})
     assert s.ppo_config.num_envs == 16 and s.num_updates == 2  # 160 env steps of 16 x 5 per update
+
+
+def test_protocol_flag_sets_attempts_best_and_headings_together():
+    """``--protocol headings`` = 80 walks, best 5 per heading, 4 headings (difficulty.HEADINGS); single-field flags
+    win; evolve and coverage write them into the config (coverage has --protocol only)."""
+    import argparse
+
+    from experiments import coverage, evolve
+
+    def parsed(module, argv):
+        parser = argparse.ArgumentParser()
+        module.add_arguments(parser)
+        return module.overrides(parser.parse_args(argv))
+
+    over = parsed(evolve, ["--protocol", "headings", "--best", "4"])
+    assert (over["attempts"], over["best"], over["headings"]) == (80, 4, 4)
+    assert "headings" not in {k for k, v in parsed(evolve, []).items() if v is not None}
+    assert parsed(coverage, ["--protocol", "paper"])["headings"] == 1
+    given = {k: v for k, v in over.items() if v is not None}
+    assert evolve.evolve_config({**evolve.PRESETS["gpu"], **given}).headings == 4
+    assert evolve.evolve_config({k: v for k, v in evolve.PRESETS["gpu"].items() if k != "headings"}).headings == 1
+    with pytest.raises(common.UsageError, match="'attempts' must be a multiple of --headings"):
+        common.check_values({"attempts": 2, "best": 1, "headings": 4},
+                            where=lambda k: f"'{k}'" if k == "attempts" else common.flag(k))
+    with pytest.raises(common.UsageError, match="--best must be <= --attempts / --headings"):
+        common.check_values({"attempts": 20, "best": 6, "headings": 4})

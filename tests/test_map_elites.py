@@ -236,6 +236,30 @@ def test_reseat_moves_refuses_and_resolves_collisions_like_insert():
     np.testing.assert_array_equal(out2.source[j], 0)  # the winner of cell j is min(i, j)'s genome; both equal
     with pytest.raises(ValueError, match="fitness must have shape"):
         A.reseat(broken, fitness[:3], gens={"uv": gen}, descriptor_fn=desc2)
+    from jaxterrain import difficulty
+
+    out3, _ = A.reseat(broken, fitness, gens={"uv": gen}, descriptor_fn=desc2, protocol=difficulty.HEADINGS)
+    assert (out3.config.attempts, out3.config.best, out3.config.headings) == (80, 5, 4)  # recorded with the fitness
+    with pytest.raises(ValueError, match="start_spread"):
+        A.reseat(broken, fitness, gens={"uv": gen}, descriptor_fn=desc2, protocol=difficulty.Protocol(start_spread=1.0))
+
+
+def test_evolve_config_headings_choose_the_walker_fitness_protocol():
+    """``EvolveConfig.headings``: checked with attempts and best, default 1 for dicts written before it, and the
+    config's walker fitness is ``difficulty.fitness_fn`` under ``Protocol(attempts, best, headings)``."""
+    from jaxterrain import difficulty, evolution
+    from jaxterrain._archive_types import config_from_dict, config_to_dict
+
+    c = A.resolve_config(A.EvolveConfig(attempts=80, best=5, headings=4))
+    assert config_from_dict(config_to_dict(c)) == c
+    old = config_to_dict(A.resolve_config(A.EvolveConfig()))
+    del old["headings"]
+    assert config_from_dict(old).headings == 1
+    for bad, match in ((dict(headings=3), "headings must be 1, 2 or 4"), (dict(attempts=30, headings=4), "multiple"),
+                       (dict(attempts=20, best=6, headings=4), "attempts / headings = 5")):
+        with pytest.raises(ValueError, match=match):
+            A.resolve_config(A.EvolveConfig(**bad))
+    assert evolution.default_fitness(256, c) is difficulty.fitness_fn(256, difficulty.HEADINGS, c.scale)
 
 
 # ----------------------------------------------------------------------------------------------------------------

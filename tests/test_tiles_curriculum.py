@@ -162,11 +162,12 @@ def test_no_retrace_on_tiles_when_the_terrain_changes():
 WALK = TerrainScale(cell_size=0.2, height=1.0)  # 16 x 16: a 3 m square, 2 m track
 
 
-def _walker_run(backend: str, trials: int, tiles: int, chunks: int = 1, episode_length: int = 20):
+def _walker_run(backend: str, trials: int, tiles: int, chunks: int = 1, episode_length: int = 20, headings: int = 1):
     """``chunks`` chunks of ``trials`` trials of the real walker harness (base policy, 2 envs, 2 walks of
-    ``episode_length`` steps per evaluation) on a 2 x 2 toy bank of 16 x 16 terrains: (start states, end states)."""
+    ``episode_length`` steps per evaluation, in ``headings`` headings) on a 2 x 2 toy bank of 16 x 16 terrains:
+    (start states, end states). ``tiles`` counts tiles, ``trials x headings`` for every trial on its own."""
     policy = W.load_policy(None)
-    config = small("map", num_envs=2, attempts=2, best=1, max_evals=2, update_epochs=1)
+    config = small("map", num_envs=2, attempts=2, best=1, headings=headings, max_evals=2, update_epochs=1)
     env = W.walker_env(policy, SHAPE, WALK, episode_length, backend=backend, tiles=tiles,
                        worlds=trials * max(config.ppo.num_envs, config.attempts))
     ppo = config.ppo_config(policy.config)
@@ -180,10 +181,12 @@ def _walker_run(backend: str, trials: int, tiles: int, chunks: int = 1, episode_
 
 
 @pytest.mark.skipif(not WARP_OK, reason=WARP_WHY or "warp available")
-def test_warp_walker_curriculum_chunk_on_tiles():
-    """MuJoCo Warp: two trials, each on its own tile of the chunk's bank, train PPO (2 envs) and are evaluated
-    (2 walks); the evaluations are real walks (in (0, 1]), PPO changed every trial's policy, and nothing failed."""
-    start, end = _walker_run("warp", trials=2, tiles=2, chunks=1)
+@pytest.mark.parametrize("headings", [1, 2])
+def test_warp_walker_curriculum_chunk_on_tiles(headings):
+    """MuJoCo Warp: two trials, each on its own tile(s) of the chunk's bank (one per heading), train PPO (2 envs)
+    and are evaluated (2 walks, one per heading with headings=2); the evaluations are real walks (in (0, 1]), PPO
+    changed every trial's policy, and nothing failed."""
+    start, end = _walker_run("warp", trials=2, tiles=2 * headings, chunks=1, headings=headings)
     ev = np.asarray(end.history.evaluation[:, 0])
     assert np.all((ev > 0.0) & (ev <= 1.0)), ev
     assert np.all(np.asarray(end.chunk) == 1) and np.all(np.asarray(end.epoch) == 1)
@@ -195,13 +198,26 @@ def test_warp_walker_curriculum_chunk_on_tiles():
 
 
 @pytest.mark.slow
-def test_jax_walker_curriculum_on_one_tile_equals_the_classic_one():
+@pytest.mark.parametrize("headings", [1, 2])
+def test_jax_walker_curriculum_on_one_tile_equals_the_classic_one(headings):
     """MJX: one trial on a one-tile bank (the tile at the origin) runs the classic chunks bit for bit: PPO on its
-    Tile, the restart and the evaluation walks (``tile_distances``). Two MJX programs: minutes of CPU."""
-    _, classic = _walker_run("jax", trials=1, tiles=0, chunks=2)
-    _, tiled = _walker_run("jax", trials=1, tiles=1, chunks=2)
-    assert tree_equal(tiled, classic)
+    Tile, the restart and the evaluation walks (``tile_distances``). With 2 headings (a second tile, off the origin,
+    holds the turned terrain; PPO env 1 and walk 1 on it) against ``difficulty.protocol_distances`` and per-env
+    turned terrains: the same choices, and evaluations and parameters equal up to the float rounding of the tile's
+    shifted coordinates. Two MJX programs each: minutes of CPU."""
+    _, classic = _walker_run("jax", trials=1, tiles=0, chunks=2, headings=headings)
+    _, tiled = _walker_run("jax", trials=1, tiles=headings, chunks=2, headings=headings)
     assert np.all(np.asarray(classic.history.evaluation[0, :2]) > 0)
+    if headings == 1:
+        assert tree_equal(tiled, classic)
+        return
+    for name in ("terrain", "epoch", "hardest"):
+        np.testing.assert_array_equal(np.asarray(getattr(tiled.history, name)),
+                                      np.asarray(getattr(classic.history, name)))
+    np.testing.assert_allclose(np.asarray(tiled.history.evaluation), np.asarray(classic.history.evaluation),
+                               atol=1e-5)
+    for a, b in zip(jax.tree.leaves(tiled.policy.params), jax.tree.leaves(classic.policy.params)):
+        np.testing.assert_allclose(np.asarray(a), np.asarray(b), atol=1e-4)
 
 
 # ---------------------------------------------------------------------------------------------------------------
@@ -275,3 +291,50 @@ def test_learn_smoke_on_warp_end_to_end(tmp_path, tiny_archive):
     assert np.all((evals >= 0) & (evals <= 1)) and evals.max() > 0
     assert cli("learn", "--resume", str(out)) == 0
     assert json.loads((out / "config.json").read_text())["backend"] == "warp"
+
+
+def test_tile_layout_with_headings_puts_each_turned_terrain_on_its_own_tile():
+    """``tile_layout(env, 2)``: trial i trains on tile 2 i (its terrain as it is) and heading 1 walks tile 2 i + 1,
+    which holds the terrain turned by a quarter (``difficulty.rotate_headings``): read through the walker, both match
+    the classic terrain and its turned copy at every probe point; too few tiles is a ValueError naming tiles."""
+    from jaxterrain import difficulty
+
+    env, plain = _envs(4)
+    x = np.arange(SHAPE[1], dtype=np.float32)
+    ramps = np.stack([np.broadcast_to(x / 16.0, SHAPE), np.broadcast_to(x[:, None] / 32.0, SHAPE)]).astype(np.float32)
+    tiles, axes = W.tile_layout(env, 2)(jnp.asarray(ramps))
+    assert axes == W.TILE_AXES and np.asarray(tiles.index).tolist() == [0, 2]
+    turned = np.asarray(difficulty.rotate_headings(jnp.asarray(ramps), 2))
+    px, py = jnp.asarray(PROBE[:, 0]), jnp.asarray(PROBE[:, 1])
+    for i in range(2):
+        for h in range(2):
+            ox, oy = env.tile_origin(jnp.int32(2 * i + h))
+            got = env.terrain_height(Tile(tiles.bank, jnp.int32(2 * i + h)), px + ox, py + oy)
+            want = plain.terrain_height(jnp.asarray(turned[2 * i + h]), px, py)
+            np.testing.assert_array_equal(np.asarray(got), np.asarray(want))
+    assert not np.array_equal(turned[0], turned[1])  # the ramp along x turned: another terrain
+    with pytest.raises(ValueError, match="tiles=4"):
+        W.tile_layout(env, 4)(jnp.asarray(ramps))
+
+
+def test_learn_takes_the_evaluation_protocol_from_the_archive(tmp_path, tiny_archive):
+    """``attempts`` / ``best`` / ``headings`` left None (the paper and gpu-short presets) come from the archive's
+    config, so the GP's prior and its observations share a protocol; given ones win; Warp gets a tile per trial and
+    heading. A protocol that does not divide is one line naming the field."""
+    from experiments import learn
+    from jaxterrain import archive as A
+
+    arch = A.load(tiny_archive)
+    four = str(A.save(tmp_path / "four_headings.npz", arch._replace(config=arch.config._replace(
+        attempts=80, best=5, headings=4))))
+    paper = {**learn.PRESETS["paper"], "archive": tiny_archive, "seed": 0}
+    assert learn.PRESETS["paper"]["headings"] is None and learn.PRESETS["gpu-short"]["attempts"] is None
+    assert learn.validate(paper)[0].protocol == (20, 5, 1, 0.0, "mean")  # an archive saved before headings existed
+    assert learn.validate({**paper, "archive": four})[0].protocol == (80, 5, 4, 0.0, "mean")
+    assert learn.validate({**paper, "archive": four, "headings": 1, "attempts": 20})[0].protocol[:3] == (20, 5, 1)
+    with pytest.raises(learn.BadInput, match="attempts must be a multiple of headings"):
+        learn.validate({**paper, "archive": four, "attempts": 30})
+    assert learn.walker_layout({**paper, "backend": "jax"}) == {}
+    if WARP_OK:
+        layout = learn.walker_layout({**paper, "backend": "warp", "headings": 4, "attempts": 80, "trials": 3})
+        assert layout == {"backend": "warp", "tiles": 12, "worlds": 3 * 500}

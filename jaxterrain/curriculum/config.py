@@ -42,6 +42,14 @@ terrains predicted easier than the one just trained are removed, the run ends wh
   the far corner of 50 x 50). Its Table 2 text says "distance from the top-right corner"; ``"top_right"`` reads that
   as ``70.71 - hypot(bins - b0, bins - b1)`` (0 at (0, 0), 69.3 in the top-right cell) for comparison.
 
+``attempts, best, headings`` - each evaluation walks the protocol the archive's fitness was measured under
+  (``difficulty.Protocol(attempts, best, headings)``; the paper's 20 / 5 / 1 by default, ``HEADINGS`` = 80 / 5 / 4):
+  the GP's prior is the archive's fitness and its observations are the evaluations, so both must measure the same
+  thing. ``experiments learn`` reads them from the archive's ``EvolveConfig``. With more than one heading the
+  PPO envs are spread over the headings as well (env e on heading ``e % headings``): the policy trains in the
+  directions it is judged in. On tiles (MuJoCo Warp) a trial's terrain takes one tile per heading, turned
+  (``curriculum.walker.tile_layout``).
+
 Ties in the choice of the next terrain (equal scores) go to the terrain nearest the origin, then the lowest index.
 The first terrain of the map curriculum is the argmax of the prior (no observation yet: the UCB is the prior + kappa).
 
@@ -86,7 +94,11 @@ class CurriculumConfig(NamedTuple):
       threshold: a terrain is learnt at fitness >= threshold x max_fitness, in (0, 1] (paper: 0.9).
       max_fitness: the maximum fitness (the normalised distance's 1.0), > 0.
       max_evals: evaluations (chunks) spent on one terrain before it is left anyway (paper: 100).
-      attempts, best: the difficulty protocol of each evaluation: mean of the ``best`` of ``attempts`` walks.
+      attempts, best, headings: the difficulty protocol of each evaluation,
+        ``difficulty.Protocol(attempts, best, headings)``: ``attempts`` walks in total, ``attempts // headings``
+        per heading (1: the paper's +x; 2 or 4: the map also turned, ``difficulty.HEADINGS`` is 80, 5, 4), the mean
+        over headings of each heading's best ``best``. Use the protocol the archive's fitness (the GP's prior) was
+        measured under: ``experiments learn`` takes it from the archive unless told otherwise.
       kappa: UCB exploration weight (IT&E: 0.05).
       rho, sigma_f, noise: GP length scale, signal variance, observation noise (IT&E: 0.4, 1, 0.001).
       gp_evaluation: ``final`` or ``best`` evaluation of a finished terrain enters the GP.
@@ -114,6 +126,7 @@ class CurriculumConfig(NamedTuple):
     max_evals: int = 100
     attempts: int = 20
     best: int = 5
+    headings: int = 1
     kappa: float = 0.05
     rho: float = 0.4
     sigma_f: float = 1.0
@@ -152,6 +165,13 @@ class CurriculumConfig(NamedTuple):
         if self.max_observations is not None:
             return int(self.max_observations)
         return max(1, min(int(num_terrains), self.max_chunks))
+
+    @property
+    def protocol(self):
+        """The evaluation's :class:`jaxterrain.difficulty.Protocol` (``attempts``, ``best``, ``headings``)."""
+        from jaxterrain.difficulty import Protocol
+
+        return Protocol(int(self.attempts), int(self.best), int(self.headings))
 
     def ppo_config(self, base: PPOConfig) -> PPOConfig:
         """The fine-tuning :class:`jaxterrain.rl.PPOConfig`: ``base`` (the base policy's) with the :data:`FINE_TUNED`
@@ -203,8 +223,13 @@ def validate_config(config: CurriculumConfig) -> CurriculumConfig:
     for name in ("epochs_per_chunk", "steps_per_epoch", "max_epochs", "max_evals", "attempts", "best",
                  "roughness_stride"):
         _int_at_least(config, name, 1)
-    if config.best > config.attempts:
-        raise ValueError(f"CurriculumConfig.best must be <= attempts ({config.attempts}), got {config.best}")
+    _choice(config, "headings", (1, 2, 4))
+    if config.attempts % config.headings:
+        raise ValueError(f"CurriculumConfig.attempts must be a multiple of headings ({config.headings}), got "
+                         f"{config.attempts}")
+    if config.best > config.attempts // config.headings:
+        raise ValueError(f"CurriculumConfig.best must be <= attempts / headings ({config.attempts // config.headings}"
+                         f"), got {config.best}")
     _float_in(config, "threshold", 0.0, 1.0, lo_open=True)
     _float_in(config, "max_fitness", 0.0, None, lo_open=True)
     _float_in(config, "kappa", 0.0, None, lo_open=False)

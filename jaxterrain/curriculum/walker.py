@@ -9,9 +9,11 @@
 
 ``harness.train`` runs ``config.updates_per_chunk`` PPO updates (``rl.run_updates``, one chunk =
 ``epochs_per_chunk x steps_per_epoch`` env steps) with all ``num_envs`` envs on the current terrain;
-``harness.evaluate`` walks the updated deterministic policy ``attempts`` times on it
-(``difficulty.batched_distances``) and returns the mean of the ``best`` distances; ``harness.reset`` restarts the envs
-on a new terrain (``rl.reset_envs``).
+``harness.evaluate`` walks the updated deterministic policy under ``config.protocol`` on it
+(``difficulty.protocol_distances``: ``attempts`` walks, the mean of the ``best`` distances per heading, the mean over
+``headings``); ``harness.reset`` restarts the envs on a new terrain (``rl.reset_envs``). With ``headings`` > 1 the
+PPO envs are spread over the headings too (env e on the terrain turned for heading ``e % headings``), so the policy
+trains on the directions it is evaluated in.
 
 On tiles (MuJoCo Warp, whose heightfield every env shares): build the walker with one tile per trial and enough
 Warp worlds for the envs stepped together, then the harness lays the trials' terrains out as tiles::
@@ -100,43 +102,56 @@ def walker_harness(env, ppo: rl.PPOConfig, config: CurriculumConfig) -> Harness:
         raise ValueError(f"PPO's {ppo.steps_per_update} env steps per update must divide a chunk's "
                          f"{config.steps_per_chunk}")
     act = rl.policy_fn(ppo, env.action_size)
-    attempts, best = config.attempts, config.best
+    protocol = config.protocol.validate()
+
+    def spread(terrain):
+        """The trial's terrain for its PPO envs: env e walks heading ``e % headings`` (all +x for one heading)."""
+        if protocol.headings == 1:
+            return terrain
+        heading = jnp.arange(ppo.num_envs, dtype=jnp.int32) % protocol.headings
+        if env.tiles:
+            return Tile(terrain.bank, terrain.index + heading)
+        return difficulty.rotate_headings(terrain[None], protocol.headings)[heading]
 
     def train(state: rl.TrainState, key, terrain):
         state = state._replace(key=jax.random.key_data(key) if jnp.issubdtype(key.dtype, jax.dtypes.prng_key)
                                else key)
-        return rl.run_updates(state, terrain, env=env, config=ppo, num_updates=updates)[0]
+        return rl.run_updates(state, spread(terrain), env=env, config=ppo, num_updates=updates)[0]
 
     def evaluate(state: rl.TrainState, key, terrain):
         params = (state.params, state.normaliser)
         if env.tiles:
-            d = tile_distances(env, act, terrain, key, attempts, params)[None]
+            d = tile_distances(env, act, terrain, key, protocol.attempts, params, protocol.headings)[None]
         else:
-            d, _ = difficulty.batched_distances(env, act, terrain[None], key, attempts, policy_params=params)
-        return difficulty.best_of(d, best)[0]
+            d, _ = difficulty.protocol_distances(env, act, terrain[None], key, protocol, policy_params=params)
+        return difficulty.aggregate(d, protocol)[0]
 
     def reset(state: rl.TrainState, key, terrain):
-        return rl.reset_envs(state, key, terrain, env=env, config=ppo)
+        return rl.reset_envs(state, key, spread(terrain), env=env, config=ppo)
 
     if not env.tiles:
         return Harness(train=train, evaluate=evaluate, reset=reset)
-    return Harness(train=train, evaluate=evaluate, reset=reset, layout=tile_layout(env),
+    return Harness(train=train, evaluate=evaluate, reset=reset, layout=tile_layout(env, protocol.headings),
                    where=lambda pred, a, b: select_policy(env, pred, a, b))
 
 
-def tile_layout(env):
+def tile_layout(env, headings: int = 1):
     """The ``Harness.layout`` of a tiled walker (``env.tiles >= 1``): ``terrains [k, H, W]`` metres (the current
-    terrains of k <= ``env.tiles`` trials, e.g. one device's share) -> ``(env.make_bank(terrains).at(arange(k)),
-    TILE_AXES)``: trial i on tile i of one bank (tiles past k flat). Jit-able; ``ValueError`` when k > tiles."""
+    terrains of k trials, e.g. one device's share) -> ``(Tile, TILE_AXES)`` with trial i on tile ``i * headings`` of
+    ONE bank: tiles ``i * headings + h`` hold its terrain turned for heading h (``difficulty.rotate_headings``), so
+    heading h of a trial (its PPO envs ``e % headings == h``, its evaluation walks of heading h) is tile ``index +
+    h``; tiles past
+    ``k * headings`` are flat. Jit-able; ``ValueError`` when ``k * headings > env.tiles``."""
 
     def layout(terrains):
         k = terrains.shape[0]
-        if k > env.tiles:
-            raise ValueError(f"{k} trials run together but the walker has tiles={env.tiles}: build it with one tile "
-                             "per trial (walker_env(..., tiles=trials))")
-        if k < env.tiles:
-            terrains = jnp.concatenate([terrains, jnp.zeros((env.tiles - k,) + terrains.shape[1:], terrains.dtype)])
-        return env.make_bank(terrains).at(jnp.arange(k, dtype=jnp.int32)), TILE_AXES
+        if k * headings > env.tiles:
+            raise ValueError(f"{k} trials x {headings} heading(s) need {k * headings} tiles but the walker has "
+                             f"tiles={env.tiles}: build it with walker_env(..., tiles=trials * headings)")
+        turned = difficulty.rotate_headings(terrains, headings)
+        if k * headings < env.tiles:
+            turned = jnp.concatenate([turned, jnp.zeros((env.tiles - k * headings,) + turned.shape[1:], turned.dtype)])
+        return env.make_bank(turned).at(jnp.arange(k, dtype=jnp.int32) * headings), TILE_AXES
 
     return layout
 
@@ -149,11 +164,15 @@ def select_policy(env, pred, on_true: rl.TrainState, on_false: rl.TrainState) ->
     return rest._replace(env_state=env.select(pred, on_true.env_state, on_false.env_state))
 
 
-def tile_distances(env, policy, tile, key, attempts: int, policy_params=None) -> jax.Array:
+def tile_distances(env, policy, tile, key, attempts: int, policy_params=None, headings: int = 1) -> jax.Array:
     """``[attempts]`` normalised distances (0 where a walk failed) of ``attempts`` walks of ``policy(obs)`` (or
     ``policy(policy_params, obs)``) on ``tile`` (a :class:`~jaxterrain.walker.Tile`, index []) of a tiled ``env``,
     until every walk has ended or the episode limit: the loop of ``difficulty.batched_distances`` for one terrain
     (keys ``split(key, (1, attempts))``, the same vmap nesting) with the tile in place of ``terrain[None]``.
+
+    ``headings`` > 1: attempt ``a`` walks tile ``index + a // (attempts // headings)`` (the trial's terrain turned
+    for that heading, :func:`tile_layout`), keyed ``split(key, (headings, attempts // headings))`` in heading-major
+    order: ``difficulty.protocol_distances`` of one terrain, feed them to ``difficulty.aggregate``.
 
     Under ``jax.vmap`` (the curriculum's trials; the bank shared, one tile index per trial) a custom batching rule
     runs ONE loop over all trials' walks until every walk of every trial has ended: a plain while loop would get a
@@ -165,7 +184,7 @@ def tile_distances(env, policy, tile, key, attempts: int, policy_params=None) ->
 
     @jax.custom_batching.custom_vmap
     def walks(data, index, key, params):
-        return _tile_walks(env, act, attempts, data, index[None], key[None], params, None)[0]
+        return _tile_walks(env, act, attempts, headings, data, index[None], key[None], params, None)[0]
 
     @walks.def_vmap
     def walks_batched(axis_size, in_batched, data, index, key, params):
@@ -176,19 +195,25 @@ def tile_distances(env, policy, tile, key, attempts: int, policy_params=None) ->
         index = index if index_b else jnp.broadcast_to(index, (axis_size,))
         key = key if key_b else jnp.broadcast_to(key, (axis_size,) + key.shape)
         axes = jax.tree.map(lambda b: 0 if b else None, params_b)
-        return _tile_walks(env, act, attempts, data, index, key, params, axes), True
+        return _tile_walks(env, act, attempts, headings, data, index, key, params, axes), True
 
     return walks(tile.bank.data, jnp.asarray(tile.index, jnp.int32), key, params)
 
 
-def _tile_walks(env, act, attempts: int, data, index, keys, params, params_axes) -> jax.Array:
-    """``[B, attempts]`` distances of ``attempts`` walks of ``act(params_b, obs)`` on tiles ``index`` [B] of the
-    bank ``data``, trial b's walks keyed ``split(keys[b], (1, attempts))[0]``; ``params_axes``: vmap axes of
-    ``params`` over B (None: shared)."""
-    reset_keys = jax.vmap(lambda k: jax.random.split(k, (1, attempts))[0])(keys)
-    world = Tile(TileBank(data), index)
-    reset = jax.vmap(jax.vmap(env.reset, in_axes=(0, None)), in_axes=(0, TILE_AXES))
-    step = jax.vmap(jax.vmap(env.step, in_axes=(0, 0, None)), in_axes=(0, 0, TILE_AXES))
+def _tile_walks(env, act, attempts: int, headings: int, data, index, keys, params, params_axes) -> jax.Array:
+    """``[B, attempts]`` distances of ``attempts`` walks of ``act(params_b, obs)`` on the bank ``data``: trial b's
+    attempt a on tile ``index[b] + a // (attempts // headings)``, keyed ``split(keys[b], (headings, attempts //
+    headings))`` flattened (for one heading ``split(keys[b], (1, attempts))[0]``, as before headings existed);
+    ``params_axes``: vmap axes of ``params`` over B (None: shared)."""
+    per = attempts // headings
+    reset_keys = jax.vmap(lambda k: jax.random.split(k, (headings, per)).reshape(attempts))(keys)
+    if headings == 1:  # every walk of a trial on its one tile
+        world, inner = Tile(TileBank(data), index), None
+    else:
+        world, inner = Tile(TileBank(data), index[:, None] + jnp.arange(attempts, dtype=jnp.int32)[None] // per), \
+            TILE_AXES
+    reset = jax.vmap(jax.vmap(env.reset, in_axes=(0, inner)), in_axes=(0, TILE_AXES))
+    step = jax.vmap(jax.vmap(env.step, in_axes=(0, 0, inner)), in_axes=(0, 0, TILE_AXES))
     policy = jax.vmap(jax.vmap(act, in_axes=(None, 0)), in_axes=(params_axes, 0))
     horizon = env.config.episode_length
 
