@@ -10,6 +10,7 @@ from typing import Callable, NamedTuple
 import jax
 import numpy as np
 
+from jaxterrain._validate import walks
 from jaxterrain.terrain import TerrainScale, validate_scale
 
 PRNGKey = jax.Array
@@ -135,14 +136,7 @@ def resolve_config(config: EvolveConfig) -> EvolveConfig:
     for name in ("batch_size", "initial_population", "bins", "window", "stride", "attempts", "best",
                  "checkpoint_every", "traversable_window"):
         positive(name, getattr(config, name))
-    if config.headings not in (1, 2, 4):
-        raise ValueError(f"EvolveConfig.headings must be 1, 2 or 4; got {config.headings!r}")
-    if config.attempts % config.headings:
-        raise ValueError(f"EvolveConfig.attempts must be a multiple of headings={config.headings}; got "
-                         f"{config.attempts}")
-    if config.best > config.attempts // config.headings:
-        raise ValueError(f"EvolveConfig.best must be in [1, attempts / headings = {config.attempts // config.headings}]"
-                         f"; got {config.best}")
+    walks("EvolveConfig", config)
     names = tuple(config.descriptors)
     if len(names) != 2 or len(set(names)) != 2:
         raise ValueError(f"EvolveConfig.descriptors must be two different descriptor names; got {names!r}")

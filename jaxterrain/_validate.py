@@ -26,3 +26,14 @@ def known_fields(owner: str, fields: Iterable[str], d: dict) -> None:
     unknown = set(d) - set(fields)
     if unknown:
         raise ValueError(f"{owner}: unknown fields {sorted(unknown)}")
+
+
+def walks(owner: str, config: Any) -> None:
+    """A config's walker protocol: ``config.headings`` in (1, 2, 4), ``config.attempts`` (walks in total, already
+    an int >= 1) a multiple of it, ``config.best`` (per heading) at most ``attempts / headings``."""
+    one_of(owner, config, "headings", (1, 2, 4))
+    per = config.attempts // config.headings
+    if config.attempts % config.headings:
+        raise ValueError(f"{owner}.attempts must be a multiple of headings ({config.headings}), got {config.attempts}")
+    if config.best > per:
+        raise ValueError(f"{owner}.best must be <= attempts / headings ({per}), got {config.best}")

@@ -64,7 +64,7 @@ from __future__ import annotations
 import math
 from typing import NamedTuple, Optional
 
-from jaxterrain._validate import int_at_least, known_fields, one_of
+from jaxterrain._validate import int_at_least, known_fields, one_of, walks
 from jaxterrain.rl.config import PPOConfig
 from jaxterrain.rl.config import validate_config as validate_ppo_config
 
@@ -223,13 +223,7 @@ def validate_config(config: CurriculumConfig) -> CurriculumConfig:
     for name in ("epochs_per_chunk", "steps_per_epoch", "max_epochs", "max_evals", "attempts", "best",
                  "roughness_stride"):
         _int_at_least(config, name, 1)
-    _choice(config, "headings", (1, 2, 4))
-    if config.attempts % config.headings:
-        raise ValueError(f"CurriculumConfig.attempts must be a multiple of headings ({config.headings}), got "
-                         f"{config.attempts}")
-    if config.best > config.attempts // config.headings:
-        raise ValueError(f"CurriculumConfig.best must be <= attempts / headings ({config.attempts // config.headings}"
-                         f"), got {config.best}")
+    walks("CurriculumConfig", config)
     _float_in(config, "threshold", 0.0, 1.0, lo_open=True)
     _float_in(config, "max_fitness", 0.0, None, lo_open=True)
     _float_in(config, "kappa", 0.0, None, lo_open=False)
