@@ -12,7 +12,9 @@ skipped with one archive), and the roughness-sorted standard CL on the ``cppn`` 
 treatments are kept, so ``--resume`` continues where the time limit stopped. ``--shard I/N`` runs only the
 treatments ``t % N == I`` of that order, so that independent processes (e.g. one per GPU:
 ``CUDA_VISIBLE_DEVICES=I ... --out RUN --shard I/N``) share one run folder; ``--resume RUN`` without ``--shard``
-then reuses the finished treatments and writes the tables.
+then reuses the finished treatments and writes the tables. ``--resume RUN --report`` writes the tables and figures
+from the treatments as they stand, the unfinished ones from their last checkpoint (``learn --report``; marked
+``[partial: E epochs]``), without training: e.g. before a GPU machine is given back.
 
 Writes ``figure7a.png`` (hardest terrain traversed vs epoch, every map treatment, mean +- 1 standard error),
 ``figure7b.png`` (CPPN: map vs standard CL), ``table2.csv`` / ``table2.md`` (epochs to first traverse a terrain at
@@ -50,6 +52,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--baseline", choices=["roughness", "random"], default=None,
                         help="the baseline run on the cppn archive (Figure 7b; default roughness)")
     common.add_protocol_argument(parser)  # default: each archive's own protocol (learn's)
+    parser.add_argument("--report", action="store_true",
+                        help="with --resume: Table 2 and the figures from the treatments as they stand (unfinished "
+                             "ones from their last checkpoint, marked partial), without training")
     parser.add_argument("--shard", type=common.parse_shard, default=None, metavar="I/N",
                         help="run only the treatments t % N == I of the fixed order (independent processes, e.g. one "
                              "per GPU, on one run folder); then --resume without --shard writes the tables")
@@ -98,6 +103,12 @@ def _treatment_cfg(cfg: dict, path: str, curriculum: str) -> dict:
     return {**keep, "archive": path, "curriculum": curriculum, "command": "learn"}
 
 
+def shown(label: str, summary: dict) -> str:
+    """A treatment's name in tables and legends: ``label``, with ``[partial: E epochs]`` for a summary of an
+    unfinished run (``learn.report_treatment``)."""
+    return f"{label} [partial: {summary['epochs_max']} epochs]" if summary.get("partial") else label
+
+
 def write_table(folder: Path, rows: list[tuple[str, dict]], trials: int) -> None:
     """table2.csv (ours: mean epochs and trials reaching each milestone; the paper's) and table2.md."""
     from jaxterrain.curriculum import MILESTONES, PAPER_TABLE2, format_milestone
@@ -110,9 +121,10 @@ def write_table(folder: Path, rows: list[tuple[str, dict]], trials: int) -> None
     md = ["| treatment | " + " | ".join(pct) + " |", "|---|" + "---|" * len(pct)]
     for label, s in rows:
         means, reached = s["milestone_epochs"], s["milestone_trials"]
-        w.writerow([label, "ours"] + ["" if m is None else f"{m:.1f}" for m in means] + reached)
+        name = shown(label, s)
+        w.writerow([name, "ours"] + ["" if m is None else f"{m:.1f}" for m in means] + reached)
         cells = [format_milestone(float("nan") if m is None else m, r, trials) for m, r in zip(means, reached)]
-        md.append(f"| {label} (ours) | " + " | ".join(cells) + " |")
+        md.append(f"| {name} (ours) | " + " | ".join(cells) + " |")
         paper = PAPER_TABLE2.get(label.split(" ")[0]) if label.endswith(" map") else None
         if paper is not None:
             w.writerow([label, "paper"] + ["" if v is None else v for v in paper] + [""] * len(pct))
@@ -129,12 +141,12 @@ def write_figures(folder: Path, rows: list[tuple[str, dict]], baseline: str) -> 
     import numpy as np
 
     curve = lambda s: tuple(np.asarray(s["curve"][k], float) for k in ("epoch", "mean", "se"))  # noqa: E731
-    maps = {label.split(" ")[0]: curve(s) for label, s in rows if label.endswith(" map")}
+    maps = {shown(label.split(" ")[0], s): curve(s) for label, s in rows if label.endswith(" map")}
     fig, ax = plt.subplots(figsize=(7, 4))
     learn.plot_curves(ax, maps, "Figure 7a: map-based curriculum per archive (mean +- 1 s.e.)")
     fig.tight_layout()
     common.save_figure(fig, folder / "figure7a.png")
-    pair = {label: curve(s) for label, s in rows if label in ("cppn map", f"cppn {baseline}")}
+    pair = {shown(label, s): curve(s) for label, s in rows if label in ("cppn map", f"cppn {baseline}")}
     if len(pair) == 2:
         fig, ax = plt.subplots(figsize=(7, 4))
         learn.plot_curves(ax, pair, f"Figure 7b: CPPN, map-based vs {baseline}-sorted curriculum")
@@ -154,7 +166,31 @@ def write_sequences(folder: Path, done: list[tuple[str, Path]]) -> None:
     atomic_write_text(folder / "sequences.csv", "\n".join(lines) + "\n")
 
 
+def report(folder: Path, cfg: dict, plan) -> int:
+    """``--report``: every treatment as it stands (``learn.report_treatment``; none compiles), then the tables."""
+    rows, done = [], []
+    for name, path, curriculum in plan:
+        sub = folder / f"{name}-{curriculum}"
+        summary = learn.report_treatment(_treatment_cfg(cfg, path, curriculum), sub) if sub.is_dir() else None
+        if summary is None:
+            print(f"{name} {curriculum}: no checkpoint yet", flush=True)
+            continue
+        rows.append((f"{name} {curriculum}", summary))
+        done.append((f"{name} {curriculum}", sub))
+        print(f"{shown(f'{name} {curriculum}', summary)}: hardest {summary['hardest_mean']:.2f}", flush=True)
+    if not rows:
+        print(f"curriculum: no treatment of {folder} has a checkpoint yet", file=sys.stderr)
+        return 2
+    write_table(folder, rows, int(cfg["trials"]))
+    write_figures(folder, rows, cfg["baseline"])
+    write_sequences(folder, done)
+    print(f"report: {len(rows)} of {len(plan)} treatments -> {folder}/table2.md, figure7a.png", flush=True)
+    return 0
+
+
 def main(args) -> int:
+    if args.report and args.resume is None:
+        raise common.UsageError("--report needs --resume RUN (the run to report on)")
     over = dict(archives=parse_archives(args.archives), trials=args.trials, max_epochs=args.max_epochs,
                 baseline=args.baseline, backend=args.backend, **common.protocol_overrides(args))
     mesh = common.device_mesh(args.devices)
@@ -168,6 +204,8 @@ def main(args) -> int:
     except learn.BadInput as err:
         print(f"curriculum: {err}", file=sys.stderr)
         return 2
+    if args.report:
+        return report(folder, cfg, plan)
     rows, done = [], []
     shard_i, shard_n = args.shard or (0, 1)
     shard = "" if args.shard is None else f" --shard {shard_i}/{shard_n}"

@@ -28,6 +28,10 @@ Presets: ``paper`` (30 000 epochs, the paper's budget), ``gpu-short`` (3 000 epo
 about a minute after compiling: 2 trials of 4 one-epoch chunks of 80 env steps on 4 envs, 2 walks per evaluation,
 100-step episodes; the archive's terrains are used as they are).
 
+``--resume RUN --report`` writes the outputs below from the last checkpoint without training (``summary_partial.json``
+instead of ``summary.json``, which marks a finished run): the per-trial history survives a machine that is given
+back with the checkpoint on it.
+
 Writes into the run folder: ``config.json``, ``checkpoint.npz`` + ``metrics.csv`` + ``tb/`` (the driver's),
 ``history.csv`` (one row per trial and chunk), ``sequences.csv`` (each trial's terrains in order), ``milestones.csv``
 / ``.md`` (Table 2's row), ``curve.png`` (hardest terrain traversed vs epoch, mean +- 1 standard error) and
@@ -79,6 +83,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--policy", default=None, help="policy folder to start from (default: the base policy)")
     parser.add_argument("--chunks-per-call", type=int, default=None, help="chunks per jitted call / checkpoint")
     parser.add_argument("--num-envs", type=int, default=None, help="PPO envs per trial (all on its terrain)")
+    parser.add_argument("--report", action="store_true",
+                        help="with --resume: write the outputs of the last checkpoint (history, sequences, "
+                             "milestones, curve, summary_partial.json) without training, and stop")
     parser.add_argument("--attempts", type=int, default=None,
                         help="evaluation walks in total (default: the archive's protocol, e.g. 20)")
     parser.add_argument("--best", type=int, default=None, help="best walks averaged per heading (default: archive's)")
@@ -337,6 +344,47 @@ def run_treatment(cfg: dict, folder: Path, time_limit_s: float | None = None, de
     return write_outputs(folder, cfg, config, bank, states, seconds=time.perf_counter() - t0)
 
 
+PARTIAL = "summary_partial.json"
+
+
+def report_treatment(cfg: dict, folder: Path) -> dict | None:
+    """The outputs of a treatment as it stands, without training: a finished one's summary; for one with a
+    checkpoint, its history / sequences / milestones / curve as of that checkpoint and ``summary_partial.json``
+    (the summary with ``"partial": true`` and ``"chunks_done"``; ``summary.json`` stays the mark of a finished run,
+    so ``--resume`` still continues it); None without a checkpoint. Compiles nothing: the checkpoint is read into
+    the shapes of the initial states (``jax.eval_shape``)."""
+    import jax
+    import jax.numpy as jnp
+
+    from jaxterrain import bank as B
+    from jaxterrain import curriculum as C
+    from jaxterrain import driver
+    from jaxterrain.curriculum import walker as W
+
+    folder = Path(folder)
+    if (folder / "summary.json").exists():
+        return json.loads((folder / "summary.json").read_text())
+    if not (folder / driver.CHECKPOINT_NAME).exists():
+        return None
+    config, arch, policy, env = validate(cfg)
+    bank = B.from_archive(arch)
+    ppo = config.ppo_config(policy.config)
+    harness = W.walker_harness(env, ppo, config)
+    start = W.start_state(env, ppo, policy, bank.heightmaps.shape[1:])
+    keys = jax.random.split(jax.random.key(0), int(cfg["trials"]))
+    shapes = jax.eval_shape(lambda k, b, s: strip_envs(C.init_trials(k, b, s, config=config, harness=harness)),
+                            keys, bank, start)
+
+    def zeros(spec):
+        if jnp.issubdtype(spec.dtype, jax.dtypes.prng_key):
+            data = jax.eval_shape(jax.random.key_data, spec)
+            return jax.random.wrap_key_data(jnp.zeros(data.shape, data.dtype))
+        return jnp.zeros(spec.shape, spec.dtype)
+
+    states, done, _, _ = driver.restore(folder, like=jax.tree.map(zeros, shapes))
+    return write_outputs(folder, cfg, config, bank, states, seconds=None, chunks_done=done)
+
+
 # ----------------------------------------------------------------------------------------------------------------
 # Outputs
 # ----------------------------------------------------------------------------------------------------------------
@@ -404,8 +452,11 @@ def plot_curves(ax, curves: dict, title: str = "") -> None:
     ax.legend(fontsize=7)
 
 
-def write_outputs(folder: Path, cfg: dict, config, bank, states, seconds: float) -> dict:
-    """history.csv, sequences.csv, milestones.csv/.md, curve.png and summary.json; returns the summary."""
+def write_outputs(folder: Path, cfg: dict, config, bank, states, seconds: float | None,
+                  chunks_done: int | None = None) -> dict:
+    """history.csv, sequences.csv, milestones.csv/.md, curve.png and summary.json; returns the summary. With
+    ``chunks_done`` (an unfinished run's last checkpoint, :func:`report_treatment`) the summary goes to
+    ``summary_partial.json`` with ``"partial": true`` and ``"chunks_done"``, and the curve's title says so."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -439,7 +490,8 @@ def write_outputs(folder: Path, cfg: dict, config, bank, states, seconds: float)
                       + f"\n| {label} | " + " | ".join(cells) + " |\n")
     grid, mean, se = hardest_curve(hist["epoch"], hist["hardest"])
     fig, ax = plt.subplots(figsize=(6, 3.5))
-    plot_curves(ax, {label: (grid, mean, se)}, f"{label}: {hist['epoch'].shape[0]} trials, mean +- 1 s.e.")
+    upto = "" if chunks_done is None else f", partial: {chunks_done} of {config.max_chunks} chunks"
+    plot_curves(ax, {label: (grid, mean, se)}, f"{label}: {hist['epoch'].shape[0]} trials{upto}, mean +- 1 s.e.")
     fig.tight_layout()
     common.save_figure(fig, folder / "curve.png")
     final = np.asarray(states.hardest, np.float64)
@@ -455,11 +507,16 @@ def write_outputs(folder: Path, cfg: dict, config, bank, states, seconds: float)
         "milestone_trials": csv_row[1 + len(pct):],
         "curve": {"epoch": grid.tolist(), "mean": mean.tolist(), "se": se.tolist()},
     }
-    atomic_write_text(folder / "summary.json", json.dumps(summary, indent=2) + "\n")
+    if chunks_done is not None:
+        summary.update(partial=True, chunks_done=int(chunks_done))
+    atomic_write_text(folder / ("summary.json" if chunks_done is None else PARTIAL), json.dumps(summary, indent=2)
+                      + "\n")
     return summary
 
 
 def main(args) -> int:
+    if args.report and args.resume is None:
+        raise common.UsageError("--report needs --resume RUN (the run to report on)")
     mesh = common.device_mesh(args.devices)
     folder, cfg = common.setup_run("learn", args, PRESETS, "smoke", overrides(args))
     try:
@@ -469,6 +526,15 @@ def main(args) -> int:
         if args.resume is None and sorted(p.name for p in folder.iterdir()) == [common.CONFIG_NAME]:
             shutil.rmtree(folder)
         return 2
+    if args.report:
+        summary = report_treatment(cfg, folder)
+        if summary is None:
+            print(f"learn: {folder} has no checkpoint yet: nothing to report", file=sys.stderr)
+            return 2
+        state = f"partial, {summary['chunks_done']} chunks" if summary.get("partial") else "finished"
+        print(f"report ({state}): hardest traversed {summary['hardest_mean']:.2f} +- {summary['hardest_se']:.2f} "
+              f"cells -> {folder}", flush=True)
+        return 0
     limit = None if args.time_limit is None else 60.0 * args.time_limit
     summary = run_treatment(cfg, folder, limit, mesh=mesh)
     if summary is None:

@@ -500,6 +500,11 @@ def test_curriculum_tables_put_the_papers_numbers_beside_ours(tmp_path):
     table = (tmp_path / "table2.csv").read_text().splitlines()
     assert table[1].startswith("cppn map,ours,40.0,120.0,,") and table[2].startswith("cppn map,paper,40,80,120")
     assert (tmp_path / "figure7a.png").stat().st_size > 0 and (tmp_path / "figure7b.png").stat().st_size > 0
+    partial = {**summary([40.0, None], [1, 0]), "partial": True, "epochs_max": 80}  # learn --report of a checkpoint
+    (tmp_path / "p").mkdir()
+    exp.write_table(tmp_path / "p", [("cppn map", partial)], trials=2)
+    md = (tmp_path / "p" / "table2.md").read_text().splitlines()
+    assert md[2].startswith("| cppn map [partial: 80 epochs] (ours) | 40 (1/2) |") and "(paper)" in md[3]
 
 
 def test_curriculum_shards_share_one_run_folder_and_resume_writes_the_tables(tmp_path, tiny_archive, capsys):
@@ -521,6 +526,9 @@ def test_curriculum_shards_share_one_run_folder_and_resume_writes_the_tables(tmp
     assert "shard 1/2 done (1 of 2 treatments)" in out and not (run / "table2.md").exists()
     with pytest.raises(SystemExit):
         cli(*base, "--out", str(run / "bad"), "--shard", "2/2")
+    assert cli("curriculum", "--resume", str(run), "--report") == 0  # as they stand: here both finished
+    assert "| cppn map (ours) | 40 |" in (run / "table2.md").read_text()
+    (run / "table2.md").unlink()
     assert cli("curriculum", "--resume", str(run)) == 0
     md = (run / "table2.md").read_text()
     assert "| cppn map (ours) | 40 |" in md and "| cppn roughness (ours) | 40 |" in md
@@ -543,6 +551,14 @@ def test_learn_killed_by_its_time_limit_resumes_to_the_uninterrupted_curves(tmp_
     parts = tmp_path / "parts"
     assert cli("learn", "--preset", "smoke", "--archive", archive, "--out", str(parts), "--time-limit", "1e-6") == 3
     assert not (parts / "summary.json").exists() and (parts / "checkpoint.npz").exists()
+    assert cli("learn", "--resume", str(parts), "--report") == 0  # the checkpoint's outputs, nothing trained
+    partial = json.loads((parts / "summary_partial.json").read_text())
+    assert partial["partial"] and partial["chunks_done"] == 2 and not (parts / "summary.json").exists()
+    rows = (parts / "history.csv").read_text().splitlines()[1:]
+    assert rows and all(r.split(",")[1] in ("0", "1") for r in rows)  # the two chunks of the first block
+    with pytest.raises(SystemExit):
+        cli("learn", "--preset", "smoke", "--report", "--out", str(tmp_path / "nothing"))
+    assert not (tmp_path / "nothing").exists()
     assert cli("learn", "--resume", str(parts)) == 0
     for name in ("history.csv", "sequences.csv", "milestones.csv"):
         assert (parts / name).read_text() == (whole / name).read_text(), name
