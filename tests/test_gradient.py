@@ -107,11 +107,14 @@ def test_reseat_of_the_shipped_cppn_archive_matches_insertion_bug_counts(tmp_pat
 
     elites = G.load_elites(str(RESULTS / "exp1b_gpu_sound_cppn_archive.npz"))
     walked = {"rows": np.arange(elites["cells"].size), "fitness": elites["fitness"]}
-    counts = G.write_reseated(tmp_path / "cppn_reseated.npz", elites, walked)
+    from jaxterrain import difficulty
+
+    counts = G.write_reseated(tmp_path / "cppn_reseated.npz", elites, walked, difficulty.HEADINGS)
     assert counts["elites"] == 1096 and counts["refused"] == 289
     assert counts["kept"] == 1096 - 289 - counts["displaced"] and counts["moved"] >= counts["displaced"] > 0
     out = A.load(tmp_path / "cppn_reseated.npz")
     assert int(out.filled.sum()) == counts["kept"] and A.check_cells(out).all()
+    assert (out.config.attempts, out.config.best, out.config.headings) == (80, 5, 4)  # the protocol it was given
     with pytest.raises(SystemExit, match="--reseat needs --protocol"):
         G.main(G_args([str(RESULTS / "exp1b_gpu_sound_perlin_archive.npz"), "--reseat", "--out",
                        str(tmp_path / "run")]))
