@@ -105,7 +105,9 @@ def walker_harness(env, ppo: rl.PPOConfig, config: CurriculumConfig) -> Harness:
     protocol = config.protocol.validate()
 
     def spread(terrain):
-        """The trial's terrain for its PPO envs: env e walks heading ``e % headings`` (all +x for one heading)."""
+        """The trial's terrain for its PPO envs: env e walks heading ``e % headings`` (all +x for one heading). On
+        tiles a Tile per env; in the classic layout per-env turned copies, ``[num_envs, H, W]`` (131 MB per trial
+        for 500 envs at 256 x 256)."""
         if protocol.headings == 1:
             return terrain
         heading = jnp.arange(ppo.num_envs, dtype=jnp.int32) % protocol.headings
@@ -139,9 +141,9 @@ def tile_layout(env, headings: int = 1):
     """The ``Harness.layout`` of a tiled walker (``env.tiles >= 1``): ``terrains [k, H, W]`` metres (the current
     terrains of k trials, e.g. one device's share) -> ``(Tile, TILE_AXES)`` with trial i on tile ``i * headings`` of
     ONE bank: tiles ``i * headings + h`` hold its terrain turned for heading h (``difficulty.rotate_headings``), so
-    heading h of a trial (its PPO envs ``e % headings == h``, its evaluation walks of heading h) is tile ``index +
-    h``; tiles past
-    ``k * headings`` are flat. Jit-able; ``ValueError`` when ``k * headings > env.tiles``."""
+    heading h of a trial (its PPO envs ``e % headings == h``, its evaluation walks of heading h) is tile
+    ``index + h``; tiles past ``k * headings`` are flat. Jit-able; ``ValueError`` when ``k * headings > env.tiles``.
+    """
 
     def layout(terrains):
         k = terrains.shape[0]
