@@ -56,7 +56,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="with --resume: Table 2 and the figures from the treatments as they stand (unfinished "
                              "ones from their last checkpoint, marked partial), without training")
     parser.add_argument("--shard", type=common.parse_shard, default=None, metavar="I/N",
-                        help="run only the treatments t % N == I of the fixed order (independent processes, e.g. one "
+                        help="run only the treatments t %% N == I of the fixed order (independent processes, e.g. one "
                              "per GPU, on one run folder); then --resume without --shard writes the tables")
     parser.add_argument("--backend", choices=["auto", "jax", "warp"], default=None,
                         help="walker physics of every treatment: auto (default: warp on a GPU where it imports, else "

@@ -236,3 +236,14 @@ def test_protocol_flag_sets_attempts_best_and_headings_together():
                             where=lambda k: f"'{k}'" if k == "attempts" else common.flag(k))
     with pytest.raises(common.UsageError, match="--best must be <= --attempts / --headings"):
         common.check_values({"attempts": 20, "best": 6, "headings": 4})
+
+
+def test_every_command_prints_its_help(capsys):
+    """``python -m experiments CMD --help`` formats (argparse fails on a lone % in a help text) and exits 0."""
+    from experiments.__main__ import COMMANDS, main
+
+    for name in COMMANDS:
+        with pytest.raises(SystemExit) as err:
+            main([name, "--help"])
+        assert err.value.code == 0, name
+        assert "usage:" in capsys.readouterr().out, name
