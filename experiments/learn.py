@@ -272,10 +272,10 @@ def chunk_metrics(states, start: int, stop: int) -> dict:
 _PROGRAMS: dict = {}  # (config, ppo, walker, trials, bank shape, fast) -> (init, block): treatments share them
 
 
-def setup(cfg: dict, config, arch, policy, env, mesh=None):
-    """Bank, the compiled block ``(states, bank, n) -> states`` and the initial (stripped) trial states. Compiled
-    programs are reused by later treatments with the same settings and bank shape (``experiments curriculum``).
-    ``mesh``: the trials split over its devices (``sharding.map_rows``: padded, the bank replicated)."""
+def inputs(cfg: dict, config, arch, policy, env):
+    """What a treatment's programs start from: ``(bank, ppo, harness, start, keys, init)``: the archive's terrain
+    bank, the fine-tuning PPOConfig, the walker harness, the starting policy state, the trials' keys [trials] and
+    ``init(keys, bank, start)`` -> the initial trial states without env states (pure: jit or ``eval_shape`` it)."""
     import jax
 
     from jaxterrain import bank as B
@@ -284,14 +284,27 @@ def setup(cfg: dict, config, arch, policy, env, mesh=None):
 
     bank = B.from_archive(arch)
     ppo = config.ppo_config(policy.config)
-    fast = bool(cfg.get("fast_compile", False))
+    harness = W.walker_harness(env, ppo, config)
     start = W.start_state(env, ppo, policy, bank.heightmaps.shape[1:])
     keys = jax.random.split(jax.random.fold_in(jax.random.key(int(cfg["seed"])), 2), int(cfg["trials"]))
+
+    def init(k, b, s):
+        return strip_envs(C.init_trials(k, b, s, config=config, harness=harness))
+
+    return bank, ppo, harness, start, keys, init
+
+
+def setup(cfg: dict, config, arch, policy, env, mesh=None):
+    """Bank, the compiled block ``(states, bank, n) -> states`` and the initial (stripped) trial states. Compiled
+    programs are reused by later treatments with the same settings and bank shape (``experiments curriculum``).
+    ``mesh``: the trials split over its devices (``sharding.map_rows``: padded, the bank replicated)."""
+    import jax
+
+    bank, ppo, harness, start, keys, init_fn = inputs(cfg, config, arch, policy, env)
+    fast = bool(cfg.get("fast_compile", False))
     sig = (config, ppo, env.config, int(cfg["trials"]), tuple(bank.heightmaps.shape), fast, mesh)
     if sig not in _PROGRAMS:
-        harness = W.walker_harness(env, ppo, config)
-        init = compiled(lambda k, b, s: strip_envs(C.init_trials(k, b, s, config=config, harness=harness)), fast,
-                        keys, bank, start)
+        init = compiled(init_fn, fast, keys, bank, start)
         like, bank_like = init(keys, bank, start), bank
         block = make_block(config, harness, start.env_state)
         if mesh is not None:  # the trials split over the devices; inputs whole on the mesh (whence the init's)
@@ -356,10 +369,7 @@ def report_treatment(cfg: dict, folder: Path) -> dict | None:
     import jax
     import jax.numpy as jnp
 
-    from jaxterrain import bank as B
-    from jaxterrain import curriculum as C
     from jaxterrain import driver
-    from jaxterrain.curriculum import walker as W
 
     folder = Path(folder)
     if (folder / "summary.json").exists():
@@ -367,13 +377,8 @@ def report_treatment(cfg: dict, folder: Path) -> dict | None:
     if not (folder / driver.CHECKPOINT_NAME).exists():
         return None
     config, arch, policy, env = validate(cfg)
-    bank = B.from_archive(arch)
-    ppo = config.ppo_config(policy.config)
-    harness = W.walker_harness(env, ppo, config)
-    start = W.start_state(env, ppo, policy, bank.heightmaps.shape[1:])
-    keys = jax.random.split(jax.random.key(0), int(cfg["trials"]))
-    shapes = jax.eval_shape(lambda k, b, s: strip_envs(C.init_trials(k, b, s, config=config, harness=harness)),
-                            keys, bank, start)
+    bank, _, _, start, keys, init = inputs(cfg, config, arch, policy, env)
+    shapes = jax.eval_shape(init, keys, bank, start)
 
     def zeros(spec):
         if jnp.issubdtype(spec.dtype, jax.dtypes.prng_key):
