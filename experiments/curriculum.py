@@ -166,6 +166,13 @@ def write_sequences(folder: Path, done: list[tuple[str, Path]]) -> None:
     atomic_write_text(folder / "sequences.csv", "\n".join(lines) + "\n")
 
 
+def write_outputs(folder: Path, cfg: dict, rows: list[tuple[str, dict]], done: list[tuple[str, Path]]) -> None:
+    """Table 2, Figure 7a / 7b and sequences.csv of the treatments' ``rows`` (label, summary) in ``done`` folders."""
+    write_table(folder, rows, int(cfg["trials"]))
+    write_figures(folder, rows, cfg["baseline"])
+    write_sequences(folder, done)
+
+
 def report(folder: Path, cfg: dict, plan) -> int:
     """``--report``: every treatment as it stands (``learn.report_treatment``; none compiles), then the tables."""
     rows, done = [], []
@@ -181,9 +188,7 @@ def report(folder: Path, cfg: dict, plan) -> int:
     if not rows:
         print(f"curriculum: no treatment of {folder} has a checkpoint yet", file=sys.stderr)
         return 2
-    write_table(folder, rows, int(cfg["trials"]))
-    write_figures(folder, rows, cfg["baseline"])
-    write_sequences(folder, done)
+    write_outputs(folder, cfg, rows, done)
     print(f"report: {len(rows)} of {len(plan)} treatments -> {folder}/table2.md, figure7a.png", flush=True)
     return 0
 
@@ -228,9 +233,7 @@ def main(args) -> int:
         print(f"shard {shard_i}/{shard_n} done ({len(rows)} of {len(plan)} treatments); when every shard is, write the "
               f"tables with: python -m experiments curriculum --resume {folder}", flush=True)
         return 0
-    write_table(folder, rows, int(cfg["trials"]))
-    write_figures(folder, rows, cfg["baseline"])
-    write_sequences(folder, done)
+    write_outputs(folder, cfg, rows, done)
     print(f"done: {len(rows)} treatments -> {folder}/table2.md, figure7a.png, figure7b.png", flush=True)
     print(json.dumps({label: s["hardest_mean"] for label, s in rows}), flush=True)
     return 0
