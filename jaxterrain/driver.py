@@ -20,7 +20,9 @@ of ``every`` steps the driver
 * rewrites ``run_dir/metrics.csv`` (one row per step) atomically and appends the chunk's scalars to TensorBoard
   event files in ``run_dir/tb`` (tensorboardX);
 * moves a tqdm progress bar (ETA, steps per second, the ``key_metric``'s latest value);
-* stops early, after the chunk in which ``time_limit_s`` passed (``done < total``; resume later).
+* stops early (``done < total``; resume later) once ``time_limit_s`` has passed, or before a chunk that would end
+  past it: the next chunk is predicted from the fastest rate (seconds per step) of the chunks so far, so a first
+  chunk that compiled makes the prediction cautious; at least one chunk always runs.
 
 Checkpoint format (``checkpoint.npz``, uncompressed npz): ``header`` = uint8 UTF-8 JSON ``{"format":
 "jaxterrain-checkpoint", "version": 1, "done": int, "meta": {...}, "leaves": [names], "keys": [names of typed-key
@@ -255,7 +257,8 @@ def run_chunks(chunk_fn: ChunkFn, state: Any, *, total: int, every: int, start: 
       history: metrics of the steps already done (name -> list of floats), from :func:`restore`.
       run_dir: folder of ``checkpoint.npz``, ``metrics.csv`` and ``tb/``; None writes nothing.
       key_metric: the metric shown beside the progress bar.
-      time_limit_s: stop after the chunk in which this many seconds (from the call) have passed.
+      time_limit_s: the seconds (from the call) the run may take: stop after the chunk in which they passed, or
+        before a chunk predicted to end past them.
       progress: True for a tqdm bar on stderr; a callable receives a dict per chunk (``done``, ``total``,
         ``seconds``, ``steps_per_s`` and the latest value of every metric); False is silent.
       meta: a JSON-serialisable dict stored in every checkpoint (e.g. the run's config).
@@ -272,6 +275,7 @@ def run_chunks(chunk_fn: ChunkFn, state: Any, *, total: int, every: int, start: 
     bar = _bar(progress, total, start, desc, unit)
     t0 = time.perf_counter()
     done = start
+    rate = float("inf")  # the fastest seconds per step so far
     try:
         while done < total:
             stop = min(done + every, total)
@@ -284,6 +288,7 @@ def run_chunks(chunk_fn: ChunkFn, state: Any, *, total: int, every: int, start: 
                 log.write(history, done, stop)
             info = {"done": stop, "total": total, "seconds": seconds, "steps_per_s": (stop - done) / max(seconds, 1e-9),
                     **{k: v[-1] for k, v in history.items() if v}}
+            rate = min(rate, seconds / (stop - done))
             done = stop
             if bar is not None:
                 if key_metric is not None and key_metric in info:
@@ -291,7 +296,8 @@ def run_chunks(chunk_fn: ChunkFn, state: Any, *, total: int, every: int, start: 
                 bar.update(stop - bar.n)
             elif callable(progress):
                 progress(info)
-            if time_limit_s is not None and time.perf_counter() - t0 >= time_limit_s and done < total:
+            predicted = rate * (min(done + every, total) - done)  # the next chunk at the fastest rate so far
+            if time_limit_s is not None and done < total and time.perf_counter() - t0 + predicted > time_limit_s:
                 break
     finally:
         if bar is not None:

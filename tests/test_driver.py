@@ -75,6 +75,18 @@ def test_time_limit_stops_after_a_chunk(tmp_path):
     assert driver.restore(tmp_path, make_state())[1] == 2
 
 
+def test_time_limit_skips_a_chunk_predicted_to_end_past_it():
+    import time
+
+    def timed(state, start, stop):
+        time.sleep(0.2)
+        return chunk(state, start, stop)
+
+    # after 2 chunks (0.4 s) the 3rd would end at 0.6 s > 0.5 s: stop there, not after it
+    _, done, _ = driver.run_chunks(timed, make_state(), total=10, every=1, time_limit_s=0.5, progress=False)
+    assert done == 2
+
+
 def test_progress_callable_and_batched_metrics():
     seen = []
 
