@@ -247,3 +247,25 @@ def test_every_command_prints_its_help(capsys):
             main([name, "--help"])
         assert err.value.code == 0, name
         assert "usage:" in capsys.readouterr().out, name
+
+
+def test_every_flag_override_is_a_key_of_every_preset():
+    """Each command's ``overrides(args)`` keys exist in each of its presets, so that a flag given on the command line
+    is not refused as an "unknown config key" (``evolve --rollout-backend`` once was)."""
+    import argparse
+    import importlib
+
+    from experiments.__main__ import COMMANDS
+
+    checked = 0
+    for name, (module_name, _) in COMMANDS.items():
+        module = importlib.import_module(module_name)
+        if not (hasattr(module, "overrides") and hasattr(module, "PRESETS")):
+            continue
+        parser = argparse.ArgumentParser()
+        module.add_arguments(parser)
+        keys = set(module.overrides(parser.parse_args([])))
+        for preset, values in module.PRESETS.items():
+            assert keys <= set(values), f"{name} --preset {preset}: no key for {sorted(keys - set(values))}"
+        checked += 1
+    assert checked >= 6
