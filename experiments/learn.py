@@ -461,7 +461,8 @@ def write_outputs(folder: Path, cfg: dict, config, bank, states, seconds: float 
                   chunks_done: int | None = None) -> dict:
     """history.csv, sequences.csv, milestones.csv/.md, curve.png and summary.json; returns the summary. With
     ``chunks_done`` (an unfinished run's last checkpoint, :func:`report_treatment`) the summary goes to
-    ``summary_partial.json`` with ``"partial": true`` and ``"chunks_done"``, and the curve's title says so."""
+    ``summary_partial.json`` with ``"partial": true`` and ``"chunks_done"``, and the curve's title says so; without
+    it, ``summary.json``, and a ``summary_partial.json`` left by an earlier report is removed."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -516,6 +517,8 @@ def write_outputs(folder: Path, cfg: dict, config, bank, states, seconds: float 
         summary.update(partial=True, chunks_done=int(chunks_done))
     atomic_write_text(folder / ("summary.json" if chunks_done is None else PARTIAL), json.dumps(summary, indent=2)
                       + "\n")
+    if chunks_done is None:  # finished: an earlier --report's partial summary is out of date
+        (folder / PARTIAL).unlink(missing_ok=True)
     return summary
 
 

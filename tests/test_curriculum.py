@@ -560,5 +560,6 @@ def test_learn_killed_by_its_time_limit_resumes_to_the_uninterrupted_curves(tmp_
         cli("learn", "--preset", "smoke", "--report", "--out", str(tmp_path / "nothing"))
     assert not (tmp_path / "nothing").exists()
     assert cli("learn", "--resume", str(parts)) == 0
+    assert (parts / "summary.json").exists() and not (parts / "summary_partial.json").exists()  # none out of date
     for name in ("history.csv", "sequences.csv", "milestones.csv"):
         assert (parts / name).read_text() == (whole / name).read_text(), name
