@@ -49,6 +49,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="archives of the map treatments (default: the perlin and cppn archives in docs/results)")
     parser.add_argument("--trials", type=int, default=None)
     parser.add_argument("--max-epochs", type=int, default=None)
+    parser.add_argument("--healthy-reward", type=float, default=None,
+                        help="fine-tuning reward per step for staying up, >= 0, in every treatment (learn's flag; "
+                             "default: the walker's 5.0)")
     parser.add_argument("--baseline", choices=["roughness", "random"], default=None,
                         help="the baseline run on the cppn archive (Figure 7b; default roughness)")
     common.add_protocol_argument(parser)  # default: each archive's own protocol (learn's)
@@ -197,6 +200,7 @@ def main(args) -> int:
     if args.report and args.resume is None:
         raise common.UsageError("--report needs --resume RUN (the run to report on)")
     over = dict(archives=parse_archives(args.archives), trials=args.trials, max_epochs=args.max_epochs,
+                healthy_reward=args.healthy_reward,
                 baseline=args.baseline, backend=args.backend, **common.protocol_overrides(args))
     mesh = common.device_mesh(args.devices)
     folder, cfg = common.setup_run("curriculum", args, PRESETS, "smoke", over)

@@ -24,6 +24,11 @@ or reseated under ``difficulty.HEADINGS``), so the GP's prior and its observatio
 or ``--attempts`` / ``--best`` / ``--headings`` override it. With several headings the PPO envs also train in every
 heading (``jaxterrain.curriculum.walker``).
 
+Fine-tuning reward: the base policy's own (brax's humanoid: 1.25 x forward velocity + 5.0 per step for staying up -
+control cost). ``--healthy-reward`` changes the per-step bonus for PPO only (evaluations measure distance): under
+``HEADINGS`` the roughness baseline's policy got worse on its second terrain in every trial, 0.76 -> 0.02-0.10
+(docs/results/exp2_headings.md), and a bonus that pays for standing still is the suspect.
+
 Presets: ``paper`` (30 000 epochs, the paper's budget), ``gpu-short`` (3 000 epochs, a tenth), ``smoke`` (CPU,
 about a minute after compiling: 2 trials of 4 one-epoch chunks of 80 env steps on 4 envs, 2 walks per evaluation,
 100-step episodes; the archive's terrains are used as they are).
@@ -58,7 +63,7 @@ _PAPER = dict(archive=CPPN_ARCHIVE, curriculum="map", trials=10, descriptors=["r
               gp_evaluation="final", removal_margin=0.05, removal_ties="nearer", credit="threshold",
               distance_origin="origin", roughness_stride=5, max_observations=None, num_envs=500, unroll_length=10,
               num_unrolls=8, num_minibatches=8, update_epochs=8, learning_rate=3e-4, episode_length=1000,
-              chunks_per_call=25, fast_compile=False, backend="auto")
+              chunks_per_call=25, fast_compile=False, backend="auto", healthy_reward=None)
 PRESETS: dict[str, dict] = {
     "paper": _PAPER,
     "gpu-short": {**_PAPER, "max_epochs": 3000},
@@ -83,6 +88,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--policy", default=None, help="policy folder to start from (default: the base policy)")
     parser.add_argument("--chunks-per-call", type=int, default=None, help="chunks per jitted call / checkpoint")
     parser.add_argument("--num-envs", type=int, default=None, help="PPO envs per trial (all on its terrain)")
+    parser.add_argument("--healthy-reward", type=float, default=None,
+                        help="fine-tuning reward per step for staying up, >= 0 (default: the walker's 5.0, the base "
+                             "policy's; evaluations measure distance and do not use it)")
     parser.add_argument("--report", action="store_true",
                         help="with --resume: write the outputs of the last checkpoint (history, sequences, "
                              "milestones, curve, summary_partial.json) without training, and stop")
@@ -100,7 +108,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 def overrides(args) -> dict:
     return dict(archive=args.archive, curriculum=args.curriculum, trials=args.trials, threshold=args.threshold,
                 max_epochs=args.max_epochs, policy=args.policy, chunks_per_call=args.chunks_per_call,
-                num_envs=args.num_envs, backend=args.backend, **common.protocol_overrides(args))
+                num_envs=args.num_envs, backend=args.backend, healthy_reward=args.healthy_reward,
+                **common.protocol_overrides(args))
 
 
 # ----------------------------------------------------------------------------------------------------------------
@@ -201,7 +210,8 @@ def validate(cfg: dict):
     except ValueError as err:
         raise BadInput(f"--policy: {err}") from None
     shape = (256, 256) if arch.heightmaps is None else tuple(arch.heightmaps.shape[1:])
-    env = W.walker_env(policy, shape, TerrainScale(), cfg["episode_length"], **walker_layout(cfg))
+    env = W.walker_env(policy, shape, TerrainScale(), cfg["episode_length"], **walker_layout(cfg),
+                       healthy_reward=cfg.get("healthy_reward"))
     try:
         W.check_policy(policy, env)
     except ValueError as err:

@@ -454,6 +454,22 @@ def test_learn_rejects_bad_input_with_one_line_naming_it(tmp_path, tiny_archive,
         assert len(err) == 1 and needle in err[0], (argv, err)
         assert not out.exists()  # nothing left behind
     assert "observations 53" in err[0]
+    for value in ("-1", "nan"):  # flag values: argparse's exit status 2, before the run folder exists
+        with pytest.raises(SystemExit) as stop:
+            cli("learn", "--preset", "smoke", "--out", str(tmp_path / "h"), "--archive", good, "--healthy-reward", value)
+        assert stop.value.code == 2 and "--healthy-reward must be a finite number >= 0" in capsys.readouterr().err
+        assert not (tmp_path / "h").exists()
+
+
+def test_learn_healthy_reward_reaches_the_fine_tuning_walker(tiny_archive):
+    """``--healthy-reward`` (config ``healthy_reward``) sets the walker's per-step bonus for staying up, which only
+    PPO's reward uses; None keeps the walker's (and the base policy's) 5.0. Builds the env only, compiles nothing."""
+    from experiments import learn
+
+    cfg = {**learn.PRESETS["smoke"], "archive": tiny_archive(4, "four.npz")}
+    assert learn.validate(cfg)[3].config.healthy_reward == 5.0
+    env = learn.validate({**cfg, "healthy_reward": 0.5})[3]
+    assert env.config.healthy_reward == 0.5
 
 
 @pytest.fixture(scope="module")

@@ -45,9 +45,13 @@ __all__ = ["walker_env_config", "walker_env", "check_policy", "walker_harness", 
 
 
 def walker_env_config(policy, shape: tuple[int, int], scale: TerrainScale, episode_length: Optional[int] = None,
-                      backend: str = "jax", tiles: int = 0, worlds: Optional[int] = None):
+                      backend: str = "jax", tiles: int = 0, worlds: Optional[int] = None,
+                      healthy_reward: Optional[float] = None):
     """The :class:`~jaxterrain.walker.WalkerConfig` of the curriculum: the bank's terrain shape and scale, the
     contact solver the policy was trained with, and (optionally) a shorter ``episode_length``.
+
+    ``healthy_reward``: the fine-tuning reward's per-step bonus for staying up (None: the walker's 5.0, brax's
+    humanoid and the base policy's training reward). Evaluations measure distance, which it does not change.
 
     ``backend``: "jax" (MJX) or "warp" (MuJoCo Warp, needs ``tiles >= 1``). ``tiles``: 0 for the classic layout (a
     ``[H, W]`` terrain per trial), else the trials run together (one tile each). ``worlds``: MuJoCo Warp's contact
@@ -60,14 +64,18 @@ def walker_env_config(policy, shape: tuple[int, int], scale: TerrainScale, episo
         config = config._replace(backend=backend, tiles=int(tiles))
     if worlds is not None:
         config = config._replace(warp_worlds=int(worlds))
+    if healthy_reward is not None:
+        config = config._replace(healthy_reward=float(healthy_reward))
     return config
 
 
 def walker_env(policy, shape: tuple[int, int], scale: TerrainScale, episode_length: Optional[int] = None,
-               backend: str = "jax", tiles: int = 0, worlds: Optional[int] = None):
+               backend: str = "jax", tiles: int = 0, worlds: Optional[int] = None,
+               healthy_reward: Optional[float] = None):
     """The cached :class:`~jaxterrain.walker.WalkerEnv` of :func:`walker_env_config` (builds the MuJoCo model;
     compiles nothing)."""
-    return difficulty.make_env(walker_env_config(policy, shape, scale, episode_length, backend, tiles, worlds))
+    return difficulty.make_env(walker_env_config(policy, shape, scale, episode_length, backend, tiles, worlds,
+                                                 healthy_reward))
 
 
 def check_policy(policy, env) -> None:
