@@ -49,6 +49,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="archives of the map treatments (default: the perlin and cppn archives in docs/results)")
     parser.add_argument("--trials", type=int, default=None)
     parser.add_argument("--max-epochs", type=int, default=None)
+    parser.add_argument("--freeze-normaliser", dest="update_normaliser", action="store_const", const=False,
+                        default=None, help="keep the base policy's observation statistics fixed during fine-tuning, "
+                                           "in every treatment (learn's flag)")
     parser.add_argument("--healthy-reward", type=float, default=None,
                         help="fine-tuning reward per step for staying up, >= 0, in every treatment (learn's flag; "
                              "default: the walker's 5.0)")
@@ -200,7 +203,7 @@ def main(args) -> int:
     if args.report and args.resume is None:
         raise common.UsageError("--report needs --resume RUN (the run to report on)")
     over = dict(archives=parse_archives(args.archives), trials=args.trials, max_epochs=args.max_epochs,
-                healthy_reward=args.healthy_reward,
+                healthy_reward=args.healthy_reward, update_normaliser=args.update_normaliser,
                 baseline=args.baseline, backend=args.backend, **common.protocol_overrides(args))
     mesh = common.device_mesh(args.devices)
     folder, cfg = common.setup_run("curriculum", args, PRESETS, "smoke", over)

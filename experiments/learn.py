@@ -27,7 +27,8 @@ heading (``jaxterrain.curriculum.walker``).
 Fine-tuning reward: the base policy's own (brax's humanoid: 1.25 x forward velocity + 5.0 per step for staying up -
 control cost). ``--healthy-reward`` changes the per-step bonus for PPO only (evaluations measure distance): under
 ``HEADINGS`` the roughness baseline's policy got worse on its second terrain in every trial, 0.76 -> 0.02-0.10
-(docs/results/exp2_headings.md), and a bonus that pays for standing still is the suspect.
+(docs/results/exp2_headings.md); that bonus is one suspect, the observation normaliser (which keeps merging the
+fine-tuning data; ``--freeze-normaliser`` keeps the base policy's) the other.
 
 Presets: ``paper`` (30 000 epochs, the paper's budget), ``gpu-short`` (3 000 epochs, a tenth), ``smoke`` (CPU,
 about a minute after compiling: 2 trials of 4 one-epoch chunks of 80 env steps on 4 envs, 2 walks per evaluation,
@@ -63,7 +64,7 @@ _PAPER = dict(archive=CPPN_ARCHIVE, curriculum="map", trials=10, descriptors=["r
               gp_evaluation="final", removal_margin=0.05, removal_ties="nearer", credit="threshold",
               distance_origin="origin", roughness_stride=5, max_observations=None, num_envs=500, unroll_length=10,
               num_unrolls=8, num_minibatches=8, update_epochs=8, learning_rate=3e-4, episode_length=1000,
-              chunks_per_call=25, fast_compile=False, backend="auto", healthy_reward=None)
+              chunks_per_call=25, fast_compile=False, backend="auto", healthy_reward=None, update_normaliser=True)
 PRESETS: dict[str, dict] = {
     "paper": _PAPER,
     "gpu-short": {**_PAPER, "max_epochs": 3000},
@@ -88,6 +89,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--policy", default=None, help="policy folder to start from (default: the base policy)")
     parser.add_argument("--chunks-per-call", type=int, default=None, help="chunks per jitted call / checkpoint")
     parser.add_argument("--num-envs", type=int, default=None, help="PPO envs per trial (all on its terrain)")
+    parser.add_argument("--freeze-normaliser", dest="update_normaliser", action="store_const", const=False,
+                        default=None, help="keep the base policy's observation statistics fixed during fine-tuning "
+                                           "(default: they keep merging the fine-tuning data, as brax's PPO)")
     parser.add_argument("--healthy-reward", type=float, default=None,
                         help="fine-tuning reward per step for staying up, >= 0 (default: the walker's 5.0, the base "
                              "policy's; evaluations measure distance and do not use it)")
@@ -109,6 +113,7 @@ def overrides(args) -> dict:
     return dict(archive=args.archive, curriculum=args.curriculum, trials=args.trials, threshold=args.threshold,
                 max_epochs=args.max_epochs, policy=args.policy, chunks_per_call=args.chunks_per_call,
                 num_envs=args.num_envs, backend=args.backend, healthy_reward=args.healthy_reward,
+                update_normaliser=args.update_normaliser,
                 **common.protocol_overrides(args))
 
 

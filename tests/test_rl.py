@@ -152,6 +152,16 @@ def test_normaliser_matches_numpy():
     np.testing.assert_allclose(np.asarray(rl.normalize(rl.init_stats(3), jnp.ones(3))), np.ones(3))
 
 
+def test_update_normaliser_false_keeps_the_statistics():
+    """``PPOConfig.update_normaliser=False`` (fine-tuning with the base policy's statistics frozen): an update
+    leaves the normaliser as given and still trains; True merges the collected observations."""
+    state = rl.init(jax.random.PRNGKey(0), ENV, CFG, TERRAIN)
+    for flag in (True, False):
+        new, _ = rl.update(state, jax.random.PRNGKey(1), TERRAIN, env=ENV, config=CFG._replace(update_normaliser=flag))
+        assert tree_equal(new.normaliser, state.normaliser) is not flag
+        assert not tree_equal(new.params, state.params)
+
+
 def test_config_validation_names_the_field():
     with pytest.raises(ValueError, match="num_minibatches"):
         rl.validate_config(CFG._replace(num_minibatches=5))

@@ -19,7 +19,10 @@ terrains predicted easier than the one just trained are removed, the run ends wh
   40 000 env steps; 4 updates per 40-epoch chunk, 64 Adam steps per update: about brax's ratio of Adam steps to env
   steps). 500 envs make each env walk 320 steps per chunk, longer than one traversal (about 210 steps at the base
   policy's 2.9 m/s), so the first chunk on a new terrain already sees whole walks; 10 trials x 500 envs fill a GPU.
-  Adam's state starts fresh (none is shipped with the base policy).
+  Adam's state starts fresh (none is shipped with the base policy). ``update_normaliser = True``: the observation
+  normaliser keeps merging the fine-tuning data, as brax's PPO does (the base policy's statistics cover 20 M
+  observations; a ``gpu-short`` trial adds 12 M). False freezes the base policy's statistics
+  (``learn --freeze-normaliser``).
 
 ``max_fitness = 1.0`` - "maximum fitness" is the maximum of the normalised distance (the far edge), so the threshold
   is fitness >= 0.9. (IT&E's own stop rule compares with the GP's maximum mean; that is a different quantity.)
@@ -77,9 +80,10 @@ CREDITS = ("threshold", "finished")
 DISTANCE_ORIGINS = ("origin", "top_right")
 # The PPOConfig fields that fine-tuning sets (how much is collected per update, how it is trained on); every other
 # field (networks, normaliser, clipping, discount, ...) is the base policy's, whose params and normaliser carry over.
-FINE_TUNED = ("num_envs", "unroll_length", "num_unrolls", "num_minibatches", "update_epochs", "learning_rate")
+FINE_TUNED = ("num_envs", "unroll_length", "num_unrolls", "num_minibatches", "update_epochs", "learning_rate",
+              "update_normaliser")
 FINE_TUNING = PPOConfig(num_envs=500, unroll_length=10, num_unrolls=8, num_minibatches=8, update_epochs=8,
-                        learning_rate=3e-4)
+                        learning_rate=3e-4, update_normaliser=True)
 
 
 class CurriculumConfig(NamedTuple):
@@ -111,7 +115,8 @@ class CurriculumConfig(NamedTuple):
       max_observations: GP observation slots ``M``; None = ``min(N terrains, max chunks)``, which can never fill up
         (one observation per finished terrain, each terrain finished at most once).
       ppo: a :class:`jaxterrain.rl.PPOConfig` whose :data:`FINE_TUNED` fields (``num_envs, unroll_length,
-        num_unrolls, num_minibatches, update_epochs, learning_rate``) are the fine-tuning PPO's (the base policy's
+        num_unrolls, num_minibatches, update_epochs, learning_rate, update_normaliser``) are the fine-tuning PPO's
+        (the base policy's
         recipe otherwise, :meth:`ppo_config`); its other fields must keep ``PPOConfig``'s defaults. Default
         :data:`FINE_TUNING`; e.g. ``ppo=FINE_TUNING._replace(num_envs=64)``. ``steps_per_update`` (``num_envs x
         unroll_length x num_unrolls``) must divide a chunk's env steps.

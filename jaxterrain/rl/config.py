@@ -48,6 +48,9 @@ class PPOConfig(NamedTuple):
       max_grad_norm: global-norm gradient clipping, ``None`` = off (brax default).
       reward_scaling: rewards are multiplied by this inside the loss (episode returns are reported unscaled).
       normalize_observations: running (Welford) mean/std normalisation of observations for both networks.
+      update_normaliser: with ``normalize_observations``, merge each update's observations into the running
+        statistics (brax); False keeps the given statistics fixed, e.g. when fine-tuning a trained policy on data
+        that would shift them.
       normalize_advantage: standardise advantages per minibatch.
       policy_hidden: hidden layer sizes of the policy MLP.
       value_hidden: hidden layer sizes of the value MLP.
@@ -73,6 +76,7 @@ class PPOConfig(NamedTuple):
     max_grad_norm: Optional[float] = None
     reward_scaling: float = 0.1
     normalize_observations: bool = True
+    update_normaliser: bool = True
     normalize_advantage: bool = True
     policy_hidden: Tuple[int, ...] = (32, 32, 32, 32)
     value_hidden: Tuple[int, ...] = (256, 256, 256, 256, 256)

@@ -356,7 +356,7 @@ def update(state: TrainState, key: jax.Array, terrains: jax.Array, *, env: EnvLi
         env_state, episode, data, bootstrap_obs = _collect(state, collect_key, terrains, env, config)
 
     normaliser = state.normaliser
-    if config.normalize_observations:
+    if config.normalize_observations and config.update_normaliser:
         normaliser = nets.update_stats(normaliser, data.obs)
 
     # [K, T, N, ...] -> segments [K * N, T, ...]; bootstrap [K, N, O] -> [K * N, O]
