@@ -49,12 +49,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="archives of the map treatments (default: the perlin and cppn archives in docs/results)")
     parser.add_argument("--trials", type=int, default=None)
     parser.add_argument("--max-epochs", type=int, default=None)
-    parser.add_argument("--freeze-normaliser", dest="update_normaliser", action="store_const", const=False,
-                        default=None, help="keep the base policy's observation statistics fixed during fine-tuning, "
-                                           "in every treatment (learn's flag)")
-    parser.add_argument("--healthy-reward", type=float, default=None,
-                        help="fine-tuning reward per step for staying up, >= 0, in every treatment (learn's flag; "
-                             "default: the walker's 5.0)")
+    learn.add_fine_tuning_arguments(parser, ", in every treatment")
     parser.add_argument("--baseline", choices=["roughness", "random"], default=None,
                         help="the baseline run on the cppn archive (Figure 7b; default roughness)")
     common.add_protocol_argument(parser)  # default: each archive's own protocol (learn's)

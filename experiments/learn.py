@@ -89,12 +89,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--policy", default=None, help="policy folder to start from (default: the base policy)")
     parser.add_argument("--chunks-per-call", type=int, default=None, help="chunks per jitted call / checkpoint")
     parser.add_argument("--num-envs", type=int, default=None, help="PPO envs per trial (all on its terrain)")
-    parser.add_argument("--freeze-normaliser", dest="update_normaliser", action="store_const", const=False,
-                        default=None, help="keep the base policy's observation statistics fixed during fine-tuning "
-                                           "(default: they keep merging the fine-tuning data, as brax's PPO)")
-    parser.add_argument("--healthy-reward", type=float, default=None,
-                        help="fine-tuning reward per step for staying up, >= 0 (default: the walker's 5.0, the base "
-                             "policy's; evaluations measure distance and do not use it)")
+    add_fine_tuning_arguments(parser)
     parser.add_argument("--report", action="store_true",
                         help="with --resume: write the outputs of the last checkpoint (history, sequences, "
                              "milestones, curve, summary_partial.json) without training, and stop")
@@ -107,6 +102,17 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--backend", choices=BACKENDS, default=None,
                         help="walker physics: auto (default: warp on a GPU where it imports, else jax), jax (MJX) or "
                              "warp (MuJoCo Warp on one tile per trial)")
+
+
+def add_fine_tuning_arguments(parser: argparse.ArgumentParser, scope: str = "") -> None:
+    """``--freeze-normaliser`` and ``--healthy-reward`` (config ``update_normaliser`` / ``healthy_reward``), shared
+    with ``curriculum`` (``scope`` is added to the help, e.g. ", in every treatment")."""
+    parser.add_argument("--freeze-normaliser", dest="update_normaliser", action="store_const", const=False,
+                        default=None, help=f"keep the base policy's observation statistics fixed during fine-tuning"
+                                           f"{scope} (default: they keep merging the fine-tuning data, as brax's PPO)")
+    parser.add_argument("--healthy-reward", type=float, default=None,
+                        help=f"fine-tuning reward per step for staying up, >= 0{scope} (default: the walker's 5.0, the "
+                             f"base policy's; evaluations measure distance and do not use it)")
 
 
 def overrides(args) -> dict:
