@@ -41,23 +41,18 @@ from pathlib import Path
 
 from experiments import common
 
+_PAPER = dict(generator="perlin", descriptors=["roughness", "tpi"], generations=5000, batch_size=20,
+              initial_population=100, bins=50, size=256, window=30, stride=2, attempts=20, best=5, headings=1,
+              checkpoint_every=250, fitness="difficulty", robot_height=None, out_of_range="clip", ranges=None,
+              store_heightmaps=True, rollout_slots=None, rollout_backend="jax")
 PRESETS: dict[str, dict] = {
-    "paper": dict(generator="perlin", descriptors=["roughness", "tpi"], generations=5000, batch_size=20,
-                  initial_population=100, bins=50, size=256, window=30, stride=2, attempts=20, best=5, headings=1,
-                  checkpoint_every=250, fitness="difficulty", robot_height=None, out_of_range="clip", ranges=None,
-                  store_heightmaps=True, rollout_slots=None, rollout_backend="jax"),
-    "gpu": dict(generator="perlin", descriptors=["roughness", "tpi"], generations=25, batch_size=4000,
-                initial_population=100, bins=50, size=256, window=30, stride=2, attempts=20, best=5, headings=1,
-                checkpoint_every=1, fitness="difficulty", robot_height=None, out_of_range="clip", ranges=None,
-                store_heightmaps=True, rollout_slots=16384, rollout_backend="jax"),
-    "gpu-short": dict(generator="perlin", descriptors=["roughness", "tpi"], generations=5, batch_size=2000,
-                      initial_population=100, bins=50, size=256, window=30, stride=2, attempts=20, best=5, headings=1,
-                      checkpoint_every=1, fitness="difficulty", robot_height=None, out_of_range="clip", ranges=None,
-                      store_heightmaps=False, rollout_slots=8192, rollout_backend="jax"),
-    "smoke": dict(generator="perlin", descriptors=["roughness", "tpi"], generations=4, batch_size=8,
-                  initial_population=16, bins=10, size=32, window=8, stride=2, attempts=2, best=1, headings=1,
-                  checkpoint_every=2, fitness="slope", robot_height=None, out_of_range="clip",
-                  ranges=[[0.0, 0.5], [-0.02, 0.02]], store_heightmaps=True, rollout_slots=None, rollout_backend="jax"),
+    "paper": _PAPER,
+    "gpu": {**_PAPER, "generations": 25, "batch_size": 4000, "checkpoint_every": 1, "rollout_slots": 16384},
+    "gpu-short": {**_PAPER, "generations": 5, "batch_size": 2000, "checkpoint_every": 1, "store_heightmaps": False,
+                  "rollout_slots": 8192},
+    "smoke": {**_PAPER, "generations": 4, "batch_size": 8, "initial_population": 16, "bins": 10, "size": 32,
+              "window": 8, "attempts": 2, "best": 1, "checkpoint_every": 2, "fitness": "slope",
+              "ranges": [[0.0, 0.5], [-0.02, 0.02]]},
 }
 
 

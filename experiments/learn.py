@@ -24,11 +24,10 @@ or reseated under ``difficulty.HEADINGS``), so the GP's prior and its observatio
 or ``--attempts`` / ``--best`` / ``--headings`` override it. With several headings the PPO envs also train in every
 heading (``jaxterrain.curriculum.walker``).
 
-Fine-tuning reward: the base policy's own (brax's humanoid: 1.25 x forward velocity + 5.0 per step for staying up -
-control cost). ``--healthy-reward`` changes the per-step bonus for PPO only (evaluations measure distance): under
-``HEADINGS`` the roughness baseline's policy got worse on its second terrain in every trial, 0.76 -> 0.02-0.10
-(docs/results/exp2_headings.md); that bonus is one suspect, the observation normaliser (which keeps merging the
-fine-tuning data; ``--freeze-normaliser`` keeps the base policy's) the other.
+Fine-tuning: the reward is the base policy's own (brax's humanoid: 1.25 x forward velocity + 5.0 per step for
+staying up - control cost); ``--healthy-reward`` changes the per-step bonus for PPO only (evaluations measure
+distance). The observation normaliser keeps merging the fine-tuning data, as brax's PPO does;
+``--freeze-normaliser`` keeps the base policy's statistics. Why both exist: docs/results/exp2_headings.md.
 
 Presets: ``paper`` (30 000 epochs, the paper's budget), ``gpu-short`` (3 000 epochs, a tenth), ``smoke`` (CPU,
 about a minute after compiling: 2 trials of 4 one-epoch chunks of 80 env steps on 4 envs, 2 walks per evaluation,

@@ -57,9 +57,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--env-steps", type=float, default=None,
                         help="total env steps to train (default: smoke 4 updates, gpu 410 updates = 50.4e6)")
     parser.add_argument("--time-budget", type=float, default=None,
-                        help="seconds of wall time for this process; training stops after the chunk in which "
-                             "the budget less the evaluation's minute passes, leaving a checkpoint (default: smoke "
-                             "none, gpu 480)")
+                        help="seconds of wall time for this process; training stops, leaving a checkpoint, once "
+                             "the budget less the evaluation's minute has passed or before a chunk predicted to end "
+                             "past it (jaxterrain.driver.run_chunks; default: smoke none, gpu 480)")
     parser.add_argument("--updates-per-chunk", type=int, default=None,
                         help="PPO updates per jitted chunk = per checkpoint (default: smoke 2, gpu 10)")
     parser.add_argument("--num-envs", type=int, default=None, help="override PPOConfig.num_envs")
@@ -251,7 +251,7 @@ def _print_chunk(steps_per_update: int):
 def train_with_checkpoints(env, terrain, state, start: int, history, args, settings: RunSettings, run: RunFolder,
                            origin: TrainOrigin, t_start: float, preset: str, mesh=None) -> TrainOutcome:
     """Train updates ``[start, num_updates)`` through ``jaxterrain.driver.run_chunks``: a checkpoint, metrics.csv
-    and TensorBoard events after every chunk; stops after the chunk in which the time limit passes. ``mesh``:
+    and TensorBoard events after every chunk; stops at the time limit as ``run_chunks`` does. ``mesh``:
     data parallel over its devices (``rl.update``)."""
     import time
 
