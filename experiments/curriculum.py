@@ -199,6 +199,7 @@ def main(args) -> int:
         raise common.UsageError("--report needs --resume RUN (the run to report on)")
     over = dict(archives=parse_archives(args.archives), trials=args.trials, max_epochs=args.max_epochs,
                 healthy_reward=args.healthy_reward, update_normaliser=args.update_normaliser,
+                max_evals=args.max_evals,
                 baseline=args.baseline, backend=args.backend, **common.protocol_overrides(args))
     mesh = common.device_mesh(args.devices)
     folder, cfg = common.setup_run("curriculum", args, PRESETS, "smoke", over)

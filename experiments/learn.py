@@ -104,21 +104,26 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def add_fine_tuning_arguments(parser: argparse.ArgumentParser, scope: str = "") -> None:
-    """``--freeze-normaliser`` and ``--healthy-reward`` (config ``update_normaliser`` / ``healthy_reward``), shared
-    with ``curriculum`` (``scope`` is added to the help, e.g. ", in every treatment")."""
+    """``--freeze-normaliser``, ``--healthy-reward`` and ``--max-evals`` (config ``update_normaliser`` /
+    ``healthy_reward`` / ``max_evals``), shared with ``curriculum`` (``scope`` is added to the help, e.g. ", in every
+    treatment")."""
     parser.add_argument("--freeze-normaliser", dest="update_normaliser", action="store_const", const=False,
                         default=None, help=f"keep the base policy's observation statistics fixed during fine-tuning"
                                            f"{scope} (default: they keep merging the fine-tuning data, as brax's PPO)")
     parser.add_argument("--healthy-reward", type=float, default=None,
                         help=f"fine-tuning reward per step for staying up, >= 0{scope} (default: the walker's 5.0, the "
                              f"base policy's; evaluations measure distance and do not use it)")
+    parser.add_argument("--max-evals", type=int, default=None,
+                        help=f"evaluations (chunks) spent on one terrain before it is left anyway, >= 1{scope} "
+                             f"(default: the paper's 100 in every preset; gpu-short keeps it, so one terrain that never "
+                             f"reaches the threshold can take all 75 of its chunks)")
 
 
 def overrides(args) -> dict:
     return dict(archive=args.archive, curriculum=args.curriculum, trials=args.trials, threshold=args.threshold,
                 max_epochs=args.max_epochs, policy=args.policy, chunks_per_call=args.chunks_per_call,
                 num_envs=args.num_envs, backend=args.backend, healthy_reward=args.healthy_reward,
-                update_normaliser=args.update_normaliser,
+                update_normaliser=args.update_normaliser, max_evals=args.max_evals,
                 **common.protocol_overrides(args))
 
 

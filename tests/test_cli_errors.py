@@ -80,6 +80,8 @@ CASES = [
     (["train-gan", "--batch-size", "0"], "--batch-size must be an integer >= 1"),
     (["train-gan", "--data", "MISSING"], "--data 'MISSING': no such file or folder"),
     (["train-base-policy", "--num-envs", "0"], "--num-envs must be an integer >= 1"),
+    (["learn", "--max-evals", "0"], "--max-evals must be an integer >= 1"),
+    (["curriculum", "--max-evals", "-2"], "--max-evals must be an integer >= 1"),
     (["train-base-policy", "--env-steps", "-5"], "--env-steps must be a finite number > 0"),
     (["train-base-policy", "--eval-attempts", "2", "--eval-best", "5"], "--eval-best must be <= --eval-attempts"),
 ]

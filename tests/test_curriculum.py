@@ -464,15 +464,16 @@ def test_learn_rejects_bad_input_with_one_line_naming_it(tmp_path, tiny_archive,
 def test_learn_fine_tuning_knobs_reach_the_walker_and_ppo(tiny_archive):
     """``--healthy-reward`` (config ``healthy_reward``) sets the walker's per-step bonus for staying up, which only
     PPO's reward uses; None keeps the walker's (and the base policy's) 5.0. ``--freeze-normaliser`` (config
-    ``update_normaliser: false``) reaches the fine-tuning PPOConfig. Builds the env only, compiles nothing."""
+    ``update_normaliser: false``) reaches the fine-tuning PPOConfig, ``--max-evals`` the CurriculumConfig. Builds the
+    env only, compiles nothing."""
     from experiments import learn
     from jaxterrain import rl
 
     cfg = {**learn.PRESETS["smoke"], "archive": tiny_archive(4, "four.npz")}
     config, _, _, env = learn.validate(cfg)
     assert env.config.healthy_reward == 5.0 and config.ppo.update_normaliser
-    config, _, _, env = learn.validate({**cfg, "healthy_reward": 0.5, "update_normaliser": False})
-    assert env.config.healthy_reward == 0.5 and not config.ppo.update_normaliser
+    config, _, _, env = learn.validate({**cfg, "healthy_reward": 0.5, "update_normaliser": False, "max_evals": 7})
+    assert env.config.healthy_reward == 0.5 and not config.ppo.update_normaliser and config.max_evals == 7
     assert not config.ppo_config(rl.PPOConfig()).update_normaliser
 
 
