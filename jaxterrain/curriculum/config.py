@@ -97,7 +97,9 @@ class CurriculumConfig(NamedTuple):
       max_epochs: the run stops after this many epochs (paper: 30 000).
       threshold: a terrain is learnt at fitness >= threshold x max_fitness, in (0, 1] (paper: 0.9).
       max_fitness: the maximum fitness (the normalised distance's 1.0), > 0.
-      max_evals: evaluations (chunks) spent on one terrain before it is left anyway (paper: 100).
+      max_evals: evaluations (chunks) spent on one terrain before it is left anyway (paper: 100, i.e. 4 000 of its
+        30 000 epochs). Scale it with a shorter ``max_epochs``: at 3 000 epochs, 100 evaluations let one terrain
+        that never reaches the threshold take the whole run.
       attempts, best, headings: the difficulty protocol of each evaluation,
         ``difficulty.Protocol(attempts, best, headings)``: ``attempts`` walks in total, ``attempts // headings``
         per heading (1: the paper's +x; 2 or 4: the map also turned, ``difficulty.HEADINGS`` is 80, 5, 4), the mean
