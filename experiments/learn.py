@@ -105,8 +105,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def add_fine_tuning_arguments(parser: argparse.ArgumentParser, scope: str = "") -> None:
     """``--freeze-normaliser``, ``--healthy-reward`` and ``--max-evals`` (config ``update_normaliser`` /
-    ``healthy_reward`` / ``max_evals``), shared with ``curriculum`` (``scope`` is added to the help, e.g. ", in every
-    treatment")."""
+    ``healthy_reward`` / ``max_evals``, read back by :func:`fine_tuning_overrides`), shared with ``curriculum``
+    (``scope`` is added to the help, e.g. ", in every treatment")."""
     parser.add_argument("--freeze-normaliser", dest="update_normaliser", action="store_const", const=False,
                         default=None, help=f"keep the base policy's observation statistics fixed during fine-tuning"
                                            f"{scope} (default: they keep merging the fine-tuning data, as brax's PPO)")
@@ -119,11 +119,16 @@ def add_fine_tuning_arguments(parser: argparse.ArgumentParser, scope: str = "") 
                              f"reaches the threshold can take all 75 of its chunks)")
 
 
+def fine_tuning_overrides(args) -> dict:
+    """The config values of :func:`add_fine_tuning_arguments`' flags (None = not given)."""
+    return dict(healthy_reward=args.healthy_reward, update_normaliser=args.update_normaliser,
+                max_evals=args.max_evals)
+
+
 def overrides(args) -> dict:
     return dict(archive=args.archive, curriculum=args.curriculum, trials=args.trials, threshold=args.threshold,
                 max_epochs=args.max_epochs, policy=args.policy, chunks_per_call=args.chunks_per_call,
-                num_envs=args.num_envs, backend=args.backend, healthy_reward=args.healthy_reward,
-                update_normaliser=args.update_normaliser, max_evals=args.max_evals,
+                num_envs=args.num_envs, backend=args.backend, **fine_tuning_overrides(args),
                 **common.protocol_overrides(args))
 
 
