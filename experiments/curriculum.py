@@ -206,8 +206,9 @@ def main(args) -> int:
     limit = None if args.time_limit is None else 60.0 * args.time_limit
     try:
         plan = treatments(cfg, folder)
-        for _, path, curriculum in plan:  # every treatment's input, before anything is compiled
-            learn.validate(_treatment_cfg(cfg, path, curriculum))
+        for name, path, curriculum in plan:  # every treatment's input, before anything is compiled
+            tcfg = _treatment_cfg(cfg, path, curriculum)
+            learn.check_resumable(folder / f"{name}-{curriculum}", tcfg, learn.archive_digest(learn.validate(tcfg)[1]))
     except learn.BadInput as err:
         print(f"curriculum: {err}", file=sys.stderr)
         return 2

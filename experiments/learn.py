@@ -174,6 +174,40 @@ def load_archive(path, descriptors):
     return arch
 
 
+def archive_digest(arch) -> str:
+    """sha256 (hex) of what a treatment reads from an archive: its generator names, elite sources, fitness (the GP's
+    prior), descriptors, genomes and stored heightmaps. Stored in every checkpoint (``meta["archive_sha256"]``) so
+    that a resumed treatment can tell that the archive under its path has changed (:func:`check_resumable`)."""
+    import hashlib
+
+    import jax
+    import numpy as np
+
+    h = hashlib.sha256(json.dumps(list(arch.generator_names)).encode())
+    arrays = [arch.source, arch.fitness, arch.descriptors, *jax.tree.leaves(arch.genomes)]
+    for a in arrays + ([] if arch.heightmaps is None else [arch.heightmaps]):
+        a = np.ascontiguousarray(a)
+        h.update(f"{a.dtype.str}{a.shape}".encode())
+        h.update(a.tobytes())
+    return h.hexdigest()
+
+
+def check_resumable(folder: Path, cfg: dict, digest: str) -> None:
+    """:class:`BadInput` when ``folder``'s checkpoint was written for another archive than the one now at
+    ``cfg["archive"]`` (its terrain indices, GP observations and removed cells would refer to other terrains).
+    Reads only the checkpoint's header; checkpoints written before the digest was recorded are not checked."""
+    from jaxterrain import driver
+
+    try:
+        meta = driver.read_meta(folder)
+    except ValueError as err:
+        raise BadInput(str(err)) from None
+    stored = (meta or {}).get("archive_sha256")
+    if stored is not None and stored != digest:
+        raise BadInput(f"--archive {cfg['archive']}: it is not the archive {folder} was checkpointed with (sha256 "
+                       f"{stored[:12]}... then, {digest[:12]}... now); put that file back or start a new run")
+
+
 BACKENDS = ("auto", "jax", "warp")
 
 
@@ -365,6 +399,8 @@ def run_treatment(cfg: dict, folder: Path, time_limit_s: float | None = None, de
     if (folder / "summary.json").exists():
         return json.loads((folder / "summary.json").read_text())
     config, arch, policy, env = validate(cfg)
+    digest = archive_digest(arch)
+    check_resumable(folder, cfg, digest)
     t0 = time.perf_counter()
     bank, block, states = setup(cfg, config, arch, policy, env, mesh)
     restored = driver.restore(folder, like=states)
@@ -381,7 +417,7 @@ def run_treatment(cfg: dict, folder: Path, time_limit_s: float | None = None, de
     states, done, _ = driver.run_chunks(
         chunk_fn, states, total=config.max_chunks, every=int(cfg["chunks_per_call"]), start=done, history=history,
         run_dir=folder, key_metric="hardest", time_limit_s=time_limit_s, desc=desc or cfg["curriculum"],
-        unit="chunk", meta={"config": cfg})
+        unit="chunk", meta={"config": cfg, "archive_sha256": digest})
     if done < config.max_chunks and not bool(np.all(np.asarray(states.done))):
         return None
     return write_outputs(folder, cfg, config, bank, states, seconds=time.perf_counter() - t0)
@@ -407,6 +443,7 @@ def report_treatment(cfg: dict, folder: Path) -> dict | None:
     if not (folder / driver.CHECKPOINT_NAME).exists():
         return None
     config, arch, policy, env = validate(cfg)
+    check_resumable(folder, cfg, archive_digest(arch))
     bank, _, _, start, keys, init = inputs(cfg, config, arch, policy, env)
     shapes = jax.eval_shape(init, keys, bank, start)
 
@@ -557,8 +594,8 @@ def main(args) -> int:
         raise common.UsageError("--report needs --resume RUN (the run to report on)")
     mesh = common.device_mesh(args.devices)
     folder, cfg = common.setup_run("learn", args, PRESETS, "smoke", overrides(args))
-    try:
-        validate(cfg)  # cheap: files and values, before the run folder fills up or anything compiles
+    try:  # cheap: files and values, before the run folder fills up or anything compiles
+        check_resumable(folder, cfg, archive_digest(validate(cfg)[1]))
     except BadInput as err:
         print(f"learn: {err}", file=sys.stderr)
         if args.resume is None and sorted(p.name for p in folder.iterdir()) == [common.CONFIG_NAME]:

@@ -6,6 +6,7 @@
     state, done, history = driver.run_chunks(chunk, state, total=5000, every=100, run_dir="runs/x",
                                              key_metric="coverage", time_limit_s=600)
     restored = driver.restore("runs/x", like=state) # (state, done, history, meta) or None
+    meta = driver.read_meta("runs/x")               # the meta dict alone (the header member), or None
 
 A "step" is whatever the caller counts (a MAP-Elites generation, a PPO update, a curriculum chunk). After every chunk
 of ``every`` steps the driver
@@ -52,7 +53,7 @@ import numpy as np
 
 from jaxterrain.io import atomic_save_npz, atomic_write_text
 
-__all__ = ["CHECKPOINT_NAME", "METRICS_NAME", "MetricLog", "load_checkpoint", "restore", "run_chunks",
+__all__ = ["CHECKPOINT_NAME", "METRICS_NAME", "MetricLog", "load_checkpoint", "read_meta", "restore", "run_chunks",
            "save_checkpoint"]
 
 FORMAT = "jaxterrain-checkpoint"
@@ -93,14 +94,18 @@ def save_checkpoint(path: str | os.PathLike, state: Any, *, done: int, history: 
     return atomic_save_npz(path, **arrays)
 
 
-def _read(path: Path) -> tuple[dict, dict]:
+_UNREADABLE = (zipfile.BadZipFile, EOFError, OSError, KeyError, ValueError, UnicodeDecodeError)
+
+
+def _read(path: Path, header_only: bool = False) -> tuple[dict, dict]:
+    """``(header, members)`` of a checkpoint file (``members`` empty with ``header_only``: npz reads lazily)."""
     if not path.is_file():
         raise FileNotFoundError(f"checkpoint {str(path)!r} does not exist")
     try:
         with np.load(path, allow_pickle=False) as data:
-            members = {name: data[name] for name in data.files}
-        header = json.loads(bytes(members.pop("header")).decode("utf-8"))
-    except (zipfile.BadZipFile, EOFError, OSError, KeyError, ValueError, UnicodeDecodeError) as err:
+            members = {} if header_only else {name: data[name] for name in data.files if name != "header"}
+            header = json.loads(bytes(data["header"]).decode("utf-8"))
+    except _UNREADABLE as err:
         raise ValueError(f"checkpoint {str(path)!r} is not readable (truncated or corrupt?): {err}") from err
     if not isinstance(header, dict) or header.get("format") != FORMAT or header.get("version") != VERSION:
         raise ValueError(f"{str(path)!r} is not a {FORMAT} file of version {VERSION}")
@@ -134,6 +139,15 @@ def load_checkpoint(path: str | os.PathLike, like: Any) -> tuple[Any, int, dict,
     state = jax.tree_util.tree_unflatten(jax.tree_util.tree_structure(like), leaves)
     history = {name: [float(v) for v in members[f"history:{name}"]] for name in header["history"]}
     return state, int(header["done"]), history, dict(header.get("meta") or {})
+
+
+def read_meta(run_dir: str | os.PathLike) -> Optional[dict]:
+    """The ``meta`` dict of ``run_dir/checkpoint.npz`` without reading its state (only the header member is read),
+    or None when the folder holds no checkpoint; ``ValueError`` naming the file when it is not readable."""
+    path = Path(run_dir) / CHECKPOINT_NAME
+    if not path.exists():
+        return None
+    return dict(_read(path, header_only=True)[0].get("meta") or {})
 
 
 def restore(run_dir: str | os.PathLike, like: Any) -> Optional[tuple[Any, int, dict, dict]]:

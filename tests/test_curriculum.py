@@ -563,15 +563,32 @@ def test_curriculum_shards_share_one_run_folder_and_resume_writes_the_tables(tmp
     assert [t[0] for t in one] == [t[0] for t in two] == ["cppn", "perlin", "combined", "cppn"]
 
 
-def test_learn_killed_by_its_time_limit_resumes_to_the_uninterrupted_curves(tmp_path, learn_smoke):
+def test_learn_killed_by_its_time_limit_resumes_to_the_uninterrupted_curves(tmp_path, learn_smoke, tiny_archive,
+                                                                            capsys):
     """Issue 13: a treatment stopped after its first block (``--time-limit``, as a killed run restarts from its last
     checkpoint) and resumed ends with the same history, sequences and milestones as an uninterrupted one (same
     device, same seed: the module's smoke run). The compiled block is shared with the other smoke runs of this
-    module."""
-    archive, whole = learn_smoke
+    module. A resume whose archive file was replaced meanwhile is refused in one line, before anything compiles."""
+    import shutil
+
+    from experiments import learn
+    from jaxterrain import archive as A
+    from jaxterrain import driver
+
+    shared, whole = learn_smoke
+    archive = str(shutil.copy(shared, tmp_path / "four.npz"))  # its label names the file; replaced, put back below
     parts = tmp_path / "parts"
     assert cli("learn", "--preset", "smoke", "--archive", archive, "--out", str(parts), "--time-limit", "1e-6") == 3
     assert not (parts / "summary.json").exists() and (parts / "checkpoint.npz").exists()
+    digest = learn.archive_digest(A.load(archive))
+    assert driver.read_meta(parts)["archive_sha256"] == digest != learn.archive_digest(A.load(tiny_archive(3, "3.npz")))
+    shutil.copy(tiny_archive(3, "three.npz"), archive)  # another archive under the run's path
+    for extra in ((), ("--report",)):
+        capsys.readouterr()
+        assert cli("learn", "--resume", str(parts), *extra) == 2
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and f"--archive {archive}: it is not the archive" in err[0], err
+    shutil.copy(shared, archive)
     assert cli("learn", "--resume", str(parts), "--report") == 0  # the checkpoint's outputs, nothing trained
     partial = json.loads((parts / "summary_partial.json").read_text())
     assert partial["partial"] and partial["chunks_done"] == 2 and not (parts / "summary.json").exists()
