@@ -7,6 +7,8 @@ Every command works the same way:
   nothing);
 * it writes them to ``<run folder>/config.json`` before doing any work, so ``--config <run folder>/config.json``
   re-runs it exactly;
+* every start and every ``--resume`` appends one line to ``<run folder>/provenance.jsonl`` (:func:`record_provenance`:
+  when, the code's commit, the devices, jax's version), so a run continued on other machines names each of them;
 * ``--resume [FOLDER]`` continues the run in FOLDER with the config saved there; finished pieces (archives,
   checkpoints) are reused. The folder is FOLDER, else ``--out`` (``--out RUN --resume`` continues RUN), else the
   newest ``runs/<command>-*``; ``--resume A --out B`` (two runs), a folder without ``config.json`` (no run to
@@ -25,6 +27,7 @@ from pathlib import Path
 from typing import Any
 
 CONFIG_NAME = "config.json"
+PROVENANCE_NAME = "provenance.jsonl"
 
 
 class UsageError(ValueError):
@@ -272,8 +275,33 @@ def setup_run(command: str, args: argparse.Namespace, presets: dict[str, dict], 
     folder.mkdir(parents=True, exist_ok=True)
     config["command"] = command
     write_config(folder, config)
+    record_provenance(folder, command, vars(args))
     print(f"run folder {folder}", flush=True)
     return folder, config
+
+
+def record_provenance(folder: Path, command: str, options: dict | None = None, resumed: bool = False) -> dict:
+    """Append one JSON line to ``folder/provenance.jsonl`` and return it: the UTC time, the command, the options
+    given (those not None), whether it resumed the run, the code's commit (``jaxterrain.provenance.git_commit``: ``git`` of the
+    checkout, or ``$JAXTERRAIN_COMMIT`` on a machine that received the tree without ``.git``), the JAX devices, the
+    process count and jax's version. One ``write`` of a line opened for appending, so processes that share a run
+    folder (``--shard``) each add theirs; in a multi-process JAX run only process 0 writes."""
+    import os
+
+    import jax
+
+    from jaxterrain import provenance
+
+    line = {"time": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"), "command": command,
+            "options": {k: v for k, v in (options or {}).items() if v is not None}, "resumed": bool(resumed), "commit": provenance.git_commit(),
+            "devices": provenance.device(), "processes": jax.process_count(), "jax": jax.__version__}
+    if jax.process_index() == 0:
+        fd = os.open(Path(folder) / PROVENANCE_NAME, os.O_WRONLY | os.O_CREAT | os.O_APPEND, 0o644)
+        try:
+            os.write(fd, (json.dumps(line, default=str) + "\n").encode())
+        finally:
+            os.close(fd)
+    return line
 
 
 class TimeUp(Exception):
@@ -398,6 +426,7 @@ def _resume_run(command: str, args: argparse.Namespace, overrides: dict[str, Any
         config.update(changed)
         check_values(config, lambda k: flag(k) if k in changed else f"{folder / CONFIG_NAME}: key {k!r}")
         write_config(folder, config)
+    record_provenance(folder, command, vars(args), resumed=True)
     print(f"resuming {folder}", flush=True)
     return folder, config
 

@@ -598,7 +598,7 @@ def main(args) -> int:
         check_resumable(folder, cfg, archive_digest(validate(cfg)[1]))
     except BadInput as err:
         print(f"learn: {err}", file=sys.stderr)
-        if args.resume is None and sorted(p.name for p in folder.iterdir()) == [common.CONFIG_NAME]:
+        if args.resume is None and {p.name for p in folder.iterdir()} <= {common.CONFIG_NAME, common.PROVENANCE_NAME}:
             shutil.rmtree(folder)
         return 2
     if args.report:

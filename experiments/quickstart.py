@@ -222,7 +222,7 @@ def main(args: argparse.Namespace) -> int:
     render.setup_gl()  # MuJoCo's OpenGL backend (osmesa / egl) must be chosen before mujoco is imported
     import jax
 
-    from experiments.common import run_folder, write_config
+    from experiments.common import record_provenance, run_folder, write_config
     from jaxterrain import generators
     from jaxterrain.io import atomic_write_text
 
@@ -239,6 +239,7 @@ def main(args: argparse.Namespace) -> int:
     run = run_folder("quickstart", args.out)
     run.mkdir(parents=True, exist_ok=True)
     write_config(run, vars(args))
+    record_provenance(run, "quickstart", vars(args))
 
     key = jax.random.key(args.seed)
     samples, skipped = {}, {}

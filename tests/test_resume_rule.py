@@ -72,6 +72,29 @@ def test_out_with_resume_means_the_same_in_every_command(tmp_path, monkeypatch, 
     assert "--out 'other' --resume is a run of" in _usage_error([command, "--out", "other", "--resume"], capsys)
     assert sorted(p.name for p in tmp_path.iterdir()) == ["empty", "mine", "other", "runs"]  # nothing made
     assert common.load_config("mine") == saved  # nothing rewritten
+    lines = [json.loads(line) for line in (Path("mine") / common.PROVENANCE_NAME).read_text().splitlines()]
+    assert [(line["options"].get("resume"), line["options"].get("out")) for line in lines][1:] == [
+        ("mine", None), ("./mine/", "mine")] and lines[0]["options"]["out"] == "mine"  # one per resume, its options
+    assert all(line["resumed"] and line["command"] == command and "cpu" in line["devices"] for line in lines)
+
+
+def test_every_start_and_resume_appends_a_provenance_line(tmp_path, monkeypatch):
+    """``provenance.jsonl``: a fresh start, then a resume, each one line naming the commit, devices and jax; on a
+    tree without git, ``$JAXTERRAIN_COMMIT`` names the commit."""
+    import argparse
+
+    import jax
+
+    monkeypatch.chdir(tmp_path)
+    presets = {"default": {"seed": 0}}
+    args = dict(resume=None, config=None, preset=None, seed=None, out="run")
+    folder, _ = common.setup_run("gradient", argparse.Namespace(**args), presets, "default", {})
+    monkeypatch.setenv("JAXTERRAIN_COMMIT", "abc1234")
+    common.setup_run("gradient", argparse.Namespace(**{**args, "resume": "run", "out": None}), presets, "default", {})
+    first, second = [json.loads(line) for line in (folder / common.PROVENANCE_NAME).read_text().splitlines()]
+    assert not first["resumed"] and second["resumed"] and second["commit"] == "abc1234" != first["commit"]
+    assert first["commit"] and first["jax"] == jax.__version__ and first["processes"] == 1
+    assert first["command"] == "gradient" and first["time"].endswith("+00:00")
 
 
 def test_resume_without_any_run_is_one_line(tmp_path, monkeypatch, capsys):
