@@ -1,20 +1,20 @@
 """``python -m experiments curriculum``: Experiment 2 whole - Figure 7a / 7b and Table 2 with the paper's numbers.
 
-    python -m experiments curriculum --preset gpu-short --out runs/exp2 --time-limit 9 \\
-        --archives perlin=docs/results/exp1b_gpu_sound_perlin_archive.npz \\
-                   cppn=docs/results/exp1b_gpu_sound_cppn_archive.npz
+    python -m experiments curriculum --preset gpu-short --out runs/exp2 --time-limit 9     # all five generators
     python -m experiments curriculum --resume runs/exp2 --time-limit 9            # until it says "done"
+    python -m experiments curriculum --preset gpu-short --archives cppn=A.npz perlin=B.npz ...   # other archives
 
 Treatments (each one ``learn`` run, ``--trials`` trials together, in ``<run>/<name>-<curriculum>/``): the map
 curriculum on every archive given (``NAME=PATH``; names as in the paper's Table 2: cppn, gan, perlin, worley,
-diamond_square), on their combination (``archive.combine``: the fitter elite per cell; ``<run>/combined_archive.npz``;
-skipped with one archive), and the roughness-sorted standard CL on the ``cppn`` archive (Figure 7b). Finished
-treatments are kept, so ``--resume`` continues where the time limit stopped. ``--shard I/N`` runs only the
-treatments ``t % N == I`` of that order, so that independent processes (e.g. one per GPU:
-``CUDA_VISIBLE_DEVICES=I ... --out RUN --shard I/N``) share one run folder; ``--resume RUN`` without ``--shard``
-then reuses the finished treatments and writes the tables. ``--resume RUN --report`` writes the tables and figures
-from the treatments as they stand, the unfinished ones from their last checkpoint (``learn --report``; marked
-``[partial: E epochs]``), without training: e.g. before a GPU machine is given back.
+diamond_square; by default :data:`DEFAULT_ARCHIVES`, the five shipped paper-budget roughness x TPI archives reseated
+under ``difficulty.HEADINGS``, docs/results/exp2_paper.md), on their combination (``archive.combine``: the fitter
+elite per cell; ``<run>/combined_archive.npz``; skipped with one archive), and the roughness-sorted standard CL on
+the ``cppn`` archive (Figure 7b). Finished treatments are kept, so ``--resume`` continues where the time limit
+stopped. ``--shard I/N`` runs only the treatments ``t % N == I`` of that order, so that independent processes (e.g.
+one per GPU: ``CUDA_VISIBLE_DEVICES=I ... --out RUN --shard I/N``) share one run folder; ``--resume RUN`` without
+``--shard`` then reuses the finished treatments and writes the tables. ``--resume RUN --report`` writes the tables
+and figures from the treatments as they stand, the unfinished ones from their last checkpoint (``learn --report``;
+marked ``[partial: E epochs]``), without training: e.g. before a GPU machine is given back.
 
 Writes ``figure7a.png`` (hardest terrain traversed vs epoch, every map treatment, mean +- 1 standard error),
 ``figure7b.png`` (CPPN: map vs standard CL), ``table2.csv`` / ``table2.md`` (epochs to first traverse a terrain at
@@ -36,7 +36,10 @@ from pathlib import Path
 from experiments import common
 from experiments import learn
 
-DEFAULT_ARCHIVES = {"perlin": "docs/results/exp1b_gpu_sound_perlin_archive.npz", "cppn": learn.CPPN_ARCHIVE}
+DEFAULT_ARCHIVES = {g: f"docs/results/exp2_{g}_headings_archive.npz"
+                    for g in ("cppn", "perlin", "worley", "diamond_square", "gan")}
+"""The archives of Experiment 2 when ``--archives`` is not given: each generator's paper-budget roughness x TPI
+archive (evolved after the fix of tied insertion), reseated under ``difficulty.HEADINGS``."""
 PRESETS = {name: {**{k: v for k, v in p.items() if k not in ("archive", "curriculum")},
                   "archives": dict(DEFAULT_ARCHIVES), "baseline": "roughness"}
            for name, p in learn.PRESETS.items()}
@@ -46,7 +49,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     common.add_run_arguments(parser, PRESETS, "smoke")
     common.add_devices_argument(parser)  # each treatment's trials split over the devices
     parser.add_argument("--archives", nargs="+", default=None, metavar="NAME=PATH",
-                        help="archives of the map treatments (default: the perlin and cppn archives in docs/results)")
+                        help="archives of the map treatments (default: the five generators' archives shipped in "
+                             "docs/results, exp2_G_headings_archive.npz)")
     parser.add_argument("--trials", type=int, default=None)
     parser.add_argument("--max-epochs", type=int, default=None)
     learn.add_fine_tuning_arguments(parser, ", in every treatment")

@@ -1,6 +1,6 @@
 """``python -m experiments learn``: one Experiment 2 treatment, PPO from the base policy on an archive curriculum.
 
-    python -m experiments learn --archive docs/results/exp1b_gpu_sound_cppn_archive.npz --curriculum map --trials 10 \\
+    python -m experiments learn --archive docs/results/exp2_cppn_headings_archive.npz --curriculum map --trials 10 \\
         --preset gpu-short --out runs/learn-cppn --time-limit 9
     python -m experiments learn --resume runs/learn-cppn --time-limit 9          # until it says "done"
 
@@ -30,8 +30,9 @@ distance). The observation normaliser keeps merging the fine-tuning data, as bra
 ``--freeze-normaliser`` keeps the base policy's statistics. Why both exist: docs/results/exp2_headings.md.
 
 Presets: ``paper`` (30 000 epochs, the paper's budget), ``gpu-short`` (3 000 epochs, a tenth), ``smoke`` (CPU,
-about a minute after compiling: 2 trials of 4 one-epoch chunks of 80 env steps on 4 envs, 2 walks per evaluation,
-100-step episodes; the archive's terrains are used as they are).
+about a minute after compiling: 2 trials of 4 one-epoch chunks of 80 env steps on 4 envs, 2 walks per evaluation
+along +x whatever the archive's protocol, 100-step episodes; the archive's terrains are used as they are). The
+default archive is the CPPN's shipped paper-budget archive, reseated under ``difficulty.HEADINGS`` (``CPPN_ARCHIVE``).
 
 ``--resume RUN --report`` writes the outputs below from the last checkpoint without training (``summary_partial.json``
 instead of ``summary.json``, which marks a finished run): the per-trial history survives a machine that is given
@@ -56,7 +57,7 @@ from pathlib import Path
 
 from experiments import common
 
-CPPN_ARCHIVE = "docs/results/exp1b_gpu_sound_cppn_archive.npz"
+CPPN_ARCHIVE = "docs/results/exp2_cppn_headings_archive.npz"  # paper budget, after the insertion fix, HEADINGS
 _PAPER = dict(archive=CPPN_ARCHIVE, curriculum="map", trials=10, descriptors=["roughness", "tpi"], policy=None,
               epochs_per_chunk=40, steps_per_epoch=4000, max_epochs=30000, threshold=0.9, max_fitness=1.0,
               max_evals=100, attempts=None, best=None, headings=None, kappa=0.05, rho=0.4, sigma_f=1.0, noise=0.001,
@@ -68,8 +69,8 @@ PRESETS: dict[str, dict] = {
     "paper": _PAPER,
     "gpu-short": {**_PAPER, "max_epochs": 3000},
     "smoke": {**_PAPER, "trials": 2, "epochs_per_chunk": 1, "steps_per_epoch": 80, "max_epochs": 4, "max_evals": 2,
-              "attempts": 2, "best": 1, "num_envs": 4, "num_unrolls": 2, "num_minibatches": 2, "update_epochs": 1,
-              "episode_length": 100, "chunks_per_call": 2, "fast_compile": True},
+              "attempts": 2, "best": 1, "headings": 1, "num_envs": 4, "num_unrolls": 2, "num_minibatches": 2,
+              "update_epochs": 1, "episode_length": 100, "chunks_per_call": 2, "fast_compile": True},
 }
 
 

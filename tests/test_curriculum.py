@@ -601,3 +601,20 @@ def test_learn_killed_by_its_time_limit_resumes_to_the_uninterrupted_curves(tmp_
     assert (parts / "summary.json").exists() and not (parts / "summary_partial.json").exists()  # none out of date
     for name in ("history.csv", "sequences.csv", "milestones.csv"):
         assert (parts / name).read_text() == (whole / name).read_text(), name
+
+
+def test_the_default_archives_are_the_five_shipped_headings_archives():
+    """Without ``--archive(s)``, ``learn`` and ``curriculum`` run on the shipped paper-budget archives reseated under
+    HEADINGS (80 walks, best 5, 4 headings, taken from each archive); ``smoke`` walks 2 along +x on any of them."""
+    from experiments import curriculum as exp
+    from experiments import learn
+
+    assert sorted(exp.DEFAULT_ARCHIVES) == ["cppn", "diamond_square", "gan", "perlin", "worley"]
+    assert exp.DEFAULT_ARCHIVES["cppn"] == learn.CPPN_ARCHIVE
+    for name, path in exp.DEFAULT_ARCHIVES.items():
+        arch = learn.load_archive(path, ["roughness", "tpi"])
+        cfg = learn.with_protocol(learn.PRESETS["gpu-short"], arch)
+        assert (cfg["attempts"], cfg["best"], cfg["headings"]) == (80, 5, 4), name
+        assert int(arch.filled.sum()) >= 100 and arch.config.generations == 25, name  # the paper's budget
+    config, *_ = learn.validate(dict(learn.PRESETS["smoke"]))
+    assert (config.attempts, config.best, config.headings) == (2, 1, 1)
