@@ -282,18 +282,19 @@ def setup_run(command: str, args: argparse.Namespace, presets: dict[str, dict], 
 
 def record_provenance(folder: Path, command: str, options: dict | None = None, resumed: bool = False) -> dict:
     """Append one JSON line to ``folder/provenance.jsonl`` and return it: the UTC time, the command, the options
-    given (those not None), whether it resumed the run, the code's commit (``jaxterrain.provenance.git_commit``: ``git`` of the
-    checkout, or ``$JAXTERRAIN_COMMIT`` on a machine that received the tree without ``.git``), the JAX devices, the
-    process count and jax's version. One ``write`` of a line opened for appending, so processes that share a run
-    folder (``--shard``) each add theirs; in a multi-process JAX run only process 0 writes."""
+    given (those not None), whether it resumed the run, the code's commit (``jaxterrain.provenance.git_commit``:
+    ``git`` of the checkout, or ``$JAXTERRAIN_COMMIT`` on a machine that received the tree without ``.git``), the
+    JAX devices, the process count and jax's version. One ``write`` of a line opened for appending, so processes
+    that share a run folder (``--shard``) each add theirs; in a multi-process JAX run only process 0 writes."""
     import os
 
     import jax
 
     from jaxterrain import provenance
 
+    given = {k: v for k, v in (options or {}).items() if v is not None}
     line = {"time": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"), "command": command,
-            "options": {k: v for k, v in (options or {}).items() if v is not None}, "resumed": bool(resumed), "commit": provenance.git_commit(),
+            "options": given, "resumed": bool(resumed), "commit": provenance.git_commit(),
             "devices": provenance.device(), "processes": jax.process_count(), "jax": jax.__version__}
     if jax.process_index() == 0:
         fd = os.open(Path(folder) / PROVENANCE_NAME, os.O_WRONLY | os.O_CREAT | os.O_APPEND, 0o644)

@@ -116,8 +116,8 @@ def add_fine_tuning_arguments(parser: argparse.ArgumentParser, scope: str = "") 
                              f"base policy's; evaluations measure distance and do not use it)")
     parser.add_argument("--max-evals", type=int, default=None,
                         help=f"evaluations (chunks) spent on one terrain before it is left anyway, >= 1{scope} "
-                             f"(default: the paper's 100 in every preset; gpu-short keeps it, so one terrain that never "
-                             f"reaches the threshold can take all 75 of its chunks)")
+                             f"(default: the paper's 100 in every preset; gpu-short keeps it, so one terrain that "
+                             f"never reaches the threshold can take all 75 of its chunks)")
 
 
 def fine_tuning_overrides(args) -> dict:
@@ -193,12 +193,14 @@ def archive_digest(arch) -> str:
     return h.hexdigest()
 
 
-def check_resumable(folder: Path, cfg: dict, digest: str) -> None:
-    """:class:`BadInput` when ``folder``'s checkpoint was written for another archive than the one now at
-    ``cfg["archive"]`` (its terrain indices, GP observations and removed cells would refer to other terrains).
-    Reads only the checkpoint's header; checkpoints written before the digest was recorded are not checked."""
+def check_resumable(folder: Path, cfg: dict, arch) -> str:
+    """``arch``'s :func:`archive_digest`, after checking it against ``folder``'s checkpoint: :class:`BadInput` when
+    that was written for another archive than the one now at ``cfg["archive"]`` (its terrain indices, GP
+    observations and removed cells would refer to other terrains). Reads only the checkpoint's header; checkpoints
+    written before the digest was recorded are not checked."""
     from jaxterrain import driver
 
+    digest = archive_digest(arch)
     try:
         meta = driver.read_meta(folder)
     except ValueError as err:
@@ -207,6 +209,7 @@ def check_resumable(folder: Path, cfg: dict, digest: str) -> None:
     if stored is not None and stored != digest:
         raise BadInput(f"--archive {cfg['archive']}: it is not the archive {folder} was checkpointed with (sha256 "
                        f"{stored[:12]}... then, {digest[:12]}... now); put that file back or start a new run")
+    return digest
 
 
 BACKENDS = ("auto", "jax", "warp")
@@ -400,8 +403,7 @@ def run_treatment(cfg: dict, folder: Path, time_limit_s: float | None = None, de
     if (folder / "summary.json").exists():
         return json.loads((folder / "summary.json").read_text())
     config, arch, policy, env = validate(cfg)
-    digest = archive_digest(arch)
-    check_resumable(folder, cfg, digest)
+    digest = check_resumable(folder, cfg, arch)
     t0 = time.perf_counter()
     bank, block, states = setup(cfg, config, arch, policy, env, mesh)
     restored = driver.restore(folder, like=states)
@@ -444,7 +446,7 @@ def report_treatment(cfg: dict, folder: Path) -> dict | None:
     if not (folder / driver.CHECKPOINT_NAME).exists():
         return None
     config, arch, policy, env = validate(cfg)
-    check_resumable(folder, cfg, archive_digest(arch))
+    check_resumable(folder, cfg, arch)
     bank, _, _, start, keys, init = inputs(cfg, config, arch, policy, env)
     shapes = jax.eval_shape(init, keys, bank, start)
 
@@ -596,10 +598,11 @@ def main(args) -> int:
     mesh = common.device_mesh(args.devices)
     folder, cfg = common.setup_run("learn", args, PRESETS, "smoke", overrides(args))
     try:  # cheap: files and values, before the run folder fills up or anything compiles
-        check_resumable(folder, cfg, archive_digest(validate(cfg)[1]))
+        check_resumable(folder, cfg, validate(cfg)[1])
     except BadInput as err:
         print(f"learn: {err}", file=sys.stderr)
-        if args.resume is None and {p.name for p in folder.iterdir()} <= {common.CONFIG_NAME, common.PROVENANCE_NAME}:
+        if args.resume is None and {p.name for p in folder.iterdir()} <= {common.CONFIG_NAME,
+                                                                          common.PROVENANCE_NAME}:
             shutil.rmtree(folder)
         return 2
     if args.report:
