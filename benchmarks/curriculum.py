@@ -55,6 +55,8 @@ def learn_cfg(args, trials: int) -> dict:
         raise SystemExit(f"this learn command has no backend setting; --backend {args.backend} is not available")
     if args.num_envs:
         cfg["num_envs"] = args.num_envs
+    if args.headings:
+        cfg["headings"] = args.headings
     return cfg
 
 
@@ -79,16 +81,22 @@ def measure_block(args, trials: int) -> dict:
 
 
 def measure_parts(cfg, config, bank, policy, env, trials: int) -> dict:
-    """The harness's train and evaluate alone, vmapped over ``trials`` on the bank's first terrains."""
+    """The harness's train and evaluate alone, vmapped over ``trials`` on the bank's first terrains (laid out as
+    the block lays them out: through ``harness.layout`` on a tiled walker, e.g. Warp's, one tile per trial and
+    heading)."""
     ppo = config.ppo_config(policy.config)
     harness = W.walker_harness(env, ppo, config)
     start = W.start_state(env, ppo, policy, bank.heightmaps.shape[1:])
-    terrains = bank.heightmaps[jnp.arange(trials) % bank.heightmaps.shape[0]]
+    maps = bank.heightmaps[jnp.arange(trials) % bank.heightmaps.shape[0]]
+    terrains, axes = (maps, 0) if harness.layout is None else harness.layout(maps)
     keys = jax.random.split(jax.random.key(1), trials)
     policies = jax.tree.map(lambda x: jnp.broadcast_to(x, (trials,) + x.shape), start)
-    policies = jax.jit(jax.vmap(harness.reset))(policies, keys, terrains)
-    train = jax.jit(jax.vmap(harness.train))
-    evaluate = jax.jit(jax.vmap(harness.evaluate))
+
+    def vmapped(fn):
+        return jax.jit(jax.vmap(fn, in_axes=(0, 0, axes)))
+
+    policies = vmapped(harness.reset)(policies, keys, terrains)
+    train, evaluate = vmapped(harness.train), vmapped(harness.evaluate)
     t0 = time.perf_counter()
     trained = jax.block_until_ready(train(policies, keys, terrains))
     train_compile = time.perf_counter() - t0
@@ -131,6 +139,8 @@ def main() -> None:
     p.add_argument("--chunks", type=int, default=2, help="chunks per timed block call")
     p.add_argument("--repeats", type=int, default=2, help="bare PPO: timed calls")
     p.add_argument("--num-envs", type=int, default=None, help="PPO envs per trial (default: the preset's)")
+    p.add_argument("--headings", type=int, choices=(1, 2, 4), default=None,
+                   help="evaluation headings (default: the preset's, else the archive's protocol)")
     p.add_argument("--backend", default=None, help="walker backend, where the learn command has the setting")
     p.add_argument("--parts", action="store_true", help="also time train / evaluate alone (two more compiles)")
     p.add_argument("--skip-ppo", action="store_true", help="skip bare PPO")

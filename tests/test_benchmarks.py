@@ -1,7 +1,11 @@
-"""The pool model of benchmarks/rollout_order.py, whose step counts RESULTS.md reports."""
+"""The pool model of benchmarks/rollout_order.py, whose step counts RESULTS.md reports; benchmarks/curriculum.py's parts
+(slow)."""
 
+
+import argparse
 
 import numpy as np
+import pytest
 
 from benchmark_loader import load_benchmark
 
@@ -25,3 +29,21 @@ def test_pool_model_bounds():
         assert steps >= max(-(-lengths.sum() // slots), -(-lengths.max() // 8) * 8)
     # one slot per job: the longest rollout, rounded up to the refill interval
     assert rollout_order.pool_steps(lengths, np.arange(lengths.size), 10**6) == -(-lengths.max() // 8) * 8
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("backend", ["jax", "warp"])
+def test_curriculum_parts_on_the_learn_commands_layout(backend):
+    """benchmarks/curriculum.py --parts times train and evaluate on the terrains as the block lays them out: one
+    tile per trial and heading on Warp (it passed bare maps once, which only the classic layout accepts)."""
+    from jaxterrain.walker import warp_available
+
+    if backend == "warp" and not warp_available()[0]:
+        pytest.skip(warp_available()[1])
+    curriculum = load_benchmark("curriculum")
+    args = argparse.Namespace(preset="smoke", archive=None, backend=backend, num_envs=None, headings=2, chunks=1,
+                              parts=True)
+    row = curriculum.measure_block(args, 2)
+    assert row["chunks_done"] == 2
+    assert row["train_s_per_chunk"] > 0 and row["eval_s_per_chunk"] > 0
+    assert 0.0 <= row["eval_fitness_mean"] <= 1.0
