@@ -162,30 +162,20 @@ def run_batched(cfg: dict, todo, pairs, gens, folder, clock, key, mesh=None) -> 
 
 def main(args) -> int:
     import jax
-    import matplotlib
-    import numpy as np
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    from jaxterrain import archive as A
-    from jaxterrain.io import atomic_write_text
 
     mesh = common.device_mesh(args.devices)
     folder, cfg = common.setup_run("coverage", args, PRESETS, "smoke", overrides(args))
     clock = common.Clock(args.time_limit)
     key = jax.random.key(int(cfg["seed"]))
-    size = int(cfg["size"])
     pairs = [tuple(p) for p in cfg["pairs"]]
     gens = list(cfg["generators"])
     skipped = {}
     for g in gens:
-        ok, why = common.generator_available(g, size)
+        ok, why = common.generator_available(g, int(cfg["size"]))
         if not ok:
             skipped[g] = why
             print(f"[{g}] skipped: {why}", flush=True)
     available = [g for g in gens if g not in skipped]
-    archives: dict = {}
     todo = treatments(pairs, available)
     shard_i, shard_n = args.shard or (0, 1)
     mine = [t for t in todo if t[0] % shard_n == shard_i]
@@ -194,15 +184,10 @@ def main(args) -> int:
         raise SystemExit("--batched runs every treatment in one process; it cannot be combined with --shard")
     try:
         if cfg.get("batched"):
-            archives.update(run_batched(cfg, todo, pairs, gens, folder, clock, key, mesh))
-        for n, (k, pair, g) in enumerate([] if cfg.get("batched") else mine, 1):
-            ranges = cfg.get("ranges")
-            tcfg = dict(cfg, ranges=None if ranges is None else [ranges[pair[0]], ranges[pair[1]]])
-            tkey = jax.random.fold_in(jax.random.fold_in(key, pairs.index(pair)), gens.index(g))
-            archives[(g, pair_label(pair))] = evolve_cmd.run_treatment(
-                tcfg, g, pair, folder / "archives" / f"{g}__{pair_label(pair)}", clock, tkey,
-                label=f"({n}/{len(mine)}{'' if args.shard is None else f' of shard {shard_i}/{shard_n}'}) ",
-                mesh=mesh)
+            archives = run_batched(cfg, todo, pairs, gens, folder, clock, key, mesh)
+        else:
+            shard = "" if args.shard is None else f" of shard {shard_i}/{shard_n}"
+            archives = run_each(cfg, mine, pairs, gens, folder, clock, key, mesh, shard)
     except common.TimeUp:
         shard = "" if args.shard is None else f" --shard {shard_i}/{shard_n}"
         print(f"time limit reached; continue with: {resume_hint}{shard}", flush=True)
@@ -211,8 +196,35 @@ def main(args) -> int:
         print(f"shard {shard_i}/{shard_n} done ({len(mine)} of {len(todo)} treatments); once every shard is done, "
               f"write the tables with: {resume_hint}", flush=True)
         return 0
-    rows = []
-    cov = {}
+    cov = write_tables(folder, archives, pairs, gens, available, skipped)
+    plot_figures(folder, archives, cov, pairs, available)
+    print(f"done -> {folder}", flush=True)
+    return 0
+
+
+def run_each(cfg, mine, pairs, gens, folder, clock, key, mesh, shard: str) -> dict:
+    """Evolve the treatments ``mine`` ((k, pair, generator) of :func:`treatments`) one after another, each resumed
+    or reused from its folder; ``{(generator, pair label): Archive}``. ``common.TimeUp`` at the time limit."""
+    import jax
+
+    archives = {}
+    ranges = cfg.get("ranges")
+    for n, (_, pair, g) in enumerate(mine, 1):
+        tcfg = dict(cfg, ranges=None if ranges is None else [ranges[pair[0]], ranges[pair[1]]])
+        tkey = jax.random.fold_in(jax.random.fold_in(key, pairs.index(pair)), gens.index(g))
+        archives[(g, pair_label(pair))] = evolve_cmd.run_treatment(
+            tcfg, g, pair, folder / "archives" / f"{g}__{pair_label(pair)}", clock, tkey,
+            label=f"({n}/{len(mine)}{shard}) ", mesh=mesh)
+    return archives
+
+
+def write_tables(folder, archives: dict, pairs, gens, available, skipped: dict) -> dict:
+    """Add the combined archive of each pair to ``archives`` (and save it), write ``coverage.csv`` and Table 1
+    (``coverage.md``); ``{(generator, pair label): coverage %}``."""
+    from jaxterrain import archive as A
+    from jaxterrain.io import atomic_write_text
+
+    rows, cov = [], {}
     for pair in pairs:
         members = [archives[(g, pair_label(pair))] for g in available]
         if members:
@@ -236,8 +248,20 @@ def main(args) -> int:
     table = markdown_table(cov, gens, pairs, skipped)
     atomic_write_text(folder / "coverage.md", table)
     print(table, flush=True)
+    return cov
 
-    # Figure 5: coverage bars
+
+def plot_figures(folder, archives: dict, cov: dict, pairs, available) -> None:
+    """Figure 5 (coverage bars, ``coverage.png``) and Figure 6 (the archives' heatmaps, rows = pairs, columns =
+    generators and the combined archive, ``archives.png``)."""
+    import matplotlib
+    import numpy as np
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from jaxterrain import archive as A
+
     shown = available + (["combined"] if available else [])
     fig, ax = plt.subplots(figsize=(7, 3.5))
     width = 0.8 / max(len(pairs), 1)
@@ -252,7 +276,6 @@ def main(args) -> int:
     fig.tight_layout()
     common.save_figure(fig, folder / "coverage.png", dpi=150)
 
-    # Figure 6: archive heatmaps, rows = pairs, columns = generators (+ combined)
     fig, axes = plt.subplots(len(pairs), len(shown), figsize=(2.9 * len(shown) + 1, 2.6 * len(pairs)), squeeze=False,
                              layout="constrained")
     img = None
@@ -265,5 +288,3 @@ def main(args) -> int:
     for a in axes.ravel():
         a.tick_params(labelsize=6)
     common.save_figure(fig, folder / "archives.png", dpi=130)
-    print(f"done -> {folder}", flush=True)
-    return 0
