@@ -1,6 +1,7 @@
 """Experiment 2's costs on the GPU machine: a curriculum chunk, its parts, and bare PPO, in one run.
 
-    python benchmarks/curriculum.py [--archive A.npz] [--trials 1,10] [--chunks 2] [--out result.json]
+    python benchmarks/curriculum.py [--archive A.npz] [--trials 1,10] [--chunks 2] [--parts] [--num-envs N --num-unrolls U]
+        [--out result.json]
 
 Builds exactly what ``python -m experiments learn --preset gpu-short`` builds (``experiments.learn.setup``: the bank
 of the archive, the base policy, the walker, the compiled block of chunks) and measures, each after its compile (the
@@ -55,6 +56,8 @@ def learn_cfg(args, trials: int) -> dict:
         raise SystemExit(f"this learn command has no backend setting; --backend {args.backend} is not available")
     if args.num_envs:
         cfg["num_envs"] = args.num_envs
+    if args.num_unrolls:
+        cfg["num_unrolls"] = args.num_unrolls
     if args.headings:
         cfg["headings"] = args.headings
     return cfg
@@ -139,6 +142,9 @@ def main() -> None:
     p.add_argument("--chunks", type=int, default=2, help="chunks per timed block call")
     p.add_argument("--repeats", type=int, default=2, help="bare PPO: timed calls")
     p.add_argument("--num-envs", type=int, default=None, help="PPO envs per trial (default: the preset's)")
+    p.add_argument("--num-unrolls", type=int, default=None,
+                   help="PPO unrolls per update (default: the preset's); e.g. --num-envs 2000 --num-unrolls 2 keeps "
+                        "40 000 env steps per update in a quarter of the sequential env steps")
     p.add_argument("--headings", type=int, choices=(1, 2, 4), default=None,
                    help="evaluation headings (default: the preset's, else the archive's protocol)")
     p.add_argument("--backend", default=None, help="walker backend, where the learn command has the setting")

@@ -41,8 +41,8 @@ def test_curriculum_parts_on_the_learn_commands_layout(backend):
     if backend == "warp" and not warp_available()[0]:
         pytest.skip(warp_available()[1])
     curriculum = load_benchmark("curriculum")
-    args = argparse.Namespace(preset="smoke", archive=None, backend=backend, num_envs=None, headings=2, chunks=1,
-                              parts=True)
+    args = argparse.Namespace(preset="smoke", archive=None, backend=backend, num_envs=None, num_unrolls=None,
+                              headings=2, chunks=1, parts=True)
     row = curriculum.measure_block(args, 2)
     assert row["chunks_done"] == 2
     assert row["train_s_per_chunk"] > 0 and row["eval_s_per_chunk"] > 0
