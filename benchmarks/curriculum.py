@@ -1,7 +1,7 @@
 """Experiment 2's costs on the GPU machine: a curriculum chunk, its parts, and bare PPO, in one run.
 
-    python benchmarks/curriculum.py [--archive A.npz] [--trials 1,10] [--chunks 2] [--parts] [--num-envs N --num-unrolls U]
-        [--out result.json]
+    python benchmarks/curriculum.py [--archive A.npz] [--trials 1,10] [--chunks 2] [--parts]
+        [--num-envs N --num-unrolls U] [--out result.json]
 
 Builds exactly what ``python -m experiments learn --preset gpu-short`` builds (``experiments.learn.setup``: the bank
 of the archive, the base policy, the walker, the compiled block of chunks) and measures, each after its compile (the
