@@ -11,7 +11,9 @@ compile seconds are reported too; ``JAX_COMPILATION_CACHE_DIR`` lets a second co
    PPO training on the current terrain, an evaluation, the GP update and the terrain switch) for each ``--trials``
    count T: seconds per chunk and env steps/s (T x 160 000 env steps per chunk);
 2. ``train`` / ``evaluate``: the harness's two parts alone, vmapped over T trials on fixed terrains: seconds per
-   chunk each (where a chunk's time goes);
+   chunk each (where a chunk's time goes), and the sequential env steps of each (training: updates x unroll length
+   x unrolls; evaluation, on a tiled walker: the walks' loop counted once more, until every walk of every trial
+   ended);
 3. ``ppo``: bare PPO (``rl.run_updates``, the curriculum's PPO config, one fixed terrain, the same updates per chunk,
    no evaluation, no curriculum) at T = 1: the peer of the curriculum-overhead ratio (issue 13: >= 0.9x).
 
@@ -108,8 +110,16 @@ def measure_parts(cfg, config, bank, policy, env, trials: int) -> dict:
     jax.block_until_ready(evaluate(trained, keys, terrains))
     eval_compile = time.perf_counter() - t0
     fit, eval_s = timed(evaluate, trained, keys, terrains)
-    return {"train_compile_s": train_compile, "train_s_per_chunk": train_s, "eval_compile_s": eval_compile,
-            "eval_s_per_chunk": eval_s, "eval_fitness_mean": float(np.mean(np.asarray(fit)))}
+    row = {"train_compile_s": train_compile, "train_s_per_chunk": train_s, "eval_compile_s": eval_compile,
+           "eval_s_per_chunk": eval_s, "eval_fitness_mean": float(np.mean(np.asarray(fit))),
+           "train_seq_steps": config.updates_per_chunk * ppo.unroll_length * ppo.num_unrolls}
+    if harness.layout is not None:  # the evaluation's loop again, counting its sequential env steps
+        protocol = config.protocol.validate()
+        count = jax.jit(lambda s, k, t: W._tile_walks(
+            env, rl.policy_fn(ppo, env.action_size), protocol.attempts, protocol.headings, t.bank.data, t.index, k,
+            (s.params, s.normaliser), 0, steps=True)[1])
+        row["eval_seq_steps"] = int(count(trained, keys, terrains))
+    return row
 
 
 def measure_ppo(args) -> dict:
@@ -175,7 +185,7 @@ def main() -> None:
             ratios[f"paper_treatment_minutes_T{big}"] = blocks[big]["s_per_chunk"] * paper_chunks / 60
     print()
     cols = ["part", "trials", "compile_s", "s_per_chunk", "env_steps_per_s", "train_s_per_chunk",
-            "eval_s_per_chunk", "train_compile_s", "eval_compile_s"]
+            "eval_s_per_chunk", "train_seq_steps", "eval_seq_steps", "train_compile_s", "eval_compile_s"]
     print(common.markdown_table(rows, cols))
     print(ratios, flush=True)
     common.write_json(args.out, {"environment": env, "rows": rows, "ratios": ratios})

@@ -47,3 +47,6 @@ def test_curriculum_parts_on_the_learn_commands_layout(backend):
     assert row["chunks_done"] == 2
     assert row["train_s_per_chunk"] > 0 and row["eval_s_per_chunk"] > 0
     assert 0.0 <= row["eval_fitness_mean"] <= 1.0
+    assert row["train_seq_steps"] == 20  # smoke: 80 env steps a chunk = 1 update of 4 envs x unroll 10 x 2 unrolls
+    if backend == "warp":
+        assert 1 <= row["eval_seq_steps"] <= 100  # smoke episodes are 100 steps

@@ -210,11 +210,12 @@ def tile_distances(env, policy, tile, key, attempts: int, policy_params=None, he
     return walks(tile.bank.data, jnp.asarray(tile.index, jnp.int32), key, params)
 
 
-def _tile_walks(env, act, attempts: int, headings: int, data, index, keys, params, params_axes) -> jax.Array:
+def _tile_walks(env, act, attempts: int, headings: int, data, index, keys, params, params_axes, steps: bool = False):
     """``[B, attempts]`` distances of ``attempts`` walks of ``act(params_b, obs)`` on the bank ``data``: trial b's
     attempt a on tile ``index[b] + a // (attempts // headings)``, keyed ``split(keys[b], (headings, attempts //
     headings))`` flattened (for one heading ``split(keys[b], (1, attempts))[0]``, as before headings existed);
-    ``params_axes``: vmap axes of ``params`` over B (None: shared)."""
+    ``params_axes``: vmap axes of ``params`` over B (None: shared). ``steps``: also return the loop's iterations
+    ([] int32: the sequential env steps until every walk ended, at most the episode length)."""
     per = attempts // headings
     reset_keys = jax.vmap(lambda k: jax.random.split(k, (headings, per)).reshape(attempts))(keys)
     if headings == 1:  # every walk of a trial on its one tile
@@ -239,7 +240,8 @@ def _tile_walks(env, act, attempts: int, headings: int, data, index, keys, param
 
     zeros = jnp.zeros(reset_keys.shape[:2], jnp.float32)
     carry = (jnp.int32(0), reset(reset_keys, world), zeros > 0, zeros)
-    return jax.lax.while_loop(cond, body, carry)[3]
+    t, _, _, final = jax.lax.while_loop(cond, body, carry)
+    return (final, t) if steps else final
 
 
 def start_state(env, ppo: rl.PPOConfig, policy, shape: tuple[int, int]) -> rl.TrainState:
