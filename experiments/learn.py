@@ -196,8 +196,10 @@ def archive_digest(arch) -> str:
 def check_resumable(folder: Path, cfg: dict, arch) -> str:
     """``arch``'s :func:`archive_digest`, after checking it against ``folder``'s checkpoint: :class:`BadInput` when
     that was written for another archive than the one now at ``cfg["archive"]`` (its terrain indices, GP
-    observations and removed cells would refer to other terrains). Reads only the checkpoint's header; checkpoints
-    written before the digest was recorded are not checked."""
+    observations and removed cells would refer to other terrains), or on other physics than ``cfg["backend"]``
+    resolves to here (``auto`` on a machine without MuJoCo Warp would silently continue a Warp run on MJX: one run,
+    two simulators). Reads only the checkpoint's header; checkpoints written before the digest (or the backend) was
+    recorded are not checked for it."""
     from jaxterrain import driver
 
     digest = archive_digest(arch)
@@ -209,6 +211,11 @@ def check_resumable(folder: Path, cfg: dict, arch) -> str:
     if stored is not None and stored != digest:
         raise BadInput(f"--archive {cfg['archive']}: it is not the archive {folder} was checkpointed with (sha256 "
                        f"{stored[:12]}... then, {digest[:12]}... now); put that file back or start a new run")
+    then, now = (meta or {}).get("backend"), resolve_backend(cfg.get("backend", "jax"))
+    if then is not None and then != now:
+        raise BadInput(f"--backend {cfg.get('backend', 'jax')}: it runs the walker on {now} here, but {folder} was "
+                       f"checkpointed on {then}; continue it where {then} runs (warp: a GPU with MuJoCo Warp "
+                       f"installed) or start a new run")
     return digest
 
 
@@ -420,7 +427,7 @@ def run_treatment(cfg: dict, folder: Path, time_limit_s: float | None = None, de
     states, done, _ = driver.run_chunks(
         chunk_fn, states, total=config.max_chunks, every=int(cfg["chunks_per_call"]), start=done, history=history,
         run_dir=folder, key_metric="hardest", time_limit_s=time_limit_s, desc=desc or cfg["curriculum"],
-        unit="chunk", meta={"config": cfg, "archive_sha256": digest})
+        unit="chunk", meta={"config": cfg, "archive_sha256": digest, "backend": resolve_backend(cfg.get("backend", "jax"))})
     if done < config.max_chunks and not bool(np.all(np.asarray(states.done))):
         return None
     return write_outputs(folder, cfg, config, bank, states, seconds=time.perf_counter() - t0)

@@ -564,11 +564,12 @@ def test_curriculum_shards_share_one_run_folder_and_resume_writes_the_tables(tmp
 
 
 def test_learn_killed_by_its_time_limit_resumes_to_the_uninterrupted_curves(tmp_path, learn_smoke, tiny_archive,
-                                                                            capsys):
+                                                                            capsys, monkeypatch):
     """Issue 13: a treatment stopped after its first block (``--time-limit``, as a killed run restarts from its last
     checkpoint) and resumed ends with the same history, sequences and milestones as an uninterrupted one (same
     device, same seed: the module's smoke run). The compiled block is shared with the other smoke runs of this
-    module. A resume whose archive file was replaced meanwhile is refused in one line, before anything compiles."""
+    module. A resume whose archive file was replaced meanwhile, or whose `auto` backend would now pick other physics
+    than the checkpoint's, is refused in one line, before anything compiles."""
     import shutil
 
     from experiments import learn
@@ -581,7 +582,15 @@ def test_learn_killed_by_its_time_limit_resumes_to_the_uninterrupted_curves(tmp_
     assert cli("learn", "--preset", "smoke", "--archive", archive, "--out", str(parts), "--time-limit", "1e-6") == 3
     assert not (parts / "summary.json").exists() and (parts / "checkpoint.npz").exists()
     digest = learn.archive_digest(A.load(archive))
-    assert driver.read_meta(parts)["archive_sha256"] == digest != learn.archive_digest(A.load(tiny_archive(3, "3.npz")))
+    meta = driver.read_meta(parts)
+    assert meta["archive_sha256"] == digest != learn.archive_digest(A.load(tiny_archive(3, "3.npz")))
+    assert meta["backend"] == "jax"  # auto, resolved on this CPU machine; a resume must run on the same physics
+    cfg = json.loads((parts / "config.json").read_text())
+    learn.check_resumable(parts, cfg, A.load(archive))
+    with monkeypatch.context() as m:  # as if checkpointed on a GPU with MuJoCo Warp: auto must not switch to MJX
+        m.setattr(driver, "read_meta", lambda folder: {**meta, "backend": "warp"})
+        with pytest.raises(learn.BadInput, match=r"--backend auto: it runs the walker on jax here, but .* on warp"):
+            learn.check_resumable(parts, cfg | {"backend": "auto"}, A.load(archive))
     shutil.copy(tiny_archive(3, "three.npz"), archive)  # another archive under the run's path
     for extra in ((), ("--report",)):
         capsys.readouterr()
