@@ -193,12 +193,13 @@ def archive_digest(arch) -> str:
     return h.hexdigest()
 
 
-def check_resumable(folder: Path, cfg: dict, arch) -> str:
+def check_resumable(folder: Path, cfg: dict, arch, physics: bool = True) -> str:
     """``arch``'s :func:`archive_digest`, after checking it against ``folder``'s checkpoint: :class:`BadInput` when
     that was written for another archive than the one now at ``cfg["archive"]`` (its terrain indices, GP
     observations and removed cells would refer to other terrains), or on other physics than ``cfg["backend"]``
     resolves to here (``auto`` on a machine without MuJoCo Warp would silently continue a Warp run on MJX: one run,
-    two simulators). Reads only the checkpoint's header; checkpoints written before the digest (or the backend) was
+    two simulators; ``physics=False``, for a report that only reads the checkpoint, skips this). Reads only the
+    checkpoint's header; checkpoints written before the digest (or the backend) was
     recorded are not checked for it."""
     from jaxterrain import driver
 
@@ -212,7 +213,7 @@ def check_resumable(folder: Path, cfg: dict, arch) -> str:
         raise BadInput(f"--archive {cfg['archive']}: it is not the archive {folder} was checkpointed with (sha256 "
                        f"{stored[:12]}... then, {digest[:12]}... now); put that file back or start a new run")
     then, now = (meta or {}).get("backend"), resolve_backend(cfg.get("backend", "jax"))
-    if then is not None and then != now:
+    if physics and then is not None and then != now:
         raise BadInput(f"--backend {cfg.get('backend', 'jax')}: it runs the walker on {now} here, but {folder} was "
                        f"checkpointed on {then}; continue it where {then} runs (warp: a GPU with MuJoCo Warp "
                        f"installed) or start a new run")
@@ -453,7 +454,7 @@ def report_treatment(cfg: dict, folder: Path) -> dict | None:
     if not (folder / driver.CHECKPOINT_NAME).exists():
         return None
     config, arch, policy, env = validate(cfg)
-    check_resumable(folder, cfg, arch)
+    check_resumable(folder, cfg, arch, physics=False)
     bank, _, _, start, keys, init = inputs(cfg, config, arch, policy, env)
     shapes = jax.eval_shape(init, keys, bank, start)
 
@@ -605,7 +606,7 @@ def main(args) -> int:
     mesh = common.device_mesh(args.devices)
     folder, cfg = common.setup_run("learn", args, PRESETS, "smoke", overrides(args))
     try:  # cheap: files and values, before the run folder fills up or anything compiles
-        check_resumable(folder, cfg, validate(cfg)[1])
+        check_resumable(folder, cfg, validate(cfg)[1], physics=not args.report)
     except BadInput as err:
         print(f"learn: {err}", file=sys.stderr)
         if args.resume is None and {p.name for p in folder.iterdir()} <= {common.CONFIG_NAME,
