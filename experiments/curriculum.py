@@ -212,7 +212,8 @@ def main(args) -> int:
         plan = treatments(cfg, folder)
         for name, path, curriculum in plan:  # every treatment's input, before anything is compiled
             tcfg = _treatment_cfg(cfg, path, curriculum)
-            learn.check_resumable(folder / f"{name}-{curriculum}", tcfg, learn.validate(tcfg)[1],
+            learn.check_resumable(folder / f"{name}-{curriculum}", tcfg,
+                                  learn.validate(learn.report_cfg(tcfg) if args.report else tcfg)[1],
                                   physics=not args.report)
     except learn.BadInput as err:
         print(f"curriculum: {err}", file=sys.stderr)

@@ -437,12 +437,19 @@ def run_treatment(cfg: dict, folder: Path, time_limit_s: float | None = None, de
 PARTIAL = "summary_partial.json"
 
 
+def report_cfg(cfg: dict) -> dict:
+    """``cfg`` as :func:`report_treatment` validates it: on the MJX-JAX backend, which every machine has."""
+    return {**cfg, "backend": "jax"}
+
+
 def report_treatment(cfg: dict, folder: Path) -> dict | None:
     """The outputs of a treatment as it stands, without training: a finished one's summary; for one with a
     checkpoint, its history / sequences / milestones / curve as of that checkpoint and ``summary_partial.json``
     (the summary with ``"partial": true`` and ``"chunks_done"``; ``summary.json`` stays the mark of a finished run,
     so ``--resume`` still continues it); None without a checkpoint. Compiles nothing: the checkpoint is read into
-    the shapes of the initial states (``jax.eval_shape``)."""
+    the shapes of the initial states (``jax.eval_shape``). Steps no physics either, so a run of any backend is
+    reported through the MJX-JAX layout (a Warp run's states have its shapes): a GPU run reads on a laptop without
+    MuJoCo Warp."""
     import jax
     import jax.numpy as jnp
 
@@ -453,7 +460,7 @@ def report_treatment(cfg: dict, folder: Path) -> dict | None:
         return json.loads((folder / "summary.json").read_text())
     if not (folder / driver.CHECKPOINT_NAME).exists():
         return None
-    config, arch, policy, env = validate(cfg)
+    config, arch, policy, env = validate(report_cfg(cfg))
     check_resumable(folder, cfg, arch, physics=False)
     bank, _, _, start, keys, init = inputs(cfg, config, arch, policy, env)
     shapes = jax.eval_shape(init, keys, bank, start)
@@ -606,7 +613,7 @@ def main(args) -> int:
     mesh = common.device_mesh(args.devices)
     folder, cfg = common.setup_run("learn", args, PRESETS, "smoke", overrides(args))
     try:  # cheap: files and values, before the run folder fills up or anything compiles
-        check_resumable(folder, cfg, validate(cfg)[1], physics=not args.report)
+        check_resumable(folder, cfg, validate(report_cfg(cfg) if args.report else cfg)[1], physics=not args.report)
     except BadInput as err:
         print(f"learn: {err}", file=sys.stderr)
         if args.resume is None and {p.name for p in folder.iterdir()} <= {common.CONFIG_NAME,

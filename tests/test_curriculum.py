@@ -599,7 +599,16 @@ def test_learn_killed_by_its_time_limit_resumes_to_the_uninterrupted_curves(tmp_
         err = capsys.readouterr().err.strip().splitlines()
         assert len(err) == 1 and f"--archive {archive}: it is not the archive" in err[0], err
     shutil.copy(shared, archive)
-    assert cli("learn", "--resume", str(parts), "--report") == 0  # the checkpoint's outputs, nothing trained
+    with monkeypatch.context() as m:  # a GPU run on MuJoCo Warp, reported where Warp does not import
+        from jaxterrain import walker
+
+        m.setattr(walker, "warp_available", lambda: (False, "MuJoCo Warp is not installed"))
+        (parts / "config.json").write_text(json.dumps({**cfg, "backend": "warp"}))
+        capsys.readouterr()
+        assert cli("learn", "--resume", str(parts)) == 2  # training needs Warp: one line
+        assert "--backend warp: MuJoCo Warp is not installed" in capsys.readouterr().err
+        assert cli("learn", "--resume", str(parts), "--report") == 0  # the checkpoint's outputs, nothing trained
+        (parts / "config.json").write_text(json.dumps(cfg))
     partial = json.loads((parts / "summary_partial.json").read_text())
     assert partial["partial"] and partial["chunks_done"] == 2 and not (parts / "summary.json").exists()
     rows = (parts / "history.csv").read_text().splitlines()[1:]
