@@ -637,3 +637,25 @@ def test_the_default_archives_are_the_five_shipped_headings_archives():
         assert int(arch.filled.sum()) >= 100 and arch.config.generations == 25, name  # the paper's budget
     config, *_ = learn.validate(dict(learn.PRESETS["smoke"]))
     assert (config.attempts, config.best, config.headings) == (2, 1, 1)
+
+
+@pytest.mark.slow
+def test_a_warp_checkpoint_is_reported_through_the_mjx_layout(tmp_path, monkeypatch):
+    """A `learn --backend warp` run's checkpoint (one block of the smoke preset on MuJoCo Warp's CPU device) is read
+    by `--report` into the MJX-JAX layout's states (`learn.report_cfg`): every leaf has the shape it had on Warp, so
+    a GPU run reports on a machine without Warp; resuming it there is refused (the checkpoint records warp)."""
+    from jaxterrain.walker import warp_available
+
+    if not warp_available()[0]:
+        pytest.skip(warp_available()[1])
+    run = tmp_path / "warp"
+    assert cli("learn", "--preset", "smoke", "--backend", "warp", "--out", str(run), "--time-limit", "1e-6") == 3
+    assert driver.read_meta(run)["backend"] == "warp"
+    from jaxterrain import walker
+
+    monkeypatch.setattr(walker, "warp_available", lambda: (False, "MuJoCo Warp is not installed"))
+    assert cli("learn", "--resume", str(run), "--report") == 0
+    assert json.loads((run / "summary_partial.json").read_text())["chunks_done"] == 2
+    cfg = json.loads((run / "config.json").read_text())
+    (run / "config.json").write_text(json.dumps({**cfg, "backend": "auto"}))
+    assert cli("learn", "--resume", str(run)) == 2  # auto -> jax here; the checkpoint was written on warp
