@@ -212,7 +212,7 @@ def check_resumable(folder: Path, cfg: dict, arch, physics: bool = True) -> str:
     if stored is not None and stored != digest:
         raise BadInput(f"--archive {cfg['archive']}: it is not the archive {folder} was checkpointed with (sha256 "
                        f"{stored[:12]}... then, {digest[:12]}... now); put that file back or start a new run")
-    then, now = (meta or {}).get("backend"), resolve_backend(cfg.get("backend", "jax"))
+    then, now = (meta or {}).get("backend"), physics_of(cfg)
     if physics and then is not None and then != now:
         raise BadInput(f"--backend {cfg.get('backend', 'jax')}: it runs the walker on {now} here, but {folder} was "
                        f"checkpointed on {then}; continue it where {then} runs (warp: a GPU with MuJoCo Warp "
@@ -235,12 +235,18 @@ def resolve_backend(backend: str) -> str:
     return "warp" if jax.default_backend() == "gpu" and warp_available()[0] else "jax"
 
 
+def physics_of(cfg: dict) -> str:
+    """The walker backend a learn config runs on here, ``jax`` or ``warp`` (:func:`resolve_backend` of its
+    ``backend``; a config saved before ``--backend`` existed ran on "jax")."""
+    return resolve_backend(cfg.get("backend", "jax"))
+
+
 def walker_layout(cfg: dict) -> dict:
     """The walker's ``backend`` / ``tiles`` / ``worlds`` of a learn config (a config saved before ``--backend``
     existed runs on "jax"): warp walks on one tile per trial with contact buffers for every env stepped at once
     (``trials x max(num_envs, attempts)``: the PPO envs, then the evaluation walks). :class:`BadInput` for an
     unknown backend, or warp where MuJoCo Warp does not import."""
-    backend = resolve_backend(cfg.get("backend", "jax"))
+    backend = physics_of(cfg)
     if backend == "jax":
         return {}
     if backend != "warp":
@@ -428,7 +434,7 @@ def run_treatment(cfg: dict, folder: Path, time_limit_s: float | None = None, de
     states, done, _ = driver.run_chunks(
         chunk_fn, states, total=config.max_chunks, every=int(cfg["chunks_per_call"]), start=done, history=history,
         run_dir=folder, key_metric="hardest", time_limit_s=time_limit_s, desc=desc or cfg["curriculum"],
-        unit="chunk", meta={"config": cfg, "archive_sha256": digest, "backend": resolve_backend(cfg.get("backend", "jax"))})
+        unit="chunk", meta={"config": cfg, "archive_sha256": digest, "backend": physics_of(cfg)})
     if done < config.max_chunks and not bool(np.all(np.asarray(states.done))):
         return None
     return write_outputs(folder, cfg, config, bank, states, seconds=time.perf_counter() - t0)
