@@ -86,6 +86,24 @@ class Transition(NamedTuple):
     truncation: jax.Array
 
 
+class Ride(NamedTuple):
+    """Envs that ride along PPO's rollouts (:func:`ride_updates`): ``R`` extra envs stepped in the SAME batched
+    ``env.step`` call as the ``num_envs`` PPO envs, by a fixed policy, never reset, not learned from. Where a physics
+    step costs about the same for a few hundred more envs (a GPU stepping thousands), they walk nearly free: the
+    curriculum evaluates one chunk's policy while the next chunk trains (``CurriculumConfig.overlap``).
+
+    act: ``obs [R, O] -> actions [R, A]``, the riders' policy (a closure over its params).
+    terrains: the riders' terrains, ``[R, H, W]`` / ``[H, W]`` arrays or a ``walker.Tile`` (index [] or [R]) of the
+      SAME bank as the PPO envs' Tile.
+    record: ``(carry, states, start) -> carry`` after every step; ``states`` are all ``num_envs + R`` env states,
+      the riders' are rows ``start ..`` (``start = num_envs``) of their per-env fields (e.g. ``states.done[start:]``).
+    """
+
+    act: Any
+    terrains: Any
+    record: Any
+
+
 # ----------------------------------------------------------------------------------------------------------------
 # Helpers
 # ----------------------------------------------------------------------------------------------------------------
@@ -174,6 +192,51 @@ def _select_envs(env, mask: jax.Array, on_true, on_false):
     return _select(mask, on_true, on_false) if select is None else select(mask, on_true, on_false)
 
 
+def _one_terrain(terrains, axis):
+    """One env's terrain argument of ``terrains`` with vmap ``axis`` (None, 0 or a Tile's axes)."""
+    if axis is None:
+        return terrains
+    if axis == 0:
+        return terrains[0]
+    return terrains._replace(index=terrains.index[0])
+
+
+def per_env_mask(env, terrain) -> Any:
+    """A pytree of bools over a batched env state: True for per-env leaves, False for leaves the batch shares
+    (MuJoCo Warp's contact counters and buffers, whose values every step recomputes). Told apart by their shapes at
+    two batch sizes (``jax.eval_shape``: nothing runs); ``terrain`` is one env's terrain argument."""
+
+    def shapes(n):
+        return jax.eval_shape(lambda k, t: _batched_reset(env, k, t, n), jax.random.PRNGKey(0), terrain)
+
+    return jax.tree_util.tree_map(lambda a, b: a.shape[:1] != b.shape[:1], shapes(2), shapes(3))
+
+
+def _join_envs(per_env, a, b):
+    """Batched env states ``a`` [N] and ``b`` [R] as one batch [N + R] (shared leaves: ``a``'s)."""
+    return jax.tree_util.tree_map(lambda p, x, y: jnp.concatenate([x, y]) if p else x, per_env, a, b)
+
+
+def _part_envs(per_env, states, n: int):
+    """:func:`_join_envs` undone: ``(states[:n], states[n:])`` (shared leaves in both)."""
+    head = jax.tree_util.tree_map(lambda p, x: x[:n] if p else x, per_env, states)
+    tail = jax.tree_util.tree_map(lambda p, x: x[n:] if p else x, per_env, states)
+    return head, tail
+
+
+def _join_terrains(terrains, axis, ride_terrains, n: int, r: int):
+    """The terrain argument of ``n`` PPO envs (``terrains`` with vmap ``axis``) and ``r`` riders, as one per-env
+    argument of ``n + r`` envs: arrays ``[n + r, H, W]`` or a Tile with index ``[n + r]`` (the PPO envs' bank)."""
+    tile = _tile_type()
+    if tile is not None and isinstance(terrains, tile):
+        own = jnp.broadcast_to(jnp.asarray(terrains.index, jnp.int32), (n,))
+        ride = jnp.broadcast_to(jnp.asarray(ride_terrains.index, jnp.int32), (r,))
+        return terrains._replace(index=jnp.concatenate([own, ride]))
+    own = terrains if axis == 0 else jnp.broadcast_to(terrains, (n,) + terrains.shape)
+    ride = ride_terrains if ride_terrains.ndim == 3 else jnp.broadcast_to(ride_terrains, (r,) + ride_terrains.shape)
+    return jnp.concatenate([own, ride])
+
+
 def _zero_episode(num_envs: int) -> EpisodeStats:
     z = jnp.zeros((num_envs,), jnp.float32)
     return EpisodeStats(z, z, z, z, z)
@@ -232,25 +295,36 @@ def reset_envs(state: TrainState, key: jax.Array, terrains: jax.Array, *, env: E
 # ----------------------------------------------------------------------------------------------------------------
 # update = collect + GAE + epochs of minibatch SGD
 # ----------------------------------------------------------------------------------------------------------------
-def _collect(state: TrainState, key, terrains, env, config, rows=None):
+def _collect(state: TrainState, key, terrains, env, config, rows=None, ride: Optional[Ride] = None, carry=None):
     """``num_unrolls`` x ``unroll_length`` steps of all envs with auto-reset.
 
-    Returns (env_state, episode, data: Transition [K, T, N, ...], bootstrap_obs [K, N, O]).
+    Returns (env_state, episode, data: Transition [K, T, N, ...], bootstrap_obs [K, N, O], carry).
     Envs that finish reset into a pool of fresh ``env.reset`` states drawn once per update (one reset per env
     per update instead of one per step). Non-finite observations end the episode (NaN-safety). ``rows = (start,
     total)``: these N envs are rows ``start .. start + N`` of a batch of ``total`` (one device's share, see
     :func:`_collect_split`), and every random draw is that slice of the whole batch's draw.
+
+    ``ride`` (a :class:`Ride`): ``state.env_state`` holds ``N + R`` envs, the PPO envs then the ``R`` riders (see
+    :func:`ride_updates`); all are stepped together, the riders by ``ride.act`` and never reset, ``carry`` goes
+    through ``ride.record`` after every step, and ``data`` / the episode statistics are the PPO envs' alone.
     """
     n, dist = config.num_envs, config.action_distribution
     axis = _terrain_axis(terrains, n)
-    v_step = jax.vmap(env.step, in_axes=(0, 0, axis))
     pool_key, unroll_key = jax.random.split(key)
     del key
     pool = _batched_reset(env, pool_key, terrains, n, rows)
+    if ride is None:
+        step_terrains, keep = terrains, jnp.zeros((0,), bool)
+    else:
+        r = state.env_state.obs.shape[0] - n
+        step_terrains, keep = _join_terrains(terrains, axis, ride.terrains, n, r), jnp.zeros((r,), bool)
+        per_env = per_env_mask(env, _one_terrain(terrains, axis))
+        pool = _join_envs(per_env, pool, _part_envs(per_env, state.env_state, n)[1])  # rider rows: never taken
+    v_step = jax.vmap(env.step, in_axes=(0, 0, _terrain_axis(step_terrains, pool.obs.shape[0])))
 
     def env_step(carry, step_key):
-        env_state, ep = carry
-        obs = env_state.obs
+        env_state, ep, ride_carry = carry
+        obs = env_state.obs[:n]
         loc, scale = nets.policy_apply(config, env.action_size, state.params, state.normaliser, obs)
         if rows is None:
             raw = nets.sample_raw(step_key, loc, scale)
@@ -258,11 +332,17 @@ def _collect(state: TrainState, key, terrains, env, config, rows=None):
             noise = jax.random.normal(step_key, (rows[1],) + loc.shape[1:], loc.dtype)
             raw = loc + scale * jax.lax.dynamic_slice_in_dim(noise, rows[0], n)
         logp = nets.log_prob(dist, loc, scale, raw)
-        next_state = v_step(env_state, nets.postprocess(dist, raw), terrains)
-        finite = jnp.all(jnp.isfinite(next_state.obs), axis=-1)
-        reward = jnp.where(jnp.isfinite(next_state.reward), next_state.reward, 0.0).astype(jnp.float32)
-        done = jnp.maximum(next_state.done.astype(jnp.float32), 1.0 - finite.astype(jnp.float32))
-        trunc = _truncation(next_state) * finite
+        action = nets.postprocess(dist, raw)
+        if ride is not None:
+            action = jnp.concatenate([action, jnp.asarray(ride.act(env_state.obs[n:]), action.dtype)])
+        next_state = v_step(env_state, action, step_terrains)
+        if ride is not None:
+            ride_carry = ride.record(ride_carry, next_state, n)
+        next_obs = next_state.obs[:n]
+        finite = jnp.all(jnp.isfinite(next_obs), axis=-1)
+        reward = jnp.where(jnp.isfinite(next_state.reward[:n]), next_state.reward[:n], 0.0).astype(jnp.float32)
+        done = jnp.maximum(next_state.done[:n].astype(jnp.float32), 1.0 - finite.astype(jnp.float32))
+        trunc = _truncation(next_state)[:n] * finite
         ret, length = ep.ret + reward, ep.length + 1.0
         ended = done > 0
         ep = EpisodeStats(
@@ -272,16 +352,16 @@ def _collect(state: TrainState, key, terrains, env, config, rows=None):
             last_length=jnp.where(ended, length, ep.last_length),
             count=ep.count + done,
         )
-        next_state = _select_envs(env, ended, pool, next_state)
-        return (next_state, ep), Transition(obs, raw, logp, reward, done, trunc)
+        next_state = _select_envs(env, jnp.concatenate([ended, keep]), pool, next_state)
+        return (next_state, ep, ride_carry), Transition(obs, raw, logp, reward, done, trunc)
 
     def unroll(carry, unroll_key):
         carry, data = jax.lax.scan(env_step, carry, jax.random.split(unroll_key, config.unroll_length))
-        return carry, (data, carry[0].obs)
+        return carry, (data, carry[0].obs[:n])
 
-    (env_state, episode), (data, bootstrap_obs) = jax.lax.scan(
-        unroll, (state.env_state, state.episode), jax.random.split(unroll_key, config.num_unrolls))
-    return env_state, episode, data, bootstrap_obs
+    (env_state, episode, carry), (data, bootstrap_obs) = jax.lax.scan(
+        unroll, (state.env_state, state.episode, carry), jax.random.split(unroll_key, config.num_unrolls))
+    return env_state, episode, data, bootstrap_obs, carry
 
 
 def loss_fn(params, normaliser, batch: Transition, bootstrap_obs, key, *, config: PPOConfig, action_size: int,
@@ -345,6 +425,12 @@ def update(state: TrainState, key: jax.Array, terrains: jax.Array, *, env: EnvLi
     the random draws are the ones of the one-device update, so the result equals :func:`update` without a mesh up
     to float rounding (tested on 4 CPU devices and on two processes).
     """
+    return _update(state, key, terrains, env, config, mesh)[0]
+
+
+def _update(state: TrainState, key, terrains, env, config: PPOConfig, mesh=None, ride: Optional[Ride] = None,
+            carry=None):
+    """:func:`update` -> ``((state, metrics), carry)``; with ``ride`` the riders step along (:func:`_collect`)."""
     key = _raw_key(key)
     collect_key, sgd_key = jax.random.split(key)
     del key
@@ -353,7 +439,8 @@ def update(state: TrainState, key: jax.Array, terrains: jax.Array, *, env: EnvLi
     else:
         if mesh is not None:  # envs that do not divide over the devices: XLA partitions the batched steps
             state, terrains = _split_envs(state, terrains, config, mesh)
-        env_state, episode, data, bootstrap_obs = _collect(state, collect_key, terrains, env, config)
+        env_state, episode, data, bootstrap_obs, carry = _collect(state, collect_key, terrains, env, config,
+                                                                  ride=ride, carry=carry)
 
     normaliser = state.normaliser
     if config.normalize_observations and config.update_normaliser:
@@ -385,7 +472,7 @@ def update(state: TrainState, key: jax.Array, terrains: jax.Array, *, env: EnvLi
         env_steps=state.env_steps + config.steps_per_update,
     )
     metrics["env_steps"] = new_state.env_steps.astype(jnp.float32)
-    return new_state, metrics
+    return (new_state, metrics), carry
 
 
 def _sgd(params, opt_state, normaliser, segments: Transition, boots, key, *, config: PPOConfig, action_size: int,
@@ -495,7 +582,7 @@ def _collect_split(state: TrainState, key, terrains, env, config: PPOConfig, mes
 
     def collect(state, key, terrains):
         start = jax.lax.axis_index(sharding.AXIS) * local
-        return _collect(state, key, terrains, env, config._replace(num_envs=local), rows=(start, n))
+        return _collect(state, key, terrains, env, config._replace(num_envs=local), rows=(start, n))[:4]
 
     out_specs = (state_spec.env_state, rows_spec, P(None, None, sharding.AXIS), P(None, sharding.AXIS))
     return jax.shard_map(collect, mesh=mesh, in_specs=(state_spec, P(), terrain_spec), out_specs=out_specs,
@@ -508,17 +595,7 @@ def _env_specs(env, terrains, axis, rows_spec):
     apart by their shapes (``jax.eval_shape``, nothing runs) at two batch sizes."""
     from jax.sharding import PartitionSpec as P
 
-    if axis is None:
-        one = terrains
-    elif axis == 0:
-        one = terrains[0]
-    else:
-        one = terrains._replace(index=terrains.index[0])
-
-    def shapes(n):
-        return jax.eval_shape(lambda k, t: _batched_reset(env, k, t, n), jax.random.PRNGKey(0), one)
-
-    return jax.tree_util.tree_map(lambda a, b: rows_spec if a.shape[:1] != b.shape[:1] else P(), shapes(2), shapes(3))
+    return jax.tree_util.tree_map(lambda p: rows_spec if p else P(), per_env_mask(env, _one_terrain(terrains, axis)))
 
 
 def _split_envs(state: TrainState, terrains: jax.Array, config: PPOConfig, mesh):
@@ -546,6 +623,31 @@ def run_updates(state: TrainState, terrains: jax.Array, *, env: EnvLike, config:
         return update(s._replace(key=next_key), update_key, terrains, env=env, config=config, mesh=mesh)
 
     return jax.lax.scan(body, state, None, length=num_updates)
+
+
+def ride_updates(state: TrainState, terrains: jax.Array, riders: Any, ride: Ride, carry: Any, *, env: EnvLike,
+                 config: PPOConfig, num_updates: int):
+    """:func:`run_updates` with ``R`` envs riding along (a :class:`Ride`): ``riders`` (their env states, batched
+    [R]) are stepped in the same batched ``env.step`` calls as the PPO envs, ``num_updates x num_unrolls x
+    unroll_length`` steps by ``ride.act``, never reset; ``carry`` (any pytree) goes through ``ride.record`` after
+    every step. The PPO envs, their random draws and the update are those of :func:`run_updates` (the riders take
+    no key; per-env physics does not see the other envs). Pure; one data-parallel device only.
+
+    Returns ``(state, riders, carry, metrics)`` with metrics [num_updates] per name.
+    """
+    n = config.num_envs
+    per_env = per_env_mask(env, _one_terrain(terrains, _terrain_axis(terrains, n)))
+    both = state._replace(env_state=_join_envs(per_env, state.env_state, riders))
+
+    def body(c, _):
+        s, rc = c
+        next_key, update_key = jax.random.split(s.key)
+        (s, metrics), rc = _update(s._replace(key=next_key), update_key, terrains, env, config, ride=ride, carry=rc)
+        return (s, rc), metrics
+
+    (state, carry), metrics = jax.lax.scan(body, (both, carry), None, length=num_updates)
+    envs, riders = _part_envs(per_env, state.env_state, n)
+    return state._replace(env_state=envs), riders, carry, metrics
 
 
 def make_train(env: EnvLike, config: PPOConfig, num_updates: int):
