@@ -316,6 +316,82 @@ def test_no_retrace_when_the_terrain_changes():
 
 
 # ---------------------------------------------------------------------------------------------------------------
+# Overlap: each chunk's evaluation rides along the next chunk's training
+# ---------------------------------------------------------------------------------------------------------------
+def keyed_harness(gain: float = 0.05, overlap: bool = True) -> C.Harness:
+    """:func:`fake_harness` whose training and evaluation depend on their keys (a wrong key changes the result),
+    with ``train_evaluate`` = (train, evaluate of the starting policy); ``steps`` counts the trainings kept."""
+
+    def train(policy, key, terrain):
+        return {**policy, "skill": policy["skill"] + gain * jax.random.uniform(key, (), minval=0.5, maxval=1.5),
+                "steps": policy["steps"] + 1}
+
+    def evaluate(policy, key, terrain):
+        noise = 0.02 * jax.random.normal(key, ())
+        return jnp.clip(1.0 - jnp.mean(terrain) + policy["skill"] + noise, 0.0, 1.0)
+
+    def reset(policy, key, terrain):
+        return {**policy, "resets": policy["resets"] + 1}
+
+    both = (lambda p, k, t, ek: (train(p, k, t), evaluate(p, ek, t))) if overlap else None
+    return C.Harness(train, evaluate, reset, train_evaluate=both)
+
+
+KEYED_START = {**START, "steps": jnp.zeros((), jnp.int32)}
+
+
+@pytest.mark.parametrize("selector", ["map", "random"])
+def test_overlap_runs_the_same_curriculum_as_the_plain_loop(selector):
+    """3 trials to the end: with ``overlap`` every record, GP observation, choice, policy and reset count equals the
+    plain loop's (keys and starting policies match chunk by chunk; a training dropped on a terrain switch leaves
+    no trace); in blocks of 4 every running trial does at least 4 chunks, at most one step more per switch."""
+    bank = toy_bank(toy_grid(4))
+    keys = jax.random.split(jax.random.key(5), 3)
+    out = {}
+    for overlap in (False, True):
+        config, harness = small(selector, max_evals=3, max_epochs=30, overlap=overlap), keyed_harness(0.04, overlap)
+        out[overlap] = C.make_runner(config, harness)(
+            C.init_trials(keys, bank, KEYED_START, config=config, harness=harness), bank, 100)
+    plain, over = out[False], out[True]
+    assert plain.pending is None and not np.any(np.asarray(over.pending))
+    assert tree_equal(over._replace(pending=None), plain)
+    switches = int(np.sum(np.diff(np.asarray(plain.history.terrain), axis=1) != 0))
+    assert switches >= 6 and np.all(np.asarray(plain.done))
+    config, harness = small(selector, max_evals=3, max_epochs=30, overlap=True), keyed_harness(0.04)
+    run, states = C.make_runner(config, harness), C.init_trials(keys, bank, KEYED_START, config=config,
+                                                                  harness=harness)
+    for block in range(1, 8):
+        before = np.asarray(states.chunk)
+        states = run(states, bank, 4)
+        running = ~np.asarray(states.done)
+        assert np.all(np.asarray(states.chunk)[running] >= 4 * block), (block, np.asarray(states.chunk))
+        assert np.all(np.asarray(states.chunk) >= before)
+    with pytest.raises(ValueError, match="train_evaluate"):
+        C.make_runner(config, fake_harness())(C.init_trials(keys, bank, START, config=config,
+                                                            harness=fake_harness()), bank, 1)
+
+
+def test_overlap_resumes_to_the_uninterrupted_run(tmp_path):
+    bank = toy_bank(toy_grid(4))
+    config, harness = small("map", max_evals=2, max_epochs=30, overlap=True), keyed_harness(0.05)
+    run = C.make_runner(config, harness)
+    init = lambda: C.init_trials(jax.random.split(jax.random.key(1), 2), bank, KEYED_START, config=config,  # noqa
+                                 harness=harness)
+
+    def chunk(s, a, b):
+        s = run(s, bank, b - a)
+        return s, {"hardest": jnp.full((b - a,), jnp.mean(s.hardest))}
+
+    whole, _, _ = driver.run_chunks(chunk, init(), total=12, every=4, progress=False)
+    driver.run_chunks(chunk, init(), total=12, every=4, run_dir=tmp_path, progress=False, time_limit_s=1e-9)
+    restored, done, history, _ = driver.restore(tmp_path, like=init())
+    assert done == 4 and restored.pending is not None
+    state, done, _ = driver.run_chunks(chunk, restored, total=12, every=4, start=done, history=history,
+                                       run_dir=tmp_path, progress=False)
+    assert done == 12 and tree_equal(state, whole)
+
+
+# ---------------------------------------------------------------------------------------------------------------
 # Table 2 / Figure 7
 # ---------------------------------------------------------------------------------------------------------------
 def test_milestones_and_curves_from_hand_made_histories():

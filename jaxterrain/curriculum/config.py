@@ -122,6 +122,12 @@ class CurriculumConfig(NamedTuple):
         recipe otherwise, :meth:`ppo_config`); its other fields must keep ``PPOConfig``'s defaults. Default
         :data:`FINE_TUNING`; e.g. ``ppo=FINE_TUNING._replace(num_envs=64)``. ``steps_per_update`` (``num_envs x
         unroll_length x num_unrolls``) must divide a chunk's env steps.
+      overlap: evaluate each chunk's policy while the next chunk trains, its walks stepped in the same physics
+        calls as the PPO envs (``rl.ride_updates``); the next chunk trains on the current terrain on the chance that
+        the evaluation keeps the trial there, and trains again when it does not. The same curriculum (the same
+        keys, policies, evaluations and choices; only where the envs restart between blocks of chunks differs) in
+        fewer physics calls: see :func:`jaxterrain.curriculum.core.step`. Needs a harness with ``train_evaluate``
+        (the walker's on tiles).
     """
 
     selector: str = "map"
@@ -146,6 +152,7 @@ class CurriculumConfig(NamedTuple):
     roughness_stride: int = 5
     max_observations: Optional[int] = None
     ppo: PPOConfig = FINE_TUNING
+    overlap: bool = False
 
     @property
     def max_chunks(self) -> int:
@@ -244,6 +251,8 @@ def validate_config(config: CurriculumConfig) -> CurriculumConfig:
     _choice(config, "distance_origin", DISTANCE_ORIGINS)
     if config.max_observations is not None:
         _int_at_least(config, "max_observations", 1)
+    if not isinstance(config.overlap, bool):
+        raise ValueError(f"CurriculumConfig.overlap must be True or False, got {config.overlap!r}")
     _check_ppo(config.ppo)
     if config.steps_per_chunk % config.steps_per_update:
         raise ValueError(

@@ -61,6 +61,9 @@ class Harness(NamedTuple):
       :class:`~jaxterrain.walker.Tile` of a bank of the T terrains). Called once per chunk outside the trial vmap.
     where: ``(pred [] bool, on_true, on_false) -> policy_state`` merging two policy states (None: ``jnp.where``
       leaf by leaf; the walker's merges its env states with ``env.select``).
+    train_evaluate: ``(policy_state, train_key, terrain, eval_key) -> (policy_state, fitness [])``, ``train`` and,
+      in the same physics calls, ``evaluate`` of the policy it STARTS from (``CurriculumConfig.overlap``): equal to
+      ``(train(p, train_key, terrain), evaluate(p, eval_key, terrain))``. None: no overlap.
     """
 
     train: Callable
@@ -68,6 +71,7 @@ class Harness(NamedTuple):
     reset: Optional[Callable] = None
     layout: Optional[Callable] = None
     where: Optional[Callable] = None
+    train_evaluate: Optional[Callable] = None
 
 
 class History(NamedTuple):
@@ -95,7 +99,8 @@ class State(NamedTuple):
     counters. hardest: [] float32 hardest terrain traversed (distance, cells). done: [] bool. restart: [] bool, the
     envs restart on the current terrain (``harness.reset``) before the next chunk trains (set by :func:`init` and on
     a terrain switch; set it yourself to restart them, e.g. after restoring a state saved without env states).
-    history: History.
+    history: History. pending: None, or with ``config.overlap`` [] bool: ``policy`` has trained one chunk more than
+    ``chunk`` counts (chunk ``chunk``, on ``terrain``) and its evaluation is pending (:func:`step`).
     """
 
     policy: Any
@@ -114,6 +119,7 @@ class State(NamedTuple):
     done: jax.Array
     restart: jax.Array
     history: History
+    pending: Any = None
 
 
 # ----------------------------------------------------------------------------------------------------------------
@@ -241,7 +247,8 @@ def init(key: jax.Array, bank: TerrainBank, policy: Any, *, config: CurriculumCo
     return State(policy=policy, key=_raw(trial_key), obs_index=jnp.full((m,), -1, jnp.int32),
                  obs_y=jnp.zeros((m,), jnp.float32), obs_count=zi, available=available, terrain=first,
                  terrain_evals=zi, terrain_best=jnp.full((), -jnp.inf, jnp.float32), chunk=zi, epoch=zi,
-                 env_steps=zi, hardest=zf, done=~jnp.any(available), restart=jnp.ones((), bool), history=history)
+                 env_steps=zi, hardest=zf, done=~jnp.any(available), restart=jnp.ones((), bool), history=history,
+                 pending=jnp.zeros((), bool) if config.overlap else None)
 
 
 def _next_terrain(state: State, bank: TerrainBank, config: CurriculumConfig, key, trained, finished, obs_index, obs_y,
@@ -267,18 +274,48 @@ def step(state: State, key: jax.Array, bank: TerrainBank, *, config: CurriculumC
 
     ``terrain``: the current terrain ``state.terrain`` as the harness takes it; None (the default) builds it here,
     ``bank.heightmaps[state.terrain]`` [H, W] (through ``harness.layout`` when set). :func:`run_trials` passes
-    trial i's slice of the layout of all trials' terrains."""
+    trial i's slice of the layout of all trials' terrains.
+
+    With ``config.overlap`` a call is one step of the overlapped loop instead (``key`` unused: chunk c's keys are
+    ``fold_in(state.key, c)``, as :func:`run_trials` gives them): ``harness.train_evaluate`` trains the next chunk
+    while the walks of the pending evaluation ride along. Not pending (the start, after a switch): train chunk
+    ``chunk`` and mark it pending. Pending: evaluate the policy of chunk ``chunk`` (the curriculum's update of a
+    chunk, below) while chunk ``chunk + 1`` trains on the same terrain; keep that training when the trial stays on
+    its terrain, else drop it (the next step trains chunk ``chunk + 1`` again, on the new terrain, after the
+    restart). Every chunk has the keys, starting policy, terrain and evaluation of the plain loop, so the records,
+    the GP and the choices are the plain loop's (given the same env states at block starts); a terrain switch costs
+    one step more."""
+    if config.overlap:
+        return _overlapped(state, bank, config=config, harness=harness, terrain=terrain)
     train_key, eval_key, select_key, reset_key = jax.random.split(_typed(key), 4)
     del key
+    if terrain is None:
+        terrain = _current_terrain(bank, state.terrain, harness)
+    policy = _restarted(state, reset_key, terrain, harness)
+    policy = harness.train(policy, train_key, terrain)
+    fitness = harness.evaluate(policy, eval_key, terrain)
+    return _kept(state, _evaluated(state, policy, fitness, bank, select_key, config), harness)
+
+
+def _restarted(state: State, key, terrain, harness: Harness):
+    """``state.policy`` with its envs restarted on ``terrain`` where ``state.restart``."""
+    if harness.reset is None:
+        return state.policy
+    return _where_policy(harness, state.restart, harness.reset(state.policy, key, terrain), state.policy)
+
+
+def _kept(state: State, new: State, harness: Harness) -> State:
+    """``new``, or ``state`` unchanged where the trial was already done."""
+    kept = _where_tree(state.done, state._replace(policy=None), new._replace(policy=None))
+    return kept._replace(policy=_where_policy(harness, state.done, state.policy, new.policy))
+
+
+def _evaluated(state: State, policy, fitness, bank: TerrainBank, select_key, config: CurriculumConfig) -> State:
+    """The curriculum's update after chunk ``state.chunk`` on ``state.terrain`` ended with ``policy`` evaluated at
+    ``fitness``: counters, history, the GP observation and the next terrain when the terrain is finished, done."""
     hardness = terrain_hardness(bank, config.distance_origin)
     t = state.terrain
-    if terrain is None:
-        terrain = _current_terrain(bank, t, harness)
-    policy = state.policy
-    if harness.reset is not None:
-        policy = _where_policy(harness, state.restart, harness.reset(policy, reset_key, terrain), policy)
-    policy = harness.train(policy, train_key, terrain)
-    fitness = jnp.asarray(harness.evaluate(policy, eval_key, terrain), jnp.float32).reshape(())
+    fitness = jnp.asarray(fitness, jnp.float32).reshape(())
     evals = state.terrain_evals + 1
     best = jnp.maximum(state.terrain_best, fitness)
     reached = fitness >= config.threshold * config.max_fitness
@@ -300,14 +337,37 @@ def step(state: State, key: jax.Array, bank: TerrainBank, *, config: CurriculumC
     history = History(epoch=h.epoch.at[c].set(epoch, mode="drop"), terrain=h.terrain.at[c].set(t, mode="drop"),
                       evaluation=h.evaluation.at[c].set(fitness, mode="drop"),
                       hardest=h.hardest.at[c].set(hardest, mode="drop"))
-    new = State(policy=policy, key=state.key, obs_index=obs_index, obs_y=obs_y,
-                obs_count=state.obs_count + finished.astype(jnp.int32), available=available,
-                terrain=jnp.where(switch, nxt, t), terrain_evals=jnp.where(finished, 0, evals),
-                terrain_best=jnp.where(finished, -jnp.inf, best), chunk=c + 1, epoch=epoch,
-                env_steps=state.env_steps + config.steps_per_chunk, hardest=hardest, done=done, restart=switch,
-                history=history)
-    kept = _where_tree(state.done, state._replace(policy=None), new._replace(policy=None))
-    return kept._replace(policy=_where_policy(harness, state.done, state.policy, new.policy))
+    return state._replace(policy=policy, obs_index=obs_index, obs_y=obs_y,
+                          obs_count=state.obs_count + finished.astype(jnp.int32), available=available,
+                          terrain=jnp.where(switch, nxt, t), terrain_evals=jnp.where(finished, 0, evals),
+                          terrain_best=jnp.where(finished, -jnp.inf, best), chunk=c + 1, epoch=epoch,
+                          env_steps=state.env_steps + config.steps_per_chunk, hardest=hardest, done=done,
+                          restart=switch, history=history)
+
+
+def _chunk_keys(state: State, chunk):
+    """Chunk ``chunk``'s ``(train, eval, select, reset)`` keys: ``split(fold_in(state.key, chunk), 4)``."""
+    return jax.random.split(jax.random.fold_in(_typed(state.key), chunk), 4)
+
+
+def _overlapped(state: State, bank: TerrainBank, *, config: CurriculumConfig, harness: Harness,
+                terrain: Any = None) -> State:
+    """One step of the overlapped loop (:func:`step` with ``config.overlap``)."""
+    if harness.train_evaluate is None:
+        raise ValueError("CurriculumConfig.overlap needs a harness with train_evaluate (the walker's on tiles)")
+    if terrain is None:
+        terrain = _current_terrain(bank, state.terrain, harness)
+    pending = state.pending
+    train_key, _, _, reset_key = _chunk_keys(state, state.chunk + pending.astype(jnp.int32))
+    _, eval_key, select_key, _ = _chunk_keys(state, state.chunk)
+    policy = _restarted(state, reset_key, terrain, harness)
+    trained, fitness = harness.train_evaluate(policy, train_key, terrain, eval_key)
+    evaluated = _evaluated(state, policy, fitness, bank, select_key, config)
+    stays = ~evaluated.done & ~evaluated.restart  # the chunk just trained was trained on the right terrain
+    started = state._replace(policy=trained, restart=jnp.zeros((), bool), pending=jnp.ones((), bool))
+    moved = evaluated._replace(policy=_where_policy(harness, stays, trained, policy), pending=stays)
+    new = _where_tree(pending, moved._replace(policy=None), started._replace(policy=None))
+    return _kept(state, new._replace(policy=_where_policy(harness, pending, moved.policy, started.policy)), harness)
 
 
 def _chunk(state: State, bank: TerrainBank, terrain: Any = None, *, config: CurriculumConfig,
@@ -331,6 +391,8 @@ def run_trials(states: State, bank: TerrainBank, num_chunks: jax.Array, *, confi
                harness: Harness) -> State:
     """Up to ``num_chunks`` chunks of every trial ([T]-batched ``states``), all trials in one vmapped step per
     chunk; stops early once every trial is done. ``num_chunks`` may be traced (no re-compile per value). Pure.
+    With ``config.overlap``: steps until every running trial has done ``num_chunks`` chunks more than the least
+    advanced one had (a trial with fewer terrain switches may do a few more).
 
     With ``harness.layout`` every chunk first lays out the T trials' current terrains (``bank.heightmaps
     [states.terrain]`` [T, H, W] -> one terrain pytree, e.g. a bank of T tiles) and trial i trains and is evaluated
@@ -343,9 +405,14 @@ def run_trials(states: State, bank: TerrainBank, num_chunks: jax.Array, *, confi
             terrain, axes = harness.layout(bank.heightmaps[s.terrain])
             return jax.vmap(one, in_axes=(0, None, axes))(s, bank, terrain)
 
+    # overlap: a trial's step does not always finish a chunk (a terrain switch costs one step more), so the loop
+    # runs until every running trial has done num_chunks more (at most 2 num_chunks + 1 steps)
+    target = jnp.min(jnp.where(states.done, jnp.iinfo(jnp.int32).max, states.chunk)) + num_chunks
+    limit = 2 * num_chunks + 1 if config.overlap else num_chunks
+
     def cond(carry):
         i, s = carry
-        return (i < num_chunks) & ~jnp.all(s.done)
+        return (i < limit) & jnp.any(~s.done & (s.chunk < target))
 
     def body(carry):
         i, s = carry

@@ -139,10 +139,32 @@ def walker_harness(env, ppo: rl.PPOConfig, config: CurriculumConfig) -> Harness:
     def reset(state: rl.TrainState, key, terrain):
         return rl.reset_envs(state, key, spread(terrain), env=env, config=ppo)
 
+    def train_evaluate(state: rl.TrainState, key, terrain, eval_key):
+        """``train`` with ``evaluate``'s walks of the starting policy riding along (``rl.ride_updates``), then
+        those still walking walk on alone (:func:`finish_walks`): ``(train(...), evaluate(state, eval_key, ...))``
+        in ``updates x num_unrolls x unroll_length`` shared physics steps plus the rest of the longest walk."""
+        params = (state.params, state.normaliser)
+        world, inner = _walk_tiles(terrain, protocol.attempts, protocol.headings)
+        riders = jax.vmap(env.reset, in_axes=(0, inner))(_walk_keys(eval_key, protocol.attempts,
+                                                                    protocol.headings), world)
+        ride = rl.Ride(act=jax.vmap(lambda obs: act(params, obs)), terrains=world, record=_record_ride)
+        zeros = jnp.zeros((protocol.attempts,), jnp.float32)
+        state = state._replace(key=jax.random.key_data(key) if jnp.issubdtype(key.dtype, jax.dtypes.prng_key)
+                               else key)
+        state, riders, (ended, final), _ = rl.ride_updates(state, spread(terrain), riders, ride, (zeros > 0, zeros),
+                                                           env=env, config=ppo, num_updates=updates)
+        d = finish_walks(env, act, terrain, riders, ended, final, params, protocol.attempts, protocol.headings,
+                         ride_steps=updates * ppo.num_unrolls * ppo.unroll_length)
+        return state, difficulty.aggregate(d[None], protocol)[0]
+
     if not env.tiles:
+        if config.overlap:
+            raise ValueError("CurriculumConfig.overlap needs a tiled walker (walker_env(..., tiles=trials x "
+                             "headings)): its evaluation walks share the PPO envs' physics calls on their tiles")
         return Harness(train=train, evaluate=evaluate, reset=reset)
     return Harness(train=train, evaluate=evaluate, reset=reset, layout=tile_layout(env, protocol.headings),
-                   where=lambda pred, a, b: select_policy(env, pred, a, b))
+                   where=lambda pred, a, b: select_policy(env, pred, a, b),
+                   train_evaluate=train_evaluate if config.overlap else None)
 
 
 def tile_layout(env, headings: int = 1):
@@ -210,20 +232,78 @@ def tile_distances(env, policy, tile, key, attempts: int, policy_params=None, he
     return walks(tile.bank.data, jnp.asarray(tile.index, jnp.int32), key, params)
 
 
-def _tile_walks(env, act, attempts: int, headings: int, data, index, keys, params, params_axes, steps: bool = False):
-    """``[B, attempts]`` distances of ``attempts`` walks of ``act(params_b, obs)`` on the bank ``data``: trial b's
-    attempt a on tile ``index[b] + a // (attempts // headings)``, keyed ``split(keys[b], (headings, attempts //
-    headings))`` flattened (for one heading ``split(keys[b], (1, attempts))[0]``, as before headings existed);
-    ``params_axes``: vmap axes of ``params`` over B (None: shared). ``steps``: also return the loop's iterations
-    ([] int32: the sequential env steps until every walk ended, at most the episode length)."""
+def _walk_keys(key, attempts: int, headings: int) -> jax.Array:
+    """``[attempts]`` reset keys of one evaluation: ``split(key, (headings, attempts // headings))`` flattened."""
+    return jax.random.split(key, (headings, attempts // headings)).reshape(attempts)
+
+
+def _walk_tiles(tile: Tile, attempts: int, headings: int):
+    """``(world, in_axes)``: the tiles of one trial's ``attempts`` walks, ``tile`` itself (shared, in_axes None) for
+    one heading, else walk a on ``tile.index + a // (attempts // headings)`` (``TILE_AXES``)."""
+    if headings == 1:
+        return tile, None
     per = attempts // headings
-    reset_keys = jax.vmap(lambda k: jax.random.split(k, (headings, per)).reshape(attempts))(keys)
-    if headings == 1:  # every walk of a trial on its one tile
-        world, inner = Tile(TileBank(data), index), None
-    else:
-        world, inner = Tile(TileBank(data), index[:, None] + jnp.arange(attempts, dtype=jnp.int32)[None] // per), \
-            TILE_AXES
-    reset = jax.vmap(jax.vmap(env.reset, in_axes=(0, inner)), in_axes=(0, TILE_AXES))
+    return Tile(tile.bank, tile.index + jnp.arange(attempts, dtype=jnp.int32) // per), TILE_AXES
+
+
+def _record_walks(ended, final, failed, distance, done):
+    """After a step of walks (all [..., R]): ``(ended, final)``, a walk's distance (0 if it failed) frozen at the
+    step that ended it."""
+    return ended | (done > 0), jnp.where(ended, final, jnp.where(failed > 0, 0.0, distance))
+
+
+def _record_ride(carry, states, start: int):
+    """``rl.Ride.record`` of evaluation walks: :func:`_record_walks` of rows ``start ..`` (the riders)."""
+    return _record_walks(*carry, states.failed[start:], states.distance[start:], states.done[start:])
+
+
+def finish_walks(env, act, tile: Tile, riders, ended, final, params, attempts: int, headings: int = 1,
+                 ride_steps: int = 0) -> jax.Array:
+    """``[attempts]`` distances of one trial's evaluation walks that rode ``ride_steps`` steps along PPO
+    (``riders``: their env states [attempts], ``ended`` / ``final`` [attempts] their record so far): the walks not
+    yet ended walk on (every walk steps, as in :func:`tile_distances`) until all have ended or the episode limit.
+    Under ``jax.vmap`` over trials ONE loop runs for all trials' walks (a custom batching rule, as
+    :func:`tile_distances`'s). So the distances are those of :func:`tile_distances` with the same key."""
+
+    def one(per_env, x):  # a trial axis of size 1 on the per-env leaves
+        return jax.tree.map(lambda p, v: v[None] if p else v, per_env, x)
+
+    @jax.custom_batching.custom_vmap
+    def walk_on(data, index, riders, ended, final, params):
+        riders = one(rl.ppo.per_env_mask(env, Tile(TileBank(data), index)), riders)
+        carry = (jnp.int32(ride_steps), riders, ended[None], final[None])
+        return _walk_loop(env, act, _batch_tiles(data, index[None], attempts, headings), params, None, carry)[3][0]
+
+    @walk_on.def_vmap
+    def walk_on_batched(axis_size, in_batched, data, index, riders, ended, final, params):
+        data_b, index_b, riders_b, ended_b, final_b, params_b = in_batched
+        if data_b:
+            raise ValueError("finish_walks under vmap: the tile bank must be shared (in_axes TILE_AXES)")
+        per_env = rl.ppo.per_env_mask(env, Tile(TileBank(data), index[0] if index_b else index))
+        grow = lambda b, x: x if b else jnp.broadcast_to(x, (axis_size,) + x.shape)  # noqa: E731
+        riders = jax.tree.map(lambda p, b, x: grow(b, x) if p else x, per_env, riders_b, riders)
+        index, ended, final = grow(index_b, index), grow(ended_b, ended), grow(final_b, final)
+        axes = jax.tree.map(lambda b: 0 if b else None, params_b)
+        out = _walk_loop(env, act, _batch_tiles(data, index, attempts, headings), params, axes,
+                         (jnp.int32(ride_steps), riders, ended, final))
+        return out[3], True
+
+    return walk_on(tile.bank.data, jnp.asarray(tile.index, jnp.int32), riders, ended, final, params)
+
+
+def _batch_tiles(data, index, attempts: int, headings: int):
+    """``(world, inner in_axes)`` of B trials' walks (``index`` [B]): one tile per trial for one heading, else walk a
+    of trial b on ``index[b] + a // (attempts // headings)``."""
+    if headings == 1:
+        return Tile(TileBank(data), index), None
+    per = attempts // headings
+    return Tile(TileBank(data), index[:, None] + jnp.arange(attempts, dtype=jnp.int32)[None] // per), TILE_AXES
+
+
+def _walk_loop(env, act, world_inner, params, params_axes, carry):
+    """The walks' loop: ``carry = (t, states [B, R], ended [B, R], final [B, R])`` stepped (trial b's walks on
+    ``world`` with vmap axes ``inner`` over R) until every walk has ended or ``t`` reaches the episode limit."""
+    world, inner = world_inner
     step = jax.vmap(jax.vmap(env.step, in_axes=(0, 0, inner)), in_axes=(0, 0, TILE_AXES))
     policy = jax.vmap(jax.vmap(act, in_axes=(None, 0)), in_axes=(params_axes, 0))
     horizon = env.config.episode_length
@@ -235,12 +315,23 @@ def _tile_walks(env, act, attempts: int, headings: int, data, index, keys, param
     def body(carry):
         t, state, ended, final = carry
         state = step(state, policy(params, state.obs), world)
-        final = jnp.where(ended, final, jnp.where(state.failed > 0, 0.0, state.distance))
-        return t + 1, state, ended | (state.done > 0), final
+        return (t + 1, state) + _record_walks(ended, final, state.failed, state.distance, state.done)
 
+    return jax.lax.while_loop(cond, body, carry)
+
+
+def _tile_walks(env, act, attempts: int, headings: int, data, index, keys, params, params_axes, steps: bool = False):
+    """``[B, attempts]`` distances of ``attempts`` walks of ``act(params_b, obs)`` on the bank ``data``: trial b's
+    attempt a on tile ``index[b] + a // (attempts // headings)``, keyed ``split(keys[b], (headings, attempts //
+    headings))`` flattened (for one heading ``split(keys[b], (1, attempts))[0]``, as before headings existed);
+    ``params_axes``: vmap axes of ``params`` over B (None: shared). ``steps``: also return the loop's iterations
+    ([] int32: the sequential env steps until every walk ended, at most the episode length)."""
+    reset_keys = jax.vmap(lambda k: _walk_keys(k, attempts, headings))(keys)
+    world, inner = _batch_tiles(data, index, attempts, headings)
+    reset = jax.vmap(jax.vmap(env.reset, in_axes=(0, inner)), in_axes=(0, TILE_AXES))
     zeros = jnp.zeros(reset_keys.shape[:2], jnp.float32)
     carry = (jnp.int32(0), reset(reset_keys, world), zeros > 0, zeros)
-    t, _, _, final = jax.lax.while_loop(cond, body, carry)
+    t, _, _, final = _walk_loop(env, act, (world, inner), params, params_axes, carry)
     return (final, t) if steps else final
 
 
