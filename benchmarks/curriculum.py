@@ -1,7 +1,7 @@
 """Experiment 2's costs on the GPU machine: a curriculum chunk, its parts, and bare PPO, in one run.
 
     python benchmarks/curriculum.py [--archive A.npz] [--trials 1,10] [--chunks 2] [--parts]
-        [--num-envs N --num-unrolls U] [--out result.json]
+        [--num-envs N --num-unrolls U] [--overlap off,on] [--start RUN] [--out result.json]
 
 Builds exactly what ``python -m experiments learn --preset gpu-short`` builds (``experiments.learn.setup``: the bank
 of the archive, the base policy, the walker, the compiled block of chunks) and measures, each after its compile (the
@@ -16,6 +16,14 @@ compile seconds are reported too; ``JAX_COMPILATION_CACHE_DIR`` lets a second co
    ended);
 3. ``ppo``: bare PPO (``rl.run_updates``, the curriculum's PPO config, one fixed terrain, the same updates per chunk,
    no evaluation, no curriculum) at T = 1: the peer of the curriculum-overhead ratio (issue 13: >= 0.9x).
+
+``--overlap off,on`` times the block both ways (``CurriculumConfig.overlap``: each chunk's evaluation walks ride
+along the next chunk's PPO steps); with overlap a block of n chunks takes one step more per terrain switch, so
+``s_per_chunk`` is per chunk done (the mean over trials), and ``switches`` counts the switches in the timed chunks.
+``loop_steps`` / ``s_per_step``: the loop's steps in the timed call (from the history: an upper bound by one) and
+the seconds per step, which with the switches of a whole run (``history.csv``) give its time.
+``--start RUN`` starts every block from the checkpoint of a ``learn`` run of the same preset and trial count (e.g.
+the paper run at chunk 550, where terrains change less often than in the first chunks) instead of chunk 0.
 
 Ratios printed: curriculum overhead = block env steps/s at T=1 / bare PPO's; trials at once = block env steps/s at
 the largest T / at T=1 (issue 13: >= 3x for 10 trials). Extrapolated: a paper-budget trial (750 chunks) at T=1
@@ -48,8 +56,8 @@ def timed(fn, *args):
     return out, time.perf_counter() - t0
 
 
-def learn_cfg(args, trials: int) -> dict:
-    cfg = {**learn.PRESETS[args.preset], "seed": 0, "trials": trials}
+def learn_cfg(args, trials: int, overlap: bool = False) -> dict:
+    cfg = {**learn.PRESETS[args.preset], "seed": 0, "trials": trials, "overlap": overlap}
     if args.archive:
         cfg["archive"] = args.archive
     if args.backend and "backend" in cfg:
@@ -65,21 +73,55 @@ def learn_cfg(args, trials: int) -> dict:
     return cfg
 
 
-def measure_block(args, trials: int) -> dict:
+def start_states(folder, states):
+    """``states`` (a learn block's, stripped of env states) replaced by the checkpoint in ``folder`` (a plain run's:
+    with overlap nothing is pending there)."""
+    from jaxterrain import driver
+
+    plain = states._replace(pending=None)
+    restored = driver.restore(Path(folder), like=plain)
+    if restored is None:
+        raise SystemExit(f"--start {folder}: no checkpoint there")
+    return restored[0]._replace(pending=None if states.pending is None else jnp.zeros_like(states.pending))
+
+
+def trial_switches(states, before) -> np.ndarray:
+    """``[T]`` terrain switches decided by the evaluations of each trial's chunks ``before[t] ..`` (the history:
+    chunk c's terrain differs from chunk c + 1's, or the trial ended by switching to a terrain not yet recorded)."""
+    terrain, chunk = np.asarray(states.history.terrain), np.asarray(states.chunk)
+    out = np.zeros(terrain.shape[0], np.int64)
+    for t in range(terrain.shape[0]):
+        seq = list(terrain[t, before[t]:chunk[t]]) + [int(np.asarray(states.terrain)[t])]
+        out[t] = sum(a != b for a, b in zip(seq[:-1], seq[1:]))
+    return out
+
+
+def measure_block(args, trials: int, overlap: bool = False) -> dict:
     """The learn command's block at ``trials``: compile seconds, seconds per chunk, env steps/s."""
-    cfg = learn_cfg(args, trials)
+    cfg = learn_cfg(args, trials, overlap)
     config, arch, policy, env = learn.validate(cfg)
     t0 = time.perf_counter()
     bank, block, states = learn.setup(cfg, config, arch, policy, env)
     jax.block_until_ready(states)
     compile_s = time.perf_counter() - t0
+    if args.start:
+        states = start_states(args.start, states)
     states, first = timed(block, states, bank, 1)  # first call: a chunk (and any lazy work)
+    before = np.asarray(states.chunk)
+    pending = np.ones(trials, bool) if states.pending is None else np.asarray(states.pending)
     states, t = timed(block, states, bank, args.chunks)
-    chunks = int(np.max(np.asarray(states.chunk)))
-    per_chunk = t / args.chunks
-    row = {"part": "block (learn)", "trials": trials, "compile_s": compile_s, "first_chunk_s": first,
-           "s_per_chunk": per_chunk, "env_steps_per_s": trials * config.steps_per_chunk / per_chunk,
-           "chunks_done": chunks, "hardest_mean": float(np.mean(np.asarray(states.hardest)))}
+    chunks = np.asarray(states.chunk) - before
+    switched = trial_switches(states, before)
+    # loop steps: one per chunk; with overlap one more per switch and where nothing was pending at the start (the
+    # last step of a trial that switched may fall outside the block: an upper bound)
+    steps = int(np.max(chunks + (switched + ~pending if overlap else 0)))
+    done = float(np.mean(chunks))
+    per_chunk = t / done
+    row = {"part": "block (learn)" + (", overlap" if overlap else ""), "trials": trials, "compile_s": compile_s,
+           "first_chunk_s": first, "s_per_chunk": per_chunk,
+           "env_steps_per_s": trials * config.steps_per_chunk / per_chunk, "chunks_done": done,
+           "chunk_reached": int(np.max(np.asarray(states.chunk))), "switches": int(np.sum(switched)),
+           "loop_steps": steps, "s_per_step": t / steps, "hardest_mean": float(np.mean(np.asarray(states.hardest)))}
     if args.parts:
         row.update(measure_parts(cfg, config, bank, policy, env, trials))
     return row
@@ -160,8 +202,11 @@ def main() -> None:
     p.add_argument("--backend", default=None, help="walker backend, where the learn command has the setting")
     p.add_argument("--parts", action="store_true", help="also time train / evaluate alone (two more compiles)")
     p.add_argument("--skip-ppo", action="store_true", help="skip bare PPO")
+    p.add_argument("--overlap", default="off", help="comma list of off / on: the block without / with overlap")
+    p.add_argument("--start", default=None, help="start the blocks from this learn run's checkpoint")
     p.add_argument("--out", default=None)
     args = p.parse_args()
+    modes = [{"off": False, "on": True}[m] for m in args.overlap.split(",")]
 
     env = common.environment()
     print(f"# curriculum on {env['device']} ({env['date']}, commit {env['commit']}, jax {env['jax']})", flush=True)
@@ -170,9 +215,11 @@ def main() -> None:
         rows.append(measure_ppo(args))
         print(rows[-1], flush=True)
     for trials in [int(t) for t in args.trials.split(",")]:
-        rows.append(measure_block(args, trials))
-        print(rows[-1], flush=True)
-    blocks = {r["trials"]: r for r in rows if r["part"].startswith("block")}
+        for overlap in modes:
+            rows.append(measure_block(args, trials, overlap))
+            print(rows[-1], flush=True)
+    blocks = {r["trials"]: r for r in rows if r["part"] == "block (learn)"}
+    overlapped = {r["trials"]: r for r in rows if r["part"] == "block (learn), overlap"}
     ratios = {}
     if 1 in blocks:
         paper_chunks = learn.PRESETS["paper"]["max_epochs"] // learn.PRESETS["paper"]["epochs_per_chunk"]
@@ -183,8 +230,15 @@ def main() -> None:
         if big > 1:
             ratios[f"trials_{big}_vs_1"] = blocks[big]["env_steps_per_s"] / blocks[1]["env_steps_per_s"]
             ratios[f"paper_treatment_minutes_T{big}"] = blocks[big]["s_per_chunk"] * paper_chunks / 60
+    paper_chunks = learn.PRESETS["paper"]["max_epochs"] // learn.PRESETS["paper"]["epochs_per_chunk"]
+    for trials, row in overlapped.items():
+        ratios[f"overlap_paper_minutes_T{trials}"] = row["s_per_chunk"] * paper_chunks / 60
+        if trials in blocks:
+            ratios[f"overlap_speedup_T{trials}"] = blocks[trials]["s_per_chunk"] / row["s_per_chunk"]
     print()
-    cols = ["part", "trials", "compile_s", "s_per_chunk", "env_steps_per_s", "train_s_per_chunk",
+    cols = ["part", "trials", "compile_s", "s_per_chunk", "env_steps_per_s", "chunks_done", "switches", "loop_steps",
+            "s_per_step",
+            "train_s_per_chunk",
             "eval_s_per_chunk", "train_seq_steps", "eval_seq_steps", "train_compile_s", "eval_compile_s"]
     print(common.markdown_table(rows, cols))
     print(ratios, flush=True)

@@ -64,7 +64,8 @@ _PAPER = dict(archive=CPPN_ARCHIVE, curriculum="map", trials=10, descriptors=["r
               gp_evaluation="final", removal_margin=0.05, removal_ties="nearer", credit="threshold",
               distance_origin="origin", roughness_stride=5, max_observations=None, num_envs=500, unroll_length=10,
               num_unrolls=8, num_minibatches=8, update_epochs=8, learning_rate=3e-4, episode_length=1000,
-              chunks_per_call=25, fast_compile=False, backend="auto", healthy_reward=None, update_normaliser=True)
+              chunks_per_call=25, fast_compile=False, backend="auto", healthy_reward=None, update_normaliser=True,
+              overlap=False)
 PRESETS: dict[str, dict] = {
     "paper": _PAPER,
     "gpu-short": {**_PAPER, "max_epochs": 3000},
@@ -105,9 +106,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def add_fine_tuning_arguments(parser: argparse.ArgumentParser, scope: str = "") -> None:
-    """``--freeze-normaliser``, ``--healthy-reward`` and ``--max-evals`` (config ``update_normaliser`` /
-    ``healthy_reward`` / ``max_evals``, read back by :func:`fine_tuning_overrides`), shared with ``curriculum``
-    (``scope`` is added to the help, e.g. ", in every treatment")."""
+    """``--freeze-normaliser``, ``--healthy-reward``, ``--max-evals`` and ``--overlap`` (config
+    ``update_normaliser`` / ``healthy_reward`` / ``max_evals`` / ``overlap``, read back by
+    :func:`fine_tuning_overrides`), shared with ``curriculum`` (``scope`` is added to the help, e.g. ", in every
+    treatment")."""
     parser.add_argument("--freeze-normaliser", dest="update_normaliser", action="store_const", const=False,
                         default=None, help=f"keep the base policy's observation statistics fixed during fine-tuning"
                                            f"{scope} (default: they keep merging the fine-tuning data, as brax's PPO)")
@@ -118,12 +120,16 @@ def add_fine_tuning_arguments(parser: argparse.ArgumentParser, scope: str = "") 
                         help=f"evaluations (chunks) spent on one terrain before it is left anyway, >= 1{scope} "
                              f"(default: the paper's 100 in every preset; gpu-short keeps it, so one terrain that "
                              f"never reaches the threshold can take all 75 of its chunks)")
+    parser.add_argument("--overlap", action="store_const", const=True, default=None,
+                        help=f"evaluate each chunk's policy while the next chunk trains, in the same physics calls"
+                             f"{scope} (the same curriculum; the walker on one tile per trial, on either backend; "
+                             f"CurriculumConfig.overlap)")
 
 
 def fine_tuning_overrides(args) -> dict:
     """The config values of :func:`add_fine_tuning_arguments`' flags (None = not given)."""
     return dict(healthy_reward=args.healthy_reward, update_normaliser=args.update_normaliser,
-                max_evals=args.max_evals)
+                max_evals=args.max_evals, overlap=args.overlap)
 
 
 def overrides(args) -> dict:
@@ -243,12 +249,15 @@ def physics_of(cfg: dict) -> str:
 
 def walker_layout(cfg: dict) -> dict:
     """The walker's ``backend`` / ``tiles`` / ``worlds`` of a learn config (a config saved before ``--backend``
-    existed runs on "jax"): warp walks on one tile per trial with contact buffers for every env stepped at once
-    (``trials x max(num_envs, attempts)``: the PPO envs, then the evaluation walks). :class:`BadInput` for an
-    unknown backend, or warp where MuJoCo Warp does not import."""
+    existed runs on "jax"): warp walks on one tile per trial (per heading) with contact buffers for every env stepped
+    at once (``trials x max(num_envs, attempts)``: the PPO envs, then the evaluation walks; with ``overlap``
+    ``trials x (num_envs + attempts)``, stepped together); jax on tiles too with ``overlap``. :class:`BadInput` for
+    an unknown backend, or warp where MuJoCo Warp does not import."""
     backend = physics_of(cfg)
+    trials, headings = int(cfg["trials"]), int(cfg.get("headings") or 1)
+    overlap = bool(cfg.get("overlap", False))  # the evaluation walks ride along PPO's envs on tiles
     if backend == "jax":
-        return {}
+        return dict(tiles=trials * headings) if overlap else {}
     if backend != "warp":
         raise BadInput(f"--backend must be jax or warp, got {backend!r}")
     from jaxterrain.walker import warp_available
@@ -256,9 +265,9 @@ def walker_layout(cfg: dict) -> dict:
     ok, why = warp_available()
     if not ok:
         raise BadInput(f"--backend warp: {why}")
-    trials, headings = int(cfg["trials"]), int(cfg.get("headings") or 1)
+    envs, attempts = int(cfg["num_envs"]), int(cfg["attempts"])
     return dict(backend="warp", tiles=trials * headings,
-                worlds=trials * max(int(cfg["num_envs"]), int(cfg["attempts"])))
+                worlds=trials * (envs + attempts if overlap else max(envs, attempts)))
 
 
 def validate(cfg: dict):
