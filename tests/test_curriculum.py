@@ -735,3 +735,28 @@ def test_a_warp_checkpoint_is_reported_through_the_mjx_layout(tmp_path, monkeypa
     cfg = json.loads((run / "config.json").read_text())
     (run / "config.json").write_text(json.dumps({**cfg, "backend": "auto"}))
     assert cli("learn", "--resume", str(run)) == 2  # auto -> jax here; the checkpoint was written on warp
+
+
+@pytest.mark.slow
+def test_learn_overlap_smoke_makes_the_plain_choices_and_resumes(tmp_path, learn_smoke):
+    """``learn --overlap`` (MJX on one tile per trial, the evaluation walks riding along PPO): stopped after its
+    first block and resumed, it ends with the uninterrupted plain run's terrain sequences and epochs (evaluations up
+    to the float rounding of other batches; each block restarts the envs at another chunk, so the two runs' PPO
+    data differ after the first block); config.json keeps overlap. Two more smoke programs: minutes of CPU."""
+    import csv
+
+    archive, whole = learn_smoke
+    out = tmp_path / "over"
+    assert cli("learn", "--preset", "smoke", "--archive", archive, "--overlap", "--out", str(out),
+               "--time-limit", "1e-6") == 3
+    assert json.loads((out / "config.json").read_text())["overlap"] is True
+    assert cli("learn", "--resume", str(out)) == 0
+
+    def rows(folder):
+        with open(folder / "history.csv") as f:
+            return list(csv.DictReader(f))
+
+    a, b = rows(whole), rows(out)
+    assert [(r["trial"], r["chunk"], r["epoch"], r["terrain"]) for r in a] == \
+        [(r["trial"], r["chunk"], r["epoch"], r["terrain"]) for r in b]
+    np.testing.assert_allclose([float(r["evaluation"]) for r in b], [float(r["evaluation"]) for r in a], atol=0.05)

@@ -162,17 +162,20 @@ def test_no_retrace_on_tiles_when_the_terrain_changes():
 WALK = TerrainScale(cell_size=0.2, height=1.0)  # 16 x 16: a 3 m square, 2 m track
 
 
-def _walker_run(backend: str, trials: int, tiles: int, chunks: int = 1, episode_length: int = 20, headings: int = 1):
+def _walker_run(backend: str, trials: int, tiles: int, chunks: int = 1, episode_length: int = 20, headings: int = 1,
+                selector: str = "map", grid: int = 2, relief: float = 0.5, **kw):
     """``chunks`` chunks of ``trials`` trials of the real walker harness (base policy, 2 envs, 2 walks of
-    ``episode_length`` steps per evaluation, in ``headings`` headings) on a 2 x 2 toy bank of 16 x 16 terrains:
-    (start states, end states). ``tiles`` counts tiles, ``trials x headings`` for every trial on its own."""
+    ``episode_length`` steps per evaluation, in ``headings`` headings) on a ``grid`` x ``grid`` toy bank of 16 x 16
+    terrains (heights x ``relief``): (start states, end states). ``tiles`` counts tiles, ``trials x headings`` for
+    every trial on its own. ``kw``: more CurriculumConfig fields (``overlap=True``: Warp worlds for envs + walks)."""
     policy = W.load_policy(None)
-    config = small("map", num_envs=2, attempts=2, best=1, headings=headings, max_evals=2, update_epochs=1)
-    env = W.walker_env(policy, SHAPE, WALK, episode_length, backend=backend, tiles=tiles,
-                       worlds=trials * max(config.ppo.num_envs, config.attempts))
+    config = small(selector, **{**dict(num_envs=2, attempts=2, best=1, headings=headings, max_evals=2,
+                                       update_epochs=1), **kw})
+    walks = config.ppo.num_envs + config.attempts if config.overlap else max(config.ppo.num_envs, config.attempts)
+    env = W.walker_env(policy, SHAPE, WALK, episode_length, backend=backend, tiles=tiles, worlds=trials * walks)
     ppo = config.ppo_config(policy.config)
     harness = W.walker_harness(env, ppo, config)
-    bank = toy_bank(2)._replace(heightmaps=toy_bank(2).heightmaps * 0.5)  # steps of up to 0.19 m
+    bank = toy_bank(grid)._replace(heightmaps=toy_bank(grid).heightmaps * relief)  # steps of up to 0.19 m
     start = W.start_state(env, ppo, policy, SHAPE)
     keys = jax.random.split(jax.random.key(3), trials)
     states = jax.jit(lambda k, b, s: C.init_trials(k, b, s, config=config, harness=harness))(keys, bank, start)
@@ -220,6 +223,31 @@ def test_jax_walker_curriculum_on_one_tile_equals_the_classic_one(headings):
         np.testing.assert_allclose(np.asarray(a), np.asarray(b), atol=1e-4)
 
 
+@pytest.mark.parametrize("backend", ["jax", pytest.param("warp", marks=pytest.mark.skipif(
+    not WARP_OK, reason=WARP_WHY or "warp available"))])
+def test_overlapped_walker_harness_makes_the_plain_choices(backend):
+    """Two trials, 2 headings, 6 chunks of the random selector on a 3 x 3 bank, a terrain left at fitness 0.085 (so
+    some are left after one evaluation and some stay for two): with ``overlap`` the evaluation walks ride along the
+    next chunk's PPO envs (``rl.ride_updates``, the rest walked on by ``finish_walks``), and the trials take the
+    same terrains in the same order with the same records; evaluations and parameters agree up to the float
+    rounding of the larger batches (the classic loop's walks step 2 + 2 envs, not 4 + 4)."""
+    kw = dict(selector="random", grid=3, relief=0.3, threshold=0.085, max_epochs=6, headings=2)
+    _, plain = _walker_run(backend, trials=2, tiles=4, chunks=100, **kw)
+    _, over = _walker_run(backend, trials=2, tiles=4, chunks=100, overlap=True, **kw)
+    terrain = np.asarray(plain.history.terrain)
+    assert np.all(np.asarray(plain.done)) and np.all(np.asarray(over.done)) and terrain.min() >= 0
+    assert np.sum(terrain[:, 1:] != terrain[:, :-1]) >= 4 and np.sum(terrain[:, 1:] == terrain[:, :-1]) >= 2
+    for name in ("terrain", "epoch", "hardest"):
+        np.testing.assert_array_equal(np.asarray(getattr(over.history, name)), np.asarray(getattr(plain.history,
+                                                                                                 name)))
+    np.testing.assert_allclose(np.asarray(over.history.evaluation), np.asarray(plain.history.evaluation),
+                               atol=2e-4)
+    assert np.all(np.asarray(over.history.evaluation) > 0)
+    for a, b in zip(jax.tree.leaves(over.policy.params), jax.tree.leaves(plain.policy.params)):
+        np.testing.assert_allclose(np.asarray(a), np.asarray(b), atol=1e-4)
+    assert not np.any(np.asarray(over.pending))
+
+
 # ---------------------------------------------------------------------------------------------------------------
 # experiments learn --backend
 # ---------------------------------------------------------------------------------------------------------------
@@ -250,9 +278,9 @@ def cli(*argv):
 
 
 def test_learn_backend_builds_the_walker_and_refuses_a_missing_warp(tmp_path, tiny_archive, monkeypatch, capsys):
-    """--backend jax (also a config saved without the key): the classic walker; warp: one tile per trial and
-    contact buffers for trials x max(num_envs, attempts) envs; warp where it does not import: one line, exit 2,
-    nothing left behind."""
+    """--backend jax (also a config saved without the key): the classic walker, with --overlap one tile per trial;
+    warp: one tile per trial and contact buffers for trials x max(num_envs, attempts) envs (num_envs + attempts with
+    --overlap); warp where it does not import: one line, exit 2, nothing left behind."""
     from experiments import learn
 
     cfg = {**learn.PRESETS["smoke"], "archive": tiny_archive, "seed": 0}
@@ -263,9 +291,13 @@ def test_learn_backend_builds_the_walker_and_refuses_a_missing_warp(tmp_path, ti
     monkeypatch.undo()
     old = {k: v for k, v in cfg.items() if k != "backend"}
     assert learn.validate(old)[3].config == learn.validate(cfg)[3].config
+    config, _, _, env = learn.validate({**cfg, "overlap": True, "trials": 3})  # MJX on tiles for the riding walks
+    assert config.overlap and (env.config.backend, env.tiles) == ("jax", 3)
     if WARP_OK:
         env = learn.validate({**cfg, "backend": "warp", "trials": 3})[3]
         assert (env.config.backend, env.tiles, env.config.warp_worlds) == ("warp", 3, 3 * 4)  # 4 envs > 2 walks
+        env = learn.validate({**cfg, "backend": "warp", "trials": 3, "overlap": True})[3]
+        assert env.config.warp_worlds == 3 * (4 + 2)  # the walks step with the PPO envs
     import jaxterrain.walker as walker_pkg
 
     monkeypatch.setattr(walker_pkg, "warp_available", lambda: (False, "no warp here"))
