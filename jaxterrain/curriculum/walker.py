@@ -24,6 +24,11 @@ Warp worlds for the envs stepped together, then the harness lays the trials' ter
 Every chunk, :func:`jaxterrain.curriculum.run_trials` gathers the T trials' current terrains (``[T, H, W]``) into
 ONE bank of T tiles outside the trial vmap; trial i trains, restarts and is evaluated on ``bank.at(i)`` (its PPO envs
 and its ``attempts`` walks all on tile i); policy states are merged with ``env.select`` (``Harness.where``).
+
+With ``CurriculumConfig.overlap`` (tiles only) the harness also has ``train_evaluate``: the evaluation's walks of the
+policy a chunk starts from ride along that chunk's PPO envs (``rl.ride_updates``: ``num_envs + attempts`` envs per
+trial in each physics call, so Warp needs ``worlds = T * (num_envs + attempts)``), and those still walking after it
+walk on alone (:func:`finish_walks`).
 """
 
 from __future__ import annotations
@@ -123,10 +128,13 @@ def walker_harness(env, ppo: rl.PPOConfig, config: CurriculumConfig) -> Harness:
             return Tile(terrain.bank, terrain.index + heading)
         return difficulty.rotate_headings(terrain[None], protocol.headings)[heading]
 
+    def keyed(state: rl.TrainState, key) -> rl.TrainState:
+        """``state`` with PPO's stream set to ``key`` (raw [2] uint32)."""
+        return state._replace(key=jax.random.key_data(key) if jnp.issubdtype(key.dtype, jax.dtypes.prng_key)
+                              else key)
+
     def train(state: rl.TrainState, key, terrain):
-        state = state._replace(key=jax.random.key_data(key) if jnp.issubdtype(key.dtype, jax.dtypes.prng_key)
-                               else key)
-        return rl.run_updates(state, spread(terrain), env=env, config=ppo, num_updates=updates)[0]
+        return rl.run_updates(keyed(state, key), spread(terrain), env=env, config=ppo, num_updates=updates)[0]
 
     def evaluate(state: rl.TrainState, key, terrain):
         params = (state.params, state.normaliser)
@@ -149,10 +157,9 @@ def walker_harness(env, ppo: rl.PPOConfig, config: CurriculumConfig) -> Harness:
                                                                     protocol.headings), world)
         ride = rl.Ride(act=jax.vmap(lambda obs: act(params, obs)), terrains=world, record=_record_ride)
         zeros = jnp.zeros((protocol.attempts,), jnp.float32)
-        state = state._replace(key=jax.random.key_data(key) if jnp.issubdtype(key.dtype, jax.dtypes.prng_key)
-                               else key)
-        state, riders, (ended, final), _ = rl.ride_updates(state, spread(terrain), riders, ride, (zeros > 0, zeros),
-                                                           env=env, config=ppo, num_updates=updates)
+        state, riders, (ended, final), _ = rl.ride_updates(keyed(state, key), spread(terrain), riders, ride,
+                                                           (zeros > 0, zeros), env=env, config=ppo,
+                                                           num_updates=updates)
         d = finish_walks(env, act, terrain, riders, ended, final, params, protocol.attempts, protocol.headings,
                          ride_steps=updates * ppo.num_unrolls * ppo.unroll_length)
         return state, difficulty.aggregate(d[None], protocol)[0]
