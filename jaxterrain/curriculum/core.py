@@ -28,6 +28,10 @@ Terrain layouts. By default every trial indexes the bank inside its own (vmapped
 one small bank rebuilt every chunk; ``step`` on a single trial still works (``layout(heightmaps[terrain][None])``,
 trial 0 of it). ``Harness.where`` merges two policy states where a per-leaf ``jnp.where`` would not do (the
 walker's env states under MuJoCo Warp).
+
+Overlap (``config.overlap``, a harness with ``train_evaluate``): a step trains the next chunk while the pending
+chunk's evaluation runs in the same physics calls; the curriculum is the plain one, a terrain switch costing one
+step more (:func:`step`). ``State.pending`` marks a trained chunk whose evaluation is still to come.
 """
 
 from __future__ import annotations
