@@ -259,6 +259,31 @@ def test_no_recompile_when_terrains_change():
         step(state, jax.random.PRNGKey(5), jnp.zeros((n + 1, 4, 4)))
 
 
+def test_riders_step_with_ppo_and_leave_its_update_unchanged():
+    """``rl.ride_updates``: 3 riders (their own terrains, a fixed policy) stepped in PPO's batched steps for 2
+    updates: PPO's state and metrics equal ``run_updates``' exactly; the riders took every one of the 2 x 2 x 8 steps
+    (never reset), as stepping them alone does; ``record`` saw each step with the riders' rows."""
+    env = PointEnv()
+    state = rl.init(jax.random.PRNGKey(0), env, CFG, TERRAIN)
+    ride_terrains = jnp.arange(3, dtype=jnp.float32)[:, None, None] + jnp.zeros((3, 4, 4))
+    riders = jax.vmap(env.reset)(jax.random.split(jax.random.PRNGKey(9), 3), ride_terrains)
+    act = lambda obs: jnp.clip(obs[:, 1:2], -1.0, 1.0)  # noqa: E731 - move toward the target
+    record = lambda c, s, start: c + s.pos[start:]  # noqa: E731 - the sum of the riders' positions
+    ride = rl.Ride(act=act, terrains=ride_terrains, record=record)
+    run = jax.jit(lambda s, r, c: rl.ride_updates(s, TERRAIN, r, ride, c, env=env, config=CFG, num_updates=2))
+    out, riders_out, total, metrics = run(state, riders, jnp.zeros(3))
+    plain, plain_metrics = jax.jit(lambda s: rl.run_updates(s, TERRAIN, env=env, config=CFG, num_updates=2))(state)
+    assert tree_equal(out, plain) and tree_equal(metrics, plain_metrics)
+    steps = 2 * CFG.num_unrolls * CFG.unroll_length
+    alone, pos_sum = riders, jnp.zeros(3)
+    for _ in range(steps):
+        alone = jax.vmap(env.step)(alone, act(alone.obs), ride_terrains)
+        pos_sum = pos_sum + alone.pos
+    assert np.all(np.asarray(riders_out.t) == steps)  # past the 16-step horizon: never reset
+    np.testing.assert_allclose(np.asarray(riders_out.pos), np.asarray(alone.pos), atol=1e-6)
+    np.testing.assert_allclose(np.asarray(total), np.asarray(pos_sum), atol=1e-5)
+
+
 def test_policy_export_and_load(tmp_path, monkeypatch):
     env = PointEnv()
     state = rl.init(jax.random.PRNGKey(0), env, CFG, TERRAIN)
