@@ -244,15 +244,6 @@ def _walk_keys(key, attempts: int, headings: int) -> jax.Array:
     return jax.random.split(key, (headings, attempts // headings)).reshape(attempts)
 
 
-def _walk_tiles(tile: Tile, attempts: int, headings: int):
-    """``(world, in_axes)``: the tiles of one trial's ``attempts`` walks, ``tile`` itself (shared, in_axes None) for
-    one heading, else walk a on ``tile.index + a // (attempts // headings)`` (``TILE_AXES``)."""
-    if headings == 1:
-        return tile, None
-    per = attempts // headings
-    return Tile(tile.bank, tile.index + jnp.arange(attempts, dtype=jnp.int32) // per), TILE_AXES
-
-
 def _record_walks(ended, final, failed, distance, done):
     """After a step of walks (all [..., R]): ``(ended, final)``, a walk's distance (0 if it failed) frozen at the
     step that ended it."""
@@ -279,7 +270,8 @@ def finish_walks(env, act, tile: Tile, riders, ended, final, params, attempts: i
     def walk_on(data, index, riders, ended, final, params):
         riders = one(rl.ppo.per_env_mask(env, Tile(TileBank(data), index)), riders)
         carry = (jnp.int32(ride_steps), riders, ended[None], final[None])
-        return _walk_loop(env, act, _batch_tiles(data, index[None], attempts, headings), params, None, carry)[3][0]
+        return _walk_loop(env, act, _walk_tiles(Tile(TileBank(data), index[None]), attempts, headings), params, None,
+                          carry)[3][0]
 
     @walk_on.def_vmap
     def walk_on_batched(axis_size, in_batched, data, index, riders, ended, final, params):
@@ -291,20 +283,21 @@ def finish_walks(env, act, tile: Tile, riders, ended, final, params, attempts: i
         riders = jax.tree.map(lambda p, b, x: grow(b, x) if p else x, per_env, riders_b, riders)
         index, ended, final = grow(index_b, index), grow(ended_b, ended), grow(final_b, final)
         axes = jax.tree.map(lambda b: 0 if b else None, params_b)
-        out = _walk_loop(env, act, _batch_tiles(data, index, attempts, headings), params, axes,
+        out = _walk_loop(env, act, _walk_tiles(Tile(TileBank(data), index), attempts, headings), params, axes,
                          (jnp.int32(ride_steps), riders, ended, final))
         return out[3], True
 
     return walk_on(tile.bank.data, jnp.asarray(tile.index, jnp.int32), riders, ended, final, params)
 
 
-def _batch_tiles(data, index, attempts: int, headings: int):
-    """``(world, inner in_axes)`` of B trials' walks (``index`` [B]): one tile per trial for one heading, else walk a
-    of trial b on ``index[b] + a // (attempts // headings)``."""
+def _walk_tiles(tile: Tile, attempts: int, headings: int):
+    """``(world, inner in_axes)``: the tiles of the ``attempts`` walks of the trials at ``tile.index`` ([] one trial,
+    [B] B trials): the trial's tile itself for one heading (in_axes None over the walks), else walk a on
+    ``index + a // (attempts // headings)`` (``TILE_AXES``)."""
     if headings == 1:
-        return Tile(TileBank(data), index), None
+        return tile, None
     per = attempts // headings
-    return Tile(TileBank(data), index[:, None] + jnp.arange(attempts, dtype=jnp.int32)[None] // per), TILE_AXES
+    return Tile(tile.bank, tile.index[..., None] + jnp.arange(attempts, dtype=jnp.int32) // per), TILE_AXES
 
 
 def _walk_loop(env, act, world_inner, params, params_axes, carry):
@@ -334,7 +327,7 @@ def _tile_walks(env, act, attempts: int, headings: int, data, index, keys, param
     ``params_axes``: vmap axes of ``params`` over B (None: shared). ``steps``: also return the loop's iterations
     ([] int32: the sequential env steps until every walk ended, at most the episode length)."""
     reset_keys = jax.vmap(lambda k: _walk_keys(k, attempts, headings))(keys)
-    world, inner = _batch_tiles(data, index, attempts, headings)
+    world, inner = _walk_tiles(Tile(TileBank(data), index), attempts, headings)
     reset = jax.vmap(jax.vmap(env.reset, in_axes=(0, inner)), in_axes=(0, TILE_AXES))
     zeros = jnp.zeros(reset_keys.shape[:2], jnp.float32)
     carry = (jnp.int32(0), reset(reset_keys, world), zeros > 0, zeros)

@@ -313,18 +313,20 @@ def _collect(state: TrainState, key, terrains, env, config, rows=None, ride: Opt
     pool_key, unroll_key = jax.random.split(key)
     del key
     pool = _batched_reset(env, pool_key, terrains, n, rows)
-    if ride is None:
-        step_terrains, keep = terrains, jnp.zeros((0,), bool)
+    if ride is None:  # the PPO envs alone: nothing sliced or widened
+        step_terrains, own, widen = terrains, (lambda x: x), (lambda mask: mask)
     else:
         r = state.env_state.obs.shape[0] - n
-        step_terrains, keep = _join_terrains(terrains, axis, ride.terrains, n, r), jnp.zeros((r,), bool)
+        step_terrains = _join_terrains(terrains, axis, ride.terrains, n, r)
+        own = lambda x: x[:n]  # noqa: E731 - the PPO envs' rows
+        widen = lambda mask: jnp.concatenate([mask, jnp.zeros((r,), bool)])  # noqa: E731 - riders never reset
         per_env = per_env_mask(env, _one_terrain(terrains, axis))
         pool = _join_envs(per_env, pool, _part_envs(per_env, state.env_state, n)[1])  # rider rows: never taken
     v_step = jax.vmap(env.step, in_axes=(0, 0, _terrain_axis(step_terrains, pool.obs.shape[0])))
 
     def env_step(carry, step_key):
         env_state, ep, ride_carry = carry
-        obs = env_state.obs[:n]
+        obs = own(env_state.obs)
         loc, scale = nets.policy_apply(config, env.action_size, state.params, state.normaliser, obs)
         if rows is None:
             raw = nets.sample_raw(step_key, loc, scale)
@@ -338,11 +340,11 @@ def _collect(state: TrainState, key, terrains, env, config, rows=None, ride: Opt
         next_state = v_step(env_state, action, step_terrains)
         if ride is not None:
             ride_carry = ride.record(ride_carry, next_state, n)
-        next_obs = next_state.obs[:n]
-        finite = jnp.all(jnp.isfinite(next_obs), axis=-1)
-        reward = jnp.where(jnp.isfinite(next_state.reward[:n]), next_state.reward[:n], 0.0).astype(jnp.float32)
-        done = jnp.maximum(next_state.done[:n].astype(jnp.float32), 1.0 - finite.astype(jnp.float32))
-        trunc = _truncation(next_state)[:n] * finite
+        finite = jnp.all(jnp.isfinite(own(next_state.obs)), axis=-1)
+        reward = own(next_state.reward)
+        reward = jnp.where(jnp.isfinite(reward), reward, 0.0).astype(jnp.float32)
+        done = jnp.maximum(own(next_state.done).astype(jnp.float32), 1.0 - finite.astype(jnp.float32))
+        trunc = own(_truncation(next_state)) * finite
         ret, length = ep.ret + reward, ep.length + 1.0
         ended = done > 0
         ep = EpisodeStats(
@@ -352,12 +354,12 @@ def _collect(state: TrainState, key, terrains, env, config, rows=None, ride: Opt
             last_length=jnp.where(ended, length, ep.last_length),
             count=ep.count + done,
         )
-        next_state = _select_envs(env, jnp.concatenate([ended, keep]), pool, next_state)
+        next_state = _select_envs(env, widen(ended), pool, next_state)
         return (next_state, ep, ride_carry), Transition(obs, raw, logp, reward, done, trunc)
 
     def unroll(carry, unroll_key):
         carry, data = jax.lax.scan(env_step, carry, jax.random.split(unroll_key, config.unroll_length))
-        return carry, (data, carry[0].obs[:n])
+        return carry, (data, own(carry[0].obs))
 
     (env_state, episode, carry), (data, bootstrap_obs) = jax.lax.scan(
         unroll, (state.env_state, state.episode, carry), jax.random.split(unroll_key, config.num_unrolls))
