@@ -53,6 +53,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "docs/results, exp2_G_headings_archive.npz)")
     parser.add_argument("--trials", type=int, default=None)
     parser.add_argument("--max-epochs", type=int, default=None)
+    parser.add_argument("--chunks-per-call", type=int, default=None,
+                        help="chunks per jitted call / checkpoint, in every treatment (learn's)")
     learn.add_fine_tuning_arguments(parser, ", in every treatment")
     parser.add_argument("--baseline", choices=["roughness", "random"], default=None,
                         help="the baseline run on the cppn archive (Figure 7b; default roughness)")
@@ -202,7 +204,7 @@ def main(args) -> int:
     if args.report and args.resume is None:
         raise common.UsageError("--report needs --resume RUN (the run to report on)")
     over = dict(archives=parse_archives(args.archives), trials=args.trials, max_epochs=args.max_epochs,
-                baseline=args.baseline, backend=args.backend, **learn.fine_tuning_overrides(args),
+                chunks_per_call=args.chunks_per_call, baseline=args.baseline, backend=args.backend, **learn.fine_tuning_overrides(args),
                 **common.protocol_overrides(args))
     mesh = common.device_mesh(args.devices)
     folder, cfg = common.setup_run("curriculum", args, PRESETS, "smoke", over)

@@ -430,10 +430,12 @@ def run_treatment(cfg: dict, folder: Path, time_limit_s: float | None = None, de
     t0 = time.perf_counter()
     bank, block, states = setup(cfg, config, arch, policy, env, mesh)
     restored = driver.restore(folder, like=states)
-    done, history = 0, None
+    done, history, before = 0, None, 0.0  # before: wall seconds of the commands that ran it so far
     if restored is not None:
-        states, done, history, _ = restored
-        print(f"resuming at chunk {done} of {config.max_chunks}", flush=True)
+        states, done, history, saved = restored
+        before = float(saved.get("wall_s", 0.0))
+        print(f"resuming at chunk {done} of {config.max_chunks} ({before / 60:.1f} min of wall time so far)",
+              flush=True)
 
     def chunk_fn(s, a, b):
         if not bool(np.all(np.asarray(s.done))):
@@ -443,10 +445,11 @@ def run_treatment(cfg: dict, folder: Path, time_limit_s: float | None = None, de
     states, done, _ = driver.run_chunks(
         chunk_fn, states, total=config.max_chunks, every=int(cfg["chunks_per_call"]), start=done, history=history,
         run_dir=folder, key_metric="hardest", time_limit_s=time_limit_s, desc=desc or cfg["curriculum"],
-        unit="chunk", meta={"config": cfg, "archive_sha256": digest, "backend": physics_of(cfg)})
+        unit="chunk", meta={"config": cfg, "archive_sha256": digest, "backend": physics_of(cfg)},
+        wall_s=before + time.perf_counter() - t0)
     if done < config.max_chunks and not bool(np.all(np.asarray(states.done))):
         return None
-    return write_outputs(folder, cfg, config, bank, states, seconds=time.perf_counter() - t0)
+    return write_outputs(folder, cfg, config, bank, states, seconds=before + time.perf_counter() - t0)
 
 
 PARTIAL = "summary_partial.json"
@@ -486,8 +489,8 @@ def report_treatment(cfg: dict, folder: Path) -> dict | None:
             return jax.random.wrap_key_data(jnp.zeros(data.shape, data.dtype))
         return jnp.zeros(spec.shape, spec.dtype)
 
-    states, done, _, _ = driver.restore(folder, like=jax.tree.map(zeros, shapes))
-    return write_outputs(folder, cfg, config, bank, states, seconds=None, chunks_done=done)
+    states, done, _, saved = driver.restore(folder, like=jax.tree.map(zeros, shapes))
+    return write_outputs(folder, cfg, config, bank, states, seconds=saved.get("wall_s"), chunks_done=done)
 
 
 # ----------------------------------------------------------------------------------------------------------------
@@ -562,7 +565,9 @@ def write_outputs(folder: Path, cfg: dict, config, bank, states, seconds: float 
     """history.csv, sequences.csv, milestones.csv/.md, curve.png and summary.json; returns the summary. With
     ``chunks_done`` (an unfinished run's last checkpoint, :func:`report_treatment`) the summary goes to
     ``summary_partial.json`` with ``"partial": true`` and ``"chunks_done"``, and the curve's title says so; without
-    it, ``summary.json``, and a ``summary_partial.json`` left by an earlier report is removed."""
+    it, ``summary.json``, and a ``summary_partial.json`` left by an earlier report is removed. ``seconds``: the wall
+    time of every command that ran the treatment, summed over resumes (each from its set-up and compilation on; the
+    interpreter's start-up and imports are not in it), None where unknown."""
     import matplotlib
 
     matplotlib.use("Agg")

@@ -260,7 +260,7 @@ def run_chunks(chunk_fn: ChunkFn, state: Any, *, total: int, every: int, start: 
                history: Optional[dict] = None, run_dir: str | os.PathLike | None = None,
                key_metric: Optional[str] = None, time_limit_s: Optional[float] = None,
                progress: bool | Callable[[dict], None] = True, desc: str = "", unit: str = "step",
-               meta: Optional[dict] = None) -> tuple[Any, int, dict]:
+               meta: Optional[dict] = None, wall_s: float = 0.0) -> tuple[Any, int, dict]:
     """Run steps ``[start, total)`` as ``chunk_fn(state, a, b)`` calls of at most ``every`` steps.
 
     Args:
@@ -276,12 +276,17 @@ def run_chunks(chunk_fn: ChunkFn, state: Any, *, total: int, every: int, start: 
       progress: True for a tqdm bar on stderr; a callable receives a dict per chunk (``done``, ``total``,
         ``seconds``, ``steps_per_s`` and the latest value of every metric); False is silent.
       meta: a JSON-serialisable dict stored in every checkpoint (e.g. the run's config).
+      wall_s: seconds of wall time the run had taken before this call (a restored checkpoint's ``meta["wall_s"]``,
+        plus any set-up of this call). Every checkpoint's meta gets ``"wall_s"``: that plus the seconds since this
+        call began, so a run resumed across commands knows its whole wall time.
 
     Returns ``(state, done, history)``; ``done < total`` when the time limit stopped the run.
     """
     for name, value, low in (("total", total, 0), ("every", every, 1), ("start", start, 0)):
         if not isinstance(value, (int, np.integer)) or value < low:
             raise ValueError(f"run_chunks: {name} must be an integer >= {low}; got {value!r}")
+    if not (isinstance(wall_s, (int, float, np.floating)) and math.isfinite(wall_s) and wall_s >= 0):
+        raise ValueError(f"run_chunks: wall_s must be a finite number of seconds >= 0; got {wall_s!r}")
     if time_limit_s is not None and not time_limit_s > 0:
         raise ValueError(f"run_chunks: time_limit_s must be > 0 seconds or None; got {time_limit_s!r}")
     history = {k: list(v) for k, v in (history or {}).items()}
@@ -298,7 +303,8 @@ def run_chunks(chunk_fn: ChunkFn, state: Any, *, total: int, every: int, start: 
             _extend(history, metrics, stop - done)
             seconds = time.perf_counter() - t1
             if run_dir is not None:
-                _checkpoint(Path(run_dir), state, stop, history, meta)
+                _checkpoint(Path(run_dir), state, stop, history,
+                            {**(meta or {}), "wall_s": float(wall_s) + time.perf_counter() - t0})
                 log.write(history, done, stop)
             info = {"done": stop, "total": total, "seconds": seconds, "steps_per_s": (stop - done) / max(seconds, 1e-9),
                     **{k: v[-1] for k, v in history.items() if v}}

@@ -82,6 +82,7 @@ CASES = [
     (["train-base-policy", "--num-envs", "0"], "--num-envs must be an integer >= 1"),
     (["learn", "--max-evals", "0"], "--max-evals must be an integer >= 1"),
     (["curriculum", "--max-evals", "-2"], "--max-evals must be an integer >= 1"),
+    (["curriculum", "--chunks-per-call", "0"], "--chunks-per-call must be an integer >= 1"),
     (["train-base-policy", "--env-steps", "-5"], "--env-steps must be a finite number > 0"),
     (["train-base-policy", "--eval-attempts", "2", "--eval-best", "5"], "--eval-best must be <= --eval-attempts"),
 ]

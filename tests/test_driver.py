@@ -45,7 +45,7 @@ def test_resume_equals_uninterrupted(tmp_path):
                                         meta={"seed": 0})
     assert done_a == 4
     state, done_b, history, meta = driver.restore(run, like=make_state())
-    assert done_b == 4 and meta == {"seed": 0} and history["t"] == [0, 1, 2, 3]
+    assert done_b == 4 and meta.pop("wall_s") >= 0 and meta == {"seed": 0} and history["t"] == [0, 1, 2, 3]
     assert jnp.issubdtype(state.key.dtype, jax.dtypes.prng_key)
     resumed, done_c, hist_c = driver.run_chunks(chunk, state, total=10, every=3, start=done_b, history=history,
                                                 run_dir=run, progress=False)
@@ -73,6 +73,24 @@ def test_time_limit_stops_after_a_chunk(tmp_path):
                                       run_dir=tmp_path, progress=False)
     assert done == 2 and calls == [(0, 2)] and len(hist["x"]) == 2
     assert driver.restore(tmp_path, make_state())[1] == 2
+
+
+def test_wall_time_adds_up_over_resumes(tmp_path):
+    import time
+
+    def slow(state, start, stop):
+        time.sleep(0.05)
+        return chunk(state, start, stop)
+
+    driver.run_chunks(slow, make_state(), total=2, every=1, run_dir=tmp_path, progress=False, wall_s=100.0)
+    state, done, history, meta = driver.restore(tmp_path, make_state())
+    assert 100.1 <= meta["wall_s"] < 150  # the 100 s passed in, then two chunks of >= 0.05 s
+    driver.run_chunks(slow, state, total=3, every=1, start=done, history=history, run_dir=tmp_path,
+                      progress=False, wall_s=meta["wall_s"])
+    assert driver.read_meta(tmp_path)["wall_s"] >= meta["wall_s"] + 0.05
+    for bad in (-1.0, float("nan"), "1"):
+        with pytest.raises(ValueError, match="wall_s must be a finite number of seconds >= 0"):
+            driver.run_chunks(slow, make_state(), total=1, every=1, progress=False, wall_s=bad)
 
 
 def test_time_limit_skips_a_chunk_predicted_to_end_past_it():
