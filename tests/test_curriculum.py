@@ -553,6 +553,34 @@ def test_learn_fine_tuning_knobs_reach_the_walker_and_ppo(tiny_archive):
     assert not config.ppo_config(rl.PPOConfig()).update_normaliser
 
 
+def test_learn_time_limit_counts_set_up_and_compilation(tmp_path, tiny_archive, monkeypatch):
+    """``run_treatment(time_limit_s=T)`` gives the chunk loop what is left of T after its set-up (compilation), so a
+    command under ``timeout`` stops in time. The set-up and the loop are stand-ins: nothing compiles."""
+    import time
+    from types import SimpleNamespace
+
+    from experiments import learn
+    from jaxterrain import driver
+
+    cfg = {**learn.PRESETS["smoke"], "archive": tiny_archive(4, "four.npz")}
+    seen = {}
+
+    def slow_setup(*args, **kwargs):
+        time.sleep(0.5)
+        return None, None, SimpleNamespace(done=np.zeros(2, bool))
+
+    def loop(chunk_fn, states, **kw):
+        seen["limit"] = kw["time_limit_s"]
+        return states, kw["start"], {}
+
+    monkeypatch.setattr(learn, "setup", slow_setup)
+    monkeypatch.setattr(driver, "run_chunks", loop)
+    assert learn.run_treatment(cfg, tmp_path / "run", time_limit_s=10.0) is None
+    assert 9.0 < seen["limit"] <= 9.5
+    assert learn.run_treatment(cfg, tmp_path / "run", time_limit_s=0.1) is None
+    assert 0 < seen["limit"] <= 1e-3  # spent in set-up: one chunk, then stop
+
+
 @pytest.fixture(scope="module")
 def learn_smoke(tmp_path_factory, tiny_archive):
     """``(archive, run folder)``: ONE uninterrupted ``learn --preset smoke`` run on the 4-terrain archive, shared by
@@ -687,6 +715,7 @@ def test_learn_killed_by_its_time_limit_resumes_to_the_uninterrupted_curves(tmp_
         (parts / "config.json").write_text(json.dumps(cfg))
     partial = json.loads((parts / "summary_partial.json").read_text())
     assert partial["partial"] and partial["chunks_done"] == 2 and not (parts / "summary.json").exists()
+    assert partial["seconds"] > 0  # the wall time so far (checkpoint meta), set-up and compilation included
     rows = (parts / "history.csv").read_text().splitlines()[1:]
     assert rows and all(r.split(",")[1] in ("0", "1") for r in rows)  # the two chunks of the first block
     with pytest.raises(SystemExit):
@@ -694,6 +723,7 @@ def test_learn_killed_by_its_time_limit_resumes_to_the_uninterrupted_curves(tmp_
     assert not (tmp_path / "nothing").exists()
     assert cli("learn", "--resume", str(parts)) == 0
     assert (parts / "summary.json").exists() and not (parts / "summary_partial.json").exists()  # none out of date
+    assert json.loads((parts / "summary.json").read_text())["seconds"] > partial["seconds"]  # summed over commands
     for name in ("history.csv", "sequences.csv", "milestones.csv"):
         assert (parts / name).read_text() == (whole / name).read_text(), name
 
