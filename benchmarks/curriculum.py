@@ -23,7 +23,9 @@ along the next chunk's PPO steps); with overlap a block of n chunks takes one st
 ``loop_steps`` / ``s_per_step``: the loop's steps in the timed call (from the history: an upper bound by one) and
 the seconds per step, which with the switches of a whole run (``history.csv``) give its time.
 ``--start RUN`` starts every block from the checkpoint of a ``learn`` run of the same preset and trial count (e.g.
-the paper run at chunk 550, where terrains change less often than in the first chunks) instead of chunk 0.
+the paper run at chunk 550, where terrains change less often than in the first chunks) instead of chunk 0; pass
+the run's ``--archive`` too. An ``--overlap`` run's checkpoint starts an overlapped block where it stood (its chunk
+trained ahead still pending).
 
 Ratios printed: curriculum overhead = block env steps/s at T=1 / bare PPO's; trials at once = block env steps/s at
 the largest T / at T=1 (issue 13: >= 3x for 10 trials). Extrapolated: a paper-budget trial (750 chunks) at T=1
@@ -74,15 +76,20 @@ def learn_cfg(args, trials: int, overlap: bool = False) -> dict:
 
 
 def start_states(folder, states):
-    """``states`` (a learn block's, stripped of env states) replaced by the checkpoint in ``folder`` (a plain run's:
-    with overlap nothing is pending there)."""
+    """``states`` (a learn block's, stripped of env states) replaced by the checkpoint in ``folder``: a plain run's
+    (for an overlapped block nothing is pending then) or an ``--overlap`` run's (its pending chunk kept for an
+    overlapped block; dropped for a plain one, whose policy then holds the chunk trained ahead: fine for timing,
+    not for comparing end states)."""
     from jaxterrain import driver
 
-    plain = states._replace(pending=None)
-    restored = driver.restore(Path(folder), like=plain)
+    saved = bool(((driver.read_meta(folder) or {}).get("config") or {}).get("overlap"))
+    nothing = jnp.zeros(np.shape(states.chunk), bool)
+    restored = driver.restore(Path(folder), like=states._replace(pending=nothing if saved else None))
     if restored is None:
         raise SystemExit(f"--start {folder}: no checkpoint there")
-    return restored[0]._replace(pending=None if states.pending is None else jnp.zeros_like(states.pending))
+    if states.pending is None:
+        return restored[0]._replace(pending=None)
+    return restored[0] if saved else restored[0]._replace(pending=nothing)
 
 
 def trial_switches(states, before) -> np.ndarray:

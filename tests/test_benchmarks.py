@@ -50,3 +50,29 @@ def test_curriculum_parts_on_the_learn_commands_layout(backend):
     assert row["train_seq_steps"] == 20  # smoke: 80 env steps a chunk = 1 update of 4 envs x unroll 10 x 2 unrolls
     if backend == "warp":
         assert 1 <= row["eval_seq_steps"] <= 100  # smoke episodes are 100 steps
+
+
+@pytest.mark.parametrize("saved_overlap", [False, True])
+def test_curriculum_start_reads_plain_and_overlapped_checkpoints(tmp_path, saved_overlap):
+    """benchmarks/curriculum.py --start: a plain run's checkpoint or an --overlap run's (with its pending leaf)
+    starts a plain block and an overlapped one. Stand-in states: a NamedTuple with the fields start_states uses."""
+    from typing import NamedTuple
+
+    import jax.numpy as jnp
+
+    from jaxterrain import driver
+
+    class S(NamedTuple):
+        chunk: jnp.ndarray
+        pending: object
+
+    curriculum = load_benchmark("curriculum")
+    saved = S(jnp.array([7, 9]), jnp.array([True, False]) if saved_overlap else None)
+    driver.save_checkpoint(tmp_path / driver.CHECKPOINT_NAME, saved, done=7,
+                           meta={"config": {"overlap": saved_overlap}})
+    plain = curriculum.start_states(tmp_path, S(jnp.zeros(2, jnp.int32), None))
+    assert plain.pending is None and plain.chunk.tolist() == [7, 9]
+    over = curriculum.start_states(tmp_path, S(jnp.zeros(2, jnp.int32), jnp.zeros(2, bool)))
+    assert over.chunk.tolist() == [7, 9] and over.pending.tolist() == ([True, False] if saved_overlap else [False] * 2)
+    with pytest.raises(SystemExit, match="no checkpoint there"):
+        curriculum.start_states(tmp_path / "none", S(jnp.zeros(2, jnp.int32), None))
