@@ -204,8 +204,8 @@ def main(args) -> int:
     if args.report and args.resume is None:
         raise common.UsageError("--report needs --resume RUN (the run to report on)")
     over = dict(archives=parse_archives(args.archives), trials=args.trials, max_epochs=args.max_epochs,
-                chunks_per_call=args.chunks_per_call, baseline=args.baseline, backend=args.backend, **learn.fine_tuning_overrides(args),
-                **common.protocol_overrides(args))
+                chunks_per_call=args.chunks_per_call, baseline=args.baseline, backend=args.backend,
+                **learn.fine_tuning_overrides(args), **common.protocol_overrides(args))
     mesh = common.device_mesh(args.devices)
     folder, cfg = common.setup_run("curriculum", args, PRESETS, "smoke", over)
     start = time.perf_counter()
