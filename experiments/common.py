@@ -90,7 +90,8 @@ def check_values(values: dict, where=flag) -> None:
 
             for v in items:
                 if v not in generators.names():
-                    raise UsageError(f"{where(key)}: unknown generator {v!r}; choose from {', '.join(generators.names())}")
+                    names = ", ".join(generators.names())
+                    raise UsageError(f"{where(key)}: unknown generator {v!r}; choose from {names}")
     for key, bound in _AT_MOST:
         v, b = values.get(key), values.get(bound)
         if isinstance(v, int) and isinstance(b, int) and not isinstance(v, bool) and v > b:

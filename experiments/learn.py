@@ -12,10 +12,11 @@ choices: ``jaxterrain.curriculum.config``). At the start of every block each tri
 terrain, so a checkpoint needs no physics state of thousands of envs and a resumed run equals an uninterrupted one.
 
 ``--backend``: the walker's physics, ``auto`` (the default: ``warp`` on a GPU where MuJoCo Warp imports, else
-``jax``; measured on an H100, a chunk of 10 trials took 4.63 s on Warp and 9.65 s on MJX-JAX, benchmarks/RESULTS.md),
-``jax`` (MJX; every trial's envs on their own ``[H, W]`` heightfield) or ``warp`` (MuJoCo Warp, ``pip install 'jaxterrain[warp]'``; Warp shares one heightfield across all
+``jax``; the two are compared in benchmarks/RESULTS.md), ``jax`` (MJX; every trial's envs on their own ``[H, W]``
+heightfield) or ``warp`` (MuJoCo Warp, ``pip install 'jaxterrain[warp]'``; Warp shares one heightfield across all
 envs, so the walker holds one tile per trial, ``WalkerConfig(tiles=trials)``, rebuilt from the trials' current
-terrains at every chunk, and contact buffers for ``trials x max(num_envs, attempts)`` envs; see
+terrains at every chunk, and contact buffers for ``trials x max(num_envs, attempts)`` envs, ``trials x (num_envs +
+attempts)`` with ``--overlap``; see
 ``jaxterrain.curriculum.walker``). It is saved in ``config.json``, so ``--resume`` keeps it.
 
 Evaluation protocol: each evaluation walks under the protocol the archive's fitness was measured under (its

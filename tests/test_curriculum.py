@@ -532,7 +532,8 @@ def test_learn_rejects_bad_input_with_one_line_naming_it(tmp_path, tiny_archive,
     assert "observations 53" in err[0]
     for value in ("-1", "nan"):  # flag values: argparse's exit status 2, before the run folder exists
         with pytest.raises(SystemExit) as stop:
-            cli("learn", "--preset", "smoke", "--out", str(tmp_path / "h"), "--archive", good, "--healthy-reward", value)
+            cli("learn", "--preset", "smoke", "--out", str(tmp_path / "h"), "--archive", good,
+                "--healthy-reward", value)
         assert stop.value.code == 2 and "--healthy-reward must be a finite number >= 0" in capsys.readouterr().err
         assert not (tmp_path / "h").exists()
 
