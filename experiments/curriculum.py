@@ -162,15 +162,21 @@ def write_figures(folder: Path, rows: list[tuple[str, dict]], baseline: str) -> 
 
 
 def write_sequences(folder: Path, done: list[tuple[str, Path]]) -> None:
+    """``sequences.csv`` of every treatment in one file, a ``treatment`` column first. The columns are the union of
+    the treatments' (in order of appearance), so a treatment written by an older version, with fewer columns, leaves
+    its missing cells empty."""
     from jaxterrain.io import atomic_write_text
 
-    lines = []
-    for label, sub in done:
-        rows = (sub / "sequences.csv").read_text().splitlines()
-        if not lines:
-            lines.append("treatment," + rows[0])
-        lines += [f"{label},{r}" for r in rows[1:]]
-    atomic_write_text(folder / "sequences.csv", "\n".join(lines) + "\n")
+    tables = [(label, list(csv.DictReader(io.StringIO((sub / "sequences.csv").read_text())))) for label, sub in done]
+    columns = ["treatment"]
+    for _, rows in tables:
+        columns += [c for c in (rows[0] if rows else {}) if c not in columns]
+    buf = io.StringIO()
+    w = csv.DictWriter(buf, fieldnames=columns, restval="", lineterminator="\n")
+    w.writeheader()
+    for label, rows in tables:
+        w.writerows({"treatment": label, **r} for r in rows)
+    atomic_write_text(folder / "sequences.csv", buf.getvalue())
 
 
 def write_outputs(folder: Path, cfg: dict, rows: list[tuple[str, dict]], done: list[tuple[str, Path]]) -> None:

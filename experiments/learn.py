@@ -452,7 +452,8 @@ def run_treatment(cfg: dict, folder: Path, time_limit_s: float | None = None, de
         wall_s=before + time.perf_counter() - t0)
     if done < config.max_chunks and not bool(np.all(np.asarray(states.done))):
         return None
-    return write_outputs(folder, cfg, config, bank, states, seconds=before + time.perf_counter() - t0)
+    return write_outputs(folder, cfg, config, bank, states, seconds=before + time.perf_counter() - t0,
+                         names=arch.generator_names)
 
 
 PARTIAL = "summary_partial.json"
@@ -493,7 +494,8 @@ def report_treatment(cfg: dict, folder: Path) -> dict | None:
         return jnp.zeros(spec.shape, spec.dtype)
 
     states, done, _, saved = driver.restore(folder, like=jax.tree.map(zeros, shapes))
-    return write_outputs(folder, cfg, config, bank, states, seconds=saved.get("wall_s"), chunks_done=done)
+    return write_outputs(folder, cfg, config, bank, states, seconds=saved.get("wall_s"), chunks_done=done,
+                         names=arch.generator_names)
 
 
 # ----------------------------------------------------------------------------------------------------------------
@@ -518,23 +520,38 @@ def histories(states) -> dict:
             "evaluation": np.asarray(h.evaluation, np.float64), "hardest": np.asarray(h.hardest, np.float64)}
 
 
-def sequence_rows(hist: dict, bank, config) -> list:
+def sequence_rows(hist: dict, bank, config, names: tuple = ()) -> list:
     """``sequences.csv`` rows: trial, order, terrain, cell, bin0, bin1, distance, prior, chunks, final and best
-    evaluation, reached (the threshold), end epoch."""
+    evaluation, reached (the threshold), end epoch, generator (``names[bank.source[terrain]]``; the id where
+    ``names`` lacks it)."""
     import numpy as np
 
     from jaxterrain.curriculum import terrain_runs
 
-    cell, bins = np.asarray(bank.cell), np.asarray(bank.bins)
+    cell, bins, source = np.asarray(bank.cell), np.asarray(bank.bins), np.asarray(bank.source)
     dist, prior = np.asarray(bank.distance), np.asarray(bank.fitness)
+    name = lambda k: names[source[k]] if 0 <= source[k] < len(names) else str(int(source[k]))  # noqa: E731
     rows = []
     for t in range(hist["terrain"].shape[0]):
         for i, r in enumerate(terrain_runs(hist["terrain"][t], hist["evaluation"][t], hist["epoch"][t])):
             k = r["terrain"]
             rows.append([t, i, k, int(cell[k]), int(bins[k, 0]), int(bins[k, 1]), f"{dist[k]:.3f}", f"{prior[k]:.4f}",
                          r["chunks"], f"{r['final_evaluation']:.4f}", f"{r['best_evaluation']:.4f}",
-                         int(r["best_evaluation"] >= config.threshold * config.max_fitness), r["end_epoch"]])
+                         int(r["best_evaluation"] >= config.threshold * config.max_fitness), r["end_epoch"], name(k)])
     return rows
+
+
+def generator_counts(rows: list) -> dict:
+    """Per generator, over every trial's terrain sequence (``sequence_rows``): the terrains trained, the chunks
+    spent on them and the terrains finished (threshold reached) - which generators a combined archive's curriculum
+    actually uses."""
+    out: dict = {}
+    for r in rows:
+        c = out.setdefault(r[-1], {"terrains": 0, "chunks": 0, "finished": 0})
+        c["terrains"] += 1
+        c["chunks"] += int(r[8])
+        c["finished"] += int(r[11])
+    return dict(sorted(out.items()))
 
 
 def milestone_rows(label: str, hist: dict) -> tuple[list, list]:
@@ -564,13 +581,14 @@ def plot_curves(ax, curves: dict, title: str = "") -> None:
 
 
 def write_outputs(folder: Path, cfg: dict, config, bank, states, seconds: float | None,
-                  chunks_done: int | None = None) -> dict:
+                  chunks_done: int | None = None, names: tuple = ()) -> dict:
     """history.csv, sequences.csv, milestones.csv/.md, curve.png and summary.json; returns the summary. With
     ``chunks_done`` (an unfinished run's last checkpoint, :func:`report_treatment`) the summary goes to
     ``summary_partial.json`` with ``"partial": true`` and ``"chunks_done"``, and the curve's title says so; without
     it, ``summary.json``, and a ``summary_partial.json`` left by an earlier report is removed. ``seconds``: the wall
     time of every command that ran the treatment, summed over resumes (each from its set-up and compilation on; the
-    interpreter's start-up and imports are not in it), None where unknown."""
+    interpreter's start-up and imports are not in it), None where unknown. ``names``: the archive's generator names
+    (``sequences.csv``'s ``generator`` column, the summary's ``generators``: :func:`generator_counts`)."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -590,9 +608,10 @@ def write_outputs(folder: Path, cfg: dict, config, bank, states, seconds: float 
                          f"{hist['evaluation'][t, c]:.4f}", f"{hist['hardest'][t, c]:.3f}"])
     _csv(folder / "history.csv", ["trial", "chunk", "epoch", "env_steps", "terrain", "cell", "bin0", "bin1",
                                   "distance", "evaluation", "hardest"], rows)
+    sequences = sequence_rows(hist, bank, config, names)
     _csv(folder / "sequences.csv", ["trial", "order", "terrain", "cell", "bin0", "bin1", "distance", "prior",
-                                    "chunks", "final_evaluation", "best_evaluation", "reached", "end_epoch"],
-         sequence_rows(hist, bank, config))
+                                    "chunks", "final_evaluation", "best_evaluation", "reached", "end_epoch",
+                                    "generator"], sequences)
     label = f"{Path(cfg['archive']).stem} {cfg['curriculum']}"
     pct = [f"{round(100 * m)}%" for m in MILESTONES]
     csv_row, cells = milestone_rows(label, hist)
@@ -617,6 +636,7 @@ def write_outputs(folder: Path, cfg: dict, config, bank, states, seconds: float 
         "ended_without_terrains": [bool(d and e < config.max_epochs)
                                    for d, e in zip(np.asarray(states.done), np.asarray(states.epoch))],
         "milestones": dict(zip(pct, cells)), "seconds": seconds, "bank_terrains": int(bank.size),
+        "generators": generator_counts(sequences),
         "milestone_epochs": [None if v == "" else float(v) for v in csv_row[1:1 + len(pct)]],
         "milestone_trials": csv_row[1 + len(pct):],
         "curve": {"epoch": grid.tolist(), "mean": mean.tolist(), "se": se.tolist()},

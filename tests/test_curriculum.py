@@ -604,9 +604,28 @@ def test_learn_smoke_end_to_end(learn_smoke):
     assert np.all((evals >= 0) & (evals <= 1)) and evals.max() > 0  # the policy walked
     seq = (out / "sequences.csv").read_text().splitlines()
     assert seq[0].startswith("trial,order,terrain") and len(seq) >= 3
+    assert seq[0].endswith(",end_epoch,generator") and all(r.endswith(",cppn") for r in seq[1:])
+    gens = summary["generators"]
+    assert set(gens) == {"cppn"} and gens["cppn"]["terrains"] == len(seq) - 1
+    assert gens["cppn"]["chunks"] == sum(summary["epochs"]) and 0 <= gens["cppn"]["finished"] <= len(seq) - 1
     assert (out / "curve.png").stat().st_size > 0 and (out / "milestones.md").read_text().count("|") > 10
     assert (out / "checkpoint.npz").exists()
     assert cli("learn", "--resume", str(out)) == 0  # a finished run reports its summary again
+
+
+def test_curriculum_sequences_take_every_treatments_columns(tmp_path):
+    """curriculum's sequences.csv joins the treatments' files under the union of their columns: one written before
+    the generator column existed keeps its rows, with that cell empty."""
+    from experiments import curriculum as exp
+
+    old, new = tmp_path / "old", tmp_path / "new"
+    old.mkdir(), new.mkdir()
+    (old / "sequences.csv").write_text("trial,order,terrain\n0,0,5\n")
+    (new / "sequences.csv").write_text("trial,order,terrain,generator\n1,0,7,perlin\n1,1,9,cppn\n")
+    exp.write_sequences(tmp_path, [("cppn roughness", old), ("combined map", new)])
+    assert (tmp_path / "sequences.csv").read_text().splitlines() == [
+        "treatment,trial,order,terrain,generator", "cppn roughness,0,0,5,", "combined map,1,0,7,perlin",
+        "combined map,1,1,9,cppn"]
 
 
 def test_curriculum_tables_put_the_papers_numbers_beside_ours(tmp_path):
