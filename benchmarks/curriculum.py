@@ -228,8 +228,8 @@ def main() -> None:
     blocks = {r["trials"]: r for r in rows if r["part"] == "block (learn)"}
     overlapped = {r["trials"]: r for r in rows if r["part"] == "block (learn), overlap"}
     ratios = {}
+    paper_chunks = learn.PRESETS["paper"]["max_epochs"] // learn.PRESETS["paper"]["epochs_per_chunk"]
     if 1 in blocks:
-        paper_chunks = learn.PRESETS["paper"]["max_epochs"] // learn.PRESETS["paper"]["epochs_per_chunk"]
         ratios["paper_trial_minutes_T1"] = blocks[1]["s_per_chunk"] * paper_chunks / 60
         if not args.skip_ppo:
             ratios["curriculum_overhead"] = blocks[1]["env_steps_per_s"] / rows[0]["env_steps_per_s"]
@@ -237,16 +237,13 @@ def main() -> None:
         if big > 1:
             ratios[f"trials_{big}_vs_1"] = blocks[big]["env_steps_per_s"] / blocks[1]["env_steps_per_s"]
             ratios[f"paper_treatment_minutes_T{big}"] = blocks[big]["s_per_chunk"] * paper_chunks / 60
-    paper_chunks = learn.PRESETS["paper"]["max_epochs"] // learn.PRESETS["paper"]["epochs_per_chunk"]
     for trials, row in overlapped.items():
         ratios[f"overlap_paper_minutes_T{trials}"] = row["s_per_chunk"] * paper_chunks / 60
         if trials in blocks:
             ratios[f"overlap_speedup_T{trials}"] = blocks[trials]["s_per_chunk"] / row["s_per_chunk"]
     print()
     cols = ["part", "trials", "compile_s", "s_per_chunk", "env_steps_per_s", "chunks_done", "switches", "loop_steps",
-            "s_per_step",
-            "train_s_per_chunk",
-            "eval_s_per_chunk", "train_seq_steps", "eval_seq_steps", "train_compile_s", "eval_compile_s"]
+            "s_per_step", "train_s_per_chunk", "eval_s_per_chunk", "train_seq_steps", "eval_seq_steps", "train_compile_s", "eval_compile_s"]
     print(common.markdown_table(rows, cols))
     print(ratios, flush=True)
     common.write_json(args.out, {"environment": env, "rows": rows, "ratios": ratios})

@@ -520,6 +520,11 @@ def histories(states) -> dict:
             "evaluation": np.asarray(h.evaluation, np.float64), "hardest": np.asarray(h.hardest, np.float64)}
 
 
+SEQUENCE_COLUMNS = ("trial", "order", "terrain", "cell", "bin0", "bin1", "distance", "prior", "chunks",
+                    "final_evaluation", "best_evaluation", "reached", "end_epoch", "generator")
+"""The columns of ``sequences.csv`` (:func:`sequence_rows`)."""
+
+
 def sequence_rows(hist: dict, bank, config, names: tuple = ()) -> list:
     """``sequences.csv`` rows: trial, order, terrain, cell, bin0, bin1, distance, prior, chunks, final and best
     evaluation, reached (the threshold), end epoch, generator (``names[bank.source[terrain]]``; the id where
@@ -545,12 +550,13 @@ def generator_counts(rows: list) -> dict:
     """Per generator, over every trial's terrain sequence (``sequence_rows``): the terrains trained, the chunks
     spent on them and the terrains finished (threshold reached) - which generators a combined archive's curriculum
     actually uses."""
+    col = SEQUENCE_COLUMNS.index
     out: dict = {}
     for r in rows:
-        c = out.setdefault(r[-1], {"terrains": 0, "chunks": 0, "finished": 0})
+        c = out.setdefault(r[col("generator")], {"terrains": 0, "chunks": 0, "finished": 0})
         c["terrains"] += 1
-        c["chunks"] += int(r[8])
-        c["finished"] += int(r[11])
+        c["chunks"] += int(r[col("chunks")])
+        c["finished"] += int(r[col("reached")])
     return dict(sorted(out.items()))
 
 
@@ -609,9 +615,7 @@ def write_outputs(folder: Path, cfg: dict, config, bank, states, seconds: float 
     _csv(folder / "history.csv", ["trial", "chunk", "epoch", "env_steps", "terrain", "cell", "bin0", "bin1",
                                   "distance", "evaluation", "hardest"], rows)
     sequences = sequence_rows(hist, bank, config, names)
-    _csv(folder / "sequences.csv", ["trial", "order", "terrain", "cell", "bin0", "bin1", "distance", "prior",
-                                    "chunks", "final_evaluation", "best_evaluation", "reached", "end_epoch",
-                                    "generator"], sequences)
+    _csv(folder / "sequences.csv", list(SEQUENCE_COLUMNS), sequences)
     label = f"{Path(cfg['archive']).stem} {cfg['curriculum']}"
     pct = [f"{round(100 * m)}%" for m in MILESTONES]
     csv_row, cells = milestone_rows(label, hist)

@@ -130,8 +130,7 @@ def walker_harness(env, ppo: rl.PPOConfig, config: CurriculumConfig) -> Harness:
 
     def keyed(state: rl.TrainState, key) -> rl.TrainState:
         """``state`` with PPO's stream set to ``key`` (raw [2] uint32)."""
-        return state._replace(key=jax.random.key_data(key) if jnp.issubdtype(key.dtype, jax.dtypes.prng_key)
-                              else key)
+        return state._replace(key=rl.ppo._raw_key(key))
 
     def train(state: rl.TrainState, key, terrain):
         return rl.run_updates(keyed(state, key), spread(terrain), env=env, config=ppo, num_updates=updates)[0]
