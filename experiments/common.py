@@ -45,7 +45,7 @@ _INT_MIN = {
     **dict.fromkeys(("window", "windows"), 2),
     **dict.fromkeys(("mutation_steps", "walk", "quality_samples"), 0),
 }
-_FLOAT_POSITIVE = ("time_limit", "time_budget", "env_steps", "lr", "heights", "robot_height")
+_FLOAT_POSITIVE = ("time_limit", "time_budget", "env_steps", "lr", "learning_rate", "heights", "robot_height")
 _FLOAT_NONNEGATIVE = ("r1", "healthy_reward")
 _AT_MOST = (("best", "attempts"), ("eval_best", "eval_attempts"))  # (key, bound): key <= bound
 

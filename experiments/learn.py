@@ -107,8 +107,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def add_fine_tuning_arguments(parser: argparse.ArgumentParser, scope: str = "") -> None:
-    """``--freeze-normaliser``, ``--healthy-reward``, ``--max-evals`` and ``--overlap`` (config
-    ``update_normaliser`` / ``healthy_reward`` / ``max_evals`` / ``overlap``, read back by
+    """``--freeze-normaliser``, ``--healthy-reward``, ``--learning-rate``, ``--max-evals`` and ``--overlap`` (config
+    ``update_normaliser`` / ``healthy_reward`` / ``learning_rate`` / ``max_evals`` / ``overlap``, read back by
     :func:`fine_tuning_overrides`), shared with ``curriculum`` (``scope`` is added to the help, e.g. ", in every
     treatment")."""
     parser.add_argument("--freeze-normaliser", dest="update_normaliser", action="store_const", const=False,
@@ -117,6 +117,9 @@ def add_fine_tuning_arguments(parser: argparse.ArgumentParser, scope: str = "") 
     parser.add_argument("--healthy-reward", type=float, default=None,
                         help=f"fine-tuning reward per step for staying up, >= 0{scope} (default: the walker's 5.0, the "
                              f"base policy's; evaluations measure distance and do not use it)")
+    parser.add_argument("--learning-rate", type=float, default=None,
+                        help=f"fine-tuning PPO's Adam learning rate, > 0{scope} (default: the paper preset's 3e-4; on "
+                             f"the CPPN baseline's terrain 31 a tenth of it keeps the walker, docs/results/exp2_paper.md)")
     parser.add_argument("--max-evals", type=int, default=None,
                         help=f"evaluations (chunks) spent on one terrain before it is left anyway, >= 1{scope} "
                              f"(default: the paper's 100 in every preset; gpu-short keeps it, so one terrain that "
@@ -130,7 +133,7 @@ def add_fine_tuning_arguments(parser: argparse.ArgumentParser, scope: str = "") 
 def fine_tuning_overrides(args) -> dict:
     """The config values of :func:`add_fine_tuning_arguments`' flags (None = not given)."""
     return dict(healthy_reward=args.healthy_reward, update_normaliser=args.update_normaliser,
-                max_evals=args.max_evals, overlap=args.overlap)
+                learning_rate=args.learning_rate, max_evals=args.max_evals, overlap=args.overlap)
 
 
 def overrides(args) -> dict:

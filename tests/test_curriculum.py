@@ -4,6 +4,7 @@ extraction, resume, vmapped trials, no re-trace on terrain switches, and the ``l
 
 from __future__ import annotations
 
+import argparse
 import json
 
 import jax
@@ -536,12 +537,18 @@ def test_learn_rejects_bad_input_with_one_line_naming_it(tmp_path, tiny_archive,
                 "--healthy-reward", value)
         assert stop.value.code == 2 and "--healthy-reward must be a finite number >= 0" in capsys.readouterr().err
         assert not (tmp_path / "h").exists()
+    for value in ("0", "-1e-4", "inf"):
+        with pytest.raises(SystemExit) as stop:
+            cli("learn", "--preset", "smoke", "--out", str(tmp_path / "h"), "--archive", good,
+                f"--learning-rate={value}")
+        assert stop.value.code == 2 and "--learning-rate must be a finite number > 0" in capsys.readouterr().err
+        assert not (tmp_path / "h").exists()
 
 
 def test_learn_fine_tuning_knobs_reach_the_walker_and_ppo(tiny_archive):
     """``--healthy-reward`` (config ``healthy_reward``) sets the walker's per-step bonus for staying up, which only
     PPO's reward uses; None keeps the walker's (and the base policy's) 5.0. ``--freeze-normaliser`` (config
-    ``update_normaliser: false``) reaches the fine-tuning PPOConfig, ``--max-evals`` the CurriculumConfig. Builds the
+    ``update_normaliser: false``) and ``--learning-rate`` reach the fine-tuning PPOConfig, ``--max-evals`` the CurriculumConfig. Builds the
     env only, compiles nothing."""
     from experiments import learn
     from jaxterrain import rl
@@ -549,9 +556,14 @@ def test_learn_fine_tuning_knobs_reach_the_walker_and_ppo(tiny_archive):
     cfg = {**learn.PRESETS["smoke"], "archive": tiny_archive(4, "four.npz")}
     config, _, _, env = learn.validate(cfg)
     assert env.config.healthy_reward == 5.0 and config.ppo.update_normaliser
-    config, _, _, env = learn.validate({**cfg, "healthy_reward": 0.5, "update_normaliser": False, "max_evals": 7})
+    config, _, _, env = learn.validate({**cfg, "healthy_reward": 0.5, "update_normaliser": False, "max_evals": 7,
+                                        "learning_rate": 3e-5})
     assert env.config.healthy_reward == 0.5 and not config.ppo.update_normaliser and config.max_evals == 7
     assert not config.ppo_config(rl.PPOConfig()).update_normaliser
+    assert config.ppo_config(rl.PPOConfig()).learning_rate == 3e-5
+    parser = argparse.ArgumentParser()
+    learn.add_fine_tuning_arguments(parser)
+    assert learn.fine_tuning_overrides(parser.parse_args(["--learning-rate", "1e-4"]))["learning_rate"] == 1e-4
 
 
 def test_learn_time_limit_counts_set_up_and_compilation(tmp_path, tiny_archive, monkeypatch):

@@ -3,8 +3,9 @@ fine-tuning PPO (``CurriculumConfig().ppo_config``) but NUM_ENVS envs, spread ov
 heading HEADINGS[e % len(HEADINGS)]). After every block of PER_BLOCK updates: the mean length of the envs' last
 training episode per heading, and 4 deterministic walks of at most 100 env steps per heading (steps walked / distance).
 
-    python docs/results/exp2_paper_cppn_roughness/finetune_terrain.py HEADINGS NUM_ENVS BLOCKS PER_BLOCK [CELL]
-    e.g. 0,1,2,3 64 8 20 152   (cell 152 = bank terrain 31, the baseline's second terrain; cell 0 = its first)
+    python docs/results/exp2_paper_cppn_roughness/finetune_terrain.py HEADINGS NUM_ENVS BLOCKS PER_BLOCK [CELL [LR]]
+    e.g. 0,1,2,3 64 8 20 152   (cell 152 = bank terrain 31, the baseline's second terrain; cell 0 = its first;
+    LR: Adam's learning rate, default the curriculum's 3e-4)
 """
 import sys, time
 import jax, jax.numpy as jnp, numpy as np
@@ -21,6 +22,8 @@ maps = np.asarray(B._render_filled(arch, np.array([cell]), 8))[0]
 policy = rl.load_policy()
 env = W.walker_env(policy, maps.shape, TerrainScale())
 ppo = CurriculumConfig().ppo_config(policy.config)._replace(num_envs=num_envs)
+if len(sys.argv) > 6:
+    ppo = ppo._replace(learning_rate=float(sys.argv[6]))
 print(ppo)
 state = W.start_state(env, ppo, policy, maps.shape)
 turned = jnp.stack([jnp.rot90(jnp.asarray(maps), k) for k in range(4)])
