@@ -243,7 +243,8 @@ def main() -> None:
             ratios[f"overlap_speedup_T{trials}"] = blocks[trials]["s_per_chunk"] / row["s_per_chunk"]
     print()
     cols = ["part", "trials", "compile_s", "s_per_chunk", "env_steps_per_s", "chunks_done", "switches", "loop_steps",
-            "s_per_step", "train_s_per_chunk", "eval_s_per_chunk", "train_seq_steps", "eval_seq_steps", "train_compile_s", "eval_compile_s"]
+            "s_per_step", "train_s_per_chunk", "eval_s_per_chunk", "train_seq_steps", "eval_seq_steps",
+            "train_compile_s", "eval_compile_s"]
     print(common.markdown_table(rows, cols))
     print(ratios, flush=True)
     common.write_json(args.out, {"environment": env, "rows": rows, "ratios": ratios})

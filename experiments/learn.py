@@ -118,8 +118,7 @@ def add_fine_tuning_arguments(parser: argparse.ArgumentParser, scope: str = "") 
                         help=f"fine-tuning reward per step for staying up, >= 0{scope} (default: the walker's 5.0, the "
                              f"base policy's; evaluations measure distance and do not use it)")
     parser.add_argument("--learning-rate", type=float, default=None,
-                        help=f"fine-tuning PPO's Adam learning rate, > 0{scope} (default: the paper preset's 3e-4; on "
-                             f"the CPPN baseline's terrain 31 a tenth of it keeps the walker, docs/results/exp2_paper.md)")
+                        help=f"fine-tuning PPO's Adam learning rate, > 0{scope} (default: every preset's 3e-4)")
     parser.add_argument("--max-evals", type=int, default=None,
                         help=f"evaluations (chunks) spent on one terrain before it is left anyway, >= 1{scope} "
                              f"(default: the paper's 100 in every preset; gpu-short keeps it, so one terrain that "

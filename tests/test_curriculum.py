@@ -548,8 +548,8 @@ def test_learn_rejects_bad_input_with_one_line_naming_it(tmp_path, tiny_archive,
 def test_learn_fine_tuning_knobs_reach_the_walker_and_ppo(tiny_archive):
     """``--healthy-reward`` (config ``healthy_reward``) sets the walker's per-step bonus for staying up, which only
     PPO's reward uses; None keeps the walker's (and the base policy's) 5.0. ``--freeze-normaliser`` (config
-    ``update_normaliser: false``) and ``--learning-rate`` reach the fine-tuning PPOConfig, ``--max-evals`` the CurriculumConfig. Builds the
-    env only, compiles nothing."""
+    ``update_normaliser: false``) and ``--learning-rate`` reach the fine-tuning PPOConfig, ``--max-evals`` the
+    CurriculumConfig. Builds the env only, compiles nothing."""
     from experiments import learn
     from jaxterrain import rl
 

@@ -130,7 +130,7 @@ def walker_harness(env, ppo: rl.PPOConfig, config: CurriculumConfig) -> Harness:
 
     def keyed(state: rl.TrainState, key) -> rl.TrainState:
         """``state`` with PPO's stream set to ``key`` (raw [2] uint32)."""
-        return state._replace(key=rl.ppo._raw_key(key))
+        return state._replace(key=rl.raw_key(key))
 
     def train(state: rl.TrainState, key, terrain):
         return rl.run_updates(keyed(state, key), spread(terrain), env=env, config=ppo, num_updates=updates)[0]

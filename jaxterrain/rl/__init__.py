@@ -4,7 +4,7 @@ See :mod:`jaxterrain.rl.ppo` for the env protocol and :class:`PPOConfig` for the
 humanoid recipe). Public API::
 
     PPOConfig, TrainState, init, update, run_updates, ride_updates, Ride, make_train, train, chunk_fn, reset_envs,
-    Progress,
+    raw_key, Progress,
     gae, ppo_loss, save_checkpoint, load_checkpoint, save_policy, load_policy
 """
 
@@ -14,14 +14,14 @@ from jaxterrain.rl.config import PPOConfig, validate_config
 from jaxterrain.rl.losses import gae, ppo_loss
 from jaxterrain.rl.networks import RunningStats, deterministic_action, init_stats, normalize, update_stats
 from jaxterrain.rl.ppo import (EpisodeStats, Progress, Ride, TrainState, Transition, chunk_fn, compiled_chunk, init,
-                               loss_fn, make_optimizer, make_train, reset_envs, ride_updates, run_updates, train,
-                               update)
+                               loss_fn, make_optimizer, make_train, raw_key, reset_envs, ride_updates, run_updates,
+                               train, update)
 
 __all__ = [
     "BASE_POLICY_DIR", "EpisodeStats", "PPOConfig", "Progress", "RunningStats", "TrainState", "Transition",
     "checkpoint_metadata", "chunk_fn", "compiled_chunk", "deterministic_action", "gae", "init", "init_stats",
     "load_checkpoint", "load_policy", "loss_fn", "make_optimizer", "make_train", "normalize", "policy_fn", "ppo_loss",
-    "reset_envs", "Ride", "ride_updates", "run_updates", "save_checkpoint", "save_policy", "train", "update",
+    "raw_key", "reset_envs", "Ride", "ride_updates", "run_updates", "save_checkpoint", "save_policy", "train", "update",
     "update_stats",
     "validate_config",
 ]

@@ -107,7 +107,8 @@ class Ride(NamedTuple):
 # ----------------------------------------------------------------------------------------------------------------
 # Helpers
 # ----------------------------------------------------------------------------------------------------------------
-def _raw_key(key: jax.Array) -> jax.Array:
+def raw_key(key: jax.Array) -> jax.Array:
+    """``key`` as raw ``[2]`` uint32 data (``TrainState.key``'s form): a typed key's ``key_data``, a raw one as is."""
     if jnp.issubdtype(key.dtype, jax.dtypes.prng_key):
         return jax.random.key_data(key)
     return key
@@ -262,7 +263,7 @@ def init(key: jax.Array, env: EnvLike, config: PPOConfig, terrains: jax.Array, p
     (:func:`train` does).
     """
     validate_config(config)
-    key = _raw_key(key)
+    key = raw_key(key)
     param_key, env_key, run_key = jax.random.split(key, 3)
     del key
     if params is None:
@@ -286,7 +287,7 @@ def reset_envs(state: TrainState, key: jax.Array, terrains: jax.Array, *, env: E
                config: PPOConfig) -> TrainState:
     """Restart every env on ``terrains`` (as in :func:`init`: arrays or a ``walker.Tile``; e.g. after a curriculum
     switch) and clear running episode counters."""
-    env_state = _batched_reset(env, _raw_key(key), terrains, config.num_envs)
+    env_state = _batched_reset(env, raw_key(key), terrains, config.num_envs)
     ep = state.episode
     zero = jnp.zeros_like(ep.ret)
     return state._replace(env_state=env_state, episode=ep._replace(ret=zero, length=zero))
@@ -433,7 +434,7 @@ def update(state: TrainState, key: jax.Array, terrains: jax.Array, *, env: EnvLi
 def _update(state: TrainState, key, terrains, env, config: PPOConfig, mesh=None, ride: Optional[Ride] = None,
             carry=None):
     """:func:`update` -> ``((state, metrics), carry)``; with ``ride`` the riders step along (:func:`_collect`)."""
-    key = _raw_key(key)
+    key = raw_key(key)
     collect_key, sgd_key = jax.random.split(key)
     del key
     if mesh is not None and _collect_mode(mesh, config, env) == "shard_map":

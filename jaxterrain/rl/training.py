@@ -14,7 +14,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from jaxterrain.rl.config import PPOConfig, validate_config
-from jaxterrain.rl.ppo import EnvLike, TrainState, _raw_key, _tile_type, init, run_updates
+from jaxterrain.rl.ppo import EnvLike, TrainState, _tile_type, init, raw_key, run_updates
 
 
 def _build_chunk(env, config, num_updates, batched, terrain_seed_axis, mesh=None):
@@ -117,7 +117,7 @@ def train(key: jax.Array, env: EnvLike, config: PPOConfig, num_updates: int, ter
         init_fn = lambda k, tr: init(k, env, config, tr)  # noqa: E731
         if batched:
             init_fn = jax.vmap(init_fn, in_axes=(0, terrain_seed_axis))
-        state = jax.jit(init_fn)(_raw_key(key) if not batched else key, terrains)
+        state = jax.jit(init_fn)(raw_key(key) if not batched else key, terrains)
     if mesh is not None:
         from jaxterrain import sharding
 
