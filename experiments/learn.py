@@ -66,7 +66,7 @@ _PAPER = dict(archive=CPPN_ARCHIVE, curriculum="map", trials=10, descriptors=["r
               distance_origin="origin", roughness_stride=5, max_observations=None, num_envs=500, unroll_length=10,
               num_unrolls=8, num_minibatches=8, update_epochs=8, learning_rate=3e-4, episode_length=1000,
               chunks_per_call=25, fast_compile=False, backend="auto", healthy_reward=None, update_normaliser=True,
-              overlap=False)
+              truncation="mask", overlap=False)
 PRESETS: dict[str, dict] = {
     "paper": _PAPER,
     "gpu-short": {**_PAPER, "max_epochs": 3000},
@@ -107,8 +107,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def add_fine_tuning_arguments(parser: argparse.ArgumentParser, scope: str = "") -> None:
-    """``--freeze-normaliser``, ``--healthy-reward``, ``--learning-rate``, ``--max-evals`` and ``--overlap`` (config
-    ``update_normaliser`` / ``healthy_reward`` / ``learning_rate`` / ``max_evals`` / ``overlap``, read back by
+    """``--freeze-normaliser``, ``--healthy-reward``, ``--learning-rate``, ``--truncation``, ``--max-evals`` and
+    ``--overlap`` (config ``update_normaliser`` / ``healthy_reward`` / ``learning_rate`` / ``truncation`` /
+    ``max_evals`` / ``overlap``, read back by
     :func:`fine_tuning_overrides`), shared with ``curriculum`` (``scope`` is added to the help, e.g. ", in every
     treatment")."""
     parser.add_argument("--freeze-normaliser", dest="update_normaliser", action="store_const", const=False,
@@ -119,6 +120,10 @@ def add_fine_tuning_arguments(parser: argparse.ArgumentParser, scope: str = "") 
                              f"base policy's; evaluations measure distance and do not use it)")
     parser.add_argument("--learning-rate", type=float, default=None,
                         help=f"fine-tuning PPO's Adam learning rate, > 0{scope} (default: every preset's 3e-4)")
+    parser.add_argument("--truncation", choices=("mask", "bootstrap"), default=None,
+                        help=f"what fine-tuning PPO learns from a walk that ends at the goal or the time limit{scope}: "
+                             f"mask (default, brax's: nothing) or bootstrap (r + gamma V(final observation); keeps "
+                             f"the value net from diverging, docs/results/exp2_paper.md)")
     parser.add_argument("--max-evals", type=int, default=None,
                         help=f"evaluations (chunks) spent on one terrain before it is left anyway, >= 1{scope} "
                              f"(default: the paper's 100 in every preset; gpu-short keeps it, so one terrain that "
@@ -132,7 +137,8 @@ def add_fine_tuning_arguments(parser: argparse.ArgumentParser, scope: str = "") 
 def fine_tuning_overrides(args) -> dict:
     """The config values of :func:`add_fine_tuning_arguments`' flags (None = not given)."""
     return dict(healthy_reward=args.healthy_reward, update_normaliser=args.update_normaliser,
-                learning_rate=args.learning_rate, max_evals=args.max_evals, overlap=args.overlap)
+                learning_rate=args.learning_rate, truncation=args.truncation, max_evals=args.max_evals,
+                overlap=args.overlap)
 
 
 def overrides(args) -> dict:

@@ -162,6 +162,33 @@ def test_update_normaliser_false_keeps_the_statistics():
         assert not tree_equal(new.params, state.params)
 
 
+def test_truncation_bootstrap_values_the_final_observation():
+    """``PPOConfig.truncation``: under ``mask`` (brax) a time-limit end is flagged and adds nothing; under
+    ``bootstrap`` (SB3) it becomes a terminal step whose ``bootstrap`` is ``gamma * V(final obs)``, the obs before
+    the auto-reset, valued with the collecting params. PointEnv ends every episode at step 16 by a time limit."""
+    from jaxterrain.rl import networks as nets
+    from jaxterrain.rl.ppo import _collect
+
+    cfg = CFG._replace(unroll_length=16, num_unrolls=1)
+    state = rl.init(jax.random.PRNGKey(0), ENV, cfg, TERRAIN)
+    data = {t: jax.jit(lambda s, c=cfg._replace(truncation=t): _collect(s, jax.random.PRNGKey(1), TERRAIN, ENV, c)[2])(
+        state) for t in ("mask", "bootstrap")}
+    last = data["mask"].done[0, -1]
+    assert np.all(np.asarray(last) == 1.0) and np.all(np.asarray(data["mask"].truncation[0, -1]) == 1.0)
+    assert np.all(np.asarray(data["mask"].bootstrap) == 0.0)
+    boot = data["bootstrap"]
+    assert np.all(np.asarray(boot.truncation) == 0.0) and np.array_equal(boot.done, data["mask"].done)
+    # PointEnv's final obs: pos + 0.2 a, (target - pos) - 0.2 a, with a = tanh(raw)
+    move = 0.2 * jnp.tanh(boot.raw_action[0, -1, :, 0])
+    final = boot.obs[0, -1] + jnp.stack([move, -move], axis=-1)
+    expected = cfg.gamma * nets.value_apply(cfg, state.params, state.normaliser, final)
+    np.testing.assert_allclose(np.asarray(boot.bootstrap[0, -1]), np.asarray(expected), rtol=1e-5, atol=1e-6)
+    assert np.all(np.asarray(boot.bootstrap[0, :-1]) == 0.0)
+    for t in ("mask", "bootstrap"):  # both train
+        new, metrics = rl.update(state, jax.random.PRNGKey(2), TERRAIN, env=ENV, config=cfg._replace(truncation=t))
+        assert np.isfinite(float(metrics["value_loss"])) and not tree_equal(new.params, state.params)
+
+
 def test_config_validation_names_the_field():
     with pytest.raises(ValueError, match="num_minibatches"):
         rl.validate_config(CFG._replace(num_minibatches=5))
@@ -169,6 +196,8 @@ def test_config_validation_names_the_field():
         rl.validate_config(CFG._replace(gamma=1.5))
     with pytest.raises(ValueError, match="action_distribution"):
         rl.validate_config(CFG._replace(action_distribution="beta"))
+    with pytest.raises(ValueError, match="truncation"):
+        rl.validate_config(CFG._replace(truncation="drop"))
     assert rl.PPOConfig().steps_per_update == 3072 * 10 * 4
     assert rl.PPOConfig.from_json_dict(json.loads(json.dumps(CFG.to_json_dict()))) == CFG
 

@@ -9,6 +9,7 @@ from jaxterrain._validate import int_at_least, known_fields, one_of
 
 ACTIVATIONS = ("swish", "relu", "tanh", "elu")
 DISTRIBUTIONS = ("tanh_normal", "normal")
+TRUNCATIONS = ("mask", "bootstrap")
 
 
 class PPOConfig(NamedTuple):
@@ -60,6 +61,13 @@ class PPOConfig(NamedTuple):
         learned log-std initialised at ``log(init_std)``, actions clipped to [-1, 1] before the env).
       min_std: floor of the Gaussian scale (``tanh_normal``).
       init_std: initial scale of the ``normal`` distribution.
+      truncation: what a step that ended at a time limit or the goal (``s.truncation = 1``) teaches the value.
+        ``mask`` (brax): the step gets advantage 0 and target ``V(s_t)``, so its state's value is never trained,
+        yet the step before bootstraps from it. ``bootstrap`` (SB3, Pardo et al. 2018): the step is a terminal one
+        worth ``r_t + gamma V(s_final)``, with ``s_final`` the observation before the auto-reset and ``V`` the
+        collecting params (one more value-net call per env step). Where those last states are unlike any other
+        (the walker over a drop at the goal line), ``mask`` lets the value diverge: ``docs/results/
+        exp2_paper.md``, "Why fine-tuning collapses".
     """
 
     num_envs: int = 3072
@@ -84,6 +92,7 @@ class PPOConfig(NamedTuple):
     action_distribution: str = "tanh_normal"
     min_std: float = 1e-3
     init_std: float = 1.0
+    truncation: str = "mask"
 
     @property
     def steps_per_update(self) -> int:
@@ -142,4 +151,5 @@ def validate_config(config: PPOConfig) -> PPOConfig:
             raise ValueError(f"PPOConfig.{name} must be a tuple of integers >= 1, got {v!r}")
     one_of("PPOConfig", config, "activation", ACTIVATIONS)
     one_of("PPOConfig", config, "action_distribution", DISTRIBUTIONS)
+    one_of("PPOConfig", config, "truncation", TRUNCATIONS)
     return config

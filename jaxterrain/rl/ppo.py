@@ -76,7 +76,8 @@ class TrainState(NamedTuple):
 
 class Transition(NamedTuple):
     """One env step of all envs: obs [N, O] (raw), raw_action [N, A], log_prob [N], reward [N] (unscaled),
-    done [N], truncation [N]."""
+    done [N], truncation [N], bootstrap [N] (``gamma * V(final obs)`` in the loss's scaled units where a
+    time-limit end is bootstrapped, ``PPOConfig.truncation == "bootstrap"``; 0 elsewhere)."""
 
     obs: jax.Array
     raw_action: jax.Array
@@ -84,6 +85,7 @@ class Transition(NamedTuple):
     reward: jax.Array
     done: jax.Array
     truncation: jax.Array
+    bootstrap: jax.Array
 
 
 class Ride(NamedTuple):
@@ -346,6 +348,11 @@ def _collect(state: TrainState, key, terrains, env, config, rows=None, ride: Opt
         reward = jnp.where(jnp.isfinite(reward), reward, 0.0).astype(jnp.float32)
         done = jnp.maximum(own(next_state.done).astype(jnp.float32), 1.0 - finite.astype(jnp.float32))
         trunc = own(_truncation(next_state)) * finite
+        boot = jnp.zeros_like(reward)
+        if config.truncation == "bootstrap":  # SB3's time-limit bootstrap: a terminal step worth r + gamma V(final)
+            final_value = nets.value_apply(config, state.params, state.normaliser, own(next_state.obs))
+            boot = jnp.where(trunc > 0, config.gamma * final_value, 0.0)
+            trunc = jnp.zeros_like(trunc)
         ret, length = ep.ret + reward, ep.length + 1.0
         ended = done > 0
         ep = EpisodeStats(
@@ -356,7 +363,7 @@ def _collect(state: TrainState, key, terrains, env, config, rows=None, ride: Opt
             count=ep.count + done,
         )
         next_state = _select_envs(env, widen(ended), pool, next_state)
-        return (next_state, ep, ride_carry), Transition(obs, raw, logp, reward, done, trunc)
+        return (next_state, ep, ride_carry), Transition(obs, raw, logp, reward, done, trunc, boot)
 
     def unroll(carry, unroll_key):
         carry, data = jax.lax.scan(env_step, carry, jax.random.split(unroll_key, config.unroll_length))
@@ -384,7 +391,7 @@ def loss_fn(params, normaliser, batch: Transition, bootstrap_obs, key, *, config
     values = nets.value_apply(config, params, normaliser, batch.obs)
     last_value = nets.value_apply(config, params, normaliser, bootstrap_obs)
     advantages, targets = gae(
-        batch.reward * config.reward_scaling, jax.lax.stop_gradient(values), batch.done,
+        batch.reward * config.reward_scaling + batch.bootstrap, jax.lax.stop_gradient(values), batch.done,
         jax.lax.stop_gradient(last_value), config.gamma, config.gae_lambda, batch.truncation)
     logp = nets.log_prob(config.action_distribution, loc, scale, batch.raw_action)
     noise = None
