@@ -1,11 +1,14 @@
 """PPO fine-tuning of the base policy on one terrain of the CPPN HEADINGS archive, on a CPU, with the curriculum's
 fine-tuning PPO (``CurriculumConfig().ppo_config``) but NUM_ENVS envs, spread over the given headings (env e walks
 heading HEADINGS[e % len(HEADINGS)]). After every block of PER_BLOCK updates: the mean length of the envs' last
-training episode per heading, and 4 deterministic walks of at most 100 env steps per heading (steps walked / distance).
+training episode per heading, 4 deterministic walks of at most 100 env steps per heading (steps walked / distance),
+and the PPO losses' value loss, approx. KL, clip fraction and entropy, and the mean training episode return, at the
+block's first and last update.
 
-    python docs/results/exp2_paper_cppn_roughness/finetune_terrain.py HEADINGS NUM_ENVS BLOCKS PER_BLOCK [CELL [LR]]
+    python docs/results/exp2_paper_cppn_roughness/finetune_terrain.py \
+        HEADINGS NUM_ENVS BLOCKS PER_BLOCK [CELL [LR [TRUNC]]]
     e.g. 0,1,2,3 64 8 20 152   (cell 152 = bank terrain 31, the baseline's second terrain; cell 0 = its first;
-    LR: Adam's learning rate, default the curriculum's 3e-4)
+    LR: Adam's learning rate, default the curriculum's 3e-4; TRUNC: PPOConfig.truncation, mask (default) or bootstrap)
 """
 import sys, time
 import jax, jax.numpy as jnp, numpy as np
@@ -24,6 +27,8 @@ env = W.walker_env(policy, maps.shape, TerrainScale())
 ppo = CurriculumConfig().ppo_config(policy.config)._replace(num_envs=num_envs)
 if len(sys.argv) > 6:
     ppo = ppo._replace(learning_rate=float(sys.argv[6]))
+if len(sys.argv) > 7:
+    ppo = ppo._replace(truncation=sys.argv[7])
 print(ppo)
 state = W.start_state(env, ppo, policy, maps.shape)
 turned = jnp.stack([jnp.rot90(jnp.asarray(maps), k) for k in range(4)])
@@ -57,3 +62,7 @@ for b in range(blocks):
     state, metrics = run(state)
     jax.block_until_ready(state)
     show(f"update {(b + 1) * per_block} ({time.time() - t0:.0f} s, env steps {int(state.env_steps)})", state)
+    m = {k: np.asarray(v) for k, v in metrics.items()}
+    print("  sgd, first / last update of the block: " + " ".join(
+        f"{k} {m[k][0]:.4g}/{m[k][-1]:.4g}" for k in ("value_loss", "approx_kl", "clip_fraction", "entropy",
+                                                     "episode_return")), flush=True)
