@@ -122,11 +122,9 @@ class CurriculumConfig(NamedTuple):
         (one observation per finished terrain, each terrain finished at most once).
       ppo: a :class:`jaxterrain.rl.PPOConfig` whose :data:`FINE_TUNED` fields (``num_envs, unroll_length,
         num_unrolls, num_minibatches, update_epochs, learning_rate, update_normaliser, truncation``) are the
-        fine-tuning PPO's
-        (the base policy's
-        recipe otherwise, :meth:`ppo_config`); its other fields must keep ``PPOConfig``'s defaults. Default
-        :data:`FINE_TUNING`; e.g. ``ppo=FINE_TUNING._replace(num_envs=64)``. ``steps_per_update`` (``num_envs x
-        unroll_length x num_unrolls``) must divide a chunk's env steps.
+        fine-tuning PPO's (the base policy's recipe otherwise, :meth:`ppo_config`); its other fields must keep
+        ``PPOConfig``'s defaults. Default :data:`FINE_TUNING`; e.g. ``ppo=FINE_TUNING._replace(num_envs=64)``.
+        ``steps_per_update`` (``num_envs x unroll_length x num_unrolls``) must divide a chunk's env steps.
       overlap: evaluate each chunk's policy while the next chunk trains, its walks stepped in the same physics
         calls as the PPO envs (``rl.ride_updates``); the next chunk trains on the current terrain on the chance that
         the evaluation keeps the trial there, and trains again when it does not. The same curriculum (the same

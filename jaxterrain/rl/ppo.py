@@ -390,9 +390,11 @@ def loss_fn(params, normaliser, batch: Transition, bootstrap_obs, key, *, config
     loc, scale = nets.policy_apply(config, action_size, params, normaliser, batch.obs)
     values = nets.value_apply(config, params, normaliser, batch.obs)
     last_value = nets.value_apply(config, params, normaliser, bootstrap_obs)
-    advantages, targets = gae(
-        batch.reward * config.reward_scaling + batch.bootstrap, jax.lax.stop_gradient(values), batch.done,
-        jax.lax.stop_gradient(last_value), config.gamma, config.gae_lambda, batch.truncation)
+    rewards = batch.reward * config.reward_scaling
+    if config.truncation == "bootstrap":  # mask: batch.bootstrap is all zeros, left out of the default's loss
+        rewards = rewards + batch.bootstrap
+    advantages, targets = gae(rewards, jax.lax.stop_gradient(values), batch.done, jax.lax.stop_gradient(last_value),
+                              config.gamma, config.gae_lambda, batch.truncation)
     logp = nets.log_prob(config.action_distribution, loc, scale, batch.raw_action)
     noise = None
     if rows is not None:  # this device's columns of the whole minibatch's draw [T, total, A]
