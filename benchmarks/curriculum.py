@@ -1,7 +1,8 @@
 """Experiment 2's costs on the GPU machine: a curriculum chunk, its parts, and bare PPO, in one run.
 
     python benchmarks/curriculum.py [--archive A.npz] [--trials 1,10] [--chunks 2] [--parts]
-        [--num-envs N --num-unrolls U] [--overlap off,on] [--start RUN] [--out result.json]
+        [--num-envs N --num-unrolls U] [--overlap off,on] [--truncation mask,bootstrap] [--start RUN]
+        [--out result.json]
 
 Builds exactly what ``python -m experiments learn --preset gpu-short`` builds (``experiments.learn.setup``: the bank
 of the archive, the base policy, the walker, the compiled block of chunks) and measures, each after its compile (the
@@ -22,6 +23,10 @@ along the next chunk's PPO steps); with overlap a block of n chunks takes one st
 ``s_per_chunk`` is per chunk done (the mean over trials), and ``switches`` counts the switches in the timed chunks.
 ``loop_steps`` / ``s_per_step``: the loop's steps in the timed call (from the history: an upper bound by one) and
 the seconds per step, which with the switches of a whole run (``history.csv``) give its time.
+``--truncation mask,bootstrap`` times the block under each ``PPOConfig.truncation`` (``bootstrap``: one more
+value-net call per env step, on the observation before the auto-reset), in the order given (``mask,bootstrap,mask``
+brackets the one with the other, to see the machine's drift); the ratio printed is bootstrap's seconds per chunk
+over the mean of mask's.
 ``--start RUN`` starts every block from the checkpoint of a ``learn`` run of the same preset and trial count (e.g.
 the paper run at chunk 550, where terrains change less often than in the first chunks) instead of chunk 0; pass
 the run's ``--archive`` too. An ``--overlap`` run's checkpoint starts an overlapped block where it stood (its chunk
@@ -49,6 +54,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 import common  # noqa: E402
 from experiments import learn  # noqa: E402
 from jaxterrain import rl  # noqa: E402
+from jaxterrain.rl.config import TRUNCATIONS  # noqa: E402
 from jaxterrain.curriculum import walker as W  # noqa: E402
 
 
@@ -58,8 +64,8 @@ def timed(fn, *args):
     return out, time.perf_counter() - t0
 
 
-def learn_cfg(args, trials: int, overlap: bool = False) -> dict:
-    cfg = {**learn.PRESETS[args.preset], "seed": 0, "trials": trials, "overlap": overlap}
+def learn_cfg(args, trials: int, overlap: bool = False, truncation: str = "mask") -> dict:
+    cfg = {**learn.PRESETS[args.preset], "seed": 0, "trials": trials, "overlap": overlap, "truncation": truncation}
     if args.archive:
         cfg["archive"] = args.archive
     if args.backend and "backend" in cfg:
@@ -103,9 +109,9 @@ def trial_switches(states, before) -> np.ndarray:
     return out
 
 
-def measure_block(args, trials: int, overlap: bool = False) -> dict:
+def measure_block(args, trials: int, overlap: bool = False, truncation: str = "mask") -> dict:
     """The learn command's block at ``trials``: compile seconds, seconds per chunk, env steps/s."""
-    cfg = learn_cfg(args, trials, overlap)
+    cfg = learn_cfg(args, trials, overlap, truncation)
     config, arch, policy, env = learn.validate(cfg)
     t0 = time.perf_counter()
     bank, block, states = learn.setup(cfg, config, arch, policy, env)
@@ -124,7 +130,8 @@ def measure_block(args, trials: int, overlap: bool = False) -> dict:
     steps = int(np.max(chunks + (switched + ~pending if overlap else 0)))
     done = float(np.mean(chunks))
     per_chunk = t / done
-    row = {"part": "block (learn)" + (", overlap" if overlap else ""), "trials": trials, "compile_s": compile_s,
+    row = {"part": "block (learn)" + (", overlap" if overlap else "") + (f", {truncation}" if truncation != "mask"
+                                                                          else ""), "trials": trials, "compile_s": compile_s,
            "first_chunk_s": first, "s_per_chunk": per_chunk,
            "env_steps_per_s": trials * config.steps_per_chunk / per_chunk, "chunks_done": done,
            "chunk_reached": int(np.max(np.asarray(states.chunk))), "switches": int(np.sum(switched)),
@@ -171,9 +178,9 @@ def measure_parts(cfg, config, bank, policy, env, trials: int) -> dict:
     return row
 
 
-def measure_ppo(args) -> dict:
+def measure_ppo(args, truncation: str = "mask") -> dict:
     """Bare PPO on one fixed terrain with the curriculum's PPO config, one chunk's updates per call."""
-    cfg = learn_cfg(args, 1)
+    cfg = learn_cfg(args, 1, truncation=truncation)
     config, arch, policy, env = learn.validate(cfg)
     bank, _, _ = learn.setup(cfg, config, arch, policy, env)
     ppo = config.ppo_config(policy.config)
@@ -189,7 +196,7 @@ def measure_ppo(args) -> dict:
         state, t = timed(run, state, terrain)
         times.append(t)
     t = float(np.median(times))
-    return {"part": "bare PPO (one terrain)", "trials": 1, "compile_s": compile_s, "s_per_chunk": t,
+    return {"part": "bare PPO (one terrain)" + (f", {truncation}" if truncation != "mask" else ""), "trials": 1, "compile_s": compile_s, "s_per_chunk": t,
             "env_steps_per_s": config.steps_per_chunk / t}
 
 
@@ -210,29 +217,43 @@ def main() -> None:
     p.add_argument("--parts", action="store_true", help="also time train / evaluate alone (two more compiles)")
     p.add_argument("--skip-ppo", action="store_true", help="skip bare PPO")
     p.add_argument("--overlap", default="off", help="comma list of off / on: the block without / with overlap")
+    p.add_argument("--truncation", default="mask", help="comma list of mask / bootstrap (PPOConfig.truncation)")
     p.add_argument("--start", default=None, help="start the blocks from this learn run's checkpoint")
     p.add_argument("--out", default=None)
     args = p.parse_args()
     modes = [{"off": False, "on": True}[m] for m in args.overlap.split(",")]
+    truncations = args.truncation.split(",")
+    if not set(truncations) <= set(TRUNCATIONS):
+        p.error(f"--truncation: a comma list of {', '.join(TRUNCATIONS)}; got {args.truncation!r}")
 
     env = common.environment()
     print(f"# curriculum on {env['device']} ({env['date']}, commit {env['commit']}, jax {env['jax']})", flush=True)
     rows = []
     if not args.skip_ppo:
-        rows.append(measure_ppo(args))
-        print(rows[-1], flush=True)
+        for truncation in truncations:
+            rows.append(dict(measure_ppo(args, truncation), truncation=truncation))
+            print(rows[-1], flush=True)
     for trials in [int(t) for t in args.trials.split(",")]:
         for overlap in modes:
-            rows.append(measure_block(args, trials, overlap))
-            print(rows[-1], flush=True)
-    blocks = {r["trials"]: r for r in rows if r["part"] == "block (learn)"}
-    overlapped = {r["trials"]: r for r in rows if r["part"] == "block (learn), overlap"}
+            for truncation in truncations:
+                rows.append(dict(measure_block(args, trials, overlap, truncation), truncation=truncation))
+                print(rows[-1], flush=True)
     ratios = {}
+    blocks = {r["trials"]: r for r in rows if r["part"] == "block (learn)"}  # the last mask row of each
+    for trials in sorted({r["trials"] for r in rows if r["truncation"] == "bootstrap"}):
+        for part in ("bare PPO (one terrain)", "block (learn)", "block (learn), overlap"):
+            mask = [r["s_per_chunk"] for r in rows if r["part"] == part and r["trials"] == trials]
+            boot = [r["s_per_chunk"] for r in rows if r["part"] == f"{part}, bootstrap" and r["trials"] == trials]
+            if mask and boot:
+                name = "ppo" if part.startswith("bare") else part.replace("block (learn)", "block").replace(", ", "_")
+                ratios[f"bootstrap_cost_{name}_T{trials}"] = float(np.mean(boot) / np.mean(mask))
+    overlapped = {r["trials"]: r for r in rows if r["part"] == "block (learn), overlap"}
     paper_chunks = learn.PRESETS["paper"]["max_epochs"] // learn.PRESETS["paper"]["epochs_per_chunk"]
     if 1 in blocks:
         ratios["paper_trial_minutes_T1"] = blocks[1]["s_per_chunk"] * paper_chunks / 60
         if not args.skip_ppo:
-            ratios["curriculum_overhead"] = blocks[1]["env_steps_per_s"] / rows[0]["env_steps_per_s"]
+            ratios["curriculum_overhead"] = blocks[1]["env_steps_per_s"] / next(
+                r for r in rows if r["part"] == "bare PPO (one terrain)")["env_steps_per_s"]
         big = max(blocks)
         if big > 1:
             ratios[f"trials_{big}_vs_1"] = blocks[big]["env_steps_per_s"] / blocks[1]["env_steps_per_s"]
