@@ -130,8 +130,8 @@ def measure_block(args, trials: int, overlap: bool = False, truncation: str = "m
     steps = int(np.max(chunks + (switched + ~pending if overlap else 0)))
     done = float(np.mean(chunks))
     per_chunk = t / done
-    row = {"part": "block (learn)" + (", overlap" if overlap else "") + (f", {truncation}" if truncation != "mask"
-                                                                          else ""), "trials": trials, "compile_s": compile_s,
+    part = "block (learn)" + (", overlap" if overlap else "") + (f", {truncation}" if truncation != "mask" else "")
+    row = {"part": part, "trials": trials, "compile_s": compile_s,
            "first_chunk_s": first, "s_per_chunk": per_chunk,
            "env_steps_per_s": trials * config.steps_per_chunk / per_chunk, "chunks_done": done,
            "chunk_reached": int(np.max(np.asarray(states.chunk))), "switches": int(np.sum(switched)),
@@ -196,7 +196,8 @@ def measure_ppo(args, truncation: str = "mask") -> dict:
         state, t = timed(run, state, terrain)
         times.append(t)
     t = float(np.median(times))
-    return {"part": "bare PPO (one terrain)" + (f", {truncation}" if truncation != "mask" else ""), "trials": 1, "compile_s": compile_s, "s_per_chunk": t,
+    part = "bare PPO (one terrain)" + (f", {truncation}" if truncation != "mask" else "")
+    return {"part": part, "trials": 1, "compile_s": compile_s, "s_per_chunk": t,
             "env_steps_per_s": config.steps_per_chunk / t}
 
 
