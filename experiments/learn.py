@@ -123,7 +123,8 @@ def add_fine_tuning_arguments(parser: argparse.ArgumentParser, scope: str = "") 
     parser.add_argument("--truncation", choices=("mask", "bootstrap"), default=None,
                         help=f"what fine-tuning PPO learns from a walk that ends at the goal or the time limit{scope}: "
                              f"mask (default, brax's: nothing) or bootstrap (r + gamma V(final observation); keeps "
-                             f"the value net from diverging, docs/results/exp2_paper.md)")
+                             f"the value net from diverging and standard CL learning, docs/results/exp2_paper.md: "
+                             f"recommended for new studies)")
     parser.add_argument("--max-evals", type=int, default=None,
                         help=f"evaluations (chunks) spent on one terrain before it is left anyway, >= 1{scope} "
                              f"(default: the paper's 100 in every preset; gpu-short keeps it, so one terrain that "
