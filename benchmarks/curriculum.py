@@ -179,12 +179,18 @@ def measure_parts(cfg, config, bank, policy, env, trials: int) -> dict:
 
 
 def measure_ppo(args, truncation: str = "mask") -> dict:
-    """Bare PPO on one fixed terrain with the curriculum's PPO config, one chunk's updates per call."""
+    """Bare PPO on one fixed terrain with the curriculum's PPO config, one chunk's updates per call (on a tiled
+    walker, all its envs on the terrain's first tile, unturned)."""
     cfg = learn_cfg(args, 1, truncation=truncation)
     config, arch, policy, env = learn.validate(cfg)
     bank, _, _ = learn.setup(cfg, config, arch, policy, env)
     ppo = config.ppo_config(policy.config)
-    terrain = bank.heightmaps[0]
+    layout = W.walker_harness(env, ppo, config).layout
+    if layout is None:  # one [H, W] terrain
+        terrain = bank.heightmaps[0]
+    else:  # a tiled walker (e.g. Warp's): the first trial's tile, as the block lays it out; every env on heading 0
+        tile, _ = layout(bank.heightmaps[:1])
+        terrain = tile._replace(index=tile.index[0])
     start = W.start_state(env, ppo, policy, bank.heightmaps.shape[1:])
     state = jax.jit(lambda s, k, t: rl.reset_envs(s, k, t, env=env, config=ppo))(start, jax.random.key(2), terrain)
     run = jax.jit(lambda s, t: rl.run_updates(s, t, env=env, config=ppo, num_updates=config.updates_per_chunk)[0])
