@@ -23,10 +23,10 @@ along the next chunk's PPO steps); with overlap a block of n chunks takes one st
 ``s_per_chunk`` is per chunk done (the mean over trials), and ``switches`` counts the switches in the timed chunks.
 ``loop_steps`` / ``s_per_step``: the loop's steps in the timed call (from the history: an upper bound by one) and
 the seconds per step, which with the switches of a whole run (``history.csv``) give its time.
-``--truncation mask,bootstrap`` times the block under each ``PPOConfig.truncation`` (``bootstrap``: one more
-value-net call per env step, on the observation before the auto-reset), in the order given (``mask,bootstrap,mask``
-brackets the one with the other, to see the machine's drift); the ratio printed is bootstrap's seconds per chunk
-over the mean of mask's.
+``--truncation mask,bootstrap`` times bare PPO and the block under each ``PPOConfig.truncation`` (``bootstrap``: one
+more value-net call per env step, on the observation before the auto-reset; default: the preset's), in the order
+given (``mask,bootstrap,mask`` brackets the one with the other, to see the machine's drift); the ratio printed is
+bootstrap's seconds per chunk over the mean of mask's; the other ratios use the first mode given.
 ``--start RUN`` starts every block from the checkpoint of a ``learn`` run of the same preset and trial count (e.g.
 the paper run at chunk 550, where terrains change less often than in the first chunks) instead of chunk 0; pass
 the run's ``--archive`` too. An ``--overlap`` run's checkpoint starts an overlapped block where it stood (its chunk
@@ -64,8 +64,10 @@ def timed(fn, *args):
     return out, time.perf_counter() - t0
 
 
-def learn_cfg(args, trials: int, overlap: bool = False, truncation: str = "mask") -> dict:
-    cfg = {**learn.PRESETS[args.preset], "seed": 0, "trials": trials, "overlap": overlap, "truncation": truncation}
+def learn_cfg(args, trials: int, overlap: bool = False, truncation: str | None = None) -> dict:
+    cfg = {**learn.PRESETS[args.preset], "seed": 0, "trials": trials, "overlap": overlap}
+    if truncation is not None:
+        cfg["truncation"] = truncation
     if args.archive:
         cfg["archive"] = args.archive
     if args.backend and "backend" in cfg:
@@ -109,7 +111,7 @@ def trial_switches(states, before) -> np.ndarray:
     return out
 
 
-def measure_block(args, trials: int, overlap: bool = False, truncation: str = "mask") -> dict:
+def measure_block(args, trials: int, overlap: bool = False, truncation: str | None = None) -> dict:
     """The learn command's block at ``trials``: compile seconds, seconds per chunk, env steps/s."""
     cfg = learn_cfg(args, trials, overlap, truncation)
     config, arch, policy, env = learn.validate(cfg)
@@ -130,8 +132,8 @@ def measure_block(args, trials: int, overlap: bool = False, truncation: str = "m
     steps = int(np.max(chunks + (switched + ~pending if overlap else 0)))
     done = float(np.mean(chunks))
     per_chunk = t / done
-    part = "block (learn)" + (", overlap" if overlap else "") + (f", {truncation}" if truncation != "mask" else "")
-    row = {"part": part, "trials": trials, "compile_s": compile_s,
+    row = {"part": "block (learn)" + (", overlap" if overlap else ""), "trials": trials,
+           "truncation": cfg["truncation"], "compile_s": compile_s,
            "first_chunk_s": first, "s_per_chunk": per_chunk,
            "env_steps_per_s": trials * config.steps_per_chunk / per_chunk, "chunks_done": done,
            "chunk_reached": int(np.max(np.asarray(states.chunk))), "switches": int(np.sum(switched)),
@@ -178,7 +180,7 @@ def measure_parts(cfg, config, bank, policy, env, trials: int) -> dict:
     return row
 
 
-def measure_ppo(args, truncation: str = "mask") -> dict:
+def measure_ppo(args, truncation: str | None = None) -> dict:
     """Bare PPO on one fixed terrain with the curriculum's PPO config, one chunk's updates per call (on a tiled
     walker, all its envs on the terrain's first tile, unturned)."""
     cfg = learn_cfg(args, 1, truncation=truncation)
@@ -202,8 +204,8 @@ def measure_ppo(args, truncation: str = "mask") -> dict:
         state, t = timed(run, state, terrain)
         times.append(t)
     t = float(np.median(times))
-    part = "bare PPO (one terrain)" + (f", {truncation}" if truncation != "mask" else "")
-    return {"part": part, "trials": 1, "compile_s": compile_s, "s_per_chunk": t,
+    return {"part": "bare PPO (one terrain)", "trials": 1, "truncation": cfg["truncation"], "compile_s": compile_s,
+            "s_per_chunk": t,
             "env_steps_per_s": config.steps_per_chunk / t}
 
 
@@ -224,12 +226,13 @@ def main() -> None:
     p.add_argument("--parts", action="store_true", help="also time train / evaluate alone (two more compiles)")
     p.add_argument("--skip-ppo", action="store_true", help="skip bare PPO")
     p.add_argument("--overlap", default="off", help="comma list of off / on: the block without / with overlap")
-    p.add_argument("--truncation", default="mask", help="comma list of mask / bootstrap (PPOConfig.truncation)")
+    p.add_argument("--truncation", default=None,
+                   help="comma list of mask / bootstrap (PPOConfig.truncation; default: the preset's)")
     p.add_argument("--start", default=None, help="start the blocks from this learn run's checkpoint")
     p.add_argument("--out", default=None)
     args = p.parse_args()
     modes = [{"off": False, "on": True}[m] for m in args.overlap.split(",")]
-    truncations = args.truncation.split(",")
+    truncations = (args.truncation or learn.PRESETS[args.preset]["truncation"]).split(",")
     if not set(truncations) <= set(TRUNCATIONS):
         p.error(f"--truncation: a comma list of {', '.join(TRUNCATIONS)}; got {args.truncation!r}")
 
@@ -238,29 +241,30 @@ def main() -> None:
     rows = []
     if not args.skip_ppo:
         for truncation in truncations:
-            rows.append(dict(measure_ppo(args, truncation), truncation=truncation))
+            rows.append(measure_ppo(args, truncation))
             print(rows[-1], flush=True)
     for trials in [int(t) for t in args.trials.split(",")]:
         for overlap in modes:
             for truncation in truncations:
-                rows.append(dict(measure_block(args, trials, overlap, truncation), truncation=truncation))
+                rows.append(measure_block(args, trials, overlap, truncation))
                 print(rows[-1], flush=True)
     ratios = {}
-    blocks = {r["trials"]: r for r in rows if r["part"] == "block (learn)"}  # the last mask row of each
-    for trials in sorted({r["trials"] for r in rows if r["truncation"] == "bootstrap"}):
-        for part in ("bare PPO (one terrain)", "block (learn)", "block (learn), overlap"):
-            mask = [r["s_per_chunk"] for r in rows if r["part"] == part and r["trials"] == trials]
-            boot = [r["s_per_chunk"] for r in rows if r["part"] == f"{part}, bootstrap" and r["trials"] == trials]
-            if mask and boot:
-                name = "ppo" if part.startswith("bare") else part.replace("block (learn)", "block").replace(", ", "_")
-                ratios[f"bootstrap_cost_{name}_T{trials}"] = float(np.mean(boot) / np.mean(mask))
-    overlapped = {r["trials"]: r for r in rows if r["part"] == "block (learn), overlap"}
+    first = truncations[0]  # the reference mode of every other ratio
+    blocks = {r["trials"]: r for r in rows if r["part"] == "block (learn)" and r["truncation"] == first}
+    overlapped = {r["trials"]: r for r in rows if r["part"] == "block (learn), overlap" and r["truncation"] == first}
+    for part, name in (("bare PPO (one terrain)", "ppo"), ("block (learn)", "block"),
+                       ("block (learn), overlap", "block_overlap")):
+        for trials in sorted({r["trials"] for r in rows if r["part"] == part}):
+            mode = {t: [r["s_per_chunk"] for r in rows
+                        if (r["part"], r["trials"], r["truncation"]) == (part, trials, t)] for t in TRUNCATIONS}
+            if mode["mask"] and mode["bootstrap"]:
+                ratios[f"bootstrap_cost_{name}_T{trials}"] = float(np.mean(mode["bootstrap"]) / np.mean(mode["mask"]))
     paper_chunks = learn.PRESETS["paper"]["max_epochs"] // learn.PRESETS["paper"]["epochs_per_chunk"]
     if 1 in blocks:
         ratios["paper_trial_minutes_T1"] = blocks[1]["s_per_chunk"] * paper_chunks / 60
         if not args.skip_ppo:
-            ratios["curriculum_overhead"] = blocks[1]["env_steps_per_s"] / next(
-                r for r in rows if r["part"] == "bare PPO (one terrain)")["env_steps_per_s"]
+            ppo = next(r for r in rows if r["part"] == "bare PPO (one terrain)" and r["truncation"] == first)
+            ratios["curriculum_overhead"] = blocks[1]["env_steps_per_s"] / ppo["env_steps_per_s"]
         big = max(blocks)
         if big > 1:
             ratios[f"trials_{big}_vs_1"] = blocks[big]["env_steps_per_s"] / blocks[1]["env_steps_per_s"]
@@ -270,8 +274,8 @@ def main() -> None:
         if trials in blocks:
             ratios[f"overlap_speedup_T{trials}"] = blocks[trials]["s_per_chunk"] / row["s_per_chunk"]
     print()
-    cols = ["part", "trials", "compile_s", "s_per_chunk", "env_steps_per_s", "chunks_done", "switches", "loop_steps",
-            "s_per_step", "train_s_per_chunk", "eval_s_per_chunk", "train_seq_steps", "eval_seq_steps",
+    cols = ["part", "trials", "truncation", "compile_s", "s_per_chunk", "env_steps_per_s", "chunks_done", "switches",
+            "loop_steps", "s_per_step", "train_s_per_chunk", "eval_s_per_chunk", "train_seq_steps", "eval_seq_steps",
             "train_compile_s", "eval_compile_s"]
     print(common.markdown_table(rows, cols))
     print(ratios, flush=True)
