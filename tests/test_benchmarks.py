@@ -52,6 +52,21 @@ def test_curriculum_parts_on_the_learn_commands_layout(backend):
         assert 1 <= row["eval_seq_steps"] <= 100  # smoke episodes are 100 steps
 
 
+@pytest.mark.slow
+def test_curriculum_bare_ppo_on_a_tiled_walker(monkeypatch):
+    """benchmarks/curriculum.py's bare-PPO peer runs on a tiled walker (Warp's layout; here MJX tiles, which
+    ``--overlap`` brings): it once handed such an env an ``[H, W]`` array. Both truncation modes, labelled."""
+    curriculum = load_benchmark("curriculum")
+    plain = curriculum.learn_cfg
+    monkeypatch.setattr(curriculum, "learn_cfg", lambda args, trials, overlap=False, truncation=None: plain(
+        args, trials, True, truncation))  # overlap: the walker on tiles
+    args = argparse.Namespace(preset="smoke", archive=None, backend=None, num_envs=None, num_unrolls=None,
+                              headings=None, repeats=1)
+    for truncation in ("mask", "bootstrap"):
+        row = curriculum.measure_ppo(args, truncation)
+        assert row["truncation"] == truncation and row["env_steps_per_s"] > 0
+
+
 @pytest.mark.parametrize("saved_overlap", [False, True])
 def test_curriculum_start_reads_plain_and_overlapped_checkpoints(tmp_path, saved_overlap):
     """benchmarks/curriculum.py --start: a plain run's checkpoint or an --overlap run's (with its pending leaf)
