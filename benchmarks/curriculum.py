@@ -205,8 +205,7 @@ def measure_ppo(args, truncation: str | None = None) -> dict:
         times.append(t)
     t = float(np.median(times))
     return {"part": "bare PPO (one terrain)", "trials": 1, "truncation": cfg["truncation"], "compile_s": compile_s,
-            "s_per_chunk": t,
-            "env_steps_per_s": config.steps_per_chunk / t}
+            "s_per_chunk": t, "env_steps_per_s": config.steps_per_chunk / t}
 
 
 def main() -> None:
