@@ -1,10 +1,10 @@
 """PPOConfig.truncation on a toy env (CPU, seconds): a fixed 20-step track whose episodes all end at the goal by
 truncation; the observation is a noisy height over the ground (1 +- 0.05) that jumps by DROP on the last step before
 the goal (the roughness baseline's terrain 31 in miniature), plus the last action. Reward 1 - 0.1 a^2 per step, gamma
-0.97 (a continuing walk is worth about 33). 40 updates per mode; prints the value loss at updates 1, 10, 20, 30, 40
-and the mean value target at updates 1, 20, 40.
+0.97 (a continuing walk is worth about 33). UPDATES (default 40) per mode; prints the value loss at updates 1, U/4,
+U/2, 3U/4, U and the mean value target at updates 1, U/2, U.
 
-    python docs/results/exp2_paper_cppn_roughness/truncation_toy.py DROP SEED     e.g. 1.0 0
+    python docs/results/exp2_paper_cppn_roughness/truncation_toy.py DROP SEED [UPDATES]     e.g. 1.0 0
 """
 import jax, jax.numpy as jnp, numpy as np
 from typing import NamedTuple
@@ -36,12 +36,14 @@ drop = float(sys.argv[1]) if len(sys.argv) > 1 else 1.0
 env = GoalEnv(drop=drop)
 T = jnp.zeros((4, 4))
 seed = int(sys.argv[2]) if len(sys.argv) > 2 else 0
+n = int(sys.argv[3]) if len(sys.argv) > 3 else 40
 for trunc in ("mask", "bootstrap"):
     cfg = rl.PPOConfig(num_envs=32, unroll_length=10, num_unrolls=2, num_minibatches=4, update_epochs=8,
                        learning_rate=3e-4, gamma=0.97, reward_scaling=1.0, policy_hidden=(16, 16),
                        value_hidden=(64, 64, 64), truncation=trunc)
     st = rl.init(jax.random.PRNGKey(seed), env, cfg, T)
-    st, m = rl.train(jax.random.PRNGKey(seed), env, cfg, 40, T, state=st, updates_per_chunk=20)
+    st, m = rl.train(jax.random.PRNGKey(seed), env, cfg, n, T, state=st, updates_per_chunk=20)
     vl = np.asarray(m["value_loss"]); vt = np.asarray(m["value_target"])
-    print(f"drop {drop} seed {seed} {trunc:9s} value loss", " ".join(f"{x:.4g}" for x in vl[[0, 9, 19, 29, 39]]),
-          "| value target", " ".join(f"{x:.4g}" for x in vt[[0, 19, 39]]))
+    at = [0, n // 4 - 1, n // 2 - 1, 3 * n // 4 - 1, n - 1]
+    print(f"drop {drop} seed {seed} {trunc:9s} value loss", " ".join(f"{x:.4g}" for x in vl[at]),
+          "| value target", " ".join(f"{x:.4g}" for x in vt[[0, n // 2 - 1, n - 1]]) + ("" if n == 40 else f" ({n} updates)"))
