@@ -806,6 +806,29 @@ def test_a_warp_checkpoint_is_reported_through_the_mjx_layout(tmp_path, monkeypa
 
 
 @pytest.mark.slow
+def test_learn_overlap_with_bootstrap_truncation_runs_to_the_end(tmp_path, learn_smoke):
+    """``learn --overlap --truncation bootstrap`` (the paper-budget baseline's flags; the bootstrap values come from
+    the PPO envs' own rows of a batch the evaluation walks ride in): the run ends with the plain run's chunks and
+    epochs, every evaluation in [0, 1], and config.json keeps both flags."""
+    import csv
+
+    archive, whole = learn_smoke
+    out = tmp_path / "boot"
+    assert cli("learn", "--preset", "smoke", "--archive", archive, "--overlap", "--truncation", "bootstrap",
+               "--out", str(out)) == 0
+    cfg = json.loads((out / "config.json").read_text())
+    assert cfg["overlap"] is True and cfg["truncation"] == "bootstrap"
+
+    def rows(folder):
+        with open(folder / "history.csv") as f:
+            return list(csv.DictReader(f))
+
+    a, b = rows(whole), rows(out)
+    assert [(r["trial"], r["chunk"], r["epoch"]) for r in a] == [(r["trial"], r["chunk"], r["epoch"]) for r in b]
+    assert all(0.0 <= float(r["evaluation"]) <= 1.0 for r in b)
+
+
+@pytest.mark.slow
 def test_learn_overlap_smoke_makes_the_plain_choices_and_resumes(tmp_path, learn_smoke):
     """``learn --overlap`` (MJX on one tile per trial, the evaluation walks riding along PPO): stopped after its
     first block and resumed, it ends with the uninterrupted plain run's terrain sequences and epochs (evaluations up
