@@ -182,16 +182,14 @@ def measure_parts(cfg, config, bank, policy, env, trials: int) -> dict:
 
 def measure_ppo(args, truncation: str | None = None) -> dict:
     """Bare PPO on one fixed terrain with the curriculum's PPO config, one chunk's updates per call (on a tiled
-    walker, all its envs on the terrain's first tile, unturned)."""
+    walker, all its envs on one tile holding that terrain)."""
     cfg = learn_cfg(args, 1, truncation=truncation)
     config, arch, policy, env = learn.validate(cfg)
     bank, _, _ = learn.setup(cfg, config, arch, policy, env)
     ppo = config.ppo_config(policy.config)
-    layout = W.walker_harness(env, ppo, config).layout
-    if layout is None:  # one [H, W] terrain
-        terrain = bank.heightmaps[0]
-    else:  # a tiled walker (e.g. Warp's): the first trial's tile, as the block lays it out; every env on heading 0
-        tile, _ = layout(bank.heightmaps[:1])
+    terrain = bank.heightmaps[0]
+    if env.tiles:  # a tiled walker (e.g. Warp's): that terrain on tile 0, every env on it
+        tile, _ = W.tile_layout(env)(bank.heightmaps[:1])
         terrain = tile._replace(index=tile.index[0])
     start = W.start_state(env, ppo, policy, bank.heightmaps.shape[1:])
     state = jax.jit(lambda s, k, t: rl.reset_envs(s, k, t, env=env, config=ppo))(start, jax.random.key(2), terrain)
