@@ -10,6 +10,7 @@ earlier keeps its last value). Prints a markdown table.
 import argparse
 import csv
 import pathlib
+import warnings
 
 import numpy as np
 from scipy import stats
@@ -45,7 +46,9 @@ def main() -> None:
             for j in range(len(a.epochs)):
                 s = f"{h[:, j].mean():.2f} +- {h[:, j].std(ddof=1) / np.sqrt(len(h)):.2f}"
                 if h is hb:
-                    pv = stats.ttest_ind(ha[:, j], hb[:, j], equal_var=False).pvalue
+                    with warnings.catch_warnings():  # identical samples (e.g. every trial on one terrain): p is nan
+                        warnings.simplefilter("ignore", RuntimeWarning)
+                        pv = stats.ttest_ind(ha[:, j], hb[:, j], equal_var=False).pvalue
                     s += f" (p {pv:.2f})" if np.isfinite(pv) else " (p -)"
                 cells.append(s)
             print(f"| {n} | {run.name} | " + " | ".join(cells) + " |")
