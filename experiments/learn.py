@@ -58,6 +58,8 @@ from pathlib import Path
 
 from experiments import common
 
+LEGACY_TRUNCATION = "mask"
+"""``truncation`` of a config saved without one: every run before the presets' default became ``bootstrap``."""
 CPPN_ARCHIVE = "docs/results/exp2_cppn_headings_archive.npz"  # paper budget, after the insertion fix, HEADINGS
 _PAPER = dict(archive=CPPN_ARCHIVE, curriculum="map", trials=10, descriptors=["roughness", "tpi"], policy=None,
               epochs_per_chunk=40, steps_per_epoch=4000, max_epochs=30000, threshold=0.9, max_fitness=1.0,
@@ -66,7 +68,7 @@ _PAPER = dict(archive=CPPN_ARCHIVE, curriculum="map", trials=10, descriptors=["r
               distance_origin="origin", roughness_stride=5, max_observations=None, num_envs=500, unroll_length=10,
               num_unrolls=8, num_minibatches=8, update_epochs=8, learning_rate=3e-4, episode_length=1000,
               chunks_per_call=25, fast_compile=False, backend="auto", healthy_reward=None, update_normaliser=True,
-              truncation="mask", overlap=False)
+              truncation="bootstrap", overlap=False)
 PRESETS: dict[str, dict] = {
     "paper": _PAPER,
     "gpu-short": {**_PAPER, "max_epochs": 3000},
@@ -122,9 +124,9 @@ def add_fine_tuning_arguments(parser: argparse.ArgumentParser, scope: str = "") 
                         help=f"fine-tuning PPO's Adam learning rate, > 0{scope} (default: every preset's 3e-4)")
     parser.add_argument("--truncation", choices=("mask", "bootstrap"), default=None,
                         help=f"what fine-tuning PPO learns from a walk that ends at the goal or the time limit{scope}: "
-                             f"mask (default, brax's: nothing) or bootstrap (r + gamma V(final observation); keeps "
-                             f"the value net from diverging and standard CL learning, docs/results/exp2_paper.md: "
-                             f"recommended for new studies)")
+                             f"bootstrap (default: r + gamma V(final observation); keeps the value net from diverging "
+                             f"and standard CL learning, docs/results/exp2_paper.md) or mask (brax's: nothing; the "
+                             f"runs before 2026-11-27)")
     parser.add_argument("--max-evals", type=int, default=None,
                         help=f"evaluations (chunks) spent on one terrain before it is left anyway, >= 1{scope} "
                              f"(default: the paper's 100 in every preset; gpu-short keeps it, so one terrain that "
@@ -160,6 +162,7 @@ def curriculum_config(cfg: dict):
     from jaxterrain.curriculum.config import FINE_TUNED
 
     fields = {k: v for k, v in cfg.items() if k in FINE_TUNED or (k in CurriculumConfig._fields and k != "ppo")}
+    fields.setdefault("truncation", LEGACY_TRUNCATION)
     try:
         return validate_config(CurriculumConfig.from_json_dict({**fields, "selector": cfg["curriculum"]}))
     except (ValueError, TypeError) as err:

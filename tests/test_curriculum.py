@@ -434,18 +434,18 @@ def test_config_validation_names_the_field():
 def test_config_fine_tuning_ppo_is_one_ppo_config():
     """The fine-tuning PPO is ``CurriculumConfig.ppo`` (a PPOConfig): its eight FINE_TUNED fields replace the base
     policy's, nothing else may be set there (not silently ignored), and the JSON reads nested or flat (configs written
-    before ``truncation`` existed read as ``mask``)."""
+    without ``truncation`` take the default: ``experiments learn`` reads its own old configs as ``mask``)."""
     from jaxterrain import rl
     from jaxterrain.curriculum.config import FINE_TUNED
 
     config = C.CurriculumConfig()
     assert FINE_TUNED == ("num_envs", "unroll_length", "num_unrolls", "num_minibatches", "update_epochs",
                           "learning_rate", "update_normaliser", "truncation")
-    assert [getattr(config.ppo, k) for k in FINE_TUNED] == [500, 10, 8, 8, 8, 3e-4, True, "mask"]  # the paper runs
+    assert [getattr(config.ppo, k) for k in FINE_TUNED] == [500, 10, 8, 8, 8, 3e-4, True, "bootstrap"]
     assert config.steps_per_update == 40_000 and config.updates_per_chunk == 4
     base = rl.PPOConfig(gamma=0.99, policy_hidden=(8,), num_envs=7, learning_rate=1.0)
     assert config.ppo_config(base) == base._replace(num_envs=500, unroll_length=10, num_unrolls=8, num_minibatches=8,
-                                                    update_epochs=8, learning_rate=3e-4)
+                                                    update_epochs=8, learning_rate=3e-4, truncation="bootstrap")
     with pytest.raises(ValueError, match=r"CurriculumConfig\.ppo\.gamma must keep PPOConfig's default"):
         C.validate_config(config._replace(ppo=config.ppo._replace(gamma=0.9)))
     with pytest.raises(ValueError, match=r"CurriculumConfig\.ppo: PPOConfig\.num_minibatches"):
@@ -457,7 +457,7 @@ def test_config_fine_tuning_ppo_is_one_ppo_config():
     small_ppo = config._replace(selector="random", ppo=config.ppo._replace(num_envs=4, update_epochs=1))
     d = json.loads(json.dumps(small_ppo.to_json_dict()))
     assert d["ppo"] == {"num_envs": 4, "unroll_length": 10, "num_unrolls": 8, "num_minibatches": 8,
-                        "update_epochs": 1, "learning_rate": 3e-4, "update_normaliser": True, "truncation": "mask"}
+                        "update_epochs": 1, "learning_rate": 3e-4, "update_normaliser": True, "truncation": "bootstrap"}
     assert C.CurriculumConfig.from_json_dict(d) == small_ppo
     flat = {**{k: v for k, v in d.items() if k != "ppo"}, **d["ppo"]}  # learn's config.json layout
     assert C.CurriculumConfig.from_json_dict(flat) == small_ppo
@@ -558,18 +558,20 @@ def test_learn_fine_tuning_knobs_reach_the_walker_and_ppo(tiny_archive):
     config, _, _, env = learn.validate(cfg)
     assert env.config.healthy_reward == 5.0 and config.ppo.update_normaliser
     config, _, _, env = learn.validate({**cfg, "healthy_reward": 0.5, "update_normaliser": False, "max_evals": 7,
-                                        "learning_rate": 3e-5, "truncation": "bootstrap"})
+                                        "learning_rate": 3e-5, "truncation": "mask"})
     assert env.config.healthy_reward == 0.5 and not config.ppo.update_normaliser and config.max_evals == 7
     assert not config.ppo_config(rl.PPOConfig()).update_normaliser
     assert config.ppo_config(rl.PPOConfig()).learning_rate == 3e-5
-    assert config.ppo_config(rl.PPOConfig()).truncation == "bootstrap"
-    assert learn.validate(cfg)[0].ppo_config(rl.PPOConfig()).truncation == "mask"
+    assert config.ppo_config(rl.PPOConfig()).truncation == "mask"
+    assert learn.validate(cfg)[0].ppo_config(rl.PPOConfig()).truncation == "bootstrap"  # every preset's
+    legacy = {k: v for k, v in cfg.items() if k != "truncation"}  # a config.json saved before the key existed
+    assert learn.validate(legacy)[0].ppo_config(rl.PPOConfig()).truncation == "mask"
     with pytest.raises(learn.BadInput, match="truncation"):
         learn.validate({**cfg, "truncation": "drop"})
     parser = argparse.ArgumentParser()
     learn.add_fine_tuning_arguments(parser)
     assert learn.fine_tuning_overrides(parser.parse_args(["--learning-rate", "1e-4"]))["learning_rate"] == 1e-4
-    assert learn.fine_tuning_overrides(parser.parse_args(["--truncation", "bootstrap"]))["truncation"] == "bootstrap"
+    assert learn.fine_tuning_overrides(parser.parse_args(["--truncation", "mask"]))["truncation"] == "mask"
 
 
 def test_learn_time_limit_counts_set_up_and_compilation(tmp_path, tiny_archive, monkeypatch):

@@ -22,14 +22,14 @@ terrains predicted easier than the one just trained are removed, the run ends wh
   Adam's state starts fresh (none is shipped with the base policy). ``update_normaliser = True``: the observation
   normaliser keeps merging the fine-tuning data, as brax's PPO does (the base policy's statistics cover 20 M
   observations; a ``gpu-short`` trial adds 12 M). False freezes the base policy's statistics
-  (``learn --freeze-normaliser``). ``truncation = "mask"``: the base policy's (brax's) handling of walks that end at
-  the goal or the time limit; ``"bootstrap"`` (``learn --truncation bootstrap``) trains those steps towards
-  ``r + gamma V(final observation)`` instead. On the roughness baseline's second terrain, where the last states
-  before the goal line are unlike any other, ``mask`` lets the value net diverge and fine-tuning ruin the walker
-  (``docs/results/exp2_paper.md``). On the GPU at ``gpu-short``, ``bootstrap`` keeps standard CL learning (4 of 10
-  trials pass that terrain instead of none) and leaves the CPPN and Perlin map treatments where they were. For new
-  studies pass ``bootstrap``; the default stays ``mask`` until all of Experiment 2 is re-run under ``bootstrap``,
-  so that every table in ``docs/results`` reproduces by its documented command.
+  (``learn --freeze-normaliser``). ``truncation = "bootstrap"``: a walk that ends at the goal or the time limit
+  trains its last step towards ``r + gamma V(final observation)`` (SB3, Pardo et al. 2018), not the base policy's
+  (brax's) ``"mask"`` (``learn --truncation mask``), under which that step's state is never trained yet the step
+  before bootstraps from it. On the roughness baseline's second terrain, where the last states before the goal
+  line are unlike any other, ``mask`` lets the value net diverge and fine-tuning ruin the walker; ``bootstrap``
+  keeps standard CL learning, leaves the map treatments where they were and costs nothing measurable on the GPU
+  (``docs/results/exp2_paper.md``). Runs saved before 2026-11-27 (no ``truncation`` in their config) used ``mask``
+  and resume with it (``experiments learn``).
 
 ``max_fitness = 1.0`` - "maximum fitness" is the maximum of the normalised distance (the far edge), so the threshold
   is fitness >= 0.9. (IT&E's own stop rule compares with the GP's maximum mean; that is a different quantity.)
@@ -90,7 +90,7 @@ DISTANCE_ORIGINS = ("origin", "top_right")
 FINE_TUNED = ("num_envs", "unroll_length", "num_unrolls", "num_minibatches", "update_epochs", "learning_rate",
               "update_normaliser", "truncation")
 FINE_TUNING = PPOConfig(num_envs=500, unroll_length=10, num_unrolls=8, num_minibatches=8, update_epochs=8,
-                        learning_rate=3e-4, update_normaliser=True, truncation="mask")
+                        learning_rate=3e-4, update_normaliser=True, truncation="bootstrap")
 
 
 class CurriculumConfig(NamedTuple):
