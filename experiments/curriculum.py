@@ -149,10 +149,11 @@ def write_figures(folder: Path, rows: list[tuple[str, dict]], baseline: str) -> 
 
     curve = lambda s: tuple(np.asarray(s["curve"][k], float) for k in ("epoch", "mean", "se"))  # noqa: E731
     maps = {shown(label.split(" ")[0], s): curve(s) for label, s in rows if label.endswith(" map")}
-    fig, ax = plt.subplots(figsize=(7, 4))
-    learn.plot_curves(ax, maps, "Figure 7a: map-based curriculum per archive (mean +- 1 s.e.)")
-    fig.tight_layout()
-    common.save_figure(fig, folder / "figure7a.png")
+    if maps:
+        fig, ax = plt.subplots(figsize=(7, 4))
+        learn.plot_curves(ax, maps, "Figure 7a: map-based curriculum per archive (mean +- 1 s.e.)")
+        fig.tight_layout()
+        common.save_figure(fig, folder / "figure7a.png")
     pair = {shown(label, s): curve(s) for label, s in rows if label in ("cppn map", f"cppn {baseline}")}
     if len(pair) == 2:
         fig, ax = plt.subplots(figsize=(7, 4))
@@ -202,7 +203,7 @@ def report(folder: Path, cfg: dict, plan) -> int:
         print(f"curriculum: no treatment of {folder} has a checkpoint yet", file=sys.stderr)
         return 2
     write_outputs(folder, cfg, rows, done)
-    print(f"report: {len(rows)} of {len(plan)} treatments -> {folder}/table2.md, figure7a.png", flush=True)
+    print(f"report: {len(rows)} of {len(plan)} treatments -> {folder}/table2.md and the figures", flush=True)
     return 0
 
 

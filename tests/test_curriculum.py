@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import warnings
 
 import jax
 import jax.numpy as jnp
@@ -670,6 +671,11 @@ def test_curriculum_tables_put_the_papers_numbers_beside_ours(tmp_path):
     exp.write_table(tmp_path / "p", [("cppn map", partial)], trials=2)
     md = (tmp_path / "p" / "table2.md").read_text().splitlines()
     assert md[2].startswith("| cppn map [partial: 80 epochs] (ours) | 40 (1/2) |") and "(paper)" in md[3]
+    (tmp_path / "b").mkdir()  # only the baseline so far (shards still running): no empty Figure 7a, no warning
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        exp.write_figures(tmp_path / "b", [("cppn roughness", summary([80.0, None], [2, 0]))], "roughness")
+    assert not (tmp_path / "b" / "figure7a.png").exists() and not (tmp_path / "b" / "figure7b.png").exists()
 
 
 def test_curriculum_shards_share_one_run_folder_and_resume_writes_the_tables(tmp_path, tiny_archive, capsys):
