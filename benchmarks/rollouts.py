@@ -44,6 +44,7 @@ import os
 import sys
 import time
 from pathlib import Path
+from typing import NamedTuple
 
 import jax
 import jax.numpy as jnp
@@ -324,7 +325,7 @@ def backend_check(cfg, policy, backends, n_flat, perlin_m, attempts=20, best=5):
     return out
 
 
-def main(argv=None):
+def parse_args(argv=None) -> argparse.Namespace:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--out", default=None, help="JSON result path")
     p.add_argument("--batch-sizes", default="8192,32768", help="ours: envs per batch")
@@ -350,26 +351,51 @@ def main(argv=None):
     p.add_argument("--check-perlin", type=int, default=64, help="backend check: Perlin terrains (x 20 attempts)")
     p.add_argument("--skip", default="", help="comma list of parts to skip: ours,raw,c,eval,solver,backend")
     args = p.parse_args(argv)
-    skip = set(filter(None, args.skip.split(",")))
-    backends = [v for v in args.backend.split(",") if v]
-    layouts = [v for v in args.layout.split(",") if v]
-    for v in backends:
+    for v in filter(None, args.backend.split(",")):
         if v not in walker.BACKENDS:
             p.error(f"--backend: {v!r} is not one of {walker.BACKENDS}")
-    for v in layouts:
+    for v in filter(None, args.layout.split(",")):
         if v not in ("classic", "tiles"):
             p.error(f"--layout: {v!r} is not classic or tiles")
+    return args
 
-    env_info = environment()
-    log("environment", env_info)
-    scale = TerrainScale(cell_size=args.cell_size)
-    cfg = WalkerConfig(terrain_shape=(args.size, args.size), scale=scale)
-    env = WalkerEnv(cfg)
-    env_xml = WalkerEnv(cfg._replace(solver=SOLVER_XML))
-    policy, policy_desc = make_policy(env, jax.random.PRNGKey(0))
-    log("policy:", policy_desc)
-    bank = terrain_bank(jax.random.PRNGKey(11), args.bank, args.size)
-    bank_m = bank * scale.height
+
+def ints(text: str) -> list[int]:
+    """"8192,32768" -> [8192, 32768]."""
+    return [int(v) for v in text.split(",") if v]
+
+
+class Bench(NamedTuple):
+    """What every part runs on, and where its rows and results go (``save()`` after each row)."""
+
+    args: argparse.Namespace
+    cfg: WalkerConfig
+    env: WalkerEnv
+    policy: object
+    bank: jax.Array  # [bank, size, size] heightmaps in [0, 1]
+    bank_m: jax.Array  # the same in metres
+    variants: list  # [(backend, layout)] that can run here
+    rows: list
+    result: dict
+
+    def variant_env(self, backend: str, layout: str, b: int, solver=None) -> WalkerEnv:
+        c = self.cfg if solver is None else self.cfg._replace(solver=solver)
+        if layout == "tiles":
+            c = c._replace(backend=backend, tiles=self.args.bank, warp_worlds=max(b, 1))
+        return WalkerEnv(c)
+
+    def add(self, row: dict) -> None:
+        self.rows.append(row)
+        log(row)
+        self.save()
+
+    def save(self) -> None:
+        write_json(self.args.out, self.result)
+
+
+def runnable_variants(backends: list[str], layouts: list[str]) -> tuple[list, list[str]]:
+    """([(backend, layout)] to run, [why each other one is skipped]): Warp runs the tiles layout only, and only
+    where it imports."""
     warp_ok, warp_why = walker.warp_available()
     variants, skipped = [], []
     for backend in backends:
@@ -380,123 +406,142 @@ def main(argv=None):
                 skipped.append(f"{backend}/{layout}: {warp_why}")
                 continue
             variants.append((backend, layout))
-    for why in skipped:
-        log("skipped", why)
+    return variants, skipped
 
-    def variant_env(backend, layout, b, solver=None):
-        c = cfg if solver is None else cfg._replace(solver=solver)
-        if layout == "tiles":
-            c = c._replace(backend=backend, tiles=args.bank, warp_worlds=max(b, 1))
-        return WalkerEnv(c)
 
-    rows, result = [], {"environment": env_info, "variants": [list(v) for v in variants], "skipped": skipped, "policy": policy_desc, "solver_ours": cfg.solver._asdict(),
-                        "solver_xml": SOLVER_XML._asdict(), "terrain": {"shape": [args.size, args.size],
-                                                                         "scale": scale._asdict(),
-                                                                         "distinct": args.bank},
-                        "ours": [], "raw_mjx_xml": [], "raw_mjx_sound": [], "mujoco_c": [], "difficulty": []}
+def part_ours(bench: Bench) -> None:
+    """1. the walker with the policy in the loop, per variant and batch size (stops growing a variant on OOM)."""
+    for backend, layout in bench.variants:
+        for b in ints(bench.args.batch_sizes):
+            try:
+                e = bench.variant_env(backend, layout, b)
+                terr, axes = per_env_terrains(e, bench.bank_m, b)
+                r = bench_ours(e, bench.policy, terr, bench.args.env_steps, bench.args.repeats, axes=axes)
+            except Exception as err:  # noqa: BLE001 (out of memory: stop growing)
+                log(f"ours {backend}/{layout} at {b} envs failed: {type(err).__name__}: {str(err)[:300]}")
+                break
+            r.update(batch=b, backend=backend, layout=layout)
+            bench.result["ours"].append(r)
+            bench.add({"what": f"ours: walker + policy, {walker.solver_label(bench.cfg.solver)}",
+                       "backend": f"{backend}/{layout}", "batch": b, "M steps/s": r["steps_per_s"] / 1e6,
+                       "compile+1st s": r["first_call_s"]})
 
-    def save():
-        write_json(args.out, result)
 
-    if "ours" not in skip:
-        for backend, layout in variants:
-            for b in [int(v) for v in args.batch_sizes.split(",") if v]:
+def part_raw(bench: Bench) -> None:
+    """2. (a) raw MJX, random actions, per --raw-solvers entry, variant and batch size."""
+    for text in filter(None, bench.args.raw_solvers.split(";")):
+        sname, solver = parse_solver(text)
+        name = f"raw_mjx_{sname}" if text in walker.NAMED_SOLVERS else f"raw_mjx {sname}"
+        bench.result.setdefault(name, [])
+        for backend, layout in bench.variants:
+            for b in ints(bench.args.raw_batch_sizes):
                 try:
-                    e = variant_env(backend, layout, b)
-                    terr, axes = per_env_terrains(e, bank_m, b)
-                    r = bench_ours(e, policy, terr, args.env_steps, args.repeats, axes=axes)
-                except Exception as err:  # noqa: BLE001 (out of memory: stop growing)
-                    log(f"ours {backend}/{layout} at {b} envs failed: {type(err).__name__}: {str(err)[:300]}")
+                    e = bench.variant_env(backend, layout, b, solver)
+                    terr, axes = per_env_terrains(e, bench.bank_m, b)
+                    r = bench_raw_mjx(e, terr, bench.args.env_steps * bench.cfg.n_frames, bench.args.repeats,
+                                      axes=axes)
+                except Exception as err:  # noqa: BLE001
+                    log(f"{name} {backend}/{layout} at {b} envs failed: {type(err).__name__}: {str(err)[:300]}")
                     break
                 r.update(batch=b, backend=backend, layout=layout)
-                result["ours"].append(r)
-                rows.append({"what": f"ours: walker + policy, {walker.solver_label(cfg.solver)}", "backend":
-                             f"{backend}/{layout}", "batch": b, "M steps/s": r["steps_per_s"] / 1e6,
-                             "compile+1st s": r["first_call_s"]})
-                log(rows[-1])
-                save()
-    if "raw" not in skip:
-        for text in filter(None, args.raw_solvers.split(";")):
-            sname, solver = parse_solver(text)
-            name = f"raw_mjx_{sname}" if text in walker.NAMED_SOLVERS else f"raw_mjx {sname}"
-            result.setdefault(name, [])
-            for backend, layout in variants:
-                for b in [int(v) for v in args.raw_batch_sizes.split(",") if v]:
-                    try:
-                        e = variant_env(backend, layout, b, solver)
-                        terr, axes = per_env_terrains(e, bank_m, b)
-                        r = bench_raw_mjx(e, terr, args.env_steps * cfg.n_frames, args.repeats, axes=axes)
-                    except Exception as err:  # noqa: BLE001
-                        log(f"{name} {backend}/{layout} at {b} envs failed: {type(err).__name__}: {str(err)[:300]}")
-                        break
-                    r.update(batch=b, backend=backend, layout=layout)
-                    result[name].append(r)
-                    rows.append({"what": f"(a) {name.replace('_', ' ')}, random actions", "backend":
-                                 f"{backend}/{layout}", "batch": b, "M steps/s": r["steps_per_s"] / 1e6,
-                                 "compile+1st s": r["first_call_s"]})
-                    log(rows[-1])
-                    save()
-    if "c" not in skip:
-        qpos0 = np.asarray(jax.jit(jax.vmap(env.reset))(jax.random.split(jax.random.PRNGKey(1), args.bank),
-                                                         bank_m).data.qpos)
-        for name, e in (("xml", env_xml), ("ours", env)):
-            r = bench_c_rollout(e, bank_m, qpos0, args.c_rollouts, args.c_steps, args.threads)
-            r["solver"] = name
-            result["mujoco_c"].append(r)
-            rows.append({"what": f"(b) MuJoCo C rollout, {name} solver, {args.threads} threads", "backend": "C",
-                         "batch": args.c_rollouts, "M steps/s": r["steps_per_s"] / 1e6})
-            log(rows[-1])
-            save()
-    if "eval" not in skip:
-        pools = [None if v == "none" else int(v) for v in args.eval_slots.split(",") if v]
-        for b, slots in [(b, n) for b in (int(v) for v in args.eval_batches.split(",") if v) for n in pools]:
-            if slots is not None and slots >= b * 20:
-                continue
-            hm = jnp.tile(bank, (-(-b // args.bank), 1, 1))[:b]
-            r = bench_difficulty(cfg, policy, hm, 20, args.repeats if b <= 512 else 1, slots)
-            result["difficulty"].append(r)
-            rows.append({"what": f"difficulty.evaluate {b} terrains x 20 attempts, slots {slots or 'all'}",
-                         "backend": "jax/classic",
-                         "batch": b * 20, "seconds": r["seconds"], "compile+1st s": r["first_call_s"],
-                         "M steps/s": r["env_steps"] * cfg.n_frames / r["seconds"] / 1e6,
-                         "note": f"{r['env_steps']} env steps, longest {r['loop_iterations']}, "
-                                 f"fitness mean {r['fitness_mean']:.3f}"})
-            log(rows[-1])
-            save()
-    if "solver" not in skip:
-        r = solver_check(cfg, policy, [parse_solver(t) for t in args.check_solvers.split(";") if t])
-        result["solver_check"] = r
-        for name, v in r.items():
-            rows.append({"what": f"flat ground, {name} solver: normalised distance best-5 / all-20",
-                         "backend": "jax/classic",
-                         "note": f"{v['best5_mean']:.3f} / {v['all_mean']:.3f}"})
-            log(rows[-1])
-        save()
-    if "backend" not in skip:
-        chk = [v for v in backends if v == "jax" or warp_ok]
-        perlin_m = bank_m[: args.check_perlin] if args.check_perlin <= args.bank else \
-            terrain_bank(jax.random.PRNGKey(12), args.check_perlin, args.size) * scale.height
-        r = backend_check(cfg, policy, chk, args.check_flat, perlin_m)
-        result["backend_check"] = r
-        for name, v in r.items():
-            diff = v.get(f"max_abs_fitness_diff_vs_{chk[0]}")
-            flat_txt = (f"flat best-5 / all-20 {v['flat_best5_mean']:.3f} / {v['flat_all_mean']:.3f}; "
-                        if v["flat_best5_mean"] is not None else "")
-            perlin_txt = (f"Perlin fitness mean {v['perlin_fitness_mean']:.3f} over {len(v['perlin_fitness'])}"
-                          if v["perlin_fitness_mean"] is not None else "")
-            rows.append({"what": f"backend check ({args.check_flat} flat + {len(v['perlin_fitness'])} Perlin x 20)",
-                         "backend": f"{name}/tiles", "note": flat_txt + perlin_txt + (
-                             f"; max |fitness diff| vs {chk[0]} {diff:.3f}" if diff is not None else "")})
-            log(rows[-1])
-        save()
+                bench.result[name].append(r)
+                bench.add({"what": f"(a) {name.replace('_', ' ')}, random actions", "backend": f"{backend}/{layout}",
+                           "batch": b, "M steps/s": r["steps_per_s"] / 1e6, "compile+1st s": r["first_call_s"]})
+
+
+def part_c(bench: Bench) -> None:
+    """3. (b) MuJoCo C rollout, XML and our solver options."""
+    args = bench.args
+    qpos0 = np.asarray(jax.jit(jax.vmap(bench.env.reset))(jax.random.split(jax.random.PRNGKey(1), args.bank),
+                                                           bench.bank_m).data.qpos)
+    env_xml = WalkerEnv(bench.cfg._replace(solver=SOLVER_XML))
+    for name, e in (("xml", env_xml), ("ours", bench.env)):
+        r = bench_c_rollout(e, bench.bank_m, qpos0, args.c_rollouts, args.c_steps, args.threads)
+        r["solver"] = name
+        bench.result["mujoco_c"].append(r)
+        bench.add({"what": f"(b) MuJoCo C rollout, {name} solver, {args.threads} threads", "backend": "C",
+                   "batch": args.c_rollouts, "M steps/s": r["steps_per_s"] / 1e6})
+
+
+def part_eval(bench: Bench) -> None:
+    """4. difficulty.evaluate timings, per eval batch and rollout pool size."""
+    args = bench.args
+    pools = [None if v == "none" else int(v) for v in args.eval_slots.split(",") if v]
+    for b, slots in [(b, n) for b in ints(args.eval_batches) for n in pools]:
+        if slots is not None and slots >= b * 20:
+            continue
+        hm = jnp.tile(bench.bank, (-(-b // args.bank), 1, 1))[:b]
+        r = bench_difficulty(bench.cfg, bench.policy, hm, 20, args.repeats if b <= 512 else 1, slots)
+        bench.result["difficulty"].append(r)
+        bench.add({"what": f"difficulty.evaluate {b} terrains x 20 attempts, slots {slots or 'all'}",
+                   "backend": "jax/classic", "batch": b * 20, "seconds": r["seconds"],
+                   "compile+1st s": r["first_call_s"],
+                   "M steps/s": r["env_steps"] * bench.cfg.n_frames / r["seconds"] / 1e6,
+                   "note": f"{r['env_steps']} env steps, longest {r['loop_iterations']}, "
+                           f"fitness mean {r['fitness_mean']:.3f}"})
+
+
+def part_solver(bench: Bench) -> None:
+    """5. the policy's flat-ground distance under each --check-solvers entry."""
+    r = solver_check(bench.cfg, bench.policy, [parse_solver(t) for t in bench.args.check_solvers.split(";") if t])
+    bench.result["solver_check"] = r
+    for name, v in r.items():
+        bench.add({"what": f"flat ground, {name} solver: normalised distance best-5 / all-20",
+                   "backend": "jax/classic", "note": f"{v['best5_mean']:.3f} / {v['all_mean']:.3f}"})
+
+
+def part_backend(bench: Bench, backends: list[str]) -> None:
+    """6. the same policy, keys and terrains under every backend that runs here."""
+    args = bench.args
+    chk = [v for v in backends if v == "jax" or walker.warp_available()[0]]
+    perlin_m = bench.bank_m[: args.check_perlin] if args.check_perlin <= args.bank else \
+        terrain_bank(jax.random.PRNGKey(12), args.check_perlin, args.size) * bench.cfg.scale.height
+    r = backend_check(bench.cfg, bench.policy, chk, args.check_flat, perlin_m)
+    bench.result["backend_check"] = r
+    for name, v in r.items():
+        diff = v.get(f"max_abs_fitness_diff_vs_{chk[0]}")
+        flat_txt = (f"flat best-5 / all-20 {v['flat_best5_mean']:.3f} / {v['flat_all_mean']:.3f}; "
+                    if v["flat_best5_mean"] is not None else "")
+        perlin_txt = (f"Perlin fitness mean {v['perlin_fitness_mean']:.3f} over {len(v['perlin_fitness'])}"
+                      if v["perlin_fitness_mean"] is not None else "")
+        bench.add({"what": f"backend check ({args.check_flat} flat + {len(v['perlin_fitness'])} Perlin x 20)",
+                   "backend": f"{name}/tiles", "note": flat_txt + perlin_txt + (
+                       f"; max |fitness diff| vs {chk[0]} {diff:.3f}" if diff is not None else "")})
+
+
+def main(argv=None):
+    args = parse_args(argv)
+    skip = set(filter(None, args.skip.split(",")))
+    backends = [v for v in args.backend.split(",") if v]
+    env_info = environment()
+    log("environment", env_info)
+    scale = TerrainScale(cell_size=args.cell_size)
+    cfg = WalkerConfig(terrain_shape=(args.size, args.size), scale=scale)
+    env = WalkerEnv(cfg)
+    policy, policy_desc = make_policy(env, jax.random.PRNGKey(0))
+    log("policy:", policy_desc)
+    bank = terrain_bank(jax.random.PRNGKey(11), args.bank, args.size)
+    variants, skipped = runnable_variants(backends, [v for v in args.layout.split(",") if v])
+    for why in skipped:
+        log("skipped", why)
+    result = {"environment": env_info, "variants": [list(v) for v in variants], "skipped": skipped,
+              "policy": policy_desc, "solver_ours": cfg.solver._asdict(), "solver_xml": SOLVER_XML._asdict(),
+              "terrain": {"shape": [args.size, args.size], "scale": scale._asdict(), "distinct": args.bank},
+              "ours": [], "raw_mjx_xml": [], "raw_mjx_sound": [], "mujoco_c": [], "difficulty": []}
+    bench = Bench(args, cfg, env, policy, bank, bank * scale.height, variants, [], result)
+    parts = {"ours": part_ours, "raw": part_raw, "c": part_c, "eval": part_eval, "solver": part_solver,
+             "backend": lambda b: part_backend(b, backends)}
+    for name, part in parts.items():
+        if name not in skip:
+            part(bench)
     best_ours = max((r["steps_per_s"] for r in result["ours"]), default=0.0)
     best_c = max((r["steps_per_s"] for r in result["mujoco_c"] if r["solver"] == "xml"), default=0.0)
     result["summary"] = {"best_ours_steps_per_s": best_ours, "c_xml_steps_per_s": best_c,
                          "speedup_vs_c": best_ours / best_c if best_c else None}
-    save()
+    bench.save()
     print()
     print(f"device: {env_info['device']}; policy: {policy_desc}; terrains: per-env {args.size}x{args.size}")
-    print(markdown_table(rows, ["what", "backend", "batch", "M steps/s", "seconds", "compile+1st s", "note"]))
+    print(markdown_table(bench.rows, ["what", "backend", "batch", "M steps/s", "seconds", "compile+1st s", "note"]))
     print(f"\nours best {best_ours / 1e6:.2f} M physics steps/s; vs MuJoCo C (XML solver) "
           f"{(best_ours / best_c) if best_c else float('nan'):.1f}x")
 
