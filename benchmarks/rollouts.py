@@ -361,7 +361,7 @@ def parse_args(argv=None) -> argparse.Namespace:
 
 
 def ints(text: str) -> list[int]:
-    """"8192,32768" -> [8192, 32768]."""
+    """A comma list of ints: '8192,32768' -> [8192, 32768]."""
     return [int(v) for v in text.split(",") if v]
 
 

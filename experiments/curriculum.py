@@ -145,16 +145,14 @@ def write_figures(folder: Path, rows: list[tuple[str, dict]], baseline: str) -> 
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
-    import numpy as np
 
-    curve = lambda s: tuple(np.asarray(s["curve"][k], float) for k in ("epoch", "mean", "se"))  # noqa: E731
-    maps = {shown(label.split(" ")[0], s): curve(s) for label, s in rows if label.endswith(" map")}
+    maps = {shown(label.split(" ")[0], s): learn.summary_curve(s) for label, s in rows if label.endswith(" map")}
     if maps:
         fig, ax = plt.subplots(figsize=(7, 4))
         learn.plot_curves(ax, maps, "Figure 7a: map-based curriculum per archive (mean +- 1 s.e.)")
         fig.tight_layout()
         common.save_figure(fig, folder / "figure7a.png")
-    pair = {shown(label, s): curve(s) for label, s in rows if label in ("cppn map", f"cppn {baseline}")}
+    pair = {shown(label, s): learn.summary_curve(s) for label, s in rows if label in ("cppn map", f"cppn {baseline}")}
     if len(pair) == 2:
         fig, ax = plt.subplots(figsize=(7, 4))
         learn.plot_curves(ax, pair, f"Figure 7b: CPPN, map-based vs {baseline}-sorted curriculum")

@@ -584,6 +584,14 @@ def milestone_rows(label: str, hist: dict) -> tuple[list, list]:
     return csv_row, cells
 
 
+def summary_curve(summary: dict) -> tuple:
+    """(epoch, mean, se), each [K] float: a treatment's hardest-terrain curve from its ``summary.json`` dict, in the
+    form :func:`plot_curves` takes."""
+    import numpy as np
+
+    return tuple(np.asarray(summary["curve"][k], float) for k in ("epoch", "mean", "se"))
+
+
 def plot_curves(ax, curves: dict, title: str = "") -> None:
     """Figure 7 style: hardest terrain traversed (cells) vs epoch, mean +- 1 standard error, one line per label."""
     from jaxterrain.bank import MAX_DISTANCE_50

@@ -14,7 +14,7 @@ exp.write_table(D, rows, trials=10)
 m = list(csv.DictReader(open(D / "cppn-map" / "metrics.csv")))
 epoch = np.array([0] + [40 * int(r["step"]) for r in m], float)
 mean = np.array([np.sqrt(2)] + [float(r["hardest"]) for r in m])
-curve = lambda s: tuple(np.asarray(s["curve"][k], float) for k in ("epoch", "mean", "se"))
+curve = learn.summary_curve
 maps = {label.split(" ")[0]: curve(s) for label, s in rows if label.endswith(" map")}
 maps["cppn (2 000 of 3 000 epochs; mean only)"] = (epoch, mean, np.zeros_like(mean))
 fig, ax = plt.subplots(figsize=(7, 4))

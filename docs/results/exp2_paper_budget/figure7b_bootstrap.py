@@ -7,7 +7,6 @@ import json
 import pathlib
 
 import matplotlib
-import numpy as np
 
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
@@ -22,8 +21,7 @@ RUNS = {"cppn map (mask)": HERE.parent / "exp2_paper_cppn_map",
 
 def curve(run: pathlib.Path) -> tuple:
     """(epoch, mean, se) of the run's hardest terrain traversed, each [K]."""
-    c = json.loads((run / "summary.json").read_text())["curve"]
-    return tuple(np.asarray(c[k], float) for k in ("epoch", "mean", "se"))
+    return learn.summary_curve(json.loads((run / "summary.json").read_text()))
 
 
 if __name__ == "__main__":
