@@ -223,14 +223,17 @@ def test_jax_walker_curriculum_on_one_tile_equals_the_classic_one(headings):
         np.testing.assert_allclose(np.asarray(a), np.asarray(b), atol=1e-4)
 
 
-@pytest.mark.parametrize("backend", ["jax", pytest.param("warp", marks=pytest.mark.skipif(
-    not WARP_OK, reason=WARP_WHY or "warp available"))])
+@pytest.mark.parametrize("backend", [pytest.param("jax", marks=pytest.mark.slow), pytest.param(
+    "warp", marks=pytest.mark.skipif(not WARP_OK, reason=WARP_WHY or "warp available"))])
 def test_overlapped_walker_harness_makes_the_plain_choices(backend):
     """Two trials, 2 headings, 6 chunks of the random selector on a 3 x 3 bank, a terrain left at fitness 0.085 (so
     some are left after one evaluation and some stay for two): with ``overlap`` the evaluation walks ride along the
     next chunk's PPO envs (``rl.ride_updates``, the rest walked on by ``finish_walks``), and the trials take the
     same terrains in the same order with the same records; evaluations and parameters agree up to the float
-    rounding of the larger batches (the classic loop's walks step 2 + 2 envs, not 4 + 4)."""
+    rounding of the larger batches (the classic loop's walks step 2 + 2 envs, not 4 + 4). On MJX (``jax``) the two
+    programs take about 4 minutes of a 2-core CPU (a tenth of the default suite), so that case is ``slow``; the
+    default suite keeps the property on the toy harness (tests/test_curriculum.py,
+    ``test_overlap_runs_the_same_curriculum_as_the_plain_loop``) and on the walker where MuJoCo Warp imports."""
     kw = dict(selector="random", grid=3, relief=0.3, threshold=0.085, max_epochs=6, headings=2)
     _, plain = _walker_run(backend, trials=2, tiles=4, chunks=100, **kw)
     _, over = _walker_run(backend, trials=2, tiles=4, chunks=100, overlap=True, **kw)
