@@ -1,0 +1,22 @@
+"""Test-process set-up: a persistent XLA compilation cache for this process (one per pytest-xdist worker).
+
+Many tests run a command twice in one process (a run, then its resume), and each run builds its jitted functions
+anew, so the in-memory jit cache misses where the program is the same; the on-disk cache turns those repeat
+compilations (the MJX ones take 30-70 s on a CPU) into reads. It is set here, at import, before any test module
+compiles anything, in a fresh temporary folder removed at exit, and only where ``JAX_COMPILATION_CACHE_DIR`` is not
+set already. The programs, and so the results, are the same with or without it.
+"""
+
+import atexit
+import os
+import shutil
+import tempfile
+
+import jax
+
+if not os.environ.get("JAX_COMPILATION_CACHE_DIR"):
+    _cache = tempfile.mkdtemp(prefix="jaxterrain-test-xla-cache-")
+    atexit.register(shutil.rmtree, _cache, ignore_errors=True)
+    jax.config.update("jax_compilation_cache_dir", _cache)
+    jax.config.update("jax_persistent_cache_min_compile_time_secs", 1.0)
+    jax.config.update("jax_persistent_cache_min_entry_size_bytes", 0)
