@@ -282,9 +282,11 @@ FAST_COMPILE = {"xla_backend_optimization_level": 0, "xla_llvm_disable_expensive
                 "xla_cpu_use_fusion_emitters": False}
 
 
+@pytest.mark.slow
 def test_fitness_fn_is_the_paper_computation():
     """fitness_fn(size, Protocol(2, 1)) inside a jit is bit for bit the computation archive.difficulty_fitness had
-    (the shipped policy, batched_distances, best_of) on the same key."""
+    (the shipped policy, batched_distances, best_of) on the same key. Slow: its own MJX compile, 66 s on 2 CPU
+    cores; ``evolve``'s smoke tests run fitness_fn end to end in the default suite."""
     maps = jnp.stack([jnp.zeros((32, 32)), jnp.asarray(np.random.default_rng(2).random((32, 32)) * 0.6)])
     fit = difficulty.fitness_fn(32, difficulty.Protocol(2, 1), scale=SCALE)
     assert difficulty.fitness_fn(32, difficulty.Protocol(2, 1), scale=SCALE) is fit  # cached per arguments

@@ -80,10 +80,11 @@ _SCRIPT = textwrap.dedent("""
 """).replace("TESTS", repr(TESTS))
 
 
-@pytest.mark.parametrize("split", ["shard_map", "dispatch"])
+@pytest.mark.parametrize("split", [pytest.param("shard_map", marks=pytest.mark.slow), "dispatch"])
 def test_sharded_map_elites_equals_one_device_and_masks_the_padding(split):
     """``dispatch`` (the GPU default): evolve's chunk is a host loop of jitted parts around the scoring, each device
-    scoring its rows in its own program; the archives are the same."""
+    scoring its rows in its own program; the archives are the same. ``shard_map`` (one program over the devices) is
+    in the slow suite: 38 s of the default suite's time on 2 CPU cores."""
     assert run_on_devices(_SCRIPT, JAXTERRAIN_SPLIT=split).strip().endswith("ok")
 
 
