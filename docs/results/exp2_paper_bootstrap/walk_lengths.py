@@ -65,6 +65,7 @@ def main() -> None:
     attempts, headings = protocol.attempts, protocol.headings
     tile, _ = harness.layout(bank.heightmaps[jnp.asarray(terrain)])
     act = rl.policy_fn(ppo, env.action_size)
+    ride = config.updates_per_chunk * ppo.unroll_length * ppo.num_unrolls  # the PPO steps the walks ride along
 
     @jax.jit
     def walk(data, index, keys, params):
@@ -115,7 +116,7 @@ def main() -> None:
         print(json.dumps(rows[-1]))
     out = {"treatment": str(a.treatment), "chunk": int(np.asarray(npz["leaf:.chunk"]).max()),
            "walks_per_trial": attempts, "episode_length": env.config.episode_length, "loop_steps": int(loop),
-           "walks_over_320": float((length > 320).mean()), "mean_length": float(length.mean()),
+           "ride_steps": ride, "walks_past_ride": float((length > ride).mean()), "mean_length": float(length.mean()),
            "contacts_per_step": per_step,
            "backend": a.backend, "compile_s": compile_s, "seconds": seconds, "trials": rows}
     print(json.dumps({k: v for k, v in out.items() if k != "trials"}))
