@@ -99,6 +99,13 @@ def G_args(argv):
     return parser.parse_args(argv)
 
 
+def test_reseat_needs_a_protocol(tmp_path):
+    with pytest.raises(SystemExit, match="--reseat needs --protocol"):
+        G.main(G_args([str(RESULTS / "exp1b_gpu_sound_perlin_archive.npz"), "--reseat", "--out",
+                       str(tmp_path / "run")]))
+
+
+@pytest.mark.slow  # 40 s on 2 CPU cores (renders the 1 096 genomes twice); the rule itself: test_map_elites' reseat
 def test_reseat_of_the_shipped_cppn_archive_matches_insertion_bug_counts(tmp_path):
     """``write_reseated`` (``--reseat``) on the pre-fix CPPN archive, fed its stored fitness instead of a walk: the
     289 genomes ``validate`` refuses (docs/results/insertion_bug.md) are dropped, every kept elite re-derives to its
@@ -115,6 +122,3 @@ def test_reseat_of_the_shipped_cppn_archive_matches_insertion_bug_counts(tmp_pat
     out = A.load(tmp_path / "cppn_reseated.npz")
     assert int(out.filled.sum()) == counts["kept"] and A.check_cells(out).all()
     assert (out.config.attempts, out.config.best, out.config.headings) == (80, 5, 4)  # the protocol it was given
-    with pytest.raises(SystemExit, match="--reseat needs --protocol"):
-        G.main(G_args([str(RESULTS / "exp1b_gpu_sound_perlin_archive.npz"), "--reseat", "--out",
-                       str(tmp_path / "run")]))
