@@ -345,11 +345,10 @@ def test_combined_generators_step_equals_separate_steps():
         ME.multi_step(states, keys[:1], jax.random.key(0), scorings, emitters, smooth)
 
 
-def test_evolve_many_and_the_batched_coverage_command(tmp_path):
+def test_evolve_many_resumes_to_the_same_archives(tmp_path):
     """evolve_many: one archive per treatment, each elite in its own cell; a killed run resumes to the same
-    archives; coverage --batched writes the tables from it (smoke preset, two generators, 32 x 32)."""
+    archives (two generators, 32 x 32, a slope fitness: no walker)."""
     from experiments import coverage
-    from experiments.__main__ import main
 
     smoke = coverage.PRESETS["smoke"]
     config = A.EvolveConfig(generations=2, batch_size=4, initial_population=6, bins=4, window=8, stride=2,
@@ -384,6 +383,14 @@ def test_evolve_many_and_the_batched_coverage_command(tmp_path):
                                       b.genomes[0] if not isinstance(b.genomes[0], tuple) else b.genomes[0][0])
         for k in a.metrics:
             np.testing.assert_array_equal(a.metrics[k], b.metrics[k])
+
+
+@pytest.mark.slow  # about 40 s on 2 CPU cores; the unbatched coverage command: tests/test_experiments.py
+def test_batched_coverage_command_writes_the_tables(tmp_path):
+    """coverage --batched (evolve_many under the command: smoke preset, two generators) writes the coverage table,
+    the batched run's checkpoint and one archive per treatment."""
+    from experiments.__main__ import main
+
     out = tmp_path / "cov"
     assert main(["coverage", "--preset", "smoke", "--batched", "--generators", "perlin", "diamond_square",
                  "--generations", "1", "--out", str(out)]) == 0
