@@ -156,11 +156,12 @@ def walker_harness(env, ppo: rl.PPOConfig, config: CurriculumConfig) -> Harness:
                                                                     protocol.headings), world)
         ride = rl.Ride(act=jax.vmap(lambda obs: act(params, obs)), terrains=world, record=_record_ride)
         zeros = jnp.zeros((protocol.attempts,), jnp.float32)
+        per_env = rl.ppo.per_env_mask(env, terrain)  # traced once, for both
         state, riders, (ended, final), _ = rl.ride_updates(keyed(state, key), spread(terrain), riders, ride,
                                                            (zeros > 0, zeros), env=env, config=ppo,
-                                                           num_updates=updates)
+                                                           num_updates=updates, per_env=per_env)
         d = finish_walks(env, act, terrain, riders, ended, final, params, protocol.attempts, protocol.headings,
-                         ride_steps=updates * ppo.num_unrolls * ppo.unroll_length)
+                         ride_steps=updates * ppo.num_unrolls * ppo.unroll_length, per_env=per_env)
         return state, difficulty.aggregate(d[None], protocol)[0]
 
     if not env.tiles:
@@ -255,19 +256,22 @@ def _record_ride(carry, states, start: int):
 
 
 def finish_walks(env, act, tile: Tile, riders, ended, final, params, attempts: int, headings: int = 1,
-                 ride_steps: int = 0) -> jax.Array:
+                 ride_steps: int = 0, per_env=None) -> jax.Array:
     """``[attempts]`` distances of one trial's evaluation walks that rode ``ride_steps`` steps along PPO
     (``riders``: their env states [attempts], ``ended`` / ``final`` [attempts] their record so far): the walks not
     yet ended walk on (every walk steps, as in :func:`tile_distances`) until all have ended or the episode limit.
     Under ``jax.vmap`` over trials ONE loop runs for all trials' walks (a custom batching rule, as
-    :func:`tile_distances`'s). So the distances are those of :func:`tile_distances` with the same key."""
+    :func:`tile_distances`'s). So the distances are those of :func:`tile_distances` with the same key.
+    ``per_env``: ``rl.ppo.per_env_mask(env, tile)`` where the caller has it (else traced here)."""
+    if per_env is None:
+        per_env = rl.ppo.per_env_mask(env, Tile(tile.bank, jnp.zeros((), jnp.int32)))
 
     def one(per_env, x):  # a trial axis of size 1 on the per-env leaves
         return jax.tree.map(lambda p, v: v[None] if p else v, per_env, x)
 
     @jax.custom_batching.custom_vmap
     def walk_on(data, index, riders, ended, final, params):
-        riders = one(rl.ppo.per_env_mask(env, Tile(TileBank(data), index)), riders)
+        riders = one(per_env, riders)
         carry = (jnp.int32(ride_steps), riders, ended[None], final[None])
         return _walk_loop(env, act, _walk_tiles(Tile(TileBank(data), index[None]), attempts, headings), params, None,
                           carry)[3][0]
@@ -277,7 +281,6 @@ def finish_walks(env, act, tile: Tile, riders, ended, final, params, attempts: i
         data_b, index_b, riders_b, ended_b, final_b, params_b = in_batched
         if data_b:
             raise ValueError("finish_walks under vmap: the tile bank must be shared (in_axes TILE_AXES)")
-        per_env = rl.ppo.per_env_mask(env, Tile(TileBank(data), index[0] if index_b else index))
         grow = lambda b, x: x if b else jnp.broadcast_to(x, (axis_size,) + x.shape)  # noqa: E731
         riders = jax.tree.map(lambda p, b, x: grow(b, x) if p else x, per_env, riders_b, riders)
         index, ended, final = grow(index_b, index), grow(ended_b, ended), grow(final_b, final)

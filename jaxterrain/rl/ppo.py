@@ -298,7 +298,8 @@ def reset_envs(state: TrainState, key: jax.Array, terrains: jax.Array, *, env: E
 # ----------------------------------------------------------------------------------------------------------------
 # update = collect + GAE + epochs of minibatch SGD
 # ----------------------------------------------------------------------------------------------------------------
-def _collect(state: TrainState, key, terrains, env, config, rows=None, ride: Optional[Ride] = None, carry=None):
+def _collect(state: TrainState, key, terrains, env, config, rows=None, ride: Optional[Ride] = None, carry=None,
+             per_env=None):
     """``num_unrolls`` x ``unroll_length`` steps of all envs with auto-reset.
 
     Returns (env_state, episode, data: Transition [K, T, N, ...], bootstrap_obs [K, N, O], carry).
@@ -310,6 +311,7 @@ def _collect(state: TrainState, key, terrains, env, config, rows=None, ride: Opt
     ``ride`` (a :class:`Ride`): ``state.env_state`` holds ``N + R`` envs, the PPO envs then the ``R`` riders (see
     :func:`ride_updates`); all are stepped together, the riders by ``ride.act`` and never reset, ``carry`` goes
     through ``ride.record`` after every step, and ``data`` / the episode statistics are the PPO envs' alone.
+    ``per_env``: :func:`per_env_mask` of the batch if the caller has it (else traced here: two reset traces).
     """
     n, dist = config.num_envs, config.action_distribution
     axis = _terrain_axis(terrains, n)
@@ -323,7 +325,8 @@ def _collect(state: TrainState, key, terrains, env, config, rows=None, ride: Opt
         step_terrains = _join_terrains(terrains, axis, ride.terrains, n, r)
         own = lambda x: x[:n]  # noqa: E731 - the PPO envs' rows
         widen = lambda mask: jnp.concatenate([mask, jnp.zeros((r,), bool)])  # noqa: E731 - riders never reset
-        per_env = per_env_mask(env, _one_terrain(terrains, axis))
+        if per_env is None:
+            per_env = per_env_mask(env, _one_terrain(terrains, axis))
         pool = _join_envs(per_env, pool, _part_envs(per_env, state.env_state, n)[1])  # rider rows: never taken
     v_step = jax.vmap(env.step, in_axes=(0, 0, _terrain_axis(step_terrains, pool.obs.shape[0])))
 
@@ -441,7 +444,7 @@ def update(state: TrainState, key: jax.Array, terrains: jax.Array, *, env: EnvLi
 
 
 def _update(state: TrainState, key, terrains, env, config: PPOConfig, mesh=None, ride: Optional[Ride] = None,
-            carry=None):
+            carry=None, per_env=None):
     """:func:`update` -> ``((state, metrics), carry)``; with ``ride`` the riders step along (:func:`_collect`)."""
     key = raw_key(key)
     collect_key, sgd_key = jax.random.split(key)
@@ -452,7 +455,7 @@ def _update(state: TrainState, key, terrains, env, config: PPOConfig, mesh=None,
         if mesh is not None:  # envs that do not divide over the devices: XLA partitions the batched steps
             state, terrains = _split_envs(state, terrains, config, mesh)
         env_state, episode, data, bootstrap_obs, carry = _collect(state, collect_key, terrains, env, config,
-                                                                  ride=ride, carry=carry)
+                                                                  ride=ride, carry=carry, per_env=per_env)
 
     normaliser = state.normaliser
     if config.normalize_observations and config.update_normaliser:
@@ -638,23 +641,26 @@ def run_updates(state: TrainState, terrains: jax.Array, *, env: EnvLike, config:
 
 
 def ride_updates(state: TrainState, terrains: jax.Array, riders: Any, ride: Ride, carry: Any, *, env: EnvLike,
-                 config: PPOConfig, num_updates: int):
+                 config: PPOConfig, num_updates: int, per_env: Any = None):
     """:func:`run_updates` with ``R`` envs riding along (a :class:`Ride`): ``riders`` (their env states, batched
     [R]) are stepped in the same batched ``env.step`` calls as the PPO envs, ``num_updates x num_unrolls x
     unroll_length`` steps by ``ride.act``, never reset; ``carry`` (any pytree) goes through ``ride.record`` after
     every step. The PPO envs, their random draws and the update are those of :func:`run_updates` (the riders take
-    no key; per-env physics does not see the other envs). Pure; one data-parallel device only.
+    no key; per-env physics does not see the other envs). Pure; one data-parallel device only. ``per_env``: the
+    batch's :func:`per_env_mask` where the caller has it already (else traced here, two traces of ``env.reset``).
 
     Returns ``(state, riders, carry, metrics)`` with metrics [num_updates] per name.
     """
     n = config.num_envs
-    per_env = per_env_mask(env, _one_terrain(terrains, _terrain_axis(terrains, n)))
+    if per_env is None:
+        per_env = per_env_mask(env, _one_terrain(terrains, _terrain_axis(terrains, n)))
     both = state._replace(env_state=_join_envs(per_env, state.env_state, riders))
 
     def body(c, _):
         s, rc = c
         next_key, update_key = jax.random.split(s.key)
-        (s, metrics), rc = _update(s._replace(key=next_key), update_key, terrains, env, config, ride=ride, carry=rc)
+        (s, metrics), rc = _update(s._replace(key=next_key), update_key, terrains, env, config, ride=ride, carry=rc,
+                                   per_env=per_env)
         return (s, rc), metrics
 
     (state, carry), metrics = jax.lax.scan(body, (both, carry), None, length=num_updates)
