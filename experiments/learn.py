@@ -10,6 +10,10 @@ policy (``--policy DIR`` for another), and the ``--trials`` trials run together 
 block of ``chunks_per_call`` chunks (a chunk = 40 epochs of 4 000 env steps + one evaluation; the curriculum's
 choices: ``jaxterrain.curriculum.config``). At the start of every block each trial's envs restart on its current
 terrain, so a checkpoint needs no physics state of thousands of envs and a resumed run equals an uninterrupted one.
+Once some trials have finished (the map curriculum can empty a trial's map long before the epoch budget), a block
+computes only the trials still running, padded with finished ones to a power of two (``curriculum.run_live``; the
+same states, one compile per block size); ``--no-compact`` keeps every trial in every block (the smoke preset's
+default, so that the CPU tests compile one block).
 
 ``--backend``: the walker's physics, ``auto`` (the default: ``warp`` on a GPU where MuJoCo Warp imports, else
 ``jax``; the two are compared in benchmarks/RESULTS.md), ``jax`` (MJX; every trial's envs on their own ``[H, W]``
@@ -49,6 +53,7 @@ from __future__ import annotations
 
 import argparse
 import csv
+import functools
 import io
 import json
 import shutil
@@ -68,13 +73,14 @@ _PAPER = dict(archive=CPPN_ARCHIVE, curriculum="map", trials=10, descriptors=["r
               distance_origin="origin", roughness_stride=5, max_observations=None, num_envs=500, unroll_length=10,
               num_unrolls=8, num_minibatches=8, update_epochs=8, learning_rate=3e-4, episode_length=1000,
               chunks_per_call=25, fast_compile=False, backend="auto", healthy_reward=None, update_normaliser=True,
-              truncation="bootstrap", overlap=False)
+              truncation="bootstrap", overlap=False, compact=True)
 PRESETS: dict[str, dict] = {
     "paper": _PAPER,
     "gpu-short": {**_PAPER, "max_epochs": 3000},
     "smoke": {**_PAPER, "trials": 2, "epochs_per_chunk": 1, "steps_per_epoch": 80, "max_epochs": 4, "max_evals": 2,
               "attempts": 2, "best": 1, "headings": 1, "num_envs": 4, "num_unrolls": 2, "num_minibatches": 2,
-              "update_epochs": 1, "episode_length": 100, "chunks_per_call": 2, "fast_compile": True},
+              "update_epochs": 1, "episode_length": 100, "chunks_per_call": 2, "fast_compile": True,
+              "compact": False},
 }
 
 
@@ -109,9 +115,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def add_fine_tuning_arguments(parser: argparse.ArgumentParser, scope: str = "") -> None:
-    """``--freeze-normaliser``, ``--healthy-reward``, ``--learning-rate``, ``--truncation``, ``--max-evals`` and
-    ``--overlap`` (config ``update_normaliser`` / ``healthy_reward`` / ``learning_rate`` / ``truncation`` /
-    ``max_evals`` / ``overlap``, read back by
+    """``--freeze-normaliser``, ``--healthy-reward``, ``--learning-rate``, ``--truncation``, ``--max-evals``,
+    ``--overlap`` and ``--compact`` / ``--no-compact`` (config ``update_normaliser`` / ``healthy_reward`` /
+    ``learning_rate`` / ``truncation`` / ``max_evals`` / ``overlap`` / ``compact``, read back by
     :func:`fine_tuning_overrides`), shared with ``curriculum`` (``scope`` is added to the help, e.g. ", in every
     treatment")."""
     parser.add_argument("--freeze-normaliser", dest="update_normaliser", action="store_const", const=False,
@@ -135,13 +141,16 @@ def add_fine_tuning_arguments(parser: argparse.ArgumentParser, scope: str = "") 
                         help=f"evaluate each chunk's policy while the next chunk trains, in the same physics calls"
                              f"{scope} (the same curriculum; the walker on one tile per trial, on either backend; "
                              f"CurriculumConfig.overlap)")
+    parser.add_argument("--compact", action=argparse.BooleanOptionalAction, default=None,
+                        help=f"once some trials have finished, compute only the running ones in each block (the "
+                             f"same results; one compile per block size){scope} (default: on, off in smoke)")
 
 
 def fine_tuning_overrides(args) -> dict:
     """The config values of :func:`add_fine_tuning_arguments`' flags (None = not given)."""
     return dict(healthy_reward=args.healthy_reward, update_normaliser=args.update_normaliser,
                 learning_rate=args.learning_rate, truncation=args.truncation, max_evals=args.max_evals,
-                overlap=args.overlap)
+                overlap=args.overlap, compact=args.compact)
 
 
 def overrides(args) -> dict:
@@ -348,7 +357,7 @@ def make_block(config, harness, env_like):
         states = states._replace(policy=states.policy._replace(env_state=envs),
                                  restart=jnp.ones_like(states.restart))  # envs restart on the current terrains
         states = C.run_trials(states, bank, jnp.asarray(n, jnp.int32), config=config, harness=harness)
-        return strip_envs(states)
+        return strip_envs(states)._replace(restart=jnp.ones_like(states.restart))  # no envs: all restart next
 
     return block
 
@@ -373,7 +382,7 @@ def chunk_metrics(states, start: int, stop: int) -> dict:
             "trials_running": running.astype(np.float64)}
 
 
-_PROGRAMS: dict = {}  # (config, ppo, walker, trials, bank shape, fast) -> (init, block): treatments share them
+_PROGRAMS: dict = {}  # (config, ppo, walker, trials, bank shape, fast, mesh) -> (init, block, {rows: compiled block})
 
 
 def inputs(cfg: dict, config, arch, policy, env):
@@ -399,32 +408,41 @@ def inputs(cfg: dict, config, arch, policy, env):
 
 
 def setup(cfg: dict, config, arch, policy, env, mesh=None):
-    """Bank, the compiled block ``(states, bank, n) -> states`` and the initial (stripped) trial states. Compiled
-    programs are reused by later treatments with the same settings and bank shape (``experiments curriculum``).
-    ``mesh``: the trials split over its devices (``sharding.map_rows``: padded, the bank replicated)."""
+    """Bank, the block ``run(states, bank, n) -> states`` and the initial (stripped) trial states. ``run`` computes
+    the running trials only when ``cfg["compact"]`` (``curriculum.run_live``; default on) and compiles the block
+    once per trial count it meets; compiled programs are reused by later treatments with the same settings and bank
+    shape (``experiments curriculum``). ``mesh``: the trials split over its devices (``sharding.map_rows``: padded,
+    the bank replicated)."""
     import jax
+
+    from jaxterrain import curriculum as C
 
     bank, ppo, harness, start, keys, init_fn = inputs(cfg, config, arch, policy, env)
     fast = bool(cfg.get("fast_compile", False))
     sig = (config, ppo, env.config, int(cfg["trials"]), tuple(bank.heightmaps.shape), fast, mesh)
     if sig not in _PROGRAMS:
-        init = compiled(init_fn, fast, keys, bank, start)
-        like, bank_like = init(keys, bank, start), bank
-        block = make_block(config, harness, start.env_state)
-        if mesh is not None:  # the trials split over the devices; inputs whole on the mesh (whence the init's)
-            from jaxterrain import sharding
+        _PROGRAMS[sig] = (compiled(init_fn, fast, keys, bank, start), make_block(config, harness, start.env_state),
+                          {})
+    init, block, blocks = _PROGRAMS[sig]  # blocks: trial count -> the block compiled for it
+    states = init(keys, bank, start)
+    if mesh is not None:  # the trials split over the devices; inputs whole on the mesh (whence the init's)
+        from jaxterrain import sharding
 
-            block = sharding.map_rows(block, mesh, replicated=(1, 2))
-            like, bank_like = sharding.replicate((like, bank), mesh)
-        block = compiled(block, fast, like, bank_like, jax.numpy.int32(1))
-        _PROGRAMS[sig] = (init, block)
-    init, block = _PROGRAMS[sig]
-    if mesh is None:
-        return bank, lambda s, b, n: block(s, b, jax.numpy.int32(n)), init(keys, bank, start)
-    from jaxterrain import sharding
+        block = sharding.map_rows(block, mesh, replicated=(1, 2))
+        bank, states = sharding.replicate((bank, states), mesh)
+        place = functools.partial(sharding.replicate, mesh=mesh)
+    else:
+        place = lambda tree: tree  # noqa: E731
 
-    run = lambda s, b, n: block(*sharding.replicate((s, b), mesh), jax.numpy.int32(n))  # noqa: E731
-    return sharding.replicate(bank, mesh), run, sharding.replicate(init(keys, bank, start), mesh)
+    def rows_block(s, b, n):
+        rows = int(s.done.shape[0])
+        if rows not in blocks:
+            like = jax.tree.map(lambda x: x[:rows], states)
+            blocks[rows] = compiled(block, fast, like, bank, jax.numpy.int32(1))
+        return blocks[rows](*place((s, b)), jax.numpy.int32(n))
+
+    compact = bool(cfg.get("compact", True))
+    return bank, (functools.partial(C.run_live, rows_block) if compact else rows_block), states
 
 
 def run_treatment(cfg: dict, folder: Path, time_limit_s: float | None = None, desc: str = "",

@@ -304,6 +304,32 @@ def test_resume_from_a_checkpoint_equals_an_uninterrupted_run(tmp_path):
     assert done == 12 and tree_equal(state, whole)
 
 
+def test_live_rows_pad_the_running_trials_to_a_power_of_two_with_finished_ones():
+    done = np.array([False, True, True, False, False, True, True, True, False, True])
+    assert C.live_rows(done).tolist() == [0, 3, 4, 8]
+    assert C.live_rows(np.r_[done[:9], False]).tolist() == [0, 1, 2, 3, 4, 5, 8, 9]  # 5 running -> 8 rows
+    assert C.live_rows(np.ones(10, bool)).tolist() == [0] and C.live_rows(np.zeros(3, bool)).tolist() == [0, 1, 2]
+    assert C.live_rows(np.array([True, True, False])).tolist() == [2]
+
+
+@pytest.mark.parametrize("overlap", [False, True])
+def test_run_live_equals_running_every_trial(overlap):
+    """Blocks on the running trials only (5 trials that end at different times) give, block by block, the states
+    of blocks on all five; the blocks did shrink."""
+    bank = toy_bank(toy_grid(4))
+    config = small("map", max_evals=3, max_epochs=60, overlap=overlap)
+    harness = keyed_harness(0.03, overlap)
+    run = C.make_runner(config, harness)
+    whole, live = (C.init_trials(jax.random.split(jax.random.key(3), 5), bank, KEYED_START, config=config,
+                                 harness=harness) for _ in range(2))  # two copies: the runner donates its states
+    sizes = []
+    while not np.all(np.asarray(whole.done)):
+        sizes.append(C.live_rows(live.done).size)
+        whole, live = run(whole, bank, 3), C.run_live(run, live, bank, 3)
+        assert tree_equal(live, whole)
+    assert sizes[0] == 5 and min(sizes) < 5, sizes
+
+
 def test_no_retrace_when_the_terrain_changes():
     bank = toy_bank(toy_grid(4))
     config, harness = small("map", max_evals=2), fake_harness(0.05)
@@ -859,3 +885,24 @@ def test_learn_overlap_smoke_makes_the_plain_choices_and_resumes(tmp_path, learn
     assert [(r["trial"], r["chunk"], r["epoch"], r["terrain"]) for r in a] == \
         [(r["trial"], r["chunk"], r["epoch"], r["terrain"]) for r in b]
     np.testing.assert_allclose([float(r["evaluation"]) for r in b], [float(r["evaluation"]) for r in a], atol=0.05)
+
+
+@pytest.mark.slow
+def test_learn_compact_blocks_run_the_same_treatment(tmp_path, learn_smoke):
+    """``learn --compact`` (on in the GPU presets): a 3-trial smoke run whose trials end at different chunks (a
+    threshold the smoke walker passes on some evaluations only) runs its later blocks on the running trials only
+    and writes the history of the run that keeps every trial in every block (CPU: exactly). Minutes of CPU."""
+    from experiments import learn
+
+    archive, _ = learn_smoke
+    runs = {}
+    for flag in ("--no-compact", "--compact"):
+        out = runs[flag] = tmp_path / flag
+        before = {sig: set(blocks) for sig, (_, _, blocks) in learn._PROGRAMS.items()}
+        assert cli("learn", "--preset", "smoke", "--archive", archive, "--trials", "3", "--threshold", "0.348",
+                   "--max-epochs", "8", flag, "--out", str(out)) == 0
+        assert json.loads((out / "config.json").read_text())["compact"] is (flag == "--compact")
+        sizes = set().union(*(set(b) - before.get(sig, set()) for sig, (_, _, b) in learn._PROGRAMS.items()))
+    epochs = json.loads((runs["--compact"] / "summary.json").read_text())["epochs"]
+    assert min(epochs) < max(epochs) and min(sizes, default=3) < 3, (epochs, sizes)  # smaller blocks compiled, ran
+    assert (runs["--compact"] / "history.csv").read_text() == (runs["--no-compact"] / "history.csv").read_text()

@@ -16,12 +16,13 @@ from jaxterrain.curriculum import gp
 from jaxterrain.curriculum.analysis import (MILESTONES, PAPER_TABLE2, first_epochs, format_milestone, hardest_curve,
                                             milestone_summary, terrain_runs)
 from jaxterrain.curriculum.config import SELECTORS, CurriculumConfig, validate_config
-from jaxterrain.curriculum.core import (Harness, History, State, gp_params, init, init_trials, make_runner,
-                                        removal_mask, roughness_sequence, run_trials, select, step, terrain_hardness)
+from jaxterrain.curriculum.core import (Harness, History, State, gp_params, init, init_trials, live_rows,
+                                        make_runner, removal_mask, roughness_sequence, run_live, run_trials, select,
+                                        step, terrain_hardness)
 
 __all__ = [
     "CurriculumConfig", "Harness", "History", "MILESTONES", "PAPER_TABLE2", "SELECTORS", "State", "first_epochs",
-    "format_milestone", "gp", "gp_params", "hardest_curve", "init", "init_trials", "make_runner", "milestone_summary",
-    "removal_mask", "roughness_sequence", "run_trials", "select", "step", "terrain_hardness", "terrain_runs",
-    "validate_config",
+    "format_milestone", "gp", "gp_params", "hardest_curve", "init", "init_trials", "live_rows", "make_runner",
+    "milestone_summary", "removal_mask", "roughness_sequence", "run_live", "run_trials", "select", "step",
+    "terrain_hardness", "terrain_runs", "validate_config",
 ]
