@@ -435,7 +435,10 @@ def make_runner(config: CurriculumConfig, harness: Harness, mesh=None) -> Callab
     ``mesh`` (a ``jax.sharding.Mesh``): the trials are split over its devices (``sharding.map_rows``: the trial
     axis sharded, the bank replicated; a trial count that does not divide is padded with copies of the last trial,
     cut off again), each device running its own trials' loop (it stops when ITS trials are done). A trial's chunks
-    depend only on its own state and key, so the states are those of the one-device runner."""
+    depend only on its own state and key, so the states are those of the one-device runner, except with
+    ``config.overlap``: there a block runs until the least advanced running trial has done ``num_chunks`` (trials
+    ahead of it step on meanwhile), and each device counts that among its own trials, so a trial's block may end at
+    another chunk than on one device, and its envs restart there (the same curriculum rules, other PPO data)."""
     fn = functools.partial(run_trials, config=config, harness=harness)
     if mesh is not None:
         from jaxterrain import sharding
