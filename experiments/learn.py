@@ -410,9 +410,9 @@ def inputs(cfg: dict, config, arch, policy, env):
 def setup(cfg: dict, config, arch, policy, env, mesh=None):
     """Bank, the block ``run(states, bank, n) -> states`` and the initial (stripped) trial states. ``run`` computes
     the running trials only when ``cfg["compact"]`` (``curriculum.run_live``; default on) and compiles the block
-    once per trial count it meets; compiled programs are reused by later treatments with the same settings and bank
-    shape (``experiments curriculum``). ``mesh``: the trials split over its devices (``sharding.map_rows``: padded,
-    the bank replicated)."""
+    once per trial count it meets (every trial's here, fewer at the first call that needs them); compiled programs
+    are reused by later treatments with the same settings and bank shape (``experiments curriculum``). ``mesh``:
+    the trials split over its devices (``sharding.map_rows``: padded, the bank replicated)."""
     import jax
 
     from jaxterrain import curriculum as C
@@ -434,13 +434,16 @@ def setup(cfg: dict, config, arch, policy, env, mesh=None):
     else:
         place = lambda tree: tree  # noqa: E731
 
-    def rows_block(s, b, n):
-        rows = int(s.done.shape[0])
+    def program(rows: int):
         if rows not in blocks:
             like = jax.tree.map(lambda x: x[:rows], states)
             blocks[rows] = compiled(block, fast, like, bank, jax.numpy.int32(1))
-        return blocks[rows](*place((s, b)), jax.numpy.int32(n))
+        return blocks[rows]
 
+    def rows_block(s, b, n):
+        return program(int(s.done.shape[0]))(*place((s, b)), jax.numpy.int32(n))
+
+    program(int(states.done.shape[0]))  # the block of every trial now: set-up includes its compile
     compact = bool(cfg.get("compact", True))
     return bank, (functools.partial(C.run_live, rows_block) if compact else rows_block), states
 
