@@ -466,7 +466,8 @@ def run_live(run: Callable[[State, TerrainBank, Any], State], states: State, ban
     without the cost of the finished ones: under ``vmap`` a finished trial still takes its share of every physics
     step and evaluation walk, so once trials end at different times (the map curriculum empties some maps early)
     a block of 4 rows instead of 10 is faster. Host-side (reads ``states.done``); a jitted ``run`` compiles once
-    per block size."""
+    per block size. Not exact for a mesh runner under ``config.overlap``: fewer rows regroup the trials over the
+    devices, and there each device ends a block by its own trials (:func:`make_runner`)."""
     rows = live_rows(states.done)
     if rows.size == states.done.shape[0]:
         return run(states, bank, num_chunks)
