@@ -29,7 +29,8 @@ given (``mask,bootstrap,mask`` brackets the one with the other, to see the machi
 bootstrap's seconds per chunk over the mean of mask's; the other ratios use the first mode given.
 ``--start RUN`` starts every block from the checkpoint of a ``learn`` run of the same preset and trial count (e.g.
 the paper run at chunk 550, where terrains change less often than in the first chunks) instead of chunk 0; pass
-the run's ``--archive`` too. An ``--overlap`` run's checkpoint starts an overlapped block where it stood (its chunk
+the run's ``--archive`` too. With ``--parts`` the parts then time each trial's restored policy on its current
+terrain. An ``--overlap`` run's checkpoint starts an overlapped block where it stood (its chunk
 trained ahead still pending).
 
 Ratios printed: curriculum overhead = block env steps/s at T=1 / bare PPO's; trials at once = block env steps/s at
@@ -121,6 +122,7 @@ def measure_block(args, trials: int, overlap: bool = False, truncation: str | No
     compile_s = time.perf_counter() - t0
     if args.start:
         states = start_states(args.start, states)
+    start = states
     states, first = timed(block, states, bank, 1)  # first call: a chunk (and any lazy work)
     before = np.asarray(states.chunk)
     pending = np.ones(trials, bool) if states.pending is None else np.asarray(states.pending)
@@ -139,21 +141,25 @@ def measure_block(args, trials: int, overlap: bool = False, truncation: str | No
            "chunk_reached": int(np.max(np.asarray(states.chunk))), "switches": int(np.sum(switched)),
            "loop_steps": steps, "s_per_step": t / steps, "hardest_mean": float(np.mean(np.asarray(states.hardest)))}
     if args.parts:
-        row.update(measure_parts(cfg, config, bank, policy, env, trials))
+        row.update(measure_parts(cfg, config, bank, policy, env, trials, start if args.start else None))
     return row
 
 
-def measure_parts(cfg, config, bank, policy, env, trials: int) -> dict:
-    """The harness's train and evaluate alone, vmapped over ``trials`` on the bank's first terrains (laid out as
-    the block lays them out: through ``harness.layout`` on a tiled walker, e.g. Warp's, one tile per trial and
-    heading)."""
+def measure_parts(cfg, config, bank, policy, env, trials: int, states=None) -> dict:
+    """The harness's train and evaluate alone, vmapped over ``trials`` on fixed terrains (laid out as the block lays
+    them out: through ``harness.layout`` on a tiled walker, e.g. Warp's, one tile per trial and heading): the base
+    policy on the bank's first terrains, or with ``states`` (``--start``'s restored trial states) each trial's policy
+    on its current terrain (where a late run's chunk time goes)."""
     ppo = config.ppo_config(policy.config)
     harness = W.walker_harness(env, ppo, config)
-    start = W.start_state(env, ppo, policy, bank.heightmaps.shape[1:])
-    maps = bank.heightmaps[jnp.arange(trials) % bank.heightmaps.shape[0]]
+    if states is None:
+        start = W.start_state(env, ppo, policy, bank.heightmaps.shape[1:])
+        maps = bank.heightmaps[jnp.arange(trials) % bank.heightmaps.shape[0]]
+        policies = jax.tree.map(lambda x: jnp.broadcast_to(x, (trials,) + x.shape), start)
+    else:
+        maps, policies = bank.heightmaps[states.terrain], states.policy
     terrains, axes = (maps, 0) if harness.layout is None else harness.layout(maps)
     keys = jax.random.split(jax.random.key(1), trials)
-    policies = jax.tree.map(lambda x: jnp.broadcast_to(x, (trials,) + x.shape), start)
 
     def vmapped(fn):
         return jax.jit(jax.vmap(fn, in_axes=(0, 0, axes)))
