@@ -330,12 +330,14 @@ def strip_envs(states):
     return states._replace(policy=states.policy._replace(env_state=None))
 
 
-FAST_COMPILE = {"xla_backend_optimization_level": 0, "xla_llvm_disable_expensive_passes": True}
+FAST_COMPILE = {"xla_backend_optimization_level": 0, "xla_llvm_disable_expensive_passes": True,
+                "xla_cpu_use_fusion_emitters": False}
 
 
 def compiled(fn, fast: bool, *args):
     """``jax.jit(fn)`` compiled for ``args``; with ``fast`` (the CPU smoke preset) at XLA's lowest backend
-    optimisation, which compiles the walker's programs several times faster on a CPU."""
+    optimisation and with its classic elemental emitter instead of the fusion emitters, which compiles the walker's
+    programs several times faster on a CPU."""
     import jax
 
     lowered = jax.jit(fn).lower(*args)

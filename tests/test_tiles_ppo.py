@@ -24,7 +24,10 @@ from jaxterrain import rl
 from jaxterrain.terrain import TerrainScale
 from jaxterrain.walker import Tile, WalkerConfig, WalkerEnv
 
-FAST_COMPILE = {"xla_backend_optimization_level": 0, "xla_llvm_disable_expensive_passes": True}
+# the exact comparisons below (a tile against its terrain array: two programs) hold with XLA's fusion emitters, which
+# tests/conftest.py turns off suite-wide: pinned on here
+FAST_COMPILE = {"xla_backend_optimization_level": 0, "xla_llvm_disable_expensive_passes": True,
+                "xla_cpu_use_fusion_emitters": True}
 
 
 # ---------------------------------------------------------------------------------------------------------------
