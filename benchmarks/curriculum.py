@@ -120,9 +120,9 @@ def measure_block(args, trials: int, overlap: bool = False, truncation: str | No
     bank, block, states = learn.setup(cfg, config, arch, policy, env)
     jax.block_until_ready(states)
     compile_s = time.perf_counter() - t0
+    start = None  # --start's restored states, for the parts
     if args.start:
-        states = start_states(args.start, states)
-    start = states
+        states = start = start_states(args.start, states)
     states, first = timed(block, states, bank, 1)  # first call: a chunk (and any lazy work)
     before = np.asarray(states.chunk)
     pending = np.ones(trials, bool) if states.pending is None else np.asarray(states.pending)
@@ -141,7 +141,7 @@ def measure_block(args, trials: int, overlap: bool = False, truncation: str | No
            "chunk_reached": int(np.max(np.asarray(states.chunk))), "switches": int(np.sum(switched)),
            "loop_steps": steps, "s_per_step": t / steps, "hardest_mean": float(np.mean(np.asarray(states.hardest)))}
     if args.parts:
-        row.update(measure_parts(cfg, config, bank, policy, env, trials, start if args.start else None))
+        row.update(measure_parts(cfg, config, bank, policy, env, trials, start))
     return row
 
 
