@@ -131,7 +131,8 @@ def batched_distances(env: WalkerEnv, policy: Callable, terrains: jax.Array, key
     effects of another batch size, which the walker's chaotic dynamics can grow into a different outcome of a single
     rollout: fitness is then the same in distribution, not bit for bit (a given ``slots`` is deterministic). Pooling
     saves the slot-steps that ended rollouts would idle, worth it when episode lengths vary a lot, at the cost of a
-    smaller batch.
+    smaller batch. Either way an ended rollout (or an idle slot) steps on parked (``WalkerEnv.park``): out of
+    contact, so on MuJoCo Warp it costs the solver next to nothing until the loop ends (or the slot is refilled).
 
     ``needed`` [B] bool (optional): terrains whose distances are wanted; the others get distance 0 and length 0.
     With ``slots`` their rollouts are never started (MAP-Elites passes Algorithm 1's verdict: a rejected terrain
@@ -179,7 +180,7 @@ def batched_distances(env: WalkerEnv, policy: Callable, terrains: jax.Array, key
         final = jnp.where(ended, final, dist)
         length = jnp.where(ended, length, state.steps)
         ended = ended | (state.done > 0)
-        return t + 1, state, ended, final, length
+        return t + 1, env.park(state, ended), ended, final, length  # an ended rollout steps on out of the way
 
     _, _, _, final, length = jax.lax.while_loop(cond, body, (jnp.int32(0), state, ended, final, length))
     return final, length
@@ -256,7 +257,8 @@ def _pooled_distances(env, act, terrains, keys, attempts: int, slots: int, refil
             where = jnp.where(ended, p.job, jobs)  # out of range -> dropped
             distance = p.distance.at[where].set(jnp.where(state.failed > 0, 0.0, state.distance), mode="drop")
             length = p.length.at[where].set(state.steps, mode="drop")
-            return p._replace(state=state, active=p.active & ~ended, distance=distance, length=length)
+            active = p.active & ~ended
+            return p._replace(state=env.park(state, ~active), active=active, distance=distance, length=length)
 
         return jax.lax.fori_loop(0, refill_every, one, p)
 

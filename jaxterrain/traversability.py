@@ -158,7 +158,7 @@ def walk_fn(env, policy: Callable, attempts: int, horizon: int) -> Callable:
             now = ~ended & (state.done > 0)
             fell = fell | (now & (state.truncation == 0))
             end = jnp.where(now, t + 1, end)
-            return t + 1, state, ended | now, end, fell, buf
+            return t + 1, e.park(state, ended | now), ended | now, end, fell, buf  # ended walks step on parked
 
         t, _, _, end, fell, buf = lax.while_loop(lambda c: (c[0] < horizon) & ~jnp.all(c[2]), body,
                                                  (jnp.int32(0), state, ended, end, ended, buf))

@@ -158,6 +158,33 @@ def test_fall_terminates(env, fns, settled):
     assert np.all(np.isfinite(np.asarray(state.obs)))
 
 
+def test_park_moves_only_the_masked_walkers_out_of_contact(env, fns, settled):
+    """``env.park``: the masked walker goes PARK_HEIGHT above the terrain's top, upright in the rest pose, at rest,
+    and steps on touching nothing; the other walkers' states and next steps are bit for bit those without it."""
+    from jaxterrain.walker.env import PARK_HEIGHT
+
+    _, step = fns
+    terrains, _, state = settled
+    zeros = jnp.zeros((3, env.action_size))
+    mask = jnp.array([False, True, False])
+    parked = env.park(state, mask)
+    q, v = np.asarray(parked.data.qpos), np.asarray(parked.data.qvel)
+    np.testing.assert_array_equal(q[[0, 2]], np.asarray(state.data.qpos)[[0, 2]])
+    np.testing.assert_array_equal(v[[0, 2]], np.asarray(state.data.qvel)[[0, 2]])
+    np.testing.assert_array_equal(q[1, :2], np.asarray(state.data.qpos)[1, :2])  # it stays above its place
+    assert q[1, 2] == pytest.approx(env.elevation_z + PARK_HEIGHT)
+    np.testing.assert_array_equal(q[1, 3:], env._qpos0[3:])
+    assert not v[1].any()
+    same = env.park(state, jnp.zeros(3, bool))
+    np.testing.assert_array_equal(np.asarray(same.data.qpos), np.asarray(state.data.qpos))
+    a, b = step(state, zeros, terrains), step(parked, zeros, terrains)
+    for x, y in ((a.data.qpos, b.data.qpos), (a.data.qvel, b.data.qvel), (a.obs, b.obs), (a.reward, b.reward)):
+        np.testing.assert_array_equal(np.asarray(x)[[0, 2]], np.asarray(y)[[0, 2]])
+    dist_a, dist_b = np.asarray(a.data._impl.contact.dist), np.asarray(b.data._impl.contact.dist)
+    assert dist_a[1].min() < 0 < dist_b[1].min()  # feet in contact (dist < 0), then none
+    assert np.abs(np.asarray(b.data.qvel)[1]).max() < 1.0  # free fall for one env step, nothing else
+
+
 def test_goal_time_limit_and_invalid(env, fns, settled):
     _, step = fns
     terrains, state0, _ = settled

@@ -154,7 +154,8 @@ def walker_harness(env, ppo: rl.PPOConfig, config: CurriculumConfig) -> Harness:
         world, inner = _walk_tiles(terrain, protocol.attempts, protocol.headings)
         riders = jax.vmap(env.reset, in_axes=(0, inner))(_walk_keys(eval_key, protocol.attempts,
                                                                     protocol.headings), world)
-        ride = rl.Ride(act=jax.vmap(lambda obs: act(params, obs)), terrains=world, record=_record_ride)
+        ride = rl.Ride(act=jax.vmap(lambda obs: act(params, obs)), terrains=world, record=_record_ride,
+                       park=lambda carry, states, start: _park_riders(env, carry, states, start))
         zeros = jnp.zeros((protocol.attempts,), jnp.float32)
         per_env = rl.ppo.per_env_mask(env, terrain)  # traced once, for both
         state, riders, (ended, final), _ = rl.ride_updates(keyed(state, key), spread(terrain), riders, ride,
@@ -255,6 +256,12 @@ def _record_ride(carry, states, start: int):
     return _record_walks(*carry, states.failed[start:], states.distance[start:], states.done[start:])
 
 
+def _park_riders(env, carry, states, start: int):
+    """``rl.Ride.park`` of evaluation walks: the riders (rows ``start ..`` of ``states``) whose walk ended, parked."""
+    ended = carry[0]
+    return env.park(states, jnp.concatenate([jnp.zeros((start,), bool), ended]))
+
+
 def finish_walks(env, act, tile: Tile, riders, ended, final, params, attempts: int, headings: int = 1,
                  ride_steps: int = 0, per_env=None) -> jax.Array:
     """``[attempts]`` distances of one trial's evaluation walks that rode ``ride_steps`` steps along PPO
@@ -304,7 +311,9 @@ def _walk_tiles(tile: Tile, attempts: int, headings: int):
 
 def _walk_loop(env, act, world_inner, params, params_axes, carry):
     """The walks' loop: ``carry = (t, states [B, R], ended [B, R], final [B, R])`` stepped (trial b's walks on
-    ``world`` with vmap axes ``inner`` over R) until every walk has ended or ``t`` reaches the episode limit."""
+    ``world`` with vmap axes ``inner`` over R) until every walk has ended or ``t`` reaches the episode limit. A walk
+    that ended is parked (``WalkerEnv.park``) while the others walk on: on MuJoCo Warp a fallen walker lying on the
+    terrain would cost the solver more than a walking one."""
     world, inner = world_inner
     step = jax.vmap(jax.vmap(env.step, in_axes=(0, 0, inner)), in_axes=(0, 0, TILE_AXES))
     policy = jax.vmap(jax.vmap(act, in_axes=(None, 0)), in_axes=(params_axes, 0))
@@ -317,7 +326,8 @@ def _walk_loop(env, act, world_inner, params, params_axes, carry):
     def body(carry):
         t, state, ended, final = carry
         state = step(state, policy(params, state.obs), world)
-        return (t + 1, state) + _record_walks(ended, final, state.failed, state.distance, state.done)
+        ended, final = _record_walks(ended, final, state.failed, state.distance, state.done)
+        return t + 1, env.park(state, ended), ended, final  # an ended walk steps on out of the way
 
     return jax.lax.while_loop(cond, body, carry)
 

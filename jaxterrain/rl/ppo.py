@@ -99,11 +99,15 @@ class Ride(NamedTuple):
       SAME bank as the PPO envs' Tile.
     record: ``(carry, states, start) -> carry`` after every step; ``states`` are all ``num_envs + R`` env states,
       the riders' are rows ``start ..`` (``start = num_envs``) of their per-env fields (e.g. ``states.done[start:]``).
+    park: optional ``(carry, states, start) -> states`` after ``record``: the env states with riders whose outcome
+      is recorded moved out of the way (e.g. ``WalkerEnv.park``), so that they cost the physics less; it must leave
+      the PPO envs' rows as they are. None: the riders step on as they are.
     """
 
     act: Any
     terrains: Any
     record: Any
+    park: Any = None
 
 
 # ----------------------------------------------------------------------------------------------------------------
@@ -346,6 +350,8 @@ def _collect(state: TrainState, key, terrains, env, config, rows=None, ride: Opt
         next_state = v_step(env_state, action, step_terrains)
         if ride is not None:
             ride_carry = ride.record(ride_carry, next_state, n)
+            if ride.park is not None:
+                next_state = ride.park(ride_carry, next_state, n)
         finite = jnp.all(jnp.isfinite(own(next_state.obs)), axis=-1)
         reward = own(next_state.reward)
         reward = jnp.where(jnp.isfinite(reward), reward, 0.0).astype(jnp.float32)

@@ -82,6 +82,7 @@ from jaxterrain.walker.model import (
 from jaxterrain.walker.tiles import Tile, TileBank
 
 BACKENDS = ("jax", "warp")
+PARK_HEIGHT = 100.0  # m above the terrain's top where WalkerEnv.park puts walkers whose outcome is recorded
 # MuJoCo Warp overflow bits (mujoco_warp OverflowType) that mean dropped contacts or constraints: the step is invalid.
 _WARP_DROPPED = (1 << 0) | (1 << 1) | (1 << 2) | (1 << 3)  # NEFC, NJMAX_NNZ, BROADPHASE, NARROWPHASE
 
@@ -360,6 +361,21 @@ class WalkerEnv:
         for _ in range(mask.ndim):
             one = jax.vmap(one)
         return one(mask, new, old)
+
+    def park(self, state: WalkerState, mask) -> WalkerState:
+        """``state`` with the walkers where ``mask`` (``[]`` per env, or the states' leading axes) moved out of the
+        way: ``PARK_HEIGHT`` above the terrain's top, upright in the rest pose, at rest. Nothing touches them there
+        and no joint sits at a limit, so their next physics steps cost the solver next to nothing: MuJoCo Warp's work
+        follows each world's contacts and constraint rows (MJX-JAX's is fixed-size, so there it changes nothing). For
+        loops that keep stepping envs whose outcome is already recorded (evaluation walks that ended before the
+        longest one); what a parked env does next is meaningless and must stay unread. Only ``qpos`` / ``qvel``
+        change, so MJX-Warp's shared buffers stay shared."""
+        mask = jnp.asarray(mask, bool)[..., None]
+        d = state.data
+        top = jnp.full(d.qpos.shape[:-1] + (1,), self.elevation_z + PARK_HEIGHT, d.qpos.dtype)
+        rest = jnp.broadcast_to(jnp.asarray(self._qpos0[3:], d.qpos.dtype), d.qpos.shape[:-1] + (d.qpos.shape[-1] - 3,))
+        up = jnp.concatenate([d.qpos[..., :2], top, rest], axis=-1)
+        return state._replace(data=d.replace(qpos=jnp.where(mask, up, d.qpos), qvel=jnp.where(mask, 0.0, d.qvel)))
 
     def _need_tiles(self):
         if not self.tiles:
