@@ -42,14 +42,40 @@ def test_curriculum_parts_on_the_learn_commands_layout(backend):
         pytest.skip(warp_available()[1])
     curriculum = load_benchmark("curriculum")
     args = argparse.Namespace(preset="smoke", archive=None, backend=backend, num_envs=None, num_unrolls=None,
-                              headings=2, chunks=1, parts=True)
+                              headings=2, chunks=1, parts=True, start=None)
     row = curriculum.measure_block(args, 2)
-    assert row["chunks_done"] == 2
+    assert row["chunks_done"] == 1 and row["chunk_reached"] == 2  # one timed chunk after an untimed one
     assert row["train_s_per_chunk"] > 0 and row["eval_s_per_chunk"] > 0
     assert 0.0 <= row["eval_fitness_mean"] <= 1.0
     assert row["train_seq_steps"] == 20  # smoke: 80 env steps a chunk = 1 update of 4 envs x unroll 10 x 2 unrolls
     if backend == "warp":
         assert 1 <= row["eval_seq_steps"] <= 100  # smoke episodes are 100 steps
+
+
+@pytest.mark.slow
+def test_curriculum_parts_from_restored_states():
+    """benchmarks/curriculum.py --parts with --start's restored states times each trial's policy on its current
+    terrain: trial states holding the base policy on terrains [0, 1] give the row of the default (the base policy on
+    the bank's first terrains) exactly, on the CPU; after a chunk of the block (trained policies, the GP's picks) the
+    row is another one."""
+    import jax.numpy as jnp
+
+    curriculum = load_benchmark("curriculum")
+    args = argparse.Namespace(preset="smoke", archive=None, backend=None, num_envs=None, num_unrolls=None,
+                              headings=None)
+    cfg = curriculum.learn_cfg(args, 2)
+    config, arch, policy, env = curriculum.learn.validate(cfg)
+    bank, block, states = curriculum.learn.setup(cfg, config, arch, policy, env)
+    keys = ("eval_fitness_mean", "train_seq_steps")
+    default = curriculum.measure_parts(cfg, config, bank, policy, env, 2)
+    first = states._replace(terrain=jnp.arange(2, dtype=states.terrain.dtype) % bank.heightmaps.shape[0])
+    assert np.all(np.asarray(states.chunk) == 0)  # the base policy, untrained
+    same = curriculum.measure_parts(cfg, config, bank, policy, env, 2, first)
+    assert {k: same[k] for k in keys} == {k: default[k] for k in keys}
+    later = block(states, bank, 1)
+    assert np.all(np.asarray(later.chunk) == 1)
+    moved = curriculum.measure_parts(cfg, config, bank, policy, env, 2, later)
+    assert 0.0 <= moved["eval_fitness_mean"] <= 1.0 and moved["eval_fitness_mean"] != default["eval_fitness_mean"]
 
 
 @pytest.mark.slow
