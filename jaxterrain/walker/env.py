@@ -364,12 +364,12 @@ class WalkerEnv:
 
     def park(self, state: WalkerState, mask) -> WalkerState:
         """``state`` with the walkers where ``mask`` (``[]`` per env, or the states' leading axes) moved out of the
-        way: ``PARK_HEIGHT`` above the terrain's top, upright in the rest pose, at rest. Nothing touches them there
-        and no joint sits at a limit, so their next physics steps cost the solver next to nothing: MuJoCo Warp's work
-        follows each world's contacts and constraint rows (MJX-JAX's is fixed-size, so there it changes nothing). For
-        loops that keep stepping envs whose outcome is already recorded (evaluation walks that ended before the
-        longest one); what a parked env does next is meaningless and must stay unread. Only ``qpos`` / ``qvel``
-        change, so MJX-Warp's shared buffers stay shared."""
+        way: ``PARK_HEIGHT`` above the terrain's top, upright in the rest pose, at rest. Nothing touches them there,
+        so their next physics steps carry few constraint rows (a fallen walker lying on the terrain carries many), and
+        MuJoCo Warp's solver work follows each world's rows (MJX-JAX's arrays are fixed-size). For loops that keep
+        stepping envs whose outcome is already recorded (evaluation walks that ended before the longest one); what a
+        parked env does next is meaningless and must stay unread. Only ``qpos`` / ``qvel`` change, so MJX-Warp's
+        shared buffers stay shared."""
         mask = jnp.asarray(mask, bool)[..., None]
         d = state.data
         top = jnp.full(d.qpos.shape[:-1] + (1,), self.elevation_z + PARK_HEIGHT, d.qpos.dtype)
