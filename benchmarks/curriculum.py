@@ -263,10 +263,10 @@ def main() -> None:
             if mode["mask"] and mode["bootstrap"]:
                 ratios[f"bootstrap_cost_{name}_T{trials}"] = float(np.mean(mode["bootstrap"]) / np.mean(mode["mask"]))
     paper_chunks = learn.PRESETS["paper"]["max_epochs"] // learn.PRESETS["paper"]["epochs_per_chunk"]
+    ppo = next((r for r in rows if r["part"] == "bare PPO (one terrain)" and r["truncation"] == first), None)
     if 1 in blocks:
         ratios["paper_trial_minutes_T1"] = blocks[1]["s_per_chunk"] * paper_chunks / 60
-        if not args.skip_ppo:
-            ppo = next(r for r in rows if r["part"] == "bare PPO (one terrain)" and r["truncation"] == first)
+        if ppo is not None:
             ratios["curriculum_overhead"] = blocks[1]["env_steps_per_s"] / ppo["env_steps_per_s"]
         big = max(blocks)
         if big > 1:
@@ -274,6 +274,8 @@ def main() -> None:
             ratios[f"paper_treatment_minutes_T{big}"] = blocks[big]["s_per_chunk"] * paper_chunks / 60
     for trials, row in overlapped.items():
         ratios[f"overlap_paper_minutes_T{trials}"] = row["s_per_chunk"] * paper_chunks / 60
+        if trials == 1 and ppo is not None:
+            ratios["curriculum_overhead_overlap"] = row["env_steps_per_s"] / ppo["env_steps_per_s"]
         if trials in blocks:
             ratios[f"overlap_speedup_T{trials}"] = blocks[trials]["s_per_chunk"] / row["s_per_chunk"]
     print()
