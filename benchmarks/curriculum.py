@@ -33,8 +33,9 @@ the run's ``--archive`` too. With ``--parts`` the parts then time each trial's r
 terrain. An ``--overlap`` run's checkpoint starts an overlapped block where it stood (its chunk
 trained ahead still pending).
 
-Ratios printed: curriculum overhead = block env steps/s at T=1 / bare PPO's; trials at once = block env steps/s at
-the largest T / at T=1 (issue 13: >= 3x for 10 trials). Extrapolated: a paper-budget trial (750 chunks) at T=1
+Ratios printed: curriculum overhead = block env steps/s at T=1 / bare PPO's (``curriculum_overhead_overlap``: the
+overlapped block's, per chunk done); trials at once = block env steps/s at the largest T / at T=1 (issue 13: >= 3x
+for 10 trials). Extrapolated: a paper-budget trial (750 chunks) at T=1
 and the 10 trials of a treatment, from the measured seconds per chunk.
 """
 
