@@ -20,9 +20,10 @@ rows for the solver). ``--backend`` (default ``jax``, which every machine has) p
 Solver readout (``--backend warp``; MJX-JAX neither records its iterations nor varies its rows): per walk-step,
 split into walks still running and walks already ended (which the loop keeps stepping until its longest walk ends),
 the last substep's Newton iterations (``solver_niter``), the share at the iteration cap and the constraint rows
-(``nefc``, per world); per loop step, their maximum over all walks. ``--park on`` lifts every ended walker 100 m
-above the terrain, upright, in its rest pose and at rest after each step (its result is already recorded, so the
-walks' ends must not change): ``off,on`` times both in one process, to see what the ended walks cost.
+(``nefc``, per world); per loop step, their maximum over all walks. ``--park on`` parks every ended walker after
+each step (``WalkerEnv.park``: out of contact; its result is already recorded, so the walks' ends must not change):
+``off,on`` times both in one process, to see what the ended walks cost. The ``*_warp_park.json`` outputs of d97325d
+lifted walkers 100 m above their own height instead of above the terrain's top (the same rows: none in contact).
 """
 import argparse
 import json
@@ -96,8 +97,8 @@ def main() -> None:
     def walk(data, index, keys, params, park):
         """[B, R] end step (0-based; -1: not ended), fell (a fall ends it), reached (the goal), contacts summed over
         its steps; [] the loop's steps; a dict of solver sums over the loop (``stats``). ``park``: after each step,
-        lift every ended walker 100 m above the terrain in its rest pose, at rest (no contacts; its result is
-        already recorded), to see what the ended walks cost."""
+        park every ended walker (``WalkerEnv.park``; its result is already recorded), to see what the ended walks
+        cost."""
         reset_keys = jax.vmap(lambda k: W._walk_keys(k, attempts, headings))(keys)
         world, inner = W._walk_tiles(W.Tile(W.TileBank(data), index), attempts, headings)
         reset = jax.vmap(jax.vmap(env.reset, in_axes=(0, inner)), in_axes=(0, W.TILE_AXES))
@@ -135,13 +136,8 @@ def main() -> None:
                      "max_nefc": stats["max_nefc"] + jnp.max(nefc)}
             new = running & (s.done > 0)
             end = jnp.where(new, t, end)
-            if park:  # every ended walker (this step's too) 100 m up in its rest pose: no contacts or limits
-                gone = end >= 0
-                d = s.data
-                up = jnp.concatenate([d.qpos[..., :2], d.qpos[..., 2:3] + 100.0,
-                                      jnp.broadcast_to(jnp.asarray(env._qpos0[3:]), d.qpos[..., 3:].shape)], -1)
-                d = d.replace(qpos=jnp.where(gone[..., None], up, d.qpos), qvel=jnp.where(gone[..., None], 0.0, d.qvel))
-                s = s._replace(data=d)
+            if park:  # every ended walker (this step's too) out of contact
+                s = env.park(s, end >= 0)
             return (t + 1, s, end, fell | (new & (s.truncation == 0)),
                     reached | (new & (s.truncation > 0) & (t + 1 < env.config.episode_length)), contacts, stats)
 
