@@ -15,9 +15,9 @@ import jax
 
 
 def environment() -> dict[str, Any]:
-    """Facts every result carries: device, date, commit (``jaxterrain.provenance.git_commit``: ``$JAXTERRAIN_COMMIT``
+    """Facts every result carries: device, date, commit (``jaxterrain.runtime.provenance.git_commit``: ``$JAXTERRAIN_COMMIT``
     first, else the checkout's short hash), versions."""
-    from jaxterrain.provenance import git_commit
+    from jaxterrain.runtime.provenance import git_commit
 
     dev = jax.devices()[0]
     return {
@@ -54,7 +54,7 @@ def median_time(fn: Callable[[Any], Any], inputs: Sequence[Any], repeats: int = 
 def write_json(path: str | os.PathLike | None, payload: dict[str, Any]) -> None:
     if not path:
         return
-    from jaxterrain.io import atomic_write_text
+    from jaxterrain.runtime.io import atomic_write_text
 
     atomic_write_text(Path(path), json.dumps(payload, indent=2, default=float))
 

@@ -4,7 +4,7 @@
         [--num-envs N --num-unrolls U] [--overlap off,on] [--truncation mask,bootstrap] [--start RUN]
         [--out result.json]
 
-Builds exactly what ``python -m experiments learn --preset gpu-short`` builds (``experiments.learn.setup``: the bank
+Builds exactly what ``python -m experiments learn --preset gpu-short`` builds (``experiments.runner.setup``: the bank
 of the archive, the base policy, the walker, the compiled block of chunks) and measures, each after its compile (the
 compile seconds are reported too; ``JAX_COMPILATION_CACHE_DIR`` lets a second command on the same machine skip them):
 
@@ -55,6 +55,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 import common  # noqa: E402
 from experiments import learn  # noqa: E402
+from jaxterrain.curriculum import runner  # noqa: E402
 from jaxterrain import rl  # noqa: E402
 from jaxterrain.rl.config import TRUNCATIONS  # noqa: E402
 from jaxterrain.curriculum import walker as W  # noqa: E402
@@ -90,7 +91,7 @@ def start_states(folder, states):
     (for an overlapped block nothing is pending then) or an ``--overlap`` run's (its pending chunk kept for an
     overlapped block; dropped for a plain one, whose policy then holds the chunk trained ahead: fine for timing,
     not for comparing end states)."""
-    from jaxterrain import driver
+    from jaxterrain.runtime import driver
 
     saved = bool(((driver.read_meta(folder) or {}).get("config") or {}).get("overlap"))
     nothing = jnp.zeros(np.shape(states.chunk), bool)
@@ -116,9 +117,9 @@ def trial_switches(states, before) -> np.ndarray:
 def measure_block(args, trials: int, overlap: bool = False, truncation: str | None = None) -> dict:
     """The learn command's block at ``trials``: compile seconds, seconds per chunk, env steps/s."""
     cfg = learn_cfg(args, trials, overlap, truncation)
-    config, arch, policy, env = learn.validate(cfg)
+    config, arch, policy, env = runner.validate(cfg)
     t0 = time.perf_counter()
-    bank, block, states = learn.setup(cfg, config, arch, policy, env)
+    bank, block, states = runner.setup(cfg, config, arch, policy, env)
     jax.block_until_ready(states)
     compile_s = time.perf_counter() - t0
     start = None  # --start's restored states, for the parts
@@ -191,8 +192,8 @@ def measure_ppo(args, truncation: str | None = None) -> dict:
     """Bare PPO on one fixed terrain with the curriculum's PPO config, one chunk's updates per call (on a tiled
     walker, all its envs on one tile holding that terrain)."""
     cfg = learn_cfg(args, 1, truncation=truncation)
-    config, arch, policy, env = learn.validate(cfg)
-    bank, _, _ = learn.setup(cfg, config, arch, policy, env)
+    config, arch, policy, env = runner.validate(cfg)
+    bank, _, _ = runner.setup(cfg, config, arch, policy, env)
     ppo = config.ppo_config(policy.config)
     terrain = bank.heightmaps[0]
     if env.tiles:  # a tiled walker (e.g. Warp's): that terrain on tile 0, every env on it

@@ -41,6 +41,8 @@ def child(args) -> dict:
     import numpy as np
 
     from jaxterrain import difficulty, generators, walker
+
+    from jaxterrain.walker.layout import make_env
     from jaxterrain.terrain import TerrainScale
 
     gen = generators.get("perlin")
@@ -68,7 +70,7 @@ def child(args) -> dict:
     # physics alone: same states, same actions, twice
     if cfg.tiles:  # MuJoCo Warp: the terrains are tiles of one bank, one env per tile
         cfg = cfg._replace(tiles=args.terrains, warp_worlds=args.terrains)
-    env = difficulty.make_env(cfg)
+    env = make_env(cfg)
     terrains, axes = (env.make_bank(hm * 1.0).at(jnp.arange(args.terrains)), walker.TILE_AXES) if cfg.tiles else (
         hm * 1.0, 0)
     keys = jax.random.split(jax.random.key(1), args.terrains)

@@ -1,16 +1,16 @@
-"""MAP-Elites throughput: our on-device loop (jaxterrain.archive.evolve) vs pyribs, and the paper-scale estimate.
+"""MAP-Elites throughput: our on-device loop (jaxterrain.qd.evolve) vs pyribs, and the paper-scale estimate.
 
     python benchmarks/map_elites.py                 # CPU-sized defaults
     python benchmarks/map_elites.py --preset gpu    # GPU machine: 256 x 256 terrains, large batches
 
-(a) Cheap fitness (``1 - mean slope``, experiments.common.slope_fitness): the same MAP-Elites (Perlin genomes, the
+(a) Cheap fitness (``1 - mean slope``, jaxterrain.difficulty.slope_fitness): the same MAP-Elites (Perlin genomes, the
     paper's mutation p = 0.35 / sigma = 10 % of range, uniform selection from filled cells, 50 x 50 grid over
     roughness / TPI at window 30 / stride 2, Algorithm 1, 100 initial genomes) run
       - by ``evolve`` on the default JAX device, at batch 20 (the paper's) and at a large batch;
       - by pyribs (``ribs.archives.GridArchive`` + ``sample_elites`` + the same mutation in NumPy) on the CPU, its
         evaluations (render + descriptors + Algorithm 1 + fitness) jitted by JAX on the CPU device.
     pyribs is skipped with a message when ``import ribs`` fails (``pip install ribs``).
-(b) The real fitness (walker rollouts, ``attempts`` x ``best``) through ``archive.difficulty_fitness``: measured
+(b) The real fitness (walker rollouts, ``attempts`` x ``best``) through ``difficulty.difficulty_fitness``: measured
     evaluations/s and the estimated time of a paper-scale treatment (100 100 evaluations x 20 attempts), for each
     ``--rollout-slots`` pool size in the same run (a pool also skips the terrains that Algorithm 1 rejects). When the
     base policy is not shipped yet, a fixed random linear policy stands in (its episodes end at other times than
@@ -79,10 +79,10 @@ class Bench(NamedTuple):
 
 
 def time_evolve(bench: Bench, batch: int, gens: int, fitness_fn, label: str) -> dict:
-    """One ``archive.evolve`` run of ``gens`` generations at ``batch``, timed after an identical warm-up run."""
+    """One ``qd.evolve`` run of ``gens`` generations at ``batch``, timed after an identical warm-up run."""
     import jax
 
-    from jaxterrain import archive as A
+    from jaxterrain import qd as A
 
     config = A.EvolveConfig(generations=gens, batch_size=batch, initial_population=100, bins=50,
                             descriptors=bench.names, window=bench.window, checkpoint_every=gens,
@@ -114,8 +114,8 @@ def ribs_rows(bench: Bench, cfg: dict) -> list[dict]:
     import jax.numpy as jnp
     import numpy as np
 
-    from experiments.common import slope_fitness
-    from jaxterrain import archive as A
+    from jaxterrain.difficulty import slope_fitness
+    from jaxterrain import qd as A
 
     cpu = jax.devices("cpu")[0]
     ranges = [A.DEFAULT_RANGES[n] for n in bench.names]
@@ -170,13 +170,14 @@ def difficulty_fitnesses(bench: Bench, cfg: dict, pools: list, orders: list[str]
     import jax
     import jax.numpy as jnp
 
-    from jaxterrain import archive as A
     from jaxterrain import difficulty
-    from jaxterrain.scoring import ignore_needed
+    from jaxterrain.walker.rollout import batched_distances
+    from jaxterrain.walker.layout import make_env
+    from jaxterrain.qd.scoring import ignore_needed
 
     try:
         difficulty.default_policy()
-        return ({(n, o): A.difficulty_fitness(bench.size, cfg["attempts"], cfg["best"], slots=n,
+        return ({(n, o): difficulty.difficulty_fitness(bench.size, cfg["attempts"], cfg["best"], slots=n,
                                               smooth_first=o == "smooth")
                  for n in pools for o in (orders if n is not None else ["job"])}, "shipped base policy")
     except RuntimeError as err:
@@ -184,11 +185,11 @@ def difficulty_fitnesses(bench: Bench, cfg: dict, pools: list, orders: list[str]
     from jaxterrain.terrain import TerrainScale
     from jaxterrain.walker import WalkerConfig
 
-    env = difficulty.make_env(WalkerConfig(terrain_shape=(bench.size, bench.size), scale=TerrainScale()))
+    env = make_env(WalkerConfig(terrain_shape=(bench.size, bench.size), scale=TerrainScale()))
     w = 0.1 * jax.random.normal(jax.random.key(42), (env.observation_size, env.action_size))
 
     def fitness(hm, key):
-        d, _ = difficulty.batched_distances(env, lambda obs: jnp.tanh(obs @ w), hm * TerrainScale().height, key,
+        d, _ = batched_distances(env, lambda obs: jnp.tanh(obs @ w), hm * TerrainScale().height, key,
                                             cfg["attempts"])
         return difficulty.best_of(d, cfg["best"])
 
@@ -210,9 +211,9 @@ def main(argv=None) -> int:
 
     import jax
 
-    from experiments.common import slope_fitness
+    from jaxterrain.difficulty import slope_fitness
     from jaxterrain import generators
-    from jaxterrain.scoring import ignore_needed
+    from jaxterrain.qd.scoring import ignore_needed
 
     bench = Bench(generators.get("perlin", size=cfg["size"]), cfg["size"], cfg["window"])
     device = jax.devices()[0]

@@ -1,9 +1,9 @@
 """Does starting the smoothest terrains' rollouts first shorten a pooled difficulty evaluation?
 
-A rollout pool (``difficulty.batched_distances(slots=S)``) runs until its last-started rollout has ended, so the
+A rollout pool (``walker.rollout.batched_distances(slots=S)``) runs until its last-started rollout has ended, so the
 order of its queue sets the length of the tail in which most slots sit idle. Starting the long rollouts first
 (longest-first scheduling) shortens it. The walker walks smooth terrains longest, so ``smooth_first`` (the default
-of ``difficulty.evaluate`` and ``archive.difficulty_fitness``) orders the queue by ``difficulty.smoothness_priority``.
+of ``difficulty.evaluate`` and ``difficulty.difficulty_fitness``) orders the queue by ``walker.rollout.smoothness_priority``.
 
 In one run, on the default device:
 
@@ -72,22 +72,28 @@ def main(argv=None) -> int:
 
     from jaxterrain import difficulty, generators
 
+    from jaxterrain.difficulty import evaluation
+
+    from jaxterrain.terrain import TerrainScale
+
+    from jaxterrain.walker.rollout import smoothness_priority
+
     gen = generators.get(args.generator)
     key = jax.random.key(args.seed)
     hm = block(gen.render(gen.sample(key, args.terrains)))
     a = args.attempts
     policy = difficulty.default_policy()
-    env_config = difficulty.default_env_config(tuple(hm.shape[1:]), difficulty.TerrainScale(), policy)
+    env_config = difficulty.default_env_config(tuple(hm.shape[1:]), TerrainScale(), policy)
     rollout_key = jax.random.PRNGKey(args.seed + 1)
     print(f"{environment()['device']}: {args.terrains} {args.generator} terrains x {a} attempts", flush=True)
 
     t0 = time.perf_counter()
     terrains_m = hm * env_config.scale.height
-    dist, lengths = block(difficulty._compiled(env_config, a, policy, False, None)(terrains_m, rollout_key, None))
+    dist, lengths = block(evaluation._compiled(env_config, a, policy, False, None)(terrains_m, rollout_key, None))
     lengths = np.asarray(lengths)
     print(f"all at once: {time.perf_counter() - t0:.1f} s incl. compile; rollout length mean {lengths.mean():.0f}, "
           f"max {lengths.max()} env steps", flush=True)
-    priority = np.asarray(difficulty.smoothness_priority(terrains_m))
+    priority = np.asarray(smoothness_priority(terrains_m))
     rho = np.corrcoef(np.argsort(np.argsort(priority)), np.argsort(np.argsort(lengths.mean(1))))[0, 1]
     print(f"Spearman correlation of smoothness priority and mean rollout length: {rho:.2f}", flush=True)
 
@@ -96,7 +102,7 @@ def main(argv=None) -> int:
                          "spearman_priority_length": float(rho)}
     fitness = {}
     for smooth in (False, True):
-        fn = difficulty._compiled(env_config, a, policy, False, args.slots, smooth)
+        fn = evaluation._compiled(env_config, a, policy, False, args.slots, smooth)
         block(fn(terrains_m, rollout_key, None))  # compile + warm-up
         t0 = time.perf_counter()
         d, n = block(fn(terrains_m, rollout_key, None))

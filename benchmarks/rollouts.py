@@ -58,6 +58,7 @@ from mujoco import mjx  # noqa: E402
 
 from common import block, environment, markdown_table, write_json  # noqa: E402
 from jaxterrain import difficulty  # noqa: E402
+from jaxterrain.difficulty import evaluation
 from jaxterrain.terrain import TerrainScale  # noqa: E402
 from jaxterrain import walker  # noqa: E402
 from jaxterrain.walker import SOLVER_SOUND, SOLVER_XML, SolverOptions, WalkerConfig, WalkerEnv  # noqa: E402
@@ -228,7 +229,7 @@ def bench_difficulty(cfg, policy, heightmaps, attempts, repeats, slots=None):
     first call that compiles; the episode lengths (env steps simulated) come from that first call. ``slots``: the
     rollout pool size (None = every rollout at once)."""
     b = heightmaps.shape[0]
-    fn = difficulty._compiled(cfg, attempts, policy, False, slots)  # the function evaluate() calls (same cache entry)
+    fn = evaluation._compiled(cfg, attempts, policy, False, slots)  # the function evaluate() calls (same cache entry)
     t0 = time.perf_counter()
     dist, length = block(fn(heightmaps * cfg.scale.height, jax.random.PRNGKey(7), None))
     first = time.perf_counter() - t0
@@ -268,7 +269,7 @@ def solver_check(cfg, policy, solvers=(("sound", SOLVER_SOUND), ("xml", SOLVER_X
 
 def tiled_distances(env, policy, terrains_m, key, attempts):
     """``[B, attempts]`` final normalised distances (0 where failed) of ``attempts`` walks on each of ``terrains_m``
-    ``[B, H, W]`` on a tiled env (``tiles = B``): difficulty.batched_distances' loop with the terrains as tiles."""
+    ``[B, H, W]`` on a tiled env (``tiles = B``): walker.rollout.batched_distances' loop with the terrains as tiles."""
     b = terrains_m.shape[0]
 
     @jax.jit

@@ -4,7 +4,7 @@
                                  [--out result.json]
 
 For each physics backend (``jax``: MJX-JAX, the classic layout; ``warp``: MuJoCo Warp on tiles, skipped where
-``warp`` does not import) and each device count N of ``--devices`` (a ``jaxterrain.sharding`` mesh over the first N
+``warp`` does not import) and each device count N of ``--devices`` (a ``jaxterrain.runtime.sharding`` mesh over the first N
 visible devices), after a warm-up call (the compile):
 
 1. ``eval``: ``difficulty.evaluate`` of ``--eval-terrains`` Perlin terrains (256 x 256, the paper's protocol: 20
@@ -37,7 +37,9 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 import common  # noqa: E402
-from jaxterrain import difficulty, generators, rl, sharding, walker  # noqa: E402
+from jaxterrain import difficulty, generators, rl, walker  # noqa: E402
+from jaxterrain.walker.layout import make_env
+from jaxterrain.runtime import sharding
 
 
 def log(*a):
@@ -88,7 +90,7 @@ def bench_ppo(backend: str, bank, devices: list[int], num_envs: int, updates: in
     env_cfg = difficulty.default_env_config(bank.shape[1:], backend=backend)
     if env_cfg.tiles:
         env_cfg = env_cfg._replace(tiles=int(bank.shape[0]), warp_worlds=num_envs)
-    env = difficulty.make_env(env_cfg)
+    env = make_env(env_cfg)
     index = jnp.arange(num_envs) % bank.shape[0]
     terrains = env.make_bank(bank * env_cfg.scale.height).at(index) if env.tiles else (
         bank[index] * env_cfg.scale.height)

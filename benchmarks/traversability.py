@@ -3,7 +3,7 @@
     python benchmarks/traversability.py [--batch 1024 4096 16384] [--cpu-batch 64] [--out result.json]
     python benchmarks/traversability.py --quick          # small batches, a CPU-only machine: seconds, not minutes
 
-The stage is the ``"traversability"`` descriptor: the shipped :class:`jaxterrain.traversability.PatchCNN` applied
+The stage is the ``"traversability"`` descriptor: the shipped :class:`jaxterrain.features.learned.PatchCNN` applied
 with stride 8 over each whole heightmap (a 29 x 29 map per 256 x 256 terrain, one pass of convolutions) and the
 map's mean, jit-compiled, on device-resident Perlin heightmaps, median of ``--repeats`` calls rotating through three
 input sets. Its peer in the same run: the same jitted function on the host's CPU backend (all its cores). The two
@@ -25,7 +25,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 import common  # noqa: E402
 
 from jaxterrain import generators  # noqa: E402
-from jaxterrain import traversability as trav  # noqa: E402
+from jaxterrain.features import learned as trav  # noqa: E402
 
 
 def maps(batch: int, seed: int, size: int):

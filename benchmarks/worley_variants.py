@@ -40,7 +40,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 import common  # noqa: E402
 
 from jaxterrain.generators import get  # noqa: E402
-from jaxterrain.generators import _worley_pallas  # noqa: E402
+from jaxterrain.generators import worley_pallas  # noqa: E402
 from jaxterrain.generators import worley as wm  # noqa: E402
 
 
@@ -50,7 +50,7 @@ def variant_settings(variant: str):
     method's keyword options (``step``, ``tol``, ``tile``)."""
     select, *opts = variant.split(":")
     saved = (wm._POINTS_AXIS, wm._tie, dict(wm._KTH), wm._POINT_GROUPS, wm._CAP_GROUPS,
-             _worley_pallas.NUM_WARPS, _worley_pallas.TOP_K, _worley_pallas.NUM_STAGES, _worley_pallas.FUSED)
+             worley_pallas.NUM_WARPS, worley_pallas.TOP_K, worley_pallas.NUM_STAGES, worley_pallas.FUSED)
     method_kw = {}
     try:
         for o in opts:
@@ -71,13 +71,13 @@ def variant_settings(variant: str):
             elif o.startswith("cap="):
                 wm._CAP_GROUPS = tuple(int(v) for v in o[4:].split("x"))
             elif o.startswith("warps="):
-                _worley_pallas.NUM_WARPS = int(o[6:])
+                worley_pallas.NUM_WARPS = int(o[6:])
             elif o.startswith("topk="):
-                _worley_pallas.TOP_K = int(o[5:])
+                worley_pallas.TOP_K = int(o[5:])
             elif o.startswith("pipe="):
-                _worley_pallas.NUM_STAGES = int(o[5:])
+                worley_pallas.NUM_STAGES = int(o[5:])
             elif o in ("fused", "unfused"):
-                _worley_pallas.FUSED = o == "fused"
+                worley_pallas.FUSED = o == "fused"
             else:
                 raise ValueError(f"unknown option {o!r} in variant {variant!r}")
         if method_kw:
@@ -85,8 +85,8 @@ def variant_settings(variant: str):
             wm._KTH[select] = lambda dy2, dx2, d: base(dy2, dx2, d, **method_kw)
         yield select, method_kw
     finally:
-        (wm._POINTS_AXIS, wm._tie, kth, wm._POINT_GROUPS, wm._CAP_GROUPS, _worley_pallas.NUM_WARPS,
-         _worley_pallas.TOP_K, _worley_pallas.NUM_STAGES, _worley_pallas.FUSED) = saved
+        (wm._POINTS_AXIS, wm._tie, kth, wm._POINT_GROUPS, wm._CAP_GROUPS, worley_pallas.NUM_WARPS,
+         worley_pallas.TOP_K, worley_pallas.NUM_STAGES, worley_pallas.FUSED) = saved
         wm._KTH.clear()
         wm._KTH.update(kth)
 

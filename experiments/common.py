@@ -83,8 +83,8 @@ def check_values(values: dict, where=flag) -> None:
                 if not math.isfinite(v) or (v <= 0 if positive else v < 0):
                     raise _bad(where(key), f"{'finite numbers' if isinstance(value, list) else 'a finite number'} "
                                            f"{'> 0' if positive else '>= 0'}", value)
-        elif key == "fitness" and (not isinstance(value, str) or value not in FITNESSES):
-            raise UsageError(f"{where(key)}: unknown fitness {value!r}; choose from {', '.join(FITNESSES)}")
+        elif key == "fitness" and (not isinstance(value, str) or value not in FITNESS_NAMES):
+            raise UsageError(f"{where(key)}: unknown fitness {value!r}; choose from {', '.join(FITNESS_NAMES)}")
         elif key in ("generator", "generators") and items:
             from jaxterrain import generators
 
@@ -178,10 +178,10 @@ def add_devices_argument(parser: argparse.ArgumentParser) -> None:
 
 
 def device_mesh(devices: int | None):
-    """The ``jax.sharding.Mesh`` of ``--devices``: ``jaxterrain.sharding.setup`` joins a multi-process run when
+    """The ``jax.sharding.Mesh`` of ``--devices``: ``jaxterrain.runtime.sharding.setup`` joins a multi-process run when
     ``JAXTERRAIN_COORDINATOR`` / ``JAXTERRAIN_NUM_PROCESSES`` / ``JAXTERRAIN_PROCESS_ID`` are set, then takes the
     first ``devices`` devices of all processes (None: all). More than exist is a :class:`UsageError`."""
-    from jaxterrain import sharding
+    from jaxterrain.runtime import sharding
 
     try:
         return sharding.setup(devices)
@@ -220,23 +220,17 @@ def load_config(path: str | Path) -> dict:
 
 
 def write_config(folder: Path, config: dict) -> Path:
-    from jaxterrain.io import atomic_write_text
+    from jaxterrain.runtime.io import atomic_write_text
 
     return atomic_write_text(Path(folder) / CONFIG_NAME, json.dumps(config, indent=2, sort_keys=True) + "\n")
 
 
 def save_figure(fig, path: str | Path, dpi: int = 120) -> Path:
-    """Write a matplotlib figure as PNG atomically (never a half-written file), then close it."""
-    import io
+    """Write a matplotlib figure as PNG atomically (never a half-written file), then close it
+    (:func:`jaxterrain.runtime.io.save_figure`)."""
+    from jaxterrain.runtime.io import save_figure as save
 
-    import matplotlib.pyplot as plt
-
-    from jaxterrain.io import atomic_write_bytes
-
-    buf = io.BytesIO()
-    fig.savefig(buf, format="png", dpi=dpi)
-    plt.close(fig)
-    return atomic_write_bytes(path, buf.getvalue())
+    return save(fig, path, dpi)
 
 
 def setup_run(command: str, args: argparse.Namespace, presets: dict[str, dict], default_preset: str,
@@ -283,7 +277,7 @@ def setup_run(command: str, args: argparse.Namespace, presets: dict[str, dict], 
 
 def record_provenance(folder: Path, command: str, options: dict | None = None, resumed: bool = False) -> dict:
     """Append one JSON line to ``folder/provenance.jsonl`` and return it: the UTC time, the command, the options
-    given (those not None), whether it resumed the run, the code's commit (``jaxterrain.provenance.git_commit``:
+    given (those not None), whether it resumed the run, the code's commit (``jaxterrain.runtime.provenance.git_commit``:
     ``git`` of the checkout, or ``$JAXTERRAIN_COMMIT`` on a machine that received the tree without ``.git``), the
     JAX devices, the process count and jax's version. One ``write`` of a line opened for appending, so processes
     that share a run folder (``--shard``) each add theirs; in a multi-process JAX run only process 0 writes."""
@@ -291,7 +285,7 @@ def record_provenance(folder: Path, command: str, options: dict | None = None, r
 
     import jax
 
-    from jaxterrain import provenance
+    from jaxterrain.runtime import provenance
 
     given = {k: v for k, v in (options or {}).items() if v is not None}
     line = {"time": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"), "command": command,
@@ -325,50 +319,19 @@ class Clock:
             raise TimeUp
 
 
-def slope_fitness(heightmaps, key=None, needed=None):
-    """Cheap stand-in fitness for smoke runs, tests and benchmarks: ``1 - mean slope`` in [0, 1].
-
-    ``heightmaps [B, H, W]`` in [0, 1] are scaled to metres with the default ``TerrainScale``; the slope of a pixel is
-    ``(|dz/dx| + |dz/dy|) / 2`` (rise over run), clipped to 1. Returns ``[B]`` float32. ``key`` and ``needed`` are
-    not used (every terrain is scored), so it fits both ``(heightmaps, key)`` and ``archive.evolve``'s
-    ``(heightmaps, key, needed)``.
-    """
-    import jax.numpy as jnp
-
-    from jaxterrain.difficulty import smoothness_priority
-    from jaxterrain.terrain import TerrainScale
-
-    scale = TerrainScale()
-    h = jnp.asarray(heightmaps, jnp.float32) * (scale.height / scale.cell_size)
-    # smoothness_priority = -(mean |dz/dx| + mean |dz/dy|) of the map in metres per pixel: minus twice the slope
-    return 1.0 - jnp.clip(-smoothness_priority(h) / 2.0, 0.0, 1.0)
-
-
-# ``--fitness NAME`` of every command that scores terrains (evolve, coverage, features): the one table of fitness
-# names. A function is a traceable ``(heightmaps [B, H, W] in [0, 1], key, needed=None) -> [B]``; None is the walker's
-# fitness (the shipped base policy's walks, ``jaxterrain.difficulty.fitness_fn``), which ``archive.evolve`` builds
-# from its config (attempts, best, rollout slots and backend, and the ONE scale that Algorithm 1 uses too) and
-# :func:`fitness_function` from its arguments.
-FITNESSES: dict[str, Any] = {"difficulty": None, "slope": slope_fitness}
+FITNESS_NAMES = ("difficulty", "slope")
+"""``--fitness`` choices: the names of ``jaxterrain.difficulty.FITNESSES`` (a literal, so ``--help`` imports no
+JAX; a test checks that the two agree)."""
 
 
 def fitness_of(name: str):
-    """``FITNESSES[name]``; an unknown name is a :class:`UsageError` naming ``--fitness``."""
-    if name not in FITNESSES:
-        raise UsageError(f"--fitness: unknown fitness {name!r}; choose from {', '.join(FITNESSES)}")
+    """``jaxterrain.difficulty.FITNESSES[name]`` (None: the walker's fitness, built from the run's config); an
+    unknown name is a :class:`UsageError` naming ``--fitness``."""
+    if name not in FITNESS_NAMES:
+        raise UsageError(f"--fitness: unknown fitness {name!r}; choose from {', '.join(FITNESS_NAMES)}")
+    from jaxterrain.difficulty import FITNESSES
+
     return FITNESSES[name]
-
-
-def fitness_function(name: str, attempts: int, best: int, size: int, slots: int | None = None):
-    """``--fitness NAME`` as a traceable ``(heightmaps [B, size, size], key, needed=None) -> [B]``: the function of
-    :data:`FITNESSES`, or for ``"difficulty"`` ``difficulty.fitness_fn(size, Protocol(attempts, best), slots=slots)``
-    (``slots``: its rollout pool)."""
-    fn = fitness_of(name)
-    if fn is not None:
-        return fn
-    from jaxterrain import difficulty
-
-    return difficulty.fitness_fn(int(size), difficulty.Protocol(int(attempts), int(best)), slots=slots)
 
 
 def generator_available(name: str, size: int) -> tuple[bool, str]:
@@ -434,7 +397,7 @@ def _resume_run(command: str, args: argparse.Namespace, overrides: dict[str, Any
 
 
 def say(line: str) -> None:
-    """Print ``line`` to stdout above the progress bar of ``jaxterrain.driver.run_chunks`` (``tqdm.write``), or
+    """Print ``line`` to stdout above the progress bar of ``jaxterrain.runtime.driver.run_chunks`` (``tqdm.write``), or
     plainly without tqdm."""
     try:
         from tqdm.auto import tqdm
@@ -455,22 +418,29 @@ def parse_shard(text: str) -> tuple[int, int]:
     return i, n
 
 
-PROTOCOLS = {"paper": dict(attempts=20, best=5, headings=1), "headings": dict(attempts=80, best=5, headings=4)}
-"""``--protocol`` names: the walker fitness's ``attempts`` (in total), ``best`` (per heading) and ``headings``
-(``difficulty.PAPER`` and ``difficulty.HEADINGS``)."""
+PROTOCOL_NAMES = ("headings", "paper")
+"""``--protocol`` choices: the names of ``jaxterrain.difficulty.PROTOCOLS`` (a literal, so ``--help`` imports no JAX;
+a test checks that the two agree)."""
 
 
 def add_protocol_argument(parser: argparse.ArgumentParser) -> None:
-    """``--protocol paper|headings``: sets ``attempts``, ``best`` and ``headings`` together (:data:`PROTOCOLS`);
+    """``--protocol paper|headings``: sets ``attempts``, ``best`` and ``headings`` together
+    (``jaxterrain.difficulty.PROTOCOLS``);
     ``--attempts`` / ``--best`` / ``--headings``, where the command has them, override single fields."""
-    parser.add_argument("--protocol", choices=sorted(PROTOCOLS), default=None,
+    parser.add_argument("--protocol", choices=PROTOCOL_NAMES, default=None,
                         help="the walker fitness: paper (20 walks along +x, best 5) or headings (20 walks in each "
                              "of 4 headings, best 5 per heading, mean over headings)")
 
 
 def protocol_overrides(args: argparse.Namespace) -> dict:
     """The config overrides of ``--protocol`` and of the single-field flags the command has (given ones win)."""
-    out = dict(PROTOCOLS.get(getattr(args, "protocol", None), {}))
+    name = getattr(args, "protocol", None)
+    out = {}
+    if name is not None:
+        from jaxterrain.difficulty import PROTOCOLS
+
+        p = PROTOCOLS[name]
+        out = dict(attempts=int(p.attempts), best=int(p.best), headings=int(p.headings))
     for key in ("attempts", "best", "headings"):
         if getattr(args, key, None) is not None:
             out[key] = getattr(args, key)

@@ -2,7 +2,7 @@
 
 Evolves one MAP-Elites archive per (descriptor pair, generator): the pairs TPI/TRI, roughness/TRI, roughness/TPI
 x the generators (default: diamond_square, perlin, worley, gan, cppn), then the combined archive of each pair
-(``jaxterrain.archive.combine``). A generator that cannot be built here (e.g. the GAN without trained weights) is
+(``jaxterrain.qd.combine``). A generator that cannot be built here (e.g. the GAN without trained weights) is
 reported as skipped and left out of the combined archive.
 
 Writes into the run folder:
@@ -18,13 +18,13 @@ Presets: ``paper`` and ``gpu`` (the paper's budget per treatment, see ``experime
 tenth of it: all 15 treatments in about 15 x 3 GPU-minutes), ``paper-batched`` (the paper's 5 000 generations x 20
 per treatment with every treatment at once: ``--batched``, below) and ``smoke`` (CPU, seconds).
 
-``--batched`` evolves all treatments in one process at once (``jaxterrain.archive.evolve_many``): one jitted
+``--batched`` evolves all treatments in one process at once (``jaxterrain.qd.evolve_many``): one jitted
 generation mutates every treatment's 20 offspring and scores all 15 x 20 = 300 terrains with ONE walker call, so the
 paper's deep lineages (5 000 mutations) cost 5 000 batched generations instead of 15 x 5 000 latency-bound ones. Its
 checkpoint (all treatments) is ``batched/checkpoint.npz``; ``--resume`` continues it.
 
 Several devices: ``--devices N`` (default: every visible device) splits each generation's offspring over N
-devices in one process (``jaxterrain.evolution``; with ``--batched``, the offspring of all treatments), so one
+devices in one process (``jaxterrain.qd.evolution``; with ``--batched``, the offspring of all treatments), so one
 command uses every GPU of a host, or of several hosts (README, "Several devices"); the archives are the same for any
 N. ``--shard I/N`` still runs only the treatments ``t % N == I`` of the fixed order of :func:`treatments` (every
 treatment keeps the key it has in an unsharded run), to split Experiment 1b over independent jobs on the same run
@@ -56,7 +56,7 @@ def _preset(base: str, **kw) -> dict:
 PRESETS: dict[str, dict] = {
     "paper": _preset("paper", batched=False),
     # the paper's protocol (5 000 generations x 20 per treatment), every treatment at once: 15 x 20 = 300 terrains
-    # per generation, scored by one fitness call (jaxterrain.archive.evolve_many); a checkpoint every 50 generations
+    # per generation, scored by one fitness call (jaxterrain.qd.evolve_many); a checkpoint every 50 generations
     "paper-batched": _preset("paper", batched=True, checkpoint_every=50),
     "gpu": _preset("gpu", batched=False),
     "gpu-short": _preset("gpu-short", batched=False),
@@ -74,11 +74,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--batch-size", type=int, default=None)
     parser.add_argument("--size", type=int, default=None)
     parser.add_argument("--bins", type=int, default=None)
-    parser.add_argument("--fitness", choices=common.FITNESSES, default=None)
+    parser.add_argument("--fitness", choices=common.FITNESS_NAMES, default=None)
     common.add_protocol_argument(parser)
     parser.add_argument("--batched", action="store_const", const=True, default=None,
                         help="evolve every treatment at once (one jitted generation, one fitness call on all "
-                             "treatments' offspring; jaxterrain.archive.evolve_many); not with --shard")
+                             "treatments' offspring; jaxterrain.qd.evolve_many); not with --shard")
     parser.add_argument("--shard", type=common.parse_shard, default=None, metavar="I/N",
                         help="run only the treatments t with t %% N == I (independent jobs sharing one --out; see "
                              "the module docstring); then --resume without --shard writes the tables")
@@ -127,7 +127,7 @@ def run_batched(cfg: dict, todo, pairs, gens, folder, clock, key, mesh=None) -> 
     archives are written where :func:`experiments.evolve.run_treatment` writes them (and reused)."""
     import jax
 
-    from jaxterrain import archive as A
+    from jaxterrain import qd as A
 
     def place(pair, g):
         return folder / "archives" / f"{g}__{pair_label(pair)}"
@@ -221,8 +221,8 @@ def run_each(cfg, mine, pairs, gens, folder, clock, key, mesh, shard: str) -> di
 def write_tables(folder, archives: dict, pairs, gens, available, skipped: dict) -> dict:
     """Add the combined archive of each pair to ``archives`` (and save it), write ``coverage.csv`` and Table 1
     (``coverage.md``); ``{(generator, pair label): coverage %}``."""
-    from jaxterrain import archive as A
-    from jaxterrain.io import atomic_write_text
+    from jaxterrain import qd as A
+    from jaxterrain.runtime.io import atomic_write_text
 
     rows, cov = [], {}
     for pair in pairs:
@@ -260,7 +260,7 @@ def plot_figures(folder, archives: dict, cov: dict, pairs, available) -> None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from jaxterrain import archive as A
+    from jaxterrain import qd as A
 
     shown = available + (["combined"] if available else [])
     fig, ax = plt.subplots(figsize=(7, 3.5))

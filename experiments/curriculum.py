@@ -7,7 +7,7 @@
 Treatments (each one ``learn`` run, ``--trials`` trials together, in ``<run>/<name>-<curriculum>/``): the map
 curriculum on every archive given (``NAME=PATH``; names as in the paper's Table 2: cppn, gan, perlin, worley,
 diamond_square; by default :data:`DEFAULT_ARCHIVES`, the five shipped paper-budget roughness x TPI archives reseated
-under ``difficulty.HEADINGS``, docs/results/exp2_paper.md), on their combination (``archive.combine``: the fitter
+under ``difficulty.HEADINGS``, docs/results/exp2_paper.md), on their combination (``qd.combine``: the fitter
 elite per cell; ``<run>/combined_archive.npz``; skipped with one archive), and the roughness-sorted standard CL on
 the ``cppn`` archive (Figure 7b). Finished treatments are kept, so ``--resume`` continues where the time limit
 stopped. ``--shard I/N`` runs only the treatments ``t % N == I`` of that order, so that independent processes (e.g.
@@ -88,7 +88,9 @@ def treatments(cfg: dict, folder: Path) -> list[tuple[str, str, str]]:
     The map treatments go in the order of the archives' NAMES, whatever order ``--archives`` gave them in:
     ``config.json`` stores them with sorted keys, so a resumed run (and every ``--shard``) must see the order a fresh
     one does."""
-    from jaxterrain import archive as A
+    from jaxterrain.curriculum import runner
+
+    from jaxterrain import qd as A
 
     archives = dict(sorted(cfg["archives"].items()))
     out = [(name, path, "map") for name, path in archives.items()]
@@ -96,9 +98,9 @@ def treatments(cfg: dict, folder: Path) -> list[tuple[str, str, str]]:
         combined = folder / "combined_archive.npz"
         if not combined.exists():
             try:
-                A.save(combined, A.combine([learn.load_archive(p, cfg["descriptors"]) for p in archives.values()]))
+                A.save(combined, A.combine([runner.load_archive(p, cfg["descriptors"]) for p in archives.values()]))
             except ValueError as err:
-                raise learn.BadInput(f"--archives: cannot combine them: {err}") from None
+                raise runner.BadInput(f"--archives: cannot combine them: {err}") from None
         out.append(("combined", str(combined), "map"))
     if "cppn" in archives:
         out.append(("cppn", archives["cppn"], cfg["baseline"]))
@@ -112,14 +114,15 @@ def _treatment_cfg(cfg: dict, path: str, curriculum: str) -> dict:
 
 def shown(label: str, summary: dict) -> str:
     """A treatment's name in tables and legends: ``label``, with ``[partial: E epochs]`` for a summary of an
-    unfinished run (``learn.report_treatment``)."""
+    unfinished run (``runner.report_treatment``)."""
+
     return f"{label} [partial: {summary['epochs_max']} epochs]" if summary.get("partial") else label
 
 
 def write_table(folder: Path, rows: list[tuple[str, dict]], trials: int) -> None:
     """table2.csv (ours: mean epochs and trials reaching each milestone; the paper's) and table2.md."""
     from jaxterrain.curriculum import MILESTONES, PAPER_TABLE2, format_milestone
-    from jaxterrain.io import atomic_write_text
+    from jaxterrain.runtime.io import atomic_write_text
 
     pct = [f"{round(100 * m)}%" for m in MILESTONES]
     buf = io.StringIO()
@@ -141,21 +144,23 @@ def write_table(folder: Path, rows: list[tuple[str, dict]], trials: int) -> None
 
 
 def write_figures(folder: Path, rows: list[tuple[str, dict]], baseline: str) -> None:
+    from jaxterrain.curriculum import outputs
+
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    maps = {shown(label.split(" ")[0], s): learn.summary_curve(s) for label, s in rows if label.endswith(" map")}
+    maps = {shown(label.split(" ")[0], s): outputs.summary_curve(s) for label, s in rows if label.endswith(" map")}
     if maps:
         fig, ax = plt.subplots(figsize=(7, 4))
-        learn.plot_curves(ax, maps, "Figure 7a: map-based curriculum per archive (mean +- 1 s.e.)")
+        outputs.plot_curves(ax, maps, "Figure 7a: map-based curriculum per archive (mean +- 1 s.e.)")
         fig.tight_layout()
         common.save_figure(fig, folder / "figure7a.png")
-    pair = {shown(label, s): learn.summary_curve(s) for label, s in rows if label in ("cppn map", f"cppn {baseline}")}
+    pair = {shown(label, s): outputs.summary_curve(s) for label, s in rows if label in ("cppn map", f"cppn {baseline}")}
     if len(pair) == 2:
         fig, ax = plt.subplots(figsize=(7, 4))
-        learn.plot_curves(ax, pair, f"Figure 7b: CPPN, map-based vs {baseline}-sorted curriculum")
+        outputs.plot_curves(ax, pair, f"Figure 7b: CPPN, map-based vs {baseline}-sorted curriculum")
         fig.tight_layout()
         common.save_figure(fig, folder / "figure7b.png")
 
@@ -164,7 +169,7 @@ def write_sequences(folder: Path, done: list[tuple[str, Path]]) -> None:
     """``sequences.csv`` of every treatment in one file, a ``treatment`` column first. The columns are the union of
     the treatments' (in order of appearance), so a treatment written by an older version, with fewer columns, leaves
     its missing cells empty."""
-    from jaxterrain.io import atomic_write_text
+    from jaxterrain.runtime.io import atomic_write_text
 
     tables = [(label, list(csv.DictReader(io.StringIO((sub / "sequences.csv").read_text())))) for label, sub in done]
     columns = ["treatment"]
@@ -186,11 +191,13 @@ def write_outputs(folder: Path, cfg: dict, rows: list[tuple[str, dict]], done: l
 
 
 def report(folder: Path, cfg: dict, plan) -> int:
-    """``--report``: every treatment as it stands (``learn.report_treatment``; none compiles), then the tables."""
+    """``--report``: every treatment as it stands (``runner.report_treatment``; none compiles), then the tables."""
+    from jaxterrain.curriculum import runner
+
     rows, done = [], []
     for name, path, curriculum in plan:
         sub = folder / f"{name}-{curriculum}"
-        summary = learn.report_treatment(_treatment_cfg(cfg, path, curriculum), sub) if sub.is_dir() else None
+        summary = runner.report_treatment(_treatment_cfg(cfg, path, curriculum), sub) if sub.is_dir() else None
         if summary is None:
             print(f"{name} {curriculum}: no checkpoint yet", flush=True)
             continue
@@ -206,6 +213,8 @@ def report(folder: Path, cfg: dict, plan) -> int:
 
 
 def main(args) -> int:
+    from jaxterrain.curriculum import runner
+
     if args.report and args.resume is None:
         raise common.UsageError("--report needs --resume RUN (the run to report on)")
     over = dict(archives=parse_archives(args.archives), trials=args.trials, max_epochs=args.max_epochs,
@@ -219,10 +228,10 @@ def main(args) -> int:
         plan = treatments(cfg, folder)
         for name, path, curriculum in plan:  # every treatment's input, before anything is compiled
             tcfg = _treatment_cfg(cfg, path, curriculum)
-            learn.check_resumable(folder / f"{name}-{curriculum}", tcfg,
-                                  learn.validate(learn.report_cfg(tcfg) if args.report else tcfg)[1],
+            runner.check_resumable(folder / f"{name}-{curriculum}", tcfg,
+                                  runner.validate(runner.report_cfg(tcfg) if args.report else tcfg)[1],
                                   physics=not args.report)
-    except learn.BadInput as err:
+    except runner.BadInput as err:
         print(f"curriculum: {err}", file=sys.stderr)
         return 2
     if args.report:
@@ -238,7 +247,7 @@ def main(args) -> int:
         tcfg = _treatment_cfg(cfg, path, curriculum)
         common.write_config(sub, tcfg)
         left = None if limit is None else max(limit - (time.perf_counter() - start), 1e-3)
-        summary = learn.run_treatment(tcfg, sub, left, desc=f"{name} {curriculum}", mesh=mesh)
+        summary = runner.run_treatment(tcfg, sub, left, desc=f"{name} {curriculum}", mesh=mesh)
         if summary is None:
             print(f"time limit reached; continue with: python -m experiments curriculum --resume {folder}{shard}",
                   flush=True)

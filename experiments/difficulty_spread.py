@@ -39,7 +39,7 @@ def main(args: argparse.Namespace) -> int:
 
     from experiments.common import run_folder, save_figure, write_config
     from jaxterrain import difficulty, generators
-    from jaxterrain.io import atomic_write_text
+    from jaxterrain.runtime.io import atomic_write_text
     from jaxterrain.terrain import TerrainScale
 
     if args.n < 1:

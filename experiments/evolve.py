@@ -18,11 +18,11 @@ Presets (``--preset``):
 * ``smoke``: a tiny CPU run (32 x 32 terrains, 10 x 10 cells, cheap slope fitness), seconds.
 
 Writes into the run folder: ``config.json``, ``checkpoint/checkpoint.npz`` (every ``checkpoint_every`` generations),
-``archive.npz`` (``jaxterrain.archive.save`` format), ``metrics.csv`` (one row per generation) and ``archive.png``.
+``archive.npz`` (``jaxterrain.qd.save`` format), ``metrics.csv`` (one row per generation) and ``archive.png``.
 Re-run with ``--config <run>/config.json``; continue a killed or time-limited run with ``--resume <run>``.
 
 ``--devices N`` (default: every visible device) splits each generation's offspring over N devices (render,
-descriptors, Algorithm 1, walks; the repertoire replicated; ``jaxterrain.evolution``): the same seed gives the same
+descriptors, Algorithm 1, walks; the repertoire replicated; ``jaxterrain.qd.evolution``): the same seed gives the same
 archive on any N, and a run may resume on another N. ``rollout_slots`` is the pool of EACH device. Several hosts:
 the same command in one process per host with the ``JAXTERRAIN_*`` variables (README, "Several devices").
 
@@ -57,12 +57,12 @@ PRESETS: dict[str, dict] = {
 
 
 def preset_config(name: str):
-    """The :class:`jaxterrain.archive.EvolveConfig` of a preset."""
+    """The :class:`jaxterrain.qd.EvolveConfig` of a preset."""
     return evolve_config(PRESETS[name])
 
 
 def evolve_config(cfg: dict):
-    from jaxterrain.archive import EvolveConfig
+    from jaxterrain.qd import EvolveConfig
 
     ranges = cfg.get("ranges")
     return EvolveConfig(
@@ -90,7 +90,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--bins", type=int, default=None, help="cells per descriptor")
     parser.add_argument("--size", type=int, default=None, help="heightmap side in pixels")
     parser.add_argument("--checkpoint-every", type=int, default=None)
-    parser.add_argument("--fitness", choices=common.FITNESSES, default=None)
+    parser.add_argument("--fitness", choices=common.FITNESS_NAMES, default=None)
     parser.add_argument("--attempts", type=int, default=None, help="walks per terrain in total")
     parser.add_argument("--best", type=int, default=None, help="best walks averaged per heading")
     parser.add_argument("--headings", type=int, choices=(1, 2, 4), default=None,
@@ -115,8 +115,8 @@ def overrides(args) -> dict:
 def run_treatment(cfg: dict, generator: str, descriptors, folder: Path, clock: common.Clock, key, label: str = "",
                   mesh=None):
     """Evolve one archive into ``folder`` (checkpointed there); returns the Archive, or the saved one if done.
-    ``mesh``: the devices each generation's offspring are split over (``archive.evolve``)."""
-    from jaxterrain import archive as A
+    ``mesh``: the devices each generation's offspring are split over (``qd.evolve``)."""
+    from jaxterrain import qd as A
 
     folder = Path(folder)
     done_path = folder / "archive.npz"
@@ -140,8 +140,8 @@ def run_treatment(cfg: dict, generator: str, descriptors, folder: Path, clock: c
 
 
 def fitness_fn(name: str):
-    """The ``fitness_fn`` of ``archive.evolve`` for ``--fitness NAME``: ``common.FITNESSES[name]``, where None (the
-    walker, ``"difficulty"``) lets ``archive.evolve`` build it from the config (attempts, best, rollout slots and
+    """The ``fitness_fn`` of ``qd.evolve`` for ``--fitness NAME``: ``jaxterrain.difficulty.FITNESSES[name]``, where None (the
+    walker, ``"difficulty"``) lets ``qd.evolve`` build it from the config (attempts, best, rollout slots and
     the ONE scale that Algorithm 1 uses too)."""
     return common.fitness_of(name)
 
@@ -149,7 +149,7 @@ def fitness_fn(name: str):
 def write_metrics_csv(path: Path, metrics: dict) -> None:
     import io
 
-    from jaxterrain.io import atomic_write_text
+    from jaxterrain.runtime.io import atomic_write_text
 
     names = sorted(metrics)
     buf = io.StringIO()
@@ -162,10 +162,10 @@ def write_metrics_csv(path: Path, metrics: dict) -> None:
 
 def plot_archive(ax, arch, title: str = ""):
     """Draw an archive's fitness grid on a matplotlib axis (darker = fitter, like the paper's Figure 6)."""
-    from jaxterrain import archive as A
+    from jaxterrain import qd as A
 
     (lo0, hi0), (lo1, hi1) = arch.config.ranges
-    img = ax.imshow(A.grid(arch), origin="lower", extent=(lo0, hi0, lo1, hi1), aspect="auto",
+    img = ax.imshow(A.fitness_grid(arch), origin="lower", extent=(lo0, hi0, lo1, hi1), aspect="auto",
                     cmap="viridis_r", vmin=0.0, vmax=1.0, interpolation="nearest")
     ax.set_xlabel(arch.config.descriptors[0])
     ax.set_ylabel(arch.config.descriptors[1])
@@ -180,7 +180,7 @@ def main(args) -> int:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from jaxterrain import archive as A
+    from jaxterrain import qd as A
 
     mesh = common.device_mesh(args.devices)
     folder, cfg = common.setup_run("evolve", args, PRESETS, "smoke", overrides(args))

@@ -22,7 +22,7 @@ _EXT = {"obj": ".obj", "stl": ".stl", "png": ".png", "npy": ".npy", "mjcf": ".xm
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("archive", type=Path, metavar="ARCHIVE.npz", help="archive (jaxterrain.archive.save format)")
+    parser.add_argument("archive", type=Path, metavar="ARCHIVE.npz", help="archive (jaxterrain.qd.save format)")
     parser.add_argument("--cells", default="easy,medium,hard",
                         help="comma-separated cell indices, 'easy' / 'medium' / 'hard' (highest, median, lowest "
                              "fitness) or 'all' (every filled cell)")
@@ -69,9 +69,9 @@ def main(args: argparse.Namespace) -> int:
     import csv
     import io
 
-    from jaxterrain import archive as A
+    from jaxterrain import qd as A
     from jaxterrain import terrain as T
-    from jaxterrain.io import atomic_write_text
+    from jaxterrain.runtime.io import atomic_write_text
     from jaxterrain.report.archives import elite_heightmaps
 
     try:

@@ -5,16 +5,16 @@ terrains span easy to hard), computes TRI, TPI and roughness at several windows 
 2), any extra registered descriptor (e.g. a learned traversability model, when registered in ``jaxterrain.features``)
 and the ground-truth difficulty (1 - fitness of the walker's base policy; ``--fitness slope`` for a cheap stand-in),
 then the Pearson correlation matrix of all of them. The presets add the learned ``traversability`` descriptor
-(:mod:`jaxterrain.traversability`, the paper's fourth feature).
+(:mod:`jaxterrain.features.learned`, the paper's fourth feature).
 
 Writes into the run folder: ``config.json``, ``values_<generator>.csv`` (one row per terrain), ``correlations.csv``
 (generator, feature_a, feature_b, r), ``correlation_<generator>.png`` (heatmaps like Figure 4) and
 ``correlations.png`` (both side by side), ``figure4.png`` / ``figure4.csv`` (Figure 4: TRI, TPI and roughness at
 ``figure_window``, the extra descriptors and difficulty, one heatmap per generator), plus with ``--calibrate``
 ``ranges.json``: the [0.5, 99.5] percentile of each descriptor over all generators at the archive window (the
-recipe of ``jaxterrain.archive.DEFAULT_RANGES``).
+recipe of ``jaxterrain.qd.DEFAULT_RANGES``).
 
-Long runs go through ``jaxterrain.driver.run_chunks``, one step per batch of ``batch`` terrains (generator after
+Long runs go through ``jaxterrain.runtime.driver.run_chunks``, one step per batch of ``batch`` terrains (generator after
 generator): after every batch ``checkpoint.npz`` (the columns measured so far; the one before kept as
 ``checkpoint.prev.npz``), ``metrics.csv`` and TensorBoard events (``tb/``: the batch's mean difficulty and
 traversable fraction) and a progress bar; ``--time-limit MIN`` stops after a batch (exit code 3) and ``--resume RUN``
@@ -56,7 +56,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--windows", nargs="+", type=int, default=None)
     parser.add_argument("--fitness", choices=["difficulty", "slope"], default=None)
     parser.add_argument("--calibrate", action="store_const", const=True, default=None,
-                        help="also measure descriptor ranges (see jaxterrain.archive.DEFAULT_RANGES)")
+                        help="also measure descriptor ranges (see jaxterrain.qd.DEFAULT_RANGES)")
 
 
 def overrides(args) -> dict:
@@ -142,7 +142,7 @@ def measure_batch(heightmaps, cfg: dict, key, fitness_fn, descriptors_fn, traver
 
 
 def make_chunk(plans: list[Plan], cfg: dict, key, fitness_fn):
-    """``(chunk, steps)``: the ``jaxterrain.driver`` chunk over the batches of ``cfg["batch"]`` terrains of every
+    """``(chunk, steps)``: the ``jaxterrain.runtime.driver`` chunk over the batches of ``cfg["batch"]`` terrains of every
     plan in turn, and their number. Step ``i`` measures its batch (terrains ``s .. s + batch`` of a generator, fitness
     key ``fold_in(fold_in(key, 2 * index + 1), s)``) into ``state[name][column][s:s + batch]``; its metrics are
     the batch's mean difficulty and traversable fraction."""
@@ -176,12 +176,12 @@ def make_chunk(plans: list[Plan], cfg: dict, key, fitness_fn):
 
 def measure_all(plans: list[Plan], cfg: dict, key, fitness_fn, folder: Path, resume: bool,
                 time_limit: float | None) -> dict[str, dict] | None:
-    """Measure every plan through ``jaxterrain.driver.run_chunks`` in ``folder`` (``resume``: from its checkpoint;
+    """Measure every plan through ``jaxterrain.runtime.driver.run_chunks`` in ``folder`` (``resume``: from its checkpoint;
     ``time_limit`` minutes: stop after the batch in which they pass). Returns ``{generator: {column: [N]
     float64}}`` with ``difficulty``, or None when the time limit stopped the run first."""
     import numpy as np
 
-    from jaxterrain import driver
+    from jaxterrain.runtime import driver
 
     chunk, total = make_chunk(plans, cfg, key, fitness_fn)
     names = columns(cfg)
@@ -233,7 +233,7 @@ def figure4(results: dict, cfg: dict, folder: Path) -> list[str]:
     feature names (empty when the window was not measured, e.g. a run from an older config)."""
     import matplotlib.pyplot as plt
 
-    from jaxterrain.io import atomic_write_text
+    from jaxterrain.runtime.io import atomic_write_text
 
     w = cfg.get("figure_window")
     names = [f"{f}_{w}" for f in FEATURES] + list(cfg.get("extra_descriptors") or []) + ["difficulty"]
@@ -267,7 +267,7 @@ def _csv_text(header, rows) -> str:
 
 def write_values(results: dict, folder: Path) -> None:
     """``values_<generator>.csv``: one row per terrain, the columns of :func:`columns` and ``difficulty``."""
-    from jaxterrain.io import atomic_write_text
+    from jaxterrain.runtime.io import atomic_write_text
 
     for name, values in results.items():
         cols = list(values)
@@ -280,7 +280,7 @@ def write_correlations(results: dict, cfg: dict, folder: Path) -> None:
     descriptors and difficulty; ``correlation_<generator>.png`` and ``correlations.png`` (all side by side)."""
     import matplotlib.pyplot as plt
 
-    from jaxterrain.io import atomic_write_text
+    from jaxterrain.runtime.io import atomic_write_text
 
     names = ([f"{f}_{int(w)}" for f in FEATURES for w in cfg["windows"]] + list(cfg.get("extra_descriptors") or [])
              + ["difficulty"])
@@ -303,10 +303,10 @@ def write_correlations(results: dict, cfg: dict, folder: Path) -> None:
 
 def write_ranges(results: dict, cfg: dict, folder: Path) -> None:
     """``ranges.json``: the [0.5, 99.5] percentiles of TRI, TPI and roughness at ``calibrate_window`` over the
-    traversable terrains of every generator (the recipe of ``jaxterrain.archive.DEFAULT_RANGES``)."""
+    traversable terrains of every generator (the recipe of ``jaxterrain.qd.DEFAULT_RANGES``)."""
     import numpy as np
 
-    from jaxterrain.io import atomic_write_text
+    from jaxterrain.runtime.io import atomic_write_text
 
     w = int(cfg["calibrate_window"])
     allv = np.concatenate([np.stack([values[f"{f}_{w}"] for f in FEATURES], -1)[values["traversable"] > 0]
@@ -321,6 +321,8 @@ def write_ranges(results: dict, cfg: dict, folder: Path) -> None:
 
 def main(args) -> int:
     import jax
+
+    from jaxterrain.difficulty import named_fitness
     import matplotlib
 
     matplotlib.use("Agg")
@@ -331,8 +333,7 @@ def main(args) -> int:
     if not plans:
         print("no generator available", flush=True)
         return 1
-    fitness_fn = jax.jit(common.fitness_function(cfg["fitness"], int(cfg["attempts"]), int(cfg["best"]),
-                                                 int(cfg["size"])))
+    fitness_fn = jax.jit(named_fitness(cfg["fitness"], int(cfg["attempts"]), int(cfg["best"]), int(cfg["size"])))
     results = measure_all(plans, cfg, key, fitness_fn, folder, args.resume is not None, args.time_limit)
     if results is None:
         print(f"time limit reached; continue with: python -m experiments features --resume {folder}", flush=True)

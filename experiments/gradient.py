@@ -8,13 +8,13 @@ cells:
 * the share of filled cells with fitness >= ``threshold`` (0.9, the curriculum's "already easy") in bands of
   ``band_width`` (10) cells of distance (:func:`band_table`).
 
-Distance: ``distance="corner"`` (default) is :func:`jaxterrain.bank.cell_distance`, from the grid's origin corner
+Distance: ``distance="corner"`` (default) is :func:`jaxterrain.qd.cell_distance`, from the grid's origin corner
 to the cell's far corner (the curriculum's and Table 2's measure, 1.41 to 70.71 on 50 x 50); ``"index"`` is
 ``hypot(b0, b1)``, between the cells' indices (0 to 69.3), the measure issue 13 quoted its band shares in. Cell
 ``i * bins + j`` of an archive has descriptor-0 bin ``j`` and descriptor-1 bin ``i``.
 
 The stored fitness is the paper's protocol (20 walks along +x, best 5), as the archive was evolved. With
-``--protocol headings`` (or ``paper``) every elite is re-rendered (``jaxterrain.bank.from_archive``) and walked
+``--protocol headings`` (or ``paper``) every elite is re-rendered (``jaxterrain.qd.from_archive``) and walked
 again under that :class:`jaxterrain.difficulty.Protocol` (fields overridable: ``--attempts --best --headings
 --start-spread --rule``), in ONE batched call over all elites on a rollout pool (``--slots``; ``auto`` = 16 384 on
 a GPU, all at once on a CPU), and the tables show the protocols side by side: ``stored``, the protocol, and
@@ -27,7 +27,7 @@ archive, protocol, distance measure and band), ``gradient_summary.csv`` (one row
 correlations, shares, cost), ``gradient.md``, ``gradient.png`` and, when walked, ``<archive>_walks.npz`` (cells,
 distances, stored fitness and every rollout's distance and length, heading-major), so other rules can be
 computed without walking again. ``--reseat`` (with ``--protocol``, every elite) also writes
-``<archive>_reseated.npz``: ``jaxterrain.archive.reseat`` with the fitness walked here, i.e. every genome its
+``<archive>_reseated.npz``: ``jaxterrain.qd.reseat`` with the fitness walked here, i.e. every genome its
 generator accepts, in the cell its own terrain falls in, with its own fitness (for the archives evolved before the
 fix of tied insertions, ``docs/results/insertion_bug.md``).
 
@@ -60,16 +60,10 @@ DISTANCES = ("corner", "index")
 # ----------------------------------------------------------------------------------------------------------------
 # Pure functions (NumPy)
 # ----------------------------------------------------------------------------------------------------------------
-def cell_bins(cells: np.ndarray, bins: int) -> np.ndarray:
-    """Flat cell indices ``[N]`` -> ``[N, 2]`` int32: (bin of descriptor 0, bin of descriptor 1)."""
-    c = np.asarray(cells, np.int64)
-    return np.stack([c % bins, c // bins], axis=-1).astype(np.int32)
-
-
 def distance_from_origin(bins_: np.ndarray, measure: str = "corner") -> np.ndarray:
     """``[N, 2]`` bins -> ``[N]`` float32 distance from cell (0, 0): ``"corner"`` = ``bank.cell_distance`` (to the
     cell's far corner), ``"index"`` = ``hypot(b0, b1)``."""
-    from jaxterrain.bank import cell_distance
+    from jaxterrain.qd import cell_distance
 
     if measure == "corner":
         return cell_distance(bins_)
@@ -149,7 +143,7 @@ def spread_sample(distance: np.ndarray, n: int | None) -> np.ndarray:
 # ----------------------------------------------------------------------------------------------------------------
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     common.add_run_arguments(parser, PRESETS, "default")
-    parser.add_argument("archives", nargs="*", type=str, help="archive.npz files (jaxterrain.archive.save format)")
+    parser.add_argument("archives", nargs="*", type=str, help="archive.npz files (jaxterrain.qd.save format)")
     parser.add_argument("--protocol", choices=PROTOCOLS, default=None,
                         help="also walk every elite again under this protocol (difficulty.PAPER or HEADINGS)")
     parser.add_argument("--attempts", type=int, default=None, help="override the protocol's attempts (in total)")
@@ -168,7 +162,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="distance measure of the figure and summary (default corner; the CSV has both)")
     parser.add_argument("--reseat", action="store_true", default=None,
                         help="with --protocol (no --sample): also write <archive>_reseated.npz, every valid genome "
-                             "in its own terrain's cell with the fitness walked here (jaxterrain.archive.reseat)")
+                             "in its own terrain's cell with the fitness walked here (jaxterrain.qd.reseat)")
 
 
 def overrides(args) -> dict:
@@ -213,7 +207,7 @@ def resolve_slots(value) -> int | None:
 
 def load_elites(path: str) -> dict:
     """The filled cells of an archive: ``{"archive", "name", "cells" [N], "bins" [N, 2], "fitness" [N]}``."""
-    from jaxterrain import archive as A
+    from jaxterrain import qd as A
 
     try:
         arch = A.load(path)
@@ -223,7 +217,7 @@ def load_elites(path: str) -> dict:
     if cells.size == 0:
         raise SystemExit(f"archive {path} has no filled cell")
     return {"archive": arch, "name": Path(path).name.removesuffix(".npz"), "cells": cells,
-            "bins": cell_bins(cells, int(arch.config.bins)), "fitness": np.asarray(arch.fitness, np.float32)[cells]}
+            "bins": A.cell_bins(cells, int(arch.config.bins)), "fitness": np.asarray(arch.fitness, np.float32)[cells]}
 
 
 def walk(heightmaps, protocol, key, slots: int | None, chunk: int | None) -> dict:
@@ -236,11 +230,12 @@ def walk(heightmaps, protocol, key, slots: int | None, chunk: int | None) -> dic
     import jax
     import jax.numpy as jnp
 
-    from jaxterrain import difficulty as D
 
-    terrains_m, env_config, policy = D._resolve(heightmaps, protocol, None, None, None)
-    apply, params, with_params = D._policy_program(policy, None)
-    fn = D._program(env_config, protocol.attempts, protocol.headings, apply, with_params, slots, True)
+    from jaxterrain.difficulty import evaluation
+
+    terrains_m, env_config, policy = evaluation._resolve(heightmaps, protocol, None, None, None)
+    apply, params, with_params = evaluation._policy_program(policy, None)
+    fn = evaluation._program(env_config, protocol.attempts, protocol.headings, apply, with_params, slots, True)
     n = terrains_m.shape[0]
     size = n if chunk is None else min(int(chunk), n)
     parts = -(-n // size)
@@ -261,10 +256,11 @@ def walk(heightmaps, protocol, key, slots: int | None, chunk: int | None) -> dic
 
 
 def walk_archive(elites: dict, protocol, key, slots, chunk, sample) -> dict:
-    """Render (``bank.from_archive``) and walk the elites of ``sample`` (:func:`spread_sample` by corner distance)
+    """Render (``qd.from_archive``) and walk the elites of ``sample`` (:func:`spread_sample` by corner distance)
     under ``protocol``. Returns the :func:`walk` dict plus ``"rows"`` [n] (indices into the filled cells),
     ``"fitness"`` [n] (the protocol's) and ``"heading0"`` [n] (heading 0's score alone)."""
-    from jaxterrain import bank, difficulty
+    from jaxterrain.qd import bank
+    from jaxterrain import difficulty
 
     rows = spread_sample(distance_from_origin(elites["bins"]), sample)
     b = bank.from_archive(elites["archive"])
@@ -343,7 +339,7 @@ def table_rows(name: str, elites: dict, series: list[dict], cfg: dict) -> tuple[
 
 
 def write_csv(path: Path, rows: list[dict]) -> None:
-    from jaxterrain.io import atomic_write_text
+    from jaxterrain.runtime.io import atomic_write_text
 
     buf = io.StringIO()
     if rows:
@@ -457,7 +453,7 @@ def main(args) -> int:
                   f"easy {100 * r['share_easy']:.0f} %", flush=True)
     write_csv(folder / "gradient.csv", all_bands)
     write_csv(folder / "gradient_summary.csv", all_summary)
-    from jaxterrain.io import atomic_write_text
+    from jaxterrain.runtime.io import atomic_write_text
 
     atomic_write_text(folder / "gradient.md", markdown(all_bands, all_summary, cfg, protocol) + "\n")
     plot(folder / "gradient.png", results, cfg)
@@ -466,9 +462,9 @@ def main(args) -> int:
 
 
 def write_reseated(path: Path, elites: dict, walked: dict, protocol=None) -> dict:
-    """``jaxterrain.archive.reseat`` of the walked archive (fitness = the walk's, per filled cell, under
+    """``jaxterrain.qd.reseat`` of the walked archive (fitness = the walk's, per filled cell, under
     ``protocol``, which the archive then records) saved at ``path``; prints and returns its counts."""
-    from jaxterrain import archive as A
+    from jaxterrain import qd as A
 
     arch = elites["archive"]
     fitness = np.full(arch.fitness.shape[0], np.nan, np.float32)
@@ -481,7 +477,7 @@ def write_reseated(path: Path, elites: dict, walked: dict, protocol=None) -> dic
 
 def save_walks(path: Path, elites: dict, walked: dict, protocol) -> None:
     """Every walked elite's rollouts: cells, corner distance, stored fitness, distances / lengths [n, attempts]."""
-    from jaxterrain.io import atomic_write_bytes
+    from jaxterrain.runtime.io import atomic_write_bytes
 
     buf = io.BytesIO()
     rows = walked["rows"]

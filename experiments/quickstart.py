@@ -224,7 +224,7 @@ def main(args: argparse.Namespace) -> int:
 
     from experiments.common import record_provenance, run_folder, write_config
     from jaxterrain import generators
-    from jaxterrain.io import atomic_write_text
+    from jaxterrain.runtime.io import atomic_write_text
 
     if args.n < 1:
         raise SystemExit("--n must be >= 1")

@@ -9,7 +9,7 @@ Presets:
   122 880 env steps per update, see ``jaxterrain.rl.config``), the paper-sized env (``WalkerConfig()``: 256 x 256
   flat hfield, 1000-step episodes), 410 updates = 50.4 M env steps (``--env-steps``), stopping after the chunk in
   which ``--time-budget`` seconds (default 480, less a minute kept for the evaluation) pass. The loop is
-  ``jaxterrain.driver.run_chunks``, as in ``evolve``: after every chunk of 10 updates it writes ``checkpoint.npz``
+  ``jaxterrain.runtime.driver.run_chunks``, as in ``evolve``: after every chunk of 10 updates it writes ``checkpoint.npz``
   (the whole PPO state, env states included, so a resumed run is bit-identical to an uninterrupted one),
   ``metrics.csv`` and TensorBoard events (``tb/``); a run stopped by its budget (or ``--time-limit MIN``) or
   killed (exit code 3 after a time-limit stop, as ``evolve``) continues with ``--resume RUN_DIR`` and the settings
@@ -59,7 +59,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--time-budget", type=float, default=None,
                         help="seconds of wall time for this process; training stops, leaving a checkpoint, once "
                              "the budget less the evaluation's minute has passed or before a chunk predicted to end "
-                             "past it (jaxterrain.driver.run_chunks; default: smoke none, gpu 480)")
+                             "past it (jaxterrain.runtime.driver.run_chunks; default: smoke none, gpu 480)")
     parser.add_argument("--updates-per-chunk", type=int, default=None,
                         help="PPO updates per jitted chunk = per checkpoint (default: smoke 2, gpu 10)")
     parser.add_argument("--num-envs", type=int, default=None, help="override PPOConfig.num_envs")
@@ -179,7 +179,7 @@ def write_run_info(folder: Path, settings: RunSettings, resumed: bool) -> RunFol
     (SystemExit otherwise: the library's defaults changed since)."""
     import json
 
-    from jaxterrain.io import atomic_write_text
+    from jaxterrain.runtime.io import atomic_write_text
 
     command = _command_line()
     info = {"command_line": command, "num_updates": settings.num_updates,
@@ -207,11 +207,12 @@ def _device_name() -> str:
 
 def init_or_resume(key, env, ppo_cfg, terrain, run: Path, resume: bool):
     """``(state, updates done, metric history, checkpoint meta)``: a fresh PPO training state (``rl.init``), or
-    with ``resume`` the run's ``checkpoint.npz`` (``jaxterrain.driver`` format, env states included; none yet: a
+    with ``resume`` the run's ``checkpoint.npz`` (``jaxterrain.runtime.driver`` format, env states included; none yet: a
     fresh state)."""
     import jax
 
-    from jaxterrain import driver, rl
+    from jaxterrain.runtime import driver
+    from jaxterrain import rl
 
     state = jax.jit(lambda k, t: rl.init(k, env, ppo_cfg, t))(key, terrain)
     restored = driver.restore(run, like=state) if resume else None
@@ -227,7 +228,7 @@ def init_or_resume(key, env, ppo_cfg, terrain, run: Path, resume: bool):
 def training_origin(meta: dict, done: int, num_updates: int, device_name: str) -> TrainOrigin:
     """The devices and commit that trained the run so far (from the checkpoint's ``meta``), plus this device if
     it will train."""
-    from jaxterrain.provenance import git_commit
+    from jaxterrain.runtime.provenance import git_commit
 
     train_devices = list(meta.get("train_devices", []))  # devices that trained this run (a resume may add one)
     train_commit = meta.get("train_commit", git_commit())
@@ -250,12 +251,13 @@ def _print_chunk(steps_per_update: int):
 
 def train_with_checkpoints(env, terrain, state, start: int, history, args, settings: RunSettings, run: RunFolder,
                            origin: TrainOrigin, t_start: float, preset: str, mesh=None) -> TrainOutcome:
-    """Train updates ``[start, num_updates)`` through ``jaxterrain.driver.run_chunks``: a checkpoint, metrics.csv
+    """Train updates ``[start, num_updates)`` through ``jaxterrain.runtime.driver.run_chunks``: a checkpoint, metrics.csv
     and TensorBoard events after every chunk; stops at the time limit as ``run_chunks`` does. ``mesh``:
     data parallel over its devices (``rl.update``)."""
     import time
 
-    from jaxterrain import driver, rl
+    from jaxterrain.runtime import driver
+    from jaxterrain import rl
 
     limits = []
     if settings.time_budget is not None:  # the process's budget, less what has passed and the evaluation's minute
@@ -331,7 +333,7 @@ def write_eval(run: Path, result: dict) -> None:
     """Write ``result`` (see :func:`evaluate_policy`) to ``run/eval.json`` and print its summary."""
     import json
 
-    from jaxterrain.io import atomic_write_text
+    from jaxterrain.runtime.io import atomic_write_text
 
     atomic_write_text(run / "eval.json", json.dumps(result, indent=2) + "\n")
     print(f"flat-ground normalised distance: best-{result['best']} mean {result['best_mean']:.3f}, "
@@ -345,7 +347,7 @@ def build_provenance(cfg: dict, run: RunFolder, state, origin: TrainOrigin, devi
 
     import jax
 
-    from jaxterrain.provenance import git_commit
+    from jaxterrain.runtime.provenance import git_commit
 
     return {
         "command": run.info["command_line"], "resumed_with": run.info.get("resumed_with", []),
@@ -376,7 +378,7 @@ def export_policy_assets(dest: Path, run: Path, state, settings: RunSettings, en
     import shutil
 
     from jaxterrain import rl
-    from jaxterrain.io import atomic_write_text
+    from jaxterrain.runtime.io import atomic_write_text
 
     rl.save_policy(dest, state.params, state.normaliser, settings.ppo_config, env.observation_size,
                    env.action_size, extra={"walker_config": _to_jsonable(settings.env_config),

@@ -7,11 +7,11 @@
 
 Training (:mod:`jaxterrain.generators.gan_train`, library code; this module only wires it to the command line):
 the non-saturating GAN loss, Adam(2e-4, b1=0.5) for both networks, one discriminator and one generator update per
-step on random DEM patches cut, augmented and normalised on the device (``jaxterrain.dem.random_patches``);
+step on random DEM patches cut, augmented and normalised on the device (``jaxterrain.terrain.dem.random_patches``);
 latents from N(0, 1) truncated to [-3, 3] (the genome range). R1 penalty on real data (``--r1``, lazily every 8
 steps; on in the gpu preset: without it the discriminator wins after ~3000 steps and the samples lose relief).
 
-The loop is ``jaxterrain.driver.run_chunks``, as in ``evolve``: every ``--ckpt-every`` steps it writes
+The loop is ``jaxterrain.runtime.driver.run_chunks``, as in ``evolve``: every ``--ckpt-every`` steps it writes
 ``checkpoint.npz`` (params, batch statistics, optimiser states, step and key; the previous one kept as
 ``checkpoint.prev.npz``), ``metrics.csv`` and TensorBoard events (``tb/``); ``--time-limit MIN`` stops after a
 checkpoint (exit code 3, as ``evolve``) and ``--resume FOLDER`` continues the run bit-identically with the
@@ -94,7 +94,7 @@ def save_grid(path: Path, maps, cols: int = 4) -> Path:
     from matplotlib import colormaps
     from PIL import Image
 
-    from jaxterrain.io import atomic_write_bytes
+    from jaxterrain.runtime.io import atomic_write_bytes
 
     maps = np.clip(np.asarray(maps, np.float32), 0.0, 1.0)
     n, h, w = maps.shape
@@ -116,7 +116,7 @@ def save_grid(path: Path, maps, cols: int = 4) -> Path:
 
 def export_assets(run_dir: Path, asset_dir: Path, provenance: str) -> Path:
     """Copy ``final/`` (weights + config), the last sample grid and quality.json into ``asset_dir``."""
-    from jaxterrain.io import atomic_write_bytes, atomic_write_text
+    from jaxterrain.runtime.io import atomic_write_bytes, atomic_write_text
 
     asset_dir.mkdir(parents=True, exist_ok=True)
     for name in ("generator.msgpack", "config.json"):
@@ -137,7 +137,7 @@ def provenance_text(cfg: dict, config, data_desc, state_step, wall, quality, met
     import jax
     import optax
 
-    from jaxterrain import provenance
+    from jaxterrain.runtime import provenance
     from jaxterrain.generators import gan_train
     from jaxterrain.generators.gan import generator_flops
 
@@ -167,7 +167,7 @@ def provenance_text(cfg: dict, config, data_desc, state_step, wall, quality, met
 
 
 def _scales():
-    from jaxterrain import dem
+    from jaxterrain.terrain import dem
 
     return dem.DEFAULT_SCALES
 
@@ -178,7 +178,7 @@ def _scales():
 
 
 class TrainingData(NamedTuple):
-    """The DEM tiles a run trains on (``tiles``: ``jaxterrain.dem.DemTiles``), how many, and a one-line description."""
+    """The DEM tiles a run trains on (``tiles``: ``jaxterrain.terrain.dem.DemTiles``), how many, and a one-line description."""
 
     tiles: Any
     num_tiles: int
@@ -205,7 +205,7 @@ def make_config(cfg: dict):
 
 def load_training_data(data: str | None) -> TrainingData:
     """Load the DEM tiles of ``--data`` (default: matplotlib's sample DEMs) and stack them for the device."""
-    from jaxterrain import dem
+    from jaxterrain.terrain import dem
 
     dems = dem.load_dems(data, min(dem.DEFAULT_SCALES))
     tiles = dem.stack_tiles([z for _, z in dems])
@@ -220,7 +220,7 @@ def run_quality_only(weights: str, cfg: dict, run_dir: Path, tiles) -> None:
 
     from jaxterrain.generators import gan_train
     from jaxterrain.generators.gan import load_generator
-    from jaxterrain.io import atomic_write_text
+    from jaxterrain.runtime.io import atomic_write_text
 
     gan_cfg, variables = load_generator(weights)
     report = gan_train.quality_check(jax.random.PRNGKey(int(cfg["seed"]) + 1), gan_cfg, variables, tiles,
@@ -231,10 +231,10 @@ def run_quality_only(weights: str, cfg: dict, run_dir: Path, tiles) -> None:
 
 def init_or_resume(cfg: dict, run_dir: Path, config, resume: bool) -> tuple[Any, int, dict | None]:
     """``(state, steps done, metric history)``: a fresh ``GanTrainState`` from the run's seed and 0 steps, or with
-    ``resume`` the run's ``checkpoint.npz`` (``jaxterrain.driver`` format; none yet: a fresh state)."""
+    ``resume`` the run's ``checkpoint.npz`` (``jaxterrain.runtime.driver`` format; none yet: a fresh state)."""
     import jax
 
-    from jaxterrain import driver
+    from jaxterrain.runtime import driver
     from jaxterrain.generators import gan_train
 
     state = gan_train.init_state(jax.random.PRNGKey(int(cfg["seed"])), config, float(cfg["lr"]))
@@ -265,7 +265,7 @@ def _log_metrics(say, log_path: Path, step: int, total: int, start: int, t0: flo
 
 
 def make_chunk(cfg: dict, run_dir: Path, config, tiles, start: int):
-    """The ``jaxterrain.driver`` chunk ``(state, a, b) -> (state, metrics [b - a])``: steps ``a + 1 .. b`` of the
+    """The ``jaxterrain.runtime.driver`` chunk ``(state, a, b) -> (state, metrics [b - a])``: steps ``a + 1 .. b`` of the
     jitted train step, with log lines and sample grids at their intervals (``start``: where this process began)."""
     import jax
     import jax.numpy as jnp
@@ -294,12 +294,12 @@ def make_chunk(cfg: dict, run_dir: Path, config, tiles, start: int):
 
 def train(cfg: dict, run_dir: Path, config, tiles, resume: bool = False, time_limit: float | None = None,
           progress: bool = True) -> TrainOutcome:
-    """Train (or ``resume``) to ``cfg["steps"]`` through ``jaxterrain.driver.run_chunks``: a checkpoint
+    """Train (or ``resume``) to ``cfg["steps"]`` through ``jaxterrain.runtime.driver.run_chunks``: a checkpoint
     (``checkpoint.npz``), ``metrics.csv`` and TensorBoard events every ``cfg["ckpt_every"]`` steps; stops early
     after ``time_limit`` minutes (``--time-limit``)."""
     import jax
 
-    from jaxterrain import driver
+    from jaxterrain.runtime import driver
     from jaxterrain.generators import gan_train
 
     state, start, history = init_or_resume(cfg, run_dir, config, resume)
@@ -325,7 +325,7 @@ def run_quality(cfg: dict, run_dir: Path, config, variables, tiles) -> dict | No
 
     from jaxterrain.generators import gan_train
 
-    from jaxterrain.io import atomic_write_text
+    from jaxterrain.runtime.io import atomic_write_text
 
     if int(cfg["quality_samples"]) <= 0:
         return None
@@ -344,7 +344,7 @@ def run_quality(cfg: dict, run_dir: Path, config, variables, tiles) -> dict | No
 def main(args: argparse.Namespace) -> int:
     """Resolve the settings and the run folder, load the data, train (or resume), save ``final/``, check quality,
     optionally export."""
-    from jaxterrain import provenance
+    from jaxterrain.runtime import provenance
     from jaxterrain.generators.gan import ASSET_DIR, save_generator
 
     run_dir, cfg = common.setup_resumable_run("train-gan", args, PRESETS, "smoke", overrides(args), EXTENDABLE)

@@ -1,9 +1,9 @@
 """``python -m experiments train-traversability``: the learned traversability model (paper 3.2 item 4).
 
 1. Data: for every generator, render terrains, flatten each by a random amplitude (so that the walks span easy to
-   hard), let the shipped base policy walk them (:func:`jaxterrain.traversability.walk`, lateral starts spread over
-   ``start_spread`` m), label windows of the walks (:func:`~jaxterrain.traversability.window_labels`) and cut the
-   32 x 32 patch of each labelled window (:func:`~jaxterrain.traversability.extract_patches`). Classes are balanced
+   hard), let the shipped base policy walk them (:func:`jaxterrain.features.learned.walk`, lateral starts spread over
+   ``start_spread`` m), label windows of the walks (:func:`~jaxterrain.features.learned.window_labels`) and cut the
+   32 x 32 patch of each labelled window (:func:`~jaxterrain.features.learned.extract_patches`). Classes are balanced
    per generator (the rarer class kept whole, the other subsampled). ``data_<generator>.npz`` per generator.
 2. Held-out evaluation: for each generator in turn, train on the other generators' patches and report accuracy
    and ROC AUC on the left-out generator's patches (``heldout.csv``, ``heldout.md``).
@@ -69,7 +69,7 @@ def collect(name: str, cfg: dict, key, balance_key, progress=print) -> dict:
     import numpy as np
 
     from jaxterrain import generators
-    from jaxterrain import traversability as trav
+    from jaxterrain.features import learned as trav
 
     gen = generators.get(name)
     label_cfg = trav.LabelConfig(**cfg["label"])
@@ -106,7 +106,7 @@ def collect(name: str, cfg: dict, key, balance_key, progress=print) -> dict:
 def _train_eval(key, train_x, train_y, test_x, test_y, cfg: dict, log=None):
     import numpy as np
 
-    from jaxterrain import traversability as trav
+    from jaxterrain.features import learned as trav
 
     mcfg = trav.ModelConfig(tuple(cfg["channels"]), float(cfg["input_scale"]))
     tcfg = trav.TrainConfig(steps=int(cfg["steps"]), batch=int(cfg["batch"]),
@@ -126,7 +126,7 @@ def load_or_collect(folder: Path, names, cfg: dict, key, clock: common.Clock | N
     import jax
     import numpy as np
 
-    from jaxterrain.io import atomic_save_npz
+    from jaxterrain.runtime.io import atomic_save_npz
 
     data, walked = {}, False
     for gi, name in enumerate(names):
@@ -154,7 +154,7 @@ def heldout(data: dict, cfg: dict, key, folder: Path, clock: common.Clock | None
     import jax
     import numpy as np
 
-    from jaxterrain.io import atomic_write_text
+    from jaxterrain.runtime.io import atomic_write_text
 
     path = folder / "heldout.json"
     rows = json.loads(path.read_text()) if path.exists() else []
@@ -203,7 +203,7 @@ def provenance(cfg: dict, data: dict, rows: list[dict], final: dict, seconds: di
     """PROVENANCE.md of an exported model."""
     import jax
 
-    from jaxterrain.provenance import device, git_commit
+    from jaxterrain.runtime.provenance import device, git_commit
 
     walk_s = (f"{sum(float(d['seconds']) for d in data.values()):.0f} s" if all("seconds" in d for d in data.values())
               else "not recorded (data files of an earlier version of the command)")
@@ -212,7 +212,7 @@ def provenance(cfg: dict, data: dict, rows: list[dict], final: dict, seconds: di
                        for g, d in data.items())
     return f"""# Traversability model provenance
 
-Patch classifier of `jaxterrain.traversability` (`PatchCNN`), loaded by `traversability.load()` and behind the
+Patch classifier of `jaxterrain.features.learned` (`PatchCNN`), loaded by `traversability.load()` and behind the
 `"traversability"` descriptor.
 
 - Command: `python -m experiments train-traversability --preset {cfg.get('preset')} --export-assets`
@@ -254,9 +254,9 @@ def export(folder: Path, params, mcfg, cfg: dict, data: dict, rows: list, final:
     ``jaxterrain/assets/traversability/``."""
     import shutil
 
-    from jaxterrain import traversability as trav
-    from jaxterrain.io import atomic_write_text
-    from jaxterrain.provenance import device, git_commit
+    from jaxterrain.features import learned as trav
+    from jaxterrain.runtime.io import atomic_write_text
+    from jaxterrain.runtime.provenance import device, git_commit
 
     trav.save(folder / "model", params, mcfg, extra={"label": cfg["label"], "final": final, "heldout": rows,
                                                       "device": device(), "date": date, "commit": git_commit(),
@@ -264,10 +264,10 @@ def export(folder: Path, params, mcfg, cfg: dict, data: dict, rows: list, final:
     atomic_write_text(folder / "model" / "PROVENANCE.md", provenance(cfg, data, rows, final, seconds, date))
     if to_assets:
         trav.ASSET_DIR.mkdir(parents=True, exist_ok=True)
-        for name in (trav.WEIGHTS_NAME, trav.CONFIG_NAME, "PROVENANCE.md"):
+        for name in (trav.model.WEIGHTS_NAME, trav.model.CONFIG_NAME, "PROVENANCE.md"):
             shutil.copyfile(folder / "model" / name, trav.ASSET_DIR / name)
         trav.shipped.cache_clear()
-        trav._shipped_descriptor.cache_clear()
+        trav.model._shipped_descriptor.cache_clear()
         print(f"exported to {trav.ASSET_DIR}", flush=True)
 
 
@@ -277,9 +277,9 @@ def main(args) -> int:
 
     import jax
 
-    from jaxterrain import traversability as trav
-    from jaxterrain.io import atomic_write_text
-    from jaxterrain.provenance import device
+    from jaxterrain.features import learned as trav
+    from jaxterrain.runtime.io import atomic_write_text
+    from jaxterrain.runtime.provenance import device
 
     folder, cfg = common.setup_resumable_run("train-traversability", args, PRESETS, "cpu", overrides(args))
     print(f"train-traversability: {folder}  device {device()}", flush=True)
@@ -294,7 +294,7 @@ def main(args) -> int:
         return 3
     seconds = {"data": time.time() - t0}
     t0 = time.time()
-    if (folder / "model" / trav.WEIGHTS_NAME).exists():  # --resume after the final model: keep it
+    if (folder / "model" / trav.model.WEIGHTS_NAME).exists():  # --resume after the final model: keep it
         saved = trav.load(folder / "model")
         params, mcfg, final = saved.params, saved.config, saved.meta["final"]
         seconds["final"] = float(saved.meta.get("seconds", {}).get("final", 0.0))

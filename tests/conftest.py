@@ -11,7 +11,7 @@ elemental emitter instead of XLA's fusion emitters (``--xla_cpu_use_fusion_emitt
 ``XLA_FLAGS`` unless ``XLA_FLAGS`` names that flag already): the default suite on 2 cores took 14:01 with it and
 18:47 without (2026-11-27, fresh clones of f105a74). Results may differ from the default emitters' in the last bits;
 a test that compares two different programs bit for bit pins the emitters it was checked with in its own compile
-options (``tests/test_tiles_ppo.py``).
+options (``tests/rl/test_tiles_ppo.py``).
 """
 
 import atexit

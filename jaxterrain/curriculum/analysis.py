@@ -14,7 +14,7 @@ from typing import Optional, Sequence
 
 import numpy as np
 
-from jaxterrain.bank import MAX_DISTANCE_50
+from jaxterrain.qd import MAX_DISTANCE_50
 
 __all__ = ["MILESTONES", "PAPER_TABLE2", "first_epochs", "milestone_summary", "format_milestone", "hardest_curve",
            "terrain_runs"]

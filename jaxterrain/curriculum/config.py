@@ -74,9 +74,10 @@ from __future__ import annotations
 import math
 from typing import NamedTuple, Optional
 
-from jaxterrain._validate import int_at_least, known_fields, one_of, walks
+from jaxterrain.runtime.validation import int_at_least, known_fields, one_of, walks
 from jaxterrain.rl.config import PPOConfig
 from jaxterrain.rl.config import validate_config as validate_ppo_config
+from jaxterrain.difficulty import Protocol
 
 __all__ = ["CurriculumConfig", "validate_config", "SELECTORS", "FINE_TUNED", "FINE_TUNING"]
 
@@ -189,7 +190,6 @@ class CurriculumConfig(NamedTuple):
     @property
     def protocol(self):
         """The evaluation's :class:`jaxterrain.difficulty.Protocol` (``attempts``, ``best``, ``headings``)."""
-        from jaxterrain.difficulty import Protocol
 
         return Protocol(int(self.attempts), int(self.best), int(self.headings))
 

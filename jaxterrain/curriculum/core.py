@@ -44,14 +44,14 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from jaxterrain.bank import MAX_DISTANCE_50, TerrainBank
+from jaxterrain.qd import GRID_BINS, MAX_DISTANCE_50, TerrainBank
 from jaxterrain.curriculum import gp
 from jaxterrain.curriculum.config import CurriculumConfig
+from jaxterrain.runtime import sharding
 
 __all__ = ["Harness", "History", "State", "init", "step", "init_trials", "run_trials", "make_runner", "live_rows",
            "run_live", "terrain_hardness", "roughness_sequence", "select", "removal_mask", "gp_params"]
 
-GRID_BINS = 50  # the paper's 50 x 50 grid (``distance_origin="top_right"``)
 
 
 class Harness(NamedTuple):
@@ -441,7 +441,6 @@ def make_runner(config: CurriculumConfig, harness: Harness, mesh=None) -> Callab
     another chunk than on one device, and its envs restart there (the same curriculum rules, other PPO data)."""
     fn = functools.partial(run_trials, config=config, harness=harness)
     if mesh is not None:
-        from jaxterrain import sharding
 
         return sharding.map_rows(lambda s, b, n: fn(s, b, jnp.asarray(n, jnp.int32)), mesh, replicated=(1, 2))
     return jax.jit(lambda s, b, n: fn(s, b, jnp.asarray(n, jnp.int32)), donate_argnums=(0,))

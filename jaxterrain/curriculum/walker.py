@@ -40,10 +40,13 @@ import jax
 import jax.numpy as jnp
 
 from jaxterrain import difficulty, rl
+
+from jaxterrain.walker.layout import make_env
 from jaxterrain.curriculum.config import CurriculumConfig
 from jaxterrain.curriculum.core import Harness
 from jaxterrain.terrain import TerrainScale
 from jaxterrain.walker import TILE_AXES, Tile, TileBank
+from jaxterrain.rl import networks as nets
 
 __all__ = ["walker_env_config", "walker_env", "check_policy", "walker_harness", "tile_layout", "select_policy",
            "tile_distances", "start_state"]
@@ -79,7 +82,7 @@ def walker_env(policy, shape: tuple[int, int], scale: TerrainScale, episode_leng
                healthy_reward: Optional[float] = None):
     """The cached :class:`~jaxterrain.walker.WalkerEnv` of :func:`walker_env_config` (builds the MuJoCo model;
     compiles nothing)."""
-    return difficulty.make_env(walker_env_config(policy, shape, scale, episode_length, backend, tiles, worlds,
+    return make_env(walker_env_config(policy, shape, scale, episode_length, backend, tiles, worlds,
                                                  healthy_reward))
 
 
@@ -91,7 +94,6 @@ def check_policy(policy, env) -> None:
     if obs != env.observation_size or act != env.action_size:
         raise ValueError(f"{where}: policy for observations {obs} / actions {act}, but the walker has "
                          f"{env.observation_size} / {env.action_size} (height_scan={env.config.height_scan})")
-    from jaxterrain.rl import networks as nets
 
     like = jax.eval_shape(lambda k: nets.init_params(k, policy.config, obs, act), jax.random.key(0))
     shapes = lambda t: jax.tree.map(lambda x: tuple(x.shape), t)  # noqa: E731
@@ -207,7 +209,7 @@ def select_policy(env, pred, on_true: rl.TrainState, on_false: rl.TrainState) ->
 def tile_distances(env, policy, tile, key, attempts: int, policy_params=None, headings: int = 1) -> jax.Array:
     """``[attempts]`` normalised distances (0 where a walk failed) of ``attempts`` walks of ``policy(obs)`` (or
     ``policy(policy_params, obs)``) on ``tile`` (a :class:`~jaxterrain.walker.Tile`, index []) of a tiled ``env``,
-    until every walk has ended or the episode limit: the loop of ``difficulty.batched_distances`` for one terrain
+    until every walk has ended or the episode limit: the loop of ``walker.rollout.batched_distances`` for one terrain
     (keys ``split(key, (1, attempts))``, the same vmap nesting) with the tile in place of ``terrain[None]``.
 
     ``headings`` > 1: attempt ``a`` walks tile ``index + a // (attempts // headings)`` (the trial's terrain turned

@@ -20,7 +20,7 @@ from jaxterrain.generators._cppn_genome import (
     OUTPUT,
     VALUE_LIMIT,
     CPPNGenome,
-    _closure_steps,
+    closure_steps,
 )
 
 
@@ -50,7 +50,7 @@ def reachability(adjacency: jax.Array) -> jax.Array:
     """
     n = adjacency.shape[-1]
     r = adjacency.astype(jnp.float32)
-    for _ in range(_closure_steps(n)):
+    for _ in range(closure_steps(n)):
         r = jnp.maximum(r, (jnp.matmul(r, r) > 0.5).astype(jnp.float32))
     return r > 0.5
 

@@ -100,7 +100,7 @@ def node_kinds(max_nodes: int) -> np.ndarray:
 
 
 
-def _closure_steps(n: int) -> int:
+def closure_steps(n: int) -> int:
     """Squarings of an ``[n, n]`` 0/1 adjacency matrix that cover every path (length up to n - 1)."""
     return max(1, math.ceil(math.log2(max(n - 1, 2))))
 
@@ -231,7 +231,7 @@ def _check_acyclic(g: dict[str, np.ndarray], n: int, name: str) -> None:
     adj = np.zeros((B, n, n), np.int64)
     np.add.at(adj, (np.repeat(np.arange(B), c), src.reshape(-1), dst.reshape(-1)), cu.reshape(-1).astype(np.int64))
     reach = adj > 0
-    for _ in range(_closure_steps(n) + 1):
+    for _ in range(closure_steps(n) + 1):
         reach = reach | (np.matmul(reach.astype(np.int64), reach.astype(np.int64)) > 0)
     cyc = np.diagonal(reach, axis1=1, axis2=2)
     if cyc.any():
@@ -240,7 +240,7 @@ def _check_acyclic(g: dict[str, np.ndarray], n: int, name: str) -> None:
                          "connections (enabled or not) must be acyclic")
 
 
-def _check_config(config: CPPNConfig) -> None:
+def check_config(config: CPPNConfig) -> None:
     if not isinstance(config, CPPNConfig):
         raise ValueError(f"cppn: config must be a CPPNConfig; got {type(config)}")
     for f in ("weight_replace_prob", "weight_perturb_prob", "add_connection_prob", "add_node_prob",

@@ -32,6 +32,10 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+__all__ = ["Genome", "PRNGKey", "RENDER_CHUNK", "GenomeSpec", "spec", "Generator", "is_traced", "check_count",
+           "chunked_render", "mark_checked", "checked", "uniform_genomes", "gaussian_mutation",
+           "check_vector_genomes", "vector_generator"]
+
 Genome = Any  # an array [B, G] or a pytree of arrays with leading axis B
 PRNGKey = jax.Array
 
@@ -132,7 +136,7 @@ def chunked_render(render_one: Callable[[Genome], jax.Array], chunk: int = RENDE
     return jax.jit(render_batch)
 
 
-def _mark(fn: Callable) -> Callable:
+def mark_checked(fn: Callable) -> Callable:
     fn.__jaxterrain_checked__ = True
     return fn
 
@@ -143,13 +147,13 @@ def checked(gen: "Generator") -> "Generator":
     sample, mutate = gen.sample, gen.mutate
     if not getattr(sample, "__jaxterrain_checked__", False):
 
-        @_mark
+        @mark_checked
         def sample(key: PRNGKey, n: int, _sample=gen.sample, _name=gen.name):
             return _sample(key, check_count(n, _name))
 
     if not getattr(mutate, "__jaxterrain_checked__", False):
 
-        @_mark
+        @mark_checked
         def mutate(key: PRNGKey, genomes: Genome, _mutate=gen.mutate, _validate=gen.validate):
             if not is_traced(genomes):
                 _validate(genomes)
@@ -254,7 +258,7 @@ def vector_generator(
 
     sample_jit = jax.jit(lambda key, n: repair(uniform_genomes(key, n, gspec)), static_argnums=1)
 
-    @_mark
+    @mark_checked
     def sample(key: PRNGKey, n: int) -> jax.Array:
         return sample_jit(key, check_count(n, name))
 
@@ -263,7 +267,7 @@ def vector_generator(
         if extra_check is not None:
             extra_check(g)
 
-    @_mark
+    @mark_checked
     def mutate(key: PRNGKey, genomes: jax.Array) -> jax.Array:
         if not is_traced(genomes):
             validate(genomes)

@@ -61,7 +61,7 @@ from typing import Any
 
 import jax
 
-from jaxterrain.generators import register
+from jaxterrain.generators.registry import register
 
 # The stages, re-exported: every name below stays importable from jaxterrain.generators.cppn.
 from jaxterrain.generators._cppn_eval import (  # noqa: F401
@@ -97,7 +97,7 @@ from jaxterrain.generators._cppn_genome import (  # noqa: F401
     CPPNConfig,
     CPPNGenome,
     CPPNSpec,
-    _check_config,
+    check_config,
     check_genomes,
     node_kinds,
 )
@@ -106,7 +106,7 @@ from jaxterrain.generators.base import (
     RENDER_CHUNK,
     Generator,
     PRNGKey,
-    _mark,
+    mark_checked,
     check_count,
     chunked_render,
     is_traced,
@@ -137,7 +137,7 @@ def cppn(size: int = 256, max_nodes: int = 32, max_connections: int = 128, confi
         raise ValueError(f"cppn: max_nodes is {max_nodes}; it must be an integer in [{MIN_NODES}, 256]")
     if int(max_connections) != max_connections or max_connections < NUM_INPUTS:
         raise ValueError(f"cppn: max_connections is {max_connections}; it must be an integer >= {NUM_INPUTS}")
-    _check_config(config)
+    check_config(config)
     size, max_nodes, max_connections = int(size), int(max_nodes), int(max_connections)
     gspec = CPPNSpec(max_nodes, max_connections, config)
 
@@ -157,7 +157,7 @@ def cppn(size: int = 256, max_nodes: int = 32, max_connections: int = 128, confi
     def validate(genomes: Any) -> None:
         check_genomes(genomes, max_nodes, max_connections, config.weight_limit)
 
-    @_mark
+    @mark_checked
     def mutate(key: PRNGKey, genomes: CPPNGenome) -> CPPNGenome:
         if not is_traced(genomes):
             validate(genomes)
@@ -175,7 +175,7 @@ def cppn(size: int = 256, max_nodes: int = 32, max_connections: int = 128, confi
 
     sample_jit = jax.jit(sample_raw, static_argnums=1)  # one compile per n, not one per call
 
-    @_mark
+    @mark_checked
     def sample(key: PRNGKey, n: int) -> CPPNGenome:
         return sample_jit(key, check_count(n, "cppn"))
 

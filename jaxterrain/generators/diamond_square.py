@@ -50,8 +50,10 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from jaxterrain.generators import register
+from jaxterrain.generators.registry import register
 from jaxterrain.generators.base import Generator, spec, vector_generator
+
+__all__ = ["DIAMOND_SQUARE_SPEC", "diamond_square_grid", "render_diamond_square", "diamond_square"]
 
 DIAMOND_SQUARE_SPEC = spec(
     ("c00", -1.0, 1.0, False),

@@ -11,7 +11,7 @@ Architecture (flax linen, NHWC; :class:`GanConfig`, stored in ``config.json`` be
   128 for the default ``channels=(256, 128, 64, 32, 16, 8)``), then an output layer "upsample x r -> 3 x 3 conv to
   one channel" (``r = size / 128``), so the costliest resolution, 256 x 256, has a single 8 -> 1 conv. Convs use
   reflect padding (zero padding gave bright / dark map borders in a first trial). The output map is min-max
-  normalised to [0, 1] per terrain, exactly as every training patch is (``jaxterrain.dem``): with a sigmoid the
+  normalised to [0, 1] per terrain, exactly as every training patch is (``jaxterrain.terrain.dem``): with a sigmoid the
   generator would have to learn to hit 0 and 1 exactly (a first trial with a sigmoid stalled with every output
   inside [0, 0.5]). BatchNorm uses its running averages at inference, so each terrain depends on its own latent
   only. Default: 0.60 M parameters (2.4 MB float32), 0.199 GFLOPs per 256 x 256 sample (:func:`generator_flops`).
@@ -35,8 +35,9 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from jaxterrain.generators import register
+from jaxterrain.generators.registry import register
 from jaxterrain.generators.base import Generator, spec, vector_generator
+from jaxterrain.runtime.io import atomic_write_bytes, atomic_write_text
 
 ASSET_DIR = Path(__file__).resolve().parent.parent / "assets" / "gan"
 WEIGHTS_FILE = "generator.msgpack"
@@ -214,7 +215,6 @@ def save_generator(directory: str | os.PathLike, config: GanConfig, variables: d
     """Write ``generator.msgpack`` (flax msgpack of ``{"params", "batch_stats"}``, float32) and ``config.json``."""
     from flax import serialization
 
-    from jaxterrain.io import atomic_write_bytes, atomic_write_text
 
     directory = Path(directory)
     host = jax.tree_util.tree_map(lambda x: np.asarray(x, np.float32), dict(variables))
@@ -302,6 +302,7 @@ def gan(size: int = 256, weights: str | os.PathLike | None = None) -> Generator:
 
 
 __all__ = [
+    "ASSET_DIR",
     "GanConfig",
     "count_params",
     "gan",

@@ -3,14 +3,14 @@ quality check. ``python -m experiments train-gan`` is the command around these f
 
     state = init_state(jax.random.PRNGKey(0), config)              # GanTrainState (a pytree)
     step = jitted_step(config, batch_size=64, lr=2e-4, r1=1.0)     # (state, tiles) -> (state, metrics)
-    state, metrics = step(state, tiles)                            # tiles: jaxterrain.dem.DemTiles
+    state, metrics = step(state, tiles)                            # tiles: jaxterrain.terrain.dem.DemTiles
     report = quality_check(key, config, variables, tiles)          # W1 of TRI / TPI / roughness to real patches
 
 Training: the non-saturating GAN loss, Adam(lr, b1=0.5, b2=0.999) for both networks, one discriminator and one
 generator update per step, batches of random DEM patches cut, augmented and normalised on the device inside the
-step (``jaxterrain.dem.random_patches``), latents from N(0, 1) truncated to [-3, 3] (the genome range), and an
+step (``jaxterrain.terrain.dem.random_patches``), latents from N(0, 1) truncated to [-3, 3] (the genome range), and an
 optional R1 penalty on real data applied lazily every :data:`R1_EVERY` steps (StyleGAN2). The state is a plain
-pytree: checkpoint it with ``jaxterrain.driver`` (``python -m experiments train-gan`` runs its loop there).
+pytree: checkpoint it with ``jaxterrain.runtime.driver`` (``python -m experiments train-gan`` runs its loop there).
 """
 
 from __future__ import annotations
@@ -23,8 +23,10 @@ import jax.numpy as jnp
 import numpy as np
 import optax
 
-from jaxterrain import dem
+from jaxterrain.terrain import dem
 from jaxterrain.generators.gan import GanConfig, count_params, init_variables, make_modules, sample_latents
+from jaxterrain import generators
+from jaxterrain import features
 
 __all__ = ["R1_EVERY", "GanTrainState", "gan_optimizer", "init_state", "make_train_step", "jitted_step",
            "jitted_samples", "wasserstein1", "quality_check", "generator_params"]
@@ -187,7 +189,6 @@ def _quality_sets(key: jax.Array, config: GanConfig, variables: dict, tiles, n: 
         sets[name] = np.concatenate([np.asarray(patch_fn(kk)) for kk in ks])[:n]
     perlin_error = None
     try:
-        from jaxterrain import generators
 
         perlin = generators.get("perlin", size=config.size)
         genomes = perlin.sample(k_perlin, n)
@@ -209,7 +210,7 @@ def quality_check(key: jax.Array, config: GanConfig, variables: dict, tiles, n: 
     means, and ``gan_closer_than_perlin``.
     """
     if descriptors is None:
-        from jaxterrain.features import descriptors
+        descriptors = features.descriptors
     sets, perlin_error = _quality_sets(key, config, variables, tiles, n)
     feats = {}
     for name, maps in sets.items():

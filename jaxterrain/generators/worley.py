@@ -29,9 +29,9 @@ So a CPU map can differ from a GPU map of the same genome by less than ``TOLERAN
 always gives the same map, bit for bit.
 
 * ``"pallas"`` (the default on a GPU; exact): the "tiled" method below with its three stages as Pallas kernels
-  (``_worley_pallas``), each program one 8 x 8 tile in registers. (1) The coarse grid by the selection kernel over
+  (``worley_pallas``), each program one 8 x 8 tile in registers. (1) The coarse grid by the selection kernel over
   every tile's first N points with the bracket [0, 2 x size]. (2) The candidate lists and (3) the selection, in one
-  kernel (``_worley_pallas.FUSED``; two kernels otherwise). The selection runs over the tile's own candidates, whose
+  kernel (``worley_pallas.FUSED``; two kernels otherwise). The selection runs over the tile's own candidates, whose
   loops run to that tile's candidate count (mean 16-40, max 83, at 256 x 256), not to a capacity. It first counts
   ``c_lo = count(d2 < L^2)`` and ``c_hi = count(d2 < U^2)``. Then it bisects the whole tile until no pixel has more
   than ``TOP_K`` = 4 candidates in its bracket, about 2-4 steps where a 1-candidate bracket took 7-10, since a tile
@@ -119,8 +119,12 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from jaxterrain.generators import _worley_pallas, register
+from jaxterrain.generators import worley_pallas
+from jaxterrain.generators.registry import register
 from jaxterrain.generators.base import Generator, spec, vector_generator
+
+__all__ = ["MAX_POINTS", "MAX_INDEX", "SELECT_OPTIONS", "DEFAULT_SELECT", "TOLERANCE", "WORLEY_SPEC",
+           "feature_points", "bracket_iterations", "worley_distance", "render_worley", "repair", "check_d", "worley"]
 
 MAX_POINTS = 400
 MAX_INDEX = 100
@@ -364,11 +368,11 @@ def _tile_lists(dy2: jax.Array, dx2: jax.Array, lo: jax.Array, hi: jax.Array, ti
     Returns ``idx [ty, tx, cap]`` int32 (candidate ``k`` of a tile in slot ``k``, in point order; 0 in unused
     slots), ``n_cand [ty, tx]`` int32 (may exceed ``cap``), ``inside [ty, tx]`` int32 and ``overflow`` (a scalar
     bool: some tile had more than ``cap`` candidates, so the lists are incomplete). With ``pallas`` the lists are
-    built by a kernel (``_worley_pallas.tile_lists``; unused slots then hold anything).
+    built by a kernel (``worley_pallas.tile_lists``; unused slots then hold anything).
     """
     ext = _tile_extremes(dy2, dx2, lo, hi, tile)
     if pallas:
-        idx, n_cand, inside = _worley_pallas.tile_lists(*ext, cap)
+        idx, n_cand, inside = worley_pallas.tile_lists(*ext, cap)
         return idx, n_cand, inside, jnp.any(n_cand > cap)
     rmin, rmax, cmin, cmax, lt2, ut2 = ext
     p, (ty, tx) = dy2.shape[-1], lt2.shape
@@ -429,7 +433,7 @@ def _tiled_bounds(dy2: jax.Array, dx2: jax.Array, d: jax.Array, step: int, tol: 
     if pallas:
         n_points = jnp.sum(jnp.isfinite(dx2[0]), dtype=jnp.int32)
         bound = float(dy2.shape[0] + dx2.shape[0])  # pixels, beyond any distance in the map
-        coarse = lambda y, x, d: _worley_pallas.kth_all_points(y, x, n_points, d, bound, tile)  # noqa: E731
+        coarse = lambda y, x, d: worley_pallas.kth_all_points(y, x, n_points, d, bound, tile)  # noqa: E731
     return _bracket_bounds(dy2, dx2, d, step, tol, coarse)
 
 
@@ -443,7 +447,7 @@ def _kth_tiled(dy2: jax.Array, dx2: jax.Array, d: jax.Array, step: int = _COARSE
     ``(D - inside)``-th over the candidates, exactly; steps 3-4 run over ``cap`` candidates instead of 400 (4.2x
     fewer point-pixel pairs at the defaults), so the result equals "bracket"'s up to float rounding. With
     ``pallas`` the coarse grid, the lists and steps 3-4 are Pallas kernels that loop over each tile's own
-    candidates only, and the result is exact (``_worley_pallas``). If a tile has more than ``cap`` candidates the
+    candidates only, and the result is exact (``worley_pallas``). If a tile has more than ``cap`` candidates the
     map's steps 3-4 are redone over all points (by "bracket", or by the kernel with ``pallas``), from the same
     bounds, in a ``while_loop`` that runs 0 or 1 times:
     under ``vmap`` it runs once for the whole batch if any map overflowed, and not at all otherwise.
@@ -455,13 +459,13 @@ def _kth_tiled(dy2: jax.Array, dx2: jax.Array, d: jax.Array, step: int = _COARSE
         return _kth_bracket(dy2, dx2, d, step, tol)
     lo, hi, n_iter = bounds
     d = d.astype(jnp.int32)
-    if pallas and _worley_pallas.FUSED:
-        d2, n_cand = _worley_pallas.select_kth_fused(dy2, dx2, _tile_extremes(dy2, dx2, lo, hi, tile), d, lo, hi,
+    if pallas and worley_pallas.FUSED:
+        d2, n_cand = worley_pallas.select_kth_fused(dy2, dx2, _tile_extremes(dy2, dx2, lo, hi, tile), d, lo, hi,
                                                      tile, cap)
         overflow = jnp.any(n_cand > cap)
     elif pallas:
         idx, n_cand, inside, overflow = _tile_lists(dy2, dx2, lo, hi, tile, cap, pallas)
-        d2 = _worley_pallas.select_kth(dy2, dx2, idx, jnp.minimum(n_cand, cap), d - inside, lo, hi, tile)
+        d2 = worley_pallas.select_kth(dy2, dx2, idx, jnp.minimum(n_cand, cap), d - inside, lo, hi, tile)
     else:
         idx, n_cand, inside, overflow = _tile_lists(dy2, dx2, lo, hi, tile, cap)
         rank = d - inside  # the target rank among a tile's candidates (>= 0: inside < D + 1)
@@ -480,7 +484,7 @@ def _kth_tiled(dy2: jax.Array, dx2: jax.Array, d: jax.Array, step: int = _COARSE
         if not pallas:
             return False, _bisect_all_points(dy2_, dx2_, lo_, hi_, n_iter, d)
         # Every point a candidate of every tile (the masked ones are at +inf).
-        return False, _worley_pallas.select_all_points(dy2_, dx2_, dy2.shape[-1], d, lo_, hi_, tile)
+        return False, worley_pallas.select_all_points(dy2_, dx2_, dy2.shape[-1], d, lo_, hi_, tile)
 
     return jax.lax.while_loop(lambda carry: carry[0], redo, (overflow, d2))[1]
 

@@ -1,6 +1,6 @@
 """Stage 2 of a report: an archive as a grid of cells, each with its fitness, descriptors and a terrain thumbnail.
 
-    view = archives.view(archive.load("runs/evolve-x/archive.npz"), thumb=64)
+    view = archives.view(qd.load("runs/evolve-x/archive.npz"), thumb=64)
     view.cells        # one ArchiveCell per filled cell: cell, bins, fitness, descriptors, generator, thumbnail
     view.picks        # {"easy": cell, "medium": cell, "hard": cell} (highest, median and lowest fitness)
 
@@ -17,6 +17,10 @@ import io
 from typing import NamedTuple, Sequence
 
 import numpy as np
+
+from jaxterrain import generators
+from jaxterrain import qd as A
+from jaxterrain.qd.grid import cell_bins
 
 __all__ = ["ArchiveCell", "ArchiveView", "view", "elite_heightmaps", "pick_cells", "thumbnail", "heatmap_png"]
 
@@ -70,7 +74,6 @@ def elite_heightmaps(arch, cells: Sequence[int], chunk: int = 64, size: int | No
     import jax
     import jax.numpy as jnp
 
-    from jaxterrain import generators
 
     out = None
     for g, name in enumerate(arch.generator_names):
@@ -127,7 +130,6 @@ def pick_cells(fitness: np.ndarray, cells: np.ndarray) -> dict[str, int]:
 
 def view(arch, thumb: int = 64, chunk: int = 64) -> ArchiveView:
     """The :class:`ArchiveView` of an archive: every filled cell with a ``thumb``-pixel thumbnail."""
-    from jaxterrain import archive as A
 
     config = arch.config
     filled = np.flatnonzero(np.asarray(arch.source) >= 0)
@@ -140,7 +142,8 @@ def view(arch, thumb: int = 64, chunk: int = 64) -> ArchiveView:
         shape = tuple(maps.shape[1:])
         for c, hm in zip(part, maps):
             c = int(c)
-            cells.append(ArchiveCell(cell=c, bins=(c % bins, c // bins), fitness=float(arch.fitness[c]),
+            b0, b1 = (int(b) for b in cell_bins(c, bins))
+            cells.append(ArchiveCell(cell=c, bins=(b0, b1), fitness=float(arch.fitness[c]),
                                      descriptors=tuple(float(v) for v in arch.descriptors[c]),
                                      generator=arch.generator_names[int(arch.source[c])],
                                      thumbnail=thumbnail(hm, thumb), heights=(float(hm.min()), float(hm.max()))))
@@ -170,7 +173,7 @@ def heatmap_png(v: ArchiveView, title: str = "") -> bytes:
                    aspect="auto", interpolation="nearest")
     fig.colorbar(im, ax=ax, label="fitness")
     for label, cell in v.picks.items():
-        b0, b1 = cell % v.bins, cell // v.bins
+        b0, b1 = (int(b) for b in cell_bins(cell, v.bins))
         ax.text(x0 + (b0 + 0.5) * (x1 - x0) / v.bins, y0 + (b1 + 0.5) * (y1 - y0) / v.bins, label[0].upper(),
                 ha="center", va="center", color="red", fontsize=9, fontweight="bold")
     ax.set_xlabel(v.descriptor_names[0]), ax.set_ylabel(v.descriptor_names[1])

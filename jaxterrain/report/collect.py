@@ -4,7 +4,7 @@
     run.config, run.tables, run.figures, run.archives, run.texts, run.others
 
 Every command writes ``config.json``, tables (CSV and Markdown), figures (PNG) and, for MAP-Elites runs,
-archives (``.npz`` in the :mod:`jaxterrain.archive` format) into its run folder, in sub-folders too (``coverage``
+archives (``.npz`` in the :mod:`jaxterrain.qd.archive` format) into its run folder, in sub-folders too (``coverage``
 keeps one per treatment). Nothing here knows the commands: files are sorted by suffix, an ``.npz`` counts as an
 archive when its header says so (a checkpoint does not), and the folder of an earlier report (marked by
 :data:`MARKER`) is skipped, so a new run type shows up in a report without changes here.
@@ -15,6 +15,8 @@ from __future__ import annotations
 import json
 from pathlib import Path
 from typing import NamedTuple
+
+from jaxterrain.qd import FORMAT
 
 __all__ = ["RunFiles", "scan", "is_archive", "MARKER", "TABLE_SUFFIXES", "FIGURE_SUFFIXES", "TEXT_SUFFIXES"]
 
@@ -61,7 +63,6 @@ def is_archive(path: Path) -> bool:
     read)."""
     import numpy as np
 
-    from jaxterrain.archive import FORMAT
 
     try:
         with np.load(path, allow_pickle=False) as z:

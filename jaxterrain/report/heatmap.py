@@ -10,7 +10,9 @@ import json
 import numpy as np
 
 from jaxterrain.report.archives import ArchiveView
-from jaxterrain.report.markdown import _E
+from jaxterrain.report.markdown import escape
+
+__all__ = ["CMAP", "archive_html", "SCRIPT"]
 
 CMAP = "viridis_r"  # as the archive figures of the commands: dark = high fitness = easy
 
@@ -31,7 +33,7 @@ def _legend_gradient() -> str:
     return f"linear-gradient(to right, {stops})"
 
 
-def _archive_html(v: ArchiveView, uid: str) -> str:
+def archive_html(v: ArchiveView, uid: str) -> str:
     b = v.bins
     px = int(max(6, min(40, 520 // max(b, 1))))
     fit = np.array([c.fitness for c in v.cells]) if v.cells else np.zeros(0)
@@ -66,9 +68,9 @@ def _archive_html(v: ArchiveView, uid: str) -> str:
     grid_w = b * px
     grid_style = f"grid-template-columns:repeat({b},{px}px);grid-auto-rows:{px}px;width:{grid_w}px"
     return f"""
-<div class=archive id="{uid}" data-first="{'' if first is None else first}" data-d0="{_E(d0)}" data-d1="{_E(d1)}">
+<div class=archive id="{uid}" data-first="{'' if first is None else first}" data-d0="{escape(d0)}" data-d1="{escape(d1)}">
  <p class=stats>{b} x {b} cells, {len(v.cells)} filled (coverage {v.coverage:.1f} %), QD score {v.qd_score:.2f},
-  generator(s) {_E(', '.join(v.generator_names))}; heightmaps {v.shape[0]} x {v.shape[1]}.
+  generator(s) {escape(', '.join(v.generator_names))}; heightmaps {v.shape[0]} x {v.shape[1]}.
   Colour: the archive's fitness, dark = high (the walker's fitness is the normalised distance walked: dark = easy;
   difficulty = 1 - fitness).
   <b class="pick key" data-pick=E></b> <b class="pick key" data-pick=M></b> <b class="pick key" data-pick=H></b>
@@ -76,10 +78,10 @@ def _archive_html(v: ArchiveView, uid: str) -> str:
  <div class=archrow>
   <div class=axes>
    <div class=ylab style="height:{grid_w + 2}px">
-    <span>{y1:g}</span><span class=name>{_E(d1)}</span><span>{y0:g}</span></div>
+    <span>{y1:g}</span><span class=name>{escape(d1)}</span><span>{y0:g}</span></div>
    <div>
     <div class=grid style="{grid_style}">{''.join(cells)}</div>
-    <div class=xlab style="width:{grid_w}px"><span>{x0:g}</span><span>{_E(d0)}</span><span>{x1:g}</span></div>
+    <div class=xlab style="width:{grid_w}px"><span>{x0:g}</span><span>{escape(d0)}</span><span>{x1:g}</span></div>
     <div class=legend style="width:{grid_w}px"><span>{lo:.3g}</span>
      <span class=bar style="background:{_legend_gradient()}"></span><span>{hi:.3g}</span></div>
     <label class=switch><input type=checkbox class=thumbs> show every cell's thumbnail</label>
@@ -93,7 +95,7 @@ def _archive_html(v: ArchiveView, uid: str) -> str:
 </div>"""
 
 
-_SCRIPT = """
+SCRIPT = """
 document.querySelectorAll('.archive').forEach(function (box) {
   var data = JSON.parse(box.querySelector('script.cells').textContent);
   var img = box.querySelector('.panel img'), info = box.querySelector('.panel .info');

@@ -11,17 +11,18 @@ import re
 from pathlib import Path
 from typing import Callable, Optional, Sequence
 
-__all__ = ["markdown_to_html", "read_table", "MAX_ROWS"]
+__all__ = ["markdown_to_html", "read_table", "MAX_ROWS", "MIME", "escape", "data_uri", "html_table", "md_table", "demote_markdown",
+           "image_resolver"]
 
 MAX_ROWS = 500
 """Rows of a table shown on the page; longer tables are cut there (the note names the file)."""
 
-_MIME = {".png": "image/png", ".jpg": "image/jpeg", ".jpeg": "image/jpeg", ".gif": "image/gif",
+MIME = {".png": "image/png", ".jpg": "image/jpeg", ".jpeg": "image/jpeg", ".gif": "image/gif",
          ".svg": "image/svg+xml", ".webp": "image/webp"}
-_E = html.escape
+escape = html.escape
 
 
-def _data_uri(data: bytes, mime: str) -> str:
+def data_uri(data: bytes, mime: str) -> str:
     return f"data:{mime};base64,{base64.b64encode(data).decode('ascii')}"
 
 
@@ -31,18 +32,18 @@ def read_table(path: Path) -> list[list[str]]:
     return [row for row in csv.reader(io.StringIO(text), delimiter="\t" if path.suffix.lower() == ".tsv" else ",")]
 
 
-def _html_table(rows: Sequence[Sequence[str]], max_rows: int = MAX_ROWS, header: bool = True) -> str:
+def html_table(rows: Sequence[Sequence[str]], max_rows: int = MAX_ROWS, header: bool = True) -> str:
     if not rows:
         return "<p class=note>(empty table)</p>"
     width = max(len(r) for r in rows)
     head, body = (rows[0], rows[1:]) if header else ([], rows)
     out = ["<div class=tablebox><table>"]
     if head:
-        out.append("<thead><tr>" + "".join(f"<th>{_E(c)}</th>" for c in head) + "</tr></thead>")
+        out.append("<thead><tr>" + "".join(f"<th>{escape(c)}</th>" for c in head) + "</tr></thead>")
     out.append("<tbody>")
     for r in body[:max_rows]:
         cells = list(r) + [""] * (width - len(r))
-        out.append("<tr>" + "".join(f"<td{' class=num' if _is_num(c) else ''}>{_E(c)}</td>" for c in cells)
+        out.append("<tr>" + "".join(f"<td{' class=num' if _is_num(c) else ''}>{escape(c)}</td>" for c in cells)
                    + "</tr>")
     out.append("</tbody></table></div>")
     if len(body) > max_rows:
@@ -62,7 +63,7 @@ def _md_cell(text) -> str:
     return str(text).replace("|", "\\|").replace("\n", " ")
 
 
-def _md_table(rows: Sequence[Sequence[str]], max_rows: int = MAX_ROWS) -> str:
+def md_table(rows: Sequence[Sequence[str]], max_rows: int = MAX_ROWS) -> str:
     if not rows:
         return "(empty table)\n"
     width = max(len(r) for r in rows)
@@ -81,12 +82,12 @@ def _inline_md(text: str, images: Optional[Callable[[str], Optional[str]]] = Non
     out = []
     for part in parts:
         if len(part) >= 2 and part.startswith("`") and part.endswith("`"):
-            out.append(f"<code>{_E(part[1:-1])}</code>")
+            out.append(f"<code>{escape(part[1:-1])}</code>")
             continue
 
         def image(m):
             src = images(m.group(2)) if images else None
-            return f'<img alt="{_E(m.group(1))}" src="{src}">' if src else _E(f"[image: {m.group(1) or m.group(2)}]")
+            return f'<img alt="{escape(m.group(1))}" src="{src}">' if src else escape(f"[image: {m.group(1) or m.group(2)}]")
 
         tokens = []
 
@@ -96,7 +97,7 @@ def _inline_md(text: str, images: Optional[Callable[[str], Optional[str]]] = Non
 
         s = re.sub(r"!\[([^\]]*)\]\(([^)\s]+)[^)]*\)", keep, part)
         s = re.sub(r"\[([^\]]+)\]\([^)]*\)", r"\1", s)  # links: text only
-        s = _E(s)
+        s = escape(s)
         s = re.sub(r"\*\*(.+?)\*\*", r"<strong>\1</strong>", s)
         s = re.sub(r"(?<![\w*])\*(?!\s)(.+?)(?<!\s)\*(?![\w*])", r"<em>\1</em>", s)
         s = re.sub(r"https?://", "", s)  # no network address, even as text
@@ -127,7 +128,7 @@ def markdown_to_html(text: str, demote: int = 2, images: Optional[Callable[[str]
             j = i + 1
             while j < len(lines) and not lines[j].strip().startswith("```"):
                 j += 1
-            out.append("<pre>" + _E("\n".join(lines[i + 1:j])) + "</pre>")
+            out.append("<pre>" + escape("\n".join(lines[i + 1:j])) + "</pre>")
             i = j + 1
             continue
         m = re.match(r"^(#{1,6})\s+(.*)$", stripped)
@@ -181,7 +182,7 @@ def markdown_to_html(text: str, demote: int = 2, images: Optional[Callable[[str]
     return "\n".join(out)
 
 
-def _demote_markdown(text: str, levels: int = 3) -> str:
+def demote_markdown(text: str, levels: int = 3) -> str:
     out, fenced = [], False
     for line in text.splitlines():
         if line.strip().startswith("```"):
@@ -192,11 +193,11 @@ def _demote_markdown(text: str, levels: int = 3) -> str:
     return "\n".join(out) + "\n"
 
 
-def _image_resolver(folder: Path) -> Callable[[str], Optional[str]]:
+def image_resolver(folder: Path) -> Callable[[str], Optional[str]]:
     def resolve(src: str) -> Optional[str]:
         p = (folder / src)
-        if re.match(r"^[a-z]+:", src) or not p.is_file() or p.suffix.lower() not in _MIME:
+        if re.match(r"^[a-z]+:", src) or not p.is_file() or p.suffix.lower() not in MIME:
             return None
-        return _data_uri(p.read_bytes(), _MIME[p.suffix.lower()])
+        return data_uri(p.read_bytes(), MIME[p.suffix.lower()])
 
     return resolve

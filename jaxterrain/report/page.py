@@ -27,21 +27,26 @@ from typing import Callable, NamedTuple, Optional, Sequence
 import numpy as np
 
 from jaxterrain.report import collect
-from jaxterrain.report.heatmap import _SCRIPT, CMAP, _archive_html  # noqa: F401
+from jaxterrain.report.heatmap import SCRIPT, CMAP, archive_html  # noqa: F401
 
 # Tables and Markdown live in jaxterrain.report.markdown; these names stay importable from here.
 from jaxterrain.report.markdown import (  # noqa: F401
-    _MIME,
+    MIME,
     MAX_ROWS,
-    _data_uri,
-    _demote_markdown,
-    _E,
-    _html_table,
-    _image_resolver,
-    _md_table,
+    data_uri,
+    demote_markdown,
+    escape,
+    html_table,
+    image_resolver,
+    md_table,
     markdown_to_html,
     read_table,
 )
+from jaxterrain.runtime.io import atomic_write_text
+from jaxterrain import qd as A
+from jaxterrain.report import archives as AV
+from jaxterrain.report import render as R
+from jaxterrain.runtime.io import atomic_write_bytes
 
 __all__ = ["write_report", "markdown_to_html", "read_table", "MAX_ROWS"]
 
@@ -125,7 +130,6 @@ class _Assets:
         self.names: set[str] = set()
 
     def add(self, name: str, data: bytes) -> str:
-        from jaxterrain.io import atomic_write_bytes
 
         name = re.sub(r"[^A-Za-z0-9._-]+", "_", name)
         base, n = name, 1
@@ -140,14 +144,14 @@ class _Assets:
 def _videos_html(videos) -> str:
     out = ["<div class=videos>"]
     for vid in videos:
-        cap = f"<b>{_E(vid.label)}</b>: {_E(vid.caption)}"
+        cap = f"<b>{escape(vid.label)}</b>: {escape(vid.caption)}"
         if vid.outcome:
-            cap += f"<br>{_E(vid.outcome)}"
+            cap += f"<br>{escape(vid.outcome)}"
         if vid.gif is not None:
-            out.append(f'<figure><img alt="{_E(vid.label)} walk" src="{_data_uri(vid.gif, "image/gif")}">'
+            out.append(f'<figure><img alt="{escape(vid.label)} walk" src="{data_uri(vid.gif, "image/gif")}">'
                        f"<figcaption>{cap}</figcaption></figure>")
         else:
-            out.append(f"<figure><div class=skipped>No video: {_E(vid.reason)}</div><figcaption>{cap}"
+            out.append(f"<figure><div class=skipped>No video: {escape(vid.reason)}</div><figcaption>{cap}"
                        f"</figcaption></figure>")
     out.append("</div>")
     return "".join(out)
@@ -186,7 +190,6 @@ def write_report(runs: Sequence[str | Path], out: str | Path, *, title: str = "j
     in pixels. Failures of the renders or of one archive are reported on the page, never raised. Returns the path
     of ``report.html``.
     """
-    from jaxterrain.io import atomic_write_text
 
     t_start = time.perf_counter()
     out = Path(out)
@@ -229,8 +232,6 @@ class _Walks(NamedTuple):
 def _load_archives(scans, thumb: int, videos: bool, extra: dict, progress) -> tuple[dict, _Walks]:
     """Load and view every archive of every run (key ``(run, archive)``: an ``ArchiveView``, or the error as text)
     and gather the terrains to walk: each archive's picks, then the run's extra terrains."""
-    from jaxterrain import archive as A
-    from jaxterrain.report import archives as AV
 
     views: dict[tuple[int, int], object] = {}
     walks = _Walks([], {})
@@ -262,7 +263,6 @@ def _make_videos(wanted: list, seed: int, steps: int, frames: int, size: tuple[i
     """``(gl_ok, the line that says how the videos were made or why not, [Video])``."""
     import jax
 
-    from jaxterrain.report import render as R
 
     gl_ok, gl_text = R.gl_status()
     render_line = (f"Videos: {gl_text}, replaying states recorded from MJX rollouts." if gl_ok
@@ -276,13 +276,13 @@ def _run_section(h: list[str], md: list[str], r: int, run, views: dict, walks_at
                  assets: _Assets) -> None:
     """Append run ``r``'s section to the page ``h`` and its Markdown twin ``md``."""
     prefix = f"r{r}"
-    h.append(f'<section class=run id="run-{r}"><h2>{_E(run.name)}</h2><p class=path>{_E(str(run.root))}</p>')
+    h.append(f'<section class=run id="run-{r}"><h2>{escape(run.name)}</h2><p class=path>{escape(str(run.root))}</p>')
     md += [f"## {run.name}", "", f"`{run.root}`", ""]
     if run.config is not None:
         rows = _config_rows(run.config)
         h.append(f"<details><summary>config.json ({len(rows) - 1} options)</summary>"
-                 f"{_html_table(rows)}</details>")
-        md += ["### Configuration (config.json)", "", _md_table(rows)]
+                 f"{html_table(rows)}</details>")
+        md += ["### Configuration (config.json)", "", md_table(rows)]
     _tables(h, md, run)
     _figures(h, md, run, assets, prefix)
     if run.archives:
@@ -306,20 +306,20 @@ def _tables(h: list[str], md: list[str], run) -> None:
         md += ["### Tables", ""]
     for path in run.tables:
         rel = run.rel(path)
-        h.append(f"<h4>{_E(rel)}</h4>")
+        h.append(f"<h4>{escape(rel)}</h4>")
         md += [f"#### {rel}", ""]
         try:
             if path.suffix.lower() == ".md":
                 text = path.read_text(encoding="utf-8", errors="replace")
-                resolve = _image_resolver(path.parent)
+                resolve = image_resolver(path.parent)
                 h.append(f"<div class=md>{markdown_to_html(text, demote=4, images=resolve)}</div>")
-                md.append(_demote_markdown(re.sub(r"!\[([^\]]*)\]\([^)]*\)", r"[image: \1]", text), 4))
+                md.append(demote_markdown(re.sub(r"!\[([^\]]*)\]\([^)]*\)", r"[image: \1]", text), 4))
             else:
                 rows = read_table(path)
-                h.append(_html_table(rows))
-                md.append(_md_table(rows))
+                h.append(html_table(rows))
+                md.append(md_table(rows))
         except (OSError, csv.Error) as err:
-            h.append(f"<p class=warn>cannot read {_E(rel)}: {_E(str(err))}</p>")
+            h.append(f"<p class=warn>cannot read {escape(rel)}: {escape(str(err))}</p>")
             md.append(f"cannot read {rel}: {err}\n")
 
 
@@ -331,8 +331,8 @@ def _figures(h: list[str], md: list[str], run, assets: _Assets, prefix: str) -> 
     for path in run.figures:
         rel = run.rel(path)
         data = path.read_bytes()
-        h.append(f'<figure><img alt="{_E(rel)}" src="{_data_uri(data, _MIME[path.suffix.lower()])}">'
-                 f"<figcaption>{_E(rel)}</figcaption></figure>")
+        h.append(f'<figure><img alt="{escape(rel)}" src="{data_uri(data, MIME[path.suffix.lower()])}">'
+                 f"<figcaption>{escape(rel)}</figcaption></figure>")
         md += [f"![{rel}]({assets.add(f'{prefix}_{rel}', data)})", "", f"*{rel}*", ""]
 
 
@@ -340,15 +340,14 @@ def _archive(h: list[str], md: list[str], rel: str, v, uid: str, assets: _Assets
              vids: Optional[list]) -> None:
     """One archive: the heatmap (or why it cannot be shown), its picks' table in the Markdown twin, and the walks
     ``vids`` on its picks (None: no walks)."""
-    from jaxterrain.report import archives as AV
 
-    h.append(f"<h4>{_E(rel)}</h4>")
+    h.append(f"<h4>{escape(rel)}</h4>")
     md += [f"#### {rel}", ""]
     if isinstance(v, str):
-        h.append(f"<p class=warn>cannot show this archive: {_E(v)}</p>")
+        h.append(f"<p class=warn>cannot show this archive: {escape(v)}</p>")
         md.append(f"cannot show this archive: {v}\n")
         return
-    h.append(_archive_html(v, uid))
+    h.append(archive_html(v, uid))
     md += [f"{v.bins} x {v.bins} cells, {len(v.cells)} filled (coverage {v.coverage:.1f} %), QD score "
            f"{v.qd_score:.2f}; E / M / H mark the easiest, median and hardest elites.", "",
            f"![fitness heatmap of {rel}]({assets.add(f'{prefix}_{rel}_heatmap.png', AV.heatmap_png(v))})",
@@ -376,25 +375,25 @@ def _other_files(h: list[str], md: list[str], run) -> None:
     for path in run.texts:
         rel = run.rel(path)
         text = path.read_text(encoding="utf-8", errors="replace")
-        h.append(f"<details><summary>{_E(rel)}</summary><pre>{_E(text)}</pre></details>")
+        h.append(f"<details><summary>{escape(rel)}</summary><pre>{escape(text)}</pre></details>")
         md += [f"<details><summary>{rel}</summary>", "", "```", text.rstrip("\n"), "```", "", "</details>", ""]
     if run.others:
-        h.append("<ul class=files>" + "".join(f"<li>{_E(run.rel(p))} ({_size(p.stat().st_size)})</li>"
+        h.append("<ul class=files>" + "".join(f"<li>{escape(run.rel(p))} ({_size(p.stat().st_size)})</li>"
                                               for p in run.others) + "</ul>")
         md += [f"- `{run.rel(p)}` ({_size(p.stat().st_size)})" for p in run.others] + [""]
 
 
 def _page_html(title: str, now: str, scans, elapsed: float, gl_ok: bool, render_line: str, body: list[str]) -> str:
     """The whole page: header with one link per run, the render status, the runs' sections, the script."""
-    nav = " ".join(f'<a href="#run-{r}">{_E(run.name)}</a>' for r, run in enumerate(scans))
+    nav = " ".join(f'<a href="#run-{r}">{escape(run.name)}</a>' for r, run in enumerate(scans))
     status_cls = "ok" if gl_ok else "warn"
     return f"""<!DOCTYPE html>
 <html lang="en"><head><meta charset="utf-8"><meta name="viewport" content="width=device-width, initial-scale=1">
-<title>{_E(title)}</title><style>{_STYLE}</style></head>
-<body><header><h1>{_E(title)}</h1>
-<p>Generated {_E(now)} from {len(scans)} run folder(s) in {elapsed:.0f} s. Self-contained: every image is embedded.</p>
+<title>{escape(title)}</title><style>{_STYLE}</style></head>
+<body><header><h1>{escape(title)}</h1>
+<p>Generated {escape(now)} from {len(scans)} run folder(s) in {elapsed:.0f} s. Self-contained: every image is embedded.</p>
 <nav>{nav}</nav></header>
-<main><p class={status_cls}>{_E(render_line)}</p>
+<main><p class={status_cls}>{escape(render_line)}</p>
 {''.join(body)}
-</main><script>{_SCRIPT}</script></body></html>
+</main><script>{SCRIPT}</script></body></html>
 """

@@ -39,6 +39,13 @@ from typing import Any, Callable, NamedTuple, Optional
 
 import numpy as np
 
+from jaxterrain import difficulty
+
+from jaxterrain.walker.layout import make_env
+from jaxterrain.walker.layout import sized_env, terrain_batch
+from jaxterrain.terrain import TerrainScale, validate_scale
+from jaxterrain.walker.model import FLOOR_GEOM, build_spec, metres_to_hfield
+
 __all__ = ["Walk", "Video", "make_videos", "setup_gl", "gl_backend", "gl_status", "backend_available",
            "record_walks", "render_model", "render_walk", "gif_bytes", "fps_of"]
 
@@ -212,13 +219,11 @@ def _compiled_walk(env_config, steps: int, policy: Callable):
     import jax
     import jax.numpy as jnp
 
-    from jaxterrain import difficulty
 
-    from jaxterrain.rollout import sized_env, terrain_batch
 
-    env = difficulty.make_env(env_config)
+    env = make_env(env_config)
 
-    def walks(keys, terrains):  # a tiled env (jaxterrain.rollout) walks terrain b on tile b
+    def walks(keys, terrains):  # a tiled env (jaxterrain.walker.rollout) walks terrain b on tile b
         e = sized_env(env, terrains.shape[0], terrains.shape[0])
         world, axes = terrain_batch(e, terrains)
 
@@ -266,8 +271,6 @@ def record_walks(heightmaps, key, steps: int = 1000, policy: Optional[Callable] 
     import jax
     import jax.numpy as jnp
 
-    from jaxterrain import difficulty
-    from jaxterrain.terrain import TerrainScale, validate_scale
 
     maps = np.asarray(heightmaps, np.float32)
     if maps.ndim == 2:
@@ -303,7 +306,6 @@ def render_model(env_config, terrain_m):
     and ``terrain_m`` ([H, W] metres) in its hfield."""
     import mujoco
 
-    from jaxterrain.walker.model import FLOOR_GEOM, build_spec, metres_to_hfield
 
     c = env_config
     spec = build_spec(c.terrain_shape, c.scale, c.solver, c.timestep)

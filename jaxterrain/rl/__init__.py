@@ -1,6 +1,7 @@
 """PPO in flax + optax whose training step is a pure function of (state, key, terrains).
 
-See :mod:`jaxterrain.rl.ppo` for the env protocol and :class:`PPOConfig` for the hyperparameters (brax's MJX
+The pure algorithm is :mod:`jaxterrain.rl.ppo` (the env protocol), its host driver :mod:`jaxterrain.rl.training`,
+its files :mod:`jaxterrain.rl.checkpoint`; see :mod:`jaxterrain.rl.ppo` for the env protocol and :class:`PPOConfig` for the hyperparameters (brax's MJX
 humanoid recipe). Public API::
 
     PPOConfig, TrainState, init, update, run_updates, ride_updates, Ride, make_train, train, chunk_fn, reset_envs,
@@ -13,9 +14,9 @@ from jaxterrain.rl.checkpoint import (BASE_POLICY_DIR, checkpoint_metadata, load
 from jaxterrain.rl.config import PPOConfig, validate_config
 from jaxterrain.rl.losses import gae, ppo_loss
 from jaxterrain.rl.networks import RunningStats, deterministic_action, init_stats, normalize, update_stats
-from jaxterrain.rl.ppo import (EpisodeStats, Progress, Ride, TrainState, Transition, chunk_fn, compiled_chunk, init,
-                               loss_fn, make_optimizer, make_train, raw_key, reset_envs, ride_updates, run_updates,
-                               train, update)
+from jaxterrain.rl.ppo import (EpisodeStats, Ride, TrainState, Transition, init, loss_fn, make_optimizer, make_train,
+                               raw_key, reset_envs, ride_updates, run_updates, update)
+from jaxterrain.rl.training import Progress, chunk_fn, compiled_chunk, train
 
 __all__ = [
     "BASE_POLICY_DIR", "EpisodeStats", "PPOConfig", "Progress", "RunningStats", "TrainState", "Transition",

@@ -1,11 +1,11 @@
 """Checkpoints of a whole :class:`~jaxterrain.rl.ppo.TrainState` and export / loading of a deterministic policy.
 
-Checkpoint (``save_checkpoint``): the one checkpoint format of the project, ``jaxterrain.driver``'s npz (every leaf
+Checkpoint (``save_checkpoint``): the one checkpoint format of the project, ``jaxterrain.runtime.driver``'s npz (every leaf
 under its tree path, e.g. ``.params['policy']['params']['mlp']['hidden_0']['kernel']``): params, Adam state,
 normaliser, episode counters, key, step counters and (by default) the batched env state, so that a resumed run is
 bit-identical to an uninterrupted one. ``done`` is the update step; the header's ``meta`` holds
 ``{"format": CHECKPOINT_FORMAT, "include_env_state": bool, "metadata": {...}}``. A ``run_dir/checkpoint.npz``
-written by ``rl.train(..., run_dir=...)`` or ``jaxterrain.driver.run_chunks`` loads the same way.
+written by ``rl.train(..., run_dir=...)`` or ``jaxterrain.runtime.driver.run_chunks`` loads the same way.
 
 Policy (``save_policy``): a folder with ``policy.msgpack`` (``{"params": {"policy", "value"}, "normaliser"}``)
 and ``config.json`` (the :class:`PPOConfig`, observation and action sizes). ``load_policy()`` without a path
@@ -24,10 +24,13 @@ import jax.numpy as jnp
 import numpy as np
 from flax import serialization
 
-from jaxterrain import driver
-from jaxterrain.io import atomic_write_bytes, atomic_write_text
+from jaxterrain.runtime import driver
+from jaxterrain.runtime.io import atomic_write_bytes, atomic_write_text
 from jaxterrain.rl import networks as nets
 from jaxterrain.rl.config import PPOConfig
+
+__all__ = ["CHECKPOINT_FORMAT", "POLICY_FORMAT", "BASE_POLICY_DIR", "save_checkpoint", "checkpoint_metadata",
+           "load_checkpoint", "save_policy", "load_policy", "policy_fn"]
 
 CHECKPOINT_FORMAT = "jaxterrain.rl.checkpoint/2"
 POLICY_FORMAT = "jaxterrain.rl.policy/1"
@@ -36,7 +39,7 @@ BASE_POLICY_DIR = Path(__file__).resolve().parent.parent / "assets" / "base_poli
 
 def save_checkpoint(path: str | os.PathLike, state: Any, include_env_state: bool = True,
                     metadata: Optional[dict] = None) -> Path:
-    """Write ``state`` (a TrainState or any pytree of arrays) to ``path`` atomically (``jaxterrain.driver``'s npz).
+    """Write ``state`` (a TrainState or any pytree of arrays) to ``path`` atomically (``jaxterrain.runtime.driver``'s npz).
 
     ``include_env_state=False`` leaves out ``state.env_state`` (smaller; :func:`load_checkpoint` then keeps the
     env state of ``like``). ``metadata``: a JSON-serialisable dict stored alongside (e.g. the config).

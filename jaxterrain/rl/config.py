@@ -5,7 +5,9 @@ from __future__ import annotations
 import math
 from typing import NamedTuple, Optional, Tuple
 
-from jaxterrain._validate import int_at_least, known_fields, one_of
+from jaxterrain.runtime.validation import int_at_least, known_fields, one_of
+
+__all__ = ["ACTIVATIONS", "DISTRIBUTIONS", "TRUNCATIONS", "PPOConfig", "validate_config"]
 
 ACTIVATIONS = ("swish", "relu", "tanh", "elu")
 DISTRIBUTIONS = ("tanh_normal", "normal")

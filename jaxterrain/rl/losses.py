@@ -1,4 +1,4 @@
-"""GAE and the clipped PPO objective as small pure functions (hand-checkable; see tests/test_rl.py)."""
+"""GAE and the clipped PPO objective as small pure functions (hand-checkable; see tests/rl/test_rl.py)."""
 
 from __future__ import annotations
 
@@ -6,6 +6,8 @@ from typing import Optional
 
 import jax
 import jax.numpy as jnp
+
+__all__ = ["gae", "batch_mean", "ppo_loss"]
 
 
 def gae(rewards: jax.Array, values: jax.Array, dones: jax.Array, last_value: jax.Array, gamma: float,

@@ -11,6 +11,10 @@ import jax.numpy as jnp
 
 from jaxterrain.rl.config import PPOConfig
 
+__all__ = ["RunningStats", "init_stats", "update_stats", "stats_std", "normalize", "MLP", "PolicyNet", "ValueNet",
+           "policy_net", "value_net", "init_params", "policy_apply", "value_apply", "sample_raw", "log_prob",
+           "entropy", "postprocess", "deterministic_action"]
+
 _ACT = {"swish": nn.swish, "relu": nn.relu, "tanh": nn.tanh, "elu": nn.elu}
 
 

@@ -23,7 +23,6 @@ Typical use::
 from __future__ import annotations
 
 import functools
-import sys
 from typing import Any, NamedTuple, Optional, Protocol
 
 import jax
@@ -33,6 +32,12 @@ import optax
 from jaxterrain.rl import networks as nets
 from jaxterrain.rl.config import PPOConfig, validate_config
 from jaxterrain.rl.losses import batch_mean, gae, ppo_loss
+from jaxterrain.walker.layout import terrain_axis
+from jaxterrain.walker.tiles import Tile
+from jaxterrain.runtime import sharding
+
+__all__ = ["EnvLike", "EpisodeStats", "TrainState", "Transition", "Ride", "raw_key", "make_optimizer",
+           "per_env_mask", "init", "reset_envs", "loss_fn", "update", "run_updates", "ride_updates", "make_train"]
 
 
 class EnvLike(Protocol):
@@ -128,41 +133,10 @@ def make_optimizer(config: PPOConfig) -> optax.GradientTransformation:
     return optax.chain(optax.clip_by_global_norm(config.max_grad_norm), adam)
 
 
-def _tile_type():
-    """``walker.Tile`` when :mod:`jaxterrain.walker.tiles` is loaded (no Tile exists otherwise), else None: keeps
-    ``rl`` free of the MuJoCo import for duck-typed envs."""
-    tiles = sys.modules.get("jaxterrain.walker.tiles")
-    return None if tiles is None else tiles.Tile
-
-
-def _terrain_axis(terrains, num_envs: int):
-    """The ``in_axes`` of ``terrains`` over the envs: 0 for per-env terrains [N, H, W], None for a shared [H, W]
-    or a shared ``Tile`` (index []), ``TILE_AXES`` for a ``Tile`` per env (index [N]); ValueError otherwise
-    (host-side: static shapes)."""
-    tile = _tile_type()
-    if tile is not None and isinstance(terrains, tile):
-        shape = tuple(jnp.shape(terrains.index))
-        if shape == ():
-            return None
-        if shape == (num_envs,):
-            return tile(None, 0)  # walker.TILE_AXES: the bank shared, one index per env
-        raise ValueError(f"terrains: a walker.Tile's index must be [] (shared) or [num_envs={num_envs}], "
-                         f"got shape {shape}")
-    if terrains.ndim == 2:
-        return None
-    if terrains.ndim == 3:
-        if terrains.shape[0] != num_envs:
-            raise ValueError(
-                f"terrains: per-env terrains must have shape [num_envs={num_envs}, H, W], got {terrains.shape}"
-            )
-        return 0
-    raise ValueError(f"terrains must be [H, W] (shared) or [num_envs, H, W], got shape {terrains.shape}")
-
-
 def _batched_reset(env, key, terrains, num_envs, rows=None):
     """``num_envs`` reset envs keyed ``split(key, num_envs)``; ``rows = (start, total)``: envs ``start ..
     start + num_envs`` of a batch of ``total`` (keys ``split(key, total)[start:start + num_envs]``)."""
-    axis = _terrain_axis(terrains, num_envs)
+    axis = terrain_axis(terrains, num_envs)
     if rows is None:
         keys = jax.random.split(key, num_envs)
     else:
@@ -234,8 +208,7 @@ def _part_envs(per_env, states, n: int):
 def _join_terrains(terrains, axis, ride_terrains, n: int, r: int):
     """The terrain argument of ``n`` PPO envs (``terrains`` with vmap ``axis``) and ``r`` riders, as one per-env
     argument of ``n + r`` envs: arrays ``[n + r, H, W]`` or a Tile with index ``[n + r]`` (the PPO envs' bank)."""
-    tile = _tile_type()
-    if tile is not None and isinstance(terrains, tile):
+    if isinstance(terrains, Tile):
         own = jnp.broadcast_to(jnp.asarray(terrains.index, jnp.int32), (n,))
         ride = jnp.broadcast_to(jnp.asarray(ride_terrains.index, jnp.int32), (r,))
         return terrains._replace(index=jnp.concatenate([own, ride]))
@@ -318,7 +291,7 @@ def _collect(state: TrainState, key, terrains, env, config, rows=None, ride: Opt
     ``per_env``: :func:`per_env_mask` of the batch if the caller has it (else traced here: two reset traces).
     """
     n, dist = config.num_envs, config.action_distribution
-    axis = _terrain_axis(terrains, n)
+    axis = terrain_axis(terrains, n)
     pool_key, unroll_key = jax.random.split(key)
     del key
     pool = _batched_reset(env, pool_key, terrains, n, rows)
@@ -332,7 +305,7 @@ def _collect(state: TrainState, key, terrains, env, config, rows=None, ride: Opt
         if per_env is None:
             per_env = per_env_mask(env, _one_terrain(terrains, axis))
         pool = _join_envs(per_env, pool, _part_envs(per_env, state.env_state, n)[1])  # rider rows: never taken
-    v_step = jax.vmap(env.step, in_axes=(0, 0, _terrain_axis(step_terrains, pool.obs.shape[0])))
+    v_step = jax.vmap(env.step, in_axes=(0, 0, terrain_axis(step_terrains, pool.obs.shape[0])))
 
     def env_step(carry, step_key):
         env_state, ep, ride_carry = carry
@@ -507,7 +480,6 @@ def _sgd(params, opt_state, normaliser, segments: Transition, boots, key, *, con
     if mesh is None:
         local, axis_name = size, None
     else:
-        from jaxterrain import sharding
 
         local, axis_name = -(-size // mesh.devices.size), sharding.AXIS  # segments per device, padded
     grad_fn = jax.value_and_grad(functools.partial(loss_fn, config=config, action_size=action_size,
@@ -560,7 +532,6 @@ def _collect_mode(mesh, config: PPOConfig, env=None) -> str:
     (segfault, measured on 2 H200s, 2026-11-23)."""
     import os
 
-    from jaxterrain import sharding
 
     mode = os.environ.get("JAXTERRAIN_PPO_COLLECT")
     if mode not in (None, "", "shard_map", "partition"):
@@ -585,11 +556,10 @@ def _collect_split(state: TrainState, key, terrains, env, config: PPOConfig, mes
     up to float rounding. ``num_envs`` must divide over the devices. Outputs split along their env axis."""
     from jax.sharding import PartitionSpec as P
 
-    from jaxterrain import sharding
 
     d, n = mesh.devices.size, config.num_envs
     local = n // d
-    axis = _terrain_axis(terrains, n)
+    axis = terrain_axis(terrains, n)
     rows_spec = P(sharding.AXIS)
     whole = jax.tree_util.tree_map(lambda _: P(), state)
     state_spec = whole._replace(env_state=_env_specs(env, terrains, axis, rows_spec),
@@ -621,11 +591,10 @@ def _env_specs(env, terrains, axis, rows_spec):
 
 def _split_envs(state: TrainState, terrains: jax.Array, config: PPOConfig, mesh):
     """``state``'s envs (and per-env ``terrains``) constrained to be split over ``mesh``'s devices (inside jit)."""
-    from jaxterrain import sharding
 
     rows = lambda tree: jax.lax.with_sharding_constraint(tree, sharding.rows(mesh))  # noqa: E731
     state = state._replace(env_state=rows(state.env_state), episode=rows(state.episode))
-    axis = _terrain_axis(terrains, config.num_envs)
+    axis = terrain_axis(terrains, config.num_envs)
     if axis == 0:
         return state, rows(terrains)
     return state, (terrains._replace(index=rows(terrains.index)) if axis is not None else terrains)  # per-env tiles
@@ -659,7 +628,7 @@ def ride_updates(state: TrainState, terrains: jax.Array, riders: Any, ride: Ride
     """
     n = config.num_envs
     if per_env is None:
-        per_env = per_env_mask(env, _one_terrain(terrains, _terrain_axis(terrains, n)))
+        per_env = per_env_mask(env, _one_terrain(terrains, terrain_axis(terrains, n)))
     both = state._replace(env_state=_join_envs(per_env, state.env_state, riders))
 
     def body(c, _):
@@ -684,6 +653,3 @@ def make_train(env: EnvLike, config: PPOConfig, num_updates: int):
 
     return train_fn
 
-
-# The host-side driver lives in jaxterrain/rl/training.py (imported last: it imports the names above).
-from jaxterrain.rl.training import Progress, chunk_fn, compiled_chunk, train  # noqa: E402,F401

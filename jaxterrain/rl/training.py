@@ -1,7 +1,7 @@
 r"""The host-side PPO driver: chunks of jitted ``lax.scan``\ s of :func:`~jaxterrain.rl.ppo.run_updates`, a
-callback between chunks (progress, checkpoints) through ``jaxterrain.driver.run_chunks``: :func:`compiled_chunk`,
-:func:`chunk_fn`, :func:`train` and the :class:`Progress` callback. Part of :mod:`jaxterrain.rl.ppo`; import the
-names from there (or from :mod:`jaxterrain.rl`)."""
+callback between chunks (progress, checkpoints) through ``jaxterrain.runtime.driver.run_chunks``: :func:`compiled_chunk`,
+:func:`chunk_fn`, :func:`train` and the :class:`Progress` callback, over the pure :mod:`jaxterrain.rl.ppo` (which
+imports nothing from here)."""
 
 from __future__ import annotations
 
@@ -14,7 +14,12 @@ import jax.numpy as jnp
 import numpy as np
 
 from jaxterrain.rl.config import PPOConfig, validate_config
-from jaxterrain.rl.ppo import EnvLike, TrainState, _tile_type, init, raw_key, run_updates
+from jaxterrain.rl.ppo import EnvLike, TrainState, init, raw_key, run_updates
+from jaxterrain.walker.tiles import Tile
+from jaxterrain.runtime import sharding
+from jaxterrain.runtime import driver
+
+__all__ = ["compiled_chunk", "chunk_fn", "train", "Progress"]
 
 
 def _build_chunk(env, config, num_updates, batched, terrain_seed_axis, mesh=None):
@@ -23,7 +28,6 @@ def _build_chunk(env, config, num_updates, batched, terrain_seed_axis, mesh=None
         fn = jax.vmap(fn, in_axes=(0, terrain_seed_axis))
     if mesh is None:
         return jax.jit(fn)
-    from jaxterrain import sharding  # whole on every device between chunks: any process can read or save it
 
     return jax.jit(fn, out_shardings=sharding.replicated(mesh))
 
@@ -53,7 +57,7 @@ def _is_seed_batch(key) -> bool:
 def chunk_fn(env: EnvLike, config: PPOConfig, terrains: jax.Array, batched: bool = False,
              terrain_seed_axis: Optional[int] = None,
              mesh=None) -> Callable[[TrainState, int, int], tuple[TrainState, dict]]:
-    """The ``jaxterrain.driver.run_chunks`` chunk of PPO: ``(state, start, stop) -> (state, metrics)`` runs
+    """The ``jaxterrain.runtime.driver.run_chunks`` chunk of PPO: ``(state, start, stop) -> (state, metrics)`` runs
     ``stop - start`` updates (:func:`compiled_chunk`, cached per length) on ``terrains``; metrics are numpy arrays
     [stop - start] (or [S, stop - start] for a batch of seeds, ``batched``). ``mesh``: data parallel
     (:func:`update`)."""
@@ -61,7 +65,6 @@ def chunk_fn(env: EnvLike, config: PPOConfig, terrains: jax.Array, batched: bool
     def chunk(state: TrainState, start: int, stop: int):
         fn = compiled_chunk(env, config, stop - start, batched, terrain_seed_axis, mesh)
         if mesh is not None:  # a state or terrains placed on one device (e.g. a jitted init's) go whole on the mesh
-            from jaxterrain import sharding
 
             state, data = sharding.replicate((state, terrains), mesh)
         else:
@@ -77,7 +80,7 @@ def train(key: jax.Array, env: EnvLike, config: PPOConfig, num_updates: int, ter
           updates_per_chunk: int = 10, *, run_dir=None, time_limit_s: Optional[float] = None,
           progress: Any = False, meta: Optional[dict] = None, mesh=None):
     """Run ``num_updates`` PPO updates in jitted chunks of ``updates_per_chunk`` (a ``lax.scan`` each), through
-    ``jaxterrain.driver.run_chunks``.
+    ``jaxterrain.runtime.driver.run_chunks``.
 
     Args:
       key: PRNG key; seeds :func:`init` when ``state`` is None (otherwise unused: the update keys come from
@@ -91,7 +94,7 @@ def train(key: jax.Array, env: EnvLike, config: PPOConfig, num_updates: int, ter
       callback: ``callback(state, metrics)`` on the host after every chunk, metrics a dict of numpy arrays
         [chunk] (or [S, chunk]).
       updates_per_chunk: updates per jitted call (a last shorter chunk compiles once more).
-      run_dir, time_limit_s, progress, meta: as in ``jaxterrain.driver.run_chunks`` (a checkpoint, metrics.csv
+      run_dir, time_limit_s, progress, meta: as in ``jaxterrain.runtime.driver.run_chunks`` (a checkpoint, metrics.csv
         and TensorBoard events in ``run_dir`` after every chunk; stop after ``time_limit_s``; a progress bar).
       mesh: a ``jax.sharding.Mesh`` (``sharding.make_mesh()``) to train data parallel over its devices
         (:func:`update`: the envs split, the gradients summed, the policy replicated); not with a batch of seeds.
@@ -99,14 +102,13 @@ def train(key: jax.Array, env: EnvLike, config: PPOConfig, num_updates: int, ter
     Returns ``(state, metrics)``: the final state and a dict of numpy arrays [n] ([S, n]), n = the updates run
     (``num_updates`` unless the time limit stopped it earlier).
     """
-    from jaxterrain import driver
 
     if not isinstance(num_updates, int) or num_updates < 0:
         raise ValueError(f"num_updates must be an integer >= 0, got {num_updates!r}")
     if not isinstance(updates_per_chunk, int) or updates_per_chunk < 1:
         raise ValueError(f"updates_per_chunk must be an integer >= 1, got {updates_per_chunk!r}")
     validate_config(config)
-    is_tile = _tile_type() is not None and isinstance(terrains, _tile_type())
+    is_tile = isinstance(terrains, Tile)
     if not is_tile:
         terrains = jnp.asarray(terrains, jnp.float32)
     batched = _is_seed_batch(key) if state is None else state.update_step.ndim == 1
@@ -119,7 +121,6 @@ def train(key: jax.Array, env: EnvLike, config: PPOConfig, num_updates: int, ter
             init_fn = jax.vmap(init_fn, in_axes=(0, terrain_seed_axis))
         state = jax.jit(init_fn)(raw_key(key) if not batched else key, terrains)
     if mesh is not None:
-        from jaxterrain import sharding
 
         state = sharding.replicate(state, mesh)
     history = []
@@ -171,5 +172,3 @@ class Progress:
             f"len {line['episode_length']:7.1f}  loss {line['loss']:8.4f}  [{line['elapsed_s']:6.0f} s]",
         )
         return line
-
-Progress.__module__ = "jaxterrain.rl.ppo"  # its home before the split (reprs, pickles)

@@ -1,5 +1,9 @@
 """The walker: brax's humanoid in MuJoCo MJX on a heightfield passed as data (see :mod:`jaxterrain.walker.env`).
 
+Modules: :mod:`.model` (the MJCF and solver options), :mod:`.env` (reset / step / park), :mod:`.tiles` (terrains as
+tiles of one heightfield), :mod:`.layout` (classic vs tiles, env sizing, the backend ``auto`` resolves to: the one
+home of the layout) and :mod:`.rollout` (batched walks and the rollout pool).
+
     from jaxterrain.walker import WalkerEnv, WalkerConfig, flat_terrain
     env = WalkerEnv(WalkerConfig())
     terrain = flat_terrain(env.config)                         # [256, 256] float32 metres
@@ -32,8 +36,23 @@ from jaxterrain.walker.model import (
     standing_offset,
 )
 from jaxterrain.walker.tiles import TILE_AXES, Tile, TileBank, warp_available
+from jaxterrain.walker import layout, rollout  # noqa: E402  (after env / tiles, which they import)
+from jaxterrain.walker.layout import BACKEND_CHOICES, env_for, is_tiled, make_env, resolve_backend, sized_env, terrain_batch
+from jaxterrain.walker.rollout import batched_distances, job_queue, smoothness_priority
 
 __all__ = [
+    "layout",
+    "rollout",
+    "BACKEND_CHOICES",
+    "env_for",
+    "is_tiled",
+    "make_env",
+    "resolve_backend",
+    "sized_env",
+    "terrain_batch",
+    "batched_distances",
+    "job_queue",
+    "smoothness_priority",
     "BACKENDS",
     "TILE_AXES",
     "Tile",

@@ -62,11 +62,20 @@ from __future__ import annotations
 
 from typing import Any, NamedTuple
 
+import contextlib
+import importlib.util
+import io
+
 import jax
 import jax.numpy as jnp
 import mujoco
 import numpy as np
-from mujoco import mjx
+
+# MJX prints "Failed to import warp" / "Failed to import mujoco_warp" when warp-lang is not installed, to every user,
+# Warp or not: quiet where warp-lang is absent (asking for backend="warp" then says why: tiles.warp_available);
+# where it is installed, MJX's own messages stay.
+with contextlib.redirect_stdout(io.StringIO()) if importlib.util.find_spec("warp") is None else contextlib.nullcontext():
+    from mujoco import mjx
 
 from jaxterrain.terrain import hfield_size
 from jaxterrain.walker import tiles as _tiles
@@ -80,6 +89,8 @@ from jaxterrain.walker.model import (
     metres_to_hfield,
 )
 from jaxterrain.walker.tiles import Tile, TileBank
+
+__all__ = ["BACKENDS", "PARK_HEIGHT", "WalkerConfig", "WalkerState", "sample_heights", "WalkerEnv", "flat_terrain"]
 
 BACKENDS = ("jax", "warp")
 PARK_HEIGHT = 100.0  # m above the terrain's top where WalkerEnv.park puts walkers whose outcome is recorded

@@ -26,6 +26,10 @@ import numpy as np
 
 from jaxterrain.terrain import TerrainScale, hfield_size
 
+__all__ = ["HFIELD_NAME", "FLOOR_GEOM", "FOOT_GEOMS", "TORSO_BODY", "SolverOptions", "SOLVER_SOUND", "SOLVER_FAST",
+           "SOLVER_XML", "NAMED_SOLVERS", "parse_solver", "solver_label", "humanoid_xml", "check_terrain_shape",
+           "build_spec", "build_model", "metres_to_hfield", "standing_offset"]
+
 HFIELD_NAME = "terrain"
 FLOOR_GEOM = "floor"
 FOOT_GEOMS = ("left_foot", "right_foot")

@@ -49,6 +49,9 @@ from typing import NamedTuple
 import jax
 import jax.numpy as jnp
 
+__all__ = ["TileBank", "Tile", "TILE_AXES", "grid", "tile_grid_pos", "pack", "unpack", "sample_tile_heights",
+           "warp_available"]
+
 
 class TileBank(NamedTuple):
     """``data``: ``[rows * H, cols * W]`` float32 in [0, 1], the tiled heightfield (``hfield_data`` values)."""

@@ -2,7 +2,8 @@
 the steps of each walk (the difficulty module's compiled program; run from the repository root on a CPU: 34 s)."""
 import time
 import jax, numpy as np
-from jaxterrain import archive as A, bank as B, difficulty as D
+from jaxterrain import qd as A, difficulty as D
+from jaxterrain.qd import bank as B
 arch = A.load("docs/results/exp2_cppn_headings_archive.npz")
 maps = B._render_filled(arch, np.array([152]), 8)
 print("stored fitness", float(arch.fitness[152]))

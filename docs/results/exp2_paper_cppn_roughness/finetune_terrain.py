@@ -12,7 +12,8 @@ block's first and last update.
 """
 import sys, time
 import jax, jax.numpy as jnp, numpy as np
-from jaxterrain import archive as A, bank as B, difficulty as D, rl
+from jaxterrain import qd as A, difficulty as D, rl
+from jaxterrain.qd import bank as B
 from jaxterrain.curriculum import walker as W
 from jaxterrain.curriculum.config import CurriculumConfig
 from jaxterrain.terrain import TerrainScale

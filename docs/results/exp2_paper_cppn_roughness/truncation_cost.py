@@ -5,7 +5,8 @@ with 64 envs on terrain 31, 4-update calls, 12 updates timed after a warm-up cal
 """
 import time, sys
 import jax, jax.numpy as jnp, numpy as np
-from jaxterrain import archive as A, bank as B, rl
+from jaxterrain import qd as A, rl
+from jaxterrain.qd import bank as B
 from jaxterrain.curriculum import walker as W
 from jaxterrain.curriculum.config import CurriculumConfig
 from jaxterrain.terrain import TerrainScale

@@ -11,7 +11,8 @@ normalised by the running statistics.
 """
 import sys
 import jax, jax.numpy as jnp, numpy as np
-from jaxterrain import archive as A, bank as B, rl
+from jaxterrain import qd as A, rl
+from jaxterrain.qd import bank as B
 from jaxterrain.rl import networks as nets
 from jaxterrain.rl.losses import gae
 from jaxterrain.rl.ppo import _collect

@@ -13,7 +13,8 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from jaxterrain import archive as A, bank as B, difficulty as D, rl
+from jaxterrain import qd as A, difficulty as D, rl
+from jaxterrain.qd import bank as B
 
 STEPS, WALKS = 64, 8
 arch = A.load("docs/results/exp2_cppn_headings_archive.npz")

@@ -1,0 +1,170 @@
+"""A treatment's output files: ``history.csv`` (one row per trial and chunk), ``sequences.csv`` (each trial's
+terrains in order), ``milestones.csv`` / ``.md`` (Table 2's row), ``curve.png`` (hardest terrain traversed vs epoch,
+mean +- 1 standard error) and ``summary.json`` (:func:`write_outputs`), all written atomically."""
+
+from __future__ import annotations
+
+import csv
+import io
+import json
+from pathlib import Path
+
+import numpy as np
+from matplotlib.figure import Figure
+
+from jaxterrain.curriculum.analysis import (
+    MILESTONES,
+    first_epochs,
+    format_milestone,
+    hardest_curve,
+    milestone_summary,
+    terrain_runs,
+)
+from jaxterrain.qd.grid import MAX_DISTANCE_50
+from jaxterrain.runtime.io import atomic_write_text, save_figure
+
+__all__ = ["PARTIAL", "SEQUENCE_COLUMNS", "histories", "sequence_rows", "generator_counts", "milestone_rows",
+           "summary_curve", "plot_curves", "write_outputs"]
+
+PARTIAL = "summary_partial.json"
+"""The summary of an unfinished run's last checkpoint (``summary.json`` marks a finished one)."""
+
+
+def write_csv(path: Path, header: list, rows: list) -> None:
+
+    buf = io.StringIO()
+    w = csv.writer(buf)
+    w.writerow(header)
+    w.writerows(rows)
+    atomic_write_text(path, buf.getvalue())
+
+
+def histories(states) -> dict:
+    """Host numpy history arrays [T, C] of the trial states."""
+    h = states.history
+    return {"epoch": np.asarray(h.epoch), "terrain": np.asarray(h.terrain),
+            "evaluation": np.asarray(h.evaluation, np.float64), "hardest": np.asarray(h.hardest, np.float64)}
+
+
+SEQUENCE_COLUMNS = ("trial", "order", "terrain", "cell", "bin0", "bin1", "distance", "prior", "chunks",
+                    "final_evaluation", "best_evaluation", "reached", "end_epoch", "generator")
+"""The columns of ``sequences.csv`` (:func:`sequence_rows`)."""
+
+
+def sequence_rows(hist: dict, bank, config, names: tuple = ()) -> list:
+    """``sequences.csv`` rows: trial, order, terrain, cell, bin0, bin1, distance, prior, chunks, final and best
+    evaluation, reached (the threshold), end epoch, generator (``names[bank.source[terrain]]``; the id where
+    ``names`` lacks it)."""
+    cell, bins, source = np.asarray(bank.cell), np.asarray(bank.bins), np.asarray(bank.source)
+    dist, prior = np.asarray(bank.distance), np.asarray(bank.fitness)
+    name = lambda k: names[source[k]] if 0 <= source[k] < len(names) else str(int(source[k]))  # noqa: E731
+    rows = []
+    for t in range(hist["terrain"].shape[0]):
+        for i, r in enumerate(terrain_runs(hist["terrain"][t], hist["evaluation"][t], hist["epoch"][t])):
+            k = r["terrain"]
+            rows.append([t, i, k, int(cell[k]), int(bins[k, 0]), int(bins[k, 1]), f"{dist[k]:.3f}", f"{prior[k]:.4f}",
+                         r["chunks"], f"{r['final_evaluation']:.4f}", f"{r['best_evaluation']:.4f}",
+                         int(r["best_evaluation"] >= config.threshold * config.max_fitness), r["end_epoch"], name(k)])
+    return rows
+
+
+def generator_counts(rows: list) -> dict:
+    """Per generator, over every trial's terrain sequence (``sequence_rows``): the terrains trained, the chunks
+    spent on them and the terrains finished (threshold reached) - which generators a combined archive's curriculum
+    actually uses."""
+    col = SEQUENCE_COLUMNS.index
+    out: dict = {}
+    for r in rows:
+        c = out.setdefault(r[col("generator")], {"terrains": 0, "chunks": 0, "finished": 0})
+        c["terrains"] += 1
+        c["chunks"] += int(r[col("chunks")])
+        c["finished"] += int(r[col("reached")])
+    return dict(sorted(out.items()))
+
+
+def milestone_rows(label: str, hist: dict) -> tuple[list, list]:
+    """Table 2 row of one treatment: (CSV row with mean epochs and counts, Markdown cells)."""
+    trials = hist["epoch"].shape[0]
+    mean, reached = milestone_summary(first_epochs(hist["epoch"], hist["hardest"]))
+    cells = [format_milestone(m, r, trials) for m, r in zip(mean, reached)]
+    csv_row = [label] + [("" if r == 0 else f"{m:.1f}") for m, r in zip(mean, reached)] + [int(r) for r in reached]
+    assert len(cells) == len(MILESTONES)
+    return csv_row, cells
+
+
+def summary_curve(summary: dict) -> tuple:
+    """(epoch, mean, se), each [K] float: a treatment's hardest-terrain curve from its ``summary.json`` dict, in the
+    form :func:`plot_curves` takes."""
+    return tuple(np.asarray(summary["curve"][k], float) for k in ("epoch", "mean", "se"))
+
+
+def plot_curves(ax, curves: dict, title: str = "") -> None:
+    """Figure 7 style: hardest terrain traversed (cells) vs epoch, mean +- 1 standard error, one line per label."""
+    for label, (grid, mean, se) in curves.items():
+        ax.step(grid, mean, where="post", label=label)
+        ax.fill_between(grid, mean - se, mean + se, step="post", alpha=0.25)
+    ax.set_xlabel("epoch")
+    ax.set_ylabel("hardest terrain traversed (cells from (0, 0))")
+    ax.set_ylim(0, MAX_DISTANCE_50)
+    ax.set_title(title, fontsize=9)
+    ax.legend(fontsize=7)
+
+
+def write_outputs(folder: Path, cfg: dict, config, bank, states, seconds: float | None,
+                  chunks_done: int | None = None, names: tuple = ()) -> dict:
+    """history.csv, sequences.csv, milestones.csv/.md, curve.png and summary.json; returns the summary. With
+    ``chunks_done`` (an unfinished run's last checkpoint, :func:`report_treatment`) the summary goes to
+    ``summary_partial.json`` with ``"partial": true`` and ``"chunks_done"``, and the curve's title says so; without
+    it, ``summary.json``, and a ``summary_partial.json`` left by an earlier report is removed. ``seconds``: the wall
+    time of every command that ran the treatment, summed over resumes (each from its set-up and compilation on; the
+    interpreter's start-up and imports are not in it), None where unknown. ``names``: the archive's generator names
+    (``sequences.csv``'s ``generator`` column, the summary's ``generators``: :func:`generator_counts`)."""
+    hist = histories(states)
+    cell, bins, dist = np.asarray(bank.cell), np.asarray(bank.bins), np.asarray(bank.distance)
+    rows = []
+    for t in range(hist["epoch"].shape[0]):
+        for c in np.flatnonzero(hist["epoch"][t] >= 0):
+            k = int(hist["terrain"][t, c])
+            rows.append([t, c, int(hist["epoch"][t, c]), int(hist["epoch"][t, c]) * config.steps_per_epoch, k,
+                         int(cell[k]), int(bins[k, 0]), int(bins[k, 1]), f"{dist[k]:.3f}",
+                         f"{hist['evaluation'][t, c]:.4f}", f"{hist['hardest'][t, c]:.3f}"])
+    write_csv(folder / "history.csv", ["trial", "chunk", "epoch", "env_steps", "terrain", "cell", "bin0", "bin1",
+                                  "distance", "evaluation", "hardest"], rows)
+    sequences = sequence_rows(hist, bank, config, names)
+    write_csv(folder / "sequences.csv", list(SEQUENCE_COLUMNS), sequences)
+    label = f"{Path(cfg['archive']).stem} {cfg['curriculum']}"
+    pct = [f"{round(100 * m)}%" for m in MILESTONES]
+    csv_row, cells = milestone_rows(label, hist)
+    write_csv(folder / "milestones.csv", ["treatment"] + [f"epochs_{p}" for p in pct] + [f"trials_{p}" for p in pct],
+         [csv_row])
+
+    atomic_write_text(folder / "milestones.md", "| treatment | " + " | ".join(pct) + " |\n|---|" + "---|" * len(pct)
+                      + f"\n| {label} | " + " | ".join(cells) + " |\n")
+    grid, mean, se = hardest_curve(hist["epoch"], hist["hardest"])
+    fig = Figure(figsize=(6, 3.5))
+    ax = fig.subplots()
+    upto = "" if chunks_done is None else f", partial: {chunks_done} of {config.max_chunks} chunks"
+    plot_curves(ax, {label: (grid, mean, se)}, f"{label}: {hist['epoch'].shape[0]} trials{upto}, mean +- 1 s.e.")
+    fig.tight_layout()
+    save_figure(fig, folder / "curve.png")
+    final = np.asarray(states.hardest, np.float64)
+    summary = {
+        "label": label, "trials": int(final.size), "hardest": final.tolist(), "hardest_mean": float(final.mean()),
+        "hardest_se": float(final.std(ddof=1) / np.sqrt(final.size)) if final.size > 1 else 0.0,
+        "epochs": np.asarray(states.epoch).tolist(), "epochs_max": int(np.max(np.asarray(states.epoch))),
+        "terrains_finished": np.asarray(states.obs_count).tolist(),
+        "ended_without_terrains": [bool(d and e < config.max_epochs)
+                                   for d, e in zip(np.asarray(states.done), np.asarray(states.epoch))],
+        "milestones": dict(zip(pct, cells)), "seconds": seconds, "bank_terrains": int(bank.size),
+        "generators": generator_counts(sequences),
+        "milestone_epochs": [None if v == "" else float(v) for v in csv_row[1:1 + len(pct)]],
+        "milestone_trials": csv_row[1 + len(pct):],
+        "curve": {"epoch": grid.tolist(), "mean": mean.tolist(), "se": se.tolist()},
+    }
+    if chunks_done is not None:
+        summary.update(partial=True, chunks_done=int(chunks_done))
+    atomic_write_text(folder / ("summary.json" if chunks_done is None else PARTIAL), json.dumps(summary, indent=2)
+                      + "\n")
+    if chunks_done is None:  # finished: an earlier --report's partial summary is out of date
+        (folder / PARTIAL).unlink(missing_ok=True)
+    return summary

@@ -1,0 +1,360 @@
+"""The Experiment 2 treatment runner: a flat treatment config (the ``learn`` command's ``config.json``) -> a
+validated curriculum, its compiled trial blocks, a run driven chunk by chunk with checkpoints and time limits, and
+its outputs (:mod:`jaxterrain.curriculum.outputs`).
+
+    config, arch, policy, env = runner.validate(cfg)     # BadInput naming the parameter, before anything compiles
+    summary = runner.run_treatment(cfg, folder, time_limit_s=540)   # None: stopped by the time limit (checkpointed)
+    summary = runner.report_treatment(cfg, folder)       # the outputs of the last checkpoint, without training
+
+``cfg`` is flat: the curriculum's fields and its fine-tuning PPO's side by side (``CurriculumConfig.from_json_dict``),
+``curriculum`` (the selector), ``archive`` (a path), ``trials``, ``seed``, ``backend`` (``auto`` / ``jax`` /
+``warp``), ``chunks_per_call``, ``fast_compile``, ``compact`` and ``episode_length``; the ``learn`` command's
+presets give every key.
+"""
+
+from __future__ import annotations
+
+import functools
+import hashlib
+import json
+import time
+from pathlib import Path
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from jaxterrain.curriculum import walker as W
+from jaxterrain.curriculum.config import FINE_TUNED, CurriculumConfig, validate_config
+from jaxterrain.curriculum.core import init_trials, run_live, run_trials
+from jaxterrain.curriculum.outputs import PARTIAL, write_outputs
+from jaxterrain.qd.archive_io import load as load_archive_file
+from jaxterrain.qd.bank import from_archive
+from jaxterrain.runtime import driver, sharding
+from jaxterrain.terrain import TerrainScale
+from jaxterrain.walker.layout import resolve_backend
+from jaxterrain.walker import tiles
+
+__all__ = ["BadInput", "LEGACY_TRUNCATION", "PARTIAL", "FAST_COMPILE", "PROGRAMS", "curriculum_config",
+           "with_protocol", "load_archive", "archive_digest", "check_resumable", "physics_of", "walker_layout",
+           "validate", "strip_envs", "compiled", "make_block", "chunk_metrics", "inputs", "setup", "run_treatment",
+           "report_cfg", "report_treatment"]
+
+LEGACY_TRUNCATION = "mask"
+"""``truncation`` of a config saved without one: every run before the presets' default became ``bootstrap``."""
+
+
+class BadInput(ValueError):
+    """A bad parameter or file, reported as one line before anything is compiled."""
+
+
+# ----------------------------------------------------------------------------------------------------------------
+# Validation (before anything is compiled)
+# ----------------------------------------------------------------------------------------------------------------
+def curriculum_config(cfg: dict):
+    """The :class:`jaxterrain.curriculum.CurriculumConfig` of a learn config dict (validated). The dict is flat: the
+    curriculum's fields and its fine-tuning PPO's (``num_envs``, ..., ``learning_rate``: ``CurriculumConfig.ppo``)
+    side by side, with ``curriculum`` as the selector; ``CurriculumConfig.from_json_dict`` reads that layout."""
+    fields = {k: v for k, v in cfg.items() if k in FINE_TUNED or (k in CurriculumConfig._fields and k != "ppo")}
+    fields.setdefault("truncation", LEGACY_TRUNCATION)
+    try:
+        return validate_config(CurriculumConfig.from_json_dict({**fields, "selector": cfg["curriculum"]}))
+    except (ValueError, TypeError) as err:
+        raise BadInput(str(err)) from None
+
+
+def with_protocol(cfg: dict, arch) -> dict:
+    """``cfg`` with the evaluation protocol's ``attempts`` / ``best`` / ``headings`` that are None (the presets'
+    "the archive's") taken from the archive's config: the curriculum then evaluates under the protocol its prior,
+    the archive's fitness, was measured under."""
+    fields = {k: getattr(arch.config, k, 1 if k == "headings" else None) for k in ("attempts", "best", "headings")}
+    return {**cfg, **{k: int(v) for k, v in fields.items() if cfg.get(k) is None}}
+
+
+def load_archive(path, descriptors):
+    """``qd.load`` with one-line errors naming the file: unreadable, other descriptors, < 2 filled cells."""
+    try:
+        arch = load_archive_file(path)
+    except (OSError, ValueError) as err:
+        raise BadInput(f"--archive {path}: {str(err).splitlines()[0]}") from None
+    if tuple(arch.config.descriptors) != tuple(descriptors):
+        raise BadInput(f"--archive {path}: descriptors {tuple(arch.config.descriptors)}, the curriculum expects "
+                       f"{tuple(descriptors)}")
+    filled = int(arch.filled.sum())
+    if filled < 2:
+        raise BadInput(f"--archive {path}: {filled} filled cell(s); a curriculum needs at least 2")
+    return arch
+
+
+def archive_digest(arch) -> str:
+    """sha256 (hex) of what a treatment reads from an archive: its generator names, elite sources, fitness (the GP's
+    prior), descriptors, genomes and stored heightmaps. Stored in every checkpoint (``meta["archive_sha256"]``) so
+    that a resumed treatment can tell that the archive under its path has changed (:func:`check_resumable`)."""
+    h = hashlib.sha256(json.dumps(list(arch.generator_names)).encode())
+    arrays = [arch.source, arch.fitness, arch.descriptors, *jax.tree.leaves(arch.genomes)]
+    for a in arrays + ([] if arch.heightmaps is None else [arch.heightmaps]):
+        a = np.ascontiguousarray(a)
+        h.update(f"{a.dtype.str}{a.shape}".encode())
+        h.update(a.tobytes())
+    return h.hexdigest()
+
+
+def check_resumable(folder: Path, cfg: dict, arch, physics: bool = True) -> str:
+    """``arch``'s :func:`archive_digest`, after checking it against ``folder``'s checkpoint: :class:`BadInput` when
+    that was written for another archive than the one now at ``cfg["archive"]`` (its terrain indices, GP
+    observations and removed cells would refer to other terrains), or on other physics than ``cfg["backend"]``
+    resolves to here (``auto`` on a machine without MuJoCo Warp would silently continue a Warp run on MJX: one run,
+    two simulators; ``physics=False``, for a report that only reads the checkpoint, skips this). Reads only the
+    checkpoint's header; checkpoints written before the digest (or the backend) was
+    recorded are not checked for it."""
+    digest = archive_digest(arch)
+    try:
+        meta = driver.read_meta(folder)
+    except ValueError as err:
+        raise BadInput(str(err)) from None
+    stored = (meta or {}).get("archive_sha256")
+    if stored is not None and stored != digest:
+        raise BadInput(f"--archive {cfg['archive']}: it is not the archive {folder} was checkpointed with (sha256 "
+                       f"{stored[:12]}... then, {digest[:12]}... now); put that file back or start a new run")
+    then, now = (meta or {}).get("backend"), physics_of(cfg)
+    if physics and then is not None and then != now:
+        raise BadInput(f"--backend {cfg.get('backend', 'jax')}: it runs the walker on {now} here, but {folder} was "
+                       f"checkpointed on {then}; continue it where {then} runs (warp: a GPU with MuJoCo Warp "
+                       f"installed) or start a new run")
+    return digest
+
+
+def physics_of(cfg: dict) -> str:
+    """The walker backend a learn config runs on here, ``jax`` or ``warp`` (:func:`resolve_backend` of its
+    ``backend``; a config saved before ``--backend`` existed ran on "jax")."""
+    return resolve_backend(cfg.get("backend", "jax"))
+
+
+def walker_layout(cfg: dict) -> dict:
+    """The walker's ``backend`` / ``tiles`` / ``worlds`` of a learn config (a config saved before ``--backend``
+    existed runs on "jax"): warp walks on one tile per trial (per heading) with contact buffers for every env stepped
+    at once (``trials x max(num_envs, attempts)``: the PPO envs, then the evaluation walks; with ``overlap``
+    ``trials x (num_envs + attempts)``, stepped together); jax on tiles too with ``overlap``. :class:`BadInput` for
+    an unknown backend, or warp where MuJoCo Warp does not import."""
+    backend = physics_of(cfg)
+    trials, headings = int(cfg["trials"]), int(cfg.get("headings") or 1)
+    overlap = bool(cfg.get("overlap", False))  # the evaluation walks ride along PPO's envs on tiles
+    if backend == "jax":
+        return dict(tiles=trials * headings) if overlap else {}
+    if backend != "warp":
+        raise BadInput(f"--backend must be jax or warp, got {backend!r}")
+
+    ok, why = tiles.warp_available()
+    if not ok:
+        raise BadInput(f"--backend warp: {why}")
+    envs, attempts = int(cfg["num_envs"]), int(cfg["attempts"])
+    return dict(backend="warp", tiles=trials * headings,
+                worlds=trials * (envs + attempts if overlap else max(envs, attempts)))
+
+
+def validate(cfg: dict):
+    """``(CurriculumConfig, archive, policy, env)`` or :class:`BadInput` naming the parameter or file."""
+    trials = cfg.get("trials")
+    if not isinstance(trials, int) or isinstance(trials, bool) or trials < 1:
+        raise BadInput(f"--trials must be an integer >= 1, got {trials!r}")
+    chunks = cfg.get("chunks_per_call")
+    if not isinstance(chunks, int) or chunks < 1:
+        raise BadInput(f"--chunks-per-call must be an integer >= 1, got {chunks!r}")
+    if not isinstance(cfg.get("episode_length"), int) or cfg["episode_length"] < 1:
+        raise BadInput(f"episode_length must be an integer >= 1, got {cfg.get('episode_length')!r}")
+    arch = load_archive(cfg["archive"], cfg["descriptors"])
+    cfg = with_protocol(cfg, arch)
+    config = curriculum_config(cfg)
+    try:
+        policy = W.load_policy(cfg.get("policy"))
+    except ValueError as err:
+        raise BadInput(f"--policy: {err}") from None
+    shape = (256, 256) if arch.heightmaps is None else tuple(arch.heightmaps.shape[1:])
+    env = W.walker_env(policy, shape, TerrainScale(), cfg["episode_length"], **walker_layout(cfg),
+                       healthy_reward=cfg.get("healthy_reward"))
+    try:
+        W.check_policy(policy, env)
+    except ValueError as err:
+        raise BadInput(f"--policy: {err}") from None
+    return config, arch, policy, env
+
+
+# ----------------------------------------------------------------------------------------------------------------
+# The treatment
+# ----------------------------------------------------------------------------------------------------------------
+def strip_envs(states):
+    """The carried state without the envs' physics (restarted at every block)."""
+    return states._replace(policy=states.policy._replace(env_state=None))
+
+
+FAST_COMPILE = {"xla_backend_optimization_level": 0, "xla_llvm_disable_expensive_passes": True,
+                "xla_cpu_use_fusion_emitters": False}
+
+
+def compiled(fn, fast: bool, *args):
+    """``jax.jit(fn)`` compiled for ``args``; with ``fast`` (the CPU smoke preset) at XLA's lowest backend
+    optimisation and with its classic elemental emitter instead of the fusion emitters, which compiles the walker's
+    programs several times faster on a CPU."""
+    lowered = jax.jit(fn).lower(*args)
+    return lowered.compile(FAST_COMPILE if fast and jax.default_backend() == "cpu" else None)
+
+
+def make_block(config, harness, env_like):
+    """``(states, bank, n) -> states`` (jit it): restart every trial's envs on its terrain, up to ``n`` chunks.
+    ``states`` come without env states (:func:`strip_envs`); ``env_like`` gives one trial's env-state shapes."""
+    def block(states, bank, n):
+        trials = states.done.shape[0]
+        zeros = jax.tree.map(jnp.zeros_like, env_like)  # vmap broadcasts (MuJoCo Warp's shared buffers stay shared)
+        envs = jax.vmap(lambda _: zeros)(jnp.arange(trials))
+        states = states._replace(policy=states.policy._replace(env_state=envs),
+                                 restart=jnp.ones_like(states.restart))  # envs restart on the current terrains
+        states = run_trials(states, bank, jnp.asarray(n, jnp.int32), config=config, harness=harness)
+        return strip_envs(states)._replace(restart=jnp.ones_like(states.restart))  # no envs: all restart next
+
+    return block
+
+
+def chunk_metrics(states, start: int, stop: int) -> dict:
+    """Per-chunk ``[stop - start]`` metrics over trials: hardest (mean, a finished trial keeps its last value),
+    evaluation (mean of the trials still running), trials still running."""
+    h = states.history
+    hardest = np.asarray(h.hardest, np.float64)
+    epoch = np.asarray(h.epoch)
+    carried = np.zeros_like(hardest)
+    for t in range(hardest.shape[0]):
+        n = int(np.sum(epoch[t] >= 0))
+        carried[t, :n] = hardest[t, :n]
+        carried[t, n:] = hardest[t, n - 1] if n else 0.0
+    ev = np.asarray(h.evaluation, np.float64)[:, start:stop]
+    running = np.sum(epoch[:, start:stop] >= 0, axis=0)
+    evaluation = np.where(running > 0, np.nansum(ev, axis=0) / np.maximum(running, 1), np.nan)
+    return {"hardest": carried[:, start:stop].mean(axis=0), "evaluation": evaluation,
+            "trials_running": running.astype(np.float64)}
+
+
+PROGRAMS: dict = {}  # (config, ppo, walker, trials, bank shape, fast, mesh) -> (init, block, {rows: compiled block})
+
+
+def inputs(cfg: dict, config, arch, policy, env):
+    """What a treatment's programs start from: ``(bank, ppo, harness, start, keys, init)``: the archive's terrain
+    bank, the fine-tuning PPOConfig, the walker harness, the starting policy state, the trials' keys [trials] and
+    ``init(keys, bank, start)`` -> the initial trial states without env states (pure: jit or ``eval_shape`` it)."""
+    bank = from_archive(arch)
+    ppo = config.ppo_config(policy.config)
+    harness = W.walker_harness(env, ppo, config)
+    start = W.start_state(env, ppo, policy, bank.heightmaps.shape[1:])
+    keys = jax.random.split(jax.random.fold_in(jax.random.key(int(cfg["seed"])), 2), int(cfg["trials"]))
+
+    def init(k, b, s):
+        return strip_envs(init_trials(k, b, s, config=config, harness=harness))
+
+    return bank, ppo, harness, start, keys, init
+
+
+def setup(cfg: dict, config, arch, policy, env, mesh=None):
+    """Bank, the block ``run(states, bank, n) -> states`` and the initial (stripped) trial states. ``run`` computes
+    the running trials only when ``cfg["compact"]`` (``curriculum.run_live``; default on) and compiles the block
+    once per trial count it meets (every trial's here, fewer at the first call that needs them); compiled programs
+    are reused by later treatments with the same settings and bank shape (``experiments curriculum``). ``mesh``:
+    the trials split over its devices (``sharding.map_rows``: padded, the bank replicated)."""
+    bank, ppo, harness, start, keys, init_fn = inputs(cfg, config, arch, policy, env)
+    fast = bool(cfg.get("fast_compile", False))
+    sig = (config, ppo, env.config, int(cfg["trials"]), tuple(bank.heightmaps.shape), fast, mesh)
+    if sig not in PROGRAMS:
+        PROGRAMS[sig] = (compiled(init_fn, fast, keys, bank, start), make_block(config, harness, start.env_state),
+                          {})
+    init, block, blocks = PROGRAMS[sig]  # blocks: trial count -> the block compiled for it
+    states = init(keys, bank, start)
+    if mesh is not None:  # the trials split over the devices; inputs whole on the mesh (whence the init's)
+
+        block = sharding.map_rows(block, mesh, replicated=(1, 2))
+        bank, states = sharding.replicate((bank, states), mesh)
+        place = functools.partial(sharding.replicate, mesh=mesh)
+    else:
+        place = lambda tree: tree  # noqa: E731
+
+    def program(rows: int):
+        if rows not in blocks:
+            like = jax.tree.map(lambda x: x[:rows], states)
+            blocks[rows] = compiled(block, fast, like, bank, jax.numpy.int32(1))
+        return blocks[rows]
+
+    def rows_block(s, b, n):
+        return program(int(s.done.shape[0]))(*place((s, b)), jax.numpy.int32(n))
+
+    program(int(states.done.shape[0]))  # the block of every trial now: set-up includes its compile
+    compact = bool(cfg.get("compact", True))
+    return bank, (functools.partial(run_live, rows_block) if compact else rows_block), states
+
+
+def run_treatment(cfg: dict, folder: Path, time_limit_s: float | None = None, desc: str = "",
+                  mesh=None) -> dict | None:
+    """Run (or continue) one treatment in ``folder``; its summary dict when finished, None when the time limit
+    stopped it (checkpointed; call again to continue). ``time_limit_s`` counts from this call, its set-up and
+    compilation included. Raises :class:`BadInput` before compiling anything."""
+    folder = Path(folder)
+    if (folder / "summary.json").exists():
+        return json.loads((folder / "summary.json").read_text())
+    config, arch, policy, env = validate(cfg)
+    digest = check_resumable(folder, cfg, arch)
+    t0 = time.perf_counter()
+    bank, block, states = setup(cfg, config, arch, policy, env, mesh)
+    restored = driver.restore(folder, like=states)
+    done, history, before = 0, None, 0.0  # before: wall seconds of the commands that ran it so far
+    if restored is not None:
+        states, done, history, saved = restored
+        before = float(saved.get("wall_s", 0.0))
+        print(f"resuming at chunk {done} of {config.max_chunks} ({before / 60:.1f} min of wall time so far)",
+              flush=True)
+
+    def chunk_fn(s, a, b):
+        if not bool(np.all(np.asarray(s.done))):
+            s = block(s, bank, b - a)
+        return s, chunk_metrics(s, a, b)
+
+    states, done, _ = driver.run_chunks(
+        chunk_fn, states, total=config.max_chunks, every=int(cfg["chunks_per_call"]), start=done, history=history,
+        run_dir=folder, key_metric="hardest", desc=desc or cfg["curriculum"],
+        time_limit_s=None if time_limit_s is None else max(time_limit_s - (time.perf_counter() - t0), 1e-3),
+        unit="chunk", meta={"config": cfg, "archive_sha256": digest, "backend": physics_of(cfg)},
+        wall_s=before + time.perf_counter() - t0)
+    if done < config.max_chunks and not bool(np.all(np.asarray(states.done))):
+        return None
+    return write_outputs(folder, cfg, config, bank, states, seconds=before + time.perf_counter() - t0,
+                         names=arch.generator_names)
+
+
+def report_cfg(cfg: dict) -> dict:
+    """``cfg`` as :func:`report_treatment` validates it: on the MJX-JAX backend, which every machine has."""
+    return {**cfg, "backend": "jax"}
+
+
+def report_treatment(cfg: dict, folder: Path) -> dict | None:
+    """The outputs of a treatment as it stands, without training: a finished one's summary; for one with a
+    checkpoint, its history / sequences / milestones / curve as of that checkpoint and ``summary_partial.json``
+    (the summary with ``"partial": true`` and ``"chunks_done"``; ``summary.json`` stays the mark of a finished run,
+    so ``--resume`` still continues it); None without a checkpoint. Compiles nothing: the checkpoint is read into
+    the shapes of the initial states (``jax.eval_shape``). Steps no physics either, so a run of any backend is
+    reported through the MJX-JAX layout (a Warp run's states have its shapes): a GPU run reads on a laptop without
+    MuJoCo Warp."""
+    folder = Path(folder)
+    if (folder / "summary.json").exists():
+        return json.loads((folder / "summary.json").read_text())
+    if not (folder / driver.CHECKPOINT_NAME).exists():
+        return None
+    config, arch, policy, env = validate(report_cfg(cfg))
+    check_resumable(folder, cfg, arch, physics=False)
+    bank, _, _, start, keys, init = inputs(cfg, config, arch, policy, env)
+    shapes = jax.eval_shape(init, keys, bank, start)
+
+    def zeros(spec):
+        if jnp.issubdtype(spec.dtype, jax.dtypes.prng_key):
+            data = jax.eval_shape(jax.random.key_data, spec)
+            return jax.random.wrap_key_data(jnp.zeros(data.shape, data.dtype))
+        return jnp.zeros(spec.shape, spec.dtype)
+
+    states, done, _, saved = driver.restore(folder, like=jax.tree.map(zeros, shapes))
+    return write_outputs(folder, cfg, config, bank, states, seconds=saved.get("wall_s"), chunks_done=done,
+                         names=arch.generator_names)
+
+

@@ -1,0 +1,64 @@
+"""Terrain difficulty by the base policy (paper 3.3): fitness = mean of the best ``best`` of ``attempts`` normalised
+distances walked; difficulty = 1 - fitness.
+
+- :mod:`~jaxterrain.difficulty.protocol`: :class:`Protocol` (how many walks, which count, in which headings),
+  :data:`PAPER`, :data:`HEADINGS`, and the pure functions from distances to fitness;
+- :mod:`~jaxterrain.difficulty.evaluation`: :func:`evaluate` (host, cached compiled programs), :func:`fitness_fn`
+  (pure, for MAP-Elites), the base policy and its env;
+- :mod:`~jaxterrain.difficulty.fitness`: the one table of named fitness functions (``--fitness``) and of protocol
+  names (``--protocol``).
+
+The rollout loops themselves are the walker's (:mod:`jaxterrain.walker.rollout`).
+"""
+
+from jaxterrain.difficulty.evaluation import (
+    default_env_config,
+    default_policy,
+    evaluate,
+    fitness_fn,
+    keyed_distances,
+    policy_solver,
+    protocol_distances,
+    rollout_distances,
+    validate_heightmaps,
+)
+from jaxterrain.difficulty.fitness import FITNESSES, PROTOCOLS, difficulty_fitness, named_fitness, slope_fitness
+from jaxterrain.difficulty.protocol import (
+    HEADING_TURNS,
+    HEADINGS,
+    PAPER,
+    RULES,
+    Protocol,
+    aggregate,
+    best_of,
+    heading_scores,
+    protocol_env_config,
+    rotate_headings,
+)
+
+__all__ = [
+    "Protocol",
+    "PAPER",
+    "HEADINGS",
+    "RULES",
+    "HEADING_TURNS",
+    "aggregate",
+    "best_of",
+    "heading_scores",
+    "rotate_headings",
+    "protocol_env_config",
+    "evaluate",
+    "rollout_distances",
+    "fitness_fn",
+    "protocol_distances",
+    "keyed_distances",
+    "validate_heightmaps",
+    "default_policy",
+    "default_env_config",
+    "policy_solver",
+    "FITNESSES",
+    "PROTOCOLS",
+    "slope_fitness",
+    "difficulty_fitness",
+    "named_fitness",
+]

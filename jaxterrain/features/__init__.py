@@ -1,0 +1,49 @@
+"""Terrain features (paper section 3.2) and the traversability check (paper Algorithm 1).
+
+- :mod:`~jaxterrain.features.kernels`: TRI, TPI and roughness maps over windows with a stride, equal to GDAL's
+  ``gdaldem`` at window 3, and their means;
+- :mod:`~jaxterrain.features.registry`: descriptor names -> functions, :func:`descriptors` (``[B, D]``);
+- :mod:`~jaxterrain.features.algorithm1`: :func:`is_traversable`, the paper's Algorithm 1.
+
+The learned traversability descriptor (:mod:`jaxterrain.features.learned`) sits later in the flow: it is trained on
+the walker's walks, so it imports the walker and :mod:`jaxterrain.difficulty`; importing :mod:`jaxterrain` registers
+it as the descriptor ``"traversability"``.
+"""
+
+from jaxterrain.features.algorithm1 import HUMANOID_HEIGHT, is_traversable, max_window_range
+from jaxterrain.features.kernels import (
+    HEIGHT_RANGE,
+    check_heights,
+    output_shape,
+    reference_maps,
+    roughness,
+    tpi,
+    tri,
+    window_centre,
+)
+from jaxterrain.features.registry import (
+    Descriptor,
+    descriptor_names,
+    descriptors,
+    register_descriptor,
+    unregister_descriptor,
+)
+
+__all__ = [
+    "HEIGHT_RANGE",
+    "HUMANOID_HEIGHT",
+    "check_heights",
+    "tri",
+    "tpi",
+    "roughness",
+    "Descriptor",
+    "descriptors",
+    "register_descriptor",
+    "unregister_descriptor",
+    "descriptor_names",
+    "is_traversable",
+    "max_window_range",
+    "reference_maps",
+    "output_shape",
+    "window_centre",
+]

@@ -1,0 +1,44 @@
+"""The generator registry: names -> factories ``factory(size=256, **options) -> Generator``."""
+
+from __future__ import annotations
+
+import functools
+from typing import Callable
+
+from jaxterrain.generators.base import Generator, checked
+
+__all__ = ["register", "names", "get"]
+
+_FACTORIES: dict[str, Callable[..., Generator]] = {}
+
+
+def register(name: str) -> Callable[[Callable[..., Generator]], Callable[..., Generator]]:
+    """Decorator that registers a generator factory under ``name``."""
+
+    def wrap(factory: Callable[..., Generator]) -> Callable[..., Generator]:
+        if name in _FACTORIES:
+            raise ValueError(f"a generator named {name!r} is already registered")
+        _FACTORIES[name] = factory
+        return factory
+
+    return wrap
+
+
+def names() -> tuple[str, ...]:
+    """The registered generator names, sorted."""
+    return tuple(sorted(_FACTORIES))
+
+
+@functools.lru_cache(maxsize=None)
+def _cached(name: str, options: tuple) -> Generator:
+    return checked(_FACTORIES[name](**dict(options)))
+
+
+def get(name: str, **options) -> Generator:
+    """The generator registered as ``name``, built with ``options`` (e.g. ``size=64``); cached per options.
+
+    Its ``sample`` rejects a count that is not an integer >= 1 and its ``mutate`` checks concrete genomes (as
+    ``validate`` does), also for a factory that does not check them itself (:func:`base.checked`)."""
+    if name not in _FACTORIES:
+        raise ValueError(f"unknown generator {name!r}; choose one of {', '.join(names())}")
+    return _cached(name, tuple(sorted(options.items())))

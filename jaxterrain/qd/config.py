@@ -1,0 +1,199 @@
+"""The archive's types and settings: :class:`EvolveConfig` (checked by :func:`resolve_config`), the host
+:class:`Archive`, the descriptor ranges (:data:`DEFAULT_RANGES`) and the config's JSON form."""
+
+from __future__ import annotations
+
+import math
+from typing import Callable, NamedTuple
+
+import jax
+import numpy as np
+
+from jaxterrain.runtime.validation import walks
+from jaxterrain.terrain import TerrainScale, validate_scale
+
+__all__ = ["PRNGKey", "FitnessFn", "DEFAULT_RANGES", "EvolveConfig", "Archive", "resolve_config", "config_to_dict",
+           "config_from_dict"]
+
+PRNGKey = jax.Array
+FitnessFn = Callable[[jax.Array, PRNGKey, jax.Array], jax.Array]
+"""``(heightmaps [B, H, W], key, needed [B] bool) -> [B]``; see :mod:`jaxterrain.qd.scoring`."""
+
+# Grid ranges per descriptor name, shared by every generator (window 30, stride 2, 256 x 256 heightmaps in [0, 1]).
+# How they were chosen (2026-11-21; `python -m experiments features --calibrate` does the same): 32 random genomes
+# plus 32 twice-mutated ones of each generator were rendered at 256 x 256 and described with window 30 / stride 2.
+# Each range is [0.5th, 99.5th] percentile of the pooled values, rounded outwards to 2 significant digits, with 0 as
+# the lower end of these non-negative descriptors. Pooled percentiles [0.5, 99.5]: without the GAN (cppn,
+# diamond_square, perlin, worley) tri [0.00046, 0.166], roughness [0.0024, 0.750]; with the GAN (all five)
+# tri [0.00015, 0.152], tpi (mean |TPI|) [0.00001, 0.110], roughness [0.0007, 0.630].
+# So nearly every terrain falls inside the grid and the 50 bins are not spent on values no generator reaches.
+# Re-measure after changing a feature definition or the generators; other windows need ``config.ranges``.
+DEFAULT_RANGES: dict[str, tuple[float, float]] = {
+    "tri": (0.0, 0.17),
+    "tpi": (0.0, 0.12),
+    "roughness": (0.0, 0.76),
+}
+
+
+class EvolveConfig(NamedTuple):
+    """MAP-Elites settings (defaults: the paper's protocol, 5 000 generations x 20 offspring).
+
+    Attributes:
+      generations: generations after the initial population (paper: 5 000).
+      batch_size: offspring per generation (paper: 20).
+      initial_population: random genomes evaluated in generation 0 (paper: 100).
+      bins: cells per descriptor (paper: 50), so ``bins ** 2`` cells.
+      descriptors: the two descriptor names (``features.descriptors`` names).
+      ranges: ``((lo, hi), (lo, hi))`` grid ranges of the two descriptors, or None for :data:`DEFAULT_RANGES`.
+      window, stride: descriptor kernel size and stride (paper: 30 and 2).
+      attempts, best: walker attempts per terrain IN TOTAL and how many of the best are averaged PER HEADING
+        (paper: 20 and 5).
+      headings: 1 (the paper: every walk along +x), 2 or 4: the walker fitness is
+        ``difficulty.Protocol(attempts, best, headings)`` (``attempts // headings`` walks per heading, the mean over
+        headings of each heading's best ``best``); ``difficulty.HEADINGS`` is ``attempts=80, best=5, headings=4``.
+        The archive records it, so a curriculum can evaluate under the protocol its fitness came from.
+      checkpoint_every: RUN SETTING: generations per jitted chunk (and between checkpoints when a checkpoint folder
+        is given); does not change the archive.
+      robot_height: robot height in metres for Algorithm 1 (threshold robot_height / 3); None: the features
+        module's default.
+      traversable_window: Algorithm 1's window (approx. step length, paper: 26 pixels).
+      out_of_range: "clip" (into the edge cells) or "reject" (never inserted); see the module docstring.
+      store_heightmaps: RUN SETTING: render the elites at the end and keep their heightmaps (uint16) in the archive.
+      rollout_slots: RUN SETTING: env slots of the difficulty fitness's rollout pool
+        (``walker.rollout.batched_distances``), or None to run each generation's ``batch_size x attempts`` rollouts all
+        at once. A speed knob only (same rollouts, statistically the same fitness), so a run may resume with
+        another value.
+      scale: the ONE :class:`~jaxterrain.terrain.TerrainScale` (metres per pixel and per heightmap unit) of both
+        Algorithm 1 and the walker fitness (default ``TerrainScale()``: 0.04 m, 1.0 m).
+      rollout_backend: RUN SETTING: the walker fitness's physics, ``"jax"`` (MJX-JAX) or ``"warp"`` (MuJoCo Warp on
+        a bank of terrain tiles, ``difficulty.fitness_fn(backend=)``). The same walks up to the physics
+        implementation's float arithmetic (fitness within 0.03, ``benchmarks/rollouts.py``'s backend check), so,
+        like ``rollout_slots``, a run may resume with another value.
+
+    The run settings (and ``generations``) stay here so that config files and archive headers keep one shape; they
+    are the host driver's, not the algorithm's.
+    """
+
+    generations: int = 5000
+    batch_size: int = 20
+    initial_population: int = 100
+    bins: int = 50
+    descriptors: tuple[str, str] = ("roughness", "tpi")
+    ranges: tuple[tuple[float, float], tuple[float, float]] | None = None
+    window: int = 30
+    stride: int = 2
+    attempts: int = 20
+    best: int = 5
+    checkpoint_every: int = 100
+    robot_height: float | None = None
+    traversable_window: int = 26
+    out_of_range: str = "clip"
+    store_heightmaps: bool = True
+    rollout_slots: int | None = None
+    scale: TerrainScale = TerrainScale()
+    rollout_backend: str = "jax"
+    headings: int = 1
+
+
+class Archive(NamedTuple):
+    """A MAP-Elites archive (host numpy arrays).
+
+    Attributes:
+      genomes: tuple with one genome pytree per generator name; leaves ``[cells, ...]`` (rows of cells held by
+        another generator or empty are zeros).
+      generator_names: tuple of generator names; ``source`` indexes it.
+      source: [cells] int32, the generator id of each elite, -1 for an empty cell.
+      fitness: [cells] float32, ``-inf`` for an empty cell.
+      descriptors: [cells, 2] float32, raw (unclipped) descriptor values of the elites.
+      centroids: [cells, 2] float32, grid centroids (cell i has centroid i).
+      heightmaps: [cells, H, W] uint16 (height * 65535) of the elites (zeros for empty cells), or None.
+      config: the :class:`EvolveConfig` (ranges resolved).
+      metrics: dict name -> [generations + 1] float32 history (empty for a combined archive).
+    """
+
+    genomes: tuple
+    generator_names: tuple[str, ...]
+    source: np.ndarray
+    fitness: np.ndarray
+    descriptors: np.ndarray
+    centroids: np.ndarray
+    heightmaps: np.ndarray | None
+    config: EvolveConfig
+    metrics: dict
+
+    @property
+    def filled(self) -> np.ndarray:
+        """[cells] bool, True where a cell holds an elite."""
+        return self.source >= 0
+
+
+
+def resolve_config(config: EvolveConfig) -> EvolveConfig:
+    """Check ``config`` on the host and fill in ``ranges`` from :data:`DEFAULT_RANGES`. Raises ``ValueError``."""
+    def positive(name, value, minimum=1):
+        if int(value) != value or value < minimum:
+            raise ValueError(f"EvolveConfig.{name} must be an integer >= {minimum}; got {value!r}")
+
+    positive("generations", config.generations, 0)
+    for name in ("batch_size", "initial_population", "bins", "window", "stride", "attempts", "best",
+                 "checkpoint_every", "traversable_window"):
+        positive(name, getattr(config, name))
+    walks("EvolveConfig", config)
+    names = tuple(config.descriptors)
+    if len(names) != 2 or len(set(names)) != 2:
+        raise ValueError(f"EvolveConfig.descriptors must be two different descriptor names; got {names!r}")
+    if config.out_of_range not in ("clip", "reject"):
+        raise ValueError(f"EvolveConfig.out_of_range must be 'clip' or 'reject'; got {config.out_of_range!r}")
+    if config.rollout_slots is not None:
+        positive("rollout_slots", config.rollout_slots)
+    if config.rollout_backend not in ("jax", "warp"):
+        raise ValueError(f"EvolveConfig.rollout_backend must be 'jax' or 'warp'; got {config.rollout_backend!r}")
+    if config.robot_height is not None and not config.robot_height > 0:
+        raise ValueError(f"EvolveConfig.robot_height must be > 0 metres or None; got {config.robot_height!r}")
+    scale = config.scale
+    if isinstance(scale, dict):
+        scale = TerrainScale(**scale)
+    elif not isinstance(scale, TerrainScale) and isinstance(scale, (tuple, list)):
+        scale = TerrainScale(*scale)
+    try:
+        scale = validate_scale(scale)
+    except ValueError as err:
+        raise ValueError(f"EvolveConfig.scale: {err}") from err
+    if config.ranges is None:
+        missing = [n for n in names if n not in DEFAULT_RANGES]
+        if missing:
+            raise ValueError(
+                f"EvolveConfig.ranges: no default range for descriptor(s) {missing}; known: "
+                f"{sorted(DEFAULT_RANGES)}; pass ranges=((lo, hi), (lo, hi))"
+            )
+        ranges = tuple(DEFAULT_RANGES[n] for n in names)
+    else:
+        ranges = tuple(config.ranges)
+    ranges = tuple((float(lo), float(hi)) for lo, hi in ranges)
+    if len(ranges) != 2 or any(not (math.isfinite(lo) and math.isfinite(hi) and hi > lo) for lo, hi in ranges):
+        raise ValueError(f"EvolveConfig.ranges must be two finite (lo, hi) pairs with hi > lo; got {config.ranges!r}")
+    return config._replace(descriptors=names, ranges=ranges, scale=scale)
+
+
+def config_to_dict(config: EvolveConfig) -> dict:
+    """JSON-friendly dict of an :class:`EvolveConfig`."""
+    d = config._asdict()
+    d["descriptors"] = list(config.descriptors)
+    d["ranges"] = None if config.ranges is None else [list(r) for r in config.ranges]
+    d["scale"] = {"cell_size": float(config.scale.cell_size), "height": float(config.scale.height)}
+    return d
+
+
+def config_from_dict(d: dict) -> EvolveConfig:
+    """Inverse of :func:`config_to_dict`; unknown keys raise ``ValueError``."""
+    unknown = set(d) - set(EvolveConfig._fields)
+    if unknown:
+        raise ValueError(f"unknown EvolveConfig field(s) {sorted(unknown)}; known: {list(EvolveConfig._fields)}")
+    d = dict(d)
+    if "descriptors" in d:
+        d["descriptors"] = tuple(d["descriptors"])
+    if d.get("ranges") is not None:
+        d["ranges"] = tuple(tuple(float(v) for v in r) for r in d["ranges"])
+    if isinstance(d.get("scale"), dict):  # absent in files written before the field existed: the default scale
+        d["scale"] = TerrainScale(**d["scale"])
+    return EvolveConfig(**d)

@@ -1,0 +1,13 @@
+"""What every stage runs on: the host loop of long jobs, devices, files, provenance and config checks.
+
+- :mod:`~jaxterrain.runtime.driver`: the one host loop (chunks of a jitted program, checkpoints, resume, time
+  limits, metrics);
+- :mod:`~jaxterrain.runtime.sharding`: device meshes and row-splitting of batched programs;
+- :mod:`~jaxterrain.runtime.io`: atomic file writes;
+- :mod:`~jaxterrain.runtime.provenance`: the code's commit and the device, for every result;
+- :mod:`~jaxterrain.runtime.validation`: the one-line config checks every config class shares.
+"""
+
+from jaxterrain.runtime import driver, io, provenance, sharding, validation
+
+__all__ = ["driver", "io", "provenance", "sharding", "validation"]

@@ -1,0 +1,377 @@
+"""The curriculum on tiles (``Harness.layout``): every chunk the T trials' current terrains become one bank of T
+tiles, built outside the trial vmap, and trial i walks tile i. CPU, tiny sizes.
+
+- Toy banks with a fake harness that reads its terrain through a REAL tiled walker's tile arithmetic (``make_bank``
+  via ``curriculum.walker.tile_layout``, ``tile_origin``, ``terrain_height``; no physics, so these compile in
+  seconds): a block of chunks on tiles equals the classic block exactly (dyadic cell sizes and heights, so the
+  shifted coordinates are exact), trials keep their own terrains, nothing re-traces when terrains change.
+- MuJoCo Warp (skipped with the reason where ``warp-lang`` / MJX's MuJoCo Warp do not import): one tiny curriculum
+  block of the real walker harness (PPO + evaluation) on tiles.
+- Slow: the MJX walker harness on a one-tile bank (one trial) equals the classic harness bit for bit.
+"""
+
+from __future__ import annotations
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+from jaxterrain import curriculum as C
+from jaxterrain.qd import TerrainBank, cell_distance
+from jaxterrain.curriculum import walker as W
+from jaxterrain.terrain import TerrainScale
+from jaxterrain.walker import Tile, WalkerConfig, WalkerEnv, warp_available
+from jaxterrain.curriculum import runner
+from jaxterrain.walker import layout
+
+WARP_OK, WARP_WHY = warp_available()
+FAST_COMPILE = {"xla_backend_optimization_level": 0, "xla_llvm_disable_expensive_passes": True}
+
+SHAPE = (16, 16)
+EXACT = TerrainScale(cell_size=0.25, height=1.0)  # tile origins multiples of 2 m, 0.25 m cells: exact shifts
+PROBE = np.stack(np.meshgrid(np.arange(-1.5, 1.6, 0.5), np.arange(-1.5, 1.6, 0.5)), -1).reshape(-1, 2).astype(
+    np.float32)  # tile-local sample points
+
+
+def toy_bank(grid: int = 3, shape=SHAPE) -> TerrainBank:
+    """Every cell of a grid x grid map: prior fitness ``1 - d`` with d = (b0 + b1) / (2 grid) (harder away from the
+    origin), terrain = a ``shape`` map of constant height d (a multiple of 1/8 for grid <= 4: exact)."""
+    b0, b1 = np.meshgrid(np.arange(grid), np.arange(grid))
+    bins = np.stack([b0.ravel(), b1.ravel()], -1).astype(np.int32)
+    d = ((bins[:, 0] + bins[:, 1]) / (2.0 * grid)).astype(np.float32)
+    d = np.round(d * 8) / 8
+    points = (bins / max(grid - 1, 1)).astype(np.float32)
+    maps = np.broadcast_to(d[:, None, None], (d.size,) + tuple(shape)).astype(np.float32)
+    return TerrainBank(jnp.asarray(maps), jnp.asarray(1.0 - d), jnp.asarray(points), jnp.asarray(points),
+                       jnp.asarray(bins), jnp.asarray(cell_distance(bins)), jnp.arange(d.size, dtype=jnp.int32),
+                       jnp.zeros(d.size, jnp.int32))
+
+
+TRACES = {"train": 0}
+
+
+def fake_harness(env: WalkerEnv, plain: WalkerEnv, tiled: bool, gain: float = 0.1) -> C.Harness:
+    """Policy {"skill", "resets", "seen"}: a chunk adds ``gain`` to the skill; fitness = clip(1 - level + skill,
+    0, 1), level = mean terrain height at PROBE read through the walker (a Tile of ``env`` on tiles, an [H, W]
+    array of ``plain`` otherwise); ``seen`` accumulates the levels trained on (a wrong tile changes it)."""
+
+    def level(terrain):
+        px, py = jnp.asarray(PROBE[:, 0]), jnp.asarray(PROBE[:, 1])
+        if isinstance(terrain, Tile):
+            ox, oy = env.tile_origin(terrain.index)
+            return jnp.mean(env.terrain_height(terrain, px + ox, py + oy))
+        return jnp.mean(plain.terrain_height(terrain, px, py))
+
+    def train(policy, key, terrain):
+        TRACES["train"] += 1
+        return dict(policy, skill=policy["skill"] + gain, seen=policy["seen"] + level(terrain))
+
+    def evaluate(policy, key, terrain):
+        return jnp.clip(1.0 - level(terrain) + policy["skill"], 0.0, 1.0)
+
+    def reset(policy, key, terrain):
+        return dict(policy, resets=policy["resets"] + 1)
+
+    if not tiled:
+        return C.Harness(train, evaluate, reset)
+    return C.Harness(train, evaluate, reset, layout=W.tile_layout(env))
+
+
+START = {"skill": jnp.zeros((), jnp.float32), "resets": jnp.zeros((), jnp.int32), "seen": jnp.zeros((), jnp.float32)}
+
+
+def small(selector="random", **kw) -> C.CurriculumConfig:
+    base = dict(selector=selector, epochs_per_chunk=1, steps_per_epoch=8, max_epochs=40, max_evals=3,
+                num_envs=2, unroll_length=2, num_unrolls=2, num_minibatches=1)
+    return C.validate_config(C.CurriculumConfig.from_json_dict({**base, **kw}))  # the PPO fields flat, as learn
+
+
+def tree_equal(a, b) -> bool:
+    la, lb = jax.tree.leaves(a), jax.tree.leaves(b)
+    return len(la) == len(lb) and all(np.array_equal(np.asarray(x), np.asarray(y), equal_nan=True)
+                                      for x, y in zip(la, lb))
+
+
+def _envs(tiles: int):
+    cfg = WalkerConfig(terrain_shape=SHAPE, scale=EXACT)
+    return WalkerEnv(cfg._replace(tiles=tiles)), WalkerEnv(cfg)
+
+
+def test_a_block_on_tiles_equals_the_classic_block_on_a_toy_bank():
+    """3 trials of the random selector (each its own terrain sequence) for 12 chunks: the tiled layout gives every
+    trial exactly the classic result (trial i reads tile i of the chunk's bank)."""
+    bank = toy_bank()
+    env, plain = _envs(3)
+    config = small("random", max_evals=2, max_epochs=12)
+    keys = jax.random.split(jax.random.key(4), 3)
+    out = {}
+    for tiled in (False, True):
+        harness = fake_harness(env, plain, tiled, gain=0.05)
+        states = C.init_trials(keys, bank, START, config=config, harness=harness)
+        out[tiled] = C.make_runner(config, harness)(states, bank, 12)
+    assert tree_equal(out[True], out[False])
+    terrain = np.asarray(out[True].history.terrain)
+    assert len({tuple(t) for t in terrain}) == 3  # the trials walked different sequences
+    assert np.all(np.asarray(out[True].policy["seen"]) > 0)  # non-flat terrains were trained on
+
+
+def test_a_single_trial_step_on_tiles_and_more_tiles_than_trials():
+    """``step`` on one trial lays out its terrain alone (tile 0, the other tiles flat) and equals the classic step;
+    a runner of 2 trials on a 3-tile walker (e.g. one device's share) equals the classic one; more trials than tiles
+    is a ValueError naming tiles."""
+    bank = toy_bank()
+    env, plain = _envs(3)
+    config = small("map", max_evals=2)
+    key = jax.random.key(1)
+    one = {}
+    for tiled in (False, True):
+        harness = fake_harness(env, plain, tiled)
+        state = C.init(key, bank, START, config=config, harness=harness)
+        step = jax.jit(lambda s, k, h=harness: C.step(s, k, bank, config=config, harness=h))
+        for c in range(3):
+            state = step(state, jax.random.fold_in(key, c))
+        one[tiled] = state
+    assert tree_equal(one[True], one[False]) and int(one[True].chunk) == 3
+    keys = jax.random.split(jax.random.key(2), 2)
+    two = [C.make_runner(config, h)(C.init_trials(keys, bank, START, config=config, harness=h), bank, 4)
+           for h in (fake_harness(env, plain, False), fake_harness(env, plain, True))]
+    assert tree_equal(*two)
+    small_env = _envs(1)[0]
+    harness = fake_harness(small_env, plain, True)
+    with pytest.raises(ValueError, match="tiles=1"):
+        C.make_runner(config, harness)(C.init_trials(keys, bank, START, config=config, harness=harness), bank, 1)
+
+
+def test_no_retrace_on_tiles_when_the_terrain_changes():
+    bank = toy_bank()
+    env, plain = _envs(2)
+    config = small("map", max_evals=2)
+    harness = fake_harness(env, plain, True, gain=0.05)
+    run = C.make_runner(config, harness)
+    states = C.init_trials(jax.random.split(jax.random.key(0), 2), bank, START, config=config, harness=harness)
+    TRACES["train"] = 0
+    seen = set()
+    for block in (3, 4, 5):
+        states = run(states, bank, block)
+        seen |= set(np.asarray(states.terrain).tolist())
+    assert len(seen) >= 3 and TRACES["train"] == 1
+
+
+# ---------------------------------------------------------------------------------------------------------------
+# The walker harness (PPO + evaluation) on tiles
+# ---------------------------------------------------------------------------------------------------------------
+WALK = TerrainScale(cell_size=0.2, height=1.0)  # 16 x 16: a 3 m square, 2 m track
+
+
+def _walker_run(backend: str, trials: int, tiles: int, chunks: int = 1, episode_length: int = 20, headings: int = 1,
+                selector: str = "map", grid: int = 2, relief: float = 0.5, **kw):
+    """``chunks`` chunks of ``trials`` trials of the real walker harness (base policy, 2 envs, 2 walks of
+    ``episode_length`` steps per evaluation, in ``headings`` headings) on a ``grid`` x ``grid`` toy bank of 16 x 16
+    terrains (heights x ``relief``): (start states, end states). ``tiles`` counts tiles, ``trials x headings`` for
+    every trial on its own. ``kw``: more CurriculumConfig fields (``overlap=True``: Warp worlds for envs + walks)."""
+    policy = W.load_policy(None)
+    config = small(selector, **{**dict(num_envs=2, attempts=2, best=1, headings=headings, max_evals=2,
+                                       update_epochs=1), **kw})
+    walks = config.ppo.num_envs + config.attempts if config.overlap else max(config.ppo.num_envs, config.attempts)
+    env = W.walker_env(policy, SHAPE, WALK, episode_length, backend=backend, tiles=tiles, worlds=trials * walks)
+    ppo = config.ppo_config(policy.config)
+    harness = W.walker_harness(env, ppo, config)
+    bank = toy_bank(grid)._replace(heightmaps=toy_bank(grid).heightmaps * relief)  # steps of up to 0.19 m
+    start = W.start_state(env, ppo, policy, SHAPE)
+    keys = jax.random.split(jax.random.key(3), trials)
+    states = jax.jit(lambda k, b, s: C.init_trials(k, b, s, config=config, harness=harness))(keys, bank, start)
+    run = jax.jit(lambda s, b: C.run_trials(s, b, jnp.int32(chunks), config=config, harness=harness))
+    return states, run.lower(states, bank).compile(FAST_COMPILE)(states, bank)
+
+
+@pytest.mark.skipif(not WARP_OK, reason=WARP_WHY or "warp available")
+@pytest.mark.parametrize("headings", [1, 2])
+def test_warp_walker_curriculum_chunk_on_tiles(headings):
+    """MuJoCo Warp: two trials, each on its own tile(s) of the chunk's bank (one per heading), train PPO (2 envs)
+    and are evaluated (2 walks, one per heading with headings=2); the evaluations are real walks (in (0, 1]), PPO
+    changed every trial's policy, and nothing failed."""
+    start, end = _walker_run("warp", trials=2, tiles=2 * headings, chunks=1, headings=headings)
+    ev = np.asarray(end.history.evaluation[:, 0])
+    assert np.all((ev > 0.0) & (ev <= 1.0)), ev
+    assert np.all(np.asarray(end.chunk) == 1) and np.all(np.asarray(end.epoch) == 1)
+    p0, p1 = (jax.tree.leaves(s.policy.params)[0] for s in (start, end))
+    for t in range(2):
+        assert not np.allclose(np.asarray(p1[t]), np.asarray(p0[t]))
+    assert np.all(np.isfinite(np.asarray(end.policy.env_state.obs)))
+    assert float(np.max(np.asarray(end.policy.env_state.failed))) == 0.0
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("headings", [1, 2])
+def test_jax_walker_curriculum_on_one_tile_equals_the_classic_one(headings):
+    """MJX: one trial on a one-tile bank (the tile at the origin) runs the classic chunks bit for bit: PPO on its
+    Tile, the restart and the evaluation walks (``tile_distances``). With 2 headings (a second tile, off the origin,
+    holds the turned terrain; PPO env 1 and walk 1 on it) against ``difficulty.protocol_distances`` and per-env
+    turned terrains: the same choices, and evaluations and parameters equal up to the float rounding of the tile's
+    shifted coordinates. Two MJX programs each: minutes of CPU."""
+    _, classic = _walker_run("jax", trials=1, tiles=0, chunks=2, headings=headings)
+    _, tiled = _walker_run("jax", trials=1, tiles=headings, chunks=2, headings=headings)
+    assert np.all(np.asarray(classic.history.evaluation[0, :2]) > 0)
+    if headings == 1:
+        assert tree_equal(tiled, classic)
+        return
+    for name in ("terrain", "epoch", "hardest"):
+        np.testing.assert_array_equal(np.asarray(getattr(tiled.history, name)),
+                                      np.asarray(getattr(classic.history, name)))
+    np.testing.assert_allclose(np.asarray(tiled.history.evaluation), np.asarray(classic.history.evaluation),
+                               atol=1e-5)
+    for a, b in zip(jax.tree.leaves(tiled.policy.params), jax.tree.leaves(classic.policy.params)):
+        np.testing.assert_allclose(np.asarray(a), np.asarray(b), atol=1e-4)
+
+
+@pytest.mark.parametrize("backend", [pytest.param("jax", marks=pytest.mark.slow), pytest.param(
+    "warp", marks=pytest.mark.skipif(not WARP_OK, reason=WARP_WHY or "warp available"))])
+def test_overlapped_walker_harness_makes_the_plain_choices(backend):
+    """Two trials, 2 headings, 6 chunks of the random selector on a 3 x 3 bank, a terrain left at fitness 0.085 (so
+    some are left after one evaluation and some stay for two): with ``overlap`` the evaluation walks ride along the
+    next chunk's PPO envs (``rl.ride_updates``, the rest walked on by ``finish_walks``), and the trials take the
+    same terrains in the same order with the same records; evaluations and parameters agree up to the float
+    rounding of the larger batches (the classic loop's walks step 2 + 2 envs, not 4 + 4). On MJX (``jax``) the two
+    programs take about 4 minutes of a 2-core CPU (a tenth of the default suite), so that case is ``slow``; the
+    default suite keeps the property on the toy harness (tests/test_curriculum.py,
+    ``test_overlap_runs_the_same_curriculum_as_the_plain_loop``) and on the walker where MuJoCo Warp imports."""
+    kw = dict(selector="random", grid=3, relief=0.3, threshold=0.085, max_epochs=6, headings=2)
+    _, plain = _walker_run(backend, trials=2, tiles=4, chunks=100, **kw)
+    _, over = _walker_run(backend, trials=2, tiles=4, chunks=100, overlap=True, **kw)
+    terrain = np.asarray(plain.history.terrain)
+    assert np.all(np.asarray(plain.done)) and np.all(np.asarray(over.done)) and terrain.min() >= 0
+    assert np.sum(terrain[:, 1:] != terrain[:, :-1]) >= 4 and np.sum(terrain[:, 1:] == terrain[:, :-1]) >= 2
+    for name in ("terrain", "epoch", "hardest"):
+        np.testing.assert_array_equal(np.asarray(getattr(over.history, name)), np.asarray(getattr(plain.history,
+                                                                                                 name)))
+    np.testing.assert_allclose(np.asarray(over.history.evaluation), np.asarray(plain.history.evaluation),
+                               atol=2e-4)
+    assert np.all(np.asarray(over.history.evaluation) > 0)
+    for a, b in zip(jax.tree.leaves(over.policy.params), jax.tree.leaves(plain.policy.params)):
+        np.testing.assert_allclose(np.asarray(a), np.asarray(b), atol=1e-4)
+    assert not np.any(np.asarray(over.pending))
+
+
+# ---------------------------------------------------------------------------------------------------------------
+# experiments learn --backend
+# ---------------------------------------------------------------------------------------------------------------
+CPPN = "docs/results/exp1b_gpu_sound_cppn_archive.npz"
+
+
+@pytest.fixture(scope="module")
+def tiny_archive(tmp_path_factory):
+    """The CPPN archive cut to its first 4 filled cells, with stored gentle bumps as heightmaps (as
+    tests/test_curriculum.py's)."""
+    from jaxterrain import qd as A
+
+    arch = A.load(CPPN)
+    keep = np.zeros_like(arch.filled)
+    keep[np.flatnonzero(arch.filled)[:4]] = True
+    x = np.linspace(0, 4 * np.pi, 256, dtype=np.float32)
+    bumps = (0.02 * (1 + np.sin(x)[None, :] * np.cos(x)[:, None]) * 65535).astype(np.uint16)
+    maps = np.where(keep[:, None, None], bumps[None], np.uint16(0))
+    tiny = arch._replace(source=np.where(keep, arch.source, -1).astype(np.int32),
+                         fitness=np.where(keep, arch.fitness, -np.inf).astype(np.float32), heightmaps=maps)
+    return str(A.save(tmp_path_factory.mktemp("arch") / "four.npz", tiny))
+
+
+def cli(*argv):
+    from experiments.__main__ import main
+
+    return main(list(argv))
+
+
+def test_learn_backend_builds_the_walker_and_refuses_a_missing_warp(tmp_path, tiny_archive, monkeypatch, capsys):
+    """--backend jax (also a config saved without the key): the classic walker, with --overlap one tile per trial;
+    warp: one tile per trial and contact buffers for trials x max(num_envs, attempts) envs (num_envs + attempts with
+    --overlap); warp where it does not import: one line, exit 2, nothing left behind."""
+    from experiments import learn
+
+    cfg = {**learn.PRESETS["smoke"], "archive": tiny_archive, "seed": 0}
+    assert runner.validate(cfg)[3].config.tiles == 0 and learn.PRESETS["smoke"]["backend"] == "auto"
+    assert layout.resolve_backend("auto") == "jax"  # on a CPU; "warp" on a GPU where MuJoCo Warp imports
+    monkeypatch.setattr(jax, "default_backend", lambda: "gpu")
+    assert layout.resolve_backend("auto") == ("warp" if WARP_OK else "jax") and layout.resolve_backend("jax") == "jax"
+    monkeypatch.undo()
+    old = {k: v for k, v in cfg.items() if k != "backend"}
+    assert runner.validate(old)[3].config == runner.validate(cfg)[3].config
+    config, _, _, env = runner.validate({**cfg, "overlap": True, "trials": 3})  # MJX on tiles for the riding walks
+    assert config.overlap and (env.config.backend, env.tiles) == ("jax", 3)
+    if WARP_OK:
+        env = runner.validate({**cfg, "backend": "warp", "trials": 3})[3]
+        assert (env.config.backend, env.tiles, env.config.warp_worlds) == ("warp", 3, 3 * 4)  # 4 envs > 2 walks
+        env = runner.validate({**cfg, "backend": "warp", "trials": 3, "overlap": True})[3]
+        assert env.config.warp_worlds == 3 * (4 + 2)  # the walks step with the PPO envs
+    import jaxterrain.walker as walker_pkg
+
+    monkeypatch.setattr(walker_pkg.tiles, "warp_available", lambda: (False, "no warp here"))
+    out = tmp_path / "run"
+    assert cli("learn", "--preset", "smoke", "--archive", tiny_archive, "--backend", "warp", "--out", str(out)) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "--backend warp: no warp here" in err[0] and not out.exists()
+
+
+@pytest.mark.slow
+@pytest.mark.skipif(not WARP_OK, reason=WARP_WHY or "warp available")
+def test_learn_smoke_on_warp_end_to_end(tmp_path, tiny_archive):
+    """learn --preset smoke --backend warp: 2 trials of 4 chunks on tiles, the policy walked, config.json keeps
+    the backend and --resume reports the finished run."""
+    import json
+
+    out = tmp_path / "learn"
+    assert cli("learn", "--preset", "smoke", "--archive", tiny_archive, "--backend", "warp", "--out", str(out)) == 0
+    assert json.loads((out / "config.json").read_text())["backend"] == "warp"
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["trials"] == 2 and summary["epochs_max"] <= 4
+    evals = np.array([float(r.split(",")[9]) for r in (out / "history.csv").read_text().splitlines()[1:]])
+    assert np.all((evals >= 0) & (evals <= 1)) and evals.max() > 0
+    assert cli("learn", "--resume", str(out)) == 0
+    assert json.loads((out / "config.json").read_text())["backend"] == "warp"
+
+
+def test_tile_layout_with_headings_puts_each_turned_terrain_on_its_own_tile():
+    """``tile_layout(env, 2)``: trial i trains on tile 2 i (its terrain as it is) and heading 1 walks tile 2 i + 1,
+    which holds the terrain turned by a quarter (``difficulty.rotate_headings``): read through the walker, both match
+    the classic terrain and its turned copy at every probe point; too few tiles is a ValueError naming tiles."""
+    from jaxterrain import difficulty
+
+    env, plain = _envs(4)
+    x = np.arange(SHAPE[1], dtype=np.float32)
+    ramps = np.stack([np.broadcast_to(x / 16.0, SHAPE), np.broadcast_to(x[:, None] / 32.0, SHAPE)]).astype(np.float32)
+    tiles, axes = W.tile_layout(env, 2)(jnp.asarray(ramps))
+    assert axes == W.TILE_AXES and np.asarray(tiles.index).tolist() == [0, 2]
+    turned = np.asarray(difficulty.rotate_headings(jnp.asarray(ramps), 2))
+    px, py = jnp.asarray(PROBE[:, 0]), jnp.asarray(PROBE[:, 1])
+    for i in range(2):
+        for h in range(2):
+            ox, oy = env.tile_origin(jnp.int32(2 * i + h))
+            got = env.terrain_height(Tile(tiles.bank, jnp.int32(2 * i + h)), px + ox, py + oy)
+            want = plain.terrain_height(jnp.asarray(turned[2 * i + h]), px, py)
+            np.testing.assert_array_equal(np.asarray(got), np.asarray(want))
+    assert not np.array_equal(turned[0], turned[1])  # the ramp along x turned: another terrain
+    with pytest.raises(ValueError, match="tiles=4"):
+        W.tile_layout(env, 4)(jnp.asarray(ramps))
+
+
+def test_learn_takes_the_evaluation_protocol_from_the_archive(tmp_path, tiny_archive):
+    """``attempts`` / ``best`` / ``headings`` left None (the paper and gpu-short presets) come from the archive's
+    config, so the GP's prior and its observations share a protocol; given ones win; Warp gets a tile per trial and
+    heading. A protocol that does not divide is one line naming the field."""
+    from experiments import learn
+    from jaxterrain import qd as A
+
+    arch = A.load(tiny_archive)
+    four = str(A.save(tmp_path / "four_headings.npz", arch._replace(config=arch.config._replace(
+        attempts=80, best=5, headings=4))))
+    paper = {**learn.PRESETS["paper"], "archive": tiny_archive, "seed": 0}
+    assert learn.PRESETS["paper"]["headings"] is None and learn.PRESETS["gpu-short"]["attempts"] is None
+    assert runner.validate(paper)[0].protocol == (20, 5, 1, 0.0, "mean")  # an archive saved before headings existed
+    assert runner.validate({**paper, "archive": four})[0].protocol == (80, 5, 4, 0.0, "mean")
+    assert runner.validate({**paper, "archive": four, "headings": 1, "attempts": 20})[0].protocol[:3] == (20, 5, 1)
+    with pytest.raises(runner.BadInput, match="attempts must be a multiple of headings"):
+        runner.validate({**paper, "archive": four, "attempts": 30})
+    assert runner.walker_layout({**paper, "backend": "jax"}) == {}
+    if WARP_OK:
+        layout = runner.walker_layout({**paper, "backend": "warp", "headings": 4, "attempts": 80, "trials": 3})
+        assert layout == {"backend": "warp", "tiles": 12, "worlds": 3 * 500}

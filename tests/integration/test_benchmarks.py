@@ -1,0 +1,119 @@
+"""The pool model of benchmarks/rollout_order.py, whose step counts RESULTS.md reports; benchmarks/curriculum.py's parts
+(slow)."""
+
+
+import argparse
+
+import numpy as np
+import pytest
+
+from benchmark_loader import load_benchmark
+
+rollout_order = load_benchmark("rollout_order")
+
+
+def test_pool_model_by_hand():
+    lengths = np.array([10, 3, 3, 20])
+    # 2 slots, refill every 8: job 0 holds slot A to 16; jobs 1, 2 take slot B at 0 and 8; job 3 starts at 16 -> 40
+    assert rollout_order.pool_steps(lengths, np.arange(4), 2) == 40
+    # longest first: job 3 on A until 24, job 0 on B until 16, job 1 at 16 -> 24, job 2 at 24 -> 32
+    assert rollout_order.pool_steps(lengths, np.array([3, 0, 1, 2]), 2) == 32
+
+
+def test_pool_model_bounds():
+    rng = np.random.default_rng(0)
+    lengths = rng.integers(1, 400, 5000)
+    for slots in (64, 512, 8192):
+        steps = rollout_order.pool_steps(lengths, np.arange(lengths.size), slots)
+        assert steps % 8 == 0
+        assert steps >= max(-(-lengths.sum() // slots), -(-lengths.max() // 8) * 8)
+    # one slot per job: the longest rollout, rounded up to the refill interval
+    assert rollout_order.pool_steps(lengths, np.arange(lengths.size), 10**6) == -(-lengths.max() // 8) * 8
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("backend", ["jax", "warp"])
+def test_curriculum_parts_on_the_learn_commands_layout(backend):
+    """benchmarks/curriculum.py --parts times train and evaluate on the terrains as the block lays them out: one
+    tile per trial and heading on Warp (it passed bare maps once, which only the classic layout accepts)."""
+    from jaxterrain.walker import warp_available
+
+    if backend == "warp" and not warp_available()[0]:
+        pytest.skip(warp_available()[1])
+    curriculum = load_benchmark("curriculum")
+    args = argparse.Namespace(preset="smoke", archive=None, backend=backend, num_envs=None, num_unrolls=None,
+                              headings=2, chunks=1, parts=True, start=None)
+    row = curriculum.measure_block(args, 2)
+    assert row["chunks_done"] == 1 and row["chunk_reached"] == 2  # one timed chunk after an untimed one
+    assert row["train_s_per_chunk"] > 0 and row["eval_s_per_chunk"] > 0
+    assert 0.0 <= row["eval_fitness_mean"] <= 1.0
+    assert row["train_seq_steps"] == 20  # smoke: 80 env steps a chunk = 1 update of 4 envs x unroll 10 x 2 unrolls
+    if backend == "warp":
+        assert 1 <= row["eval_seq_steps"] <= 100  # smoke episodes are 100 steps
+
+
+@pytest.mark.slow
+def test_curriculum_parts_from_restored_states():
+    """benchmarks/curriculum.py --parts with --start's restored states times each trial's policy on its current
+    terrain: trial states holding the base policy on terrains [0, 1] give the row of the default (the base policy on
+    the bank's first terrains) exactly, on the CPU; after a chunk of the block (trained policies, the GP's picks) the
+    row is another one."""
+    import jax.numpy as jnp
+
+    curriculum = load_benchmark("curriculum")
+    args = argparse.Namespace(preset="smoke", archive=None, backend=None, num_envs=None, num_unrolls=None,
+                              headings=None)
+    cfg = curriculum.learn_cfg(args, 2)
+    config, arch, policy, env = curriculum.runner.validate(cfg)
+    bank, block, states = curriculum.runner.setup(cfg, config, arch, policy, env)
+    keys = ("eval_fitness_mean", "train_seq_steps")
+    default = curriculum.measure_parts(cfg, config, bank, policy, env, 2)
+    first = states._replace(terrain=jnp.arange(2, dtype=states.terrain.dtype) % bank.heightmaps.shape[0])
+    assert np.all(np.asarray(states.chunk) == 0)  # the base policy, untrained
+    same = curriculum.measure_parts(cfg, config, bank, policy, env, 2, first)
+    assert {k: same[k] for k in keys} == {k: default[k] for k in keys}
+    later = block(states, bank, 1)
+    assert np.all(np.asarray(later.chunk) == 1)
+    moved = curriculum.measure_parts(cfg, config, bank, policy, env, 2, later)
+    assert 0.0 <= moved["eval_fitness_mean"] <= 1.0 and moved["eval_fitness_mean"] != default["eval_fitness_mean"]
+
+
+@pytest.mark.slow
+def test_curriculum_bare_ppo_on_a_tiled_walker(monkeypatch):
+    """benchmarks/curriculum.py's bare-PPO peer runs on a tiled walker (Warp's layout; here MJX tiles, which
+    ``--overlap`` brings): it once handed such an env an ``[H, W]`` array. Both truncation modes, labelled."""
+    curriculum = load_benchmark("curriculum")
+    plain = curriculum.learn_cfg
+    monkeypatch.setattr(curriculum, "learn_cfg", lambda args, trials, overlap=False, truncation=None: plain(
+        args, trials, True, truncation))  # overlap: the walker on tiles
+    args = argparse.Namespace(preset="smoke", archive=None, backend=None, num_envs=None, num_unrolls=None,
+                              headings=None, repeats=1)
+    for truncation in ("mask", "bootstrap"):
+        row = curriculum.measure_ppo(args, truncation)
+        assert row["truncation"] == truncation and row["env_steps_per_s"] > 0
+
+
+@pytest.mark.parametrize("saved_overlap", [False, True])
+def test_curriculum_start_reads_plain_and_overlapped_checkpoints(tmp_path, saved_overlap):
+    """benchmarks/curriculum.py --start: a plain run's checkpoint or an --overlap run's (with its pending leaf)
+    starts a plain block and an overlapped one. Stand-in states: a NamedTuple with the fields start_states uses."""
+    from typing import NamedTuple
+
+    import jax.numpy as jnp
+
+    from jaxterrain.runtime import driver
+
+    class S(NamedTuple):
+        chunk: jnp.ndarray
+        pending: object
+
+    curriculum = load_benchmark("curriculum")
+    saved = S(jnp.array([7, 9]), jnp.array([True, False]) if saved_overlap else None)
+    driver.save_checkpoint(tmp_path / driver.CHECKPOINT_NAME, saved, done=7,
+                           meta={"config": {"overlap": saved_overlap}})
+    plain = curriculum.start_states(tmp_path, S(jnp.zeros(2, jnp.int32), None))
+    assert plain.pending is None and plain.chunk.tolist() == [7, 9]
+    over = curriculum.start_states(tmp_path, S(jnp.zeros(2, jnp.int32), jnp.zeros(2, bool)))
+    assert over.chunk.tolist() == [7, 9] and over.pending.tolist() == ([True, False] if saved_overlap else [False] * 2)
+    with pytest.raises(SystemExit, match="no checkpoint there"):
+        curriculum.start_states(tmp_path / "none", S(jnp.zeros(2, jnp.int32), None))

@@ -1,0 +1,120 @@
+"""Bad command-line values fail fast: one line ``python -m experiments <command>: error: ...`` naming the flag,
+exit status 2, no run folder, before any JAX work (``experiments.common.check_args``)."""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+from experiments import __main__ as cli
+
+ROOT = Path(__file__).resolve().parents[2]
+
+
+def run_cli(args: list[str], cwd: Path) -> subprocess.CompletedProcess:
+    # JAX_LOG_COMPILES: any compilation would log a line to stderr, so "exactly one line" also means "no compile".
+    env = {**os.environ, "JAX_PLATFORMS": "cpu", "JAX_LOG_COMPILES": "1",
+           "PYTHONPATH": str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", "")}
+    return subprocess.run([sys.executable, "-m", "experiments", *args], cwd=cwd, env=env, capture_output=True,
+                          text=True, timeout=120)
+
+
+@pytest.mark.parametrize("args, flag", [
+    (["evolve", "--generations", "-5"], "--generations"),
+    (["features", "--windows", "0"], "--windows"),
+    (["coverage", "--generators", "perlin", "nope"], "--generators"),
+    (["evolve", "--out", "FILE"], "--out"),
+])
+def test_subprocess_one_line_error_before_any_compile(tmp_path, args, flag):
+    (tmp_path / "FILE").write_text("not a folder\n")
+    start = time.perf_counter()
+    r = run_cli(args, tmp_path)
+    seconds = time.perf_counter() - start
+    lines = r.stderr.strip().splitlines()
+    assert r.returncode == 2, r.stderr
+    assert len(lines) == 1 and lines[0].startswith(f"python -m experiments {args[0]}: error: {flag}"), r.stderr
+    assert "Traceback" not in r.stderr and r.stdout == ""
+    assert not (tmp_path / "runs").exists()
+    assert seconds < 60
+
+
+def _main(argv, capsys) -> str:
+    with pytest.raises(SystemExit) as exc:
+        cli.main(argv)
+    err = capsys.readouterr().err.strip()
+    assert exc.value.code == 2, err
+    assert len(err.splitlines()) == 1, err
+    return err
+
+
+CASES = [
+    (["evolve", "--bins", "0"], "--bins must be an integer >= 1; got 0"),
+    (["evolve", "--batch-size", "-1"], "--batch-size must be an integer >= 1"),
+    (["evolve", "--size", "0"], "--size must be an integer >= 1"),
+    (["evolve", "--generator", "nope"], "--generator: unknown generator 'nope'; choose from"),
+    (["evolve", "--time-limit", "-1"], "--time-limit must be a finite number > 0"),
+    (["evolve", "--attempts", "2", "--best", "3"], "--best must be <= --attempts (2); got 3"),
+    (["evolve", "--best", "30"], "--best must be <= preset 'smoke': 'attempts' (2); got 30"),
+    (["evolve", "--out", "FILE/sub"], "--out 'FILE/sub' lies under FILE, which is a file"),
+    (["evolve", "--resume", "OTHER"], "--resume 'OTHER' is a run of 'features', not of 'evolve'"),
+    (["evolve", "--resume", "FILE"], "--resume 'FILE' is a file"),
+    (["evolve", "--config", "BAD.json"], "BAD.json: key 'generations' must be an integer >= 1; got -3"),
+    (["evolve", "--config", "MISSING.json"], "--config 'MISSING.json': no such file or folder"),
+    (["coverage", "--size", "-64"], "--size must be an integer >= 1"),
+    (["coverage", "--generations", "0"], "--generations must be an integer >= 1"),
+    (["features", "--samples", "0"], "--samples must be an integer >= 1"),
+    (["features", "--mutation-steps", "-1"], "--mutation-steps must be an integer >= 0"),
+    (["features", "--generators", "cppn", "perlin2"], "--generators: unknown generator 'perlin2'"),
+    (["quickstart", "--n", "-1"], "--n must be an integer >= 1"),
+    (["quickstart", "--walk", "-2"], "--walk must be an integer >= 0"),
+    (["quickstart", "--out", "FILE"], "--out 'FILE' is a file"),
+    (["difficulty-spread", "--heights", "0.5", "-1"], "--heights must be finite numbers > 0"),
+    (["difficulty-spread", "--n", "0"], "--n must be an integer >= 1"),
+    (["train-gan", "--steps", "-1"], "--steps must be an integer >= 1"),
+    (["train-gan", "--batch-size", "0"], "--batch-size must be an integer >= 1"),
+    (["train-gan", "--data", "MISSING"], "--data 'MISSING': no such file or folder"),
+    (["train-base-policy", "--num-envs", "0"], "--num-envs must be an integer >= 1"),
+    (["learn", "--max-evals", "0"], "--max-evals must be an integer >= 1"),
+    (["curriculum", "--max-evals", "-2"], "--max-evals must be an integer >= 1"),
+    (["curriculum", "--chunks-per-call", "0"], "--chunks-per-call must be an integer >= 1"),
+    (["train-base-policy", "--env-steps", "-5"], "--env-steps must be a finite number > 0"),
+    (["train-base-policy", "--eval-attempts", "2", "--eval-best", "5"], "--eval-best must be <= --eval-attempts"),
+]
+
+
+@pytest.mark.parametrize("argv, message", CASES, ids=[" ".join(a) for a, _ in CASES])
+def test_bad_flags_name_the_flag(tmp_path, monkeypatch, capsys, argv, message):
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "FILE").write_text("not a folder\n")
+    (tmp_path / "OTHER").mkdir()
+    (tmp_path / "OTHER" / "config.json").write_text(json.dumps({"command": "features", "seed": 0}))
+    (tmp_path / "BAD.json").write_text(json.dumps({"generations": -3}))
+    if argv[0] not in cli.COMMANDS:
+        pytest.skip(f"no command {argv[0]}")
+    err = _main(argv, capsys)
+    assert err.startswith(f"python -m experiments {argv[0]}: error: "), err
+    assert message in err, err
+    assert not (tmp_path / "runs").exists()
+
+
+def test_every_preset_passes_the_checks():
+    """The checks by option name accept every shipped preset (they only reject what no command can run)."""
+    import importlib
+
+    from experiments import common
+
+    for name, (module_name, _) in cli.COMMANDS.items():
+        try:
+            module = importlib.import_module(module_name)
+        except ModuleNotFoundError:
+            continue
+        presets = getattr(module, "PRESETS", None)
+        for preset, values in (presets.items() if isinstance(presets, dict) else ()):
+            if isinstance(values, dict):
+                common.check_values(values, lambda k, name=name, preset=preset: f"{name} {preset} {k}")

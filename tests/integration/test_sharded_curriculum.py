@@ -1,0 +1,52 @@
+"""Curriculum trials over 4 forced CPU devices (a subprocess: XLA_FLAGS must precede jax's start): 5 trials (padded
+to 8) split over the devices, the bank replicated, run the chunks of the one-device runner exactly; so do blocks of
+the running trials only (``run_live``)."""
+
+from __future__ import annotations
+
+import textwrap
+from pathlib import Path
+
+from devices import run_on_devices
+
+TESTS = str(Path(__file__).resolve().parents[1] / "curriculum")  # the unit tests whose fixtures the script reuses
+
+SCRIPT = textwrap.dedent("""
+    import sys
+    sys.path.insert(0, TESTS)
+    import jax, numpy as np
+    from jaxterrain import curriculum as C
+    from jaxterrain.runtime import sharding as SH
+    from test_curriculum import toy_bank, fake_harness, small, START, tree_equal
+
+    assert len(jax.devices()) == 4
+    bank = toy_bank(np.linspace(1.0, 0.2, 9).reshape(3, 3))
+    config, harness = small("random", max_evals=2, max_epochs=6), fake_harness(0.3)
+    states = C.init_trials(jax.random.split(jax.random.key(0), 5), bank, START, config=config, harness=harness)
+    four = C.make_runner(config, harness, mesh=SH.make_mesh())(states, bank, 4)
+    one = C.make_runner(config, harness)(states, bank, 4)  # donates (deletes) states: last
+    assert tree_equal(one, four)
+    terrains = np.asarray(four.history.terrain)
+    assert (terrains[:, :4] >= 0).all() and len({tuple(t) for t in terrains}) > 1  # 4 chunks; the trials differ
+    assert np.asarray(four.policy["resets"]).min() >= 1
+
+    # run_live over the mesh: the running trials only (a smaller block, padded to the devices) = the one-device run
+    # (without overlap: with it each device's loop runs until ITS trials have done the block, see make_runner)
+    from test_curriculum import keyed_harness, KEYED_START, toy_grid
+    bank = toy_bank(toy_grid(4))
+    config, harness = small("map", max_evals=3, max_epochs=60), keyed_harness(0.03, overlap=False)
+    init = lambda: C.init_trials(jax.random.split(jax.random.key(3), 5), bank, KEYED_START, config=config,
+                                 harness=harness)
+    mesh_run, one_run = C.make_runner(config, harness, mesh=SH.make_mesh()), C.make_runner(config, harness)
+    live, whole, sizes = init(), init(), []
+    while not np.all(np.asarray(whole.done)):
+        sizes.append(C.live_rows(live.done).size)
+        live, whole = C.run_live(mesh_run, live, bank, 3), one_run(whole, bank, 3)
+        assert tree_equal(live, whole)
+    assert min(sizes) < 5, sizes
+    print("ok")
+""").replace("TESTS", repr(TESTS))
+
+
+def test_sharded_trials_equal_the_one_device_runner():
+    assert run_on_devices(SCRIPT).strip().endswith("ok")
