@@ -41,7 +41,7 @@ _INT_MIN = {
     **dict.fromkeys(("n", "size", "samples", "generations", "batch_size", "initial_population", "bins", "attempts",
                      "best", "checkpoint_every", "rollout_slots", "steps", "sample_every", "ckpt_every", "log_every",
                      "updates_per_chunk", "num_envs", "eval_attempts", "eval_best", "batch", "stride",
-                     "calibrate_window", "devices", "max_evals", "chunks_per_call"), 1),
+                     "calibrate_window", "devices", "max_evals", "chunks_per_call", "policy_every"), 1),
     **dict.fromkeys(("window", "windows"), 2),
     **dict.fromkeys(("mutation_steps", "walk", "quality_samples"), 0),
 }

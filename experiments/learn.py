@@ -46,7 +46,10 @@ back with the checkpoint on it.
 Writes into the run folder: ``config.json``, ``checkpoint.npz`` + ``metrics.csv`` + ``tb/`` (the driver's),
 ``history.csv`` (one row per trial and chunk), ``sequences.csv`` (each trial's terrains in order), ``milestones.csv``
 / ``.md`` (Table 2's row), ``curve.png`` (hardest terrain traversed vs epoch, mean +- 1 standard error) and
-``summary.json``. This module is the command line only: the runner is :mod:`jaxterrain.curriculum.runner`.
+``summary.json``, and every trial's walker in ``policies/trial_K/`` (``rl.load_policy`` reads it; ``python -m
+experiments evaluate --policy RUN/policies/trial_0`` walks it on the held-out suite; ``--policy-every N`` adds
+snapshots ``policies/chunk_CCCCC/trial_K/``; ``--resume RUN --export-policies`` writes them from the last checkpoint
+of a run made before). This module is the command line only: the runner is :mod:`jaxterrain.curriculum.runner`.
 """
 
 from __future__ import annotations
@@ -66,7 +69,7 @@ _PAPER = dict(archive=CPPN_ARCHIVE, curriculum="map", trials=10, descriptors=["r
               distance_origin="origin", roughness_stride=5, max_observations=None, num_envs=500, unroll_length=10,
               num_unrolls=8, num_minibatches=8, update_epochs=8, learning_rate=3e-4, episode_length=1000,
               chunks_per_call=25, fast_compile=False, backend="auto", healthy_reward=None, update_normaliser=True,
-              truncation="bootstrap", overlap=False, compact=True)
+              truncation="bootstrap", overlap=False, compact=True, policy_every=None)
 PRESETS: dict[str, dict] = {
     "paper": _PAPER,
     "gpu-short": {**_PAPER, "max_epochs": 3000},
@@ -89,6 +92,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--chunks-per-call", type=int, default=None, help="chunks per jitted call / checkpoint")
     parser.add_argument("--num-envs", type=int, default=None, help="PPO envs per trial (all on its terrain)")
     add_fine_tuning_arguments(parser)
+    parser.add_argument("--policy-every", type=int, default=None,
+                        help="also write every trial's walker every N chunks, policies/chunk_CCCCC/trial_K/ (at the end "
+                             "of the first block at or after each multiple of N; default: only the final "
+                             "policies/trial_K/)")
+    parser.add_argument("--export-policies", action="store_true",
+                        help="with --resume: write every trial's walker of the last checkpoint as policies/trial_K/ "
+                             "(for runs made before learn wrote them, or stopped by a time limit), and stop")
     parser.add_argument("--report", action="store_true",
                         help="with --resume: write the outputs of the last checkpoint (history, sequences, "
                              "milestones, curve, summary_partial.json) without training, and stop")
@@ -145,7 +155,8 @@ def fine_tuning_overrides(args) -> dict:
 def overrides(args) -> dict:
     return dict(archive=args.archive, curriculum=args.curriculum, trials=args.trials, threshold=args.threshold,
                 max_epochs=args.max_epochs, policy=args.policy, chunks_per_call=args.chunks_per_call,
-                num_envs=args.num_envs, backend=args.backend, **fine_tuning_overrides(args),
+                num_envs=args.num_envs, backend=args.backend, policy_every=args.policy_every,
+                **fine_tuning_overrides(args),
                 **common.protocol_overrides(args))
 
 
@@ -154,17 +165,28 @@ def main(args) -> int:
 
     if args.report and args.resume is None:
         raise common.UsageError("--report needs --resume RUN (the run to report on)")
+    if args.export_policies and args.resume is None:
+        raise common.UsageError("--export-policies needs --resume RUN (the run whose walkers to write)")
     mesh = common.device_mesh(args.devices)
     folder, cfg = common.setup_run("learn", args, PRESETS, "smoke", overrides(args))
     try:  # cheap: files and values, before the run folder fills up or anything compiles
-        arch = runner.validate(runner.report_cfg(cfg) if args.report else cfg)[1]
-        runner.check_resumable(folder, cfg, arch, physics=not args.report)
+        readonly = args.report or args.export_policies
+        arch = runner.validate(runner.report_cfg(cfg) if readonly else cfg)[1]
+        runner.check_resumable(folder, cfg, arch, physics=not readonly)
     except runner.BadInput as err:
         print(f"learn: {err}", file=sys.stderr)
         if args.resume is None and {p.name for p in folder.iterdir()} <= {common.CONFIG_NAME,
                                                                           common.PROVENANCE_NAME}:
             shutil.rmtree(folder)
         return 2
+    if args.export_policies:
+        try:
+            paths = runner.export_treatment(cfg, folder)
+        except runner.BadInput as err:
+            print(f"learn: {err}", file=sys.stderr)
+            return 2
+        print(f"wrote {len(paths)} policies -> {folder / 'policies'}", flush=True)
+        return 0
     if args.report:
         summary = runner.report_treatment(cfg, folder)
         if summary is None:
@@ -180,5 +202,5 @@ def main(args) -> int:
         print(f"time limit reached; continue with: python -m experiments learn --resume {folder}", flush=True)
         return 3
     print(f"done: hardest traversed {summary['hardest_mean']:.2f} +- {summary['hardest_se']:.2f} cells "
-          f"(of 70.71) after {summary['epochs_max']} epochs -> {folder}", flush=True)
+          f"(of 70.71) after {summary['epochs_max']} epochs -> {folder}; walkers in {folder / 'policies'}", flush=True)
     return 0

@@ -11,6 +11,7 @@ The subpackages, in the order the data flows (each imports only those before it)
     difficulty    the walking protocol, difficulty evaluation, the named fitness functions
     features.learned  the learned traversability descriptor (trained on the walker's walks)
     qd            MAP-Elites archives: scoring, the pure algorithm, host drivers, files, the device bank
+    suite         the held-out terrain suite (families x levels x seeds) and walkers evaluated on it
     curriculum    Experiment 2's curricula: the GP, the pure trial loop, the walker harness, the treatment runner
     report        HTML / Markdown pages of run folders
 """
@@ -26,8 +27,9 @@ from jaxterrain import rl
 from jaxterrain import difficulty
 from jaxterrain.features import learned  # noqa: F401  (registers the "traversability" descriptor)
 from jaxterrain import qd
+from jaxterrain import suite
 from jaxterrain import curriculum
 from jaxterrain import report
 
-__all__ = ["__version__", "runtime", "generators", "terrain", "features", "walker", "rl", "difficulty", "qd", "curriculum",
-           "report"]
+__all__ = ["__version__", "runtime", "generators", "terrain", "features", "walker", "rl", "difficulty", "qd", "suite",
+           "curriculum", "report"]

@@ -17,7 +17,7 @@ PKG = ROOT / "jaxterrain"
 # The stages in the order the data flows; a stage imports only stages before it. ``features.learned`` (the learned
 # traversability descriptor) is trained on the walker's walks, so it sits after ``difficulty``.
 FLOW = ("runtime", "generators", "terrain", "features", "generators.gan_train", "walker", "rl", "difficulty",
-        "features.learned", "qd", "curriculum", "report")
+        "features.learned", "qd", "suite", "curriculum", "report")
 # Stages inside a subpackage that sit later in the flow: a model trained on what later stages make (the GAN on real
 # elevation tiles, scored with the features; the traversability CNN on the walker's walks).
 LATER = ("generators.gan_train", "features.learned")

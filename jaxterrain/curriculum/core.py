@@ -441,7 +441,6 @@ def make_runner(config: CurriculumConfig, harness: Harness, mesh=None) -> Callab
     another chunk than on one device, and its envs restart there (the same curriculum rules, other PPO data)."""
     fn = functools.partial(run_trials, config=config, harness=harness)
     if mesh is not None:
-
         return sharding.map_rows(lambda s, b, n: fn(s, b, jnp.asarray(n, jnp.int32)), mesh, replicated=(1, 2))
     return jax.jit(lambda s, b, n: fn(s, b, jnp.asarray(n, jnp.int32)), donate_argnums=(0,))
 

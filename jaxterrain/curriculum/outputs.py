@@ -1,14 +1,17 @@
 """A treatment's output files: ``history.csv`` (one row per trial and chunk), ``sequences.csv`` (each trial's
 terrains in order), ``milestones.csv`` / ``.md`` (Table 2's row), ``curve.png`` (hardest terrain traversed vs epoch,
-mean +- 1 standard error) and ``summary.json`` (:func:`write_outputs`), all written atomically."""
+mean +- 1 standard error) and ``summary.json`` (:func:`write_outputs`), and the trials' walkers,
+``policies/trial_K/`` (:func:`export_policies`), all written atomically."""
 
 from __future__ import annotations
 
 import csv
+import datetime as _dt
 import io
 import json
 from pathlib import Path
 
+import jax
 import numpy as np
 from matplotlib.figure import Figure
 
@@ -21,17 +24,21 @@ from jaxterrain.curriculum.analysis import (
     terrain_runs,
 )
 from jaxterrain.qd.grid import MAX_DISTANCE_50
+from jaxterrain.rl.checkpoint import save_policy
+from jaxterrain.runtime import provenance
 from jaxterrain.runtime.io import atomic_write_text, save_figure
 
-__all__ = ["PARTIAL", "SEQUENCE_COLUMNS", "histories", "sequence_rows", "generator_counts", "milestone_rows",
-           "summary_curve", "plot_curves", "write_outputs"]
+__all__ = ["PARTIAL", "POLICIES", "SEQUENCE_COLUMNS", "histories", "sequence_rows", "generator_counts",
+           "milestone_rows", "summary_curve", "plot_curves", "write_outputs", "trial_policy", "export_policies"]
 
 PARTIAL = "summary_partial.json"
 """The summary of an unfinished run's last checkpoint (``summary.json`` marks a finished one)."""
+POLICIES = "policies"
+"""The folder of a run's walkers: ``policies/trial_K/`` at the end, ``policies/chunk_CCCCC/trial_K/`` snapshots."""
 
 
 def write_csv(path: Path, header: list, rows: list) -> None:
-
+    """``rows`` under ``header`` as a CSV file, written atomically."""
     buf = io.StringIO()
     w = csv.writer(buf)
     w.writerow(header)
@@ -168,3 +175,51 @@ def write_outputs(folder: Path, cfg: dict, config, bank, states, seconds: float 
     if chunks_done is None:  # finished: an earlier --report's partial summary is out of date
         (folder / PARTIAL).unlink(missing_ok=True)
     return summary
+
+
+def trial_policy(states, trial: int) -> tuple:
+    """``(params, normaliser)`` of trial ``trial`` of the stacked trial states (host numpy leaves): the walker that
+    trial has trained, policy AND value net, as ``rl.save_policy`` takes them."""
+    pick = lambda tree: jax.tree.map(lambda x: np.asarray(jax.device_get(x))[trial], tree)  # noqa: E731
+    return pick(states.policy.params), pick(states.policy.normaliser)
+
+
+def export_policies(folder: Path, cfg: dict, config, ppo, env, start_policy, bank, states,
+                    subdir: str | None = None, names: tuple = ()) -> list[Path]:
+    """Write every trial's walker as ``folder/policies[/subdir]/trial_K/`` (``rl.save_policy``: ``policy.msgpack``
+    + ``config.json``, which :func:`jaxterrain.rl.load_policy` reads and ``python -m experiments evaluate`` walks).
+
+    ``config.json`` keeps the starting policy's ``walker_config`` (its contact solver: a walker walks as trained only
+    under it) and adds ``curriculum``: the archive, the selector, the trial, its seed, the epochs and env steps it
+    trained, its terrain sequence (bank indices, cells, distances and generators in the order trained), the hardest
+    terrain it traversed, the chunk of the run; and ``provenance`` (commit, device, date). ``ppo`` is the
+    fine-tuning PPOConfig (the networks' shapes); ``env`` the walker env (observation and action sizes). Returns the
+    folders, in trial order."""
+    hist = histories(states)
+    epochs = np.asarray(states.epoch)
+    out = []
+    base_meta = dict(getattr(start_policy, "meta", None) or {})
+    cell, dist, source = np.asarray(bank.cell), np.asarray(bank.distance), np.asarray(bank.source)
+    for t in range(hist["epoch"].shape[0]):
+        runs = terrain_runs(hist["terrain"][t], hist["evaluation"][t], hist["epoch"][t])
+        order = [int(r["terrain"]) for r in runs]
+        params, normaliser = trial_policy(states, t)
+        extra = {
+            "walker_config": base_meta.get("walker_config"),
+            "curriculum": {
+                "archive": str(cfg.get("archive")), "selector": cfg.get("curriculum"), "trial": t,
+                "seed": int(cfg.get("seed", 0)), "epochs": int(epochs[t]),
+                "env_steps": int(epochs[t]) * int(config.steps_per_epoch),
+                "chunks": int(np.sum(hist["epoch"][t] >= 0)), "hardest": float(np.asarray(states.hardest)[t]),
+                "terrains": order, "cells": [int(cell[k]) for k in order],
+                "distances": [round(float(dist[k]), 3) for k in order],
+                "generators": [names[source[k]] if 0 <= source[k] < len(names) else str(int(source[k]))
+                               for k in order],
+                "start_policy": str(getattr(start_policy, "path", "") or ""),
+            },
+            "provenance": {"commit": provenance.git_commit(), "device": provenance.device(),
+                           "date": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds")},
+        }
+        path = Path(folder) / POLICIES / (subdir or "") / f"trial_{t}"
+        out.append(save_policy(path, params, normaliser, ppo, env.observation_size, env.action_size, extra=extra))
+    return out

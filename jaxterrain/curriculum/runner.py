@@ -5,6 +5,7 @@ its outputs (:mod:`jaxterrain.curriculum.outputs`).
     config, arch, policy, env = runner.validate(cfg)     # BadInput naming the parameter, before anything compiles
     summary = runner.run_treatment(cfg, folder, time_limit_s=540)   # None: stopped by the time limit (checkpointed)
     summary = runner.report_treatment(cfg, folder)       # the outputs of the last checkpoint, without training
+    paths = runner.export_treatment(cfg, folder)         # its walkers, folder/policies/trial_K/, without training
 
 ``cfg`` is flat: the curriculum's fields and its fine-tuning PPO's side by side (``CurriculumConfig.from_json_dict``),
 ``curriculum`` (the selector), ``archive`` (a path), ``trials``, ``seed``, ``backend`` (``auto`` / ``jax`` /
@@ -27,7 +28,7 @@ import numpy as np
 from jaxterrain.curriculum import walker as W
 from jaxterrain.curriculum.config import FINE_TUNED, CurriculumConfig, validate_config
 from jaxterrain.curriculum.core import init_trials, run_live, run_trials
-from jaxterrain.curriculum.outputs import PARTIAL, write_outputs
+from jaxterrain.curriculum.outputs import PARTIAL, export_policies, write_outputs
 from jaxterrain.qd.archive_io import load as load_archive_file
 from jaxterrain.qd.bank import from_archive
 from jaxterrain.runtime import driver, sharding
@@ -38,7 +39,7 @@ from jaxterrain.walker import tiles
 __all__ = ["BadInput", "LEGACY_TRUNCATION", "PARTIAL", "FAST_COMPILE", "PROGRAMS", "curriculum_config",
            "with_protocol", "load_archive", "archive_digest", "check_resumable", "physics_of", "walker_layout",
            "validate", "strip_envs", "compiled", "make_block", "chunk_metrics", "inputs", "setup", "run_treatment",
-           "report_cfg", "report_treatment"]
+           "report_cfg", "restored", "report_treatment", "export_treatment"]
 
 LEGACY_TRUNCATION = "mask"
 """``truncation`` of a config saved without one: every run before the presets' default became ``bootstrap``."""
@@ -266,7 +267,6 @@ def setup(cfg: dict, config, arch, policy, env, mesh=None):
     init, block, blocks = PROGRAMS[sig]  # blocks: trial count -> the block compiled for it
     states = init(keys, bank, start)
     if mesh is not None:  # the trials split over the devices; inputs whole on the mesh (whence the init's)
-
         block = sharding.map_rows(block, mesh, replicated=(1, 2))
         bank, states = sharding.replicate((bank, states), mesh)
         place = functools.partial(sharding.replicate, mesh=mesh)
@@ -307,9 +307,15 @@ def run_treatment(cfg: dict, folder: Path, time_limit_s: float | None = None, de
         print(f"resuming at chunk {done} of {config.max_chunks} ({before / 60:.1f} min of wall time so far)",
               flush=True)
 
+    every = int(cfg.get("policy_every") or 0)  # snapshots of the walkers along the run
+    ppo = config.ppo_config(policy.config)
+
     def chunk_fn(s, a, b):
         if not bool(np.all(np.asarray(s.done))):
             s = block(s, bank, b - a)
+        if every and b // every > a // every:
+            export_policies(folder, cfg, config, ppo, env, policy, bank, s, subdir=f"chunk_{b:05d}",
+                            names=arch.generator_names)
         return s, chunk_metrics(s, a, b)
 
     states, done, _ = driver.run_chunks(
@@ -320,6 +326,7 @@ def run_treatment(cfg: dict, folder: Path, time_limit_s: float | None = None, de
         wall_s=before + time.perf_counter() - t0)
     if done < config.max_chunks and not bool(np.all(np.asarray(states.done))):
         return None
+    export_policies(folder, cfg, config, ppo, env, policy, bank, states, names=arch.generator_names)
     return write_outputs(folder, cfg, config, bank, states, seconds=before + time.perf_counter() - t0,
                          names=arch.generator_names)
 
@@ -329,19 +336,14 @@ def report_cfg(cfg: dict) -> dict:
     return {**cfg, "backend": "jax"}
 
 
-def report_treatment(cfg: dict, folder: Path) -> dict | None:
-    """The outputs of a treatment as it stands, without training: a finished one's summary; for one with a
-    checkpoint, its history / sequences / milestones / curve as of that checkpoint and ``summary_partial.json``
-    (the summary with ``"partial": true`` and ``"chunks_done"``; ``summary.json`` stays the mark of a finished run,
-    so ``--resume`` still continues it); None without a checkpoint. Compiles nothing: the checkpoint is read into
-    the shapes of the initial states (``jax.eval_shape``). Steps no physics either, so a run of any backend is
-    reported through the MJX-JAX layout (a Warp run's states have its shapes): a GPU run reads on a laptop without
-    MuJoCo Warp."""
+def restored(cfg: dict, folder: Path) -> tuple:
+    """``(config, arch, policy, env, bank, states, chunks done, saved meta)`` of ``folder``'s last checkpoint, read
+    without compiling or stepping anything: the checkpoint is read into the shapes of the initial states
+    (``jax.eval_shape``), through the MJX-JAX layout (:func:`report_cfg`: a Warp run reads on a machine without
+    MuJoCo Warp). :class:`BadInput` when the folder has no checkpoint or another archive's."""
     folder = Path(folder)
-    if (folder / "summary.json").exists():
-        return json.loads((folder / "summary.json").read_text())
     if not (folder / driver.CHECKPOINT_NAME).exists():
-        return None
+        raise BadInput(f"{folder} has no checkpoint ({driver.CHECKPOINT_NAME})")
     config, arch, policy, env = validate(report_cfg(cfg))
     check_resumable(folder, cfg, arch, physics=False)
     bank, _, _, start, keys, init = inputs(cfg, config, arch, policy, env)
@@ -354,7 +356,29 @@ def report_treatment(cfg: dict, folder: Path) -> dict | None:
         return jnp.zeros(spec.shape, spec.dtype)
 
     states, done, _, saved = driver.restore(folder, like=jax.tree.map(zeros, shapes))
+    return config, arch, policy, env, bank, states, done, saved
+
+
+def report_treatment(cfg: dict, folder: Path) -> dict | None:
+    """The outputs of a treatment as it stands, without training: a finished one's summary; for one with a
+    checkpoint, its history / sequences / milestones / curve as of that checkpoint and ``summary_partial.json``
+    (the summary with ``"partial": true`` and ``"chunks_done"``; ``summary.json`` stays the mark of a finished run,
+    so ``--resume`` still continues it); None without a checkpoint. Compiles nothing and steps no physics
+    (:func:`restored`)."""
+    folder = Path(folder)
+    if (folder / "summary.json").exists():
+        return json.loads((folder / "summary.json").read_text())
+    if not (folder / driver.CHECKPOINT_NAME).exists():
+        return None
+    config, arch, _, _, bank, states, done, saved = restored(cfg, folder)
     return write_outputs(folder, cfg, config, bank, states, seconds=saved.get("wall_s"), chunks_done=done,
                          names=arch.generator_names)
 
 
+def export_treatment(cfg: dict, folder: Path) -> list[Path]:
+    """Every trial's walker of ``folder``'s last checkpoint as ``folder/policies/trial_K/``
+    (:func:`~jaxterrain.curriculum.outputs.export_policies`), for runs made before treatments wrote them, or of a
+    run stopped by its time limit. Compiles nothing (:func:`restored`)."""
+    config, arch, policy, env, bank, states, _, _ = restored(cfg, folder)
+    return export_policies(folder, cfg, config, config.ppo_config(policy.config), env, policy, bank, states,
+                           names=arch.generator_names)

@@ -146,13 +146,11 @@ def checked(gen: "Generator") -> "Generator":
     applies this to every generator it builds, so a factory that swaps in its own ``sample`` is covered too)."""
     sample, mutate = gen.sample, gen.mutate
     if not getattr(sample, "__jaxterrain_checked__", False):
-
         @mark_checked
         def sample(key: PRNGKey, n: int, _sample=gen.sample, _name=gen.name):
             return _sample(key, check_count(n, _name))
 
     if not getattr(mutate, "__jaxterrain_checked__", False):
-
         @mark_checked
         def mutate(key: PRNGKey, genomes: Genome, _mutate=gen.mutate, _validate=gen.validate):
             if not is_traced(genomes):

@@ -76,7 +76,6 @@ def _d_loss_fn(disc, real: jax.Array, fake: jax.Array, step: jax.Array, r1: floa
         loss = jax.nn.softplus(-lr_).mean() + jax.nn.softplus(lf).mean()
         penalty = jnp.zeros(())
         if r1 > 0:  # lazy R1 (StyleGAN2): every R1_EVERY steps, weighted by R1_EVERY
-
             def r1_penalty():
                 g = jax.grad(lambda x: d(x).sum())(real)
                 return jnp.mean(jnp.sum(g**2, axis=(1, 2)))
@@ -189,7 +188,6 @@ def _quality_sets(key: jax.Array, config: GanConfig, variables: dict, tiles, n: 
         sets[name] = np.concatenate([np.asarray(patch_fn(kk)) for kk in ks])[:n]
     perlin_error = None
     try:
-
         perlin = generators.get("perlin", size=config.size)
         genomes = perlin.sample(k_perlin, n)
         sets["perlin"] = _render_batches(perlin.render, genomes)

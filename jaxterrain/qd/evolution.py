@@ -72,7 +72,6 @@ def traversable_fn(config: A.EvolveConfig) -> Callable:
 
 @functools.lru_cache(maxsize=64)
 def _traversable_fn(robot_height, window, scale) -> Callable:
-
     kwargs = {"window": window, "scale": scale}
     if robot_height is not None:
         kwargs["robot_height"] = robot_height
@@ -220,7 +219,6 @@ def _resolve_one(generator, descriptors, config: A.EvolveConfig, generator_optio
     """``(generator, descriptors, config)`` of :func:`evolve`'s arguments: a generator name looked up, a pair of
     descriptor names moved into the config (descriptors then None), the config resolved."""
     if isinstance(generator, str):
-
         generator = _generators.get(generator, **(generator_options or {}))
     if descriptors is not None and not callable(descriptors):
         config = config._replace(descriptors=tuple(descriptors))

@@ -292,7 +292,6 @@ def many_finish(states, children, made, parts):
     """:func:`multi_step`'s last part (pure, jittable): complete the scores, insert, count a generation."""
     out_states, out_metrics = [], []
     for state, offspring, pending, part in zip(states, children, made, parts):
-
         def finish_one(st, genomes, pend, fit):
             scored = S.Scoring.complete(pend, fit, st.task)
             repertoire, m = _finish(st, genomes, scored)

@@ -227,7 +227,6 @@ class Scoring(NamedTuple):
     def __call__(self, genomes, key, task: Task | None = None):
         task = self.task if task is None else task
         if self.mesh is not None:
-
             n = jax.tree.leaves(genomes)[0].shape[0]
             pending, fitness = sharding.map_rows(self.prepare_rows, self.mesh, replicated=(2,), mask=True)(
                 genomes, sharding.row_keys(key, n), task)

@@ -39,7 +39,8 @@ class RunFiles(NamedTuple):
       figures: PNG / JPEG / GIF / SVG / WebP files.
       archives: ``.npz`` files in the jaxterrain archive format.
       texts: small text files (JSON other than the top config, logs, ...) shown verbatim.
-      others: everything else (checkpoints, large files, binary data), listed with sizes.
+      others: everything else (checkpoints, large files, binary data, the files of a policy folder), listed with
+        sizes.
     """
 
     root: Path
@@ -62,7 +63,6 @@ def is_archive(path: Path) -> bool:
     """True when ``path`` is an ``.npz`` whose header names the jaxterrain archive format (only the header is
     read)."""
     import numpy as np
-
 
     try:
         with np.load(path, allow_pickle=False) as z:
@@ -105,7 +105,9 @@ def scan(root: str | Path, exclude: tuple[str | Path, ...] = ()) -> RunFiles:
             except (OSError, json.JSONDecodeError, UnicodeDecodeError):
                 texts.append(path)
             continue
-        if suffix in TABLE_SUFFIXES:
+        if (path.parent / "policy.msgpack").is_file():  # a walker's folder (policies/trial_K/): listed, not shown
+            others.append(path)
+        elif suffix in TABLE_SUFFIXES:
             tables.append(path)
         elif suffix in FIGURE_SUFFIXES:
             figures.append(path)

@@ -130,7 +130,6 @@ class _Assets:
         self.names: set[str] = set()
 
     def add(self, name: str, data: bytes) -> str:
-
         name = re.sub(r"[^A-Za-z0-9._-]+", "_", name)
         base, n = name, 1
         while name in self.names:

@@ -480,7 +480,6 @@ def _sgd(params, opt_state, normaliser, segments: Transition, boots, key, *, con
     if mesh is None:
         local, axis_name = size, None
     else:
-
         local, axis_name = -(-size // mesh.devices.size), sharding.AXIS  # segments per device, padded
     grad_fn = jax.value_and_grad(functools.partial(loss_fn, config=config, action_size=action_size,
                                                    axis_name=axis_name), has_aux=True)

@@ -65,7 +65,6 @@ def chunk_fn(env: EnvLike, config: PPOConfig, terrains: jax.Array, batched: bool
     def chunk(state: TrainState, start: int, stop: int):
         fn = compiled_chunk(env, config, stop - start, batched, terrain_seed_axis, mesh)
         if mesh is not None:  # a state or terrains placed on one device (e.g. a jitted init's) go whole on the mesh
-
             state, data = sharding.replicate((state, terrains), mesh)
         else:
             data = terrains
@@ -121,7 +120,6 @@ def train(key: jax.Array, env: EnvLike, config: PPOConfig, num_updates: int, ter
             init_fn = jax.vmap(init_fn, in_axes=(0, terrain_seed_axis))
         state = jax.jit(init_fn)(raw_key(key) if not batched else key, terrains)
     if mesh is not None:
-
         state = sharding.replicate(state, mesh)
     history = []
     run = chunk_fn(env, config, terrains, batched, terrain_seed_axis, mesh)

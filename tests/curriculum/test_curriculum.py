@@ -17,7 +17,7 @@ from jaxterrain.runtime import driver
 from jaxterrain.qd import TerrainBank, cell_distance
 from jaxterrain import curriculum as C
 from jaxterrain.curriculum import gp
-from jaxterrain.curriculum import runner
+from jaxterrain.curriculum import outputs, runner
 
 
 # ---------------------------------------------------------------------------------------------------------------
@@ -740,6 +740,44 @@ def test_curriculum_shards_share_one_run_folder_and_resume_writes_the_tables(tmp
     assert [t[0] for t in one] == [t[0] for t in two] == ["cppn", "perlin", "combined", "cppn"]
 
 
+def test_learn_writes_every_trials_walker_as_a_loadable_policy(tmp_path, learn_smoke):
+    """``learn`` ends by writing ``policies/trial_K/``: ``rl.load_policy`` reads each, its parameters and normaliser
+    are trial K's in the run's last checkpoint, they moved away from the base policy (PPO trained them), and
+    ``config.json`` keeps the base policy's walker config (its solver) and records the trial's curriculum (epochs,
+    env steps, the terrains in the order ``sequences.csv`` lists them). ``--resume RUN --export-policies`` writes the
+    same weights from the checkpoint."""
+    import shutil
+
+    from jaxterrain import rl
+
+    _, out = learn_smoke
+    cfg = json.loads((out / "config.json").read_text())
+    states = runner.restored(cfg, out)[5]
+    base = rl.load_policy()
+    seq = [r.split(",") for r in (out / "sequences.csv").read_text().splitlines()[1:]]
+    for t in range(2):
+        policy = rl.load_policy(out / "policies" / f"trial_{t}")
+        params, normaliser = outputs.trial_policy(states, t)
+        assert tree_equal(policy.params, params) and tree_equal(policy.normaliser, normaliser)
+        moved = [float(np.max(np.abs(np.asarray(a) - np.asarray(b))))
+                 for a, b in zip(jax.tree.leaves(policy.params["policy"]), jax.tree.leaves(base.params["policy"]))]
+        assert max(moved) > 0.0, "the trained walker equals the base policy"
+        assert (policy.observation_size, policy.action_size) == (base.observation_size, base.action_size)
+        assert policy.meta["walker_config"] == base.meta["walker_config"]
+        c = policy.meta["curriculum"]
+        assert c["trial"] == t and c["selector"] == "map" and c["epochs"] == int(np.asarray(states.epoch)[t])
+        assert c["env_steps"] == c["epochs"] * cfg["steps_per_epoch"] and c["epochs"] > 0
+        assert c["terrains"] == [int(r[2]) for r in seq if int(r[0]) == t]
+        assert c["hardest"] == pytest.approx(float(np.asarray(states.hardest)[t]))
+    copy = tmp_path / "copy"
+    shutil.copytree(out, copy)
+    shutil.rmtree(copy / "policies")
+    assert cli("learn", "--resume", str(copy), "--export-policies") == 0
+    for t in range(2):
+        assert ((copy / "policies" / f"trial_{t}" / "policy.msgpack").read_bytes()
+                == (out / "policies" / f"trial_{t}" / "policy.msgpack").read_bytes())
+
+
 def test_learn_killed_by_its_time_limit_resumes_to_the_uninterrupted_curves(tmp_path, learn_smoke, tiny_archive,
                                                                             capsys, monkeypatch):
     """Issue 13: a treatment stopped after its first block (``--time-limit``, as a killed run restarts from its last
@@ -891,17 +929,26 @@ def test_learn_overlap_smoke_makes_the_plain_choices_and_resumes(tmp_path, learn
 def test_learn_compact_blocks_run_the_same_treatment(tmp_path, learn_smoke):
     """``learn --compact`` (on in the GPU presets): a 3-trial smoke run whose trials end at different chunks (a
     threshold the smoke walker passes on some evaluations only) runs its later blocks on the running trials only
-    and writes the history of the run that keeps every trial in every block (CPU: exactly). Minutes of CPU."""
+    and writes the history of the run that keeps every trial in every block (CPU: exactly); ``--policy-every 4``
+    adds snapshots of the walkers at chunks 4 and 8 and changes nothing else. Minutes of CPU."""
 
     archive, _ = learn_smoke
     runs = {}
     for flag in ("--no-compact", "--compact"):
         out = runs[flag] = tmp_path / flag
         before = {sig: set(blocks) for sig, (_, _, blocks) in runner.PROGRAMS.items()}
+        every = ["--policy-every", "4"] if flag == "--compact" else []  # snapshots: no effect on the run
         assert cli("learn", "--preset", "smoke", "--archive", archive, "--trials", "3", "--threshold", "0.348",
-                   "--max-epochs", "8", flag, "--out", str(out)) == 0
+                   "--max-epochs", "8", flag, "--out", str(out), *every) == 0
         assert json.loads((out / "config.json").read_text())["compact"] is (flag == "--compact")
         sizes = set().union(*(set(b) - before.get(sig, set()) for sig, (_, _, b) in runner.PROGRAMS.items()))
     epochs = json.loads((runs["--compact"] / "summary.json").read_text())["epochs"]
     assert min(epochs) < max(epochs) and min(sizes, default=3) < 3, (epochs, sizes)  # smaller blocks compiled, ran
     assert (runs["--compact"] / "history.csv").read_text() == (runs["--no-compact"] / "history.csv").read_text()
+    pol = runs["--compact"] / "policies"
+    assert sorted(p.name for p in pol.iterdir()) == ["chunk_00004", "chunk_00008", "trial_0", "trial_1", "trial_2"]
+    assert sorted(p.name for p in (pol / "chunk_00004").iterdir()) == ["trial_0", "trial_1", "trial_2"]
+    assert not (runs["--no-compact"] / "policies" / "chunk_00004").exists()
+    for k in range(3):  # the last snapshot is the final walker
+        assert ((pol / "chunk_00008" / f"trial_{k}" / "policy.msgpack").read_bytes()
+                == (pol / f"trial_{k}" / "policy.msgpack").read_bytes())

@@ -1,0 +1,179 @@
+"""``python -m experiments evaluate``: walkers on terrains they never saw.
+
+    python -m experiments evaluate --policy runs/learn-cppn/policies/trial_0 runs/learn-cppn/policies/trial_1 \\
+        --preset gpu --out runs/eval-cppn
+    python -m experiments evaluate --policy DIR --archive docs/results/exp2_cppn_headings_archive.npz
+
+Walks the shipped base policy (always, as ``base``) and every ``--policy`` folder (``rl.save_policy``'s format, as
+``learn`` writes ``policies/trial_K/``) on the held-out suite (``--suite v1``, ``jaxterrain.suite``: the field's
+sub-terrains at 10 graded levels and fresh samples of every generator) or on an archive's elites (``--archive``,
+family ``archive``, levels = bands of 7.07 cells of distance from cell (0, 0)), under ``--protocol`` (default
+``headings``: 20 walks in each of 4 headings, best 5 per heading). Every policy walks with the same key. A policy for
+another robot or observation set is refused with one line naming its folder, before the run folder is made.
+
+Presets: ``gpu`` (suite v1 at 256 x 256, 3 terrains per level, the HEADINGS protocol; the base policy walks twice
+and the second, compiled call is timed) and ``smoke`` (CPU, about a minute: three families and Perlin samples built
+at 64 x 64, one terrain per level, 2 walks along +x, best 1; not ``v1``'s terrains).
+
+Writes into the run folder: ``config.json``, ``fitness.csv`` (policy, family, level, seed, value, unit, fitness),
+``levels.csv`` (policy, family, highest level passed at mean fitness >= 0.9, -1 for none, and the mean fitness per
+level), ``summary.md`` (policies x families), ``levels.png`` (the same, coloured by the highest level passed),
+``suite.png`` (a terrain of every family at its easiest, middle and hardest level) and ``timing.json``.
+"""
+
+from __future__ import annotations
+
+import argparse
+
+PRESETS: dict[str, dict] = {
+    "gpu": dict(suite="v1", archive=None, policy=[], size=None, seeds=None, samples=None, families=None,
+                generators=None, attempts=80, best=5, headings=4, backend="auto", slots=None, chunk=None, repeat=True),
+    "smoke": dict(suite="v1", archive=None, policy=[], size=64, seeds=1, samples=4, families=["flat", "stairs_up", "gaps"],
+                  generators=["perlin"], attempts=2, best=1, headings=1, backend="jax", slots=None, chunk=None,
+                  repeat=False),
+}
+BACKENDS = ("auto", "jax", "warp")  # jaxterrain.walker.layout.BACKEND_CHOICES (literal: --help imports no JAX)
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    from experiments import common
+
+    common.add_run_arguments(parser, PRESETS, "smoke")
+    parser.add_argument("--policy", nargs="+", default=None, metavar="DIR",
+                        help="policy folders to evaluate beside the base policy (e.g. RUN/policies/trial_0)")
+    parser.add_argument("--suite", default=None, help="held-out suite version (default v1)")
+    parser.add_argument("--archive", default=None, help="walk an archive's elites instead of the suite")
+    parser.add_argument("--size", type=int, default=None, help="suite heightmap side in pixels (v1: 256)")
+    parser.add_argument("--seeds", type=int, default=None, help="suite terrains per family level (v1: 3)")
+    parser.add_argument("--samples", type=int, default=None, help="suite genomes drawn per generator (v1: 96)")
+    parser.add_argument("--families", nargs="+", default=None, help="suite families to build (default: all of the "
+                        "version's; smoke: flat stairs_up gaps)")
+    parser.add_argument("--generators", nargs="*", default=None, help="generators to sample (default: the version's "
+                        "five; smoke: perlin)")
+    parser.add_argument("--repeat", action=argparse.BooleanOptionalAction, default=None,
+                        help="walk the base policy twice and time the second, compiled call (timing.json; default: "
+                             "on in gpu, off in smoke)")
+    parser.add_argument("--attempts", type=int, default=None, help="walks per terrain in total")
+    parser.add_argument("--best", type=int, default=None, help="best walks averaged per heading")
+    parser.add_argument("--headings", type=int, choices=(1, 2, 4), default=None, help="walking headings")
+    common.add_protocol_argument(parser)
+    parser.add_argument("--backend", choices=BACKENDS, default=None,
+                        help="walker physics: auto (warp on a GPU where it imports, else jax), jax or warp")
+    parser.add_argument("--slots", type=int, default=None, help="rollout pool slots (default: all walks at once)")
+    parser.add_argument("--chunk", type=int, default=None, help="terrains per call (bounds device memory)")
+
+
+def overrides(args) -> dict:
+    from experiments import common
+
+    return dict(policy=args.policy, suite=args.suite, archive=args.archive, size=args.size, seeds=args.seeds,
+                samples=args.samples, families=args.families, generators=args.generators, repeat=args.repeat,
+                backend=args.backend, slots=args.slots, chunk=args.chunk,
+                **common.protocol_overrides(args))
+
+
+def load_policies(paths) -> list:
+    """The base policy and every folder of ``paths``, loaded; UsageError naming a folder that does not load."""
+    from experiments.common import UsageError
+    from jaxterrain import rl
+
+    out = [rl.load_policy()]
+    for p in paths or []:
+        try:
+            out.append(rl.load_policy(p))
+        except (OSError, ValueError) as err:
+            raise UsageError(f"--policy {p}: {str(err).splitlines()[0]}") from None
+    return out
+
+
+def check_terrain_flags(cfg: dict) -> None:
+    """UsageError naming the flag for an unknown suite or family, a size below 32 pixels or a missing archive."""
+    from pathlib import Path
+
+    from experiments.common import UsageError
+    from jaxterrain import suite
+
+    if cfg["suite"] not in suite.VERSIONS:
+        raise UsageError(f"--suite must be one of {', '.join(suite.VERSIONS)}; got {cfg['suite']!r}")
+    unknown = [f for f in cfg["families"] or [] if f not in suite.FAMILIES]
+    if unknown:
+        raise UsageError(f"--families: unknown {', '.join(map(repr, unknown))}; choose from "
+                         f"{', '.join(suite.FAMILIES)}")
+    if cfg["size"] is not None and cfg["size"] < 32:
+        raise UsageError(f"--size must be an integer >= 32 pixels; got {cfg['size']}")
+    if cfg["archive"] and not Path(cfg["archive"]).is_file():
+        raise UsageError(f"--archive {cfg['archive']}: no such file")
+
+
+def terrains(cfg: dict):
+    """The suite of the config, or the archive's elites as a one-family suite."""
+    from experiments.common import UsageError
+    from jaxterrain import qd, suite
+
+    if cfg["archive"]:
+        try:
+            return suite.archive_suite(qd.load(cfg["archive"]))
+        except (OSError, ValueError) as err:
+            raise UsageError(f"--archive {cfg['archive']}: {str(err).splitlines()[0]}") from None
+    try:
+        return suite.load(cfg["suite"], size=cfg["size"], seeds=cfg["seeds"], samples=cfg["samples"],
+                          families=cfg["families"], generator_names=cfg["generators"])
+    except ValueError as err:
+        raise UsageError(f"--{str(err)}") from None
+
+
+def main(args) -> int:
+    import json
+    import time
+
+    import jax
+    import numpy as np
+
+    from experiments import common
+    from jaxterrain import difficulty, suite
+    from jaxterrain.runtime import provenance
+    from jaxterrain.runtime.io import atomic_write_text
+    from jaxterrain.terrain import TerrainScale
+    from jaxterrain.walker import resolve_backend
+
+    cfg0 = {**PRESETS[args.preset or "smoke"], **{k: v for k, v in overrides(args).items() if v is not None}}
+    policies = load_policies(cfg0["policy"])  # before the run folder: a bad folder is one line, nothing left behind
+    check_terrain_flags(cfg0)
+    try:  # another robot or observation set: refused before anything is built
+        suite.check_policies(policies, (64, 64), TerrainScale())
+    except ValueError as err:
+        raise common.UsageError(str(err)) from None
+    folder, cfg = common.setup_run("evaluate", args, PRESETS, "smoke", overrides(args))
+    names = ["base"] + [str(p) for p in cfg["policy"]]
+    t0 = time.perf_counter()
+    s = terrains(cfg)
+    build_s = time.perf_counter() - t0
+    protocol = difficulty.Protocol(int(cfg["attempts"]), int(cfg["best"]), int(cfg["headings"]))
+    backend = resolve_backend(cfg["backend"])
+    print(f"{s.name}: {s.size} terrains, {len(s.families())} families; {len(policies)} policies on {backend}, "
+          f"{protocol.attempts} walks each (best {protocol.best} per heading, {protocol.headings} headings)", flush=True)
+    key = jax.random.fold_in(jax.random.key(int(cfg["seed"])), 3)
+    t1 = time.perf_counter()
+    first = suite.evaluate_policies(policies[:1], s.heightmaps, key, protocol, backend, s.scale, cfg["slots"],
+                                    cfg["chunk"])
+    first_s = time.perf_counter() - t1  # compile + walk of the base policy
+    again, walk_s = None, None
+    if cfg["repeat"]:  # the same walks again, compiled: one policy on the whole suite
+        t2 = time.perf_counter()
+        again = suite.evaluate_policies(policies[:1], s.heightmaps, key, protocol, backend, s.scale, cfg["slots"],
+                                        cfg["chunk"])
+        walk_s = time.perf_counter() - t2
+    rest = (suite.evaluate_policies(policies[1:], s.heightmaps, key, protocol, backend, s.scale, cfg["slots"],
+                                    cfg["chunk"]) if len(policies) > 1 else first[:0])
+    fitness = jax.numpy.concatenate([first, rest]) if len(policies) > 1 else first
+    suite.write_evaluation(folder, names, s, np.asarray(fitness))
+    timing = {"suite": s.name, "terrains": s.size, "policies": len(policies), "backend": backend,
+              "walks_per_terrain": protocol.attempts, "build_s": round(build_s, 3),
+              "first_call_s": round(first_s, 3), "walk_s_one_policy": None if walk_s is None else round(walk_s, 3),
+              "all_policies_s": round(time.perf_counter() - t1, 3),
+              "repeat_equal": None if again is None else bool((first == again).all()),
+              "device": provenance.device()}
+    atomic_write_text(folder / "timing.json", json.dumps(timing, indent=2) + "\n")
+    said = "" if walk_s is None else f", {walk_s:.1f} s compiled"
+    print(f"one policy on {s.size} terrains: {first_s:.1f} s the first call{said} -> {folder}", flush=True)
+    return 0

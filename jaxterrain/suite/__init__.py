@@ -1,0 +1,45 @@
+"""The held-out terrain suite and the evaluation of walkers on it (Experiment 3: do curricula generalise?).
+
+- :mod:`~jaxterrain.suite.families`: the field's sub-terrains (slopes, stairs, boxes, obstacles, stepping stones,
+  gaps, waves, roughness, flat), each at graded levels of one physical parameter;
+- :mod:`~jaxterrain.suite.heldout`: versioned suites (:func:`load`, ``"v1"``): every family at every level and
+  fresh random samples of each generator binned by descriptor distance, deterministic from :data:`SEED`;
+- :mod:`~jaxterrain.suite.evaluation`: :func:`evaluate_policies` (``[P, N]`` fitness) and :func:`passed_levels`;
+- :mod:`~jaxterrain.suite.outputs`: an evaluation's files (CSV, Markdown, figures).
+
+    from jaxterrain import rl, suite
+    s = suite.load("v1")
+    fitness = suite.evaluate_policies([rl.load_policy()], s.heightmaps, jax.random.key(0))   # [1, N]
+    suite.passed_levels(fitness[0], s)
+"""
+
+from jaxterrain.suite.evaluation import THRESHOLD, check_policies, evaluate_policies, level_fitness, passed_levels
+from jaxterrain.suite.families import FAMILIES, START_STRIP, Family, build_terrain, edge_distance, family_names
+from jaxterrain.suite.heldout import GENERATORS, LEVELS, SEED, VERSIONS, Suite, archive_suite, descriptor_levels, load
+from jaxterrain.suite.outputs import level_table, plot_levels, plot_suite, write_evaluation
+
+__all__ = [
+    "FAMILIES",
+    "START_STRIP",
+    "Family",
+    "build_terrain",
+    "edge_distance",
+    "family_names",
+    "GENERATORS",
+    "LEVELS",
+    "SEED",
+    "VERSIONS",
+    "Suite",
+    "descriptor_levels",
+    "load",
+    "archive_suite",
+    "write_evaluation",
+    "level_table",
+    "plot_levels",
+    "plot_suite",
+    "THRESHOLD",
+    "check_policies",
+    "evaluate_policies",
+    "level_fitness",
+    "passed_levels",
+]

@@ -1,0 +1,98 @@
+"""Walkers on terrains they never saw: the fitness of policies on a held-out suite (or any heightmaps), and the
+highest level of each family they pass.
+
+    fitness = evaluate_policies([rl.load_policy(), rl.load_policy(run / "policies/trial_0")], suite.heightmaps, key)
+    levels = passed_levels(fitness[1], suite)          # {family: highest level passed at fitness >= 0.9, or -1}
+
+Fitness is :func:`jaxterrain.difficulty.evaluate`'s (the walker's normalised distance under a
+:class:`~jaxterrain.difficulty.Protocol`, :data:`~jaxterrain.difficulty.HEADINGS` by default), each policy walking
+as it was trained: its own contact solver (``config.json``'s ``walker_config``) and the same env otherwise. The
+policies' weights are data to ONE compiled program per walker config, so ten policies of one robot compile once;
+every policy walks with the same key (the same start poses and noise: common random numbers, so differences between
+policies are the policies').
+"""
+
+from __future__ import annotations
+
+from typing import Callable, Sequence
+
+import jax
+import numpy as np
+
+from jaxterrain import difficulty
+from jaxterrain.difficulty import HEADINGS, Protocol
+from jaxterrain.rl.checkpoint import policy_fn
+from jaxterrain.suite.heldout import Suite
+from jaxterrain.terrain import TerrainScale
+from jaxterrain.walker.layout import make_env
+
+__all__ = ["THRESHOLD", "check_policies", "evaluate_policies", "level_fitness", "passed_levels"]
+
+THRESHOLD = 0.9
+"""A level is passed when the mean fitness of its terrains reaches this (the paper's traversability threshold)."""
+
+
+def _name(policy) -> str:
+    return str(getattr(policy, "path", None) or "the policy")
+
+
+def check_policies(policies: Sequence[Callable], shape: tuple[int, int], scale: TerrainScale,
+                   backend: str = "jax") -> list:
+    """Each policy's walker config for terrains of ``shape``, after checking that it fits the walker: loaded by
+    ``rl.load_policy`` (it carries ``params``, ``normaliser``, ``config``), with the env's observation and action
+    sizes. ValueError naming the policy's folder otherwise (one line)."""
+    configs = []
+    for p in policies:
+        if not all(hasattr(p, a) for a in ("params", "normaliser", "config", "observation_size", "action_size")):
+            raise ValueError(f"policy {_name(p)}: not a policy loaded by rl.load_policy (it needs its weights)")
+        cfg = difficulty.default_env_config(tuple(shape), scale, p, backend)
+        env = make_env(cfg)
+        if (int(p.observation_size), int(p.action_size)) != (env.observation_size, env.action_size):
+            raise ValueError(f"policy {_name(p)}: observations {p.observation_size} / actions {p.action_size}, but "
+                             f"this walker has {env.observation_size} / {env.action_size} (another robot or "
+                             f"observation set)")
+        configs.append(cfg)
+    return configs
+
+
+def evaluate_policies(policies: Sequence[Callable], heightmaps, key: jax.Array, protocol: Protocol = HEADINGS,
+                      backend: str = "jax", scale: TerrainScale | None = None, slots: int | None = None,
+                      chunk: int | None = None) -> np.ndarray:
+    """Fitness ``[P, N]`` float32 in [0, 1] of ``P`` policies on ``heightmaps`` [N, H, W] in [0, 1].
+
+    ``protocol``: the walks (default :data:`HEADINGS`: 20 in each of 4 headings, best 5 per heading, mean over
+    headings); ``backend``: ``"jax"`` (MJX) or ``"warp"`` (MuJoCo Warp on tiles); ``slots`` / ``chunk``: a rollout
+    pool and terrains per call (:func:`jaxterrain.difficulty.evaluate`), to bound device memory on large suites.
+    Every policy walks with ``key``."""
+    h = difficulty.validate_heightmaps(heightmaps)
+    scale = TerrainScale() if scale is None else scale
+    configs = check_policies(policies, tuple(h.shape[1:]), scale, backend)
+    out = []
+    for p, cfg in zip(policies, configs):
+        apply = policy_fn(p.config, int(p.action_size))  # weights as data: one program per walker config
+        out.append(np.asarray(difficulty.evaluate(h, key, policy=apply, policy_params=(p.params, p.normaliser),
+                                                  env_config=cfg, protocol=protocol, slots=slots, chunk=chunk)))
+    return np.stack(out).astype(np.float32)
+
+
+def level_fitness(fitness, suite: Suite) -> dict[str, np.ndarray]:
+    """``{family: [levels] float64}``: the mean fitness of each level's terrains (NaN for a level the suite lacks,
+    e.g. a generator sample band no random genome reached). ``fitness``: [N], one policy's."""
+    f = np.asarray(fitness, np.float64)
+    out = {}
+    for fam in suite.families():
+        rows = suite.family == fam
+        levels = int(suite.level[rows].max()) + 1
+        out[fam] = np.array([f[rows & (suite.level == lv)].mean() if np.any(rows & (suite.level == lv)) else np.nan
+                             for lv in range(levels)])
+    return out
+
+
+def passed_levels(fitness, suite: Suite, threshold: float = THRESHOLD) -> dict[str, int]:
+    """``{family: the highest level whose mean fitness is >= threshold}`` (-1: none). ``fitness``: [N], one
+    policy's."""
+    out = {}
+    for fam, per_level in level_fitness(fitness, suite).items():
+        ok = np.flatnonzero(np.nan_to_num(per_level, nan=-1.0) >= threshold)
+        out[fam] = int(ok.max()) if ok.size else -1
+    return out

@@ -1,0 +1,193 @@
+"""Held-out terrain families: the field's sub-terrains (legged_gym's ``terrain.py``, Isaac Lab's ``terrains/``), each
+at graded levels of one physical parameter, as heightmaps the walker walks like any other.
+
+A family builds one heightmap from ``(value, size, scale, rng)``: ``value`` in the family's unit (a slope's grade,
+a step's height in metres, ...), ``size`` x ``size`` pixels of ``scale.cell_size`` metres, heights in metres divided
+by ``scale.height`` and clipped to [0, 1] (so nothing is taller than ``scale.height``, 1 m by default), and ``rng``
+a ``numpy.random.Generator`` for the families with random parts. Every family keeps a flat strip of
+:data:`START_STRIP` metres along each edge, where the walker starts (``WalkerConfig.start_margin`` = 0.5 m from the
+edge), and is laid out around the map's centre, so that a walk along +x crosses it and the four headings of
+``difficulty.HEADINGS`` (the map turned by 90 degrees) meet the same terrain.
+
+``d`` below is a point's distance in metres to the nearest map edge (0 at the edge, ``L / 2`` at the centre of a
+map ``L = (size - 1) * cell_size`` wide): pyramids rise with ``d``, rings are lines of constant ``d``.
+
+| family | value (level 0 -> 9) | shape |
+| --- | --- | --- |
+| ``slope_up`` | grade 0.05 -> 0.50 | a pyramid rising at that grade to a 1 m plateau |
+| ``slope_down`` | grade 0.05 -> 0.50 | the same, inverted: down into a pit |
+| ``stairs_up`` | step 0.03 -> 0.21 m | a pyramid of 0.31 m treads up to 1 m (legged_gym: 0.05 -> 0.23 m) |
+| ``stairs_down`` | step 0.03 -> 0.21 m | the same, inverted |
+| ``boxes`` | height 0.02 -> 0.20 m | a grid of 0.4 m cells, each at a uniform random height in [0, value] |
+| ``obstacles`` | height 0.03 -> 0.25 m | 40 random rectangles of 0.3 - 1.0 m, each +- value from the ground |
+| ``stepping_stones`` | gap 0.05 -> 0.50 m | 0.6 m stones on a grid with gaps of that width, 0.5 m deep |
+| ``gaps`` | width 0.05 -> 0.60 m | square trenches around the centre every 1.2 m, 0.5 m deep |
+| ``waves`` | amplitude 0.02 -> 0.30 m | ``value * (sin(2 pi x / 2 m) + sin(2 pi y / 2 m)) / 2`` |
+| ``rough`` | amplitude 0.01 -> 0.10 m | uniform noise in [-value, value] on 0.12 m blocks |
+| ``flat`` | - | flat ground (one level) |
+"""
+
+from __future__ import annotations
+
+from typing import Callable, NamedTuple
+
+import numpy as np
+
+from jaxterrain.terrain import TerrainScale, validate_scale
+
+__all__ = ["START_STRIP", "Family", "FAMILIES", "family_names", "build_terrain", "edge_distance"]
+
+START_STRIP = 1.0
+"""Metres of flat ground along every edge (the walker spawns 0.5 m from its edge)."""
+
+TREAD = 0.31  # legged_gym's stair tread (m)
+TOP = 1.0  # metres: the plateau of the pyramids (the default TerrainScale's full height)
+DEEP = 0.5  # metres: the depth of stepping-stone gaps and trenches (the walker cannot climb out)
+
+
+class Family(NamedTuple):
+    """A terrain family: ``build(value, size, scale, rng) -> [size, size]`` metres, the parameter's ``unit``, its
+    values at ``levels`` graded levels from ``lo`` (easiest) to ``hi`` (hardest), evenly spaced."""
+
+    build: Callable[..., np.ndarray]
+    unit: str
+    lo: float
+    hi: float
+    levels: int = 10
+
+    def values(self) -> np.ndarray:
+        """[levels] float64: the parameter at each level, easiest first."""
+        return np.linspace(self.lo, self.hi, self.levels)
+
+
+def _axes(size: int, scale: TerrainScale) -> tuple[np.ndarray, np.ndarray]:
+    """``(x, y)`` [size, size] metres, centred on the map (columns along +x, rows along +y, as the hfield)."""
+    half = (size - 1) * float(scale.cell_size) / 2.0
+    c = np.linspace(-half, half, size)
+    return np.meshgrid(c, c)
+
+
+def edge_distance(size: int, scale: TerrainScale) -> np.ndarray:
+    """``[size, size]`` metres from each pixel to the nearest map edge."""
+    x, y = _axes(size, scale)
+    half = (size - 1) * float(scale.cell_size) / 2.0
+    return half - np.maximum(np.abs(x), np.abs(y))
+
+
+def _inner(size: int, scale: TerrainScale) -> np.ndarray:
+    """``[size, size]`` metres into the terrain beyond the flat start strip (0 on the strip)."""
+    return np.maximum(edge_distance(size, scale) - START_STRIP, 0.0)
+
+
+def _strip(size: int, scale: TerrainScale) -> np.ndarray:
+    """``[size, size]`` bool: the flat start strip."""
+    return edge_distance(size, scale) < START_STRIP
+
+
+def _slope(grade, size, scale, rng):
+    return np.minimum(TOP, grade * _inner(size, scale))
+
+
+def _stairs(step, size, scale, rng):
+    inner = _inner(size, scale)
+    steps = np.where(inner > 0, np.floor(inner / TREAD) + 1, 0)
+    return np.minimum(steps * step, np.floor(TOP / step) * step)
+
+
+def _inverted(build):
+    def inverted(value, size, scale, rng):
+        h = build(value, size, scale, rng)
+        return h.max() - h
+
+    return inverted
+
+
+def _boxes(height, size, scale, rng, cell: float = 0.4):
+    x, y = _axes(size, scale)
+    half = x.max()
+    ix, iy = np.floor((x + half) / cell).astype(int), np.floor((y + half) / cell).astype(int)
+    n = int(ix.max()) + 1
+    heights = rng.uniform(0.0, height, (n, n))
+    return np.where(_strip(size, scale), 0.0, heights[iy, ix])
+
+
+def _obstacles(height, size, scale, rng, count: int = 40, base: float = 0.3):
+    x, y = _axes(size, scale)
+    half = x.max()
+    h = np.full((size, size), base)
+    for _ in range(count):
+        w, d = rng.uniform(0.3, 1.0, 2)
+        cx, cy = rng.uniform(-half, half, 2)
+        box = (np.abs(x - cx) < w / 2) & (np.abs(y - cy) < d / 2)
+        h = np.where(box, base + rng.choice((-1.0, 1.0)) * height, h)
+    return np.where(_strip(size, scale), base, h)
+
+
+def _stepping_stones(gap, size, scale, rng, stone: float = 0.6):
+    x, y = _axes(size, scale)
+    pitch = stone + gap
+    ox, oy = rng.uniform(0.0, pitch, 2)
+    on = ((x + ox) % pitch < stone) & ((y + oy) % pitch < stone)
+    return np.where(on | _strip(size, scale), DEEP, 0.0)
+
+
+def _gaps(width, size, scale, rng, every: float = 1.2):
+    inner = _inner(size, scale)
+    trench = (inner > 0.3) & ((inner - 0.3) % every < width)
+    return np.where(trench, 0.0, DEEP)
+
+
+def _waves(amplitude, size, scale, rng, wavelength: float = 2.0, base: float = 0.5):
+    x, y = _axes(size, scale)
+    px, py = rng.uniform(0.0, 2 * np.pi, 2)
+    wave = (np.sin(2 * np.pi * x / wavelength + px) + np.sin(2 * np.pi * y / wavelength + py)) / 2
+    ramp = np.clip(_inner(size, scale) / 1.0, 0.0, 1.0)  # fades in over the first metre past the strip
+    return base + amplitude * wave * ramp
+
+
+def _rough(amplitude, size, scale, rng, block: float = 0.12, base: float = 0.5):
+    x, y = _axes(size, scale)
+    half = x.max()
+    ix, iy = np.floor((x + half) / block).astype(int), np.floor((y + half) / block).astype(int)
+    n = int(ix.max()) + 1
+    noise = rng.uniform(-amplitude, amplitude, (n, n))
+    return np.where(_strip(size, scale), base, base + noise[iy, ix])
+
+
+def _flat(value, size, scale, rng):
+    return np.zeros((size, size))
+
+
+FAMILIES: dict[str, Family] = {
+    "flat": Family(_flat, "-", 0.0, 0.0, levels=1),
+    "slope_up": Family(_slope, "grade", 0.05, 0.50),
+    "slope_down": Family(_inverted(_slope), "grade", 0.05, 0.50),
+    "stairs_up": Family(_stairs, "m step", 0.03, 0.21),
+    "stairs_down": Family(_inverted(_stairs), "m step", 0.03, 0.21),
+    "boxes": Family(_boxes, "m height", 0.02, 0.20),
+    "obstacles": Family(_obstacles, "m height", 0.03, 0.25),
+    "stepping_stones": Family(_stepping_stones, "m gap", 0.05, 0.50),
+    "gaps": Family(_gaps, "m width", 0.05, 0.60),
+    "waves": Family(_waves, "m amplitude", 0.02, 0.30),
+    "rough": Family(_rough, "m amplitude", 0.01, 0.10),
+}
+"""The held-out families by name, in the order tables list them."""
+
+
+def family_names() -> tuple[str, ...]:
+    """The family names, in table order."""
+    return tuple(FAMILIES)
+
+
+def build_terrain(name: str, value: float, size: int = 256, scale: TerrainScale = TerrainScale(),
+                  rng: np.random.Generator | None = None) -> np.ndarray:
+    """One heightmap ``[size, size]`` float32 in [0, 1] of family ``name`` at parameter ``value`` (metres / scale
+    height, clipped). ValueError naming the parameter for an unknown family or a size below 16 pixels."""
+    if name not in FAMILIES:
+        raise ValueError(f"family must be one of {', '.join(FAMILIES)}; got {name!r}")
+    if not isinstance(size, (int, np.integer)) or isinstance(size, bool) or size < 16:
+        raise ValueError(f"size must be an integer >= 16 pixels; got {size!r}")
+    scale = validate_scale(scale)
+    rng = np.random.default_rng(0) if rng is None else rng
+    metres = FAMILIES[name].build(float(value), int(size), scale, rng)
+    return np.clip(metres / float(scale.height), 0.0, 1.0).astype(np.float32)

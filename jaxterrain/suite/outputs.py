@@ -1,0 +1,107 @@
+"""An evaluation's files: ``fitness.csv`` (one row per policy and terrain), ``levels.csv`` (the highest level of each
+family a policy passes, and its mean fitness per level), ``summary.md``, ``levels.png`` (policies x families,
+coloured by the highest level passed) and ``suite.png`` (what the families look like), all written atomically."""
+
+from __future__ import annotations
+
+import csv
+import io
+from pathlib import Path
+from typing import Sequence
+
+import numpy as np
+from matplotlib.figure import Figure
+
+from jaxterrain.runtime.io import atomic_write_text, save_figure
+from jaxterrain.suite.evaluation import THRESHOLD, level_fitness, passed_levels
+from jaxterrain.suite.heldout import Suite
+
+__all__ = ["write_evaluation", "level_table", "plot_levels", "plot_suite"]
+
+
+def _csv(path: Path, header: list, rows: list) -> None:
+    buf = io.StringIO()
+    w = csv.writer(buf)
+    w.writerow(header)
+    w.writerows(rows)
+    atomic_write_text(path, buf.getvalue())
+
+
+def level_table(names: Sequence[str], suite: Suite, fitness: np.ndarray, threshold: float = THRESHOLD) -> list:
+    """``(policy, family, highest level passed, mean fitness, [mean fitness per level])`` per policy and family."""
+    rows = []
+    for name, f in zip(names, fitness):
+        per = level_fitness(f, suite)
+        passed = passed_levels(f, suite, threshold)
+        for fam in suite.families():
+            rows.append((name, fam, passed[fam], float(np.mean(f[suite.family == fam])), per[fam]))
+    return rows
+
+
+def plot_levels(ax, names: Sequence[str], families: Sequence[str], passed: np.ndarray, title: str = "") -> None:
+    """``passed`` [P, F] int (-1: none) as a grid: rows the policies, columns the families, coloured and labelled by
+    the highest level passed."""
+    im = ax.imshow(passed, cmap="viridis", vmin=-1, vmax=9, aspect="auto")
+    for (i, j), v in np.ndenumerate(passed):
+        ax.text(j, i, "-" if v < 0 else str(v), ha="center", va="center", fontsize=7,
+                color="white" if v < 4 else "black")
+    ax.set_xticks(range(len(families)), families, rotation=60, ha="right", fontsize=7)
+    ax.set_yticks(range(len(names)), [n if len(n) < 40 else "..." + n[-37:] for n in names], fontsize=7)
+    ax.set_title(title, fontsize=9)
+    ax.figure.colorbar(im, ax=ax, label="highest level passed")
+
+
+def plot_suite(suite: Suite, levels: Sequence[int] = (0, 4, 9)) -> Figure:
+    """A figure of every family: its seed-0 terrain at each of ``levels`` (the nearest it has), heights in metres."""
+    fams = suite.families()
+    fig = Figure(figsize=(1.6 * len(levels), 1.5 * len(fams)))
+    axes = fig.subplots(len(fams), len(levels), squeeze=False)
+    for r, fam in enumerate(fams):
+        rows = np.flatnonzero(suite.family == fam)
+        for c, lv in enumerate(levels):
+            ax = axes[r, c]
+            ax.set_xticks([]), ax.set_yticks([])
+            have = np.unique(suite.level[rows])
+            k = int(have[np.argmin(np.abs(have - lv))])
+            i = rows[(suite.level[rows] == k) & (suite.seed[rows] == suite.seed[rows][suite.level[rows] == k].min())][0]
+            ax.imshow(suite.heightmaps[i] * suite.scale.height, cmap="terrain", vmin=0.0, vmax=suite.scale.height,
+                      origin="lower")
+            unit = suite.unit[fam]
+            ax.set_title(f"{fam} L{k}\n{suite.value[i]:.3g} {unit}" if unit != "-" else fam, fontsize=6)
+    fig.tight_layout()
+    return fig
+
+
+def write_evaluation(folder: Path, names: Sequence[str], suite: Suite, fitness: np.ndarray,
+                     threshold: float = THRESHOLD) -> dict:
+    """Write the evaluation of ``names`` (one per row of ``fitness`` [P, N]) on ``suite`` into ``folder``; returns
+    ``{policy: {family: highest level passed}}``."""
+    folder = Path(folder)
+    fitness = np.asarray(fitness, np.float64)
+    rows = [(n, fam, lv, s, f"{v:.4g}", unit, f"{f:.4f}")
+            for n, fit in zip(names, fitness) for (fam, lv, s, v, unit), f in zip(suite.rows(), fit)]
+    _csv(folder / "fitness.csv", ["policy", "family", "level", "seed", "value", "unit", "fitness"], rows)
+    table = level_table(names, suite, fitness, threshold)
+    _csv(folder / "levels.csv", ["policy", "family", "highest_level_passed", "mean_fitness", "per_level_fitness"],
+         [(n, fam, lv, f"{m:.4f}", " ".join("nan" if np.isnan(x) else f"{x:.3f}" for x in per))
+          for n, fam, lv, m, per in table])
+    fams = suite.families()
+    passed = np.array([[lv for n2, f2, lv, _, _ in table if n2 == n and f2 == fam] for n in names for fam in fams],
+                      np.int64).reshape(len(names), len(fams))
+    means = {(n, fam): m for n, fam, _, m, _ in table}
+    head = "| policy | " + " | ".join(fams) + " | mean |\n|---|" + "---|" * (len(fams) + 1) + "\n"
+    body = "".join(f"| {n} | " + " | ".join(f"{'-' if passed[i, j] < 0 else passed[i, j]} ({means[(n, fam)]:.2f})"
+                                            for j, fam in enumerate(fams))
+                   + f" | {fitness[i].mean():.3f} |\n" for i, n in enumerate(names))
+    text = (f"# Held-out evaluation: {suite.name}\n\n{suite.size} terrains; each cell: the highest level passed "
+            f"(mean fitness of its terrains >= {threshold}; - for none) and, in brackets, the family's mean "
+            f"fitness.\n\n" + head + body)
+    if suite.missing:
+        text += "\nLeft out: " + "; ".join(f"{g} ({why})" for g, why in suite.missing.items()) + "\n"
+    atomic_write_text(folder / "summary.md", text)
+    fig = Figure(figsize=(max(6.0, 3.0 + 0.55 * len(fams)), 1.6 + 0.35 * len(names)))
+    plot_levels(fig.subplots(), names, fams, passed, f"{suite.name}: highest level at mean fitness >= {threshold}")
+    fig.tight_layout()
+    save_figure(fig, folder / "levels.png")
+    save_figure(plot_suite(suite), folder / "suite.png", dpi=90)
+    return {n: dict(zip(fams, map(int, passed[i]))) for i, n in enumerate(names)}

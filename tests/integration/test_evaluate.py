@@ -1,0 +1,94 @@
+"""``python -m experiments evaluate`` at its smoke size on a CPU: the base policy, a copy of it and a walker with no
+policy (zero weights) on three suite families; the files it writes agree with each other and with the walks, and a
+policy for another observation set is refused before anything is written."""
+
+from __future__ import annotations
+
+import csv
+import json
+import shutil
+
+import jax
+import numpy as np
+import pytest
+
+from jaxterrain import rl, suite
+from jaxterrain.rl import networks as nets
+
+
+def cli(*argv):
+    from experiments.__main__ import main
+
+    return main(list(argv))
+
+
+@pytest.fixture(scope="module")
+def policies(tmp_path_factory):
+    """``(copy of the base policy, a walker whose policy net is all zeros, a policy for 53 observations)``."""
+    root = tmp_path_factory.mktemp("policies")
+    base = rl.load_policy()
+    copy = root / "copy"
+    shutil.copytree(rl.BASE_POLICY_DIR, copy)
+    still = rl.save_policy(root / "still", {**base.params, "policy": jax.tree.map(np.zeros_like, base.params["policy"])},
+                           base.normaliser, base.config, base.observation_size, base.action_size,
+                           extra={"walker_config": base.meta["walker_config"]})
+    other = rl.save_policy(root / "other", nets.init_params(jax.random.key(0), base.config, 53, base.action_size),
+                           nets.init_stats(53), base.config, 53, base.action_size)
+    return copy, still, other
+
+
+@pytest.fixture(scope="module")
+def run(tmp_path_factory, policies):
+    copy, still, _ = policies
+    out = tmp_path_factory.mktemp("evaluate") / "run"
+    assert cli("evaluate", "--preset", "smoke", "--families", "flat", "gaps", "--generators", "--policy", str(copy),
+               str(still), "--out", str(out)) == 0
+    return out
+
+
+def read(path):
+    with open(path) as f:
+        return list(csv.DictReader(f))
+
+
+def test_every_policy_walks_every_terrain_with_the_same_key(run, policies):
+    rows = read(run / "fitness.csv")
+    names = ["base", str(policies[0]), str(policies[1])]
+    assert [r["policy"] for r in rows[:: len(rows) // 3]] == names
+    fit = np.array([float(r["fitness"]) for r in rows]).reshape(3, -1)
+    assert fit.shape[1] == 1 + 10  # flat, then gaps at levels 0-9, one terrain each
+    np.testing.assert_array_equal(fit[0], fit[1])  # the same weights, the same key: the same walks
+    flat = [i for i, r in enumerate(rows[: fit.shape[1]]) if r["family"] == "flat"]
+    assert fit[0, flat] == pytest.approx(1.0) and fit[2, flat][0] < 0.5  # the walker without a policy falls
+    assert [r["unit"] for r in rows[1:11]] == ["m width"] * 10
+    np.testing.assert_allclose([float(r["value"]) for r in rows[1:11]], suite.FAMILIES["gaps"].values(), rtol=1e-3)
+
+
+def test_levels_and_summary_follow_from_the_fitness(run):
+    rows = read(run / "fitness.csv")
+    levels = read(run / "levels.csv")
+    for lv in levels:
+        mine = [r for r in rows if r["policy"] == lv["policy"] and r["family"] == lv["family"]]
+        per = {}
+        for r in mine:
+            per.setdefault(int(r["level"]), []).append(float(r["fitness"]))
+        passed = [k for k, v in per.items() if np.mean(v) >= 0.9]
+        assert int(lv["highest_level_passed"]) == (max(passed) if passed else -1)
+        assert float(lv["mean_fitness"]) == pytest.approx(np.mean([float(r["fitness"]) for r in mine]), abs=1e-4)
+    summary = (run / "summary.md").read_text()
+    assert summary.count("\n| ") == 4 and "| flat | gaps | mean |" in summary
+    assert (run / "levels.png").stat().st_size > 1000 and (run / "suite.png").stat().st_size > 1000
+    timing = json.loads((run / "timing.json").read_text())
+    assert timing["terrains"] == 11 and timing["policies"] == 3 and timing["walk_s_one_policy"] is None
+
+
+def test_a_policy_for_another_robot_is_refused_before_anything_is_written(tmp_path, policies, capsys):
+    with pytest.raises(SystemExit) as stop:
+        cli("evaluate", "--preset", "smoke", "--policy", str(policies[2]), "--out", str(tmp_path / "x"))
+    err = capsys.readouterr().err.strip().splitlines()
+    assert stop.value.code == 2 and len(err) == 1
+    assert str(policies[2]) in err[0] and "observations 53" in err[0]
+    assert not (tmp_path / "x").exists()
+    with pytest.raises(ValueError, match="not a policy loaded by rl.load_policy"):
+        suite.check_policies([lambda obs: obs], (64, 64), suite.load("v1", size=64, families=("flat",),
+                                                                     generator_names=()).scale)
