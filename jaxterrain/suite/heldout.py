@@ -145,14 +145,14 @@ def load(name: str = "v1", *, size: int | None = None, seeds: int | None = None,
         try:
             gen = generators.get(g, size=size)
             genomes = gen.sample(jax.random.fold_in(jax.random.key(SEED), g_index), samples)
-            hm = np.asarray(gen.render(genomes), np.float32)
+            hm = np.clip(np.asarray(gen.render(genomes), np.float32), 0.0, 1.0)  # float rounding at the ends
         except (ValueError, FileNotFoundError, OSError) as err:
             missing[g] = str(err).splitlines()[0]
             continue
         lv, dist = descriptor_levels(hm)
         for k in range(LEVELS):  # the first `seeds` samples of each band, in draw order
             for s, i in enumerate(np.flatnonzero(lv == k)[:seeds]):
-                maps.append(np.clip(hm[i], 0.0, 1.0)), family.append(f"gen:{g}"), level.append(k)
+                maps.append(hm[i]), family.append(f"gen:{g}"), level.append(k)
                 seed.append(s), value.append(float(dist[i]))
         unit[f"gen:{g}"] = "cells"
     label = name if not custom else (f"{name}-custom(size={size}, seeds={seeds}, samples={samples}, "
