@@ -15,12 +15,33 @@ the ``learn`` command is a thin layer over it).
 """
 
 from jaxterrain.curriculum import gp, outputs, runner, walker
-from jaxterrain.curriculum.analysis import (MILESTONES, PAPER_TABLE2, first_epochs, format_milestone, hardest_curve,
-                                            milestone_summary, terrain_runs)
-from jaxterrain.curriculum.config import SELECTORS, CurriculumConfig, validate_config
-from jaxterrain.curriculum.core import (Harness, History, State, gp_params, init, init_trials, live_rows,
-                                        make_runner, removal_mask, roughness_sequence, run_live, run_trials, select,
-                                        step, terrain_hardness)
+from jaxterrain.curriculum.analysis import (
+    MILESTONES,
+    PAPER_TABLE2,
+    first_epochs,
+    format_milestone,
+    hardest_curve,
+    milestone_summary,
+    terrain_runs,
+)
+from jaxterrain.curriculum.config import CurriculumConfig, SELECTORS, validate_config
+from jaxterrain.curriculum.core import (
+    Harness,
+    History,
+    State,
+    gp_params,
+    init,
+    init_trials,
+    live_rows,
+    make_runner,
+    removal_mask,
+    roughness_sequence,
+    run_live,
+    run_trials,
+    select,
+    step,
+    terrain_hardness,
+)
 
 __all__ = [
     "CurriculumConfig", "Harness", "History", "MILESTONES", "PAPER_TABLE2", "SELECTORS", "State", "first_epochs",

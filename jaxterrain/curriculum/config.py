@@ -74,10 +74,9 @@ from __future__ import annotations
 import math
 from typing import NamedTuple, Optional
 
-from jaxterrain.runtime.validation import int_at_least, known_fields, one_of, walks
-from jaxterrain.rl.config import PPOConfig
-from jaxterrain.rl.config import validate_config as validate_ppo_config
 from jaxterrain.difficulty import Protocol
+from jaxterrain.rl.config import PPOConfig, validate_config as validate_ppo_config
+from jaxterrain.runtime.validation import int_at_least, known_fields, one_of, walks
 
 __all__ = ["CurriculumConfig", "validate_config", "SELECTORS", "FINE_TUNED", "FINE_TUNING"]
 

@@ -44,9 +44,9 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from jaxterrain.qd import GRID_BINS, MAX_DISTANCE_50, TerrainBank
 from jaxterrain.curriculum import gp
 from jaxterrain.curriculum.config import CurriculumConfig
+from jaxterrain.qd import GRID_BINS, MAX_DISTANCE_50, TerrainBank
 from jaxterrain.runtime import sharding
 
 __all__ = ["Harness", "History", "State", "init", "step", "init_trials", "run_trials", "make_runner", "live_rows",

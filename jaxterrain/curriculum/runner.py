@@ -26,15 +26,15 @@ import jax.numpy as jnp
 import numpy as np
 
 from jaxterrain.curriculum import walker as W
-from jaxterrain.curriculum.config import FINE_TUNED, CurriculumConfig, validate_config
+from jaxterrain.curriculum.config import CurriculumConfig, FINE_TUNED, validate_config
 from jaxterrain.curriculum.core import init_trials, run_live, run_trials
 from jaxterrain.curriculum.outputs import PARTIAL, export_policies, write_outputs
 from jaxterrain.qd.archive_io import load as load_archive_file
 from jaxterrain.qd.bank import from_archive
 from jaxterrain.runtime import driver, sharding
 from jaxterrain.terrain import TerrainScale
-from jaxterrain.walker.layout import resolve_backend
 from jaxterrain.walker import tiles
+from jaxterrain.walker.layout import resolve_backend
 
 __all__ = ["BadInput", "LEGACY_TRUNCATION", "PARTIAL", "FAST_COMPILE", "PROGRAMS", "curriculum_config",
            "with_protocol", "load_archive", "archive_digest", "check_resumable", "physics_of", "walker_layout",

@@ -40,13 +40,12 @@ import jax
 import jax.numpy as jnp
 
 from jaxterrain import difficulty, rl
-
-from jaxterrain.walker.layout import make_env
 from jaxterrain.curriculum.config import CurriculumConfig
 from jaxterrain.curriculum.core import Harness
+from jaxterrain.rl import networks as nets
 from jaxterrain.terrain import TerrainScale
 from jaxterrain.walker import TILE_AXES, Tile, TileBank
-from jaxterrain.rl import networks as nets
+from jaxterrain.walker.layout import make_env
 
 __all__ = ["walker_env_config", "walker_env", "check_policy", "walker_harness", "tile_layout", "select_policy",
            "tile_distances", "start_state"]

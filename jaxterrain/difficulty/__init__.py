@@ -24,11 +24,11 @@ from jaxterrain.difficulty.evaluation import (
 )
 from jaxterrain.difficulty.fitness import FITNESSES, PROTOCOLS, difficulty_fitness, named_fitness, slope_fitness
 from jaxterrain.difficulty.protocol import (
-    HEADING_TURNS,
     HEADINGS,
+    HEADING_TURNS,
     PAPER,
-    RULES,
     Protocol,
+    RULES,
     aggregate,
     best_of,
     heading_scores,

@@ -16,10 +16,10 @@ from jaxterrain.generators._cppn_genome import (
     ACT_SINE,
     ACT_SQUARE,
     ACT_TANH,
+    CPPNGenome,
     NUM_INPUTS,
     OUTPUT,
     VALUE_LIMIT,
-    CPPNGenome,
     closure_steps,
 )
 

@@ -10,7 +10,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from jaxterrain.generators._cppn_eval import adjacency, reachability
-from jaxterrain.generators._cppn_genome import NUM_ACTIVATIONS, NUM_INPUTS, OUTPUT, CPPNConfig, CPPNGenome
+from jaxterrain.generators._cppn_genome import CPPNConfig, CPPNGenome, NUM_ACTIVATIONS, NUM_INPUTS, OUTPUT
 from jaxterrain.generators.base import PRNGKey
 
 

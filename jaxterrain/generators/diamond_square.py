@@ -50,8 +50,8 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from jaxterrain.generators.registry import register
 from jaxterrain.generators.base import Generator, spec, vector_generator
+from jaxterrain.generators.registry import register
 
 __all__ = ["DIAMOND_SQUARE_SPEC", "diamond_square_grid", "render_diamond_square", "diamond_square"]
 

@@ -35,8 +35,8 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from jaxterrain.generators.registry import register
 from jaxterrain.generators.base import Generator, spec, vector_generator
+from jaxterrain.generators.registry import register
 from jaxterrain.runtime.io import atomic_write_bytes, atomic_write_text
 
 ASSET_DIR = Path(__file__).resolve().parent.parent / "assets" / "gan"

@@ -23,10 +23,9 @@ import jax.numpy as jnp
 import numpy as np
 import optax
 
-from jaxterrain.terrain import dem
+from jaxterrain import features, generators
 from jaxterrain.generators.gan import GanConfig, count_params, init_variables, make_modules, sample_latents
-from jaxterrain import generators
-from jaxterrain import features
+from jaxterrain.terrain import dem
 
 __all__ = ["R1_EVERY", "GanTrainState", "gan_optimizer", "init_state", "make_train_step", "jitted_step",
            "jitted_samples", "wasserstein1", "quality_check", "generator_params"]

@@ -44,8 +44,8 @@ from __future__ import annotations
 import jax
 import jax.numpy as jnp
 
-from jaxterrain.generators.registry import register
 from jaxterrain.generators.base import Generator, spec, vector_generator
+from jaxterrain.generators.registry import register
 
 __all__ = ["MAX_OCTAVES", "PERLIN_SPEC", "perlin_octave", "octave_params", "render_perlin", "perlin"]
 

@@ -120,8 +120,8 @@ import jax.numpy as jnp
 import numpy as np
 
 from jaxterrain.generators import worley_pallas
-from jaxterrain.generators.registry import register
 from jaxterrain.generators.base import Generator, spec, vector_generator
+from jaxterrain.generators.registry import register
 
 __all__ = ["MAX_POINTS", "MAX_INDEX", "SELECT_OPTIONS", "DEFAULT_SELECT", "TOLERANCE", "WORLEY_SPEC",
            "feature_points", "bracket_iterations", "worley_distance", "render_worley", "repair", "check_d", "worley"]

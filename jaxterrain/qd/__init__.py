@@ -31,8 +31,8 @@ from jaxterrain.qd.archive import (
 from jaxterrain.qd.archive_io import FORMAT, VERSION, load, save
 from jaxterrain.qd.bank import TerrainBank, from_archive, to_device
 from jaxterrain.qd.config import (
-    DEFAULT_RANGES,
     Archive,
+    DEFAULT_RANGES,
     EvolveConfig,
     FitnessFn,
     PRNGKey,

@@ -18,9 +18,9 @@ from typing import NamedTuple
 import jax.numpy as jnp
 import numpy as np
 
+from jaxterrain import generators
 from jaxterrain.qd.grid import cell_bins, cell_distance
 from jaxterrain.terrain import TerrainScale, validate_scale
-from jaxterrain import generators
 
 __all__ = ["TerrainBank", "from_archive", "to_device"]
 

@@ -31,11 +31,8 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from jaxterrain import difficulty, features
-from jaxterrain import generators as _generators
-from jaxterrain.qd import config as A
-from jaxterrain.qd import map_elites as ME
-from jaxterrain.qd import scoring as S
+from jaxterrain import difficulty, features, generators as _generators
+from jaxterrain.qd import config as A, map_elites as ME, scoring as S
 from jaxterrain.qd.archive import render_elites
 from jaxterrain.qd.grid import centroids_for
 from jaxterrain.runtime import driver, sharding

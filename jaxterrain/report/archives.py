@@ -18,8 +18,7 @@ from typing import NamedTuple, Sequence
 
 import numpy as np
 
-from jaxterrain import generators
-from jaxterrain import qd as A
+from jaxterrain import generators, qd as A
 from jaxterrain.qd.grid import cell_bins
 
 __all__ = ["ArchiveCell", "ArchiveView", "view", "elite_heightmaps", "pick_cells", "thumbnail", "heatmap_png"]

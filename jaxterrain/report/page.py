@@ -26,7 +26,10 @@ from typing import Callable, NamedTuple, Optional, Sequence
 
 import numpy as np
 
+from jaxterrain import qd as A
+from jaxterrain.report import archives as AV
 from jaxterrain.report import collect
+from jaxterrain.report import render as R
 from jaxterrain.report.heatmap import SCRIPT, CMAP, archive_html  # noqa: F401
 
 # Tables and Markdown live in jaxterrain.report.markdown; these names stay importable from here.
@@ -42,11 +45,7 @@ from jaxterrain.report.markdown import (  # noqa: F401
     markdown_to_html,
     read_table,
 )
-from jaxterrain.runtime.io import atomic_write_text
-from jaxterrain import qd as A
-from jaxterrain.report import archives as AV
-from jaxterrain.report import render as R
-from jaxterrain.runtime.io import atomic_write_bytes
+from jaxterrain.runtime.io import atomic_write_bytes, atomic_write_text
 
 __all__ = ["write_report", "markdown_to_html", "read_table", "MAX_ROWS"]
 

@@ -40,10 +40,8 @@ from typing import Any, Callable, NamedTuple, Optional
 import numpy as np
 
 from jaxterrain import difficulty
-
-from jaxterrain.walker.layout import make_env
-from jaxterrain.walker.layout import sized_env, terrain_batch
 from jaxterrain.terrain import TerrainScale, validate_scale
+from jaxterrain.walker.layout import make_env, sized_env, terrain_batch
 from jaxterrain.walker.model import FLOOR_GEOM, build_spec, metres_to_hfield
 
 __all__ = ["Walk", "Video", "make_videos", "setup_gl", "gl_backend", "gl_status", "backend_available",

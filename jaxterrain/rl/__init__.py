@@ -9,13 +9,33 @@ humanoid recipe). Public API::
     gae, ppo_loss, save_checkpoint, load_checkpoint, save_policy, load_policy
 """
 
-from jaxterrain.rl.checkpoint import (BASE_POLICY_DIR, checkpoint_metadata, load_checkpoint, load_policy, policy_fn,
-                                      save_checkpoint, save_policy)
+from jaxterrain.rl.checkpoint import (
+    BASE_POLICY_DIR,
+    checkpoint_metadata,
+    load_checkpoint,
+    load_policy,
+    policy_fn,
+    save_checkpoint,
+    save_policy,
+)
 from jaxterrain.rl.config import PPOConfig, validate_config
 from jaxterrain.rl.losses import gae, ppo_loss
 from jaxterrain.rl.networks import RunningStats, deterministic_action, init_stats, normalize, update_stats
-from jaxterrain.rl.ppo import (EpisodeStats, Ride, TrainState, Transition, init, loss_fn, make_optimizer, make_train,
-                               raw_key, reset_envs, ride_updates, run_updates, update)
+from jaxterrain.rl.ppo import (
+    EpisodeStats,
+    Ride,
+    TrainState,
+    Transition,
+    init,
+    loss_fn,
+    make_optimizer,
+    make_train,
+    raw_key,
+    reset_envs,
+    ride_updates,
+    run_updates,
+    update,
+)
 from jaxterrain.rl.training import Progress, chunk_fn, compiled_chunk, train
 
 __all__ = [

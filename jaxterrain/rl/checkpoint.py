@@ -24,10 +24,10 @@ import jax.numpy as jnp
 import numpy as np
 from flax import serialization
 
-from jaxterrain.runtime import driver
-from jaxterrain.runtime.io import atomic_write_bytes, atomic_write_text
 from jaxterrain.rl import networks as nets
 from jaxterrain.rl.config import PPOConfig
+from jaxterrain.runtime import driver
+from jaxterrain.runtime.io import atomic_write_bytes, atomic_write_text
 
 __all__ = ["CHECKPOINT_FORMAT", "POLICY_FORMAT", "BASE_POLICY_DIR", "save_checkpoint", "checkpoint_metadata",
            "load_checkpoint", "save_policy", "load_policy", "policy_fn"]

@@ -32,9 +32,9 @@ import optax
 from jaxterrain.rl import networks as nets
 from jaxterrain.rl.config import PPOConfig, validate_config
 from jaxterrain.rl.losses import batch_mean, gae, ppo_loss
+from jaxterrain.runtime import sharding
 from jaxterrain.walker.layout import terrain_axis
 from jaxterrain.walker.tiles import Tile
-from jaxterrain.runtime import sharding
 
 __all__ = ["EnvLike", "EpisodeStats", "TrainState", "Transition", "Ride", "raw_key", "make_optimizer",
            "per_env_mask", "init", "reset_envs", "loss_fn", "update", "run_updates", "ride_updates", "make_train"]

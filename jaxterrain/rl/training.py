@@ -15,9 +15,8 @@ import numpy as np
 
 from jaxterrain.rl.config import PPOConfig, validate_config
 from jaxterrain.rl.ppo import EnvLike, TrainState, init, raw_key, run_updates
+from jaxterrain.runtime import driver, sharding
 from jaxterrain.walker.tiles import Tile
-from jaxterrain.runtime import sharding
-from jaxterrain.runtime import driver
 
 __all__ = ["compiled_chunk", "chunk_fn", "train", "Progress"]
 

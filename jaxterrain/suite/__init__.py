@@ -14,8 +14,8 @@
 """
 
 from jaxterrain.suite.evaluation import THRESHOLD, check_policies, evaluate_policies, level_fitness, passed_levels
-from jaxterrain.suite.families import FAMILIES, START_STRIP, Family, build_terrain, edge_distance, family_names
-from jaxterrain.suite.heldout import GENERATORS, LEVELS, SEED, VERSIONS, Suite, archive_suite, descriptor_levels, load
+from jaxterrain.suite.families import FAMILIES, Family, START_STRIP, build_terrain, edge_distance, family_names
+from jaxterrain.suite.heldout import GENERATORS, LEVELS, SEED, Suite, VERSIONS, archive_suite, descriptor_levels, load
 from jaxterrain.suite.outputs import level_table, plot_levels, plot_suite, write_evaluation
 
 __all__ = [

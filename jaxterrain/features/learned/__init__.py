@@ -58,9 +58,9 @@ from jaxterrain.features.learned.data import (
 from jaxterrain.features.learned.model import (
     ASSET_DIR,
     MAP_STRIDE,
-    PATCH,
     Model,
     ModelConfig,
+    PATCH,
     PatchCNN,
     ZeroSumConv,
     apply_patches,

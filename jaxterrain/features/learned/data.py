@@ -12,12 +12,11 @@ import jax.numpy as jnp
 import numpy as np
 from jax import lax
 
+from jaxterrain import difficulty
 from jaxterrain.features.learned.model import PATCH
 from jaxterrain.terrain import TerrainScale, validate_scale
-from jaxterrain.walker.layout import sized_env, terrain_batch
-from jaxterrain import difficulty
-from jaxterrain.walker.layout import make_env
 from jaxterrain.walker import BACKENDS
+from jaxterrain.walker.layout import make_env, sized_env, terrain_batch
 
 __all__ = ["LabelConfig", "Walks", "walk_fn", "walk", "window_labels", "labelled_centres", "pixel_of",
            "extract_patches", "extract_patches_batch", "balanced_indices"]

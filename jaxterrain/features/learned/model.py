@@ -16,8 +16,8 @@ import numpy as np
 from jax import lax
 
 from jaxterrain.features import registry
-from jaxterrain.terrain import TerrainScale
 from jaxterrain.runtime.io import atomic_write_bytes, atomic_write_text
+from jaxterrain.terrain import TerrainScale
 
 __all__ = ["PATCH", "MAP_STRIDE", "ASSET_DIR", "ModelConfig", "PatchCNN", "ZeroSumConv", "init_params",
            "apply_patches", "logit_map", "traversability_map", "Model", "save", "load", "shipped", "make_descriptor",

@@ -8,7 +8,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from jaxterrain.features.learned.model import PATCH, ModelConfig, apply_patches, init_params
+from jaxterrain.features.learned.model import ModelConfig, PATCH, apply_patches, init_params
 
 __all__ = ["TrainConfig", "train", "roc_auc", "accuracy"]
 
