@@ -163,13 +163,15 @@ def load(name: str = "v1", *, size: int | None = None, seeds: int | None = None,
 
 def archive_suite(archive, scale: TerrainScale | None = None) -> Suite:
     """An archive's elites as a one-family suite (``family`` ``"archive"``): each filled cell's heightmap (rendered
-    by its generator where the archive stores genomes only), ``level`` its band of 7.07 cells of distance from cell
-    (0, 0) (0 to 9), ``seed`` its index within the band, ``value`` the distance in cells. ``scale`` defaults to
+    by its generator where the archive stores genomes only), ``level`` its tenth of the distance from cell (0, 0) to
+    the grid's farthest cell (bands of 7.07 cells on the paper's 50 x 50 grid; 0 to 9), ``seed`` its index within the band, ``value`` the distance in cells. ``scale`` defaults to
     the archive's own (``config.scale``)."""
     scale = archive.config.scale if scale is None else scale  # the scale its fitness was measured at
     bank = from_archive(archive, scale)
-    dist = np.asarray(bank.distance, np.float64)
-    level = np.minimum((dist / MAX_DISTANCE_50 * LEVELS).astype(np.int64), LEVELS - 1)
+    b = np.asarray(bank.bins, np.float64) + 1.0  # qd.grid.cell_distance in float64: bands are exact at their edges
+    dist = np.hypot(b[:, 0], b[:, 1])
+    far = float(np.hypot(archive.config.bins, archive.config.bins))  # the grid's farthest cell (70.71 at 50 x 50)
+    level = np.minimum((dist / far * LEVELS).astype(np.int64), LEVELS - 1)
     order = np.lexsort((dist, level))
     seed = np.zeros_like(level)
     for lv in np.unique(level):

@@ -100,6 +100,25 @@ def test_generator_samples_sit_in_the_level_of_their_descriptor_distance(small):
             assert list(seeds) == list(range(len(seeds))) and len(seeds) <= 2
 
 
+def test_an_archive_becomes_a_one_family_suite_banded_by_cell_distance():
+    from jaxterrain import qd
+
+    bins, cells = 4, 16
+    config = qd.resolve_config(qd.EvolveConfig(bins=bins, ranges=((0.0, 1.0), (0.0, 2.0))))
+    source = np.full(cells, -1, np.int32)
+    source[[15, 0, 5]] = 0
+    fitness = np.where(source >= 0, 0.5, -np.inf).astype(np.float32)
+    maps = np.zeros((cells, 32, 32), np.uint16)
+    maps[5], maps[15] = 65535, 32768
+    arch = qd.Archive((np.zeros((cells, 3), np.float32),), ("perlin",), source, fitness,
+                      np.zeros((cells, 2), np.float32), np.asarray(qd.centroids_for(config)), maps, config, {})
+    s = suite.archive_suite(arch)
+    np.testing.assert_allclose(s.value, np.hypot([1, 2, 4], [1, 2, 4]), rtol=1e-6)  # cells 0, 5, 15: nearest first
+    np.testing.assert_array_equal(s.level, [2, 5, 9])  # tenths of the way to the farthest cell, hypot(4, 4)
+    np.testing.assert_allclose(s.heightmaps[:, 0, 0], [0.0, 1.0, 32768 / 65535], rtol=1e-6)
+    assert s.families() == ("archive",) and s.unit == {"archive": "cells"} and list(s.seed) == [0, 0, 0]
+
+
 def test_bad_input_is_one_value_error_naming_it():
     with pytest.raises(ValueError, match="suite must be one of v1"):
         suite.load("v0")
