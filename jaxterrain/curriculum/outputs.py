@@ -5,9 +5,7 @@ mean +- 1 standard error) and ``summary.json`` (:func:`write_outputs`), and the 
 
 from __future__ import annotations
 
-import csv
 import datetime as _dt
-import io
 import json
 from pathlib import Path
 
@@ -26,7 +24,7 @@ from jaxterrain.curriculum.analysis import (
 from jaxterrain.qd.grid import MAX_DISTANCE_50
 from jaxterrain.rl.checkpoint import save_policy
 from jaxterrain.runtime import provenance
-from jaxterrain.runtime.io import atomic_write_text, save_figure
+from jaxterrain.runtime.io import atomic_write_csv, atomic_write_text, save_figure
 
 __all__ = ["PARTIAL", "POLICIES", "SEQUENCE_COLUMNS", "histories", "sequence_rows", "generator_counts",
            "milestone_rows", "summary_curve", "plot_curves", "write_outputs", "trial_policy", "export_policies"]
@@ -35,15 +33,6 @@ PARTIAL = "summary_partial.json"
 """The summary of an unfinished run's last checkpoint (``summary.json`` marks a finished one)."""
 POLICIES = "policies"
 """The folder of a run's walkers: ``policies/trial_K/`` at the end, ``policies/chunk_CCCCC/trial_K/`` snapshots."""
-
-
-def write_csv(path: Path, header: list, rows: list) -> None:
-    """``rows`` under ``header`` as a CSV file, written atomically."""
-    buf = io.StringIO()
-    w = csv.writer(buf)
-    w.writerow(header)
-    w.writerows(rows)
-    atomic_write_text(path, buf.getvalue())
 
 
 def histories(states) -> dict:
@@ -135,14 +124,14 @@ def write_outputs(folder: Path, cfg: dict, config, bank, states, seconds: float 
             rows.append([t, c, int(hist["epoch"][t, c]), int(hist["epoch"][t, c]) * config.steps_per_epoch, k,
                          int(cell[k]), int(bins[k, 0]), int(bins[k, 1]), f"{dist[k]:.3f}",
                          f"{hist['evaluation'][t, c]:.4f}", f"{hist['hardest'][t, c]:.3f}"])
-    write_csv(folder / "history.csv", ["trial", "chunk", "epoch", "env_steps", "terrain", "cell", "bin0", "bin1",
+    atomic_write_csv(folder / "history.csv", ["trial", "chunk", "epoch", "env_steps", "terrain", "cell", "bin0", "bin1",
                                   "distance", "evaluation", "hardest"], rows)
     sequences = sequence_rows(hist, bank, config, names)
-    write_csv(folder / "sequences.csv", list(SEQUENCE_COLUMNS), sequences)
+    atomic_write_csv(folder / "sequences.csv", list(SEQUENCE_COLUMNS), sequences)
     label = f"{Path(cfg['archive']).stem} {cfg['curriculum']}"
     pct = [f"{round(100 * m)}%" for m in MILESTONES]
     csv_row, cells = milestone_rows(label, hist)
-    write_csv(folder / "milestones.csv", ["treatment"] + [f"epochs_{p}" for p in pct] + [f"trials_{p}" for p in pct],
+    atomic_write_csv(folder / "milestones.csv", ["treatment"] + [f"epochs_{p}" for p in pct] + [f"trials_{p}" for p in pct],
          [csv_row])
 
     atomic_write_text(folder / "milestones.md", "| treatment | " + " | ".join(pct) + " |\n|---|" + "---|" * len(pct)

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import csv
 import io
 import os
 import sys
@@ -10,7 +11,7 @@ from pathlib import Path
 
 import numpy as np
 
-__all__ = ["atomic_write_bytes", "atomic_write_text", "atomic_save_npz", "save_figure"]
+__all__ = ["atomic_write_bytes", "atomic_write_text", "atomic_save_npz", "atomic_write_csv", "save_figure"]
 
 
 def atomic_write_bytes(path: str | os.PathLike, data: bytes) -> Path:
@@ -55,3 +56,12 @@ def save_figure(fig, path: str | os.PathLike, dpi: int = 120) -> Path:
     if pyplot is not None:
         pyplot.close(fig)
     return atomic_write_bytes(path, buf.getvalue())
+
+
+def atomic_write_csv(path: str | os.PathLike, header: list, rows: list) -> Path:
+    """``rows`` under ``header`` as a CSV file, written atomically."""
+    buf = io.StringIO()
+    w = csv.writer(buf)
+    w.writerow(header)
+    w.writerows(rows)
+    return atomic_write_text(path, buf.getvalue())

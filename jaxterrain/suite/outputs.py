@@ -4,27 +4,17 @@ coloured by the highest level passed) and ``suite.png`` (what the families look 
 
 from __future__ import annotations
 
-import csv
-import io
 from pathlib import Path
 from typing import Sequence
 
 import numpy as np
 from matplotlib.figure import Figure
 
-from jaxterrain.runtime.io import atomic_write_text, save_figure
+from jaxterrain.runtime.io import atomic_write_csv, atomic_write_text, save_figure
 from jaxterrain.suite.evaluation import THRESHOLD, level_fitness, passed_levels
 from jaxterrain.suite.heldout import Suite
 
 __all__ = ["write_evaluation", "level_table", "plot_levels", "plot_suite"]
-
-
-def _csv(path: Path, header: list, rows: list) -> None:
-    buf = io.StringIO()
-    w = csv.writer(buf)
-    w.writerow(header)
-    w.writerows(rows)
-    atomic_write_text(path, buf.getvalue())
 
 
 def level_table(names: Sequence[str], suite: Suite, fitness: np.ndarray, threshold: float = THRESHOLD) -> list:
@@ -80,9 +70,9 @@ def write_evaluation(folder: Path, names: Sequence[str], suite: Suite, fitness: 
     fitness = np.asarray(fitness, np.float64)
     rows = [(n, fam, lv, s, f"{v:.4g}", unit, f"{f:.4f}")
             for n, fit in zip(names, fitness) for (fam, lv, s, v, unit), f in zip(suite.rows(), fit)]
-    _csv(folder / "fitness.csv", ["policy", "family", "level", "seed", "value", "unit", "fitness"], rows)
+    atomic_write_csv(folder / "fitness.csv", ["policy", "family", "level", "seed", "value", "unit", "fitness"], rows)
     table = level_table(names, suite, fitness, threshold)
-    _csv(folder / "levels.csv", ["policy", "family", "highest_level_passed", "mean_fitness", "per_level_fitness"],
+    atomic_write_csv(folder / "levels.csv", ["policy", "family", "highest_level_passed", "mean_fitness", "per_level_fitness"],
          [(n, fam, lv, f"{m:.4f}", " ".join("nan" if np.isnan(x) else f"{x:.3f}" for x in per))
           for n, fam, lv, m, per in table])
     fams = suite.families()
