@@ -66,6 +66,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from common import block, environment, write_json  # noqa: E402
+from rollouts import terrain_bank  # noqa: E402  (Perlin maps in [0, 1], benchmarks/rollouts.py)
 from jaxterrain import rl  # noqa: E402
 from jaxterrain.walker import TerrainScale, WalkerConfig, WalkerEnv, parse_solver, solver_label  # noqa: E402
 
@@ -288,7 +289,6 @@ def main(argv=None) -> dict:
     args = parse_args(argv)
     skip = set(filter(None, args.skip.split(",")))
     env_cfg, ppo_cfg = settings(args)
-    from rollouts import terrain_bank  # Perlin maps in [0, 1] (benchmarks/rollouts.py)
 
     env = WalkerEnv(env_cfg)
     bank = terrain_bank(jax.random.PRNGKey(11), args.bank, args.terrain_size) * env_cfg.scale.height

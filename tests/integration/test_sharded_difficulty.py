@@ -17,7 +17,7 @@ SCRIPT = textwrap.dedent("""
     from jaxterrain import difficulty as D
     from jaxterrain.runtime import sharding as SH
     from jaxterrain.terrain import TerrainScale
-    from jaxterrain.walker import WalkerConfig
+    from jaxterrain.walker import WalkerConfig, make_env
 
     assert len(jax.devices()) == 4
     config = WalkerConfig(terrain_shape=(32, 32), scale=TerrainScale(cell_size=0.2, height=0.5), episode_length=40)
@@ -28,7 +28,7 @@ SCRIPT = textwrap.dedent("""
     key = jax.random.key(3)
     got = D.rollout_distances(maps, key, 4, policy=policy, env_config=config, policy_params=params, slots=3,
                               smooth_first=True, mesh=SH.make_mesh())
-    env, protocol = D.make_env(config), D.Protocol(4, 1)
+    env, protocol = make_env(config), D.Protocol(4, 1)
     want, steps = jax.jit(lambda t, k, p: D.keyed_distances(env, policy, t, k, protocol, p))(
         maps * 0.5, SH.row_keys(key, 5), params)
     got, want, steps = np.asarray(got), np.asarray(want), np.asarray(steps)

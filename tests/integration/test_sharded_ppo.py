@@ -54,14 +54,14 @@ def test_data_parallel_ppo_update_equals_one_device():
 
 _WARP_SCRIPT = textwrap.dedent("""
     import jax, jax.numpy as jnp, numpy as np
-    from jaxterrain import rl, difficulty, generators
+    from jaxterrain import rl, difficulty, generators, walker
     from jaxterrain.runtime import sharding as SH
     gen = generators.get("perlin", size=96)
     bank = jnp.clip(gen.render(gen.sample(jax.random.key(1), 4)).astype(jnp.float32), 0, 1)
     n = 8
     config = rl.PPOConfig(num_envs=n, unroll_length=5, num_unrolls=2, num_minibatches=2, update_epochs=1)
     cfg = difficulty.default_env_config((96, 96), backend="warp")._replace(tiles=4, warp_worlds=n)
-    env = difficulty.make_env(cfg)
+    env = walker.make_env(cfg)
     terrains = env.make_bank(bank * cfg.scale.height).at(jnp.arange(n) % 4)  # a tile per env
     start = jax.jit(lambda k, t: rl.init(k, env, config, t))(jax.random.key(3), terrains)
     one, m1 = rl.train(None, env, config, 1, terrains, state=start)
