@@ -163,10 +163,11 @@ def main(args) -> int:
         again = suite.evaluate_policies(policies[:1], s.heightmaps, key, protocol, backend, s.scale, cfg["slots"],
                                         cfg["chunk"])
         walk_s = time.perf_counter() - t2
-    rest = (suite.evaluate_policies(policies[1:], s.heightmaps, key, protocol, backend, s.scale, cfg["slots"],
-                                    cfg["chunk"]) if len(policies) > 1 else first[:0])
-    fitness = jax.numpy.concatenate([first, rest]) if len(policies) > 1 else first
-    suite.write_evaluation(folder, names, s, np.asarray(fitness))
+    fitness = first
+    if len(policies) > 1:  # the other policies: the same compiled program, their weights as data
+        fitness = np.concatenate([first, suite.evaluate_policies(policies[1:], s.heightmaps, key, protocol, backend,
+                                                                 s.scale, cfg["slots"], cfg["chunk"])])
+    suite.write_evaluation(folder, names, s, fitness)
     timing = {"suite": s.name, "terrains": s.size, "policies": len(policies), "backend": backend,
               "walks_per_terrain": protocol.attempts, "build_s": round(build_s, 3),
               "first_call_s": round(first_s, 3), "walk_s_one_policy": None if walk_s is None else round(walk_s, 3),
