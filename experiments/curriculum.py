@@ -8,8 +8,9 @@ Treatments (each one ``learn`` run, ``--trials`` trials together, in ``<run>/<na
 curriculum on every archive given (``NAME=PATH``; names as in the paper's Table 2: cppn, gan, perlin, worley,
 diamond_square; by default :data:`DEFAULT_ARCHIVES`, the five shipped paper-budget roughness x TPI archives reseated
 under ``difficulty.HEADINGS``, docs/results/exp2_paper.md), on their combination (``qd.combine``: the fitter
-elite per cell; ``<run>/combined_archive.npz``; skipped with one archive), and the roughness-sorted standard CL on
-the ``cppn`` archive (Figure 7b). Finished treatments are kept, so ``--resume`` continues where the time limit
+elite per cell; ``<run>/combined_archive.npz``; skipped with one archive), and each ``--baseline`` on the ``cppn``
+archive (default the roughness-sorted standard CL of Figure 7b; ``--baseline roughness random`` adds the random
+order, Experiment 3's eight treatments). Finished treatments are kept, so ``--resume`` continues where the time limit
 stopped. ``--shard I/N`` runs only the treatments ``t % N == I`` of that order, so that independent processes (e.g.
 one per GPU: ``CUDA_VISIBLE_DEVICES=I ... --out RUN --shard I/N``) share one run folder; ``--resume RUN`` without
 ``--shard`` then reuses the finished treatments and writes the tables. ``--resume RUN --report`` writes the tables
@@ -40,6 +41,8 @@ DEFAULT_ARCHIVES = {g: f"docs/results/exp2_{g}_headings_archive.npz"
                     for g in ("cppn", "perlin", "worley", "diamond_square", "gan")}
 """The archives of Experiment 2 when ``--archives`` is not given: each generator's paper-budget roughness x TPI
 archive (evolved after the fix of tied insertion), reseated under ``difficulty.HEADINGS``."""
+BASELINES = ("roughness", "random")
+"""The curricula of ``--baseline`` (``jaxterrain.curriculum.CurriculumConfig.selector``'s other than ``map``)."""
 PRESETS = {name: {**{k: v for k, v in p.items() if k not in ("archive", "curriculum")},
                   "archives": dict(DEFAULT_ARCHIVES), "baseline": "roughness"}
            for name, p in learn.PRESETS.items()}
@@ -56,8 +59,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--chunks-per-call", type=int, default=None,
                         help="chunks per jitted call / checkpoint, in every treatment (learn's)")
     learn.add_fine_tuning_arguments(parser, ", in every treatment")
-    parser.add_argument("--baseline", choices=["roughness", "random"], default=None,
-                        help="the baseline run on the cppn archive (Figure 7b; default roughness)")
+    parser.add_argument("--baseline", nargs="+", choices=BASELINES, default=None,
+                        help="the baselines run on the cppn archive, in this order (Figure 7b; default roughness)")
     common.add_protocol_argument(parser)  # default: each archive's own protocol (learn's)
     parser.add_argument("--report", action="store_true",
                         help="with --resume: Table 2 and the figures from the treatments as they stand (unfinished "
@@ -103,8 +106,14 @@ def treatments(cfg: dict, folder: Path) -> list[tuple[str, str, str]]:
                 raise runner.BadInput(f"--archives: cannot combine them: {err}") from None
         out.append(("combined", str(combined), "map"))
     if "cppn" in archives:
-        out.append(("cppn", archives["cppn"], cfg["baseline"]))
+        out += [("cppn", archives["cppn"], b) for b in baselines(cfg)]
     return out
+
+
+def baselines(cfg: dict) -> list[str]:
+    """The run's baselines in order: ``config.json`` keeps one name (runs before Experiment 3) or a list."""
+    b = cfg["baseline"]
+    return [b] if isinstance(b, str) else list(b)
 
 
 def _treatment_cfg(cfg: dict, path: str, curriculum: str) -> dict:
@@ -143,7 +152,7 @@ def write_table(folder: Path, rows: list[tuple[str, dict]], trials: int) -> None
     atomic_write_text(folder / "table2.md", "\n".join(md) + "\n")
 
 
-def write_figures(folder: Path, rows: list[tuple[str, dict]], baseline: str) -> None:
+def write_figures(folder: Path, rows: list[tuple[str, dict]], baseline: str | list[str]) -> None:
     from jaxterrain.curriculum import outputs
 
     import matplotlib
@@ -157,10 +166,12 @@ def write_figures(folder: Path, rows: list[tuple[str, dict]], baseline: str) -> 
         outputs.plot_curves(ax, maps, "Figure 7a: map-based curriculum per archive (mean +- 1 s.e.)")
         fig.tight_layout()
         common.save_figure(fig, folder / "figure7a.png")
-    pair = {shown(label, s): outputs.summary_curve(s) for label, s in rows if label in ("cppn map", f"cppn {baseline}")}
-    if len(pair) == 2:
+    names = [baseline] if isinstance(baseline, str) else list(baseline)
+    pair = {shown(label, s): outputs.summary_curve(s) for label, s in rows
+            if label == "cppn map" or label in {f"cppn {b}" for b in names}}
+    if len(pair) >= 2 and any(label == "cppn map" for label, _ in rows):
         fig, ax = plt.subplots(figsize=(7, 4))
-        outputs.plot_curves(ax, pair, f"Figure 7b: CPPN, map-based vs {baseline}-sorted curriculum")
+        outputs.plot_curves(ax, pair, f"Figure 7b: CPPN, map-based vs {' / '.join(names)} curriculum")
         fig.tight_layout()
         common.save_figure(fig, folder / "figure7b.png")
 
@@ -217,6 +228,8 @@ def main(args) -> int:
 
     if args.report and args.resume is None:
         raise common.UsageError("--report needs --resume RUN (the run to report on)")
+    if args.baseline is not None and len(set(args.baseline)) < len(args.baseline):
+        raise common.UsageError(f"--baseline: each of {', '.join(BASELINES)} at most once; got {' '.join(args.baseline)}")
     over = dict(archives=parse_archives(args.archives), trials=args.trials, max_epochs=args.max_epochs,
                 chunks_per_call=args.chunks_per_call, baseline=args.baseline, backend=args.backend,
                 **learn.fine_tuning_overrides(args), **common.protocol_overrides(args))

@@ -90,10 +90,15 @@ def load_checkpoint(path: str | os.PathLike, like: Any) -> Any:
 # Policy export
 # ----------------------------------------------------------------------------------------------------------------
 def save_policy(path: str | os.PathLike, params: Any, normaliser: nets.RunningStats, config: PPOConfig,
-                observation_size: int, action_size: int, extra: Optional[dict] = None) -> Path:
+                observation_size: int, action_size: int, extra: Optional[dict] = None,
+                actor_only: bool = False) -> Path:
     """Write ``path/policy.msgpack`` and ``path/config.json`` (atomically). ``extra`` is merged into config.json
-    (e.g. the env config). Returns the folder."""
+    (e.g. the env config). ``actor_only``: keep the policy network and drop the value network (``config.json`` says
+    ``"actor_only": true``): enough to walk and evaluate, not to go on training; the base walker's is 24 KB instead
+    of 1.1 MB, which is how released walkers are shipped. Returns the folder."""
     path = Path(path)
+    if actor_only:
+        params = {"policy": params["policy"]}
     blob = {
         "format": POLICY_FORMAT,
         "params": jax.tree_util.tree_map(lambda x: np.asarray(jax.device_get(x)), params),
@@ -107,6 +112,7 @@ def save_policy(path: str | os.PathLike, params: Any, normaliser: nets.RunningSt
         "ppo_config": config.to_json_dict(),
     }
     meta.update(extra or {})
+    meta["actor_only"] = bool(actor_only)
     atomic_write_text(path / "config.json", json.dumps(meta, indent=2, sort_keys=True) + "\n")
     return path
 
@@ -120,7 +126,8 @@ def load_policy(path: str | os.PathLike | None = None) -> Callable[[jax.Array], 
     (``jaxterrain/assets/base_policy/``).
 
     Returns ``policy(obs [..., O]) -> action [..., A]`` in [-1, 1], the deterministic (mean) action, a pure
-    function (jit / vmap it). Attributes: ``.params`` (``{"policy", "value"}``), ``.normaliser``, ``.config``
+    function (jit / vmap it). Attributes: ``.params`` (``{"policy", "value"}``; ``{"policy"}`` alone for a policy
+    saved with ``actor_only``), ``.normaliser``, ``.config``
     (:class:`PPOConfig`), ``.observation_size``, ``.action_size``, ``.meta`` (config.json), ``.path``.
     """
     folder = Path(path) if path is not None else BASE_POLICY_DIR
@@ -166,6 +173,8 @@ def _read_policy(folder: Path, weights: Path):
     except Exception as err:  # msgpack raises many unrelated types on damaged bytes
         raise ValueError(f"{weights}: damaged policy weights, cannot be decoded ({type(err).__name__}: {err})") from err
     like = jax.eval_shape(lambda: nets.init_params(jax.random.key(0), config, observation_size, action_size))
+    if meta.get("actor_only"):
+        like = {"policy": like["policy"]}
     shapes = lambda t: [(jax.tree_util.keystr(k), tuple(np.shape(v))) for k, v in  # noqa: E731
                         jax.tree_util.tree_flatten_with_path(t)[0]]
     if shapes(params) != shapes(like) or tuple(np.shape(normaliser.mean)) != (observation_size,):

@@ -738,6 +738,13 @@ def test_curriculum_shards_share_one_run_folder_and_resume_writes_the_tables(tmp
     two = exp.treatments({"archives": {"cppn": archive, "perlin": archive}, "descriptors": ["roughness", "tpi"],
                           "baseline": "roughness"}, tmp_path / "p2")
     assert [t[0] for t in one] == [t[0] for t in two] == ["cppn", "perlin", "combined", "cppn"]
+    eight = exp.treatments({"archives": {"perlin": archive, "cppn": archive}, "descriptors": ["roughness", "tpi"],
+                            "baseline": ["roughness", "random"]}, tmp_path / "p1")  # Experiment 3's baselines
+    assert [(t[0], t[2]) for t in eight] == [("cppn", "map"), ("perlin", "map"), ("combined", "map"),
+                                             ("cppn", "roughness"), ("cppn", "random")]
+    with pytest.raises(SystemExit):  # a baseline twice would be two treatments in one folder
+        cli(*base, "--out", str(tmp_path / "twice"), "--baseline", "random", "random")
+    assert not (tmp_path / "twice").exists()
 
 
 def test_learn_writes_every_trials_walker_as_a_loadable_policy(tmp_path, learn_smoke):

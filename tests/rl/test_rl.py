@@ -324,6 +324,13 @@ def test_policy_export_and_load(tmp_path, monkeypatch):
     np.testing.assert_array_equal(np.asarray(jax.jit(policy)(obs)), np.asarray(expected))
     assert policy.config == CFG and policy.action_size == 1 and policy(obs[0]).shape == (1,)
     assert float(jnp.max(jnp.abs(policy(obs * 100.0)))) <= 1.0
+    # actor-only (how released walkers ship): the same actions, no value network, smaller on disk
+    rl.save_policy(tmp_path / "actor", policy.params, policy.normaliser, CFG, env.observation_size, env.action_size,
+                   actor_only=True)
+    actor = rl.load_policy(tmp_path / "actor")
+    assert set(actor.params) == {"policy"} and actor.meta["actor_only"] and not policy.meta["actor_only"]
+    np.testing.assert_array_equal(np.asarray(jax.jit(actor)(obs)), np.asarray(expected))
+    assert (tmp_path / "actor" / "policy.msgpack").stat().st_size < (tmp_path / "pol" / "policy.msgpack").stat().st_size
     monkeypatch.setattr(rl.checkpoint, "BASE_POLICY_DIR", tmp_path / "missing")
     with pytest.raises(FileNotFoundError, match="train-base-policy"):
         rl.load_policy()
