@@ -24,6 +24,7 @@ COMMANDS = {
     "curriculum": ("experiments.curriculum", "Experiment 2: every treatment, Figure 7 and Table 2"),
     "train-traversability": ("experiments.train_traversability", "train the learned traversability patch classifier on base-policy walks"),
     "evaluate": ("experiments.evaluate", "walkers (the base policy and --policy folders) on the held-out suite or an archive"),
+    "generalise": ("experiments.generalise", "Experiment 3: treatments' walkers on the held-out suite, rliable intervals"),
     "report": ("experiments.report", "one self-contained HTML page (and Markdown) of run folders, with walker videos"),
     "export": ("experiments.export", "terrains of an archive as OBJ / STL meshes, PNG, .npy or MJCF"),
 }

@@ -5,9 +5,11 @@
 - :mod:`~jaxterrain.runtime.sharding`: device meshes and row-splitting of batched programs;
 - :mod:`~jaxterrain.runtime.io`: atomic file writes;
 - :mod:`~jaxterrain.runtime.provenance`: the code's commit and the device, for every result;
-- :mod:`~jaxterrain.runtime.validation`: the one-line config checks every config class shares.
+- :mod:`~jaxterrain.runtime.validation`: the one-line config checks every config class shares;
+- :mod:`~jaxterrain.runtime.statistics`: scores of several runs aggregated with rliable (IQM, stratified-bootstrap
+  intervals, probability of improvement) and rank correlations.
 """
 
-from jaxterrain.runtime import driver, io, provenance, sharding, validation
+from jaxterrain.runtime import driver, io, provenance, sharding, statistics, validation
 
-__all__ = ["driver", "io", "provenance", "sharding", "validation"]
+__all__ = ["driver", "io", "provenance", "sharding", "statistics", "validation"]

@@ -13,10 +13,10 @@
     suite.passed_levels(fitness[0], s)
 """
 
-from jaxterrain.suite.evaluation import THRESHOLD, check_policies, evaluate_policies, level_fitness, passed_levels
+from jaxterrain.suite.evaluation import THRESHOLD, cell_scores, check_policies, evaluate_policies, level_fitness, passed_levels
 from jaxterrain.suite.families import FAMILIES, Family, START_STRIP, build_terrain, edge_distance, family_names
 from jaxterrain.suite.heldout import GENERATORS, LEVELS, SEED, Suite, VERSIONS, archive_suite, descriptor_levels, load
-from jaxterrain.suite.outputs import level_table, plot_levels, plot_suite, write_evaluation
+from jaxterrain.suite.outputs import Evaluation, level_table, read_fitness, plot_levels, plot_suite, write_evaluation
 
 __all__ = [
     "FAMILIES",
@@ -33,11 +33,14 @@ __all__ = [
     "descriptor_levels",
     "load",
     "archive_suite",
+    "Evaluation",
+    "read_fitness",
     "write_evaluation",
     "level_table",
     "plot_levels",
     "plot_suite",
     "THRESHOLD",
+    "cell_scores",
     "check_policies",
     "evaluate_policies",
     "level_fitness",

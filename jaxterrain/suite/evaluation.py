@@ -26,7 +26,7 @@ from jaxterrain.suite.heldout import Suite
 from jaxterrain.terrain import TerrainScale
 from jaxterrain.walker.layout import make_env
 
-__all__ = ["THRESHOLD", "check_policies", "evaluate_policies", "level_fitness", "passed_levels"]
+__all__ = ["THRESHOLD", "cell_scores", "check_policies", "evaluate_policies", "level_fitness", "passed_levels"]
 
 THRESHOLD = 0.9
 """A level is passed when the mean fitness of its terrains reaches this (the paper's traversability threshold)."""
@@ -96,3 +96,15 @@ def passed_levels(fitness, suite: Suite, threshold: float = THRESHOLD) -> dict[s
         ok = np.flatnonzero(np.nan_to_num(per_level, nan=-1.0) >= threshold)
         out[fam] = int(ok.max()) if ok.size else -1
     return out
+
+
+def cell_scores(fitness, family, level) -> tuple[list, np.ndarray]:
+    """The suite's cells as tasks: ``(cells, scores)`` with ``cells`` the ``(family, level)`` pairs in order of first
+    appearance and ``scores`` [P, C] the mean fitness of each cell's terrains (its seeds) for each of the ``P``
+    policies of ``fitness`` [P, N]. ``family`` / ``level``: [N], the terrains' (``Suite.family``, ``Suite.level``
+    or ``read_fitness``'s)."""
+    f = np.atleast_2d(np.asarray(fitness, np.float64))
+    fam, lv = np.asarray(family), np.asarray(level)
+    cells = list(dict.fromkeys(zip(fam.tolist(), lv.tolist())))
+    scores = np.stack([f[:, (fam == c[0]) & (lv == c[1])].mean(axis=1) for c in cells], axis=1)
+    return cells, scores

@@ -1,11 +1,15 @@
 """An evaluation's files: ``fitness.csv`` (one row per policy and terrain), ``levels.csv`` (the highest level of each
 family a policy passes, and its mean fitness per level), ``summary.md``, ``levels.png`` (policies x families,
-coloured by the highest level passed) and ``suite.png`` (what the families look like), all written atomically."""
+coloured by the highest level passed) and ``suite.png`` (what the families look like), all written atomically; and
+:func:`read_fitness`, which reads ``fitness.csv`` (or a gzipped ``fitness.csv.gz``) back."""
 
 from __future__ import annotations
 
+import csv
+import gzip
+import io
 from pathlib import Path
-from typing import Sequence
+from typing import NamedTuple, Sequence
 
 import numpy as np
 from matplotlib.figure import Figure
@@ -14,7 +18,7 @@ from jaxterrain.runtime.io import atomic_write_csv, atomic_write_text, save_figu
 from jaxterrain.suite.evaluation import THRESHOLD, level_fitness, passed_levels
 from jaxterrain.suite.heldout import Suite
 
-__all__ = ["write_evaluation", "level_table", "plot_levels", "plot_suite"]
+__all__ = ["Evaluation", "read_fitness", "write_evaluation", "level_table", "plot_levels", "plot_suite"]
 
 
 def level_table(names: Sequence[str], suite: Suite, fitness: np.ndarray, threshold: float = THRESHOLD) -> list:
@@ -95,3 +99,32 @@ def write_evaluation(folder: Path, names: Sequence[str], suite: Suite, fitness: 
     save_figure(fig, folder / "levels.png")
     save_figure(plot_suite(suite), folder / "suite.png", dpi=90)
     return {n: dict(zip(fams, map(int, passed[i]))) for i, n in enumerate(names)}
+
+
+class Evaluation(NamedTuple):
+    """An evaluation read back from ``fitness.csv``: ``policies`` [P] names, ``family`` / ``level`` / ``seed`` [N]
+    (the suite's terrains in order) and ``fitness`` [P, N] float64."""
+
+    policies: list
+    family: np.ndarray
+    level: np.ndarray
+    seed: np.ndarray
+    fitness: np.ndarray
+
+
+def read_fitness(path) -> Evaluation:
+    """Read ``fitness.csv`` as :func:`write_evaluation` writes it (``path`` may end in ``.gz``); ValueError naming
+    the file when the policies do not cover the same terrains in the same order."""
+    path = Path(path)
+    raw = path.read_bytes()
+    text = (gzip.decompress(raw) if path.suffix == ".gz" else raw).decode()
+    rows = list(csv.DictReader(io.StringIO(text)))
+    names = list(dict.fromkeys(r["policy"] for r in rows))
+    per = {n: [r for r in rows if r["policy"] == n] for n in names}
+    terrain = lambda r: (r["family"], int(r["level"]), int(r["seed"]))  # noqa: E731
+    first = [terrain(r) for r in per[names[0]]] if names else []
+    if not names or any([terrain(r) for r in per[n]] != first for n in names):
+        raise ValueError(f"{path}: not an evaluation's fitness.csv (every policy on the same terrains, in order)")
+    return Evaluation(names, np.array([t[0] for t in first]), np.array([t[1] for t in first], np.int64),
+                      np.array([t[2] for t in first], np.int64),
+                      np.array([[float(r["fitness"]) for r in per[n]] for n in names], np.float64))
