@@ -50,6 +50,18 @@ _FLOAT_NONNEGATIVE = ("r1", "healthy_reward")
 _AT_MOST = (("best", "attempts"), ("eval_best", "eval_attempts"))  # (key, bound): key <= bound
 
 
+def shipped(relative: str) -> str:
+    """The absolute path of a file shipped in the package's ``assets/`` (e.g. ``"archives/cppn_headings.npz"``),
+    found without importing jaxterrain (``--help`` imports no JAX): commands' default inputs work from any folder
+    and from an installed wheel."""
+    import importlib.util
+
+    spec = importlib.util.find_spec("jaxterrain")
+    if spec is None or spec.origin is None:
+        raise UsageError("jaxterrain is not installed (pip install -e .)")
+    return str(Path(spec.origin).parent / "assets" / relative)
+
+
 def flag(key: str) -> str:
     """The command-line flag of a config key / argparse dest: ``batch_size`` -> ``--batch-size``."""
     return "--" + key.replace("_", "-")
@@ -158,7 +170,7 @@ def check_args(command: str, args: argparse.Namespace) -> None:
 
 
 def add_run_arguments(parser: argparse.ArgumentParser, presets: dict[str, dict], default_preset: str) -> None:
-    """Add ``--preset``, ``--config``, ``--resume``, ``--out``, ``--seed`` and ``--time-limit``."""
+    """Add ``--preset``, ``--config``, ``--resume``, ``--out``, ``--seed``, ``--time-limit`` and ``--print-config``."""
     parser.add_argument("--preset", choices=sorted(presets), default=None,
                         help=f"settings preset (default {default_preset})")
     parser.add_argument("--config", type=Path, default=None, help="re-run from a saved config.json")
@@ -168,6 +180,16 @@ def add_run_arguments(parser: argparse.ArgumentParser, presets: dict[str, dict],
     parser.add_argument("--seed", type=int, default=None, help="PRNG seed")
     parser.add_argument("--time-limit", type=float, default=None, metavar="MIN",
                         help="stop cleanly after about MIN minutes (after a checkpoint); continue with --resume")
+    parser.add_argument("--print-config", action="store_true",
+                        help="print the resolved configuration (preset, --config and flags) as JSON and exit, "
+                             "before any run folder is made or anything compiles")
+
+
+def print_config(args: argparse.Namespace, config: dict) -> None:
+    """``--print-config``: print ``config`` as sorted JSON and exit with status 0 (nothing written)."""
+    if getattr(args, "print_config", False):
+        print(json.dumps(config, indent=2, sort_keys=True, default=str))
+        raise SystemExit(0)
 
 
 def add_devices_argument(parser: argparse.ArgumentParser) -> None:
@@ -265,6 +287,7 @@ def setup_run(command: str, args: argparse.Namespace, presets: dict[str, dict], 
     source = f"preset {config.get('preset')!r}:" if args.config is None else f"{args.config}: key"
     check_values(config, lambda k: flag(k) if k in given or (k == "seed" and args.seed is not None)
                  else f"{source} {k!r}")
+    print_config(args, {**config, "command": command})
     check_out(args.out)
     folder = run_folder(command, args.out)
     folder.mkdir(parents=True, exist_ok=True)
@@ -390,6 +413,8 @@ def _resume_run(command: str, args: argparse.Namespace, overrides: dict[str, Any
     if changed:
         config.update(changed)
         check_values(config, lambda k: flag(k) if k in changed else f"{folder / CONFIG_NAME}: key {k!r}")
+    print_config(args, config)
+    if changed:
         write_config(folder, config)
     record_provenance(folder, command, vars(args), resumed=True)
     print(f"resuming {folder}", flush=True)

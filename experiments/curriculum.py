@@ -37,10 +37,11 @@ from pathlib import Path
 from experiments import common
 from experiments import learn
 
-DEFAULT_ARCHIVES = {g: f"docs/results/exp2_{g}_headings_archive.npz"
+DEFAULT_ARCHIVES = {g: common.shipped(f"archives/{g}_headings.npz")
                     for g in ("cppn", "perlin", "worley", "diamond_square", "gan")}
 """The archives of Experiment 2 when ``--archives`` is not given: each generator's paper-budget roughness x TPI
-archive (evolved after the fix of tied insertion), reseated under ``difficulty.HEADINGS``."""
+archive (evolved after the fix of tied insertion), reseated under ``difficulty.HEADINGS``; package data
+(``jaxterrain/assets/archives/G_headings.npz``, copies of ``docs/results/exp2_G_headings_archive.npz``)."""
 BASELINES = ("roughness", "random")
 """The curricula of ``--baseline`` (``jaxterrain.curriculum.CurriculumConfig.selector``'s other than ``map``)."""
 PRESETS = {name: {**{k: v for k, v in p.items() if k not in ("archive", "curriculum")},
@@ -53,7 +54,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     common.add_devices_argument(parser)  # each treatment's trials split over the devices
     parser.add_argument("--archives", nargs="+", default=None, metavar="NAME=PATH",
                         help="archives of the map treatments (default: the five generators' archives shipped in "
-                             "docs/results, exp2_G_headings_archive.npz)")
+                             "jaxterrain/assets/archives, G_headings.npz)")
     parser.add_argument("--trials", type=int, default=None)
     parser.add_argument("--max-epochs", type=int, default=None)
     parser.add_argument("--chunks-per-call", type=int, default=None,

@@ -60,7 +60,10 @@ import sys
 
 from experiments import common
 
-CPPN_ARCHIVE = "docs/results/exp2_cppn_headings_archive.npz"  # paper budget, after the insertion fix, HEADINGS
+CPPN_ARCHIVE = common.shipped("archives/cppn_headings.npz")
+"""The default archive: the CPPN's paper-budget roughness x TPI archive (evolved after the fix of tied insertion),
+reseated under ``difficulty.HEADINGS``; package data (``jaxterrain/assets/archives/``, a copy of
+``docs/results/exp2_cppn_headings_archive.npz``), so ``learn`` runs from any folder."""
 BACKENDS = ("auto", "jax", "warp")  # jaxterrain.walker.layout.BACKEND_CHOICES (literal: --help imports no JAX)
 _PAPER = dict(archive=CPPN_ARCHIVE, curriculum="map", trials=10, descriptors=["roughness", "tpi"], policy=None,
               epochs_per_chunk=40, steps_per_epoch=4000, max_epochs=30000, threshold=0.9, max_fitness=1.0,
@@ -83,7 +86,7 @@ PRESETS: dict[str, dict] = {
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     common.add_run_arguments(parser, PRESETS, "smoke")
     common.add_devices_argument(parser)  # the trials are split over the devices (curriculum.make_runner)
-    parser.add_argument("--archive", default=None, help=f"archive .npz (default {CPPN_ARCHIVE})")
+    parser.add_argument("--archive", default=None, help="archive .npz (default: the shipped CPPN archive, jaxterrain/assets/archives/cppn_headings.npz)")
     parser.add_argument("--curriculum", choices=["map", "roughness", "random"], default=None)
     parser.add_argument("--trials", type=int, default=None, help="trials run together (paper: 10)")
     parser.add_argument("--threshold", type=float, default=None, help="fraction of the maximum fitness, in (0, 1]")

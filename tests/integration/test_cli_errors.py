@@ -118,3 +118,18 @@ def test_every_preset_passes_the_checks():
         for preset, values in (presets.items() if isinstance(presets, dict) else ()):
             if isinstance(values, dict):
                 common.check_values(values, lambda k, name=name, preset=preset: f"{name} {preset} {k}")
+
+
+LONG_COMMANDS = ["coverage", "curriculum", "evaluate", "evolve", "features", "gradient", "learn", "train-base-policy",
+                 "train-gan", "train-traversability"]
+
+
+@pytest.mark.parametrize("command", LONG_COMMANDS)
+def test_print_config_prints_the_resolved_settings_and_makes_nothing(command, tmp_path, capsys):
+    """``--print-config``: the preset's settings with the flags given, as JSON, exit status 0, no run folder."""
+    with pytest.raises(SystemExit) as exit_:
+        cli.main([command, "--seed", "7", "--print-config", "--out", str(tmp_path / "run")])
+    assert exit_.value.code == 0
+    config = json.loads(capsys.readouterr().out)
+    assert config["command"] == command and config["seed"] == 7 and "preset" in config
+    assert not (tmp_path / "run").exists()
