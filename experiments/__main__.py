@@ -53,8 +53,12 @@ def main(argv: list[str] | None = None) -> int:
                 continue
             raise
         available[name] = module
-        module.add_arguments(sub.add_parser(name, help=help_text, description=help_text,
-                                            formatter_class=HelpFormatter))
+        command = sub.add_parser(name, help=help_text, description=help_text, formatter_class=HelpFormatter)
+        module.add_arguments(command)
+        if hasattr(module, "PRESETS"):  # every preset's value in each flag's help
+            from experiments.common import show_preset_values
+
+            show_preset_values(command, module.PRESETS)
     args = parser.parse_args(argv)
     from experiments.common import UsageError, check_args
 

@@ -50,6 +50,57 @@ _FLOAT_NONNEGATIVE = ("r1", "healthy_reward")
 _AT_MOST = (("best", "attempts"), ("eval_best", "eval_attempts"))  # (key, bound): key <= bound
 
 
+PRESET_NAMES = ("smoke", "gpu-short", "gpu", "paper")
+"""The presets every long command takes, each with one meaning:
+
+- ``smoke``: a CPU, about a minute: the command runs end to end at tiny sizes (a check, not a result);
+- ``gpu-short``: one GPU, minutes: a tenth of ``gpu``'s budget;
+- ``gpu``: one GPU, the full budget: the paper's protocol at GPU batch sizes;
+- ``paper``: the paper's settings as it states them (where it states none, ``gpu``'s).
+
+A command may add its own (``coverage``'s ``paper-batched``, ``train-traversability``'s ``cpu``)."""
+PRESET_HELP = ("smoke: CPU, about a minute; gpu-short: a tenth of gpu's budget; gpu: the full budget on one GPU; "
+               "paper: the paper's own settings")
+
+
+def with_preset_names(presets: dict[str, dict], same: dict[str, Any] | None = None) -> dict[str, dict]:
+    """``presets`` with every name of :data:`PRESET_NAMES` it lacks made from another preset: ``same`` maps a name
+    to the preset it copies (``{"gpu": "paper"}``) or to ``(preset, changes)`` (``{"gpu-short": ("gpu",
+    {"steps": 1200})}``); ValueError when one is still missing."""
+    out = dict(presets)
+    for name, made in (same or {}).items():
+        other, changes = (made, {}) if isinstance(made, str) else made
+        if name in out:
+            raise ValueError(f"preset {name!r} exists; it cannot also be made from {other!r}")
+        out[name] = {**presets[other], **changes}
+    missing = [n for n in PRESET_NAMES if n not in out]
+    if missing:
+        raise ValueError(f"presets {missing} missing: every long command takes {', '.join(PRESET_NAMES)}")
+    return out
+
+
+def show_preset_values(parser: argparse.ArgumentParser, presets: dict[str, dict]) -> None:
+    """Append to the help of every option that a preset sets the value each preset gives it (``[every preset: V]``
+    or ``[smoke: a; gpu-short: b; ...]``), so ``--help`` shows what a flag left out will be."""
+    order = [n for n in PRESET_NAMES if n in presets] + sorted(n for n in presets if n not in PRESET_NAMES)
+    for action in parser._actions:
+        if action.dest in ("preset", "help") or not any(action.dest in presets[n] for n in order):
+            continue
+        shown = {n: _short(presets[n].get(action.dest)) for n in order}
+        text = (f"every preset: {next(iter(shown.values()))}" if len(set(shown.values())) == 1
+                else "; ".join(f"{n}: {v}" for n, v in shown.items()))
+        action.help = f"{action.help or ''} [{text.replace('%', '%%')}]".strip()
+
+
+def _short(value: Any) -> str:
+    text = "-" if value is None else (" ".join(map(str, value)) if isinstance(value, (list, tuple)) else str(value))
+    if isinstance(value, str) and "/" in value:  # a path: its file name
+        text = Path(value).name
+    if isinstance(value, dict):
+        text = " ".join(f"{k}={Path(str(v)).name}" for k, v in value.items())
+    return text if len(text) <= 48 else text[:45] + "..."
+
+
 def shipped(relative: str) -> str:
     """The absolute path of a file shipped in the package's ``assets/`` (e.g. ``"archives/cppn_headings.npz"``),
     found without importing jaxterrain (``--help`` imports no JAX): commands' default inputs work from any folder
@@ -172,7 +223,7 @@ def check_args(command: str, args: argparse.Namespace) -> None:
 def add_run_arguments(parser: argparse.ArgumentParser, presets: dict[str, dict], default_preset: str) -> None:
     """Add ``--preset``, ``--config``, ``--resume``, ``--out``, ``--seed``, ``--time-limit`` and ``--print-config``."""
     parser.add_argument("--preset", choices=sorted(presets), default=None,
-                        help=f"settings preset (default {default_preset})")
+                        help=f"settings preset ({PRESET_HELP}; default {default_preset})")
     parser.add_argument("--config", type=Path, default=None, help="re-run from a saved config.json")
     parser.add_argument("--resume", nargs="?", const="latest", default=None, metavar="FOLDER",
                         help="continue the run in FOLDER (default: the newest run of this command)")

@@ -25,19 +25,19 @@ from __future__ import annotations
 
 import argparse
 
-PRESETS: dict[str, dict] = {
+from experiments import common
+
+PRESETS: dict[str, dict] = common.with_preset_names({
     "gpu": dict(suite="v1", archive=None, policy=[], size=None, seeds=None, samples=None, families=None,
                 generators=None, attempts=80, best=5, headings=4, backend="auto", slots=None, chunk=None, repeat=True),
     "smoke": dict(suite="v1", archive=None, policy=[], size=64, seeds=1, samples=4, families=["flat", "stairs_up", "gaps"],
                   generators=["perlin"], attempts=2, best=1, headings=1, backend="jax", slots=None, chunk=None,
                   repeat=False),
-}
+}, {"gpu-short": "gpu", "paper": ("gpu", {"attempts": 20, "best": 5, "headings": 1})})
 BACKENDS = ("auto", "jax", "warp")  # jaxterrain.walker.layout.BACKEND_CHOICES (literal: --help imports no JAX)
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    from experiments import common
-
     common.add_run_arguments(parser, PRESETS, "smoke")
     parser.add_argument("--policy", nargs="+", default=None, metavar="DIR",
                         help="policy folders to evaluate beside the base policy (e.g. RUN/policies/trial_0)")
@@ -64,8 +64,6 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def overrides(args) -> dict:
-    from experiments import common
-
     return dict(policy=args.policy, suite=args.suite, archive=args.archive, size=args.size, seeds=args.seeds,
                 samples=args.samples, families=args.families, generators=args.generators, repeat=args.repeat,
                 backend=args.backend, slots=args.slots, chunk=args.chunk,
@@ -129,7 +127,6 @@ def main(args) -> int:
     import jax
     import numpy as np
 
-    from experiments import common
     from jaxterrain import difficulty, suite
     from jaxterrain.runtime import provenance
     from jaxterrain.runtime.io import atomic_write_text

@@ -32,7 +32,7 @@ from typing import Any, NamedTuple
 
 from experiments import common
 
-PRESETS: dict[str, dict] = {
+PRESETS: dict[str, dict] = common.with_preset_names({
     "paper": dict(generators=["cppn", "perlin"], samples=250, mutation_steps=4, size=256, windows=[5, 10, 20, 30, 40],
                   stride=2, fitness="difficulty", attempts=20, best=5, batch=50, extra_descriptors=["traversability"],
                   calibrate=False, calibrate_window=30, figure_window=30),
@@ -42,7 +42,7 @@ PRESETS: dict[str, dict] = {
     "smoke": dict(generators=["cppn", "perlin"], samples=6, mutation_steps=1, size=48, windows=[5, 10],
                   stride=2, fitness="slope", attempts=2, best=1, batch=12, extra_descriptors=["traversability"],
                   calibrate=False, calibrate_window=10, figure_window=10),
-}
+}, {"gpu-short": ("gpu", {"samples": 25})})
 FEATURES = ("tri", "tpi", "roughness")
 
 

@@ -48,11 +48,11 @@ import numpy as np
 
 from experiments import common
 
-PRESETS: dict[str, dict] = {
+PRESETS: dict[str, dict] = common.with_preset_names({
     "default": dict(archives=[], protocol=None, attempts=None, best=None, headings=None, start_spread=None,
                     rule=None, slots="auto", chunk=None, sample=None, band_width=10.0, threshold=0.9,
                     distance="corner", reseat=False),
-}
+}, {"smoke": "default", "gpu-short": "default", "gpu": "default", "paper": "default"})
 PROTOCOLS = ("paper", "headings")
 DISTANCES = ("corner", "index")
 

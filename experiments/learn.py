@@ -73,14 +73,14 @@ _PAPER = dict(archive=CPPN_ARCHIVE, curriculum="map", trials=10, descriptors=["r
               num_unrolls=8, num_minibatches=8, update_epochs=8, learning_rate=3e-4, episode_length=1000,
               chunks_per_call=25, fast_compile=False, backend="auto", healthy_reward=None, update_normaliser=True,
               truncation="bootstrap", overlap=False, compact=True, policy_every=None)
-PRESETS: dict[str, dict] = {
+PRESETS: dict[str, dict] = common.with_preset_names({
     "paper": _PAPER,
     "gpu-short": {**_PAPER, "max_epochs": 3000},
     "smoke": {**_PAPER, "trials": 2, "epochs_per_chunk": 1, "steps_per_epoch": 80, "max_epochs": 4, "max_evals": 2,
               "attempts": 2, "best": 1, "headings": 1, "num_envs": 4, "num_unrolls": 2, "num_minibatches": 2,
               "update_epochs": 1, "episode_length": 100, "chunks_per_call": 2, "fast_compile": True,
               "compact": False},
-}
+}, {"gpu": "paper"})
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:

@@ -40,12 +40,12 @@ from experiments import common
 # The options of each preset; its walker and PPO configs are :func:`configs`. env_steps: smoke 4 updates of
 # 8 envs x 5 steps, gpu 410 updates of PPOConfig().steps_per_update = 122 880 (41 whole chunks of 10; a shorter last
 # chunk would compile once more, ~25 s).
-PRESETS: dict[str, dict[str, Any]] = {
+PRESETS: dict[str, dict[str, Any]] = common.with_preset_names({
     "smoke": dict(env_steps=4 * 40, time_budget=None, updates_per_chunk=2, num_envs=None, solver=None,
                   eval_attempts=20, eval_best=5),
     "gpu": dict(env_steps=410 * 122_880, time_budget=480.0, updates_per_chunk=10, num_envs=None, solver=None,
                 eval_attempts=20, eval_best=5),
-}
+}, {"gpu-short": ("gpu", {"env_steps": 41 * 122_880, "time_budget": 48.0}), "paper": "gpu"})
 # What ``--resume`` may change (how long the run lasts, how it is chunked, how it is evaluated); the rest is the run's.
 EXTENDABLE = ("env_steps", "time_budget", "updates_per_chunk", "eval_attempts", "eval_best")
 RUN_INFO = "run.json"
@@ -92,7 +92,8 @@ def configs():
                              episode_length=30)
     smoke_ppo = PPOConfig(num_envs=8, unroll_length=5, num_unrolls=1, num_minibatches=2, update_epochs=2,
                           policy_hidden=(16, 16), value_hidden=(32, 32))
-    return {"smoke": (smoke_env, smoke_ppo), "gpu": (WalkerConfig(), PPOConfig())}
+    full = (WalkerConfig(), PPOConfig())
+    return {"smoke": (smoke_env, smoke_ppo), "gpu-short": full, "gpu": full, "paper": full}
 
 
 def _to_jsonable(x):

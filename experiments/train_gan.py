@@ -36,7 +36,7 @@ from typing import Any, NamedTuple
 
 from experiments import common
 
-PRESETS: dict[str, dict[str, Any]] = {
+PRESETS: dict[str, dict[str, Any]] = common.with_preset_names({
     # tiny: a few seconds of steps on CPU at 64 x 64
     "smoke": dict(
         size=64, channels=(64, 32, 16, 8), disc_channels=(16, 32, 64), batch_size=8, steps=20,
@@ -48,7 +48,7 @@ PRESETS: dict[str, dict[str, Any]] = {
         steps=12000, sample_every=2000, ckpt_every=2000, log_every=500, quality_samples=512, r1=1.0, lr=2e-4,
         data=None,
     ),
-}
+}, {"gpu-short": ("gpu", {"steps": 1200, "sample_every": 200, "ckpt_every": 200, "log_every": 50}), "paper": "gpu"})
 
 
 # What ``--resume`` may change (how long the run lasts and how often it logs); the rest is the run's.

@@ -29,7 +29,7 @@ from pathlib import Path
 from experiments import common
 
 _LABEL = dict(window=30, threshold=0.3, every=4, warmup=8)
-PRESETS: dict[str, dict] = {
+PRESETS: dict[str, dict] = common.with_preset_names({
     "smoke": dict(generators=["perlin", "diamond_square"], terrains=4, attempts=2, horizon=60, walk_batch=4,
                   amplitude=[0.8, 1.0], start_spread=3.0, label=_LABEL, channels=[4, 4, 4, 4], input_scale=10.0,
                   steps=20, batch=32, learning_rate=2e-3, weight_decay=1e-4, test_fraction=0.2, heldout=True),
@@ -41,7 +41,7 @@ PRESETS: dict[str, dict] = {
                 horizon=400, walk_batch=1024, amplitude=[0.2, 1.0], start_spread=3.0, label=_LABEL,
                 channels=[16, 32, 32, 64], input_scale=10.0, steps=12000, batch=512, learning_rate=2e-3,
                 weight_decay=1e-4, test_fraction=0.1, heldout=True),
-}
+}, {"gpu-short": ("gpu", {"terrains": 128, "steps": 1200}), "paper": "gpu"})
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:

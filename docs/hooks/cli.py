@@ -24,12 +24,16 @@ def cli_reference() -> str:
 
     os.environ["COLUMNS"] = "110"  # argparse wraps help to the terminal: one width wherever the site is built
     from experiments.__main__ import COMMANDS, HelpFormatter
+    from experiments.common import show_preset_values
 
     parts = []
     for name, (module_name, text) in COMMANDS.items():
         parser = argparse.ArgumentParser(prog=f"python -m experiments {name}", description=text,
                                          formatter_class=HelpFormatter)
-        importlib.import_module(module_name).add_arguments(parser)
+        module = importlib.import_module(module_name)
+        module.add_arguments(parser)
+        if hasattr(module, "PRESETS"):
+            show_preset_values(parser, module.PRESETS)
         parts.append(f"## {name}\n\n{text}\n\n```text\n{_help(parser).rstrip()}\n```\n")
     return "\n".join(parts)
 

@@ -125,11 +125,15 @@ LONG_COMMANDS = ["coverage", "curriculum", "evaluate", "evolve", "features", "gr
 
 
 @pytest.mark.parametrize("command", LONG_COMMANDS)
-def test_print_config_prints_the_resolved_settings_and_makes_nothing(command, tmp_path, capsys):
-    """``--print-config``: the preset's settings with the flags given, as JSON, exit status 0, no run folder."""
-    with pytest.raises(SystemExit) as exit_:
-        cli.main([command, "--seed", "7", "--print-config", "--out", str(tmp_path / "run")])
-    assert exit_.value.code == 0
-    config = json.loads(capsys.readouterr().out)
-    assert config["command"] == command and config["seed"] == 7 and "preset" in config
+def test_every_long_command_takes_the_same_presets_and_prints_its_config(command, tmp_path, capsys):
+    """One vocabulary: every long command takes ``smoke``, ``gpu-short``, ``gpu`` and ``paper``.
+    ``--print-config``: the preset's settings with the flags given, as JSON, exit status 0, no run folder."""
+    from experiments.common import PRESET_NAMES
+
+    for preset in PRESET_NAMES:
+        with pytest.raises(SystemExit) as exit_:
+            cli.main([command, "--preset", preset, "--seed", "7", "--print-config", "--out", str(tmp_path / "run")])
+        assert exit_.value.code == 0, preset
+        config = json.loads(capsys.readouterr().out)
+        assert config["command"] == command and config["seed"] == 7 and config["preset"] == preset
     assert not (tmp_path / "run").exists()
