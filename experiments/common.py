@@ -24,7 +24,7 @@ import math
 import sys
 import time
 from pathlib import Path
-from typing import Any
+from typing import Any, Callable
 
 CONFIG_NAME = "config.json"
 PROVENANCE_NAME = "provenance.jsonl"
@@ -41,13 +41,17 @@ _INT_MIN = {
     **dict.fromkeys(("n", "size", "samples", "generations", "batch_size", "initial_population", "bins", "attempts",
                      "best", "checkpoint_every", "rollout_slots", "steps", "sample_every", "ckpt_every", "log_every",
                      "updates_per_chunk", "num_envs", "eval_attempts", "eval_best", "batch", "stride",
-                     "calibrate_window", "devices", "max_evals", "chunks_per_call", "policy_every"), 1),
+                     "calibrate_window", "devices", "max_evals", "chunks_per_call", "policy_every", "terrains",
+                     "chunk", "sample", "seeds", "walk_batch", "horizon", "trials", "epochs_per_chunk",
+                     "steps_per_epoch", "max_epochs"), 1),
     **dict.fromkeys(("window", "windows"), 2),
     **dict.fromkeys(("mutation_steps", "walk", "quality_samples"), 0),
 }
 _FLOAT_POSITIVE = ("time_limit", "time_budget", "env_steps", "lr", "learning_rate", "heights", "robot_height")
 _FLOAT_NONNEGATIVE = ("r1", "healthy_reward")
-_AT_MOST = (("best", "attempts"), ("eval_best", "eval_attempts"))  # (key, bound): key <= bound
+_FLOAT_UNIT = ("threshold",)  # in (0, 1]
+_AT_MOST = (("best", "attempts"), ("eval_best", "eval_attempts"), ("window", "size"),
+            ("windows", "size"))  # (key, bound): key (each of a list) <= bound
 
 
 PRESET_NAMES = ("smoke", "gpu-short", "gpu", "paper")
@@ -126,9 +130,8 @@ def check_values(values: dict, where=flag) -> None:
     """Check option values by name (see ``_INT_MIN`` and friends; unknown names and ``None`` pass).
 
     ``where(key)`` names a value in the message (default: its flag). Fitness names are checked against
-    :data:`FITNESSES`, generator names against the registry (importing the library, running nothing). Descriptor
-    names are not: a command may register its own (e.g. a learned model) before it needs them. Raises
-    :class:`UsageError`."""
+    :data:`FITNESSES`, generator and descriptor names against their registries (importing the library, which
+    registers the learned ``traversability`` descriptor; running nothing). Raises :class:`UsageError`."""
     for key, value in values.items():
         if value is None:
             continue
@@ -146,6 +149,18 @@ def check_values(values: dict, where=flag) -> None:
                 if not math.isfinite(v) or (v <= 0 if positive else v < 0):
                     raise _bad(where(key), f"{'finite numbers' if isinstance(value, list) else 'a finite number'} "
                                            f"{'> 0' if positive else '>= 0'}", value)
+        elif key in _FLOAT_UNIT:
+            for v in numbers:
+                if not (math.isfinite(v) and 0.0 < v <= 1.0):
+                    raise _bad(where(key), "a number in (0, 1]", value)
+        elif key in ("descriptors", "extra_descriptors") and items:
+            import jaxterrain  # noqa: F401 - registers the learned descriptor (features.learned)
+            from jaxterrain import features
+
+            for v in items:
+                if v not in features.descriptor_names():
+                    raise UsageError(f"{where(key)}: unknown descriptor {v!r}; choose from "
+                                     f"{', '.join(features.descriptor_names())}")
         elif key == "fitness" and (not isinstance(value, str) or value not in FITNESS_NAMES):
             raise UsageError(f"{where(key)}: unknown fitness {value!r}; choose from {', '.join(FITNESS_NAMES)}")
         elif key in ("generator", "generators") and items:
@@ -157,8 +172,9 @@ def check_values(values: dict, where=flag) -> None:
                     raise UsageError(f"{where(key)}: unknown generator {v!r}; choose from {names}")
     for key, bound in _AT_MOST:
         v, b = values.get(key), values.get(bound)
-        if isinstance(v, int) and isinstance(b, int) and not isinstance(v, bool) and v > b:
-            raise UsageError(f"{where(key)} must be <= {where(bound)} ({b}); got {v}")
+        for item in v if isinstance(v, (list, tuple)) else [v]:
+            if isinstance(item, int) and isinstance(b, int) and not isinstance(item, bool) and item > b:
+                raise UsageError(f"{where(key)} must be <= {where(bound)} ({b}); got {v}")
     heads, attempts, best = values.get("headings"), values.get("attempts"), values.get("best")
     if heads is not None:  # the walker protocol: attempts in total over the headings, best per heading
         if heads not in (1, 2, 4) or isinstance(heads, bool):
@@ -307,7 +323,8 @@ def save_figure(fig, path: str | Path, dpi: int = 120) -> Path:
 
 
 def setup_run(command: str, args: argparse.Namespace, presets: dict[str, dict], default_preset: str,
-              overrides: dict[str, Any], extendable: tuple[str, ...] = ()) -> tuple[Path, dict]:
+              overrides: dict[str, Any], extendable: tuple[str, ...] = (),
+              check: Callable[[dict], None] | None = None) -> tuple[Path, dict]:
     """Resolve the settings and the run folder; write the config there. Returns ``(folder, config)``.
 
     ``overrides`` maps config keys to the values given on the command line (``None`` = not given). ``--resume``
@@ -315,6 +332,8 @@ def setup_run(command: str, args: argparse.Namespace, presets: dict[str, dict], 
     with the config saved there; options given on the command line are ignored (a note on stderr says which),
     except the keys of ``extendable`` (how long the run lasts and how often it logs, e.g. ``steps``): those replace
     the saved values, are checked as a fresh config is, and are written back to the run's ``config.json``.
+    ``check(config)``: the command's own checks of the resolved config (raise :class:`UsageError`), run before any
+    folder is made.
     """
     if args.resume is not None:
         return _resume_run(command, args, overrides, extendable)
@@ -338,6 +357,8 @@ def setup_run(command: str, args: argparse.Namespace, presets: dict[str, dict], 
     source = f"preset {config.get('preset')!r}:" if args.config is None else f"{args.config}: key"
     check_values(config, lambda k: flag(k) if k in given or (k == "seed" and args.seed is not None)
                  else f"{source} {k!r}")
+    if check is not None:
+        check(config)
     print_config(args, {**config, "command": command})
     check_out(args.out)
     folder = run_folder(command, args.out)
@@ -445,10 +466,11 @@ def resume_folder(command: str, resume: Any, out: Any = None) -> Path:
 
 
 def setup_resumable_run(command: str, args: argparse.Namespace, presets: dict[str, dict], default_preset: str,
-                        overrides: dict[str, Any], extendable: tuple[str, ...] = ()) -> tuple[Path, dict]:
+                        overrides: dict[str, Any], extendable: tuple[str, ...] = (),
+                        check: Callable[[dict], None] | None = None) -> tuple[Path, dict]:
     """:func:`setup_run` (its name in the training commands: ``train-gan``, ``train-base-policy``,
     ``train-traversability``, ``features``)."""
-    return setup_run(command, args, presets, default_preset, overrides, extendable)
+    return setup_run(command, args, presets, default_preset, overrides, extendable, check)
 
 
 def _resume_run(command: str, args: argparse.Namespace, overrides: dict[str, Any],

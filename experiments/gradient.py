@@ -414,12 +414,19 @@ def plot(path: Path, results: list[tuple[str, dict, list[dict]]], cfg: dict) -> 
     common.save_figure(fig, path, dpi=110)
 
 
+def check_config(cfg: dict) -> None:
+    """Before a run folder: at least one archive, each an existing file."""
+    if not cfg.get("archives"):
+        raise common.UsageError("give at least one archive.npz (ARCHIVE ...)")
+    for path in cfg["archives"]:
+        if not Path(path).is_file():
+            raise common.UsageError(f"archive {path}: no such file")
+
+
 def main(args) -> int:
     import jax
 
-    folder, cfg = common.setup_run("gradient", args, PRESETS, "default", overrides(args))
-    if not cfg.get("archives"):
-        raise SystemExit("give at least one archive.npz")
+    folder, cfg = common.setup_run("gradient", args, PRESETS, "default", overrides(args), check=check_config)
     if cfg["distance"] not in DISTANCES:
         raise SystemExit(f"distance must be one of {DISTANCES}, got {cfg['distance']!r}")
     protocol = resolve_protocol(cfg)

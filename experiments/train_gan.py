@@ -203,6 +203,14 @@ def make_config(cfg: dict):
                      disc_channels=tuple(cfg["disc_channels"])).check()
 
 
+def check_config(cfg: dict) -> None:
+    """Before a run folder: the size fits the architecture (``GanConfig.check``), as a one-line error."""
+    try:
+        make_config(cfg)
+    except ValueError as err:
+        raise common.UsageError(f"--size / the preset's architecture: {str(err).splitlines()[0]}") from None
+
+
 def load_training_data(data: str | None) -> TrainingData:
     """Load the DEM tiles of ``--data`` (default: matplotlib's sample DEMs) and stack them for the device."""
     from jaxterrain.terrain import dem
@@ -347,7 +355,8 @@ def main(args: argparse.Namespace) -> int:
     from jaxterrain.runtime import provenance
     from jaxterrain.generators.gan import ASSET_DIR, save_generator
 
-    run_dir, cfg = common.setup_resumable_run("train-gan", args, PRESETS, "smoke", overrides(args), EXTENDABLE)
+    run_dir, cfg = common.setup_resumable_run("train-gan", args, PRESETS, "smoke", overrides(args), EXTENDABLE,
+                                              check=check_config)
     config = make_config(cfg)
     data = load_training_data(cfg.get("data"))
     print(f"train-gan: {run_dir}  device {provenance.device()}  data {data.num_tiles} tiles", flush=True)

@@ -54,6 +54,17 @@ def _main(argv, capsys) -> str:
 
 
 CASES = [
+    # issue 49's probe: each of these used to end in a traceback, or was accepted and ignored, or left a run folder
+    (["evolve", "--descriptors", "foo", "bar"], "--descriptors: unknown descriptor 'foo'; choose from"),
+    (["gradient"], "give at least one archive.npz"),
+    (["gradient", "missing.npz"], "archive missing.npz: no such file"),
+    (["gradient", "missing.npz", "--threshold", "2"], "--threshold must be a number in (0, 1]; got 2.0"),
+    (["gradient", "missing.npz", "--sample", "-1"], "--sample must be an integer >= 1; got -1"),
+    (["gradient", "missing.npz", "--chunk", "0"], "--chunk must be an integer >= 1; got 0"),
+    (["train-gan", "--size", "100"], "--size / the preset's architecture: GanConfig: size=100 must be"),
+    (["features", "--windows", "1000"], "--windows must be <= preset 'smoke': 'size' (48); got [1000]"),
+    (["train-traversability", "--terrains", "0"], "--terrains must be an integer >= 1; got 0"),
+    (["learn", "--threshold", "0"], "--threshold must be a number in (0, 1]; got 0.0"),
     (["evolve", "--bins", "0"], "--bins must be an integer >= 1; got 0"),
     (["evolve", "--batch-size", "-1"], "--batch-size must be an integer >= 1"),
     (["evolve", "--size", "0"], "--size must be an integer >= 1"),
@@ -120,6 +131,7 @@ def test_every_preset_passes_the_checks():
                 common.check_values(values, lambda k, name=name, preset=preset: f"{name} {preset} {k}")
 
 
+NEEDS = {"gradient": [str(ROOT / "docs" / "results" / "exp2_perlin_headings_archive.npz")]}  # required inputs
 LONG_COMMANDS = ["coverage", "curriculum", "evaluate", "evolve", "features", "gradient", "learn", "train-base-policy",
                  "train-gan", "train-traversability"]
 
@@ -132,7 +144,8 @@ def test_every_long_command_takes_the_same_presets_and_prints_its_config(command
 
     for preset in PRESET_NAMES:
         with pytest.raises(SystemExit) as exit_:
-            cli.main([command, "--preset", preset, "--seed", "7", "--print-config", "--out", str(tmp_path / "run")])
+            cli.main([command, *NEEDS.get(command, []), "--preset", preset, "--seed", "7", "--print-config",
+                      "--out", str(tmp_path / "run")])
         assert exit_.value.code == 0, preset
         config = json.loads(capsys.readouterr().out)
         assert config["command"] == command and config["seed"] == 7 and config["preset"] == preset
