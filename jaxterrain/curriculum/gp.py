@@ -23,6 +23,8 @@ from typing import NamedTuple
 import jax
 import jax.numpy as jnp
 
+from jaxterrain.runtime import validation
+
 __all__ = ["GPParams", "matern52", "posterior", "ucb"]
 
 _SQRT5 = 5.0 ** 0.5
@@ -61,6 +63,7 @@ def posterior(obs_x: jax.Array, obs_y: jax.Array, obs_mask: jax.Array, obs_prior
     Returns ``(mean [N], variance [N])`` float32; the variance is clipped at 0. With no observation the posterior
     is the prior (mean = ``prior_mean``, variance = ``sigma_f``).
     """
+    _check(obs_x, obs_y, obs_mask, obs_prior, cells_x, prior_mean, params)
     obs_mask = jnp.asarray(obs_mask, bool)
     m = obs_x.shape[0]
     pair = obs_mask[:, None] & obs_mask[None, :]
@@ -74,6 +77,20 @@ def posterior(obs_x: jax.Array, obs_y: jax.Array, obs_mask: jax.Array, obs_prior
     v = jax.scipy.linalg.solve_triangular(chol, k_star.T, lower=True)  # [M, N]
     var = params.sigma_f - jnp.sum(v * v, axis=0)
     return mean, jnp.maximum(var, 0.0)
+
+
+def _check(obs_x, obs_y, obs_mask, obs_prior, cells_x, prior_mean, params: GPParams) -> None:
+    """Shapes always (they are static), hyperparameter values where concrete: ValueError naming the argument."""
+    if jnp.ndim(obs_x) != 2 or jnp.ndim(cells_x) != 2 or jnp.shape(obs_x)[1] != jnp.shape(cells_x)[1]:
+        raise ValueError(f"gp.posterior: obs_x [M, D] and cells_x [N, D] must share D; got {jnp.shape(obs_x)} and "
+                         f"{jnp.shape(cells_x)}")
+    m, n = jnp.shape(obs_x)[0], jnp.shape(cells_x)[0]
+    for name, x, size in (("obs_y", obs_y, m), ("obs_mask", obs_mask, m), ("obs_prior", obs_prior, m),
+                          ("prior_mean", prior_mean, n)):
+        if jnp.shape(x) != (size,):
+            raise ValueError(f"gp.posterior: {name} must have shape ({size},); got {jnp.shape(x)}")
+    for name in ("rho", "sigma_f", "noise"):
+        validation.positive(f"GPParams.{name}", getattr(params, name))
 
 
 def ucb(mean: jax.Array, variance: jax.Array, kappa: float = 0.05) -> jax.Array:

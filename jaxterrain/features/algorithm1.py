@@ -8,6 +8,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from jaxterrain.features.kernels import as_batch, check_heights, check_window, roughness_core
+from jaxterrain.runtime import validation
 from jaxterrain.terrain import TerrainScale, validate_scale
 
 __all__ = ["HUMANOID_HEIGHT", "max_window_range", "is_traversable"]
@@ -49,8 +50,7 @@ def is_traversable(
     Returns:
       ``[B]`` bool (``[]`` for a single map).
     """
-    if isinstance(robot_height, (int, float, np.number)) and not (np.isfinite(robot_height) and robot_height > 0):
-        raise ValueError(f"robot_height must be a finite number of metres > 0; got {robot_height!r}")
+    validation.positive("robot_height (metres)", robot_height)  # concrete values: numbers and [] arrays alike
     validate_scale(scale)
     h, single = as_batch(heightmaps)
     check_heights(h, single)

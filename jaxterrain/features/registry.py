@@ -101,6 +101,8 @@ def descriptors(
     """
     if isinstance(names, str):
         names = (names,)
+    if names is None or not all(isinstance(n, str) for n in names):
+        raise ValueError(f"names must be a sequence of descriptor names out of {descriptor_names()}; got {names!r}")
     names = tuple(names)
     if not names:
         raise ValueError(f"names must name at least one descriptor out of {descriptor_names()}")

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import functools
+import numbers
 from typing import Callable
 
 from jaxterrain.generators.base import Generator, checked
@@ -41,4 +42,7 @@ def get(name: str, **options) -> Generator:
     ``validate`` does), also for a factory that does not check them itself (:func:`base.checked`)."""
     if name not in _FACTORIES:
         raise ValueError(f"unknown generator {name!r}; choose one of {', '.join(names())}")
+    size = options.get("size", 1)
+    if not isinstance(size, numbers.Integral) or isinstance(size, bool) or size < 1:
+        raise ValueError(f"generators.get({name!r}): size must be an integer >= 1 (pixels); got {size!r}")
     return _cached(name, tuple(sorted(options.items())))

@@ -25,7 +25,7 @@ import numpy as np
 from flax import serialization
 
 from jaxterrain.rl import networks as nets
-from jaxterrain.rl.config import PPOConfig
+from jaxterrain.rl.config import PPOConfig, validate_config
 from jaxterrain.runtime import driver
 from jaxterrain.runtime.io import atomic_write_bytes, atomic_write_text
 
@@ -163,7 +163,7 @@ def _read_policy(folder: Path, weights: Path):
     if meta.get("format") != POLICY_FORMAT:
         raise ValueError(f"{cfg_path}: not a {POLICY_FORMAT} policy (format={meta.get('format')!r})")
     try:
-        config = PPOConfig.from_json_dict(meta["ppo_config"])
+        config = validate_config(PPOConfig.from_json_dict(meta["ppo_config"]))
         action_size, observation_size = int(meta["action_size"]), int(meta["observation_size"])
     except (KeyError, TypeError, ValueError) as err:
         raise ValueError(f"{cfg_path}: incomplete policy config ({err!r})") from err

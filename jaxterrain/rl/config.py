@@ -136,7 +136,10 @@ def validate_config(config: PPOConfig) -> PPOConfig:
         "init_std": (0.0, None, False),
     }
     for name, (lo, hi, lo_inclusive) in ranges.items():
-        v = float(getattr(config, name))
+        try:
+            v = float(getattr(config, name))
+        except (TypeError, ValueError):
+            raise ValueError(f"PPOConfig.{name} must be a finite number, got {getattr(config, name)!r}") from None
         ok = math.isfinite(v) and (v >= lo if lo_inclusive else v > lo) and (hi is None or v <= hi)
         if not ok:
             lo_s = f"{'>=' if lo_inclusive else '>'} {lo}"

@@ -4,9 +4,12 @@
 
 from __future__ import annotations
 
+import math
 from typing import Any, Iterable
 
-__all__ = ["int_at_least", "one_of", "known_fields", "walks"]
+import numpy as np
+
+__all__ = ["int_at_least", "one_of", "known_fields", "walks", "concrete", "positive"]
 
 
 def int_at_least(owner: str, config: Any, name: str, lo: int) -> None:
@@ -39,3 +42,29 @@ def walks(owner: str, config: Any) -> None:
         raise ValueError(f"{owner}.attempts must be a multiple of headings ({config.headings}), got {config.attempts}")
     if config.best > per:
         raise ValueError(f"{owner}.best must be <= attempts / headings ({per}), got {config.best}")
+
+
+def concrete(value: Any) -> bool:
+    """Whether ``value`` has a value on the host now (a Python number or a concrete array), not a JAX tracer inside
+    ``jit`` / ``vmap``: checks of values run only on concrete ones, shapes always."""
+    try:
+        np.asarray(value)
+    except Exception:  # a tracer (jax.errors.TracerArrayConversionError and kin)
+        return False
+    return True
+
+
+def positive(where: str, value: Any, allow_zero: bool = False) -> None:
+    """``value`` (a number or a concrete [] array; tracers pass unchecked) must be a finite real number > 0
+    (``>= 0`` with ``allow_zero``); ValueError naming ``where`` otherwise (a string, a bool, NaN, a negative)."""
+    if not concrete(value):
+        return
+    bound = ">= 0" if allow_zero else "> 0"
+    if isinstance(value, (str, bytes, bool)) or np.ndim(value) != 0:
+        raise ValueError(f"{where} must be a finite number {bound}; got {value!r}")
+    try:
+        v = float(value)
+    except (TypeError, ValueError):
+        raise ValueError(f"{where} must be a finite number {bound}; got {value!r}") from None
+    if not math.isfinite(v) or (v < 0 if allow_zero else v <= 0):
+        raise ValueError(f"{where} must be a finite number {bound}; got {value!r}")

@@ -48,7 +48,10 @@ class _TerrainScaleFields(NamedTuple):
 
 
 def _check_positive(name: str, value) -> None:
-    # Only concrete numbers are checked: JAX may rebuild the tuple with tracers or placeholders (pytree unflatten).
+    # Only concrete numbers are checked: JAX may rebuild the tuple with tracers or placeholders (pytree unflatten);
+    # a string or a bool is never a length
+    if isinstance(value, (str, bytes, bool)):
+        raise ValueError(f"TerrainScale.{name} must be a finite number of metres > 0; got {value!r}")
     if isinstance(value, numbers.Real) or (isinstance(value, np.ndarray) and value.ndim == 0):
         v = float(value)
         if not (np.isfinite(v) and v > 0):
