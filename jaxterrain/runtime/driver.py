@@ -20,7 +20,8 @@ of ``every`` steps the driver
   how);
 * rewrites ``run_dir/metrics.csv`` (one row per step) atomically and appends the chunk's scalars to TensorBoard
   event files in ``run_dir/tb`` (tensorboardX);
-* moves a tqdm progress bar (ETA, steps per second, the ``key_metric``'s latest value);
+* moves a tqdm progress bar (ETA, steps per second, the ``key_metric``'s latest value), or without a terminal
+  writes the same as plain lines (a log file gets no carriage returns);
 * stops early (``done < total``; resume later) once ``time_limit_s`` has passed, or before a chunk that would end
   past it: the next chunk is predicted from the fastest rate (seconds per step) of the chunks so far, so a first
   chunk that compiled makes the prediction cautious; at least one chunk always runs.
@@ -53,7 +54,7 @@ import numpy as np
 
 from jaxterrain.runtime.io import atomic_save_npz, atomic_write_text
 
-__all__ = ["CHECKPOINT_NAME", "METRICS_NAME", "MetricLog", "load_checkpoint", "read_meta", "restore", "run_chunks",
+__all__ = ["CHECKPOINT_NAME", "METRICS_NAME", "PLAIN_EVERY_S", "MetricLog", "load_checkpoint", "read_meta", "restore", "run_chunks",
            "save_checkpoint"]
 
 FORMAT = "jaxterrain-checkpoint"
@@ -236,15 +237,42 @@ def _fmt(v: float) -> str:
 # ----------------------------------------------------------------------------------------------------------------
 # The loop
 # ----------------------------------------------------------------------------------------------------------------
+PLAIN_EVERY_S = 10.0
+"""Without a terminal (a log file, a batch job), progress is a plain line on stderr at most this often."""
+
+
+class _PlainProgress:
+    """Progress as plain lines (no carriage returns) where stderr is not a terminal: the first chunk, then at most
+    one line every :data:`PLAIN_EVERY_S` seconds, and the last."""
+
+    def __init__(self, total: int, start: int, desc: str, unit: str):
+        self.total, self.desc, self.unit = total, desc or "run", unit
+        self.t0, self.start, self.last = time.perf_counter(), start, -float("inf")
+
+    def line(self, info: dict, key_metric: Optional[str]) -> None:
+        now = time.perf_counter()
+        if now - self.last < PLAIN_EVERY_S and info["done"] < self.total:
+            return
+        self.last = now
+        done, total = info["done"], self.total
+        rate = (done - self.start) / max(now - self.t0, 1e-9)
+        eta = (total - done) / rate if rate > 0 else float("inf")
+        metric = f", {key_metric} {info[key_metric]:.4g}" if key_metric and key_metric in info else ""
+        print(f"{self.desc}: {done}/{total} {self.unit}s ({100.0 * done / max(total, 1):.0f} %), "
+              f"{rate:.3g} {self.unit}s/s, {now - self.t0:.0f} s, ETA {eta:.0f} s{metric}", file=sys.stderr,
+              flush=True)
+
+
 def _bar(progress, total: int, start: int, desc: str, unit: str):
     if progress is not True:
         return None
+    if not sys.stderr.isatty():
+        return _PlainProgress(total, start, desc, unit)
     try:
         from tqdm.auto import tqdm
     except ImportError:  # pragma: no cover
-        return None
-    return tqdm(total=total, initial=start, desc=desc or None, unit=unit, dynamic_ncols=True, file=sys.stderr,
-                disable=None)
+        return _PlainProgress(total, start, desc, unit)
+    return tqdm(total=total, initial=start, desc=desc or None, unit=unit, dynamic_ncols=True, file=sys.stderr)
 
 
 def _extend(history: dict, metrics: dict, n: int) -> None:
@@ -273,7 +301,8 @@ def run_chunks(chunk_fn: ChunkFn, state: Any, *, total: int, every: int, start: 
       key_metric: the metric shown beside the progress bar.
       time_limit_s: the seconds (from the call) the run may take: stop after the chunk in which they passed, or
         before a chunk predicted to end past them.
-      progress: True for a tqdm bar on stderr; a callable receives a dict per chunk (``done``, ``total``,
+      progress: True for a tqdm bar on stderr (plain lines, at most one per :data:`PLAIN_EVERY_S` seconds, where
+        stderr is not a terminal); a callable receives a dict per chunk (``done``, ``total``,
         ``seconds``, ``steps_per_s`` and the latest value of every metric); False is silent.
       meta: a JSON-serialisable dict stored in every checkpoint (e.g. the run's config).
       wall_s: seconds of wall time the run had taken before this call (a restored checkpoint's ``meta["wall_s"]``,
@@ -310,7 +339,9 @@ def run_chunks(chunk_fn: ChunkFn, state: Any, *, total: int, every: int, start: 
                     **{k: v[-1] for k, v in history.items() if v}}
             rate = min(rate, seconds / (stop - done))
             done = stop
-            if bar is not None:
+            if isinstance(bar, _PlainProgress):
+                bar.line(info, key_metric)
+            elif bar is not None:
                 if key_metric is not None and key_metric in info:
                     bar.set_postfix({key_metric: f"{info[key_metric]:.4g}"}, refresh=False)
                 bar.update(stop - bar.n)
@@ -320,7 +351,7 @@ def run_chunks(chunk_fn: ChunkFn, state: Any, *, total: int, every: int, start: 
             if time_limit_s is not None and done < total and time.perf_counter() - t0 + predicted > time_limit_s:
                 break
     finally:
-        if bar is not None:
+        if bar is not None and not isinstance(bar, _PlainProgress):
             bar.close()
         if log is not None:
             log.close()

@@ -117,6 +117,18 @@ def test_progress_callable_and_batched_metrics():
     assert [s["done"] for s in seen] == [2, 3]
 
 
+def test_without_a_terminal_progress_is_plain_lines(capsys, monkeypatch):
+    """stderr not a terminal (pytest captures it; a log file, a batch job): no tqdm bar and no carriage return, but a
+    line at the first chunk, at most one per PLAIN_EVERY_S seconds after, and one at the end."""
+    monkeypatch.setattr(driver, "PLAIN_EVERY_S", 3600.0)
+    driver.run_chunks(chunk, make_state(), total=6, every=2, desc="demo", unit="step", key_metric="x")
+    err = capsys.readouterr().err
+    lines = err.splitlines()
+    assert "\r" not in err and len(lines) == 2, err  # the first chunk and the last; the middle one throttled
+    assert lines[0].startswith("demo: 2/6 steps (33 %)") and lines[1].startswith("demo: 6/6 steps (100 %)")
+    assert ", x " in lines[1] and "ETA 0 s" in lines[1]
+
+
 def test_bad_checkpoints_name_the_file_and_leaf(tmp_path):
     path = tmp_path / "c.npz"
     driver.save_checkpoint(path, make_state(), done=1)
