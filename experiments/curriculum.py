@@ -19,7 +19,9 @@ marked ``[partial: E epochs]``), without training: e.g. before a GPU machine is 
 
 Writes ``figure7a.png`` (hardest terrain traversed vs epoch, every map treatment, mean +- 1 standard error),
 ``figure7b.png`` (CPPN: map vs standard CL), ``table2.csv`` / ``table2.md`` (epochs to first traverse a terrain at
-5 %, ..., 50 % of 70.71, ours beside the paper's), ``sequences.csv`` (every trial's terrains in order, all
+5 %, ..., 50 % of 70.71, ours beside the paper's), ``hardest.csv`` / ``hardest.md`` (each treatment's hardest
+terrain traversed: mean +- s.e. beside rliable's intervals of the mean and the IQM, and the probability that one
+treatment's trial went further than another's), ``sequences.csv`` (every trial's terrains in order, all
 treatments) and ``config.json``. Presets: those of ``learn`` (smoke, gpu-short, paper). ``--backend auto|jax|warp``: the
 walker's physics of every treatment (``learn``'s flag; saved in ``config.json``, kept by ``--resume``).
 """
@@ -195,9 +197,43 @@ def write_sequences(folder: Path, done: list[tuple[str, Path]]) -> None:
     atomic_write_text(folder / "sequences.csv", buf.getvalue())
 
 
+def write_hardest(folder: Path, rows: list[tuple[str, dict]]) -> None:
+    """hardest.csv / hardest.md: each treatment's hardest terrain traversed over its trials, mean +- s.e. beside
+    rliable's (the mean's and the interquartile mean's 95 % stratified-bootstrap intervals, seed 0), and the
+    probability that a trial of one treatment went further than a trial of another."""
+    import numpy as np
+
+    from jaxterrain.curriculum.outputs import BOOTSTRAP_REPS
+    from jaxterrain.runtime import statistics
+    from jaxterrain.runtime.io import atomic_write_csv, atomic_write_text
+
+    scores = {shown(label, s): np.asarray(s["hardest"], np.float64)[:, None] for label, s in rows}
+    est = statistics.interval_estimates(scores, reps=BOOTSTRAP_REPS)
+    table = []
+    md = ["| treatment | trials | mean +- s.e. | mean [95 % CI] | IQM [95 % CI] |", "|---|---|---|---|---|"]
+    for name, x in scores.items():
+        se = x.std(ddof=1) / np.sqrt(x.size) if x.size > 1 else 0.0
+        m, q = est[name]["mean"], est[name]["iqm"]
+        table.append((name, x.size, f"{x.mean():.3f}", f"{se:.3f}", f"{m.low:.3f}", f"{m.high:.3f}", f"{q.point:.3f}",
+                      f"{q.low:.3f}", f"{q.high:.3f}"))
+        md.append(f"| {name} | {x.size} | {x.mean():.2f} +- {se:.2f} | {m.point:.2f} [{m.low:.2f}, {m.high:.2f}] | "
+                  f"{q.point:.2f} [{q.low:.2f}, {q.high:.2f}] |")
+    names = list(scores)
+    if len(names) > 1:
+        md += ["", "P(a trial of the row went further than a trial of the column):", "",
+               "| | " + " | ".join(names) + " |", "|---|" + "---|" * len(names)]
+        md += [f"| {a} | " + " | ".join("-" if a == b else f"{statistics.probability_of_improvement(scores[a], scores[b]):.2f}"
+                                        for b in names) + " |" for a in names]
+    atomic_write_csv(folder / "hardest.csv", ["treatment", "trials", "mean", "se", "mean_low", "mean_high", "iqm",
+                                              "iqm_low", "iqm_high"], table)
+    atomic_write_text(folder / "hardest.md", "\n".join(md) + "\n")
+
+
 def write_outputs(folder: Path, cfg: dict, rows: list[tuple[str, dict]], done: list[tuple[str, Path]]) -> None:
-    """Table 2, Figure 7a / 7b and sequences.csv of the treatments' ``rows`` (label, summary) in ``done`` folders."""
+    """Table 2, Figure 7a / 7b, hardest.csv / .md and sequences.csv of the treatments' ``rows`` (label, summary) in
+    ``done`` folders."""
     write_table(folder, rows, int(cfg["trials"]))
+    write_hardest(folder, rows)
     write_figures(folder, rows, cfg["baseline"])
     write_sequences(folder, done)
 

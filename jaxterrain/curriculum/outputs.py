@@ -23,12 +23,14 @@ from jaxterrain.curriculum.analysis import (
 )
 from jaxterrain.qd.grid import MAX_DISTANCE_50
 from jaxterrain.rl.checkpoint import save_policy
-from jaxterrain.runtime import provenance
+from jaxterrain.runtime import provenance, statistics
 from jaxterrain.runtime.io import atomic_write_csv, atomic_write_text, save_figure
 
-__all__ = ["PARTIAL", "POLICIES", "SEQUENCE_COLUMNS", "histories", "sequence_rows", "generator_counts",
+__all__ = ["BOOTSTRAP_REPS", "PARTIAL", "POLICIES", "SEQUENCE_COLUMNS", "histories", "sequence_rows", "generator_counts",
            "milestone_rows", "summary_curve", "plot_curves", "write_outputs", "trial_policy", "export_policies"]
 
+BOOTSTRAP_REPS = 2000
+"""Resamples of the trials for ``summary.json``'s ``hardest_mean_ci`` and ``hardest_iqm`` (rliable, seed 0)."""
 PARTIAL = "summary_partial.json"
 """The summary of an unfinished run's last checkpoint (``summary.json`` marks a finished one)."""
 POLICIES = "policies"
@@ -111,7 +113,10 @@ def write_outputs(folder: Path, cfg: dict, config, bank, states, seconds: float 
     """history.csv, sequences.csv, milestones.csv/.md, curve.png and summary.json; returns the summary. With
     ``chunks_done`` (an unfinished run's last checkpoint, :func:`report_treatment`) the summary goes to
     ``summary_partial.json`` with ``"partial": true`` and ``"chunks_done"``, and the curve's title says so; without
-    it, ``summary.json``, and a ``summary_partial.json`` left by an earlier report is removed. ``seconds``: the wall
+    it, ``summary.json``, and a ``summary_partial.json`` left by an earlier report is removed. The summary holds each
+    trial's hardest terrain traversed, their mean +- s.e., and (rliable, the trials resampled
+    :data:`BOOTSTRAP_REPS` times) the mean's 95 % interval ``hardest_mean_ci`` and the interquartile mean with its
+    interval ``hardest_iqm`` ([point, low, high]). ``seconds``: the wall
     time of every command that ran the treatment, summed over resumes (each from its set-up and compilation on; the
     interpreter's start-up and imports are not in it), None where unknown. ``names``: the archive's generator names
     (``sequences.csv``'s ``generator`` column, the summary's ``generators``: :func:`generator_counts`)."""
@@ -144,9 +149,11 @@ def write_outputs(folder: Path, cfg: dict, config, bank, states, seconds: float 
     fig.tight_layout()
     save_figure(fig, folder / "curve.png")
     final = np.asarray(states.hardest, np.float64)
+    est = statistics.interval_estimates({label: final[:, None]}, reps=BOOTSTRAP_REPS)[label]  # trials as runs
     summary = {
         "label": label, "trials": int(final.size), "hardest": final.tolist(), "hardest_mean": float(final.mean()),
         "hardest_se": float(final.std(ddof=1) / np.sqrt(final.size)) if final.size > 1 else 0.0,
+        "hardest_mean_ci": [est["mean"].low, est["mean"].high], "hardest_iqm": list(est["iqm"]),
         "epochs": np.asarray(states.epoch).tolist(), "epochs_max": int(np.max(np.asarray(states.epoch))),
         "terrains_finished": np.asarray(states.obs_count).tolist(),
         "ended_without_terrains": [bool(d and e < config.max_epochs)

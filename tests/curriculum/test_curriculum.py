@@ -713,7 +713,7 @@ def test_curriculum_shards_share_one_run_folder_and_resume_writes_the_tables(tmp
     archive = tiny_archive(4, "four.npz")
     run = tmp_path / "exp2"
     fake = {"milestone_epochs": [40.0] + [None] * 9, "milestone_trials": [2] + [0] * 9, "hardest_mean": 3.0,
-            "curve": {"epoch": [0, 40], "mean": [0.0, 3.0], "se": [0.0, 0.5]}}
+            "hardest": [2.5, 3.5], "curve": {"epoch": [0, 40], "mean": [0.0, 3.0], "se": [0.0, 0.5]}}
     for sub in ("cppn-map", "cppn-roughness"):  # the plan of one cppn archive: map (t = 0), then the baseline
         (run / sub).mkdir(parents=True)
         (run / sub / "summary.json").write_text(json.dumps(fake))
@@ -731,6 +731,8 @@ def test_curriculum_shards_share_one_run_folder_and_resume_writes_the_tables(tmp
     md = (run / "table2.md").read_text()
     assert "| cppn map (ours) | 40 |" in md and "| cppn roughness (ours) | 40 |" in md
     assert (run / "figure7b.png").exists() and (run / "sequences.csv").read_text().count("cppn") == 2
+    hardest = (run / "hardest.md").read_text()  # rliable's intervals beside mean +- s.e.
+    assert "| cppn map | 2 | 3.00 +- 0.50 | 3.00 [2.50, 3.50] |" in hardest and "| cppn roughness | 0.50 | - |" in hardest
     # the plan follows the archives' names, not the order given: a fresh shard and a resumed one (config.json has
     # sorted keys) must agree on which treatment is t
     one = exp.treatments({"archives": {"perlin": archive, "cppn": archive}, "descriptors": ["roughness", "tpi"],
