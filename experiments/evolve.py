@@ -98,7 +98,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     common.add_protocol_argument(parser)
     parser.add_argument("--rollout-slots", type=int, default=None,
                         help="env slots of the difficulty rollout pool per device (speed only; gpu preset: 16384)")
-    parser.add_argument("--rollout-backend", choices=["jax", "warp"], default=None,
+    parser.add_argument("--backend", "--rollout-backend", dest="rollout_backend", choices=["jax", "warp"], default=None,
                         help="walker physics of the difficulty rollouts: jax (MJX, default) or warp (MuJoCo Warp)")
     parser.add_argument("--no-heightmaps", dest="store_heightmaps", action="store_const", const=False, default=None,
                         help="do not store the elites' heightmaps in archive.npz (they can be re-rendered)")

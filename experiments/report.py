@@ -26,10 +26,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="report folder (default: RUN_DIR/report for one run, runs/report-<time> for several)")
     parser.add_argument("--title", default="jaxterrain report", help="page title")
     parser.add_argument("--no-videos", action="store_true", help="leave out the walks (no MJX rollout, no GL)")
-    parser.add_argument("--steps", type=int, default=1000, help="env steps walked per video (15 ms each)")
+    parser.add_argument("--video-steps", "--steps", dest="steps", type=int, default=1000, help="env steps walked per video (15 ms each)")
     parser.add_argument("--frames", type=int, default=60, help="frames per video (evenly spaced over the walk)")
-    parser.add_argument("--width", type=int, default=320, help="video width in pixels")
-    parser.add_argument("--height", type=int, default=240, help="video height in pixels")
+    parser.add_argument("--video-width", "--width", dest="width", type=int, default=320, help="video width in pixels")
+    parser.add_argument("--video-height", "--height", dest="height", type=int, default=240, help="video height in pixels")
     parser.add_argument("--thumb", type=int, default=64, help="thumbnail side in pixels")
     parser.add_argument("--policy", type=Path, default=None,
                         help="policy folder (jaxterrain.rl.save_policy); default: the shipped base policy")

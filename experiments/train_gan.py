@@ -62,11 +62,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--size", type=int, default=None, help="heightmap side; must fit the preset's architecture")
     parser.add_argument("--data", default=None,
                         help="folder / file of DEM tiles (.tif .tiff .npy .npz); default: matplotlib DEMs")
-    parser.add_argument("--lr", type=float, default=None, help="Adam learning rate of both networks (default 2e-4)")
+    parser.add_argument("--learning-rate", "--lr", dest="lr", type=float, default=None, help="Adam learning rate of both networks (default 2e-4)")
     parser.add_argument("--r1", type=float, default=None, help="R1 penalty weight on real data, applied lazily "
                         "every 8 steps (0 = off; default: the preset's)")
     parser.add_argument("--sample-every", type=int, default=None, help="steps between sample grids")
-    parser.add_argument("--ckpt-every", type=int, default=None, help="steps between checkpoints")
+    parser.add_argument("--checkpoint-every", "--ckpt-every", dest="ckpt_every", type=int, default=None, help="steps between checkpoints")
     parser.add_argument("--log-every", type=int, default=None, help="steps between log lines")
     parser.add_argument("--quality-samples", type=int, default=None,
                         help="terrains per set in the quality check (0 = skip)")
