@@ -107,23 +107,15 @@ def band_table(distance: np.ndarray, fitness: np.ndarray, width: float = 10.0, t
     return {"lo": lo, "hi": lo + width, "filled": filled.astype(np.int64), "share": share, "mean": mean}
 
 
-def rank(x: np.ndarray) -> np.ndarray:
-    """Ranks 1..N of ``x`` [N], ties sharing their average rank (for Spearman's correlation)."""
-    x = np.asarray(x, np.float64)
-    order = np.argsort(x, kind="stable")
-    r = np.empty(x.size, np.float64)
-    r[order] = np.arange(1, x.size + 1)
-    _, inverse, counts = np.unique(x, return_inverse=True, return_counts=True)
-    sums = np.bincount(inverse, weights=r)
-    return sums[inverse] / counts[inverse]
-
-
 def correlations(distance: np.ndarray, fitness: np.ndarray) -> tuple[float, float]:
-    """``(pearson, spearman)`` of ``fitness`` against ``distance`` ([N] each); NaN when N < 3 or one is constant."""
+    """``(pearson, spearman)`` of ``fitness`` against ``distance`` ([N] each; scipy.stats, ties at their average
+    rank); NaN when N < 3 or one is constant."""
+    from scipy import stats
+
     d, f = np.asarray(distance, np.float64), np.asarray(fitness, np.float64)
     if d.size < 3 or np.ptp(d) == 0 or np.ptp(f) == 0:
         return float("nan"), float("nan")
-    return float(np.corrcoef(d, f)[0, 1]), float(np.corrcoef(rank(d), rank(f))[0, 1])
+    return float(stats.pearsonr(d, f)[0]), float(stats.spearmanr(d, f)[0])
 
 
 def spread_sample(distance: np.ndarray, n: int | None) -> np.ndarray:

@@ -66,8 +66,11 @@ def test_gradient_of_a_hand_made_archive():
     assert all(np.isnan(G.correlations(d, np.ones_like(d))))
 
 
-def test_rank_ties_and_spread_sample():
-    np.testing.assert_allclose(G.rank(np.array([3.0, 1.0, 3.0, 2.0])), [3.5, 1.0, 3.5, 2.0])
+def test_correlations_with_ties_and_spread_sample():
+    # ties share their average rank: ranks of d are 3.5 1 3.5 2, of f 1 2 3 4 -> Spearman = Pearson of those ranks
+    pearson, spearman = G.correlations(np.array([3.0, 1.0, 3.0, 2.0]), np.array([1.0, 2.0, 3.0, 4.0]))
+    assert spearman == pytest.approx(np.corrcoef([3.5, 1.0, 3.5, 2.0], [1, 2, 3, 4])[0, 1])
+    assert pearson == pytest.approx(np.corrcoef([3.0, 1.0, 3.0, 2.0], [1, 2, 3, 4])[0, 1])
     d = np.array([5.0, 1.0, 9.0, 3.0, 7.0, 2.0])
     rows = G.spread_sample(d, 3)  # sorted positions 0, 2 (round(2.5)), 5: the nearest, one between, the farthest
     assert rows.tolist() == [1, 2, 3] and d[rows].tolist() == [1.0, 9.0, 3.0]
