@@ -602,3 +602,64 @@ def test_bad_policy_files_name_the_file(policy_dir, tmp_path):
         kinds = sorted(set(g.split(":")[0] for g in gaps))
         pytest.xfail(f"load_policy: {len(gaps)} of 40 damaged files without a clear error ({', '.join(kinds)}); "
                      f"first: {gaps[0]}")
+
+
+# ---- Experiment 3's statistics (jaxterrain.runtime.statistics, suite.cell_scores) ----
+def score_matrices(max_runs: int = 6, max_tasks: int = 8):
+    """Two [runs, tasks] score matrices with the same tasks, values on a coarse grid (ties happen)."""
+    return st.integers(1, max_tasks).flatmap(lambda tasks: st.tuples(*(
+        st.integers(1, max_runs).flatmap(lambda runs: st.lists(
+            st.lists(st.integers(0, 10).map(lambda v: v / 10), min_size=tasks, max_size=tasks),
+            min_size=runs, max_size=runs)) for _ in range(2))))
+
+
+@bounded(60)
+@given(pair=score_matrices())
+def test_probability_of_improvement_is_complementary_and_bounded(pair):
+    from jaxterrain.runtime import statistics
+
+    x, y = (np.asarray(m, np.float64) for m in pair)
+    TRIED["probability_of_improvement"] += 1
+    p, q = statistics.probability_of_improvement(x, y), statistics.probability_of_improvement(y, x)
+    assert 0.0 <= p <= 1.0 and p + q == pytest.approx(1.0)
+    lo, hi = x.min(), x.max()
+    assert lo - 1e-12 <= statistics.iqm(x) <= hi + 1e-12
+
+
+@bounded(25)
+@given(pair=score_matrices(max_runs=4, max_tasks=4))
+def test_intervals_contain_their_point_and_lie_within_the_scores(pair):
+    from jaxterrain.runtime import statistics
+
+    x = np.asarray(pair[0], np.float64)
+    TRIED["interval_estimates"] += 1
+    est = statistics.interval_estimates({"x": x}, reps=40, seed=1)["x"]
+    for iv in est.values():
+        assert x.min() - 1e-9 <= iv.low <= iv.high <= x.max() + 1e-9
+    assert est["mean"].point == pytest.approx(x.mean())
+
+
+@bounded(40)
+@given(levels=st.lists(st.integers(0, 3), min_size=1, max_size=12), runs=st.integers(1, 3), data=st.data())
+def test_cell_scores_average_each_cell_and_keep_first_appearance_order(levels, runs, data):
+    from jaxterrain import suite
+
+    family = np.array(data.draw(st.lists(st.sampled_from(["a", "b"]), min_size=len(levels), max_size=len(levels))))
+    level = np.array(levels)
+    fitness = np.asarray(data.draw(st.lists(st.lists(st.floats(0, 1), min_size=len(levels), max_size=len(levels)),
+                                            min_size=runs, max_size=runs)))
+    TRIED["cell_scores"] += 1
+    cells, scores = suite.cell_scores(fitness, family, level)
+    assert scores.shape == (runs, len(cells)) and len(set(cells)) == len(cells)
+    assert cells == list(dict.fromkeys(zip(family.tolist(), level.tolist())))
+    for j, (f, lv) in enumerate(cells):
+        np.testing.assert_allclose(scores[:, j], fitness[:, (family == f) & (level == lv)].mean(axis=1))
+
+
+@bounded(30)
+@given(size=st.one_of(st.floats(0.5, 64).filter(lambda v: v != int(v)), st.integers(-3, 0), st.booleans(),
+                      st.text(max_size=3)))
+def test_a_generator_size_that_is_not_a_whole_positive_number_is_refused(size):
+    TRIED["generators.get size"] += 1
+    with pytest.raises(ValueError, match="size must be an integer >= 1"):
+        generators.get("perlin", size=size)
