@@ -15,6 +15,8 @@ from __future__ import annotations
 
 import argparse
 
+from experiments.common import UsageError
+
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--heights", nargs="+", type=float, default=[0.5], help="height scales to try (metres, > 0)")
@@ -43,9 +45,9 @@ def main(args: argparse.Namespace) -> int:
     from jaxterrain.terrain import TerrainScale
 
     if args.n < 1:
-        raise SystemExit("--n must be >= 1")
+        raise UsageError("--n must be >= 1")
     if any(h <= 0 for h in args.heights):
-        raise SystemExit("--heights must all be > 0 (metres)")
+        raise UsageError("--heights must all be > 0 (metres)")
     run = run_folder("difficulty-spread", args.out)
     run.mkdir(parents=True, exist_ok=True)
     write_config(run, {**vars(args), "command": "difficulty-spread"})

@@ -17,6 +17,8 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from experiments.common import UsageError
+
 FORMATS = ("obj", "stl", "png", "npy", "mjcf")
 _EXT = {"obj": ".obj", "stl": ".stl", "png": ".png", "npy": ".npy", "mjcf": ".xml"}
 
@@ -33,7 +35,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def parse_cells(text: str, arch) -> list[int]:
-    """Cell indices from ``text`` (see ``--cells``); SystemExit naming the problem."""
+    """Cell indices from ``text`` (see ``--cells``); UsageError naming the problem."""
     import numpy as np
 
     from jaxterrain.report.archives import pick_cells
@@ -48,20 +50,20 @@ def parse_cells(text: str, arch) -> list[int]:
             cells += filled.tolist()
         elif part in ("easy", "medium", "hard"):
             if part not in picks:
-                raise SystemExit(f"--cells {part}: the archive has too few elites ({filled.size})")
+                raise UsageError(f"--cells {part}: the archive has too few elites ({filled.size})")
             cells.append(picks[part])
         else:
             try:
                 c = int(part)
             except ValueError:
-                raise SystemExit(f"--cells: {part!r} is not a cell index, easy, medium, hard or all") from None
+                raise UsageError(f"--cells: {part!r} is not a cell index, easy, medium, hard or all") from None
             if not 0 <= c < arch.fitness.shape[0]:
-                raise SystemExit(f"--cells: cell {c} is outside [0, {arch.fitness.shape[0] - 1}]")
+                raise UsageError(f"--cells: cell {c} is outside [0, {arch.fitness.shape[0] - 1}]")
             if arch.source[c] < 0:
-                raise SystemExit(f"--cells: cell {c} is empty")
+                raise UsageError(f"--cells: cell {c} is empty")
             cells.append(c)
     if not cells:
-        raise SystemExit("--cells: no cell given")
+        raise UsageError("--cells: no cell given")
     return list(dict.fromkeys(cells))  # unique, in order
 
 
@@ -77,11 +79,11 @@ def main(args: argparse.Namespace) -> int:
     try:
         scale = T.TerrainScale(args.cell_size, args.height)
     except ValueError as err:
-        raise SystemExit(str(err)) from None
+        raise UsageError(str(err)) from None
     try:
         arch = A.load(args.archive)
     except (OSError, ValueError) as err:
-        raise SystemExit(f"cannot load {args.archive}: {err}") from None
+        raise UsageError(f"cannot load {args.archive}: {err}") from None
     cells = parse_cells(args.cells, arch)
     out = args.out or args.archive.with_name(args.archive.stem + "_terrains")
     out.mkdir(parents=True, exist_ok=True)

@@ -22,6 +22,8 @@ from __future__ import annotations
 import argparse
 from typing import Any, NamedTuple
 
+from experiments.common import UsageError
+
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--n", type=int, default=32, help="terrains per generator (>= 1)")
@@ -227,15 +229,15 @@ def main(args: argparse.Namespace) -> int:
     from jaxterrain.runtime.io import atomic_write_text
 
     if args.n < 1:
-        raise SystemExit("--n must be >= 1")
+        raise UsageError("--n must be >= 1")
     if not 32 <= args.size <= 1024:
-        raise SystemExit("--size must be in [32, 1024]")
+        raise UsageError("--size must be in [32, 1024]")
     if args.walk < 0:
-        raise SystemExit(f"--walk must be >= 0, got {args.walk}")
+        raise UsageError(f"--walk must be >= 0, got {args.walk}")
     if args.attempts < 1 or not 1 <= args.best <= args.attempts:
-        raise SystemExit(f"--attempts must be >= 1 and --best in [1, attempts], got {args.attempts} / {args.best}")
+        raise UsageError(f"--attempts must be >= 1 and --best in [1, attempts], got {args.attempts} / {args.best}")
     if args.report_frames < 0:
-        raise SystemExit(f"--report-frames must be >= 0, got {args.report_frames}")
+        raise UsageError(f"--report-frames must be >= 0, got {args.report_frames}")
     run = run_folder("quickstart", args.out)
     run.mkdir(parents=True, exist_ok=True)
     write_config(run, vars(args))
@@ -255,7 +257,7 @@ def main(args: argparse.Namespace) -> int:
         print(f"{name:15s} {args.n} terrains rendered in {s.render_s:.2f} s (incl. compile); "
               f"traversable {s.traversable.mean():.0%}", flush=True)
     if not samples:
-        raise SystemExit("no generator could be loaded")
+        raise UsageError("no generator could be loaded")
 
     walk_note = "Not walked (--walk 0)."
     if args.walk > 0:

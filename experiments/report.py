@@ -19,6 +19,8 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from experiments.common import UsageError
+
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("runs", nargs="+", type=Path, metavar="RUN_DIR", help="run folders to report on")
@@ -47,10 +49,10 @@ def main(args: argparse.Namespace) -> int:
 
     for run in args.runs:
         if not run.is_dir():
-            raise SystemExit(f"run folder not found: {run}")
+            raise UsageError(f"run folder not found: {run}")
     for name in ("steps", "frames", "width", "height", "thumb"):
         if getattr(args, name) < 1:
-            raise SystemExit(f"--{name} must be >= 1, got {getattr(args, name)}")
+            raise UsageError(f"--{name} must be >= 1, got {getattr(args, name)}")
     out = args.out or (args.runs[0] / "report" if len(args.runs) == 1 else run_folder("report"))
     policy = None
     if args.policy is not None:

@@ -107,7 +107,7 @@ def test_report_says_why_renders_were_skipped(smoke_run, tmp_path, monkeypatch):
     assert "Renders skipped" in md
 
 
-def test_report_command_and_export_command(smoke_run, tmp_path):
+def test_report_command_and_export_command(smoke_run, tmp_path, capsys):
     import trimesh
 
     from experiments.__main__ import main
@@ -132,8 +132,10 @@ def test_report_command_and_export_command(smoke_run, tmp_path):
     np.testing.assert_allclose(mesh.vertices[:, 2], expected.ravel(), atol=1e-5)
     rows = (out / "cells.csv").read_text().splitlines()
     assert rows[0] == "cell,generator,fitness,roughness,tpi,file" and len(rows) == 1 + 3 * 5
-    with pytest.raises(SystemExit, match="empty"):
+    with pytest.raises(SystemExit) as stop:  # one line naming the problem, exit status 2
         main(["export", str(smoke_run / "archive.npz"), "--cells", "1", "--out", str(out)])
+    err = capsys.readouterr().err.strip()
+    assert stop.value.code == 2 and err == "python -m experiments export: error: --cells: cell 1 is empty"
 
 
 def test_markdown_to_html():
