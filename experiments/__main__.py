@@ -41,10 +41,14 @@ class HelpFormatter(argparse.ArgumentDefaultsHelpFormatter):
         return super()._get_help_string(action)
 
 
-def main(argv: list[str] | None = None) -> int:
+def build_parser() -> tuple[argparse.ArgumentParser, dict]:
+    """The parser of ``python -m experiments`` and ``{name: (module, its subparser)}`` of every command built, each
+    flag's help ending with every preset's value (the docs' command-line page is written from the same parsers)."""
+    from experiments.common import show_preset_values
+
     parser = argparse.ArgumentParser(prog="python -m experiments", description=__doc__.splitlines()[0])
     sub = parser.add_subparsers(dest="command", required=True, metavar="command")
-    available = {}
+    commands = {}
     for name, (module_name, help_text) in COMMANDS.items():
         try:
             module = importlib.import_module(module_name)
@@ -52,13 +56,17 @@ def main(argv: list[str] | None = None) -> int:
             if err.name == module_name:  # command not built yet
                 continue
             raise
-        available[name] = module
         command = sub.add_parser(name, help=help_text, description=help_text, formatter_class=HelpFormatter)
         module.add_arguments(command)
-        if hasattr(module, "PRESETS"):  # every preset's value in each flag's help
-            from experiments.common import show_preset_values
-
+        if hasattr(module, "PRESETS"):
             show_preset_values(command, module.PRESETS)
+        commands[name] = (module, command)
+    return parser, commands
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser, commands = build_parser()
+    available = {name: module for name, (module, _) in commands.items()}
     args = parser.parse_args(argv)
     from experiments.common import UsageError, check_args
 

@@ -19,23 +19,14 @@ def _help(parser: argparse.ArgumentParser) -> str:
 
 
 def cli_reference() -> str:
-    import importlib
     import os
 
     os.environ["COLUMNS"] = "110"  # argparse wraps help to the terminal: one width wherever the site is built
-    from experiments.__main__ import COMMANDS, HelpFormatter
-    from experiments.common import show_preset_values
+    from experiments.__main__ import COMMANDS, build_parser
 
-    parts = []
-    for name, (module_name, text) in COMMANDS.items():
-        parser = argparse.ArgumentParser(prog=f"python -m experiments {name}", description=text,
-                                         formatter_class=HelpFormatter)
-        module = importlib.import_module(module_name)
-        module.add_arguments(parser)
-        if hasattr(module, "PRESETS"):
-            show_preset_values(parser, module.PRESETS)
-        parts.append(f"## {name}\n\n{text}\n\n```text\n{_help(parser).rstrip()}\n```\n")
-    return "\n".join(parts)
+    _, commands = build_parser()
+    return "\n".join(f"## {name}\n\n{COMMANDS[name][1]}\n\n```text\n{_help(command).rstrip()}\n```\n"
+                     for name, (_, command) in commands.items())
 
 
 def on_page_markdown(markdown: str, page, config, files) -> str:
