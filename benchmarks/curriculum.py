@@ -1,6 +1,6 @@
 """Experiment 2's costs on the GPU machine: a curriculum chunk, its parts, and bare PPO, in one run.
 
-    python benchmarks/curriculum.py [--archive A.npz] [--trials 1,10] [--chunks 2] [--parts]
+    python benchmarks/curriculum.py [--archive A.npz] [--trials 1,10] [--chunks 2] [--parts] [--curricula map,dr]
         [--num-envs N --num-unrolls U] [--overlap off,on] [--truncation mask,bootstrap] [--start RUN]
         [--out result.json]
 
@@ -27,6 +27,8 @@ the seconds per step, which with the switches of a whole run (``history.csv``) g
 more value-net call per env step, on the observation before the auto-reset; default: the preset's), in the order
 given (``mask,bootstrap,mask`` brackets the one with the other, to see the machine's drift); the ratio printed is
 bootstrap's seconds per chunk over the mean of mask's; the other ratios use the first mode given.
+``--curricula map,dr,levels`` times the block of each curriculum (the first the peer): ``dr_vs_map_T10`` is dr's env
+steps/s over map's at 10 trials (issue 46: a per-env selector costs at most 10 %, ratio >= 0.9).
 ``--start RUN`` starts every block from the checkpoint of a ``learn`` run of the same preset and trial count (e.g.
 the paper run at chunk 550, where terrains change less often than in the first chunks) instead of chunk 0; pass
 the run's ``--archive`` too. With ``--parts`` the parts then time each trial's restored policy on its current
@@ -67,8 +69,11 @@ def timed(fn, *args):
     return out, time.perf_counter() - t0
 
 
-def learn_cfg(args, trials: int, overlap: bool = False, truncation: str | None = None) -> dict:
+def learn_cfg(args, trials: int, overlap: bool = False, truncation: str | None = None,
+              curriculum: str | None = None) -> dict:
     cfg = {**learn.PRESETS[args.preset], "seed": 0, "trials": trials, "overlap": overlap}
+    if curriculum is not None:
+        cfg["curriculum"] = curriculum
     if truncation is not None:
         cfg["truncation"] = truncation
     if args.archive:
@@ -114,9 +119,10 @@ def trial_switches(states, before) -> np.ndarray:
     return out
 
 
-def measure_block(args, trials: int, overlap: bool = False, truncation: str | None = None) -> dict:
+def measure_block(args, trials: int, overlap: bool = False, truncation: str | None = None,
+                  curriculum: str | None = None) -> dict:
     """The learn command's block at ``trials``: compile seconds, seconds per chunk, env steps/s."""
-    cfg = learn_cfg(args, trials, overlap, truncation)
+    cfg = learn_cfg(args, trials, overlap, truncation, curriculum)
     config, arch, policy, env = runner.validate(cfg)
     t0 = time.perf_counter()
     bank, block, states = runner.setup(cfg, config, arch, policy, env)
@@ -136,13 +142,14 @@ def measure_block(args, trials: int, overlap: bool = False, truncation: str | No
     steps = int(np.max(chunks + (switched + ~pending if overlap else 0)))
     done = float(np.mean(chunks))
     per_chunk = t / done
-    row = {"part": "block (learn)" + (", overlap" if overlap else ""), "trials": trials,
+    row = {"part": "block (learn)" + (", overlap" if overlap else ""), "curriculum": cfg["curriculum"],
+           "trials": trials,
            "truncation": cfg["truncation"], "compile_s": compile_s,
            "first_chunk_s": first, "s_per_chunk": per_chunk,
            "env_steps_per_s": trials * config.steps_per_chunk / per_chunk, "chunks_done": done,
            "chunk_reached": int(np.max(np.asarray(states.chunk))), "switches": int(np.sum(switched)),
            "loop_steps": steps, "s_per_step": t / steps, "hardest_mean": float(np.mean(np.asarray(states.hardest)))}
-    if args.parts:
+    if args.parts and runner.selector_slots(cfg) == 1:  # the parts of a one-terrain curriculum
         row.update(measure_parts(cfg, config, bank, policy, env, trials, start))
     return row
 
@@ -234,6 +241,9 @@ def main() -> None:
     p.add_argument("--truncation", default=None,
                    help="comma list of mask / bootstrap (PPOConfig.truncation; default: the preset's)")
     p.add_argument("--start", default=None, help="start the blocks from this learn run's checkpoint")
+    p.add_argument("--curricula", default=None,
+                   help="comma list of learn --curriculum names timed as blocks, the first the peer of the others' "
+                        "ratios (e.g. map,dr,levels: the per-env selectors' cost; default: the preset's)")
     p.add_argument("--out", default=None)
     args = p.parse_args()
     modes = [{"off": False, "on": True}[m] for m in args.overlap.split(",")]
@@ -248,15 +258,24 @@ def main() -> None:
         for truncation in truncations:
             rows.append(measure_ppo(args, truncation))
             print(rows[-1], flush=True)
+    curricula = args.curricula.split(",") if args.curricula else [learn.PRESETS[args.preset]["curriculum"]]
     for trials in [int(t) for t in args.trials.split(",")]:
         for overlap in modes:
             for truncation in truncations:
-                rows.append(measure_block(args, trials, overlap, truncation))
-                print(rows[-1], flush=True)
+                for curriculum in curricula:
+                    rows.append(measure_block(args, trials, overlap, truncation, curriculum))
+                    print(rows[-1], flush=True)
     ratios = {}
-    first = truncations[0]  # the reference mode of every other ratio
-    blocks = {r["trials"]: r for r in rows if r["part"] == "block (learn)" and r["truncation"] == first}
-    overlapped = {r["trials"]: r for r in rows if r["part"] == "block (learn), overlap" and r["truncation"] == first}
+    first, reference = truncations[0], curricula[0]  # the reference mode / curriculum of every other ratio
+    blocks = {r["trials"]: r for r in rows if r["part"] == "block (learn)" and r["truncation"] == first
+              and r["curriculum"] == reference}
+    for r in rows:  # each curriculum's env steps/s over the first's, same trials, mode and truncation
+        peer = next((q for q in rows if q["part"] == r["part"] and q["trials"] == r["trials"]
+                     and q["truncation"] == r["truncation"] and q["curriculum"] == reference), None)
+        if r["part"].startswith("block") and r["curriculum"] != reference and peer is not None:
+            ratios[f"{r['curriculum']}_vs_{reference}_T{r['trials']}"] = r["env_steps_per_s"] / peer["env_steps_per_s"]
+    overlapped = {r["trials"]: r for r in rows if r["part"] == "block (learn), overlap" and r["truncation"] == first
+                  and r["curriculum"] == reference}
     for part, name in (("bare PPO (one terrain)", "ppo"), ("block (learn)", "block"),
                        ("block (learn), overlap", "block_overlap")):
         for trials in sorted({r["trials"] for r in rows if r["part"] == part}):
@@ -281,7 +300,7 @@ def main() -> None:
         if trials in blocks:
             ratios[f"overlap_speedup_T{trials}"] = blocks[trials]["s_per_chunk"] / row["s_per_chunk"]
     print()
-    cols = ["part", "trials", "truncation", "compile_s", "s_per_chunk", "env_steps_per_s", "chunks_done", "switches",
+    cols = ["part", "curriculum", "trials", "truncation", "compile_s", "s_per_chunk", "env_steps_per_s", "chunks_done", "switches",
             "loop_steps", "s_per_step", "train_s_per_chunk", "eval_s_per_chunk", "train_seq_steps", "eval_seq_steps",
             "train_compile_s", "eval_compile_s"]
     print(common.markdown_table(rows, cols))

@@ -43,15 +43,27 @@ _INT_MIN = {
                      "updates_per_chunk", "num_envs", "eval_attempts", "eval_best", "batch", "stride",
                      "calibrate_window", "devices", "max_evals", "chunks_per_call", "policy_every", "terrains",
                      "chunk", "sample", "seeds", "walk_batch", "horizon", "trials", "epochs_per_chunk",
-                     "steps_per_epoch", "max_epochs"), 1),
+                     "steps_per_epoch", "max_epochs", "dr_terrains", "levels"), 1),
     **dict.fromkeys(("window", "windows"), 2),
-    **dict.fromkeys(("mutation_steps", "walk", "quality_samples"), 0),
+    **dict.fromkeys(("mutation_steps", "walk", "quality_samples", "levels_init"), 0),
 }
 _FLOAT_POSITIVE = ("time_limit", "time_budget", "env_steps", "lr", "learning_rate", "heights", "robot_height")
 _FLOAT_NONNEGATIVE = ("r1", "healthy_reward")
-_FLOAT_UNIT = ("threshold",)  # in (0, 1]
+_FLOAT_UNIT = ("threshold", "levels_promote")  # in (0, 1]
+_FLOAT_FRACTION = ("levels_demote",)  # in [0, 1]
 _AT_MOST = (("best", "attempts"), ("eval_best", "eval_attempts"), ("window", "size"),
             ("windows", "size"))  # (key, bound): key (each of a list) <= bound
+
+
+SELECTOR_NAMES = ("map", "roughness", "random", "dr", "levels")
+"""The built-in curricula (``jaxterrain.curriculum.SELECTORS``; literal here so that ``--help`` imports no JAX)."""
+
+
+def selector_name(text: str) -> str:
+    """argparse type of ``--curriculum`` / ``--baseline``: a built-in curriculum or ``module:object``."""
+    if text in SELECTOR_NAMES or (":" in text and all(text.partition(":")[::2])):
+        return text
+    raise argparse.ArgumentTypeError(f"choose from {', '.join(SELECTOR_NAMES)} or module:object; got {text!r}")
 
 
 PRESET_NAMES = ("smoke", "gpu-short", "gpu", "paper")
@@ -153,6 +165,10 @@ def check_values(values: dict, where=flag) -> None:
             for v in numbers:
                 if not (math.isfinite(v) and 0.0 < v <= 1.0):
                     raise _bad(where(key), "a number in (0, 1]", value)
+        elif key in _FLOAT_FRACTION:
+            for v in numbers:
+                if not (math.isfinite(v) and 0.0 <= v <= 1.0):
+                    raise _bad(where(key), "a number in [0, 1]", value)
         elif key in ("descriptors", "extra_descriptors") and items:
             import jaxterrain  # noqa: F401 - registers the learned descriptor (features.learned)
             from jaxterrain import features

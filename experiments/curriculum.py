@@ -44,7 +44,7 @@ DEFAULT_ARCHIVES = {g: common.shipped(f"archives/{g}_headings.npz")
 """The archives of Experiment 2 when ``--archives`` is not given: each generator's paper-budget roughness x TPI
 archive (evolved after the fix of tied insertion), reseated under ``difficulty.HEADINGS``; package data
 (``jaxterrain/assets/archives/G_headings.npz``, copies of ``docs/results/exp2_G_headings_archive.npz``)."""
-BASELINES = ("roughness", "random")
+BASELINES = ("roughness", "random", "dr", "levels")
 """The curricula of ``--baseline`` (``jaxterrain.curriculum.CurriculumConfig.selector``'s other than ``map``)."""
 PRESETS = {name: {**{k: v for k, v in p.items() if k not in ("archive", "curriculum")},
                   "archives": dict(DEFAULT_ARCHIVES), "baseline": "roughness"}
@@ -62,8 +62,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--chunks-per-call", type=int, default=None,
                         help="chunks per jitted call / checkpoint, in every treatment (learn's)")
     learn.add_fine_tuning_arguments(parser, ", in every treatment")
-    parser.add_argument("--baseline", nargs="+", choices=BASELINES, default=None,
-                        help="the baselines run on the cppn archive, in this order (Figure 7b; default roughness)")
+    parser.add_argument("--baseline", nargs="+", type=common.selector_name, default=None, metavar="NAME",
+                        help=f"the baselines run on the cppn archive, in this order: {', '.join(BASELINES)} or "
+                             f"module:object (Figure 7b; default roughness)")
+    learn.add_selector_arguments(parser)
     common.add_protocol_argument(parser)  # default: each archive's own protocol (learn's)
     parser.add_argument("--report", action="store_true",
                         help="with --resume: Table 2 and the figures from the treatments as they stand (unfinished "
@@ -269,7 +271,8 @@ def main(args) -> int:
         raise common.UsageError(f"--baseline: each of {', '.join(BASELINES)} at most once; got {' '.join(args.baseline)}")
     over = dict(archives=parse_archives(args.archives), trials=args.trials, max_epochs=args.max_epochs,
                 chunks_per_call=args.chunks_per_call, baseline=args.baseline, backend=args.backend,
-                **learn.fine_tuning_overrides(args), **common.protocol_overrides(args))
+                **learn.fine_tuning_overrides(args), **learn.selector_overrides(args),
+                **common.protocol_overrides(args))
     mesh = common.device_mesh(args.devices)
     folder, cfg = common.setup_run("curriculum", args, PRESETS, "smoke", over)
     start = time.perf_counter()

@@ -5,7 +5,9 @@
     python -m experiments learn --resume runs/learn-cppn --time-limit 9          # until it says "done"
 
 ``--curriculum``: ``map`` (the paper's IT&E map-based curriculum), ``roughness`` (standard CL: the terrains sorted by
-roughness, every fifth, in order) or ``random`` (uniform over the archive). Every trial starts from the shipped base
+roughness, every fifth, in order), ``random`` (uniform over the archive), ``dr`` (domain randomisation: ``--dr-terrains``
+terrains a chunk, each env on one) or ``levels`` (legged_gym's terrain levels over bands of the archive), or
+``module:object`` (your own :class:`jaxterrain.curriculum.Selector`; ``jaxterrain.curriculum.selectors``). Every trial starts from the shipped base
 policy (``--policy DIR`` for another), and the ``--trials`` trials run together (vmap) in one jitted function per
 block of ``chunks_per_call`` chunks (a chunk = 40 epochs of 4 000 env steps + one evaluation; the curriculum's
 choices: ``jaxterrain.curriculum.config``). At the start of every block each trial's envs restart on its current
@@ -72,7 +74,8 @@ _PAPER = dict(archive=CPPN_ARCHIVE, curriculum="map", trials=10, descriptors=["r
               distance_origin="origin", roughness_stride=5, max_observations=None, num_envs=500, unroll_length=10,
               num_unrolls=8, num_minibatches=8, update_epochs=8, learning_rate=3e-4, episode_length=1000,
               chunks_per_call=25, fast_compile=False, backend="auto", healthy_reward=None, update_normaliser=True,
-              truncation="bootstrap", overlap=False, compact=True, policy_every=None)
+              truncation="bootstrap", overlap=False, compact=True, policy_every=None, dr_terrains=8, levels=10,
+              levels_init=None, levels_promote=None, levels_demote=0.5)
 PRESETS: dict[str, dict] = common.with_preset_names({
     "paper": _PAPER,
     "gpu-short": {**_PAPER, "max_epochs": 3000},
@@ -87,7 +90,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     common.add_run_arguments(parser, PRESETS, "smoke")
     common.add_devices_argument(parser)  # the trials are split over the devices (curriculum.make_runner)
     parser.add_argument("--archive", default=None, help="archive .npz (default: the shipped CPPN archive, jaxterrain/assets/archives/cppn_headings.npz)")
-    parser.add_argument("--curriculum", choices=["map", "roughness", "random"], default=None)
+    parser.add_argument("--curriculum", type=common.selector_name, default=None, metavar="NAME",
+                        help=f"{', '.join(common.SELECTOR_NAMES)} or module:object (a factory config -> "
+                             f"jaxterrain.curriculum.Selector); jaxterrain.curriculum.selectors")
+    add_selector_arguments(parser)
     parser.add_argument("--trials", type=int, default=None, help="trials run together (paper: 10)")
     parser.add_argument("--threshold", type=float, default=None, help="fraction of the maximum fitness, in (0, 1]")
     parser.add_argument("--max-epochs", type=int, default=None)
@@ -114,6 +120,27 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--backend", choices=BACKENDS, default=None,
                         help="walker physics: auto (default: warp on a GPU where it imports, else jax), jax (MJX) or "
                              "warp (MuJoCo Warp on one tile per trial)")
+
+
+def add_selector_arguments(parser: argparse.ArgumentParser) -> None:
+    """The per-env curricula's settings (``dr``, ``levels``; CurriculumConfig's fields of the same names)."""
+    parser.add_argument("--dr-terrains", type=int, default=None,
+                        help="dr: terrains per trial and chunk, the envs dealt round-robin over them, >= 1 (default 8)")
+    parser.add_argument("--levels", type=int, default=None,
+                        help="levels: difficulty levels (bands of the archive by distance from (0, 0)), >= 1 "
+                             "(default: legged_gym's 10)")
+    parser.add_argument("--levels-init", type=int, default=None,
+                        help="levels: envs start at random levels 0 .. N, in [0, levels - 1] (default levels // 2)")
+    parser.add_argument("--levels-promote", type=float, default=None,
+                        help="levels: an env moves up when its furthest normalised distance in a chunk is at least "
+                             "this, in (0, 1] (default: the threshold)")
+    parser.add_argument("--levels-demote", type=float, default=None,
+                        help="levels: ... and down when it is below this, in [0, 1] (default 0.5: half the course)")
+
+
+def selector_overrides(args) -> dict:
+    return dict(dr_terrains=args.dr_terrains, levels=args.levels, levels_init=args.levels_init,
+                levels_promote=args.levels_promote, levels_demote=args.levels_demote)
 
 
 def add_fine_tuning_arguments(parser: argparse.ArgumentParser, scope: str = "") -> None:
@@ -159,7 +186,7 @@ def overrides(args) -> dict:
     return dict(archive=args.archive, curriculum=args.curriculum, trials=args.trials, threshold=args.threshold,
                 max_epochs=args.max_epochs, policy=args.policy, chunks_per_call=args.chunks_per_call,
                 num_envs=args.num_envs, backend=args.backend, policy_every=args.policy_every,
-                **fine_tuning_overrides(args),
+                **fine_tuning_overrides(args), **selector_overrides(args),
                 **common.protocol_overrides(args))
 
 

@@ -1,4 +1,5 @@
-"""Experiment 2's curricula over a terrain archive: the IT&E map-based curriculum and its baselines, on device.
+"""Curricula over a terrain archive, on device: Experiment 2's IT&E map-based curriculum and its baselines, and the
+field's (domain randomisation, terrain levels), all behind one selector protocol (:mod:`.selectors`).
 
     from jaxterrain import curriculum as C
     config = C.validate_config(C.CurriculumConfig(selector="map"))          # every choice documented in .config
@@ -7,14 +8,16 @@
     states = run(states, bank, 25)
     first = C.first_epochs(states.history.epoch, states.history.hardest)    # Table 2, per trial
 
-Modules, in the order they build on each other: :mod:`.gp` (the IT&E Gaussian process), :mod:`.config`
-(CurriculumConfig and the choices the paper leaves open), :mod:`.core` (state, init, step, trials: pure),
+Modules, in the order they build on each other: :mod:`.gp` (the IT&E Gaussian process), :mod:`.selectors` (a
+curriculum as ``Selector(init, assign, update, summary)`` over its own state: map, roughness, random, dr, levels,
+yours), :mod:`.config` (CurriculumConfig and the choices the paper leaves open), :mod:`.core` (state, init, step,
+trials: pure, whichever selector runs),
 :mod:`.walker` (the PPO + walker harness), :mod:`.analysis` (Table 2, Figure 7), :mod:`.outputs` (a treatment's
 files) and :mod:`.runner` (a treatment from a flat config: validation, compiled blocks, checkpoints, time limits;
 the ``learn`` command is a thin layer over it).
 """
 
-from jaxterrain.curriculum import gp, outputs, runner, walker
+from jaxterrain.curriculum import gp, outputs, runner, selectors, walker
 from jaxterrain.curriculum.analysis import (
     MILESTONES,
     PAPER_TABLE2,
@@ -24,7 +27,16 @@ from jaxterrain.curriculum.analysis import (
     milestone_summary,
     terrain_runs,
 )
-from jaxterrain.curriculum.config import CurriculumConfig, SELECTORS, validate_config
+from jaxterrain.curriculum.config import FINE_TUNING, CurriculumConfig, SELECTORS, validate_config
+from jaxterrain.curriculum.selectors import (
+    Assignment,
+    Decision,
+    Outcome,
+    Selector,
+    get_selector,
+    register_selector,
+    selector_names,
+)
 from jaxterrain.curriculum.core import (
     Harness,
     History,
@@ -44,7 +56,8 @@ from jaxterrain.curriculum.core import (
 )
 
 __all__ = [
-    "CurriculumConfig", "Harness", "History", "MILESTONES", "PAPER_TABLE2", "SELECTORS", "State", "first_epochs",
+    "Assignment", "CurriculumConfig", "Decision", "FINE_TUNING", "Outcome", "Selector", "get_selector",
+    "register_selector", "selector_names", "selectors", "Harness", "History", "MILESTONES", "PAPER_TABLE2", "SELECTORS", "State", "first_epochs",
     "format_milestone", "gp", "gp_params", "outputs", "runner", "walker", "hardest_curve", "init", "init_trials", "live_rows", "make_runner",
     "milestone_summary", "removal_mask", "roughness_sequence", "run_live", "run_trials", "select", "step",
     "terrain_hardness", "terrain_runs", "validate_config",

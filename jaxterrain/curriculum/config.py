@@ -66,7 +66,10 @@ The first terrain of the map curriculum is the argmax of the prior (no observati
 Baselines share everything but the ``selector``: ``"roughness"`` (standard CL, the paper's Figure 7b: the terrains
 sorted by descriptor 0 (roughness) ascending, every ``roughness_stride``-th one, in order, each finished by the same
 threshold / 100-evaluation rule) and ``"random"`` (uniformly random among the available terrains, each removed after
-it is finished, no GP).
+it is finished, no GP). The field's curricula spread a trial's envs over several terrains at once: ``"dr"`` (domain
+randomisation, ``dr_terrains`` terrains a chunk) and ``"levels"`` (legged_gym's terrain levels: ``levels``,
+``levels_init``, ``levels_promote``, ``levels_demote``); their rules and where they differ from the field's are in
+:mod:`.selectors`. Any other name is a registered selector (``selectors.register_selector``) or ``module:object``.
 """
 
 from __future__ import annotations
@@ -74,13 +77,14 @@ from __future__ import annotations
 import math
 from typing import NamedTuple, Optional
 
+from jaxterrain.curriculum.selectors import resolve_factory
 from jaxterrain.difficulty import Protocol
 from jaxterrain.rl.config import PPOConfig, validate_config as validate_ppo_config
 from jaxterrain.runtime.validation import int_at_least, known_fields, one_of, walks
 
 __all__ = ["CurriculumConfig", "validate_config", "SELECTORS", "FINE_TUNED", "FINE_TUNING"]
 
-SELECTORS = ("map", "roughness", "random")
+SELECTORS = ("map", "roughness", "random", "dr", "levels")  # built in; selectors.selector_names() adds registered ones
 GP_EVALUATIONS = ("final", "best")
 REMOVAL_TIES = ("nearer", "keep", "remove")
 CREDITS = ("threshold", "finished")
@@ -98,7 +102,9 @@ class CurriculumConfig(NamedTuple):
     the choices of the module docstring.
 
     Fields:
-      selector: ``map`` (IT&E GP + UCB + removal), ``roughness`` (standard CL) or ``random``.
+      selector: ``map`` (IT&E GP + UCB + removal), ``roughness`` (standard CL), ``random``, ``dr`` (domain
+        randomisation), ``levels`` (legged_gym's terrain levels), a registered name or ``module:object``
+        (:mod:`.selectors`).
       epochs_per_chunk: epochs trained between two evaluations (paper: 40).
       steps_per_epoch: env steps per epoch (SpinningUp's epoch: 4 000).
       max_epochs: the run stops after this many epochs (paper: 30 000).
@@ -133,7 +139,14 @@ class CurriculumConfig(NamedTuple):
         the evaluation keeps the trial there, and trains again when it does not. The same curriculum (the same
         keys, policies, evaluations and choices; only where the envs restart between blocks of chunks differs) in
         fewer physics calls: see :func:`jaxterrain.curriculum.core.step`. Needs a harness with ``train_evaluate``
-        (the walker's on tiles).
+        (the walker's on tiles). One-terrain selectors only (``map``, ``roughness``, ``random``).
+      dr_terrains: ``dr``'s terrains per chunk (its envs dealt round-robin over them), >= 1.
+      levels: ``levels``' difficulty levels (bands of the bank by hardness; legged_gym: 10), >= 1.
+      levels_init: envs start at random levels ``0 .. levels_init``, in [0, levels - 1]; None = ``levels // 2``
+        (legged_gym: 5 of 10).
+      levels_promote: an env moves up a level when its furthest normalised distance in the chunk is at least this;
+        None = ``threshold x max_fitness``.
+      levels_demote: ... and down when it is below this (legged_gym: half the course), in [0, 1].
     """
 
     selector: str = "map"
@@ -159,6 +172,11 @@ class CurriculumConfig(NamedTuple):
     max_observations: Optional[int] = None
     ppo: PPOConfig = FINE_TUNING
     overlap: bool = False
+    dr_terrains: int = 8
+    levels: int = 10
+    levels_init: Optional[int] = None
+    levels_promote: Optional[float] = None
+    levels_demote: float = 0.5
 
     @property
     def max_chunks(self) -> int:
@@ -238,9 +256,9 @@ def _choice(config, name: str, options: tuple) -> None:
 
 def validate_config(config: CurriculumConfig) -> CurriculumConfig:
     """Raise ``ValueError`` naming the first bad field and its allowed range; return ``config`` unchanged."""
-    _choice(config, "selector", SELECTORS)
+    resolve_factory(config.selector)
     for name in ("epochs_per_chunk", "steps_per_epoch", "max_epochs", "max_evals", "attempts", "best",
-                 "roughness_stride"):
+                 "roughness_stride", "dr_terrains", "levels"):
         _int_at_least(config, name, 1)
     walks("CurriculumConfig", config)
     _float_in(config, "threshold", 0.0, 1.0, lo_open=True)
@@ -256,6 +274,17 @@ def validate_config(config: CurriculumConfig) -> CurriculumConfig:
     _choice(config, "distance_origin", DISTANCE_ORIGINS)
     if config.max_observations is not None:
         _int_at_least(config, "max_observations", 1)
+    if config.levels_init is not None:
+        _int_at_least(config, "levels_init", 0)
+    if config.levels_init is not None and config.levels_init > config.levels - 1:
+        raise ValueError(f"CurriculumConfig.levels_init must be in [0, levels - 1 = {config.levels - 1}], got "
+                         f"{config.levels_init!r}")
+    if config.levels_promote is not None:
+        _float_in(config, "levels_promote", 0.0, 1.0, lo_open=True)
+    _float_in(config, "levels_demote", 0.0, 1.0, lo_open=False)
+    if config.overlap and config.selector not in ("map", "roughness", "random"):
+        raise ValueError(f"CurriculumConfig.overlap needs a one-terrain selector (map, roughness, random), got "
+                         f"selector={config.selector!r}")
     if not isinstance(config.overlap, bool):
         raise ValueError(f"CurriculumConfig.overlap must be True or False, got {config.overlap!r}")
     _check_ppo(config.ppo)

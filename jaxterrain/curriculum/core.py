@@ -44,13 +44,15 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from jaxterrain.curriculum import gp
 from jaxterrain.curriculum.config import CurriculumConfig
-from jaxterrain.qd import GRID_BINS, MAX_DISTANCE_50, TerrainBank
+from jaxterrain.curriculum.selectors import (Outcome, Selector, get_selector, gp_params, removal_mask,
+                                             roughness_sequence, select, terrain_hardness)
+from jaxterrain.qd import TerrainBank
 from jaxterrain.runtime import sharding
 
 __all__ = ["Harness", "History", "State", "init", "step", "init_trials", "run_trials", "make_runner", "live_rows",
            "run_live", "terrain_hardness", "roughness_sequence", "select", "removal_mask", "gp_params"]
+# terrain_hardness, roughness_sequence, select, removal_mask and gp_params live in .selectors (re-exported here)
 
 
 
@@ -70,6 +72,13 @@ class Harness(NamedTuple):
     train_evaluate: ``(policy_state, train_key, terrain, eval_key) -> (policy_state, fitness [])``, ``train`` and,
       in the same physics calls, ``evaluate`` of the policy it STARTS from (``CurriculumConfig.overlap``): equal to
       ``(train(p, train_key, terrain), evaluate(p, eval_key, terrain))``. None: no overlap.
+    pick: ``(terrains, index) -> terrain``, for selectors of several terrains a chunk (``Selector.slots`` K > 1):
+      ``terrains`` is the trial's K terrains (``[K, H, W]``, or its slice of ``layout`` of all trials' ``[T x K, H,
+      W]`` with the leading axis split into ``[T, K]``), ``index`` [] or [E] int32 slots; the result is one terrain
+      (evaluate) or one per env (train / reset: then ``[E, H, W]``, or the walker's ``Tile`` with index [E]).
+      None: ``terrains[index]``.
+    progress: ``policy_state -> [E] float32``, each env's furthest normalised distance since its envs' last
+      restart (``Outcome.progress``; selectors with ``Selector.progress`` need it). None: no such selector runs.
     """
 
     train: Callable
@@ -78,6 +87,8 @@ class Harness(NamedTuple):
     layout: Optional[Callable] = None
     where: Optional[Callable] = None
     train_evaluate: Optional[Callable] = None
+    pick: Optional[Callable] = None
+    progress: Optional[Callable] = None
 
 
 class History(NamedTuple):
@@ -98,10 +109,10 @@ class State(NamedTuple):
     """One trial's curriculum (a pytree; :func:`init_trials` adds a leading trial axis to every leaf).
 
     policy: the harness's policy state (``jaxterrain.rl.TrainState`` with the walker). key: [2] uint32, the trial's
-    key (chunk ``c`` uses ``fold_in(key, c)``, so a resumed run continues the same stream). obs_index: [M] int32
-    bank index of each GP observation (-1 = empty slot). obs_y: [M] float32 observed fitness. obs_count: [] int32.
-    available: [N] bool terrains still on offer. terrain: [] int32 current terrain. terrain_evals: [] int32
-    evaluations spent on it. terrain_best: [] float32 its best evaluation so far. chunk, epoch, env_steps: [] int32
+    key (chunk ``c`` uses ``fold_in(key, c)``, so a resumed run continues the same stream). selector: the
+    selector's state (:mod:`.selectors`; e.g. ``SequenceState`` for map / roughness / random, with the GP's
+    observations). terrain: [] int32 the terrain the current chunk is evaluated on (one-terrain selectors: the
+    terrain trained; the selector's ``assign`` holds the rest). chunk, epoch, env_steps: [] int32
     counters. hardest: [] float32 hardest terrain traversed (distance, cells). done: [] bool. restart: [] bool, the
     envs restart on the current terrain (``harness.reset``) before the next chunk trains (set by :func:`init` and on
     a terrain switch; set it yourself to restart them, e.g. after restoring a state saved without env states).
@@ -111,13 +122,8 @@ class State(NamedTuple):
 
     policy: Any
     key: jax.Array
-    obs_index: jax.Array
-    obs_y: jax.Array
-    obs_count: jax.Array
-    available: jax.Array
+    selector: Any
     terrain: jax.Array
-    terrain_evals: jax.Array
-    terrain_best: jax.Array
     chunk: jax.Array
     epoch: jax.Array
     env_steps: jax.Array
@@ -128,64 +134,18 @@ class State(NamedTuple):
     pending: Any = None
 
 
+# Checkpoints written before the selector protocol (2026-11-28) hold a sequence selector's state at the top level
+# of State; ``driver.restore(folder, like, **CHECKPOINT_COMPAT)`` reads them into ``State.selector``.
+CHECKPOINT_COMPAT = {
+    "aliases": {".selector.current": ".terrain", **{f".selector.{name}": f".{name}" for name in (
+        "available", "terrain_evals", "terrain_best", "obs_index", "obs_y", "obs_count")}},
+    "defaults": (".episode.progress",),
+}
+
+
 # ----------------------------------------------------------------------------------------------------------------
 # Pure helpers
 # ----------------------------------------------------------------------------------------------------------------
-def gp_params(config: CurriculumConfig) -> gp.GPParams:
-    return gp.GPParams(rho=config.rho, sigma_f=config.sigma_f, noise=config.noise)
-
-
-def terrain_hardness(bank: TerrainBank, origin: str = "origin") -> jax.Array:
-    """``[N]`` float32 hardness of each terrain in cells: ``bank.distance`` (from cell (0, 0)) for ``"origin"``,
-    ``70.71 - hypot(50 - b0, 50 - b1)`` for ``"top_right"`` (see :mod:`.config`)."""
-    if origin == "origin":
-        return jnp.asarray(bank.distance, jnp.float32)
-    b = jnp.asarray(bank.bins, jnp.float32)
-    return MAX_DISTANCE_50 - jnp.hypot(GRID_BINS - b[:, 0], GRID_BINS - b[:, 1])
-
-
-def roughness_sequence(bank: TerrainBank, stride: int) -> tuple[jax.Array, jax.Array]:
-    """Standard CL's terrains: ``(rank [N] int32, member [N] bool)``. ``rank`` is each terrain's position in the
-    order of increasing descriptor 0 (roughness; ties by index); ``member`` marks every ``stride``-th of that order
-    (positions 0, stride, 2 stride, ...)."""
-    order = jnp.argsort(jnp.asarray(bank.descriptors)[:, 0], stable=True)
-    rank = jnp.zeros(order.shape[0], jnp.int32).at[order].set(jnp.arange(order.shape[0], dtype=jnp.int32))
-    return rank, (rank % stride) == 0
-
-
-def select(score: jax.Array, available: jax.Array, hardness: jax.Array) -> jax.Array:
-    """``[] int32``: the available terrain of highest ``score`` [N]; ties to the smallest ``hardness``, then the lowest
-    index. 0 when none is available (check ``available.any()``)."""
-    s = jnp.where(available, jnp.nan_to_num(score, nan=-jnp.inf), -jnp.inf)
-    cand = available & (s == jnp.max(s))
-    return jnp.argmin(jnp.where(cand, hardness, jnp.inf)).astype(jnp.int32)
-
-
-def removal_mask(mean: jax.Array, trained: jax.Array, hardness: jax.Array, margin: float, ties: str) -> jax.Array:
-    """``[N] bool``: terrains the map curriculum removes after finishing terrain ``trained`` ([] int32).
-
-    ``mean`` [N] is the updated GP's posterior mean. Removed: ``trained`` itself; terrains predicted clearly easier,
-    ``mean > mean[trained] + margin``; and of the ties (``|mean - mean[trained]| <= margin``) none (``"keep"``),
-    all (``"remove"``) or those no further from the origin (``hardness <= hardness[trained]``, ``"nearer"``).
-    """
-    mu_t = mean[trained]
-    tie = jnp.abs(mean - mu_t) <= margin
-    if ties == "nearer":
-        tie = tie & (hardness <= hardness[trained])
-    elif ties == "keep":
-        tie = jnp.zeros_like(tie)
-    elif ties != "remove":
-        raise ValueError(f"removal_ties must be nearer, keep or remove, got {ties!r}")
-    return (mean > mu_t + margin) | tie | (jnp.arange(mean.shape[0]) == trained)
-
-
-def _posterior(bank: TerrainBank, obs_index, obs_y, config: CurriculumConfig):
-    mask = obs_index >= 0
-    idx = jnp.maximum(obs_index, 0)
-    return gp.posterior(bank.points[idx], obs_y, mask, bank.fitness[idx], bank.points, bank.fitness,
-                        gp_params(config))
-
-
 def _where_tree(pred, on_true, on_false):
     return jax.tree.map(lambda a, b: jnp.where(pred, a, b), on_true, on_false)
 
@@ -203,14 +163,42 @@ def _take(tree, axes, i: int):
                         tree, is_leaf=lambda a: a is None)
 
 
-def _current_terrain(bank: TerrainBank, index, harness: Harness):
+def _current_terrain(bank: TerrainBank, index, harness: Harness, slots: int = 1):
     """One trial's terrain argument for the harness: ``bank.heightmaps[index]`` [H, W], or with ``harness.layout``
-    trial 0 of ``layout(bank.heightmaps[index][None])``."""
+    trial 0 of ``layout(bank.heightmaps[index][None])``. ``slots`` > 1: ``index`` is the trial's [K] terrains and
+    the result their slotted form (``[K, H, W]``, or ``layout``'s of the K maps, K tiles)."""
     maps = bank.heightmaps[index]
     if harness.layout is None:
         return maps
+    if slots > 1:
+        return harness.layout(maps)[0]
     terrain, axes = harness.layout(maps[None])
     return _take(terrain, axes, 0)
+
+
+def _pick(harness: Harness, terrains, index):
+    return terrains[index] if harness.pick is None else harness.pick(terrains, index)
+
+
+def _split_terrain(terrain, assignment, harness: Harness, slots: int):
+    """``(train terrain, evaluation terrain)`` of a trial's terrain argument: the same one for one-terrain
+    selectors; for K slots the per-env terrains (``pick(terrain, env_slot)``) and the evaluated slot's."""
+    if slots == 1 and assignment.env_slot is None:
+        return terrain, terrain
+    env_slot = assignment.env_slot
+    if env_slot is None:
+        raise ValueError("a selector of several slots must assign every env a slot (Assignment.env_slot)")
+    return _pick(harness, terrain, env_slot), _pick(harness, terrain, assignment.evaluated)
+
+
+def _split_axes(terrain, axes, trials: int, slots: int):
+    """``layout``'s terrain of ``trials x slots`` maps with its batched leaves split ``[T x K, ...] -> [T, K, ...]``
+    (trial i's slice: its K slots)."""
+    def split(a, x):
+        if a is None:
+            return x
+        return jax.tree.map(lambda v: v.reshape(v.shape[:a] + (trials, slots) + v.shape[a + 1:]), x)
+    return jax.tree.map(split, axes, terrain, is_leaf=lambda a: a is None)
 
 
 def _raw(key):
@@ -224,54 +212,28 @@ def _typed(key):
 # ----------------------------------------------------------------------------------------------------------------
 # init / step
 # ----------------------------------------------------------------------------------------------------------------
-def _initial(bank: TerrainBank, config: CurriculumConfig, key) -> tuple[jax.Array, jax.Array]:
-    """``(available [N] bool, score [N])`` before any training."""
-    n = bank.fitness.shape[0]
-    if config.selector == "roughness":
-        rank, member = roughness_sequence(bank, config.roughness_stride)
-        return member, -rank.astype(jnp.float32)
-    if config.selector == "random":
-        return jnp.ones(n, bool), jax.random.uniform(key, (n,))
-    return jnp.ones(n, bool), gp.ucb(bank.fitness, jnp.full((n,), config.sigma_f, jnp.float32), config.kappa)
+def _evaluated_terrain(selector: Selector, selector_state) -> jax.Array:
+    a = selector.assign(selector_state)
+    return a.terrains[a.evaluated]
 
 
 def init(key: jax.Array, bank: TerrainBank, policy: Any, *, config: CurriculumConfig, harness: Harness) -> State:
-    """A trial at its start: every terrain of the selector available, the first one chosen (map: the prior's
-    argmax), its envs due for a restart on it (the first :func:`step` calls ``harness.reset``). ``policy``: the
-    starting policy state (the base policy's params and normaliser in an ``rl.TrainState``; its env state only
-    gives the structure). Pure; vmap over ``key`` for trials."""
+    """A trial at its start: the selector's state (``selector.init``: map's first terrain is the prior's argmax),
+    its envs due for a restart on the first assignment (the first :func:`step` calls ``harness.reset``).
+    ``policy``: the starting policy state (the base policy's params and normaliser in an ``rl.TrainState``; its env
+    state only gives the structure). Pure; vmap over ``key`` for trials."""
     key = _typed(key)
     trial_key, select_key = jax.random.split(key)
     del key
-    n = bank.fitness.shape[0]
-    m, c = config.observation_slots(n), config.max_chunks
-    available, score = _initial(bank, config, select_key)
-    first = select(score, available, terrain_hardness(bank, config.distance_origin))
+    selector = get_selector(config)
+    chosen = selector.init(select_key, bank)
+    c = config.max_chunks
     zi, zf = jnp.zeros((), jnp.int32), jnp.zeros((), jnp.float32)
     history = History(epoch=jnp.full((c,), -1, jnp.int32), terrain=jnp.full((c,), -1, jnp.int32),
                       evaluation=jnp.full((c,), jnp.nan, jnp.float32), hardest=jnp.full((c,), jnp.nan, jnp.float32))
-    return State(policy=policy, key=_raw(trial_key), obs_index=jnp.full((m,), -1, jnp.int32),
-                 obs_y=jnp.zeros((m,), jnp.float32), obs_count=zi, available=available, terrain=first,
-                 terrain_evals=zi, terrain_best=jnp.full((), -jnp.inf, jnp.float32), chunk=zi, epoch=zi,
-                 env_steps=zi, hardest=zf, done=~jnp.any(available), restart=jnp.ones((), bool), history=history,
-                 pending=jnp.zeros((), bool) if config.overlap else None)
-
-
-def _next_terrain(state: State, bank: TerrainBank, config: CurriculumConfig, key, trained, finished, obs_index, obs_y,
-                  hardness):
-    """After the GP update: ``(available [N], next terrain [])``; unchanged unless ``finished``."""
-    n = bank.fitness.shape[0]
-    used = jnp.arange(n) == trained
-    if config.selector == "map":
-        mean, var = _posterior(bank, obs_index, obs_y, config)
-        remove = removal_mask(mean, trained, hardness, config.removal_margin, config.removal_ties)
-        score = gp.ucb(mean, var, config.kappa)
-    elif config.selector == "roughness":
-        remove, score = used, -roughness_sequence(bank, config.roughness_stride)[0].astype(jnp.float32)
-    else:
-        remove, score = used, jax.random.uniform(key, (n,))
-    available = jnp.where(finished, state.available & ~remove, state.available)
-    return available, select(score, available, hardness)
+    return State(policy=policy, key=_raw(trial_key), selector=chosen, terrain=_evaluated_terrain(selector, chosen),
+                 chunk=zi, epoch=zi, env_steps=zi, hardest=zf, done=jnp.zeros((), bool), restart=jnp.ones((), bool),
+                 history=history, pending=jnp.zeros((), bool) if config.overlap else None)
 
 
 def step(state: State, key: jax.Array, bank: TerrainBank, *, config: CurriculumConfig, harness: Harness,
@@ -295,12 +257,21 @@ def step(state: State, key: jax.Array, bank: TerrainBank, *, config: CurriculumC
         return _overlapped(state, bank, config=config, harness=harness, terrain=terrain)
     train_key, eval_key, select_key, reset_key = jax.random.split(_typed(key), 4)
     del key
+    selector = get_selector(config)
+    assignment = selector.assign(state.selector)
     if terrain is None:
-        terrain = _current_terrain(bank, state.terrain, harness)
-    policy = _restarted(state, reset_key, terrain, harness)
-    policy = harness.train(policy, train_key, terrain)
-    fitness = harness.evaluate(policy, eval_key, terrain)
-    return _kept(state, _evaluated(state, policy, fitness, bank, select_key, config), harness)
+        index = assignment.terrains if selector.slots > 1 else state.terrain
+        terrain = _current_terrain(bank, index, harness, selector.slots)
+    trained_on, evaluated_on = _split_terrain(terrain, assignment, harness, selector.slots)
+    policy = _restarted(state, reset_key, trained_on, harness)
+    policy = harness.train(policy, train_key, trained_on)
+    fitness = harness.evaluate(policy, eval_key, evaluated_on)
+    progress = None
+    if selector.progress:
+        if harness.progress is None:
+            raise ValueError(f"selector {selector.name!r} needs a harness with progress (each env's distance)")
+        progress = harness.progress(policy)
+    return _kept(state, _evaluated(state, policy, fitness, bank, select_key, config, selector, progress), harness)
 
 
 def _restarted(state: State, key, terrain, harness: Harness):
@@ -316,39 +287,29 @@ def _kept(state: State, new: State, harness: Harness) -> State:
     return kept._replace(policy=_where_policy(harness, state.done, state.policy, new.policy))
 
 
-def _evaluated(state: State, policy, fitness, bank: TerrainBank, select_key, config: CurriculumConfig) -> State:
-    """The curriculum's update after chunk ``state.chunk`` on ``state.terrain`` ended with ``policy`` evaluated at
-    ``fitness``: counters, history, the GP observation and the next terrain when the terrain is finished, done."""
+def _evaluated(state: State, policy, fitness, bank: TerrainBank, select_key, config: CurriculumConfig,
+               selector: Selector, progress=None) -> State:
+    """The curriculum's update after chunk ``state.chunk`` evaluated on ``state.terrain`` ended with ``policy``
+    evaluated at ``fitness``: counters, the hardest terrain traversed, history, the selector's update (its next
+    terrains; map: the GP observation when the terrain is finished), done."""
     hardness = terrain_hardness(bank, config.distance_origin)
     t = state.terrain
     fitness = jnp.asarray(fitness, jnp.float32).reshape(())
-    evals = state.terrain_evals + 1
-    best = jnp.maximum(state.terrain_best, fitness)
     reached = fitness >= config.threshold * config.max_fitness
-    finished = reached | (evals >= config.max_evals)
-    credited = finished if config.credit == "finished" else reached
+    chosen, decision = selector.update(state.selector, select_key, bank, Outcome(t, fitness, progress))
+    credited = decision.finished if config.credit == "finished" else reached
     hardest = jnp.where(credited, jnp.maximum(state.hardest, hardness[t]), state.hardest)
     epoch = state.epoch + config.epochs_per_chunk
-
-    slot = jnp.where(finished, state.obs_count, state.obs_index.shape[0])  # out of range -> dropped
-    y = fitness if config.gp_evaluation == "final" else best
-    obs_index = state.obs_index.at[slot].set(t, mode="drop")
-    obs_y = state.obs_y.at[slot].set(y, mode="drop")
-    available, nxt = _next_terrain(state, bank, config, select_key, t, finished, obs_index, obs_y, hardness)
-    switch = finished & jnp.any(available)
-    done = (finished & ~jnp.any(available)) | (epoch >= config.max_epochs)
+    done = decision.exhausted | (epoch >= config.max_epochs)
 
     c = state.chunk
     h = state.history
     history = History(epoch=h.epoch.at[c].set(epoch, mode="drop"), terrain=h.terrain.at[c].set(t, mode="drop"),
                       evaluation=h.evaluation.at[c].set(fitness, mode="drop"),
                       hardest=h.hardest.at[c].set(hardest, mode="drop"))
-    return state._replace(policy=policy, obs_index=obs_index, obs_y=obs_y,
-                          obs_count=state.obs_count + finished.astype(jnp.int32), available=available,
-                          terrain=jnp.where(switch, nxt, t), terrain_evals=jnp.where(finished, 0, evals),
-                          terrain_best=jnp.where(finished, -jnp.inf, best), chunk=c + 1, epoch=epoch,
-                          env_steps=state.env_steps + config.steps_per_chunk, hardest=hardest, done=done,
-                          restart=switch, history=history)
+    return state._replace(policy=policy, selector=chosen, terrain=_evaluated_terrain(selector, chosen), chunk=c + 1,
+                          epoch=epoch, env_steps=state.env_steps + config.steps_per_chunk, hardest=hardest, done=done,
+                          restart=decision.restart, history=history)
 
 
 def _chunk_keys(state: State, chunk):
@@ -368,7 +329,7 @@ def _overlapped(state: State, bank: TerrainBank, *, config: CurriculumConfig, ha
     _, eval_key, select_key, _ = _chunk_keys(state, state.chunk)
     policy = _restarted(state, reset_key, terrain, harness)
     trained, fitness = harness.train_evaluate(policy, train_key, terrain, eval_key)
-    evaluated = _evaluated(state, policy, fitness, bank, select_key, config)
+    evaluated = _evaluated(state, policy, fitness, bank, select_key, config, get_selector(config))
     stays = ~evaluated.done & ~evaluated.restart  # the chunk just trained was trained on the right terrain
     started = state._replace(policy=trained, restart=jnp.zeros((), bool), pending=jnp.ones((), bool))
     moved = evaluated._replace(policy=_where_policy(harness, stays, trained, policy), pending=stays)
@@ -404,12 +365,21 @@ def run_trials(states: State, bank: TerrainBank, num_chunks: jax.Array, *, confi
     [states.terrain]`` [T, H, W] -> one terrain pytree, e.g. a bank of T tiles) and trial i trains and is evaluated
     on its slice i."""
     one = functools.partial(_chunk, config=config, harness=harness)
+    slots = get_selector(config).slots
     if harness.layout is None:
         chunk = jax.vmap(one, in_axes=(0, None))
-    else:
+    elif slots == 1:
         def chunk(s, bank):
             terrain, axes = harness.layout(bank.heightmaps[s.terrain])
             return jax.vmap(one, in_axes=(0, None, axes))(s, bank, terrain)
+    else:  # every trial's K terrains laid out together ([T x K] maps), trial i gets its K
+        selector = get_selector(config)
+
+        def chunk(s, bank):
+            index = jax.vmap(selector.assign)(s.selector).terrains  # [T, K]
+            trials = index.shape[0]
+            terrain, axes = harness.layout(bank.heightmaps[index.reshape(-1)])
+            return jax.vmap(one, in_axes=(0, None, axes))(s, bank, _split_axes(terrain, axes, trials, slots))
 
     # overlap: a trial's step does not always finish a chunk (a terrain switch costs one step more), so the loop
     # runs until every running trial has done num_chunks more (at most 2 num_chunks + 1 steps)

@@ -21,6 +21,7 @@ from jaxterrain.curriculum.analysis import (
     milestone_summary,
     terrain_runs,
 )
+from jaxterrain.curriculum.selectors import get_selector
 from jaxterrain.qd.grid import MAX_DISTANCE_50
 from jaxterrain.rl.checkpoint import save_policy
 from jaxterrain.runtime import provenance, statistics
@@ -155,7 +156,8 @@ def write_outputs(folder: Path, cfg: dict, config, bank, states, seconds: float 
         "hardest_se": float(final.std(ddof=1) / np.sqrt(final.size)) if final.size > 1 else 0.0,
         "hardest_mean_ci": [est["mean"].low, est["mean"].high], "hardest_iqm": list(est["iqm"]),
         "epochs": np.asarray(states.epoch).tolist(), "epochs_max": int(np.max(np.asarray(states.epoch))),
-        "terrains_finished": np.asarray(states.obs_count).tolist(),
+        **{name: np.asarray(value).tolist() for name, value in
+           jax.vmap(get_selector(config).summary)(states.selector).items()},
         "ended_without_terrains": [bool(d and e < config.max_epochs)
                                    for d, e in zip(np.asarray(states.done), np.asarray(states.epoch))],
         "milestones": dict(zip(pct, cells)), "seconds": seconds, "bank_terrains": int(bank.size),

@@ -18,6 +18,7 @@ from __future__ import annotations
 import functools
 import hashlib
 import json
+import re
 import time
 from pathlib import Path
 
@@ -27,8 +28,9 @@ import numpy as np
 
 from jaxterrain.curriculum import walker as W
 from jaxterrain.curriculum.config import CurriculumConfig, FINE_TUNED, validate_config
-from jaxterrain.curriculum.core import init_trials, run_live, run_trials
+from jaxterrain.curriculum.core import CHECKPOINT_COMPAT, init_trials, run_live, run_trials
 from jaxterrain.curriculum.outputs import PARTIAL, export_policies, write_outputs
+from jaxterrain.curriculum.selectors import get_selector
 from jaxterrain.qd.archive_io import load as load_archive_file
 from jaxterrain.qd.bank import from_archive
 from jaxterrain.runtime import driver, sharding
@@ -37,7 +39,7 @@ from jaxterrain.walker import tiles
 from jaxterrain.walker.layout import resolve_backend
 
 __all__ = ["BadInput", "LEGACY_TRUNCATION", "PARTIAL", "FAST_COMPILE", "PROGRAMS", "curriculum_config",
-           "with_protocol", "load_archive", "archive_digest", "check_resumable", "physics_of", "walker_layout",
+           "with_protocol", "load_archive", "archive_digest", "check_resumable", "physics_of", "selector_slots", "walker_layout",
            "validate", "strip_envs", "compiled", "make_block", "chunk_metrics", "inputs", "setup", "run_treatment",
            "report_cfg", "restored", "report_treatment", "export_treatment"]
 
@@ -60,8 +62,10 @@ def curriculum_config(cfg: dict):
     fields.setdefault("truncation", LEGACY_TRUNCATION)
     try:
         return validate_config(CurriculumConfig.from_json_dict({**fields, "selector": cfg["curriculum"]}))
-    except (ValueError, TypeError) as err:
-        raise BadInput(str(err)) from None
+    except (ValueError, TypeError) as err:  # a field is its flag's name: --levels-init (CurriculumConfig.levels_init)
+        raise BadInput(re.sub(r"CurriculumConfig\.selector\b", "--curriculum", re.sub(
+            r"CurriculumConfig\.(?!selector\b)([a-z_]+)\b", lambda m: f"--{m.group(1).replace('_', '-')}",
+            str(err)))) from None
 
 
 def with_protocol(cfg: dict, arch) -> dict:
@@ -131,14 +135,25 @@ def physics_of(cfg: dict) -> str:
     return resolve_backend(cfg.get("backend", "jax"))
 
 
+def selector_slots(cfg: dict) -> int:
+    """``Selector.slots`` of a learn config's curriculum (1 for map / roughness / random): a trial's terrains per
+    chunk. :class:`BadInput` for an unknown curriculum."""
+    fields = {k: cfg[k] for k in ("dr_terrains", "levels") if cfg.get(k) is not None}
+    try:
+        return int(get_selector(CurriculumConfig(selector=cfg["curriculum"], **fields)).slots)
+    except (ValueError, TypeError) as err:
+        raise BadInput(f"--curriculum: {err}") from None
+
+
 def walker_layout(cfg: dict) -> dict:
     """The walker's ``backend`` / ``tiles`` / ``worlds`` of a learn config (a config saved before ``--backend``
-    existed runs on "jax"): warp walks on one tile per trial (per heading) with contact buffers for every env stepped
+    existed runs on "jax"): warp walks on one tile per trial (per heading, per selector slot) with contact buffers for every env stepped
     at once (``trials x max(num_envs, attempts)``: the PPO envs, then the evaluation walks; with ``overlap``
     ``trials x (num_envs + attempts)``, stepped together); jax on tiles too with ``overlap``. :class:`BadInput` for
     an unknown backend, or warp where MuJoCo Warp does not import."""
     backend = physics_of(cfg)
-    trials, headings = int(cfg["trials"]), int(cfg.get("headings") or 1)
+    slots = selector_slots(cfg)  # a trial's terrains per chunk: one tile each
+    trials, headings = int(cfg["trials"]), int(cfg.get("headings") or 1) * slots
     overlap = bool(cfg.get("overlap", False))  # the evaluation walks ride along PPO's envs on tiles
     if backend == "jax":
         return dict(tiles=trials * headings) if overlap else {}
@@ -299,7 +314,7 @@ def run_treatment(cfg: dict, folder: Path, time_limit_s: float | None = None, de
     digest = check_resumable(folder, cfg, arch)
     t0 = time.perf_counter()
     bank, block, states = setup(cfg, config, arch, policy, env, mesh)
-    restored = driver.restore(folder, like=states)
+    restored = driver.restore(folder, like=states, **CHECKPOINT_COMPAT)
     done, history, before = 0, None, 0.0  # before: wall seconds of the commands that ran it so far
     if restored is not None:
         states, done, history, saved = restored
@@ -355,7 +370,7 @@ def restored(cfg: dict, folder: Path) -> tuple:
             return jax.random.wrap_key_data(jnp.zeros(data.shape, data.dtype))
         return jnp.zeros(spec.shape, spec.dtype)
 
-    states, done, _, saved = driver.restore(folder, like=jax.tree.map(zeros, shapes))
+    states, done, _, saved = driver.restore(folder, like=jax.tree.map(zeros, shapes), **CHECKPOINT_COMPAT)
     return config, arch, policy, env, bank, states, done, saved
 
 

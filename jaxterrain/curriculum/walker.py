@@ -121,12 +121,16 @@ def walker_harness(env, ppo: rl.PPOConfig, config: CurriculumConfig) -> Harness:
     def spread(terrain):
         """The trial's terrain for its PPO envs: env e walks heading ``e % headings`` (all +x for one heading). On
         tiles a Tile per env; in the classic layout per-env turned copies, ``[num_envs, H, W]`` (131 MB per trial
-        for 500 envs at 256 x 256)."""
+        for 500 envs at 256 x 256). A per-env terrain (a selector of several terrains: ``[num_envs, H, W]`` or a
+        Tile with index [num_envs]) is turned env by env."""
         if protocol.headings == 1:
             return terrain
         heading = jnp.arange(ppo.num_envs, dtype=jnp.int32) % protocol.headings
         if env.tiles:
             return Tile(terrain.bank, terrain.index + heading)
+        if terrain.ndim == 3:
+            turned = difficulty.rotate_headings(terrain, protocol.headings)  # [E x headings, H, W]
+            return turned[jnp.arange(ppo.num_envs) * protocol.headings + heading]
         return difficulty.rotate_headings(terrain[None], protocol.headings)[heading]
 
     def keyed(state: rl.TrainState, key) -> rl.TrainState:
@@ -166,14 +170,18 @@ def walker_harness(env, ppo: rl.PPOConfig, config: CurriculumConfig) -> Harness:
                          ride_steps=updates * ppo.num_unrolls * ppo.unroll_length, per_env=per_env)
         return state, difficulty.aggregate(d[None], protocol)[0]
 
+    def progress(state: rl.TrainState):
+        return state.episode.progress
+
     if not env.tiles:
         if config.overlap:
             raise ValueError("CurriculumConfig.overlap needs a tiled walker (walker_env(..., tiles=trials x "
                              "headings)): its evaluation walks share the PPO envs' physics calls on their tiles")
-        return Harness(train=train, evaluate=evaluate, reset=reset)
+        return Harness(train=train, evaluate=evaluate, reset=reset, progress=progress)
     return Harness(train=train, evaluate=evaluate, reset=reset, layout=tile_layout(env, protocol.headings),
                    where=lambda pred, a, b: select_policy(env, pred, a, b),
-                   train_evaluate=train_evaluate if config.overlap else None)
+                   train_evaluate=train_evaluate if config.overlap else None,
+                   pick=lambda terrains, index: Tile(terrains.bank, terrains.index[index]), progress=progress)
 
 
 def tile_layout(env, headings: int = 1):

@@ -35,6 +35,8 @@ __all__ = ["CHECKPOINT_FORMAT", "POLICY_FORMAT", "BASE_POLICY_DIR", "save_checkp
 CHECKPOINT_FORMAT = "jaxterrain.rl.checkpoint/2"
 POLICY_FORMAT = "jaxterrain.rl.policy/1"
 BASE_POLICY_DIR = Path(__file__).resolve().parent.parent / "assets" / "base_policy"
+# leaves added to TrainState since checkpoints were first written (read as the template's value when absent)
+LEGACY_DEFAULTS = (".episode.progress",)
 
 
 def save_checkpoint(path: str | os.PathLike, state: Any, include_env_state: bool = True,
@@ -80,7 +82,7 @@ def load_checkpoint(path: str | os.PathLike, like: Any) -> Any:
         raise ValueError(f"{path}: not a {CHECKPOINT_FORMAT} file (format={meta.get('format')!r})")
     keep_env = not meta.get("include_env_state", True) and hasattr(like, "_replace")
     target = like._replace(env_state=None) if keep_env else like
-    restored, _, _, _ = driver.load_checkpoint(path, target)
+    restored, _, _, _ = driver.load_checkpoint(path, target, defaults=LEGACY_DEFAULTS)
     if keep_env:
         restored = restored._replace(env_state=like.env_state)
     return restored

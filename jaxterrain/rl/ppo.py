@@ -51,13 +51,16 @@ class EnvLike(Protocol):
 
 class EpisodeStats(NamedTuple):
     """Per-env episode bookkeeping, all [N]: running ``ret``/``length`` of the current episode (unscaled reward),
-    ``last_return``/``last_length`` of the most recent finished one, ``count`` of finished episodes."""
+    ``last_return``/``last_length`` of the most recent finished one, ``count`` of finished episodes, ``progress``
+    the furthest ``env_state.distance`` (the walker's normalised distance; 0 for an env without one) reached since
+    the envs were last (re)started (:func:`init`, :func:`reset_envs`), over all its episodes."""
 
     ret: jax.Array
     length: jax.Array
     last_return: jax.Array
     last_length: jax.Array
     count: jax.Array
+    progress: jax.Array
 
 
 class TrainState(NamedTuple):
@@ -219,7 +222,7 @@ def _join_terrains(terrains, axis, ride_terrains, n: int, r: int):
 
 def _zero_episode(num_envs: int) -> EpisodeStats:
     z = jnp.zeros((num_envs,), jnp.float32)
-    return EpisodeStats(z, z, z, z, z)
+    return EpisodeStats(z, z, z, z, z, z)
 
 
 # ----------------------------------------------------------------------------------------------------------------
@@ -269,7 +272,7 @@ def reset_envs(state: TrainState, key: jax.Array, terrains: jax.Array, *, env: E
     env_state = _batched_reset(env, raw_key(key), terrains, config.num_envs)
     ep = state.episode
     zero = jnp.zeros_like(ep.ret)
-    return state._replace(env_state=env_state, episode=ep._replace(ret=zero, length=zero))
+    return state._replace(env_state=env_state, episode=ep._replace(ret=zero, length=zero, progress=zero))
 
 
 # ----------------------------------------------------------------------------------------------------------------
@@ -337,12 +340,16 @@ def _collect(state: TrainState, key, terrains, env, config, rows=None, ride: Opt
             trunc = jnp.zeros_like(trunc)
         ret, length = ep.ret + reward, ep.length + 1.0
         ended = done > 0
+        distance = getattr(next_state, "distance", None)
+        reached = ep.progress if distance is None else jnp.maximum(
+            ep.progress, jnp.where(finite, jnp.nan_to_num(own(distance).astype(jnp.float32)), 0.0))
         ep = EpisodeStats(
             ret=jnp.where(ended, 0.0, ret),
             length=jnp.where(ended, 0.0, length),
             last_return=jnp.where(ended, ret, ep.last_return),
             last_length=jnp.where(ended, length, ep.last_length),
             count=ep.count + done,
+            progress=reached,
         )
         next_state = _select_envs(env, widen(ended), pool, next_state)
         return (next_state, ep, ride_carry), Transition(obs, raw, logp, reward, done, trunc, boot)

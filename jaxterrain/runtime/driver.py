@@ -113,11 +113,16 @@ def _read(path: Path, header_only: bool = False) -> tuple[dict, dict]:
     return header, members
 
 
-def load_checkpoint(path: str | os.PathLike, like: Any) -> tuple[Any, int, dict, dict]:
+def load_checkpoint(path: str | os.PathLike, like: Any, *, aliases: Optional[dict] = None,
+                    defaults: tuple = ()) -> tuple[Any, int, dict, dict]:
     """Read a :func:`save_checkpoint` file into the structure of ``like``: ``(state, done, history, meta)``.
 
     Every leaf of ``like`` must be stored with the same shape and dtype (``ValueError`` naming the file and leaf
     otherwise); typed PRNG keys come back typed. ``history`` maps names to lists of floats.
+
+    Files of an older state layout: ``aliases`` maps a leaf's name (``jax.tree_util.keystr`` of its path) to the
+    name an older version stored it under (read when the name itself is absent); a leaf whose name ends with one of
+    ``defaults`` and is absent takes ``like``'s value (a field added since, e.g. ``".episode.progress"``).
     """
     path = Path(path)
     header, members = _read(path)
@@ -125,6 +130,11 @@ def load_checkpoint(path: str | os.PathLike, like: Any) -> tuple[Any, int, dict,
     leaves = []
     for name, ref in _leaves(like):
         stored = members.get(f"leaf:{name}")
+        if stored is None and aliases and name in aliases:
+            stored = members.get(f"leaf:{aliases[name]}")
+        if stored is None and any(name.endswith(d) for d in defaults):
+            leaves.append(ref)
+            continue
         if stored is None:
             raise ValueError(f"checkpoint {str(path)!r} has no leaf {name!r}: it was written for another state")
         want = jax.random.key_data(ref) if _is_key(ref) else np.asarray(ref)
@@ -151,7 +161,7 @@ def read_meta(run_dir: str | os.PathLike) -> Optional[dict]:
     return dict(_read(path, header_only=True)[0].get("meta") or {})
 
 
-def restore(run_dir: str | os.PathLike, like: Any) -> Optional[tuple[Any, int, dict, dict]]:
+def restore(run_dir: str | os.PathLike, like: Any, **compat) -> Optional[tuple[Any, int, dict, dict]]:
     """:func:`load_checkpoint` of ``run_dir/checkpoint.npz``, or None when the folder holds no checkpoint.
 
     A damaged latest checkpoint raises ``ValueError`` naming it and, when ``checkpoint.prev.npz`` (one chunk
@@ -160,7 +170,7 @@ def restore(run_dir: str | os.PathLike, like: Any) -> Optional[tuple[Any, int, d
     if not path.exists():
         return None
     try:
-        return load_checkpoint(path, like)
+        return load_checkpoint(path, like, **compat)
     except ValueError as err:
         previous = Path(run_dir) / PREVIOUS_NAME
         if previous.exists():

@@ -161,16 +161,16 @@ def test_map_step_adds_the_observation_removes_and_picks_the_ucb_argmax():
     config = small(threshold=0.9)
     harness = fake_harness(gain=-0.05)  # the policy gets a little worse: evaluation 1.0 - 0 - 0.05 = 0.95
     state = C.init(jax.random.key(0), bank, START, config=config, harness=harness)
-    assert int(state.terrain) == 0 and bool(state.available.all())
+    assert int(state.terrain) == 0 and bool(state.selector.available.all())
     state = jax.jit(lambda s, k: C.step(s, k, bank, config=config, harness=harness))(state, jax.random.key(1))
-    assert int(state.obs_count) == 1 and int(state.obs_index[0]) == 0
-    np.testing.assert_allclose(float(state.obs_y[0]), 0.95, atol=1e-6)
+    assert int(state.selector.obs_count) == 1 and int(state.selector.obs_index[0]) == 0
+    np.testing.assert_allclose(float(state.selector.obs_y[0]), 0.95, atol=1e-6)
     pts, prior = np.asarray(bank.points, np.float64), GRID3.ravel().astype(np.float64)
     mean, var = numpy_posterior(pts[:1], np.array([0.95]), prior[:1], pts, prior)
     hard = np.asarray(bank.distance)
     removed = (mean > mean[0] + 0.05) | ((np.abs(mean - mean[0]) <= 0.05) & (hard <= hard[0]))
     removed[0] = True
-    np.testing.assert_array_equal(np.asarray(state.available), ~removed)
+    np.testing.assert_array_equal(np.asarray(state.selector.available), ~removed)
     score = np.where(removed, -np.inf, mean + 0.05 * np.sqrt(np.maximum(var, 0)))
     best = np.flatnonzero(np.isclose(score, score.max(), atol=1e-6))
     expected = best[np.argmin(hard[best])]
@@ -663,6 +663,26 @@ def test_learn_smoke_end_to_end(learn_smoke):
     assert (out / "curve.png").stat().st_size > 0 and (out / "milestones.md").read_text().count("|") > 10
     assert (out / "checkpoint.npz").exists()
     assert cli("learn", "--resume", str(out)) == 0  # a finished run reports its summary again
+
+
+@pytest.mark.parametrize("curriculum", ["levels", pytest.param("dr", marks=pytest.mark.slow)])
+def test_learn_runs_the_per_env_curricula_end_to_end(tmp_path, tiny_archive, curriculum):
+    """``learn --curriculum levels|dr --preset smoke``: each env on its own terrain through the real walker and PPO
+    (each env's progress read from PPO's episode record), the selector's own summary, every trial's walker."""
+    archive = tiny_archive(4, "four.npz")
+    out = tmp_path / curriculum
+    assert cli("learn", "--preset", "smoke", "--archive", archive, "--curriculum", curriculum, "--levels", "2",
+               "--dr-terrains", "3", "--out", str(out)) == 0
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["epochs"] == [4, 4] and summary["ended_without_terrains"] == [False, False]
+    if curriculum == "levels":
+        assert all(0 <= v <= 1 for v in summary["max_level"]) and all(m >= 0 for m in summary["level_moves"])
+    else:
+        assert summary["terrains_drawn"] == [15, 15]  # 3 at the start and after each of the 4 chunks
+    rows = (out / "history.csv").read_text().splitlines()
+    assert len(rows) == 1 + 8 and all(0 <= float(r.split(",")[9]) <= 1 for r in rows[1:])
+    assert sorted(p.name for p in (out / "policies").iterdir()) == ["trial_0", "trial_1"]
+    assert json.loads((out / "config.json").read_text())["curriculum"] == curriculum
 
 
 def test_curriculum_sequences_take_every_treatments_columns(tmp_path):

@@ -1,0 +1,410 @@
+"""Curricula as selectors: which terrains a trial trains on, as a pytree state and pure functions over it.
+
+    selector = get_selector(config)                       # by config.selector: map, roughness, random, dr, levels
+    s = selector.init(key, bank)                          # the selector's state (rides in core.State.selector)
+    a = selector.assign(s)                                # Assignment: the trial's K terrains, env -> terrain, evaluated
+    s, decision = selector.update(s, key, bank, outcome)  # after a chunk: Outcome(terrain, fitness, progress)
+
+The shape is optax's ``GradientTransformation`` and JaxUED's ``LevelSampler``: a :class:`Selector` is a NamedTuple of
+pure functions, built once from the (static) :class:`~jaxterrain.curriculum.CurriculumConfig`; its state is any
+pytree of arrays. The trial loop (:mod:`.core`, jitted and vmapped over trials) never knows which selector runs:
+each chunk it trains the envs on the assignment, evaluates the policy on the assignment's ``evaluated`` terrain,
+credits the hardest terrain traversed, and hands the selector the :class:`Outcome`; the selector's
+:class:`Decision` says whether the envs restart (new terrains) and whether the trial has run out of terrains.
+
+Two kinds ship:
+
+- **Sequence selectors** (``slots = 1``: every env on one terrain until it is finished, the paper's Experiment 2):
+  ``map`` (the IT&E GP: UCB choice and the removal rule), ``roughness`` (standard CL: every ``roughness_stride``-th
+  terrain in order of roughness) and ``random`` (uniform among the terrains not yet trained). A terrain is finished
+  at ``threshold x max_fitness`` or after ``max_evals`` evaluations (:class:`SequenceState`).
+- **Per-env selectors** (``slots = K > 1``: the trial's envs spread over K terrains, each env on its own, new
+  terrains every chunk and the envs restarted on them): ``dr`` (domain randomisation: K terrains drawn uniformly
+  from the bank every chunk, envs dealt round-robin) and ``levels`` (legged_gym's terrain curriculum: ``levels``
+  difficulty levels, each env moved up or down by how far it walked, :class:`LevelsState`).
+
+Where ours differ from the field's (decisions, with reasons):
+
+- Terrains are re-drawn and levels moved at chunk boundaries (every ``epochs_per_chunk x steps_per_epoch`` env
+  steps: 320 steps of each of the 500 envs at the paper's sizes, about 1.5 walks), not at each env's own reset as
+  in legged_gym (``_update_terrain_curriculum`` runs in ``reset_idx``): the terrains of a chunk are one bank of
+  tiles shared by every env on MuJoCo Warp, rebuilt once per chunk.
+- ``levels``: legged_gym's levels are columns of a terrain grid made at increasing difficulty; ours are bands of
+  equal size of the bank ordered by hardness (``terrain_hardness``: the cell's distance from (0, 0)), level 0 the
+  easiest. Each chunk level l's terrain is drawn uniformly from band l. Its rule (legged_gym's defaults): an env
+  moves up when it walked far (``progress >= levels_promote``, default ``threshold``: it crossed the terrain, where
+  legged_gym asks for more than half its 8 m tile from the tile's centre, i.e. to the tile's edge), down when it
+  walked less than ``levels_demote`` (0.5) of the course (legged_gym: less than half the distance its command
+  asked for), and past the top it goes to a random level (``randint(0, levels)``; below 0 it stays at 0). Envs
+  start at random levels ``0 .. levels_init`` (default ``levels // 2``: legged_gym's ``max_init_terrain_level =
+  5`` of 10).
+  ``progress`` is each env's furthest normalised distance since the chunk's restart (``Outcome.progress``).
+- Per-env selectors evaluate (for the record of the hardest terrain traversed, the paper's metric) one terrain a
+  chunk: ``dr`` its first slot (a uniform draw), ``levels`` the terrain of the highest level an env stands on.
+
+A selector of your own: a function ``(config) -> Selector`` registered with :func:`register_selector` (or named as
+``module:object`` in ``CurriculumConfig.selector``), e.g. from a plugin module.
+"""
+
+from __future__ import annotations
+
+import importlib
+from typing import Any, Callable, NamedTuple, Optional
+
+import jax
+import jax.numpy as jnp
+
+from jaxterrain.curriculum import gp
+from jaxterrain.qd import GRID_BINS, MAX_DISTANCE_50, TerrainBank
+
+__all__ = ["Selector", "Assignment", "Outcome", "Decision", "SequenceState", "DRState", "LevelsState",
+           "get_selector", "register_selector", "selector_names", "sequence_selector", "dr_selector",
+           "levels_selector", "terrain_hardness", "roughness_sequence", "select", "removal_mask", "gp_params",
+           "level_bands", "levels_rule"]
+
+
+class Assignment(NamedTuple):
+    """The terrains of a trial's next chunk.
+
+    terrains: [K] int32 bank indices (K = ``Selector.slots``). env_slot: [E] int32, env e trains on
+    ``terrains[env_slot[e]]`` (E = the PPO envs of a trial), or None: every env on ``terrains[0]`` (K = 1).
+    evaluated: [] int32 slot whose terrain the policy is evaluated on after the chunk."""
+
+    terrains: jax.Array
+    env_slot: Optional[jax.Array]
+    evaluated: jax.Array
+
+
+class Outcome(NamedTuple):
+    """What a chunk showed. terrain: [] int32 the evaluated bank index. fitness: [] float32 its evaluation (the
+    difficulty protocol, in [0, 1]). progress: [E] float32 each PPO env's furthest normalised distance since the
+    chunk's restart, or None when the selector does not need it (sequence selectors)."""
+
+    terrain: jax.Array
+    fitness: jax.Array
+    progress: Optional[jax.Array] = None
+
+
+class Decision(NamedTuple):
+    """What the loop does next. finished: [] bool the evaluated terrain's stint ended (``credit = "finished"``
+    credits it). restart: [] bool the envs restart on the new assignment before the next chunk. exhausted: [] bool no
+    terrain is left, the trial ends."""
+
+    finished: jax.Array
+    restart: jax.Array
+    exhausted: jax.Array
+
+
+class Selector(NamedTuple):
+    """A curriculum's choice of terrains (pure functions; ``jax.vmap`` them over trials).
+
+    name: its ``CurriculumConfig.selector``. slots: K terrains per chunk (static; 1 = every env on one terrain).
+    progress: whether :func:`update` reads ``Outcome.progress`` (the loop computes it only then).
+    init: ``(key, bank) -> state``. assign: ``state -> Assignment``. update: ``(state, key, bank, Outcome) ->
+    (state, Decision)``. summary: ``state -> {name: [] array}``, what a treatment's ``summary.json`` records per
+    trial (e.g. terrains finished, final levels)."""
+
+    name: str
+    slots: int
+    init: Callable
+    assign: Callable
+    update: Callable
+    summary: Callable
+    progress: bool = False
+
+
+# ----------------------------------------------------------------------------------------------------------------
+# Pure helpers
+# ----------------------------------------------------------------------------------------------------------------
+def gp_params(config) -> gp.GPParams:
+    return gp.GPParams(rho=config.rho, sigma_f=config.sigma_f, noise=config.noise)
+
+
+def terrain_hardness(bank: TerrainBank, origin: str = "origin") -> jax.Array:
+    """``[N]`` float32 hardness of each terrain in cells: ``bank.distance`` (from cell (0, 0)) for ``"origin"``,
+    ``70.71 - hypot(50 - b0, 50 - b1)`` for ``"top_right"`` (see :mod:`.config`)."""
+    if origin == "origin":
+        return jnp.asarray(bank.distance, jnp.float32)
+    b = jnp.asarray(bank.bins, jnp.float32)
+    return MAX_DISTANCE_50 - jnp.hypot(GRID_BINS - b[:, 0], GRID_BINS - b[:, 1])
+
+
+def roughness_sequence(bank: TerrainBank, stride: int) -> tuple[jax.Array, jax.Array]:
+    """Standard CL's terrains: ``(rank [N] int32, member [N] bool)``. ``rank`` is each terrain's position in the
+    order of increasing descriptor 0 (roughness; ties by index); ``member`` marks every ``stride``-th of that order
+    (positions 0, stride, 2 stride, ...)."""
+    order = jnp.argsort(jnp.asarray(bank.descriptors)[:, 0], stable=True)
+    rank = jnp.zeros(order.shape[0], jnp.int32).at[order].set(jnp.arange(order.shape[0], dtype=jnp.int32))
+    return rank, (rank % stride) == 0
+
+
+def select(score: jax.Array, available: jax.Array, hardness: jax.Array) -> jax.Array:
+    """``[] int32``: the available terrain of highest ``score`` [N]; ties to the smallest ``hardness``, then the lowest
+    index. 0 when none is available (check ``available.any()``)."""
+    s = jnp.where(available, jnp.nan_to_num(score, nan=-jnp.inf), -jnp.inf)
+    cand = available & (s == jnp.max(s))
+    return jnp.argmin(jnp.where(cand, hardness, jnp.inf)).astype(jnp.int32)
+
+
+def removal_mask(mean: jax.Array, trained: jax.Array, hardness: jax.Array, margin: float, ties: str) -> jax.Array:
+    """``[N] bool``: terrains the map curriculum removes after finishing terrain ``trained`` ([] int32).
+
+    ``mean`` [N] is the updated GP's posterior mean. Removed: ``trained`` itself; terrains predicted clearly easier,
+    ``mean > mean[trained] + margin``; and of the ties (``|mean - mean[trained]| <= margin``) none (``"keep"``),
+    all (``"remove"``) or those no further from the origin (``hardness <= hardness[trained]``, ``"nearer"``).
+    """
+    mu_t = mean[trained]
+    tie = jnp.abs(mean - mu_t) <= margin
+    if ties == "nearer":
+        tie = tie & (hardness <= hardness[trained])
+    elif ties == "keep":
+        tie = jnp.zeros_like(tie)
+    elif ties != "remove":
+        raise ValueError(f"removal_ties must be nearer, keep or remove, got {ties!r}")
+    return (mean > mu_t + margin) | tie | (jnp.arange(mean.shape[0]) == trained)
+
+
+def _posterior(bank: TerrainBank, obs_index, obs_y, config):
+    mask = obs_index >= 0
+    idx = jnp.maximum(obs_index, 0)
+    return gp.posterior(bank.points[idx], obs_y, mask, bank.fitness[idx], bank.points, bank.fitness,
+                        gp_params(config))
+
+
+# ----------------------------------------------------------------------------------------------------------------
+# Sequence selectors: map (IT&E), roughness (standard CL), random
+# ----------------------------------------------------------------------------------------------------------------
+class SequenceState(NamedTuple):
+    """A sequence selector's state. current: [] int32 the terrain trained now. available: [N] bool terrains still
+    on offer. terrain_evals: [] int32 evaluations spent on ``current``. terrain_best: [] float32 its best so far.
+    obs_index: [M] int32 bank index of each GP observation (-1 = empty slot; ``map`` reads them, the others record
+    the finished terrains there too). obs_y: [M] float32 observed fitness. obs_count: [] int32 terrains finished."""
+
+    current: jax.Array
+    available: jax.Array
+    terrain_evals: jax.Array
+    terrain_best: jax.Array
+    obs_index: jax.Array
+    obs_y: jax.Array
+    obs_count: jax.Array
+
+
+def sequence_selector(config) -> Selector:
+    """``map``, ``roughness`` or ``random`` (``config.selector``): one terrain at a time, each finished at the
+    threshold or after ``max_evals`` evaluations; the run ends when none is left (see :mod:`.config`)."""
+    kind = config.selector
+
+    def initial(bank, key):
+        n = bank.fitness.shape[0]
+        if kind == "roughness":
+            rank, member = roughness_sequence(bank, config.roughness_stride)
+            return member, -rank.astype(jnp.float32)
+        if kind == "random":
+            return jnp.ones(n, bool), jax.random.uniform(key, (n,))
+        return jnp.ones(n, bool), gp.ucb(bank.fitness, jnp.full((n,), config.sigma_f, jnp.float32), config.kappa)
+
+    def init(key, bank):
+        n = bank.fitness.shape[0]
+        m = config.observation_slots(n)
+        available, score = initial(bank, key)
+        first = select(score, available, terrain_hardness(bank, config.distance_origin))
+        zi = jnp.zeros((), jnp.int32)
+        return SequenceState(current=first, available=available, terrain_evals=zi,
+                             terrain_best=jnp.full((), -jnp.inf, jnp.float32), obs_index=jnp.full((m,), -1, jnp.int32),
+                             obs_y=jnp.zeros((m,), jnp.float32), obs_count=zi)
+
+    def assign(s):
+        return Assignment(terrains=s.current[None], env_slot=None, evaluated=jnp.zeros((), jnp.int32))
+
+    def next_terrain(s, bank, key, trained, finished, obs_index, obs_y, hardness):
+        n = bank.fitness.shape[0]
+        used = jnp.arange(n) == trained
+        if kind == "map":
+            mean, var = _posterior(bank, obs_index, obs_y, config)
+            remove = removal_mask(mean, trained, hardness, config.removal_margin, config.removal_ties)
+            score = gp.ucb(mean, var, config.kappa)
+        elif kind == "roughness":
+            remove, score = used, -roughness_sequence(bank, config.roughness_stride)[0].astype(jnp.float32)
+        else:
+            remove, score = used, jax.random.uniform(key, (n,))
+        available = jnp.where(finished, s.available & ~remove, s.available)
+        return available, select(score, available, hardness)
+
+    def update(s, key, bank, outcome):
+        hardness = terrain_hardness(bank, config.distance_origin)
+        t, fitness = s.current, outcome.fitness
+        evals = s.terrain_evals + 1
+        best = jnp.maximum(s.terrain_best, fitness)
+        finished = (fitness >= config.threshold * config.max_fitness) | (evals >= config.max_evals)
+        slot = jnp.where(finished, s.obs_count, s.obs_index.shape[0])  # out of range -> dropped
+        y = fitness if config.gp_evaluation == "final" else best
+        obs_index = s.obs_index.at[slot].set(t, mode="drop")
+        obs_y = s.obs_y.at[slot].set(y, mode="drop")
+        available, nxt = next_terrain(s, bank, key, t, finished, obs_index, obs_y, hardness)
+        switch = finished & jnp.any(available)
+        new = SequenceState(current=jnp.where(switch, nxt, t), available=available,
+                            terrain_evals=jnp.where(finished, 0, evals),
+                            terrain_best=jnp.where(finished, -jnp.inf, best), obs_index=obs_index, obs_y=obs_y,
+                            obs_count=s.obs_count + finished.astype(jnp.int32))
+        return new, Decision(finished=finished, restart=switch, exhausted=finished & ~jnp.any(available))
+
+    return Selector(kind, 1, init, assign, update, lambda s: {"terrains_finished": s.obs_count})
+
+
+# ----------------------------------------------------------------------------------------------------------------
+# Per-env selectors: domain randomisation, terrain levels
+# ----------------------------------------------------------------------------------------------------------------
+class DRState(NamedTuple):
+    """``dr``'s state. terrains: [K] int32 this chunk's terrains (uniform draws from the bank, with replacement).
+    draws: [] int32 chunks drawn."""
+
+    terrains: jax.Array
+    draws: jax.Array
+
+
+def _round_robin(num_envs: int, slots: int) -> jax.Array:
+    return jnp.arange(num_envs, dtype=jnp.int32) % slots
+
+
+def dr_selector(config) -> Selector:
+    """Domain randomisation: every chunk ``config.dr_terrains`` terrains drawn uniformly from the bank, env e on terrain
+    ``e % slots``, the envs restarted on them; evaluated on the first. No terrain is ever used up: the trial runs to
+    ``max_epochs``."""
+    k, e = int(config.dr_terrains), int(config.ppo.num_envs)
+
+    def draw(key, bank):
+        return jax.random.randint(key, (k,), 0, bank.fitness.shape[0], dtype=jnp.int32)
+
+    def init(key, bank):
+        return DRState(terrains=draw(key, bank), draws=jnp.ones((), jnp.int32))
+
+    def assign(s):
+        return Assignment(terrains=s.terrains, env_slot=_round_robin(e, k), evaluated=jnp.zeros((), jnp.int32))
+
+    def update(s, key, bank, outcome):
+        reached = outcome.fitness >= config.threshold * config.max_fitness
+        new = DRState(terrains=draw(key, bank), draws=s.draws + 1)
+        return new, Decision(finished=reached, restart=jnp.ones((), bool), exhausted=jnp.zeros((), bool))
+
+    return Selector("dr", k, init, assign, update, lambda s: {"terrains_drawn": s.draws * k})
+
+
+class LevelsState(NamedTuple):
+    """``levels``' state. level: [E] int32 each env's level (0 = easiest). terrains: [L] int32 this chunk's terrain
+    of each level (drawn from its band). moves: [] int32 level changes so far (up or down, over all envs)."""
+
+    level: jax.Array
+    terrains: jax.Array
+    moves: jax.Array
+
+
+def level_bands(hardness: jax.Array, levels: int) -> tuple[jax.Array, jax.Array]:
+    """``(order [N] int32, start [L + 1] int32)``: the terrains sorted by ``hardness`` (stable: ties by index) and
+    band l = ``order[start[l]:start[l + 1]]``, L bands of equal size (``floor(l N / L)``; every band has at least
+    one terrain when N >= L, else bands repeat terrains: band l = ``order[floor(l N / L)]``)."""
+    n = hardness.shape[0]
+    order = jnp.argsort(hardness, stable=True).astype(jnp.int32)
+    start = (jnp.arange(levels + 1, dtype=jnp.int32) * n) // levels
+    return order, start
+
+
+def _draw_levels(key, bank, config) -> jax.Array:
+    """``[L]`` int32: one terrain of each level's band, uniform within the band."""
+    levels = int(config.levels)
+    order, start = level_bands(terrain_hardness(bank, config.distance_origin), levels)
+    lo, hi = start[:-1], jnp.maximum(start[1:], start[:-1] + 1)
+    pos = lo + jnp.floor(jax.random.uniform(key, (levels,)) * (hi - lo)).astype(jnp.int32)
+    return order[jnp.minimum(pos, order.shape[0] - 1)]
+
+
+def levels_rule(level, progress, key, levels: int, promote: float, demote: float) -> jax.Array:
+    """legged_gym's ``_update_terrain_curriculum`` over ``level`` [E] int32 with ``progress`` [E] float32: up one
+    where ``progress >= promote``, down one where ``progress < demote`` (not both: up wins), clipped at 0, and an env
+    moved past the top (``level >= levels``) to ``randint(key, 0, levels)``."""
+    up = progress >= promote
+    down = ~up & (progress < demote)
+    moved = level + up.astype(jnp.int32) - down.astype(jnp.int32)
+    top = jax.random.randint(key, level.shape, 0, levels, dtype=jnp.int32)
+    return jnp.where(moved >= levels, top, jnp.maximum(moved, 0))
+
+
+def levels_selector(config) -> Selector:
+    """legged_gym's terrain levels over the bank's hardness bands (see the module docstring)."""
+    levels, e = int(config.levels), int(config.ppo.num_envs)
+    promote = float(config.threshold * config.max_fitness if config.levels_promote is None else config.levels_promote)
+    demote = float(config.levels_demote)
+
+    def init(key, bank):
+        level_key, draw_key = jax.random.split(key)
+        top = levels // 2 if config.levels_init is None else int(config.levels_init)
+        level = jax.random.randint(level_key, (e,), 0, top + 1, dtype=jnp.int32)
+        return LevelsState(level=level, terrains=_draw_levels(draw_key, bank, config), moves=jnp.zeros((), jnp.int32))
+
+    def assign(s):
+        return Assignment(terrains=s.terrains, env_slot=s.level, evaluated=jnp.max(s.level))
+
+    def update(s, key, bank, outcome):
+        rule_key, draw_key = jax.random.split(key)
+        level = levels_rule(s.level, outcome.progress, rule_key, levels, promote, demote)
+        reached = outcome.fitness >= config.threshold * config.max_fitness
+        new = LevelsState(level=level, terrains=_draw_levels(draw_key, bank, config),
+                          moves=s.moves + jnp.sum(level != s.level).astype(jnp.int32))
+        return new, Decision(finished=reached, restart=jnp.ones((), bool), exhausted=jnp.zeros((), bool))
+
+    def summary(s):
+        return {"mean_level": jnp.mean(s.level.astype(jnp.float32)), "max_level": jnp.max(s.level),
+                "level_moves": s.moves}
+
+    return Selector("levels", levels, init, assign, update, summary, progress=True)
+
+
+# ----------------------------------------------------------------------------------------------------------------
+# Registry
+# ----------------------------------------------------------------------------------------------------------------
+_REGISTRY: dict[str, Callable[[Any], Selector]] = {
+    "map": sequence_selector, "roughness": sequence_selector, "random": sequence_selector,
+    "dr": dr_selector, "levels": levels_selector,
+}
+
+
+def register_selector(name: str, factory: Callable[[Any], Selector]) -> None:
+    """Make ``CurriculumConfig(selector=name)`` (and ``learn --curriculum name``) build ``factory(config)``."""
+    if not isinstance(name, str) or not name.isidentifier():
+        raise ValueError(f"selector name must be an identifier, got {name!r}")
+    if not callable(factory):
+        raise ValueError(f"selector {name!r}: the factory must be callable (config -> Selector)")
+    _REGISTRY[name] = factory
+
+
+def selector_names() -> tuple[str, ...]:
+    """The registered selector names (the built-in ones first)."""
+    return tuple(_REGISTRY)
+
+
+def _imported(spec: str) -> Callable[[Any], Selector]:
+    """``module:object`` -> the object (a factory ``config -> Selector``, or a :class:`Selector`)."""
+    module, _, attr = spec.partition(":")
+    try:
+        obj = getattr(importlib.import_module(module), attr)
+    except (ImportError, AttributeError) as err:
+        raise ValueError(f"CurriculumConfig.selector {spec!r}: cannot import it ({err})") from None
+    return (lambda config: obj) if isinstance(obj, Selector) else obj
+
+
+def resolve_factory(name: str) -> Callable[[Any], Selector]:
+    """The factory of a selector name (registered, or ``module:object``); ``ValueError`` naming the choices."""
+    if isinstance(name, str) and name in _REGISTRY:
+        return _REGISTRY[name]
+    if isinstance(name, str) and ":" in name:
+        return _imported(name)
+    raise ValueError(f"CurriculumConfig.selector must be one of {', '.join(_REGISTRY)} or module:object, "
+                     f"got {name!r}")
+
+
+def get_selector(config) -> Selector:
+    """The :class:`Selector` of ``config.selector`` built for ``config``."""
+    selector = resolve_factory(config.selector)(config)
+    if not isinstance(selector, Selector):
+        raise ValueError(f"CurriculumConfig.selector {config.selector!r}: its factory returned "
+                         f"{type(selector).__name__}, not a jaxterrain.curriculum.Selector")
+    return selector

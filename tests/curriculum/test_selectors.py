@@ -1,0 +1,323 @@
+"""jaxterrain.curriculum.selectors: the selector protocol. The paper's curricula in it reproduce the histories of the
+loop before it bit for bit; domain randomisation and terrain levels against NumPy versions of their rules; per-env
+terrains reach the envs they were assigned to, on the classic layout and on tiles alike; a selector of the user's
+own runs through ``CurriculumConfig.selector`` without editing the library."""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+from jaxterrain import curriculum as C
+from jaxterrain.curriculum import selectors as S
+from jaxterrain.curriculum import walker as W
+from jaxterrain.terrain import TerrainScale
+from jaxterrain.walker import Tile, WalkerConfig, WalkerEnv
+
+DATA = Path(__file__).resolve().parents[1] / "data"
+sys.path.insert(0, str(DATA))
+from make_selector_reference import CASES, run as reference_case  # noqa: E402
+
+
+def leaf(tree, path: str):
+    for part in path.split("."):
+        tree = tree[part] if isinstance(tree, dict) else getattr(tree, part)
+    return np.asarray(tree)
+
+
+@pytest.mark.parametrize("case", sorted(CASES))
+def test_the_papers_curricula_reproduce_the_loop_before_the_protocol_bit_for_bit(case):
+    """map (two settings, and overlapped), roughness, random (and overlapped): 3 trials to the end with a keyed
+    fake harness, every history entry, counter, policy leaf, key and GP observation as stored at commit cb463e4."""
+    ref = np.load(DATA / "selector_reference.npz")
+    states = reference_case(*CASES[case])
+    names = [k.split("/", 1)[1] for k in ref.files if k.startswith(case + "/")]
+    assert len(names) == 19
+    for name in names:
+        np.testing.assert_array_equal(leaf(states, name), ref[f"{case}/{name}"], err_msg=name)
+
+
+# ---------------------------------------------------------------------------------------------------------------
+# The rules against NumPy
+# ---------------------------------------------------------------------------------------------------------------
+def numpy_levels_rule(level, progress, levels, promote, demote, top):
+    up = progress >= promote
+    down = ~up & (progress < demote)
+    moved = level + up.astype(int) - down.astype(int)
+    return np.where(moved >= levels, top, np.maximum(moved, 0))
+
+
+def test_levels_rule_promotes_demotes_clips_and_sends_the_top_to_a_random_level():
+    rng = np.random.default_rng(0)
+    level = rng.integers(0, 10, 4000).astype(np.int32)
+    progress = rng.uniform(0, 1, 4000).astype(np.float32)
+    key = jax.random.key(3)
+    got = np.asarray(S.levels_rule(jnp.asarray(level), jnp.asarray(progress), key, 10, 0.9, 0.5))
+    top = np.asarray(jax.random.randint(key, (4000,), 0, 10, dtype=jnp.int32))
+    np.testing.assert_array_equal(got, numpy_levels_rule(level, progress, 10, 0.9, 0.5, top))
+    # the cases one by one: up, down, stay, floor, past the top
+    assert np.all(got[(progress >= 0.9) & (level < 9)] == level[(progress >= 0.9) & (level < 9)] + 1)
+    assert np.all(got[(progress < 0.5) & (level > 0)] == level[(progress < 0.5) & (level > 0)] - 1)
+    mid = (progress >= 0.5) & (progress < 0.9)
+    assert np.all(got[mid] == level[mid]) and np.all(got[(progress < 0.5) & (level == 0)] == 0)
+    past = (progress >= 0.9) & (level == 9)
+    assert past.sum() > 30 and len(set(got[past])) >= 8 and np.all((got[past] >= 0) & (got[past] < 10))
+
+
+def test_level_bands_split_the_bank_into_equal_bands_by_hardness():
+    hardness = jnp.asarray([5.0, 1.0, 3.0, 2.0, 4.0, 0.0, 6.0])
+    order, start = S.level_bands(hardness, 3)
+    np.testing.assert_array_equal(np.asarray(order), [5, 1, 3, 2, 4, 0, 6])
+    np.testing.assert_array_equal(np.asarray(start), [0, 2, 4, 7])
+
+
+# ---------------------------------------------------------------------------------------------------------------
+# Per-env terrains with a fake harness on the walker's tiles
+# ---------------------------------------------------------------------------------------------------------------
+SHAPE = (16, 16)
+EXACT = TerrainScale(cell_size=0.25, height=1.0)
+PROBE = np.stack(np.meshgrid(np.arange(-1.5, 1.6, 0.5), np.arange(-1.5, 1.6, 0.5)), -1).reshape(-1, 2).astype(
+    np.float32)
+ENVS = 6
+
+
+def toy_bank(n: int = 12):
+    """n terrains of constant heights d_i = i / 16 (exact in float32), harder in order; prior 1 - d."""
+    from jaxterrain.qd import TerrainBank
+
+    d = (np.arange(n) / 16.0).astype(np.float32)
+    bins = np.stack([np.arange(n), np.zeros(n, int)], -1).astype(np.int32)
+    maps = np.broadcast_to(d[:, None, None], (n,) + SHAPE).astype(np.float32)
+    points = np.stack([d, d], -1)
+    return TerrainBank(jnp.asarray(maps), jnp.asarray(1.0 - d), jnp.asarray(points), jnp.asarray(points),
+                       jnp.asarray(bins), jnp.asarray(np.arange(n, dtype=np.float32) + 1.0),
+                       jnp.arange(n, dtype=jnp.int32), jnp.zeros(n, jnp.int32))
+
+
+def per_env_harness(env: WalkerEnv, plain: WalkerEnv, tiled: bool, gain: float = 0.05) -> C.Harness:
+    """Policy {"skill", "resets", "level" [E]}: a chunk adds ``gain`` to the skill and records each env's terrain
+    height (read through the walker: a Tile of ``env`` or an [H, W] map of ``plain``); progress of env e =
+    clip(1 - height_e + skill, 0, 1); evaluation the same on the evaluated terrain."""
+
+    def height(terrain):
+        px, py = jnp.asarray(PROBE[:, 0]), jnp.asarray(PROBE[:, 1])
+        if isinstance(terrain, Tile):
+            ox, oy = env.tile_origin(terrain.index)
+            return jnp.mean(env.terrain_height(terrain, px + ox, py + oy))
+        return jnp.mean(plain.terrain_height(terrain, px, py))
+
+    def per_env(terrain):  # one terrain for all envs (a one-terrain selector), or one each
+        if isinstance(terrain, Tile):
+            index = jnp.broadcast_to(terrain.index, (ENVS,))
+            return jax.vmap(lambda i: height(Tile(terrain.bank, i)))(index)
+        if terrain.ndim == 2:
+            return jnp.broadcast_to(height(terrain), (ENVS,))
+        return jax.vmap(height)(terrain)
+
+    def train(policy, key, terrain):
+        return dict(policy, skill=policy["skill"] + gain, level=per_env(terrain))
+
+    def evaluate(policy, key, terrain):
+        return jnp.clip(1.0 - height(terrain) + policy["skill"], 0.0, 1.0)
+
+    def reset(policy, key, terrain):
+        return dict(policy, resets=policy["resets"] + 1)
+
+    def progress(policy):
+        return jnp.clip(1.0 - policy["level"] + policy["skill"], 0.0, 1.0)
+
+    if not tiled:
+        return C.Harness(train, evaluate, reset, progress=progress)
+    return C.Harness(train, evaluate, reset, layout=W.tile_layout(env), progress=progress,
+                     pick=lambda t, i: Tile(t.bank, t.index[i]))
+
+
+START = {"skill": jnp.zeros((), jnp.float32), "resets": jnp.zeros((), jnp.int32),
+         "level": jnp.zeros((ENVS,), jnp.float32)}
+
+
+def small(selector, **kw) -> C.CurriculumConfig:
+    base = dict(selector=selector, epochs_per_chunk=1, steps_per_epoch=6 * 2 * 2, max_epochs=10, num_envs=ENVS,
+                unroll_length=2, num_unrolls=2, num_minibatches=1)
+    return C.validate_config(C.CurriculumConfig.from_json_dict({**base, **kw}))
+
+
+def run_chunks(config, harness, bank, trials: int, chunks: int, key: int = 0):
+    """Every chunk's (state before, state after) of ``trials`` trials, one jitted chunk at a time."""
+    states = C.init_trials(jax.random.split(jax.random.key(key), trials), bank, START, config=config,
+                           harness=harness)
+    run = C.make_runner(config, harness)
+    out = []
+    for _ in range(chunks):
+        before = states
+        states = run(jax.tree.map(jnp.copy, states), bank, 1)
+        out.append((before, states))
+    return out
+
+
+def test_dr_deals_the_envs_round_robin_over_fresh_uniform_terrains_every_chunk():
+    bank = toy_bank()
+    config = small("dr", dr_terrains=3, max_epochs=400)
+    harness = per_env_harness(*_envs(3), tiled=False)
+    steps = run_chunks(config, harness, bank, trials=1, chunks=400)
+    drawn = []
+    for before, after in steps:
+        terrains = np.asarray(before.selector.terrains[0])
+        heights = np.asarray(bank.heightmaps[:, 0, 0])[terrains[np.arange(ENVS) % 3]]
+        np.testing.assert_array_equal(np.asarray(after.policy["level"][0]), heights)  # env e on terrain e % 3
+        assert int(after.history.terrain[0, int(before.chunk[0])]) == terrains[0]  # evaluated on slot 0
+        assert int(after.policy["resets"][0]) == int(before.policy["resets"][0]) + 1  # restarted every chunk
+        drawn += terrains.tolist()
+    counts = np.bincount(drawn, minlength=12)
+    assert counts.sum() == 1200 and counts.min() > 60 and counts.max() < 140  # 100 each expected (sd ~ 9.6)
+    assert not bool(steps[-1][1].done[0]) or int(steps[-1][1].epoch[0]) >= 400  # never runs out of terrains
+
+
+def test_levels_move_each_env_by_legged_gyms_rule_on_its_levels_terrain():
+    """12 terrains in 4 levels of 3 (by hardness): every chunk env e trains on its level's terrain, and its next
+    level is the NumPy rule of its progress; the evaluation is on the highest level's terrain."""
+    bank = toy_bank()
+    config = small("levels", levels=4, levels_init=1, levels_promote=0.8, levels_demote=0.6, max_epochs=30)
+    harness = per_env_harness(*_envs(4), tiled=False, gain=0.04)
+    order, start = (np.asarray(x) for x in S.level_bands(S.terrain_hardness(bank), 4))
+    moved = 0
+    for before, after in run_chunks(config, harness, bank, trials=1, chunks=30):
+        level, terrains = np.asarray(before.selector.level[0]), np.asarray(before.selector.terrains[0])
+        for lv in range(4):  # each level's terrain is from its band
+            assert terrains[lv] in order[start[lv]:start[lv + 1]]
+        heights = np.asarray(bank.heightmaps[:, 0, 0])[terrains[level]]
+        np.testing.assert_array_equal(np.asarray(after.policy["level"][0]), heights)
+        progress = np.clip(1.0 - heights + np.asarray(after.policy["skill"][0]), 0, 1).astype(np.float32)
+        new = np.asarray(after.selector.level[0])
+        stay_below_top = new < 4
+        expected = numpy_levels_rule(level, progress, 4, 0.8, 0.6, new)  # past the top: whatever was drawn
+        np.testing.assert_array_equal(new, expected)
+        assert np.all(stay_below_top)
+        assert int(after.history.terrain[0, int(before.chunk[0])]) == terrains[level.max()]
+        moved += int(np.sum(new != level))
+    assert moved > 10  # the levels went somewhere
+
+
+@pytest.mark.parametrize("selector", ["dr", "levels"])
+def test_per_env_terrains_on_tiles_equal_the_classic_layout(selector):
+    """3 trials x K terrains a chunk laid out as one bank of 3 K tiles: every env reads exactly the terrain the
+    classic layout gives it ([E, H, W] maps), so every record, level and policy leaf is equal."""
+    bank = toy_bank()
+    config = small(selector, dr_terrains=3, levels=4, max_epochs=8)
+    k = S.get_selector(config).slots
+    env, plain = _envs(3 * k)
+    keys = jax.random.split(jax.random.key(2), 3)
+    out = {}
+    for tiled in (False, True):
+        harness = per_env_harness(env, plain, tiled)
+        states = C.init_trials(keys, bank, START, config=config, harness=harness)
+        out[tiled] = C.make_runner(config, harness)(states, bank, 8)
+    leaves = jax.tree.leaves(out[True]), jax.tree.leaves(out[False])
+    assert all(np.array_equal(np.asarray(a), np.asarray(b), equal_nan=True) for a, b in zip(*leaves))
+    assert len({tuple(np.asarray(t)) for t in out[True].history.terrain}) == 3  # trials differ
+
+
+def _envs(tiles: int):
+    cfg = WalkerConfig(terrain_shape=SHAPE, scale=EXACT)
+    return WalkerEnv(cfg._replace(tiles=tiles)), WalkerEnv(cfg)
+
+
+# ---------------------------------------------------------------------------------------------------------------
+# A selector of one's own; config errors
+# ---------------------------------------------------------------------------------------------------------------
+def hardest_first(config) -> S.Selector:
+    """A user's selector (this module, named ``tests...:hardest_first``): the hardest terrain, forever."""
+
+    def init(key, bank):
+        return jnp.argmax(S.terrain_hardness(bank)).astype(jnp.int32)
+
+    def update(state, key, bank, outcome):
+        no = jnp.zeros((), bool)
+        return state, S.Decision(finished=no, restart=no, exhausted=no)
+
+    return S.Selector("hardest_first", 1, init, lambda s: S.Assignment(s[None], None, jnp.zeros((), jnp.int32)),
+                      update, lambda s: {"hardest_index": s})
+
+
+def test_a_users_selector_runs_by_module_and_name_without_editing_the_library():
+    bank = toy_bank()
+    name = f"{__name__}:hardest_first"
+    config = small(name, num_envs=ENVS, max_epochs=3)
+    harness = per_env_harness(*_envs(1), tiled=False)
+    states = C.make_runner(config, harness)(C.init_trials(jax.random.split(jax.random.key(0), 2), bank, START,
+                                                          config=config, harness=harness), bank, 5)
+    assert np.all(np.asarray(states.history.terrain)[:, :3] == 11) and np.all(np.asarray(states.chunk) == 3)
+    S.register_selector("hardest_first", hardest_first)
+    assert "hardest_first" in S.selector_names()
+    again = C.validate_config(config._replace(selector="hardest_first"))
+    assert S.get_selector(again).name == "hardest_first"
+
+
+@pytest.mark.parametrize("fields, message", [
+    (dict(selector="nope"), "selector must be one of map, roughness, random, dr, levels"),
+    (dict(selector="no_such_module:thing"), "cannot import it"),
+    (dict(selector="levels", levels=3, levels_init=3), r"levels_init must be in \[0, levels - 1 = 2\]"),
+    (dict(selector="levels", levels_promote=1.5), r"levels_promote must be in \(0.0, 1.0\]"),
+    (dict(selector="levels", levels_demote=-0.1), r"levels_demote must be in \[0.0, 1.0\]"),
+    (dict(selector="dr", dr_terrains=0), "dr_terrains must be an integer >= 1"),
+    (dict(selector="dr", overlap=True), "overlap needs a one-terrain selector"),
+])
+def test_selector_settings_are_refused_with_the_field_and_its_range(fields, message):
+    with pytest.raises(ValueError, match=message):
+        C.validate_config(C.CurriculumConfig(**fields))
+
+
+def test_a_checkpoint_of_the_state_before_the_protocol_restores_into_the_selector_state(tmp_path):
+    """Runs checkpointed before the protocol kept the GP's observations and the terrain bookkeeping at the top of
+    State and no ``episode.progress``: ``driver.restore(..., **CHECKPOINT_COMPAT)`` reads them into place."""
+    from typing import Any, NamedTuple
+
+    from jaxterrain.curriculum.core import CHECKPOINT_COMPAT
+    from jaxterrain.runtime import driver
+
+    class Episode(NamedTuple):  # the PPO episode record as it was: no progress
+        count: Any
+
+    class OldState(NamedTuple):  # State's fields as they were stored
+        policy: Any
+        key: Any
+        obs_index: Any
+        obs_y: Any
+        obs_count: Any
+        available: Any
+        terrain: Any
+        terrain_evals: Any
+        terrain_best: Any
+
+    class Policy(NamedTuple):  # rl.TrainState's path to the episode record
+        episode: Any
+
+    old = OldState(policy=Policy(Episode(jnp.arange(3.0))), key=jnp.asarray([1, 2], jnp.uint32),
+                   obs_index=jnp.asarray([4, -1], jnp.int32), obs_y=jnp.asarray([0.5, 0.0]),
+                   obs_count=jnp.int32(1), available=jnp.asarray([True, False, True]), terrain=jnp.int32(2),
+                   terrain_evals=jnp.int32(3), terrain_best=jnp.float32(0.25))
+    driver.save_checkpoint(tmp_path / "checkpoint.npz", old, done=7)
+
+    class NewEpisode(NamedTuple):
+        count: Any
+        progress: Any
+
+    like = {"policy": Policy(NewEpisode(jnp.zeros(3), jnp.full(3, 9.0))), "key": jnp.zeros(2, jnp.uint32),
+            "selector": S.SequenceState(current=jnp.int32(0), available=jnp.zeros(3, bool),
+                                        terrain_evals=jnp.int32(0), terrain_best=jnp.float32(0),
+                                        obs_index=jnp.zeros(2, jnp.int32), obs_y=jnp.zeros(2),
+                                        obs_count=jnp.int32(0)), "terrain": jnp.int32(0)}
+    like = NamedTuple("Like", [(k, Any) for k in like])(**like)
+    state, done, _, _ = driver.restore(tmp_path, like, **CHECKPOINT_COMPAT)
+    assert done == 7 and int(state.terrain) == 2 and int(state.selector.current) == 2
+    np.testing.assert_array_equal(np.asarray(state.selector.obs_index), [4, -1])
+    np.testing.assert_array_equal(np.asarray(state.selector.available), [True, False, True])
+    assert int(state.selector.terrain_evals) == 3 and float(state.selector.terrain_best) == 0.25
+    np.testing.assert_array_equal(np.asarray(state.policy.episode.progress), [9.0, 9.0, 9.0])  # the template's
+    with pytest.raises(ValueError, match="has no leaf"):
+        driver.restore(tmp_path, like)  # without the aliases
