@@ -378,7 +378,9 @@ def report_treatment(cfg: dict, folder: Path) -> dict | None:
     """The outputs of a treatment as it stands, without training: a finished one's summary; for one with a
     checkpoint, its history / sequences / milestones / curve as of that checkpoint and ``summary_partial.json``
     (the summary with ``"partial": true`` and ``"chunks_done"``; ``summary.json`` stays the mark of a finished run,
-    so ``--resume`` still continues it); None without a checkpoint. Compiles nothing and steps no physics
+    so ``--resume`` still continues it); when that checkpoint is the run's end (every chunk done, or every trial)
+    but its outputs were never written (a run stopped after its last checkpoint), the finished outputs and
+    ``summary.json``, as the run would have written them; None without a checkpoint. Compiles nothing and steps no physics
     (:func:`restored`)."""
     folder = Path(folder)
     if (folder / "summary.json").exists():
@@ -386,8 +388,9 @@ def report_treatment(cfg: dict, folder: Path) -> dict | None:
     if not (folder / driver.CHECKPOINT_NAME).exists():
         return None
     config, arch, _, _, bank, states, done, saved = restored(cfg, folder)
-    return write_outputs(folder, cfg, config, bank, states, seconds=saved.get("wall_s"), chunks_done=done,
-                         names=arch.generator_names)
+    finished = done >= config.max_chunks or bool(np.all(np.asarray(states.done)))  # run_treatment's end
+    return write_outputs(folder, cfg, config, bank, states, seconds=saved.get("wall_s"),
+                         chunks_done=None if finished else done, names=arch.generator_names)
 
 
 def export_treatment(cfg: dict, folder: Path) -> list[Path]:

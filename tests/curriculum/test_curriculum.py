@@ -869,6 +869,14 @@ def test_learn_killed_by_its_time_limit_resumes_to_the_uninterrupted_curves(tmp_
     assert json.loads((parts / "summary.json").read_text())["seconds"] > partial["seconds"]  # summed over commands
     for name in ("history.csv", "sequences.csv", "milestones.csv"):
         assert (parts / name).read_text() == (whole / name).read_text(), name
+    finished = json.loads((parts / "summary.json").read_text())
+    for name in ("summary.json", "history.csv"):  # stopped after its last checkpoint, before its outputs (a crash)
+        (parts / name).unlink()
+    assert cli("learn", "--resume", str(parts), "--report") == 0  # the finished outputs, from the checkpoint
+    assert not (parts / "summary_partial.json").exists()
+    again = json.loads((parts / "summary.json").read_text())
+    assert again == finished | {"seconds": again["seconds"]} and "partial" not in again
+    assert (parts / "history.csv").read_text() == (whole / "history.csv").read_text()
 
 
 def test_the_default_archives_are_the_five_shipped_headings_archives():
