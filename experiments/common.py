@@ -43,19 +43,19 @@ _INT_MIN = {
                      "updates_per_chunk", "num_envs", "eval_attempts", "eval_best", "batch", "stride",
                      "calibrate_window", "devices", "max_evals", "chunks_per_call", "policy_every", "terrains",
                      "chunk", "sample", "seeds", "walk_batch", "horizon", "trials", "epochs_per_chunk",
-                     "steps_per_epoch", "max_epochs", "dr_terrains", "levels"), 1),
+                     "steps_per_epoch", "max_epochs", "terrains_per_chunk", "levels", "plr_capacity"), 1),
     **dict.fromkeys(("window", "windows"), 2),
     **dict.fromkeys(("mutation_steps", "walk", "quality_samples", "levels_init"), 0),
 }
-_FLOAT_POSITIVE = ("time_limit", "time_budget", "env_steps", "lr", "learning_rate", "heights", "robot_height")
+_FLOAT_POSITIVE = ("plr_temperature", "time_limit", "time_budget", "env_steps", "lr", "learning_rate", "heights", "robot_height")
 _FLOAT_NONNEGATIVE = ("r1", "healthy_reward")
 _FLOAT_UNIT = ("threshold", "levels_promote")  # in (0, 1]
-_FLOAT_FRACTION = ("levels_demote",)  # in [0, 1]
+_FLOAT_FRACTION = ("levels_demote", "plr_replay_prob", "plr_staleness", "plr_min_fill")  # in [0, 1]
 _AT_MOST = (("best", "attempts"), ("eval_best", "eval_attempts"), ("window", "size"),
             ("windows", "size"))  # (key, bound): key (each of a list) <= bound
 
 
-SELECTOR_NAMES = ("map", "roughness", "random", "dr", "levels")
+SELECTOR_NAMES = ("map", "roughness", "random", "dr", "levels", "plr")
 """The built-in curricula (``jaxterrain.curriculum.SELECTORS``; literal here so that ``--help`` imports no JAX)."""
 
 

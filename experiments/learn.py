@@ -5,8 +5,9 @@
     python -m experiments learn --resume runs/learn-cppn --time-limit 9          # until it says "done"
 
 ``--curriculum``: ``map`` (the paper's IT&E map-based curriculum), ``roughness`` (standard CL: the terrains sorted by
-roughness, every fifth, in order), ``random`` (uniform over the archive), ``dr`` (domain randomisation: ``--dr-terrains``
-terrains a chunk, each env on one) or ``levels`` (legged_gym's terrain levels over bands of the archive), or
+roughness, every fifth, in order), ``random`` (uniform over the archive), ``dr`` (domain randomisation: ``--terrains-per-chunk``
+terrains a chunk, each env on one), ``levels`` (legged_gym's terrain levels over bands of the archive), ``plr``
+(prioritised level replay over the archive's terrains), or
 ``module:object`` (your own :class:`jaxterrain.curriculum.Selector`; ``jaxterrain.curriculum.selectors``). Every trial starts from the shipped base
 policy (``--policy DIR`` for another), and the ``--trials`` trials run together (vmap) in one jitted function per
 block of ``chunks_per_call`` chunks (a chunk = 40 epochs of 4 000 env steps + one evaluation; the curriculum's
@@ -74,8 +75,9 @@ _PAPER = dict(archive=CPPN_ARCHIVE, curriculum="map", trials=10, descriptors=["r
               distance_origin="origin", roughness_stride=5, max_observations=None, num_envs=500, unroll_length=10,
               num_unrolls=8, num_minibatches=8, update_epochs=8, learning_rate=3e-4, episode_length=1000,
               chunks_per_call=25, fast_compile=False, backend="auto", healthy_reward=None, update_normaliser=True,
-              truncation="bootstrap", overlap=False, compact=True, policy_every=None, dr_terrains=8, levels=10,
-              levels_init=None, levels_promote=None, levels_demote=0.5)
+              truncation="bootstrap", overlap=False, compact=True, policy_every=None, terrains_per_chunk=8, levels=10,
+              levels_init=None, levels_promote=None, levels_demote=0.5, plr_capacity=4000, plr_replay_prob=0.8,
+              plr_staleness=0.3, plr_temperature=0.3, plr_min_fill=0.5)
 PRESETS: dict[str, dict] = common.with_preset_names({
     "paper": _PAPER,
     "gpu-short": {**_PAPER, "max_epochs": 3000},
@@ -124,8 +126,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def add_selector_arguments(parser: argparse.ArgumentParser) -> None:
     """The per-env curricula's settings (``dr``, ``levels``; CurriculumConfig's fields of the same names)."""
-    parser.add_argument("--dr-terrains", type=int, default=None,
-                        help="dr: terrains per trial and chunk, the envs dealt round-robin over them, >= 1 (default 8)")
+    parser.add_argument("--terrains-per-chunk", type=int, default=None,
+                        help="dr, plr: terrains per trial and chunk, the envs dealt round-robin over them, >= 1 "
+                             "(default 8)")
     parser.add_argument("--levels", type=int, default=None,
                         help="levels: difficulty levels (bands of the archive by distance from (0, 0)), >= 1 "
                              "(default: legged_gym's 10)")
@@ -136,11 +139,20 @@ def add_selector_arguments(parser: argparse.ArgumentParser) -> None:
                              "this, in (0, 1] (default: the threshold)")
     parser.add_argument("--levels-demote", type=float, default=None,
                         help="levels: ... and down when it is below this, in [0, 1] (default 0.5: half the course)")
+    for name, kind, what in (("capacity", int, "level buffer entries, >= 1 (at most the archive's terrains; 4000)"),
+                             ("replay-prob", float, "the chance a chunk replays buffer terrains, in [0, 1] (0.8)"),
+                             ("staleness", float, "staleness coefficient, in [0, 1] (0.3)"),
+                             ("temperature", float, "rank prioritisation temperature, > 0 (0.3)"),
+                             ("min-fill", float, "buffer fill before any replay, in [0, 1] (0.5)")):
+        parser.add_argument(f"--plr-{name}", type=kind, default=None,
+                            help=f"plr: {what}; JaxUED's maze_plr.py default in brackets")
 
 
 def selector_overrides(args) -> dict:
-    return dict(dr_terrains=args.dr_terrains, levels=args.levels, levels_init=args.levels_init,
-                levels_promote=args.levels_promote, levels_demote=args.levels_demote)
+    return dict(terrains_per_chunk=args.terrains_per_chunk, levels=args.levels, levels_init=args.levels_init,
+                levels_promote=args.levels_promote, levels_demote=args.levels_demote, plr_capacity=args.plr_capacity,
+                plr_replay_prob=args.plr_replay_prob, plr_staleness=args.plr_staleness,
+                plr_temperature=args.plr_temperature, plr_min_fill=args.plr_min_fill)
 
 
 def add_fine_tuning_arguments(parser: argparse.ArgumentParser, scope: str = "") -> None:

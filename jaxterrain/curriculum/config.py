@@ -67,8 +67,8 @@ Baselines share everything but the ``selector``: ``"roughness"`` (standard CL, t
 sorted by descriptor 0 (roughness) ascending, every ``roughness_stride``-th one, in order, each finished by the same
 threshold / 100-evaluation rule) and ``"random"`` (uniformly random among the available terrains, each removed after
 it is finished, no GP). The field's curricula spread a trial's envs over several terrains at once: ``"dr"`` (domain
-randomisation, ``dr_terrains`` terrains a chunk) and ``"levels"`` (legged_gym's terrain levels: ``levels``,
-``levels_init``, ``levels_promote``, ``levels_demote``); their rules and where they differ from the field's are in
+randomisation, ``terrains_per_chunk`` terrains a chunk), ``"levels"`` (legged_gym's terrain levels: ``levels``,
+``levels_init``, ``levels_promote``, ``levels_demote``) and ``"plr"`` (prioritised level replay, ``plr_*``); their rules and where they differ from the field's are in
 :mod:`.selectors`. Any other name is a registered selector (``selectors.register_selector``) or ``module:object``.
 """
 
@@ -84,7 +84,7 @@ from jaxterrain.runtime.validation import int_at_least, known_fields, one_of, wa
 
 __all__ = ["CurriculumConfig", "validate_config", "SELECTORS", "FINE_TUNED", "FINE_TUNING"]
 
-SELECTORS = ("map", "roughness", "random", "dr", "levels")  # built in; selectors.selector_names() adds registered ones
+SELECTORS = ("map", "roughness", "random", "dr", "levels", "plr")  # built in; selectors.selector_names() adds registered ones
 GP_EVALUATIONS = ("final", "best")
 REMOVAL_TIES = ("nearer", "keep", "remove")
 CREDITS = ("threshold", "finished")
@@ -140,13 +140,16 @@ class CurriculumConfig(NamedTuple):
         keys, policies, evaluations and choices; only where the envs restart between blocks of chunks differs) in
         fewer physics calls: see :func:`jaxterrain.curriculum.core.step`. Needs a harness with ``train_evaluate``
         (the walker's on tiles). One-terrain selectors only (``map``, ``roughness``, ``random``).
-      dr_terrains: ``dr``'s terrains per chunk (its envs dealt round-robin over them), >= 1.
+      terrains_per_chunk: ``dr``'s and ``plr``'s terrains per chunk (the envs dealt round-robin over them), >= 1.
       levels: ``levels``' difficulty levels (bands of the bank by hardness; legged_gym: 10), >= 1.
       levels_init: envs start at random levels ``0 .. levels_init``, in [0, levels - 1]; None = ``levels // 2``
         (legged_gym: 5 of 10).
       levels_promote: an env moves up a level when its furthest normalised distance in the chunk is at least this;
         None = ``threshold x max_fitness``.
       levels_demote: ... and down when it is below this (legged_gym: half the course), in [0, 1].
+      plr_capacity, plr_replay_prob, plr_staleness, plr_temperature, plr_min_fill: ``plr``'s level buffer (JaxUED's
+        ``maze_plr.py`` defaults 4000, 0.8, 0.3, 0.3, 0.5): entries (at most the bank's terrains), the chance a chunk
+        replays, the staleness coefficient, the rank temperature (> 0), the buffer's fill before any replay.
     """
 
     selector: str = "map"
@@ -172,11 +175,16 @@ class CurriculumConfig(NamedTuple):
     max_observations: Optional[int] = None
     ppo: PPOConfig = FINE_TUNING
     overlap: bool = False
-    dr_terrains: int = 8
+    terrains_per_chunk: int = 8
     levels: int = 10
     levels_init: Optional[int] = None
     levels_promote: Optional[float] = None
     levels_demote: float = 0.5
+    plr_capacity: int = 4000
+    plr_replay_prob: float = 0.8
+    plr_staleness: float = 0.3
+    plr_temperature: float = 0.3
+    plr_min_fill: float = 0.5
 
     @property
     def max_chunks(self) -> int:
@@ -258,7 +266,7 @@ def validate_config(config: CurriculumConfig) -> CurriculumConfig:
     """Raise ``ValueError`` naming the first bad field and its allowed range; return ``config`` unchanged."""
     resolve_factory(config.selector)
     for name in ("epochs_per_chunk", "steps_per_epoch", "max_epochs", "max_evals", "attempts", "best",
-                 "roughness_stride", "dr_terrains", "levels"):
+                 "roughness_stride", "terrains_per_chunk", "levels", "plr_capacity"):
         _int_at_least(config, name, 1)
     walks("CurriculumConfig", config)
     _float_in(config, "threshold", 0.0, 1.0, lo_open=True)
@@ -282,7 +290,10 @@ def validate_config(config: CurriculumConfig) -> CurriculumConfig:
     if config.levels_promote is not None:
         _float_in(config, "levels_promote", 0.0, 1.0, lo_open=True)
     _float_in(config, "levels_demote", 0.0, 1.0, lo_open=False)
-    if config.overlap and config.selector not in ("map", "roughness", "random"):
+    for name in ("plr_replay_prob", "plr_staleness", "plr_min_fill"):
+        _float_in(config, name, 0.0, 1.0, lo_open=False)
+    _float_in(config, "plr_temperature", 0.0, None, lo_open=True)
+    if config.overlap and config.selector not in ("map", "roughness", "random"):  # one terrain a trial
         raise ValueError(f"CurriculumConfig.overlap needs a one-terrain selector (map, roughness, random), got "
                          f"selector={config.selector!r}")
     if not isinstance(config.overlap, bool):

@@ -138,7 +138,7 @@ def physics_of(cfg: dict) -> str:
 def selector_slots(cfg: dict) -> int:
     """``Selector.slots`` of a learn config's curriculum (1 for map / roughness / random): a trial's terrains per
     chunk. :class:`BadInput` for an unknown curriculum."""
-    fields = {k: cfg[k] for k in ("dr_terrains", "levels") if cfg.get(k) is not None}
+    fields = {k: cfg[k] for k in ("terrains_per_chunk", "levels") if cfg.get(k) is not None}
     try:
         return int(get_selector(CurriculumConfig(selector=cfg["curriculum"], **fields)).slots)
     except (ValueError, TypeError) as err:

@@ -21,7 +21,8 @@ Two kinds ship:
 - **Per-env selectors** (``slots = K > 1``: the trial's envs spread over K terrains, each env on its own, new
   terrains every chunk and the envs restarted on them): ``dr`` (domain randomisation: K terrains drawn uniformly
   from the bank every chunk, envs dealt round-robin) and ``levels`` (legged_gym's terrain curriculum: ``levels``
-  difficulty levels, each env moved up or down by how far it walked, :class:`LevelsState`).
+  difficulty levels, each env moved up or down by how far it walked, :class:`LevelsState`) and ``plr``
+  (prioritised level replay: JaxUED's level buffer over the bank's terrains, :class:`PLRState`).
 
 Where ours differ from the field's (decisions, with reasons):
 
@@ -39,8 +40,17 @@ Where ours differ from the field's (decisions, with reasons):
   start at random levels ``0 .. levels_init`` (default ``levels // 2``: legged_gym's ``max_init_terrain_level =
   5`` of 10).
   ``progress`` is each env's furthest normalised distance since the chunk's restart (``Outcome.progress``).
+- ``plr`` keeps JaxUED's ``LevelSampler`` and the defaults of its ``maze_plr.py`` (buffer of 4 000 levels, replay
+  probability 0.8 once the buffer is half full, rank prioritisation at temperature 0.3, staleness coefficient 0.3,
+  duplicates updated, not added), with a level = a bank terrain (so the buffer holds at most the bank's N) and
+  two differences: (1) a terrain's score is its *learnability* ``p (1 - p)`` (p: the fraction of its envs that
+  reached the threshold in the chunk; Rutherford et al. 2024's SFL), not MaxMC or the positive value loss, which
+  need per-level value estimates that our chunk does not expose; (2) new terrains are trained on (PLR's
+  "exploratory gradient updates", JaxUED's ``--exploratory_grad_updates``), not only scored as robust PLR does:
+  a chunk's PPO rollouts are the only rollouts it makes, and scoring without training would spend a chunk's
+  budget on evaluation. ACCEL (edits of replayed levels by the generator's ``mutate``) is not built yet.
 - Per-env selectors evaluate (for the record of the hardest terrain traversed, the paper's metric) one terrain a
-  chunk: ``dr`` its first slot (a uniform draw), ``levels`` the terrain of the highest level an env stands on.
+  chunk: ``dr`` and ``plr`` their first slot, ``levels`` the terrain of the highest level an env stands on.
 
 A selector of your own: a function ``(config) -> Selector`` registered with :func:`register_selector` (or named as
 ``module:object`` in ``CurriculumConfig.selector``), e.g. from a plugin module.
@@ -57,9 +67,9 @@ import jax.numpy as jnp
 from jaxterrain.curriculum import gp
 from jaxterrain.qd import GRID_BINS, MAX_DISTANCE_50, TerrainBank
 
-__all__ = ["Selector", "Assignment", "Outcome", "Decision", "SequenceState", "DRState", "LevelsState",
+__all__ = ["Selector", "Assignment", "Outcome", "Decision", "SequenceState", "DRState", "LevelsState", "PLRState",
            "get_selector", "register_selector", "selector_names", "sequence_selector", "dr_selector",
-           "levels_selector", "terrain_hardness", "roughness_sequence", "select", "removal_mask", "gp_params",
+           "levels_selector", "plr_selector", "plr_weights", "plr_insert", "plr_sample", "learnability", "terrain_hardness", "roughness_sequence", "select", "removal_mask", "gp_params",
            "level_bands", "levels_rule"]
 
 
@@ -267,10 +277,10 @@ def _round_robin(num_envs: int, slots: int) -> jax.Array:
 
 
 def dr_selector(config) -> Selector:
-    """Domain randomisation: every chunk ``config.dr_terrains`` terrains drawn uniformly from the bank, env e on terrain
+    """Domain randomisation: every chunk ``config.terrains_per_chunk`` terrains drawn uniformly from the bank, env e on terrain
     ``e % slots``, the envs restarted on them; evaluated on the first. No terrain is ever used up: the trial runs to
     ``max_epochs``."""
-    k, e = int(config.dr_terrains), int(config.ppo.num_envs)
+    k, e = int(config.terrains_per_chunk), int(config.ppo.num_envs)
 
     def draw(key, bank):
         return jax.random.randint(key, (k,), 0, bank.fitness.shape[0], dtype=jnp.int32)
@@ -359,11 +369,136 @@ def levels_selector(config) -> Selector:
 
 
 # ----------------------------------------------------------------------------------------------------------------
+# Prioritised level replay over the bank's terrains
+# ----------------------------------------------------------------------------------------------------------------
+class PLRState(NamedTuple):
+    """``plr``'s state: JaxUED's level buffer (``LevelSampler``'s ``Sampler``) over bank terrains, and the chunk's
+    assignment. levels: [C] int32 bank index of each buffer entry (-1 empty). scores: [C] float32 (-inf empty).
+    timestamps: [C] int32 the episode count when the entry was last sampled or inserted. size: [] int32 entries.
+    episode_count: [] int32. terrains: [K] int32 this chunk's terrains. entry: [K] int32 their buffer entries
+    (replay), -1 for new terrains. replay: [] bool this chunk replays. replays: [] int32 replay chunks so far."""
+
+    levels: jax.Array
+    scores: jax.Array
+    timestamps: jax.Array
+    size: jax.Array
+    episode_count: jax.Array
+    terrains: jax.Array
+    entry: jax.Array
+    replay: jax.Array
+    replays: jax.Array
+
+
+def plr_weights(s: PLRState, temperature: float, staleness_coeff: float) -> jax.Array:
+    """``[C]`` replay distribution of a buffer: ``(1 - staleness_coeff) x`` rank prioritisation (``(1 / rank) **
+    (1 / temperature)``, normalised; rank 1 = highest score) ``+ staleness_coeff x`` staleness (``episode_count -
+    timestamps``, normalised; uniform over the entries while all are 0), both over the filled entries only
+    (JaxUED ``LevelSampler.level_weights`` with ``prioritization="rank"``)."""
+    c = s.scores.shape[0]
+    mask = jnp.arange(c) < s.size
+    order = jnp.argsort(-jnp.where(mask, s.scores, -jnp.inf))
+    ranks = jnp.zeros(c, jnp.int32).at[order].set(jnp.arange(c, dtype=jnp.int32) + 1)
+    w_s = jnp.where(mask, 1.0 / ranks, 0.0) ** (1.0 / temperature)
+    w_s = w_s / jnp.maximum(w_s.sum(), 1e-30)
+    stale = jnp.where(mask, s.episode_count - s.timestamps, 0).astype(jnp.float32)
+    w_c = jnp.where(stale.sum() > 0, stale / jnp.maximum(stale.sum(), 1e-30),
+                    mask / jnp.maximum(s.size, 1).astype(jnp.float32))
+    return (1.0 - staleness_coeff) * w_s + staleness_coeff * w_c
+
+
+def plr_insert(s: PLRState, level, score, temperature: float, staleness_coeff: float) -> PLRState:
+    """One level (bank index) into the buffer with its score (JaxUED ``insert`` with ``duplicate_check``): a level
+    already there gets the new score and timestamp; else it fills the next empty entry, or, when full, replaces the
+    entry of lowest replay weight if its score is lower; the episode count grows by one either way."""
+    c = s.levels.shape[0]
+    found = (s.levels == level) & (jnp.arange(c) < s.size)
+    there = jnp.any(found)
+    idx = jnp.where(there, jnp.argmax(found),
+                    jnp.where(s.size < c, s.size, jnp.argmin(plr_weights(s, temperature, staleness_coeff))))
+    write = there | (s.scores[idx] < score)
+    count = s.episode_count + 1
+    return s._replace(levels=s.levels.at[idx].set(jnp.where(write, level, s.levels[idx])),
+                      scores=s.scores.at[idx].set(jnp.where(write, score, s.scores[idx])),
+                      timestamps=s.timestamps.at[idx].set(jnp.where(write, count, s.timestamps[idx])),
+                      size=jnp.where(write & ~there, jnp.minimum(s.size + 1, c), s.size), episode_count=count)
+
+
+def plr_sample(s: PLRState, key, num: int, temperature: float, staleness_coeff: float):
+    """``(state, entries [num] int32)``: ``num`` replays drawn one after another from :func:`plr_weights`, each
+    marking its entry as just seen (JaxUED ``sample_replay_levels``)."""
+    def one(s, k):
+        idx = jax.random.choice(k, s.levels.shape[0], p=plr_weights(s, temperature, staleness_coeff))
+        count = s.episode_count + 1
+        return s._replace(timestamps=s.timestamps.at[idx].set(count), episode_count=count), idx.astype(jnp.int32)
+
+    return jax.lax.scan(one, s, jax.random.split(key, num))
+
+
+def learnability(progress, env_slot, slots: int, threshold: float) -> jax.Array:
+    """``[K]`` score of each terrain of a chunk: ``p (1 - p)``, p the fraction of its envs whose furthest progress
+    reached ``threshold`` (the learnability of SFL, Rutherford et al. 2024: highest for terrains walked sometimes)."""
+    success = (progress >= threshold).astype(jnp.float32)
+    count = jnp.zeros(slots, jnp.float32).at[env_slot].add(1.0)
+    p = jnp.zeros(slots, jnp.float32).at[env_slot].add(success) / jnp.maximum(count, 1.0)
+    return p * (1.0 - p)
+
+
+def plr_selector(config) -> Selector:
+    """Prioritised level replay over the bank's terrains (JaxUED's ``LevelSampler`` and its defaults; see the module
+    docstring for where ours differ). Every chunk trains the envs on ``terrains_per_chunk`` terrains, env e on
+    terrain ``e % K``: with probability ``plr_replay_prob`` (once the buffer is ``plr_min_fill`` full) K replays
+    from the buffer, else K new terrains drawn uniformly from the bank; after the chunk each terrain's score
+    (:func:`learnability` of its envs' progress) updates its replayed entry or is inserted (:func:`plr_insert`)."""
+    k, e = int(config.terrains_per_chunk), int(config.ppo.num_envs)
+    temperature, stale = float(config.plr_temperature), float(config.plr_staleness)
+    threshold = float(config.threshold * config.max_fitness)
+
+    def new(key, bank):
+        return jax.random.randint(key, (k,), 0, bank.fitness.shape[0], dtype=jnp.int32)
+
+    def init(key, bank):
+        c = min(int(config.plr_capacity), int(bank.fitness.shape[0]))
+        zi = jnp.zeros((), jnp.int32)
+        return PLRState(levels=jnp.full((c,), -1, jnp.int32), scores=jnp.full((c,), -jnp.inf, jnp.float32),
+                        timestamps=jnp.zeros((c,), jnp.int32), size=zi, episode_count=zi, terrains=new(key, bank),
+                        entry=jnp.full((k,), -1, jnp.int32), replay=jnp.zeros((), bool), replays=zi)
+
+    def assign(s):
+        return Assignment(terrains=s.terrains, env_slot=_round_robin(e, k), evaluated=jnp.zeros((), jnp.int32))
+
+    def update(s, key, bank, outcome):
+        decide_key, sample_key, new_key = jax.random.split(key, 3)
+        scores = learnability(outcome.progress, _round_robin(e, k), k, threshold)
+        # replayed entries take their new scores; new terrains go in one by one
+        replayed = s._replace(scores=s.scores.at[jnp.where(s.replay, s.entry, s.scores.shape[0])].set(
+            scores, mode="drop"))
+        inserted = jax.lax.fori_loop(0, k, lambda i, b: plr_insert(b, s.terrains[i], scores[i], temperature, stale),
+                                     s)
+        buf = jax.tree.map(lambda a, b: jnp.where(s.replay, a, b), replayed, inserted)
+        replay = ((buf.size / buf.levels.shape[0]) >= config.plr_min_fill) & (
+            jax.random.uniform(decide_key) < config.plr_replay_prob)
+        sampled, entry = plr_sample(buf, sample_key, k, temperature, stale)
+        nxt = jax.tree.map(lambda a, b: jnp.where(replay, a, b), sampled, buf)
+        nxt = nxt._replace(terrains=jnp.where(replay, buf.levels[entry], new(new_key, bank)),
+                           entry=jnp.where(replay, entry, -1), replay=replay,
+                           replays=s.replays + replay.astype(jnp.int32))
+        reached = outcome.fitness >= threshold
+        return nxt, Decision(finished=reached, restart=jnp.ones((), bool), exhausted=jnp.zeros((), bool))
+
+    def summary(s):
+        filled = jnp.arange(s.scores.shape[0]) < s.size
+        return {"buffer_size": s.size, "replay_chunks": s.replays,
+                "buffer_mean_score": jnp.sum(jnp.where(filled, s.scores, 0.0)) / jnp.maximum(s.size, 1)}
+
+    return Selector("plr", k, init, assign, update, summary, progress=True)
+
+
+# ----------------------------------------------------------------------------------------------------------------
 # Registry
 # ----------------------------------------------------------------------------------------------------------------
 _REGISTRY: dict[str, Callable[[Any], Selector]] = {
     "map": sequence_selector, "roughness": sequence_selector, "random": sequence_selector,
-    "dr": dr_selector, "levels": levels_selector,
+    "dr": dr_selector, "levels": levels_selector, "plr": plr_selector,
 }
 
 

@@ -162,7 +162,7 @@ def run_chunks(config, harness, bank, trials: int, chunks: int, key: int = 0):
 
 def test_dr_deals_the_envs_round_robin_over_fresh_uniform_terrains_every_chunk():
     bank = toy_bank()
-    config = small("dr", dr_terrains=3, max_epochs=400)
+    config = small("dr", terrains_per_chunk=3, max_epochs=400)
     harness = per_env_harness(*_envs(3), tiled=False)
     steps = run_chunks(config, harness, bank, trials=1, chunks=400)
     drawn = []
@@ -203,12 +203,12 @@ def test_levels_move_each_env_by_legged_gyms_rule_on_its_levels_terrain():
     assert moved > 10  # the levels went somewhere
 
 
-@pytest.mark.parametrize("selector", ["dr", "levels"])
+@pytest.mark.parametrize("selector", ["dr", "levels", "plr"])
 def test_per_env_terrains_on_tiles_equal_the_classic_layout(selector):
     """3 trials x K terrains a chunk laid out as one bank of 3 K tiles: every env reads exactly the terrain the
     classic layout gives it ([E, H, W] maps), so every record, level and policy leaf is equal."""
     bank = toy_bank()
-    config = small(selector, dr_terrains=3, levels=4, max_epochs=8)
+    config = small(selector, terrains_per_chunk=3, levels=4, max_epochs=8, plr_capacity=4)
     k = S.get_selector(config).slots
     env, plain = _envs(3 * k)
     keys = jax.random.split(jax.random.key(2), 3)
@@ -259,12 +259,14 @@ def test_a_users_selector_runs_by_module_and_name_without_editing_the_library():
 
 
 @pytest.mark.parametrize("fields, message", [
-    (dict(selector="nope"), "selector must be one of map, roughness, random, dr, levels"),
+    (dict(selector="nope"), "selector must be one of map, roughness, random, dr, levels, plr"),
+    (dict(selector="plr", plr_temperature=0.0), r"plr_temperature must be in \(0.0, inf\)"),
+    (dict(selector="plr", plr_replay_prob=1.5), r"plr_replay_prob must be in \[0.0, 1.0\]"),
     (dict(selector="no_such_module:thing"), "cannot import it"),
     (dict(selector="levels", levels=3, levels_init=3), r"levels_init must be in \[0, levels - 1 = 2\]"),
     (dict(selector="levels", levels_promote=1.5), r"levels_promote must be in \(0.0, 1.0\]"),
     (dict(selector="levels", levels_demote=-0.1), r"levels_demote must be in \[0.0, 1.0\]"),
-    (dict(selector="dr", dr_terrains=0), "dr_terrains must be an integer >= 1"),
+    (dict(selector="dr", terrains_per_chunk=0), "terrains_per_chunk must be an integer >= 1"),
     (dict(selector="dr", overlap=True), "overlap needs a one-terrain selector"),
 ])
 def test_selector_settings_are_refused_with_the_field_and_its_range(fields, message):
@@ -321,3 +323,88 @@ def test_a_checkpoint_of_the_state_before_the_protocol_restores_into_the_selecto
     np.testing.assert_array_equal(np.asarray(state.policy.episode.progress), [9.0, 9.0, 9.0])  # the template's
     with pytest.raises(ValueError, match="has no leaf"):
         driver.restore(tmp_path, like)  # without the aliases
+
+
+# ---------------------------------------------------------------------------------------------------------------
+# PLR: JaxUED's level buffer against NumPy
+# ---------------------------------------------------------------------------------------------------------------
+def numpy_plr_weights(scores, timestamps, size, count, temperature, rho):
+    c = scores.size
+    mask = np.arange(c) < size
+    order = np.argsort(-np.where(mask, scores, -np.inf), kind="stable")
+    ranks = np.empty(c)
+    ranks[order] = np.arange(c) + 1
+    w_s = np.where(mask, 1.0 / ranks, 0.0) ** (1.0 / temperature)
+    w_s /= w_s.sum()
+    stale = np.where(mask, count - timestamps, 0).astype(float)
+    w_c = stale / stale.sum() if stale.sum() > 0 else mask / size
+    return (1 - rho) * w_s + rho * w_c
+
+
+def buffer(levels, scores, timestamps, count):
+    c = len(levels)
+    size = int(np.sum(np.asarray(levels) >= 0))
+    return S.PLRState(levels=jnp.asarray(levels, jnp.int32), scores=jnp.asarray(scores, jnp.float32),
+                      timestamps=jnp.asarray(timestamps, jnp.int32), size=jnp.int32(size),
+                      episode_count=jnp.int32(count), terrains=jnp.zeros(2, jnp.int32),
+                      entry=jnp.full(2, -1, jnp.int32), replay=jnp.zeros((), bool), replays=jnp.int32(0))
+
+
+def test_plr_replay_distribution_is_rank_prioritisation_mixed_with_staleness():
+    rng = np.random.default_rng(1)
+    scores = rng.uniform(0, 0.25, 6).astype(np.float32)
+    stamps = np.array([3, 9, 1, 7, 7, 0])
+    s = buffer([4, 2, 7, 0, 9, -1], np.where(np.arange(6) < 5, scores, -np.inf), stamps, 10)
+    got = np.asarray(S.plr_weights(s, 0.3, 0.3))
+    want = numpy_plr_weights(np.where(np.arange(6) < 5, scores, -np.inf), stamps, 5, 10, 0.3, 0.3)
+    np.testing.assert_allclose(got, want, rtol=1e-5)
+    assert got[5] == 0 and got[np.argmax(scores[:5])] == got.max()  # the best score weighs most; empty: 0
+    # drawing: the empirical distribution of many single draws from the same buffer
+    keys = jax.random.split(jax.random.key(0), 20000)
+    draws = np.asarray(jax.vmap(lambda k: S.plr_sample(s, k, 1, 0.3, 0.3)[1][0])(keys))
+    np.testing.assert_allclose(np.bincount(draws, minlength=6) / 20000, want, atol=0.012)
+    # sampling marks the entry as just seen: its staleness drops to 0
+    after, idx = S.plr_sample(s, jax.random.key(3), 3, 0.3, 0.3)
+    assert int(after.episode_count) == 13 and int(after.timestamps[int(idx[-1])]) == 13
+
+
+def test_plr_insert_updates_duplicates_fills_then_replaces_the_lowest_weight_when_beaten():
+    s = buffer([4, 2, -1], [0.1, 0.2, -np.inf], [1, 2, 0], 5)
+    s = S.plr_insert(s, jnp.int32(2), jnp.float32(0.05), 0.3, 0.3)  # a duplicate: its score and timestamp change
+    assert np.asarray(s.levels).tolist() == [4, 2, -1] and float(s.scores[1]) == pytest.approx(0.05)
+    assert int(s.size) == 2 and int(s.timestamps[1]) == 6 == int(s.episode_count)
+    s = S.plr_insert(s, jnp.int32(8), jnp.float32(0.15), 0.3, 0.3)  # an empty entry
+    assert np.asarray(s.levels).tolist() == [4, 2, 8] and int(s.size) == 3
+    weights = numpy_plr_weights(np.asarray(s.scores), np.asarray(s.timestamps), 3, int(s.episode_count), 0.3, 0.3)
+    low = int(np.argmin(weights))
+    kept = S.plr_insert(s, jnp.int32(5), jnp.float32(float(s.scores[low]) - 0.01), 0.3, 0.3)  # not better: kept
+    assert np.asarray(kept.levels).tolist() == [4, 2, 8] and int(kept.episode_count) == int(s.episode_count) + 1
+    better = S.plr_insert(s, jnp.int32(5), jnp.float32(0.24), 0.3, 0.3)  # better: replaces the lowest weight
+    assert int(better.levels[low]) == 5 and float(better.scores[low]) == pytest.approx(0.24)
+
+
+def test_learnability_is_p_one_minus_p_of_each_terrains_envs():
+    progress = jnp.asarray([1.0, 0.95, 0.2, 0.1, 0.92, 0.3, 0.0, 0.99])
+    got = np.asarray(S.learnability(progress, jnp.arange(8) % 4, 4, 0.9))
+    # terrain 0: envs 0, 4 (both reached): p 1; 1: envs 1, 5 (one): 0.5; 2: envs 2, 6 (none); 3: envs 3, 7: 0.5
+    np.testing.assert_allclose(got, [0.0, 0.25, 0.0, 0.25])
+
+
+def test_plr_fills_its_buffer_then_replays_and_rescores_on_the_loop():
+    bank = toy_bank()
+    config = small("plr", terrains_per_chunk=3, plr_capacity=6, plr_min_fill=0.5, max_epochs=40)
+    harness = per_env_harness(*_envs(3), tiled=False, gain=0.01)
+    replays, new_chunks = 0, 0
+    for before, after in run_chunks(config, harness, bank, trials=1, chunks=40):
+        b, a = jax.tree.map(lambda x: np.asarray(x[0]), before.selector), jax.tree.map(lambda x: np.asarray(x[0]),
+                                                                                      after.selector)
+        if b.replay:
+            replays += 1
+            np.testing.assert_array_equal(b.levels[b.entry], b.terrains)  # replayed terrains are buffer entries
+        else:
+            new_chunks += 1
+            assert set(b.terrains.tolist()) <= set(a.levels[a.levels >= 0].tolist()) or a.size == 6
+        assert a.size <= 6 and len(set(a.levels[:a.size].tolist())) == a.size  # no duplicates
+        if a.replay:
+            assert a.size >= 3  # half full before any replay
+    assert replays > 15 and new_chunks >= 2
