@@ -3,6 +3,12 @@
 Each command lives in its own module of this package, which defines ``add_arguments(parser)`` and ``main(args)``;
 this file only maps command names to modules. Command modules import jax and the library inside ``main`` only, so
 ``--help`` stays fast.
+
+Plugins: ``--plugin MODULE`` (before or after the command, repeatable) imports MODULE first, and every installed
+package's ``jaxterrain.plugins`` entry points are loaded (an entry point naming a callable is called with no
+arguments): a module that registers generators (``jaxterrain.generators.register``), descriptors
+(``jaxterrain.features.register_descriptor``) or curricula (``jaxterrain.curriculum.register_selector``) makes their names
+valid in every command, e.g. ``python -m experiments --plugin mylab.terrains evolve --generator ridges``.
 """
 
 from __future__ import annotations
@@ -41,12 +47,74 @@ class HelpFormatter(argparse.ArgumentDefaultsHelpFormatter):
         return super()._get_help_string(action)
 
 
+PLUGIN_GROUP = "jaxterrain.plugins"
+"""The entry-point group of installed plugins (``[project.entry-points."jaxterrain.plugins"]``)."""
+
+
+def split_plugins(argv: list[str]) -> tuple[list[str], list[str]]:
+    """``(plugin modules, the other arguments)`` of a command line: every ``--plugin MODULE`` / ``--plugin=MODULE``,
+    wherever it stands (before ``--``)."""
+    plugins, rest, i = [], [], 0
+    while i < len(argv):
+        arg = argv[i]
+        if arg == "--":
+            rest += argv[i:]
+            break
+        if arg == "--plugin":
+            if i + 1 >= len(argv) or argv[i + 1].startswith("-"):
+                raise PluginError("--plugin needs a module name, e.g. --plugin mylab.terrains")
+            plugins.append(argv[i + 1])
+            i += 2
+            continue
+        if arg.startswith("--plugin="):
+            plugins.append(arg.split("=", 1)[1])
+        else:
+            rest.append(arg)
+        i += 1
+    return plugins, rest
+
+
+class PluginError(Exception):
+    """A plugin that cannot be loaded: one line naming it."""
+
+
+def load_plugins(modules: list[str]) -> list[str]:
+    """Import ``modules`` (``--plugin``) and every ``jaxterrain.plugins`` entry point; the names loaded, in order.
+    :class:`PluginError` naming the plugin when one does not import."""
+    from importlib import metadata
+
+    loaded = []
+    for name in modules:
+        if not name or not all(part.isidentifier() for part in name.split(".")):
+            raise PluginError(f"--plugin {name!r}: not a module name (dotted identifiers, e.g. mylab.terrains)")
+        try:
+            importlib.import_module(name)
+        except Exception as err:  # noqa: BLE001 - any failure of the user's module is reported in one line
+            raise PluginError(f"--plugin {name}: cannot import it ({type(err).__name__}: "
+                              f"{str(err).splitlines()[0] if str(err) else ''})") from None
+        loaded.append(name)
+    for point in metadata.entry_points(group=PLUGIN_GROUP):
+        try:
+            obj = point.load()
+            if callable(obj):
+                obj()
+        except Exception as err:  # noqa: BLE001
+            raise PluginError(f"plugin {point.name} ({point.value}, entry point {PLUGIN_GROUP}): cannot load it "
+                              f"({type(err).__name__}: {str(err).splitlines()[0] if str(err) else ''})") from None
+        loaded.append(point.value)
+    return loaded
+
+
 def build_parser() -> tuple[argparse.ArgumentParser, dict]:
     """The parser of ``python -m experiments`` and ``{name: (module, its subparser)}`` of every command built, each
     flag's help ending with every preset's value (the docs' command-line page is written from the same parsers)."""
     from experiments.common import show_preset_values
 
     parser = argparse.ArgumentParser(prog="python -m experiments", description=__doc__.splitlines()[0])
+    parser.add_argument("--plugin", action="append", default=[], metavar="MODULE",
+                        help="import MODULE first: its generators, descriptors and curricula become valid names in "
+                             "every command (also after the command; repeatable). Installed packages' "
+                             f"{PLUGIN_GROUP} entry points load too")
     sub = parser.add_subparsers(dest="command", required=True, metavar="command")
     commands = {}
     for name, (module_name, help_text) in COMMANDS.items():
@@ -65,9 +133,16 @@ def build_parser() -> tuple[argparse.ArgumentParser, dict]:
 
 
 def main(argv: list[str] | None = None) -> int:
+    try:
+        plugins, argv = split_plugins(list(sys.argv[1:] if argv is None else argv))
+        load_plugins(plugins)
+    except PluginError as err:
+        print(f"python -m experiments: error: {err}", file=sys.stderr)
+        return 2
     parser, commands = build_parser()
     available = {name: module for name, (module, _) in commands.items()}
     args = parser.parse_args(argv)
+    args.plugin = plugins
     from experiments.common import UsageError, check_args
 
     try:  # bad flag values: one line naming the flag, exit status 2 (as argparse), before any JAX work

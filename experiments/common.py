@@ -60,10 +60,17 @@ SELECTOR_NAMES = ("map", "roughness", "random", "dr", "levels", "plr")
 
 
 def selector_name(text: str) -> str:
-    """argparse type of ``--curriculum`` / ``--baseline``: a built-in curriculum or ``module:object``."""
+    """argparse type of ``--curriculum`` / ``--baseline``: a built-in curriculum, ``module:object``, or the name a
+    plugin registered (``--plugin``; checked against the registry when the command runs)."""
     if text in SELECTOR_NAMES or (":" in text and all(text.partition(":")[::2])):
         return text
-    raise argparse.ArgumentTypeError(f"choose from {', '.join(SELECTOR_NAMES)} or module:object; got {text!r}")
+    if text.isidentifier() and "jaxterrain.curriculum.selectors" in sys.modules:  # a plugin may have registered it
+        from jaxterrain.curriculum import selectors
+
+        if text in selectors.selector_names():
+            return text
+    raise argparse.ArgumentTypeError(f"choose from {', '.join(SELECTOR_NAMES)}, a name registered by a --plugin, or "
+                                     f"module:object; got {text!r}")
 
 
 PRESET_NAMES = ("smoke", "gpu-short", "gpu", "paper")
@@ -185,7 +192,8 @@ def check_values(values: dict, where=flag) -> None:
             for v in items:
                 if v not in generators.names():
                     names = ", ".join(generators.names())
-                    raise UsageError(f"{where(key)}: unknown generator {v!r}; choose from {names}")
+                    raise UsageError(f"{where(key)}: unknown generator {v!r}; choose from {names} (or one a --plugin "
+                                     f"registers)")
     for key, bound in _AT_MOST:
         v, b = values.get(key), values.get(bound)
         for item in v if isinstance(v, (list, tuple)) else [v]:

@@ -6,7 +6,8 @@
     >>> gen = generators.get("perlin")           # a Generator (see base.py)
 
 Each module registers a factory ``factory(size=256, **options) -> Generator`` with :func:`register`; ``get`` calls
-it. Register your own generator the same way and every experiment command can use it by name.
+it. Register your own generator the same way and every experiment command can use it by name once your module
+is imported (``python -m experiments --plugin MODULE ...``, or a ``jaxterrain.plugins`` entry point).
 """
 
 from __future__ import annotations
