@@ -136,9 +136,14 @@ def shipped(relative: str) -> str:
     return str(Path(spec.origin).parent / "assets" / relative)
 
 
+FLAG_NAMES = {"n": "--terrains", "samples": "--terrains"}
+"""Config keys whose flag has another name (the key kept so that older runs' ``config.json`` still read): terrains
+per generator is ``--terrains`` in every command (``--n`` and ``--samples`` stay as aliases)."""
+
+
 def flag(key: str) -> str:
     """The command-line flag of a config key / argparse dest: ``batch_size`` -> ``--batch-size``."""
-    return "--" + key.replace("_", "-")
+    return FLAG_NAMES.get(key, "--" + key.replace("_", "-"))
 
 
 def _bad(where: str, what: str, value: Any) -> UsageError:

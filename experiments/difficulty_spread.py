@@ -20,7 +20,7 @@ from experiments.common import UsageError
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--heights", nargs="+", type=float, default=[0.5], help="height scales to try (metres, > 0)")
-    parser.add_argument("--n", type=int, default=16, help="random terrains per generator (>= 1)")
+    parser.add_argument("--terrains", "--n", dest="n", type=int, default=16, help="random terrains per generator (>= 1)")
     parser.add_argument("--attempts", type=int, default=20)
     parser.add_argument("--best", type=int, default=5)
     parser.add_argument("--generators", nargs="*", default=None, help="default: every generator that loads")
@@ -45,7 +45,7 @@ def main(args: argparse.Namespace) -> int:
     from jaxterrain.terrain import TerrainScale
 
     if args.n < 1:
-        raise UsageError("--n must be >= 1")
+        raise UsageError("--terrains must be >= 1")
     if any(h <= 0 for h in args.heights):
         raise UsageError("--heights must all be > 0 (metres)")
     run = run_folder("difficulty-spread", args.out)

@@ -45,7 +45,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--archive", default=None, help="walk an archive's elites instead of the suite")
     parser.add_argument("--size", type=int, default=None, help="suite heightmap side in pixels (v1: 256)")
     parser.add_argument("--seeds", type=int, default=None, help="suite terrains per family level (v1: 3)")
-    parser.add_argument("--samples", type=int, default=None, help="suite genomes drawn per generator (v1: 96)")
+    parser.add_argument("--terrains", "--samples", dest="samples", type=int, default=None, help="suite genomes drawn per generator (v1: 96)")
     parser.add_argument("--families", nargs="+", default=None, help="suite families to build (default: all of the "
                         "version's; smoke: flat stairs_up gaps)")
     parser.add_argument("--generators", nargs="*", default=None, help="generators to sample (default: the version's "

@@ -49,7 +49,7 @@ FEATURES = ("tri", "tpi", "roughness")
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     common.add_run_arguments(parser, PRESETS, "smoke")
     parser.add_argument("--generators", nargs="+", default=None, help="generator names (default cppn perlin)")
-    parser.add_argument("--samples", type=int, default=None,
+    parser.add_argument("--terrains", "--samples", dest="samples", type=int, default=None,
                         help="random genomes per generator; each also gives mutation_steps mutated descendants")
     parser.add_argument("--mutation-steps", type=int, default=None)
     parser.add_argument("--size", type=int, default=None)

@@ -26,7 +26,7 @@ from experiments.common import UsageError
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--n", type=int, default=32, help="terrains per generator (>= 1)")
+    parser.add_argument("--terrains", "--n", dest="n", type=int, default=32, help="terrains per generator (>= 1)")
     parser.add_argument("--size", type=int, default=256, help="heightmap side in pixels (32..1024)")
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--generators", nargs="*", default=None, help="default: every generator that loads")
@@ -229,7 +229,7 @@ def main(args: argparse.Namespace) -> int:
     from jaxterrain.runtime.io import atomic_write_text
 
     if args.n < 1:
-        raise UsageError("--n must be >= 1")
+        raise UsageError("--terrains must be >= 1")
     if not 32 <= args.size <= 1024:
         raise UsageError("--size must be in [32, 1024]")
     if args.walk < 0:
