@@ -43,9 +43,11 @@ from experiments import common
 PRESETS: dict[str, dict[str, Any]] = common.with_preset_names({
     "smoke": dict(env_steps=4 * 40, time_budget=None, updates_per_chunk=2, num_envs=None, solver=None,
                   eval_attempts=20, eval_best=5),
-    "gpu": dict(env_steps=410 * 122_880, time_budget=480.0, updates_per_chunk=10, num_envs=None, solver=None,
+    "gpu": dict(env_steps=410 * 122_880, time_budget=None, updates_per_chunk=10, num_envs=None, solver=None,
                 eval_attempts=20, eval_best=5),
-}, {"gpu-short": ("gpu", {"env_steps": 41 * 122_880, "time_budget": 48.0}), "paper": "gpu"})
+}, {"gpu-short": ("gpu", {"env_steps": 41 * 122_880}), "paper": "gpu"})
+# time_budget (seconds, the whole process) is the config key of runs made before --time-limit replaced --time-budget
+# (2026-11-28); no preset sets it: --time-limit MIN bounds a process now, on every preset.
 # What ``--resume`` may change (how long the run lasts, how it is chunked, how it is evaluated); the rest is the run's.
 EXTENDABLE = ("env_steps", "time_budget", "updates_per_chunk", "eval_attempts", "eval_best")
 RUN_INFO = "run.json"
@@ -56,10 +58,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     common.add_devices_argument(parser)  # data parallel: envs split over the devices, gradients summed
     parser.add_argument("--env-steps", type=float, default=None,
                         help="total env steps to train (default: smoke 4 updates, gpu 410 updates = 50.4e6)")
-    parser.add_argument("--time-budget", type=float, default=None,
-                        help="seconds of wall time for this process; training stops, leaving a checkpoint, once "
-                             "the budget less the evaluation's minute has passed or before a chunk predicted to end "
-                             "past it (jaxterrain.runtime.driver.run_chunks; default: smoke none, gpu 480)")
+    parser.add_argument("--time-budget", type=float, default=None, help=argparse.SUPPRESS)  # seconds: --time-limit's
+    # predecessor, kept so that older command lines (the base policy's PROVENANCE.md) still run
     parser.add_argument("--updates-per-chunk", type=int, default=None,
                         help="PPO updates per jitted chunk = per checkpoint (default: smoke 2, gpu 10)")
     parser.add_argument("--num-envs", type=int, default=None, help="override PPOConfig.num_envs")
@@ -264,8 +264,9 @@ def train_with_checkpoints(env, terrain, state, start: int, history, args, setti
     if settings.time_budget is not None:  # the process's budget, less what has passed and the evaluation's minute
         reserve = 0.0 if args.skip_eval else 60.0
         limits.append(max(settings.time_budget - (time.perf_counter() - t_start) - reserve, 1e-3))
-    if args.time_limit is not None:
-        limits.append(args.time_limit * 60.0)
+    if args.time_limit is not None:  # the whole process, as time_budget: training leaves the evaluation its minute
+        reserve = 0.0 if args.skip_eval else 60.0
+        limits.append(max(args.time_limit * 60.0 - (time.perf_counter() - t_start) - reserve, 1e-3))
     meta = {"preset": preset, "train_devices": origin.devices, "train_commit": origin.commit,
             "command": "train-base-policy", "command_line": run.command}
     cfg = settings.ppo_config
