@@ -244,7 +244,7 @@ def hardest_first(config) -> S.Selector:
                       update, lambda s: {"hardest_index": s})
 
 
-def test_a_users_selector_runs_by_module_and_name_without_editing_the_library():
+def test_a_users_selector_runs_by_module_and_name_without_editing_the_library(monkeypatch):
     bank = toy_bank()
     name = f"{__name__}:hardest_first"
     config = small(name, num_envs=ENVS, max_epochs=3)
@@ -252,6 +252,7 @@ def test_a_users_selector_runs_by_module_and_name_without_editing_the_library():
     states = C.make_runner(config, harness)(C.init_trials(jax.random.split(jax.random.key(0), 2), bank, START,
                                                           config=config, harness=harness), bank, 5)
     assert np.all(np.asarray(states.history.terrain)[:, :3] == 11) and np.all(np.asarray(states.chunk) == 3)
+    monkeypatch.setattr(S, "_REGISTRY", dict(S._REGISTRY))  # registered for this test only
     S.register_selector("hardest_first", hardest_first)
     assert "hardest_first" in S.selector_names()
     again = C.validate_config(config._replace(selector="hardest_first"))

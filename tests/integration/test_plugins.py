@@ -15,7 +15,7 @@ from experiments import __main__ as front
 
 PLUGIN = textwrap.dedent('''
     """A test plugin: the ``planes`` generator (inclined planes, slope and direction genes) and the
-    ``hardest_first`` curriculum (the hardest terrain of the archive, every chunk)."""
+    ``plugin_hardest_first`` curriculum (the hardest terrain of the archive, every chunk)."""
     import jax.numpy as jnp
 
     from jaxterrain import curriculum, generators
@@ -36,7 +36,7 @@ PLUGIN = textwrap.dedent('''
         return base.vector_generator("planes", PLANES, render_one, size)
 
 
-    def hardest_first(config) -> S.Selector:
+    def plugin_hardest_first(config) -> S.Selector:
         def init(key, bank):
             return jnp.argmax(S.terrain_hardness(bank)).astype(jnp.int32)
 
@@ -44,12 +44,12 @@ PLUGIN = textwrap.dedent('''
             no = jnp.zeros((), bool)
             return state, S.Decision(finished=no, restart=no, exhausted=no)
 
-        return S.Selector("hardest_first", 1, init,
+        return S.Selector("plugin_hardest_first", 1, init,
                           lambda s: S.Assignment(s[None], None, jnp.zeros((), jnp.int32)), update,
                           lambda s: {"hardest_index": s})
 
 
-    curriculum.register_selector("hardest_first", hardest_first)
+    curriculum.register_selector("plugin_hardest_first", plugin_hardest_first)
 ''')
 
 
@@ -63,6 +63,12 @@ def run(argv) -> int:
 
 @pytest.fixture()
 def plugin(tmp_path, monkeypatch):
+    """The plugin module, importable; what it registers is taken out of the registries again afterwards."""
+    from jaxterrain.curriculum import selectors
+    from jaxterrain.generators import registry
+
+    monkeypatch.setattr(registry, "_FACTORIES", dict(registry._FACTORIES))
+    monkeypatch.setattr(selectors, "_REGISTRY", dict(selectors._REGISTRY))
     (tmp_path / "jt_test_plugin.py").write_text(PLUGIN)
     monkeypatch.syspath_prepend(str(tmp_path))
     yield "jt_test_plugin"
@@ -89,13 +95,13 @@ def test_a_plugin_that_does_not_import_is_one_line_and_status_2(argv, message, c
 
 def test_a_plugins_generator_and_curriculum_are_names_every_command_takes(plugin, capsys):
     with pytest.raises(SystemExit):  # without the plugin the names are unknown
-        front.main(["learn", "--curriculum", "hardest_first", "--print-config"])
-    assert "hardest_first" in capsys.readouterr().err
+        front.main(["learn", "--curriculum", "plugin_hardest_first", "--print-config"])
+    assert "plugin_hardest_first" in capsys.readouterr().err
     with pytest.raises(SystemExit):
         front.main(["evolve", "--generator", "planes", "--print-config"])  # unknown generator: one line
     assert "unknown generator 'planes'" in capsys.readouterr().err
-    assert run(["--plugin", plugin, "learn", "--curriculum", "hardest_first", "--print-config"]) == 0
-    assert json.loads(capsys.readouterr().out)["curriculum"] == "hardest_first"
+    assert run(["--plugin", plugin, "learn", "--curriculum", "plugin_hardest_first", "--print-config"]) == 0
+    assert json.loads(capsys.readouterr().out)["curriculum"] == "plugin_hardest_first"
     assert run(["evolve", "--plugin", plugin, "--generator", "planes", "--print-config"]) == 0
     assert json.loads(capsys.readouterr().out)["generator"] == "planes"
 
@@ -104,10 +110,10 @@ def test_installed_plugins_load_from_their_entry_points(plugin, monkeypatch):
     from importlib import metadata
 
     calls = []
-    point = metadata.EntryPoint(name="test", value="jt_test_plugin:hardest_first", group=front.PLUGIN_GROUP)
+    point = metadata.EntryPoint(name="test", value="jt_test_plugin:plugin_hardest_first", group=front.PLUGIN_GROUP)
     monkeypatch.setattr(metadata, "entry_points", lambda group=None: [point] if group == front.PLUGIN_GROUP else [])
     monkeypatch.setattr(point.__class__, "load", lambda self: (lambda: calls.append(self.value)))
-    assert front.load_plugins([]) == ["jt_test_plugin:hardest_first"] and calls == ["jt_test_plugin:hardest_first"]
+    assert front.load_plugins([]) == ["jt_test_plugin:plugin_hardest_first"] and calls == ["jt_test_plugin:plugin_hardest_first"]
 
 
 @pytest.mark.slow
@@ -118,6 +124,6 @@ def test_evolve_and_learn_run_on_the_plugins_generator_and_curriculum(plugin, tm
     archive = next(evolved.glob("*.npz"))
     learned = tmp_path / "learn"
     assert front.main(["--plugin", plugin, "learn", "--preset", "smoke", "--archive", str(archive), "--curriculum",
-                       "hardest_first", "--out", str(learned)]) == 0
+                       "plugin_hardest_first", "--out", str(learned)]) == 0
     summary = json.loads((learned / "summary.json").read_text())
     assert summary["epochs"] == [4, 4] and len(summary["hardest_index"]) == 2
