@@ -365,7 +365,8 @@ def run_trials(states: State, bank: TerrainBank, num_chunks: jax.Array, *, confi
     [states.terrain]`` [T, H, W] -> one terrain pytree, e.g. a bank of T tiles) and trial i trains and is evaluated
     on its slice i."""
     one = functools.partial(_chunk, config=config, harness=harness)
-    slots = get_selector(config).slots
+    selector = get_selector(config)
+    slots = selector.slots
     if harness.layout is None:
         chunk = jax.vmap(one, in_axes=(0, None))
     elif slots == 1:
@@ -373,8 +374,6 @@ def run_trials(states: State, bank: TerrainBank, num_chunks: jax.Array, *, confi
             terrain, axes = harness.layout(bank.heightmaps[s.terrain])
             return jax.vmap(one, in_axes=(0, None, axes))(s, bank, terrain)
     else:  # every trial's K terrains laid out together ([T x K] maps), trial i gets its K
-        selector = get_selector(config)
-
         def chunk(s, bank):
             index = jax.vmap(selector.assign)(s.selector).terrains  # [T, K]
             trials = index.shape[0]
