@@ -43,7 +43,7 @@ _INT_MIN = {
                      "updates_per_chunk", "num_envs", "eval_attempts", "eval_best", "batch", "stride",
                      "calibrate_window", "devices", "max_evals", "chunks_per_call", "policy_every", "terrains",
                      "chunk", "sample", "seeds", "walk_batch", "horizon", "trials", "epochs_per_chunk",
-                     "steps_per_epoch", "max_epochs", "terrains_per_chunk", "levels", "plr_capacity"), 1),
+                     "steps_per_epoch", "max_epochs", "terrains_per_chunk", "levels", "plr_capacity", "accel_edits"), 1),
     **dict.fromkeys(("window", "windows"), 2),
     **dict.fromkeys(("mutation_steps", "walk", "quality_samples", "levels_init"), 0),
 }
@@ -55,7 +55,7 @@ _AT_MOST = (("best", "attempts"), ("eval_best", "eval_attempts"), ("window", "si
             ("windows", "size"))  # (key, bound): key (each of a list) <= bound
 
 
-SELECTOR_NAMES = ("map", "roughness", "random", "dr", "levels", "plr")
+SELECTOR_NAMES = ("map", "roughness", "random", "dr", "levels", "plr", "accel")
 """The built-in curricula (``jaxterrain.curriculum.SELECTORS``; literal here so that ``--help`` imports no JAX)."""
 
 

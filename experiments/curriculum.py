@@ -44,7 +44,7 @@ DEFAULT_ARCHIVES = {g: common.shipped(f"archives/{g}_headings.npz")
 """The archives of Experiment 2 when ``--archives`` is not given: each generator's paper-budget roughness x TPI
 archive (evolved after the fix of tied insertion), reseated under ``difficulty.HEADINGS``; package data
 (``jaxterrain/assets/archives/G_headings.npz``, copies of ``docs/results/exp2_G_headings_archive.npz``)."""
-BASELINES = ("roughness", "random", "dr", "levels", "plr")
+BASELINES = ("roughness", "random", "dr", "levels", "plr", "accel")
 """The curricula of ``--baseline`` (``jaxterrain.curriculum.CurriculumConfig.selector``'s other than ``map``)."""
 PRESETS = {name: {**{k: v for k, v in p.items() if k not in ("archive", "curriculum")},
                   "archives": dict(DEFAULT_ARCHIVES), "baseline": "roughness"}

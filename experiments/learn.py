@@ -77,7 +77,7 @@ _PAPER = dict(archive=CPPN_ARCHIVE, curriculum="map", trials=10, descriptors=["r
               chunks_per_call=25, fast_compile=False, backend="auto", healthy_reward=None, update_normaliser=True,
               truncation="bootstrap", overlap=False, compact=True, policy_every=None, terrains_per_chunk=8, levels=10,
               levels_init=None, levels_promote=None, levels_demote=0.5, plr_capacity=4000, plr_replay_prob=0.8,
-              plr_staleness=0.3, plr_temperature=0.3, plr_min_fill=0.5)
+              plr_staleness=0.3, plr_temperature=0.3, plr_min_fill=0.5, accel_generator=None, accel_edits=1)
 PRESETS: dict[str, dict] = common.with_preset_names({
     "paper": _PAPER,
     "gpu-short": {**_PAPER, "max_epochs": 3000},
@@ -139,20 +139,26 @@ def add_selector_arguments(parser: argparse.ArgumentParser) -> None:
                              "this, in (0, 1] (default: the threshold)")
     parser.add_argument("--levels-demote", type=float, default=None,
                         help="levels: ... and down when it is below this, in [0, 1] (default 0.5: half the course)")
-    for name, kind, what in (("capacity", int, "level buffer entries, >= 1 (at most the archive's terrains; 4000)"),
+    for name, kind, what in (("capacity", int, "level buffer entries, >= 1 (plr: at most the archive's terrains; 4000)"),
                              ("replay-prob", float, "the chance a chunk replays buffer terrains, in [0, 1] (0.8)"),
                              ("staleness", float, "staleness coefficient, in [0, 1] (0.3)"),
                              ("temperature", float, "rank prioritisation temperature, > 0 (0.3)"),
                              ("min-fill", float, "buffer fill before any replay, in [0, 1] (0.5)")):
         parser.add_argument(f"--plr-{name}", type=kind, default=None,
-                            help=f"plr: {what}; JaxUED's maze_plr.py default in brackets")
+                            help=f"plr, accel: {what}; JaxUED's maze_plr.py default in brackets")
+    parser.add_argument("--accel-generator", default=None, metavar="NAME",
+                        help="accel: the generator whose genomes are the levels (its sample and mutate); default: "
+                             "the archive's generator")
+    parser.add_argument("--accel-edits", type=int, default=None,
+                        help="accel: the generator's mutations per edit of a replayed level, >= 1 (default 1)")
 
 
 def selector_overrides(args) -> dict:
     return dict(terrains_per_chunk=args.terrains_per_chunk, levels=args.levels, levels_init=args.levels_init,
                 levels_promote=args.levels_promote, levels_demote=args.levels_demote, plr_capacity=args.plr_capacity,
                 plr_replay_prob=args.plr_replay_prob, plr_staleness=args.plr_staleness,
-                plr_temperature=args.plr_temperature, plr_min_fill=args.plr_min_fill)
+                plr_temperature=args.plr_temperature, plr_min_fill=args.plr_min_fill,
+                accel_generator=args.accel_generator, accel_edits=args.accel_edits)
 
 
 def add_fine_tuning_arguments(parser: argparse.ArgumentParser, scope: str = "") -> None:

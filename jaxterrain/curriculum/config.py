@@ -68,7 +68,9 @@ sorted by descriptor 0 (roughness) ascending, every ``roughness_stride``-th one,
 threshold / 100-evaluation rule) and ``"random"`` (uniformly random among the available terrains, each removed after
 it is finished, no GP). The field's curricula spread a trial's envs over several terrains at once: ``"dr"`` (domain
 randomisation, ``terrains_per_chunk`` terrains a chunk), ``"levels"`` (legged_gym's terrain levels: ``levels``,
-``levels_init``, ``levels_promote``, ``levels_demote``) and ``"plr"`` (prioritised level replay, ``plr_*``); their rules and where they differ from the field's are in
+``levels_init``, ``levels_promote``, ``levels_demote``), ``"plr"`` (prioritised level replay, ``plr_*``) and
+``"accel"`` (PLR over a generator's genomes whose replayed levels are edited by its ``mutate``: ``accel_generator``,
+``accel_edits`` and the ``plr_*`` buffer settings); their rules and where they differ from the field's are in
 :mod:`.selectors`. Any other name is a registered selector (``selectors.register_selector``) or ``module:object``.
 """
 
@@ -84,7 +86,7 @@ from jaxterrain.runtime.validation import int_at_least, known_fields, one_of, wa
 
 __all__ = ["CurriculumConfig", "validate_config", "SELECTORS", "FINE_TUNED", "FINE_TUNING"]
 
-SELECTORS = ("map", "roughness", "random", "dr", "levels", "plr")  # built in; selectors.selector_names() adds registered ones
+SELECTORS = ("map", "roughness", "random", "dr", "levels", "plr", "accel")  # built in; selectors.selector_names() adds registered ones
 GP_EVALUATIONS = ("final", "best")
 REMOVAL_TIES = ("nearer", "keep", "remove")
 CREDITS = ("threshold", "finished")
@@ -103,7 +105,8 @@ class CurriculumConfig(NamedTuple):
 
     Fields:
       selector: ``map`` (IT&E GP + UCB + removal), ``roughness`` (standard CL), ``random``, ``dr`` (domain
-        randomisation), ``levels`` (legged_gym's terrain levels), a registered name or ``module:object``
+        randomisation), ``levels`` (legged_gym's terrain levels), ``plr`` (prioritised level replay), ``accel``
+        (PLR with edits of generator genomes), a registered name or ``module:object``
         (:mod:`.selectors`).
       epochs_per_chunk: epochs trained between two evaluations (paper: 40).
       steps_per_epoch: env steps per epoch (SpinningUp's epoch: 4 000).
@@ -140,7 +143,7 @@ class CurriculumConfig(NamedTuple):
         keys, policies, evaluations and choices; only where the envs restart between blocks of chunks differs) in
         fewer physics calls: see :func:`jaxterrain.curriculum.core.step`. Needs a harness with ``train_evaluate``
         (the walker's on tiles). One-terrain selectors only (``map``, ``roughness``, ``random``).
-      terrains_per_chunk: ``dr``'s and ``plr``'s terrains per chunk (the envs dealt round-robin over them), >= 1.
+      terrains_per_chunk: ``dr``'s, ``plr``'s and ``accel``'s terrains per chunk (the envs dealt round-robin over them), >= 1.
       levels: ``levels``' difficulty levels (bands of the bank by hardness; legged_gym: 10), >= 1.
       levels_init: envs start at random levels ``0 .. levels_init``, in [0, levels - 1]; None = ``levels // 2``
         (legged_gym: 5 of 10).
@@ -150,6 +153,12 @@ class CurriculumConfig(NamedTuple):
       plr_capacity, plr_replay_prob, plr_staleness, plr_temperature, plr_min_fill: ``plr``'s level buffer (JaxUED's
         ``maze_plr.py`` defaults 4000, 0.8, 0.3, 0.3, 0.5): entries (at most the bank's terrains), the chance a chunk
         replays, the staleness coefficient, the rank temperature (> 0), the buffer's fill before any replay.
+        ``accel`` uses the same settings for its buffer of genomes (there the capacity is not bounded by the bank).
+      accel_generator: ``accel``'s levels are genomes of this generator (its ``sample`` makes new levels, its
+        ``mutate`` edits them); None = unset (``experiments learn`` sets the archive's generator). Must be set for
+        ``accel``.
+      accel_edits: ``mutate`` applications per edit of a replayed level, >= 1 (JaxUED's maze: 5 tile edits; one of
+        our mutations already moves about a third of a vector genome's genes, or grows a CPPN's network).
     """
 
     selector: str = "map"
@@ -185,6 +194,8 @@ class CurriculumConfig(NamedTuple):
     plr_staleness: float = 0.3
     plr_temperature: float = 0.3
     plr_min_fill: float = 0.5
+    accel_generator: Optional[str] = None
+    accel_edits: int = 1
 
     @property
     def max_chunks(self) -> int:
@@ -266,7 +277,7 @@ def validate_config(config: CurriculumConfig) -> CurriculumConfig:
     """Raise ``ValueError`` naming the first bad field and its allowed range; return ``config`` unchanged."""
     resolve_factory(config.selector)
     for name in ("epochs_per_chunk", "steps_per_epoch", "max_epochs", "max_evals", "attempts", "best",
-                 "roughness_stride", "terrains_per_chunk", "levels", "plr_capacity"):
+                 "roughness_stride", "terrains_per_chunk", "levels", "plr_capacity", "accel_edits"):
         _int_at_least(config, name, 1)
     walks("CurriculumConfig", config)
     _float_in(config, "threshold", 0.0, 1.0, lo_open=True)
@@ -293,6 +304,10 @@ def validate_config(config: CurriculumConfig) -> CurriculumConfig:
     for name in ("plr_replay_prob", "plr_staleness", "plr_min_fill"):
         _float_in(config, name, 0.0, 1.0, lo_open=False)
     _float_in(config, "plr_temperature", 0.0, None, lo_open=True)
+    if config.selector == "accel" or config.accel_generator is not None:
+        from jaxterrain.curriculum.selectors import accel_generator
+
+        accel_generator(config)
     if config.overlap and config.selector not in ("map", "roughness", "random"):  # one terrain a trial
         raise ValueError(f"CurriculumConfig.overlap needs a one-terrain selector (map, roughness, random), got "
                          f"selector={config.selector!r}")

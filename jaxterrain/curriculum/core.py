@@ -163,11 +163,19 @@ def _take(tree, axes, i: int):
                         tree, is_leaf=lambda a: a is None)
 
 
-def _current_terrain(bank: TerrainBank, index, harness: Harness, slots: int = 1):
+def _assigned_maps(selector: Selector, selector_state, bank: TerrainBank) -> jax.Array:
+    """``[K, H, W]``: the maps of a trial's K slots, ``selector.maps`` or the bank's maps of its assignment."""
+    if selector.maps is not None:
+        return selector.maps(selector_state, bank)
+    return bank.heightmaps[selector.assign(selector_state).terrains]
+
+
+def _current_terrain(bank: TerrainBank, index, harness: Harness, slots: int = 1, maps=None):
     """One trial's terrain argument for the harness: ``bank.heightmaps[index]`` [H, W], or with ``harness.layout``
-    trial 0 of ``layout(bank.heightmaps[index][None])``. ``slots`` > 1: ``index`` is the trial's [K] terrains and
-    the result their slotted form (``[K, H, W]``, or ``layout``'s of the K maps, K tiles)."""
-    maps = bank.heightmaps[index]
+    trial 0 of ``layout(bank.heightmaps[index][None])``. ``slots`` > 1: ``maps`` is the trial's [K, H, W] slot
+    maps (:func:`_assigned_maps`) and the result their slotted form (``[K, H, W]``, or ``layout``'s of the K
+    maps, K tiles)."""
+    maps = bank.heightmaps[index] if maps is None else maps
     if harness.layout is None:
         return maps
     if slots > 1:
@@ -260,8 +268,8 @@ def step(state: State, key: jax.Array, bank: TerrainBank, *, config: CurriculumC
     selector = get_selector(config)
     assignment = selector.assign(state.selector)
     if terrain is None:
-        index = assignment.terrains if selector.slots > 1 else state.terrain
-        terrain = _current_terrain(bank, index, harness, selector.slots)
+        maps = _assigned_maps(selector, state.selector, bank) if selector.slots > 1 else None
+        terrain = _current_terrain(bank, state.terrain, harness, selector.slots, maps)
     trained_on, evaluated_on = _split_terrain(terrain, assignment, harness, selector.slots)
     policy = _restarted(state, reset_key, trained_on, harness)
     policy = harness.train(policy, train_key, trained_on)
@@ -375,9 +383,9 @@ def run_trials(states: State, bank: TerrainBank, num_chunks: jax.Array, *, confi
             return jax.vmap(one, in_axes=(0, None, axes))(s, bank, terrain)
     else:  # every trial's K terrains laid out together ([T x K] maps), trial i gets its K
         def chunk(s, bank):
-            index = jax.vmap(selector.assign)(s.selector).terrains  # [T, K]
-            trials = index.shape[0]
-            terrain, axes = harness.layout(bank.heightmaps[index.reshape(-1)])
+            maps = jax.vmap(lambda st: _assigned_maps(selector, st, bank))(s.selector)  # [T, K, H, W]
+            trials = maps.shape[0]
+            terrain, axes = harness.layout(maps.reshape((-1,) + maps.shape[2:]))
             return jax.vmap(one, in_axes=(0, None, axes))(s, bank, _split_axes(terrain, axes, trials, slots))
 
     # overlap: a trial's step does not always finish a chunk (a terrain switch costs one step more), so the loop

@@ -76,6 +76,18 @@ def with_protocol(cfg: dict, arch) -> dict:
     return {**cfg, **{k: int(v) for k, v in fields.items() if cfg.get(k) is None}}
 
 
+def with_accel_generator(cfg: dict, arch) -> dict:
+    """``cfg`` with ``accel_generator`` set to the archive's generator when the curriculum is ``accel`` and none was
+    given; :class:`BadInput` when the archive holds several generators (``--accel-generator`` must choose)."""
+    if cfg.get("curriculum") != "accel" or cfg.get("accel_generator") is not None:
+        return cfg
+    names = sorted({arch.generator_names[int(i)] for i in np.asarray(arch.source)[np.asarray(arch.source) >= 0]})
+    if len(names) != 1:
+        raise BadInput(f"--accel-generator: the archive holds {', '.join(names)}; name the generator whose genomes "
+                       f"are accel's levels")
+    return {**cfg, "accel_generator": names[0]}
+
+
 def load_archive(path, descriptors):
     """``qd.load`` with one-line errors naming the file: unreadable, other descriptors, < 2 filled cells."""
     try:
@@ -179,7 +191,7 @@ def validate(cfg: dict):
     if not isinstance(cfg.get("episode_length"), int) or cfg["episode_length"] < 1:
         raise BadInput(f"episode_length must be an integer >= 1, got {cfg.get('episode_length')!r}")
     arch = load_archive(cfg["archive"], cfg["descriptors"])
-    cfg = with_protocol(cfg, arch)
+    cfg = with_accel_generator(with_protocol(cfg, arch), arch)
     config = curriculum_config(cfg)
     try:
         policy = W.load_policy(cfg.get("policy"))

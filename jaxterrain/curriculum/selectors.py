@@ -1,6 +1,6 @@
 """Curricula as selectors: which terrains a trial trains on, as a pytree state and pure functions over it.
 
-    selector = get_selector(config)                       # by config.selector: map, roughness, random, dr, levels
+    selector = get_selector(config)                       # config.selector: map, roughness, random, dr, levels, plr, accel
     s = selector.init(key, bank)                          # the selector's state (rides in core.State.selector)
     a = selector.assign(s)                                # Assignment: the trial's K terrains, env -> terrain, evaluated
     s, decision = selector.update(s, key, bank, outcome)  # after a chunk: Outcome(terrain, fitness, progress)
@@ -21,8 +21,10 @@ Two kinds ship:
 - **Per-env selectors** (``slots = K > 1``: the trial's envs spread over K terrains, each env on its own, new
   terrains every chunk and the envs restarted on them): ``dr`` (domain randomisation: K terrains drawn uniformly
   from the bank every chunk, envs dealt round-robin) and ``levels`` (legged_gym's terrain curriculum: ``levels``
-  difficulty levels, each env moved up or down by how far it walked, :class:`LevelsState`) and ``plr``
-  (prioritised level replay: JaxUED's level buffer over the bank's terrains, :class:`PLRState`).
+  difficulty levels, each env moved up or down by how far it walked, :class:`LevelsState`), ``plr``
+  (prioritised level replay: JaxUED's level buffer over the bank's terrains, :class:`PLRState`) and ``accel``
+  (PLR over a generator's genomes, rendered in the loop, the replayed levels edited by the generator's ``mutate``
+  and re-inserted, :class:`AccelState`; ``Selector.maps`` gives the loop its maps).
 
 Where ours differ from the field's (decisions, with reasons):
 
@@ -48,9 +50,20 @@ Where ours differ from the field's (decisions, with reasons):
   need per-level value estimates that our chunk does not expose; (2) new terrains are trained on (PLR's
   "exploratory gradient updates", JaxUED's ``--exploratory_grad_updates``), not only scored as robust PLR does:
   a chunk's PPO rollouts are the only rollouts it makes, and scoring without training would spend a chunk's
-  budget on evaluation. ACCEL (edits of replayed levels by the generator's ``mutate``) is not built yet.
+  budget on evaluation.
+- ``accel`` keeps JaxUED's ``accel`` branch structure (a chunk on new levels or, with the replay probability, on
+  buffer replays; the chunk after a replay on the replayed levels, each edited; new and edited levels scored and
+  inserted, replayed ones re-scored) with ``plr``'s buffer defaults and its two differences (learnability scores,
+  edited and new levels trained on, where robust ACCEL only scores them), and: a level is a genome of
+  ``accel_generator`` (JaxUED: a maze), a new level is the generator's random ``sample`` (JaxUED's ACCEL starts
+  from empty mazes), an edit is ``accel_edits`` (default 1) applications of the generator's own ``mutate`` (the
+  paper's operator; JaxUED edits 5 maze tiles), and the buffer's capacity is ``plr_capacity`` genomes (not bound
+  by the bank). The policy is also evaluated each chunk on one bank terrain drawn uniformly (an extra slot no env
+  trains on), so the paper's "hardest terrain traversed" is recorded on the archive as for ``dr``.
 - Per-env selectors evaluate (for the record of the hardest terrain traversed, the paper's metric) one terrain a
-  chunk: ``dr`` and ``plr`` their first slot, ``levels`` the terrain of the highest level an env stands on.
+  chunk: ``dr`` and ``plr`` their first slot, ``levels`` the terrain of the highest level an env stands on (so a
+  ``levels`` trial whose envs reached the top band is evaluated there, and credits nothing until it walks it),
+  ``accel`` a uniform bank terrain in an extra slot.
 
 A selector of your own: a function ``(config) -> Selector`` registered with :func:`register_selector` (or named as
 ``module:object`` in ``CurriculumConfig.selector``), e.g. from a plugin module.
@@ -58,6 +71,7 @@ A selector of your own: a function ``(config) -> Selector`` registered with :fun
 
 from __future__ import annotations
 
+import functools
 import importlib
 from typing import Any, Callable, NamedTuple, Optional
 
@@ -69,7 +83,8 @@ from jaxterrain.qd import GRID_BINS, MAX_DISTANCE_50, TerrainBank
 
 __all__ = ["Selector", "Assignment", "Outcome", "Decision", "SequenceState", "DRState", "LevelsState", "PLRState",
            "get_selector", "register_selector", "selector_names", "sequence_selector", "dr_selector",
-           "levels_selector", "plr_selector", "plr_weights", "plr_insert", "plr_sample", "learnability", "terrain_hardness", "roughness_sequence", "select", "removal_mask", "gp_params",
+           "levels_selector", "plr_selector", "accel_selector", "accel_generator", "LevelBuffer", "AccelState",
+           "ACCEL_NEW", "ACCEL_REPLAY", "ACCEL_EDIT", "plr_weights", "plr_insert", "plr_sample", "learnability", "terrain_hardness", "roughness_sequence", "select", "removal_mask", "gp_params",
            "level_bands", "levels_rule"]
 
 
@@ -112,7 +127,10 @@ class Selector(NamedTuple):
     progress: whether :func:`update` reads ``Outcome.progress`` (the loop computes it only then).
     init: ``(key, bank) -> state``. assign: ``state -> Assignment``. update: ``(state, key, bank, Outcome) ->
     (state, Decision)``. summary: ``state -> {name: [] array}``, what a treatment's ``summary.json`` records per
-    trial (e.g. terrains finished, final levels)."""
+    trial (e.g. terrains finished, final levels). maps: None (the assignment's terrains are
+    ``bank.heightmaps[Assignment.terrains]``), or ``(state, bank) -> [K, H, W]`` float32 metres, the slots' maps
+    for selectors whose levels are not bank terrains (``accel``: genomes rendered in the loop; their
+    ``Assignment.terrains`` entries are -1, except the evaluated slot, which must be a bank terrain)."""
 
     name: str
     slots: int
@@ -121,6 +139,7 @@ class Selector(NamedTuple):
     update: Callable
     summary: Callable
     progress: bool = False
+    maps: Optional[Callable] = None
 
 
 # ----------------------------------------------------------------------------------------------------------------
@@ -406,28 +425,40 @@ def plr_weights(s: PLRState, temperature: float, staleness_coeff: float) -> jax.
     return (1.0 - staleness_coeff) * w_s + staleness_coeff * w_c
 
 
-def plr_insert(s: PLRState, level, score, temperature: float, staleness_coeff: float) -> PLRState:
-    """One level (bank index) into the buffer with its score (JaxUED ``insert`` with ``duplicate_check``): a level
-    already there gets the new score and timestamp; else it fills the next empty entry, or, when full, replaces the
-    entry of lowest replay weight if its score is lower; the episode count grows by one either way."""
-    c = s.levels.shape[0]
-    found = (s.levels == level) & (jnp.arange(c) < s.size)
+def _same_level(levels, level) -> jax.Array:
+    """``[C]`` bool: entry c of ``levels`` (a pytree, leading axis C: bank indices [C] or genomes) equals ``level``
+    (the same pytree without the C axis) in every leaf."""
+    def eq(a, b):
+        return jnp.all((a == b).reshape(a.shape[0], -1), axis=1)
+    return functools.reduce(jnp.logical_and, jax.tree.leaves(jax.tree.map(eq, levels, level)))
+
+
+def plr_insert(s, level, score, temperature: float, staleness_coeff: float):
+    """One level into the buffer with its score (JaxUED ``insert`` with ``duplicate_check``): a level already there
+    gets the new score and timestamp; else it fills the next empty entry, or, when full, replaces the entry of
+    lowest replay weight if its score is lower; the episode count grows by one either way. ``s``: a
+    :class:`PLRState` (levels = bank indices [C]) or :class:`LevelBuffer` (levels = a genome pytree [C, ...]);
+    ``level`` one level of the same kind."""
+    c = s.scores.shape[0]
+    found = _same_level(s.levels, level) & (jnp.arange(c) < s.size)
     there = jnp.any(found)
     idx = jnp.where(there, jnp.argmax(found),
                     jnp.where(s.size < c, s.size, jnp.argmin(plr_weights(s, temperature, staleness_coeff))))
     write = there | (s.scores[idx] < score)
     count = s.episode_count + 1
-    return s._replace(levels=s.levels.at[idx].set(jnp.where(write, level, s.levels[idx])),
+    levels = jax.tree.map(lambda a, b: a.at[idx].set(jnp.where(write, b, a[idx])), s.levels, level)
+    return s._replace(levels=levels,
                       scores=s.scores.at[idx].set(jnp.where(write, score, s.scores[idx])),
                       timestamps=s.timestamps.at[idx].set(jnp.where(write, count, s.timestamps[idx])),
                       size=jnp.where(write & ~there, jnp.minimum(s.size + 1, c), s.size), episode_count=count)
 
 
-def plr_sample(s: PLRState, key, num: int, temperature: float, staleness_coeff: float):
+def plr_sample(s, key, num: int, temperature: float, staleness_coeff: float):
     """``(state, entries [num] int32)``: ``num`` replays drawn one after another from :func:`plr_weights`, each
-    marking its entry as just seen (JaxUED ``sample_replay_levels``)."""
+    marking its entry as just seen (JaxUED ``sample_replay_levels``). ``s``: :class:`PLRState` or
+    :class:`LevelBuffer`."""
     def one(s, k):
-        idx = jax.random.choice(k, s.levels.shape[0], p=plr_weights(s, temperature, staleness_coeff))
+        idx = jax.random.choice(k, s.scores.shape[0], p=plr_weights(s, temperature, staleness_coeff))
         count = s.episode_count + 1
         return s._replace(timestamps=s.timestamps.at[idx].set(count), episode_count=count), idx.astype(jnp.int32)
 
@@ -494,11 +525,149 @@ def plr_selector(config) -> Selector:
 
 
 # ----------------------------------------------------------------------------------------------------------------
+# ACCEL: PLR over generator genomes, replayed levels edited by the generator's mutate
+# ----------------------------------------------------------------------------------------------------------------
+ACCEL_NEW, ACCEL_REPLAY, ACCEL_EDIT = 0, 1, 2
+"""``AccelState.mode``: this chunk trains on new levels (the generator's fresh samples), on replayed buffer levels,
+or on edits (``mutate``) of the levels the previous chunk replayed."""
+
+
+class LevelBuffer(NamedTuple):
+    """A PLR level buffer whose levels are any pytree (JaxUED's ``Sampler``). levels: genomes, every leaf with a
+    leading axis C. scores: [C] float32 (-inf empty). timestamps: [C] int32. size: [] int32 entries filled.
+    episode_count: [] int32. :func:`plr_weights`, :func:`plr_insert` and :func:`plr_sample` take it."""
+
+    levels: Any
+    scores: jax.Array
+    timestamps: jax.Array
+    size: jax.Array
+    episode_count: jax.Array
+
+
+class AccelState(NamedTuple):
+    """``accel``'s state. buffer: :class:`LevelBuffer` of genomes. genomes: the chunk's K levels (leading axis K).
+    terrain: [] int32 the bank terrain the policy is evaluated on (the paper's metric; not trained on). entry: [K]
+    int32 the replayed levels' buffer entries (-1 for new and edited levels). mode: [] int32 ``ACCEL_NEW``,
+    ``ACCEL_REPLAY`` or ``ACCEL_EDIT``. replays, edits: [] int32 chunks of each kind so far."""
+
+    buffer: LevelBuffer
+    genomes: Any
+    terrain: jax.Array
+    entry: jax.Array
+    mode: jax.Array
+    replays: jax.Array
+    edits: jax.Array
+
+
+def _take_levels(levels, index):
+    return jax.tree.map(lambda a: a[index], levels)
+
+
+def _where_levels(pred, a, b):
+    return jax.tree.map(lambda x, y: jnp.where(pred, x, y), a, b)
+
+
+def accel_generator(config, size: Optional[int] = None):
+    """The :class:`jaxterrain.generators.Generator` whose genomes are ``accel``'s levels
+    (``config.accel_generator``), rendering ``size`` x ``size`` maps (None: its default, 256);
+    ``ValueError`` naming the field when it is unset or unknown."""
+    from jaxterrain import generators
+
+    name = config.accel_generator
+    if name is None or name not in generators.names():
+        raise ValueError(f"CurriculumConfig.accel_generator must be one of {', '.join(generators.names())} (the "
+                         f"generator whose genomes are accel's levels), got {name!r}")
+    return generators.get(name) if size is None else generators.get(name, size=int(size))
+
+
+def accel_selector(config) -> Selector:
+    """ACCEL (Parker-Holder et al. 2022; JaxUED's ``accel`` branch): PLR whose levels are genomes of
+    ``config.accel_generator``. A chunk trains on K = ``terrains_per_chunk`` levels, rendered in the loop (env e on
+    level ``e % K``): new levels (``generator.sample``), or with probability ``plr_replay_prob`` (once the buffer is
+    ``plr_min_fill`` full) K replays from the buffer; the chunk after a replay trains on the replayed levels each
+    edited by ``accel_edits`` applications of the generator's ``mutate``. After a chunk each level's
+    :func:`learnability` updates its replayed entry, or the level (new or edited) is inserted with it
+    (:func:`plr_insert`). The policy is evaluated on one more slot, a bank terrain drawn uniformly each chunk, not
+    trained on: the paper's "hardest terrain traversed" on the archive, as ``dr`` records it. Levels are rendered
+    at ``TerrainScale()``'s height (1 m per unit), the scale ``qd.bank.from_archive`` renders the archive at."""
+    from jaxterrain.terrain import TerrainScale
+
+    k, e = int(config.terrains_per_chunk), int(config.ppo.num_envs)
+    temperature, stale = float(config.plr_temperature), float(config.plr_staleness)
+    threshold = float(config.threshold * config.max_fitness)
+    edits, height = int(config.accel_edits), float(TerrainScale().height)
+
+    def fresh(key):
+        return accel_generator(config).sample(key, k)
+
+    def edit(key, genomes):
+        mutate = accel_generator(config).mutate
+        return jax.lax.fori_loop(0, edits, lambda i, g: mutate(jax.random.fold_in(key, i), g), genomes)
+
+    def draw(key, bank):
+        return jax.random.randint(key, (), 0, bank.fitness.shape[0], dtype=jnp.int32)
+
+    def init(key, bank):
+        new_key, eval_key = jax.random.split(key)
+        genomes = fresh(new_key)
+        c = int(config.plr_capacity)
+        buffer = LevelBuffer(levels=jax.tree.map(lambda a: jnp.zeros((c,) + a.shape[1:], a.dtype), genomes),
+                             scores=jnp.full((c,), -jnp.inf, jnp.float32), timestamps=jnp.zeros((c,), jnp.int32),
+                             size=jnp.zeros((), jnp.int32), episode_count=jnp.zeros((), jnp.int32))
+        zi = jnp.zeros((), jnp.int32)
+        return AccelState(buffer=buffer, genomes=genomes, terrain=draw(eval_key, bank),
+                          entry=jnp.full((k,), -1, jnp.int32), mode=jnp.full((), ACCEL_NEW, jnp.int32), replays=zi,
+                          edits=zi)
+
+    def assign(s):
+        terrains = jnp.concatenate([jnp.full((k,), -1, jnp.int32), s.terrain[None]])
+        return Assignment(terrains=terrains, env_slot=_round_robin(e, k), evaluated=jnp.full((), k, jnp.int32))
+
+    def maps(s, bank):
+        h, w = bank.heightmaps.shape[1:]
+        if h != w:
+            raise ValueError(f"accel renders square maps; the bank's are {h} x {w}")
+        gen = accel_generator(config, None if h == 256 else h)
+        rendered = jax.vmap(gen.render_one)(s.genomes).astype(jnp.float32) * height
+        return jnp.concatenate([rendered, bank.heightmaps[s.terrain][None]])
+
+    def update(s, key, bank, outcome):
+        decide_key, sample_key, new_key, edit_key, eval_key = jax.random.split(key, 5)
+        scores = learnability(outcome.progress, _round_robin(e, k), k, threshold)
+        b = s.buffer
+        replayed = b._replace(scores=b.scores.at[jnp.where(s.mode == ACCEL_REPLAY, s.entry, b.scores.shape[0])].set(
+            scores, mode="drop"))
+        inserted = jax.lax.fori_loop(
+            0, k, lambda i, buf: plr_insert(buf, _take_levels(s.genomes, i), scores[i], temperature, stale), b)
+        buf = _where_levels(s.mode == ACCEL_REPLAY, replayed, inserted)
+        edit_next = s.mode == ACCEL_REPLAY  # the chunk after a replay trains on its levels, edited
+        replay = ~edit_next & ((buf.size / buf.scores.shape[0]) >= config.plr_min_fill) & (
+            jax.random.uniform(decide_key) < config.plr_replay_prob)
+        sampled, entry = plr_sample(buf, sample_key, k, temperature, stale)
+        genomes = _where_levels(edit_next, edit(edit_key, s.genomes),
+                                _where_levels(replay, _take_levels(buf.levels, entry), fresh(new_key)))
+        mode = jnp.where(edit_next, ACCEL_EDIT, jnp.where(replay, ACCEL_REPLAY, ACCEL_NEW)).astype(jnp.int32)
+        new = AccelState(buffer=_where_levels(replay, sampled, buf), genomes=genomes, terrain=draw(eval_key, bank),
+                         entry=jnp.where(replay, entry, -1), mode=mode,
+                         replays=s.replays + replay.astype(jnp.int32), edits=s.edits + edit_next.astype(jnp.int32))
+        reached = outcome.fitness >= threshold
+        return new, Decision(finished=reached, restart=jnp.ones((), bool), exhausted=jnp.zeros((), bool))
+
+    def summary(s):
+        b = s.buffer
+        filled = jnp.arange(b.scores.shape[0]) < b.size
+        return {"buffer_size": b.size, "replay_chunks": s.replays, "edit_chunks": s.edits,
+                "buffer_mean_score": jnp.sum(jnp.where(filled, b.scores, 0.0)) / jnp.maximum(b.size, 1)}
+
+    return Selector("accel", k + 1, init, assign, update, summary, progress=True, maps=maps)
+
+
+# ----------------------------------------------------------------------------------------------------------------
 # Registry
 # ----------------------------------------------------------------------------------------------------------------
 _REGISTRY: dict[str, Callable[[Any], Selector]] = {
     "map": sequence_selector, "roughness": sequence_selector, "random": sequence_selector,
-    "dr": dr_selector, "levels": levels_selector, "plr": plr_selector,
+    "dr": dr_selector, "levels": levels_selector, "plr": plr_selector, "accel": accel_selector,
 }
 
 

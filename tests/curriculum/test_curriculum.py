@@ -666,9 +666,10 @@ def test_learn_smoke_end_to_end(learn_smoke):
 
 
 @pytest.mark.parametrize("curriculum", ["levels", pytest.param("dr", marks=pytest.mark.slow),
-                                        pytest.param("plr", marks=pytest.mark.slow)])
+                                        pytest.param("plr", marks=pytest.mark.slow),
+                                        pytest.param("accel", marks=pytest.mark.slow)])
 def test_learn_runs_the_per_env_curricula_end_to_end(tmp_path, tiny_archive, curriculum):
-    """``learn --curriculum levels|dr --preset smoke``: each env on its own terrain through the real walker and PPO
+    """``learn --curriculum levels|dr|plr|accel --preset smoke``: each env on its own terrain through the real walker and PPO
     (each env's progress read from PPO's episode record), the selector's own summary, every trial's walker."""
     archive = tiny_archive(4, "four.npz")
     out = tmp_path / curriculum
@@ -680,8 +681,11 @@ def test_learn_runs_the_per_env_curricula_end_to_end(tmp_path, tiny_archive, cur
         assert all(0 <= v <= 1 for v in summary["max_level"]) and all(m >= 0 for m in summary["level_moves"])
     elif curriculum == "dr":
         assert summary["terrains_drawn"] == [15, 15]  # 3 at the start and after each of the 4 chunks
-    else:
+    elif curriculum == "plr":
         assert all(1 <= n <= 4 for n in summary["buffer_size"]) and all(0 <= r <= 4 for r in summary["replay_chunks"])
+    else:  # accel: CPPN genomes (the archive's generator) rendered in the loop, the buffer not bound by the archive
+        assert all(3 <= n <= 12 for n in summary["buffer_size"]) and all(0 <= r <= 4 for r in summary["edit_chunks"])
+        assert json.loads((out / "config.json").read_text()).get("accel_generator") in (None, "cppn")
     rows = (out / "history.csv").read_text().splitlines()
     assert len(rows) == 1 + 8 and all(0 <= float(r.split(",")[9]) <= 1 for r in rows[1:])
     assert sorted(p.name for p in (out / "policies").iterdir()) == ["trial_0", "trial_1"]

@@ -99,10 +99,12 @@ def toy_bank(n: int = 12):
                        jnp.arange(n, dtype=jnp.int32), jnp.zeros(n, jnp.int32))
 
 
-def per_env_harness(env: WalkerEnv, plain: WalkerEnv, tiled: bool, gain: float = 0.05) -> C.Harness:
+def per_env_harness(env: WalkerEnv, plain: WalkerEnv, tiled: bool, gain: float = 0.05,
+                    spread: float = 0.0) -> C.Harness:
     """Policy {"skill", "resets", "level" [E]}: a chunk adds ``gain`` to the skill and records each env's terrain
     height (read through the walker: a Tile of ``env`` or an [H, W] map of ``plain``); progress of env e =
-    clip(1 - height_e + skill, 0, 1); evaluation the same on the evaluated terrain."""
+    clip(1 - height_e + skill + spread x [e >= E / 2], 0, 1); evaluation clip(1 - height + skill, 0, 1) on the
+    evaluated terrain."""
 
     def height(terrain):
         px, py = jnp.asarray(PROBE[:, 0]), jnp.asarray(PROBE[:, 1])
@@ -129,7 +131,8 @@ def per_env_harness(env: WalkerEnv, plain: WalkerEnv, tiled: bool, gain: float =
         return dict(policy, resets=policy["resets"] + 1)
 
     def progress(policy):
-        return jnp.clip(1.0 - policy["level"] + policy["skill"], 0.0, 1.0)
+        lift = spread * (jnp.arange(ENVS) >= ENVS // 2)
+        return jnp.clip(1.0 - policy["level"] + policy["skill"] + lift, 0.0, 1.0)
 
     if not tiled:
         return C.Harness(train, evaluate, reset, progress=progress)
@@ -269,6 +272,9 @@ def test_a_users_selector_runs_by_module_and_name_without_editing_the_library(mo
     (dict(selector="levels", levels_demote=-0.1), r"levels_demote must be in \[0.0, 1.0\]"),
     (dict(selector="dr", terrains_per_chunk=0), "terrains_per_chunk must be an integer >= 1"),
     (dict(selector="dr", overlap=True), "overlap needs a one-terrain selector"),
+    (dict(selector="accel"), "accel_generator must be one of cppn, .*got None"),
+    (dict(selector="accel", accel_generator="nope"), "accel_generator must be one of .*got 'nope'"),
+    (dict(selector="accel", accel_generator="perlin", accel_edits=0), "accel_edits must be an integer >= 1"),
 ])
 def test_selector_settings_are_refused_with_the_field_and_its_range(fields, message):
     with pytest.raises(ValueError, match=message):
@@ -409,3 +415,112 @@ def test_plr_fills_its_buffer_then_replays_and_rescores_on_the_loop():
         if a.replay:
             assert a.size >= 3  # half full before any replay
     assert replays > 15 and new_chunks >= 2
+
+
+# ---------------------------------------------------------------------------------------------------------------
+# ACCEL: PLR over genomes, replayed levels edited by the generator's mutate
+# ---------------------------------------------------------------------------------------------------------------
+def toy_level_generator(size: int = 16):
+    """A one-gene generator for the tests: genome [h] in [0, 0.75], the map is flat at height h (exact: the fake
+    harness reads heights); mutate moves the gene with probability 1 by N(0, (0.1 x 0.75)^2)."""
+    from jaxterrain.generators import base
+
+    gspec = base.spec(("h", 0.0, 0.75, False))
+    return base.vector_generator("toy_level", gspec, lambda g: jnp.full((size, size), g[0], jnp.float32), size,
+                                 mutation_prob=1.0)
+
+
+@pytest.fixture
+def toy_generator(monkeypatch):
+    from jaxterrain.generators import registry
+
+    monkeypatch.setitem(registry._FACTORIES, "toy_level", toy_level_generator)
+    registry._cached.cache_clear()
+    yield "toy_level"
+    registry._cached.cache_clear()
+
+
+def genome_buffer(levels, scores, timestamps, count):
+    levels = np.asarray(levels, np.float32).reshape(len(levels), 1)
+    return S.LevelBuffer(levels=jnp.asarray(levels), scores=jnp.asarray(scores, jnp.float32),
+                         timestamps=jnp.asarray(timestamps, jnp.int32), size=jnp.int32(int(np.sum(levels[:, 0] >= 0))),
+                         episode_count=jnp.int32(count))
+
+
+def test_accel_buffer_of_genomes_updates_duplicates_fills_then_replaces_the_lowest_weight():
+    """The buffer of genome levels behaves as the buffer of bank terrains (the same NumPy rule)."""
+    s = genome_buffer([0.4, 0.2, -1.0], [0.1, 0.2, -np.inf], [1, 2, 0], 5)
+    s = S.plr_insert(s, jnp.asarray([0.2], jnp.float32), jnp.float32(0.05), 0.3, 0.3)  # a duplicate genome
+    assert np.asarray(s.levels)[:, 0].tolist() == pytest.approx([0.4, 0.2, -1.0]) and int(s.size) == 2
+    assert float(s.scores[1]) == pytest.approx(0.05) and int(s.timestamps[1]) == 6
+    s = S.plr_insert(s, jnp.asarray([0.3], jnp.float32), jnp.float32(0.15), 0.3, 0.3)  # an empty entry
+    assert int(s.size) == 3 and float(s.levels[2, 0]) == pytest.approx(0.3)
+    weights = numpy_plr_weights(np.asarray(s.scores), np.asarray(s.timestamps), 3, int(s.episode_count), 0.3, 0.3)
+    low = int(np.argmin(weights))
+    better = S.plr_insert(s, jnp.asarray([0.7], jnp.float32), jnp.float32(0.24), 0.3, 0.3)
+    assert float(better.levels[low, 0]) == pytest.approx(0.7) and float(better.scores[low]) == pytest.approx(0.24)
+    kept = S.plr_insert(s, jnp.asarray([0.7], jnp.float32), jnp.float32(float(s.scores[low]) - 0.01), 0.3, 0.3)
+    np.testing.assert_array_equal(np.asarray(kept.levels), np.asarray(s.levels))
+
+
+def test_accel_edits_the_levels_it_replayed_and_inserts_them_with_their_learnability(toy_generator):
+    """Every chunk, against NumPy: env e trains on level e % K (a genome rendered in the loop), the policy is
+    evaluated on a bank terrain (slot K); new and edited levels enter the buffer with p (1 - p) of their envs'
+    progress, replayed ones are re-scored; the chunk after a replay trains on those levels, each mutated."""
+    from jaxterrain.generators import get
+
+    bank = toy_bank()
+    k = 3
+    config = small("accel", terrains_per_chunk=k, plr_capacity=12, plr_min_fill=0.25, max_epochs=60,
+                   accel_generator=toy_generator)
+    harness = per_env_harness(*_envs(k + 1), tiled=False, gain=0.01, spread=0.2)
+    lift = 0.2 * (np.arange(ENVS) >= ENVS // 2)
+    modes, scored = [], 0
+    for before, after in run_chunks(config, harness, bank, trials=1, chunks=60):
+        b, a = (jax.tree.map(lambda x: np.asarray(x[0]), st.selector) for st in (before, after))
+        heights = b.genomes[np.arange(ENVS) % k, 0]
+        np.testing.assert_allclose(np.asarray(after.policy["level"][0]), heights, rtol=1e-6)  # env e on level e % K
+        assert int(after.history.terrain[0, int(before.chunk[0])]) == int(b.terrain)  # evaluated on a bank terrain
+        skill = float(after.policy["skill"][0])
+        progress = np.clip(1 - heights + skill + lift, 0, 1)
+        p = np.array([np.mean(progress[np.arange(ENVS) % k == j] >= 0.9) for j in range(k)])
+        score = p * (1 - p)
+        scored += int(np.sum(score > 0))
+        if b.mode == S.ACCEL_REPLAY:
+            np.testing.assert_allclose(a.buffer.scores[b.entry], score, atol=1e-6)  # re-scored
+            assert a.mode == S.ACCEL_EDIT
+            edited = np.asarray(get(toy_generator).mutate(jax.random.key(0), jnp.asarray(b.genomes)))
+            assert edited.shape == a.genomes.shape and not np.allclose(a.genomes, b.genomes)  # mutated
+            assert np.all((a.genomes >= 0) & (a.genomes <= 0.75))
+        else:  # new or edited levels: inserted with their scores (unless beaten by a full buffer)
+            for j in range(k):
+                there = np.flatnonzero(np.isclose(a.buffer.levels[:a.buffer.size, 0], b.genomes[j, 0], atol=0))
+                if there.size:
+                    assert a.buffer.scores[there[0]] == pytest.approx(score[j], abs=1e-6) or np.sum(
+                        np.isclose(b.genomes[:, 0], b.genomes[j, 0], atol=0)) > 1
+                else:
+                    assert int(a.buffer.size) == 12  # only a full buffer turns a level away
+        if a.mode == S.ACCEL_REPLAY:
+            np.testing.assert_array_equal(a.genomes, a.buffer.levels[a.entry])  # replays are buffer entries
+        modes.append(int(b.mode))
+    modes = np.array(modes)
+    assert np.all(modes[1:][modes[:-1] == S.ACCEL_REPLAY] == S.ACCEL_EDIT)  # every replay is followed by its edits
+    assert np.sum(modes == S.ACCEL_REPLAY) > 5 and np.sum(modes == S.ACCEL_NEW) >= 1 and scored > 10
+    summary = S.get_selector(config).summary(jax.tree.map(lambda x: x[0], after.selector))
+    assert int(summary["edit_chunks"]) == np.sum(modes[1:] == S.ACCEL_EDIT) + (a.mode == S.ACCEL_EDIT)
+
+
+def test_accel_on_tiles_equals_the_classic_layout(toy_generator):
+    bank = toy_bank()
+    config = small("accel", terrains_per_chunk=3, max_epochs=8, plr_capacity=4, accel_generator=toy_generator)
+    k = S.get_selector(config).slots
+    assert k == 4  # 3 levels + the evaluation terrain
+    env, plain = _envs(3 * k)
+    keys = jax.random.split(jax.random.key(2), 3)
+    out = {}
+    for tiled in (False, True):
+        harness = per_env_harness(env, plain, tiled)
+        states = C.init_trials(keys, bank, START, config=config, harness=harness)
+        out[tiled] = C.make_runner(config, harness)(states, bank, 8)
+    leaves = jax.tree.leaves(out[True]), jax.tree.leaves(out[False])
+    assert all(np.array_equal(np.asarray(a), np.asarray(b), equal_nan=True) for a, b in zip(*leaves))

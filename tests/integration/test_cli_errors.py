@@ -97,6 +97,7 @@ CASES = [
     (["train-gan", "--data", "MISSING"], "--data 'MISSING': no such file or folder"),
     (["train-base-policy", "--num-envs", "0"], "--num-envs must be an integer >= 1"),
     (["learn", "--max-evals", "0"], "--max-evals must be an integer >= 1"),
+    (["learn", "--curriculum", "accel", "--accel-edits", "0"], "--accel-edits must be an integer >= 1"),
     (["curriculum", "--max-evals", "-2"], "--max-evals must be an integer >= 1"),
     (["curriculum", "--chunks-per-call", "0"], "--chunks-per-call must be an integer >= 1"),
     (["train-base-policy", "--env-steps", "-5"], "--env-steps must be a finite number > 0"),
@@ -155,3 +156,18 @@ def test_every_long_command_takes_the_same_presets_and_prints_its_config(command
         config = json.loads(capsys.readouterr().out)
         assert config["command"] == command and config["seed"] == 7 and config["preset"] == preset
     assert not (tmp_path / "run").exists()
+
+
+@pytest.mark.parametrize("argv, message", [
+    (["--curriculum", "accel", "--accel-generator", "nope"], "learn: --accel-generator must be one of cppn, "),
+    (["--curriculum", "levels", "--levels", "3", "--levels-init", "3"], "learn: --levels-init must be in [0, levels - 1"),
+])
+def test_learn_refuses_settings_read_against_the_archive_in_one_line_and_leaves_no_run(tmp_path, monkeypatch,
+                                                                                     capsys, argv, message):
+    """Values checked once the archive is read (the curriculum's config): one line, status 2, the run folder gone."""
+    monkeypatch.chdir(tmp_path)
+    assert cli.main(["learn", *argv]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and err.startswith(message), err
+    runs = tmp_path / "runs"
+    assert not runs.exists() or not any(runs.iterdir())  # the run folder made for it was removed again
