@@ -79,7 +79,7 @@ from __future__ import annotations
 import math
 from typing import NamedTuple, Optional
 
-from jaxterrain.curriculum.selectors import resolve_factory
+from jaxterrain.curriculum.selectors import accel_generator, resolve_factory
 from jaxterrain.difficulty import Protocol
 from jaxterrain.rl.config import PPOConfig, validate_config as validate_ppo_config
 from jaxterrain.runtime.validation import int_at_least, known_fields, one_of, walks
@@ -305,8 +305,6 @@ def validate_config(config: CurriculumConfig) -> CurriculumConfig:
         _float_in(config, name, 0.0, 1.0, lo_open=False)
     _float_in(config, "plr_temperature", 0.0, None, lo_open=True)
     if config.selector == "accel" or config.accel_generator is not None:
-        from jaxterrain.curriculum.selectors import accel_generator
-
         accel_generator(config)
     if config.overlap and config.selector not in ("map", "roughness", "random"):  # one terrain a trial
         raise ValueError(f"CurriculumConfig.overlap needs a one-terrain selector (map, roughness, random), got "

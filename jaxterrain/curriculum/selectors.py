@@ -78,8 +78,10 @@ from typing import Any, Callable, NamedTuple, Optional
 import jax
 import jax.numpy as jnp
 
+from jaxterrain import generators
 from jaxterrain.curriculum import gp
 from jaxterrain.qd import GRID_BINS, MAX_DISTANCE_50, TerrainBank
+from jaxterrain.terrain import TerrainScale
 
 __all__ = ["Selector", "Assignment", "Outcome", "Decision", "SequenceState", "DRState", "LevelsState", "PLRState",
            "get_selector", "register_selector", "selector_names", "sequence_selector", "dr_selector",
@@ -571,8 +573,6 @@ def accel_generator(config, size: Optional[int] = None):
     """The :class:`jaxterrain.generators.Generator` whose genomes are ``accel``'s levels
     (``config.accel_generator``), rendering ``size`` x ``size`` maps (None: its default, 256);
     ``ValueError`` naming the field when it is unset or unknown."""
-    from jaxterrain import generators
-
     name = config.accel_generator
     if name is None or name not in generators.names():
         raise ValueError(f"CurriculumConfig.accel_generator must be one of {', '.join(generators.names())} (the "
@@ -590,8 +590,6 @@ def accel_selector(config) -> Selector:
     (:func:`plr_insert`). The policy is evaluated on one more slot, a bank terrain drawn uniformly each chunk, not
     trained on: the paper's "hardest terrain traversed" on the archive, as ``dr`` records it. Levels are rendered
     at ``TerrainScale()``'s height (1 m per unit), the scale ``qd.bank.from_archive`` renders the archive at."""
-    from jaxterrain.terrain import TerrainScale
-
     k, e = int(config.terrains_per_chunk), int(config.ppo.num_envs)
     temperature, stale = float(config.plr_temperature), float(config.plr_staleness)
     threshold = float(config.threshold * config.max_fitness)

@@ -306,7 +306,7 @@ def render_model(env_config, terrain_m):
 
 
     c = env_config
-    spec = build_spec(c.terrain_shape, c.scale, c.solver, c.timestep)
+    spec = build_spec(c.terrain_shape, c.scale, c.solver, c.timestep, getattr(c, "robot", "humanoid"))
     tex = spec.add_texture(name="terrain_checker", type=mujoco.mjtTexture.mjTEXTURE_2D,
                            builtin=mujoco.mjtBuiltin.mjBUILTIN_CHECKER, width=64, height=64,
                            rgb1=[0.78, 0.72, 0.6], rgb2=[0.62, 0.56, 0.46])

@@ -1,6 +1,7 @@
-"""The walker: brax's humanoid in MuJoCo MJX on a heightfield passed as data (see :mod:`jaxterrain.walker.env`).
+"""The walker: a robot (default brax's humanoid; ``WalkerConfig(robot="ant")`` brax's quadruped, or any
+:class:`RobotSpec` you register) in MuJoCo MJX on a heightfield passed as data (see :mod:`jaxterrain.walker.env`).
 
-Modules: :mod:`.model` (the MJCF and solver options), :mod:`.env` (reset / step / park), :mod:`.tiles` (terrains as
+Modules: :mod:`.robots` (robot specs and their registry), :mod:`.model` (the MJCF and solver options), :mod:`.env` (reset / step / park), :mod:`.tiles` (terrains as
 tiles of one heightfield), :mod:`.layout` (classic vs tiles, env sizing, the backend ``auto`` resolves to: the one
 home of the layout) and :mod:`.rollout` (batched walks and the rollout pool).
 
@@ -19,7 +20,10 @@ Per-env terrains as tiles of one heightfield (needed by the MuJoCo Warp backend,
     state = env.select(done, reset_state, state)               # auto-reset (never tree-map jnp.where over data)
 """
 
-from jaxterrain.walker.env import BACKENDS, WalkerConfig, WalkerEnv, WalkerState, flat_terrain, sample_heights
+from jaxterrain.walker import robots
+from jaxterrain.walker.robots import RobotSpec, register_robot
+from jaxterrain.walker.env import (BACKENDS, WalkerConfig, WalkerEnv, WalkerState, flat_terrain, resolve_config,
+                                   sample_heights)
 from jaxterrain.walker.model import (
     NAMED_SOLVERS,
     SOLVER_FAST,
@@ -41,6 +45,10 @@ from jaxterrain.walker.layout import BACKEND_CHOICES, env_for, is_tiled, make_en
 from jaxterrain.walker.rollout import batched_distances, job_queue, smoothness_priority
 
 __all__ = [
+    "robots",
+    "RobotSpec",
+    "register_robot",
+    "resolve_config",
     "layout",
     "rollout",
     "BACKEND_CHOICES",

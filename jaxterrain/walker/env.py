@@ -1,8 +1,9 @@
-"""A pure-function MJX environment: brax's humanoid walking along +x over a heightfield passed as DATA.
+"""A pure-function MJX environment: a robot (default brax's humanoid; :mod:`.robots`) walking along +x over a
+heightfield passed as DATA.
 
     env = WalkerEnv(WalkerConfig())                 # builds the MjModel / mjx.Model once (host)
     state = env.reset(key, terrain)                 # terrain: [H, W] float32 metres, H = y rows, W = x columns
-    state = env.step(state, action, terrain)        # action: [17] in [-1, 1]
+    state = env.step(state, action, terrain)        # action: [A] in [-1, 1] (the humanoid's A = 17)
 
 Both are pure and vmappable: ``jax.vmap(env.step, in_axes=(0, 0, None))`` shares one terrain,
 ``in_axes=(0, 0, 0)`` gives every environment its own terrain. The terrain enters the physics through
@@ -60,7 +61,7 @@ Physical choices (all in :class:`WalkerConfig`):
 
 from __future__ import annotations
 
-from typing import Any, NamedTuple
+from typing import Any, NamedTuple, Optional
 
 import contextlib
 import importlib.util
@@ -80,7 +81,6 @@ with contextlib.redirect_stdout(io.StringIO()) if importlib.util.find_spec("warp
 from jaxterrain.terrain import hfield_size
 from jaxterrain.walker import tiles as _tiles
 from jaxterrain.walker.model import (
-    FOOT_GEOMS,
     SOLVER_SOUND,
     SolverOptions,
     TerrainScale,
@@ -88,9 +88,11 @@ from jaxterrain.walker.model import (
     check_terrain_shape,
     metres_to_hfield,
 )
+from jaxterrain.walker.robots import ROBOT_FIELDS, get as get_robot
 from jaxterrain.walker.tiles import Tile, TileBank
 
-__all__ = ["BACKENDS", "PARK_HEIGHT", "WalkerConfig", "WalkerState", "sample_heights", "WalkerEnv", "flat_terrain"]
+__all__ = ["BACKENDS", "PARK_HEIGHT", "WalkerConfig", "WalkerState", "resolve_config", "sample_heights", "WalkerEnv",
+           "flat_terrain"]
 
 BACKENDS = ("jax", "warp")
 PARK_HEIGHT = 100.0  # m above the terrain's top where WalkerEnv.park puts walkers whose outcome is recorded
@@ -99,7 +101,9 @@ _WARP_DROPPED = (1 << 0) | (1 << 1) | (1 << 2) | (1 << 3)  # NEFC, NJMAX_NNZ, BR
 
 
 class WalkerConfig(NamedTuple):
-    """Static configuration of :class:`WalkerEnv` (hashable; lengths in metres, times in env steps)."""
+    """Static configuration of :class:`WalkerEnv` (hashable; lengths in metres, times in env steps). ``robot`` names
+    a :class:`~jaxterrain.walker.robots.RobotSpec`; the fields of :data:`~jaxterrain.walker.robots.ROBOT_FIELDS`
+    left None take its defaults (:func:`resolve_config`; ``WalkerEnv.config`` holds the resolved values)."""
 
     terrain_shape: tuple[int, int] = (256, 256)  # (nrow = y samples, ncol = x samples)
     scale: TerrainScale = TerrainScale()
@@ -108,21 +112,21 @@ class WalkerConfig(NamedTuple):
     n_frames: int = 5  # physics steps per env step
     episode_length: int = 1000  # env steps (15 s)
     # track
-    start_margin: float = 0.5  # x_start = -radius_x + start_margin
+    start_margin: Optional[float] = None  # x_start = -radius_x + start_margin (humanoid: 0.5; the ant's legs: 1.0)
     goal_margin: float = 0.5  # x_goal = radius_x - goal_margin
     side_margin: float = 0.3  # fall when |y| > radius_y - side_margin
     start_spread: float = 0.0  # start y uniform in [-start_spread, start_spread] m (0: y = 0, no key drawn)
     spawn_clearance: float = 0.01  # lowest foot this far above the highest terrain under the start
     # termination
-    healthy_z_range: tuple[float, float] = (1.0, 2.0)  # torso z minus terrain height under the torso
+    healthy_z_range: Optional[tuple[float, float]] = None  # torso z minus terrain height under it (humanoid: 1, 2)
     max_qvel: float = 500.0  # |qvel| beyond this = exploding physics
     # reset noise (uniform, +-)
-    joint_noise: float = 0.1  # rad on the 17 hinge joints
-    qvel_noise: float = 0.1  # rad/s on the hinge joint velocities
+    joint_noise: Optional[float] = None  # rad on the hinge joints (humanoid: 0.1)
+    qvel_noise: Optional[float] = None  # rad/s on the hinge joint velocities (humanoid: 0.1)
     # reward
-    forward_reward_weight: float = 1.25
-    healthy_reward: float = 5.0
-    ctrl_cost_weight: float = 0.1
+    forward_reward_weight: Optional[float] = None  # humanoid: 1.25
+    healthy_reward: Optional[float] = None  # humanoid: 5.0
+    ctrl_cost_weight: Optional[float] = None  # humanoid: 0.1
     # optional height scan (off for the paper's protocol)
     height_scan: bool = False
     scan_x: tuple[float, float] = (0.0, 1.4)  # ahead of the torso, heading frame
@@ -132,8 +136,10 @@ class WalkerConfig(NamedTuple):
     backend: str = "jax"  # "jax" (MJX-JAX) | "warp" (MJX-Warp, needs tiles >= 1 and warp-lang + mujoco-warp)
     tiles: int = 0  # 0: terrain = one [H, W] array per env; T >= 1: terrain = a Tile of a bank of T tiles
     warp_worlds: int = 8192  # warp: contacts are allocated for this many envs stepped together (all vmap axes)
-    warp_contacts: int = 8  # warp: contacts per env (2 feet x up to 4 hfield contacts each)
-    warp_njmax: int = 64  # warp: constraint rows per env (8 contacts x 4 + 17 joint limits = 49 at most)
+    warp_contacts: Optional[int] = None  # warp: contacts per env (humanoid: 8, 2 feet x up to 4 hfield contacts)
+    warp_njmax: Optional[int] = None  # warp: constraint rows per env (humanoid: 64; 8 contacts x 4 + 17 limits = 49)
+    # the body (jaxterrain.walker.robots): every field above that is None takes this robot's default
+    robot: str = "humanoid"
 
 
 class WalkerState(NamedTuple):
@@ -156,6 +162,13 @@ class WalkerState(NamedTuple):
     x_start: jax.Array
     distance: jax.Array
     metrics: dict
+
+
+def resolve_config(config: WalkerConfig) -> WalkerConfig:
+    """``config`` with every :data:`~jaxterrain.walker.robots.ROBOT_FIELDS` field that is None set to its robot's
+    default (``ValueError`` for an unknown robot)."""
+    robot = get_robot(config.robot)
+    return config._replace(**{f: robot.default(f) for f in ROBOT_FIELDS if getattr(config, f) is None})
 
 
 def _check_config(c: WalkerConfig) -> None:
@@ -216,23 +229,27 @@ def _yaw(quat: jax.Array) -> jax.Array:
 
 
 class WalkerEnv:
-    """brax's humanoid on a heightfield; ``reset``/``step`` are pure functions of (key/state, terrain).
+    """A robot (``config.robot``, default brax's humanoid) on a heightfield; ``reset``/``step`` are pure functions of
+    (key/state, terrain).
 
     Attributes: ``config``, ``mj_model`` (MuJoCo C model, flat terrain), ``mjx_model``, ``dt`` (s per env step),
     ``radius_x/radius_y/elevation_z`` (hfield size), ``x_start``, ``x_goal``, ``track_length`` (m),
-    ``observation_size``, ``action_size`` (17; actions in [-1, 1]).
-    Observation: [torso height above terrain (1), torso quaternion (4), 17 joint angles, 23 qvel]
+    ``observation_size``, ``action_size`` (the robot's actuators: humanoid 17, ant 8; actions in [-1, 1]), ``robot``
+    (its :class:`~jaxterrain.walker.robots.RobotSpec`).
+    Observation: [torso height above terrain (1), torso quaternion (4), J joint angles, 6 + J qvel] (humanoid: J = 17)
     (+ ``scan_points[0] * scan_points[1]`` terrain heights minus torso z when ``config.height_scan``).
     """
 
     def __init__(self, config: WalkerConfig = WalkerConfig()):
+        config = resolve_config(config)
         _check_config(config)
         self.config = config
+        self.robot = get_robot(config.robot)
         h, w = config.terrain_shape
         self.tiles = int(config.tiles)
         self.grid = _tiles.grid(max(self.tiles, 1))  # (rows, cols) of the tile grid
         hfield_shape = (self.grid[0] * h, self.grid[1] * w) if self.tiles else (h, w)
-        self.mj_model = build_model(hfield_shape, config.scale, config.solver, config.timestep)
+        self.mj_model = build_model(hfield_shape, config.scale, config.solver, config.timestep, self.robot)
         self.backend = config.backend
         if config.backend == "warp":
             try:
@@ -263,11 +280,22 @@ class WalkerEnv:
             raise ValueError(f"start_spread must lie in [0, {max(max_spread, 0.0):.3g}] m (0.5 m inside the side limit "
                              f"radius_y - side_margin), got {config.start_spread}")
         self._qpos0 = np.asarray(m.qpos0, np.float32)
+        if self.robot.start_joints is not None:  # the robot's start pose (hinge joints after the free root)
+            if len(self.robot.start_joints) != m.nq - 7:
+                raise ValueError(f"robot {self.robot.name!r}: start_joints has {len(self.robot.start_joints)} angles, "
+                                 f"the model {m.nq - 7} hinge joints")
+            self._qpos0[7:] = np.asarray(self.robot.start_joints, np.float32)
         self._jnt_lo = np.asarray(m.jnt_range[1:, 0], np.float32)  # hinge joints (joint 0 = free root)
         self._jnt_hi = np.asarray(m.jnt_range[1:, 1], np.float32)
         self._ctrl_lo = np.asarray(m.actuator_ctrlrange[:, 0], np.float32)
         self._ctrl_hi = np.asarray(m.actuator_ctrlrange[:, 1], np.float32)
-        self._feet = np.array([mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_GEOM, n) for n in FOOT_GEOMS])
+        torso = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_BODY, self.robot.torso_body)
+        if m.njnt < 1 or m.jnt_type[0] != mujoco.mjtJoint.mjJNT_FREE or m.jnt_bodyid[0] != torso:
+            raise ValueError(f"robot {self.robot.name!r}: the torso body {self.robot.torso_body!r} must carry the "
+                             f"model's first joint, a free joint (the walker reads its position from qpos[:7])")
+        if m.njnt > 1 and np.any(m.jnt_type[1:] != mujoco.mjtJoint.mjJNT_HINGE):
+            raise ValueError(f"robot {self.robot.name!r}: every joint after the free root must be a hinge")
+        self._feet = np.array([mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_GEOM, n) for n in self.robot.foot_geoms])
         self._foot_radius = np.asarray(m.geom_size[self._feet, 0], np.float32)
         self.action_size = int(m.nu)
         self.observation_size = 1 + 4 + (m.nq - 7) + m.nv

@@ -1,12 +1,14 @@
-"""The walker's MuJoCo model: brax's humanoid on a heightfield, edited in code with ``mujoco.MjSpec``.
+"""The walker's MuJoCo model: a robot (:mod:`.robots`; default brax's humanoid) on a heightfield, edited in code with
+``mujoco.MjSpec``.
 
-The XML is read at runtime from the installed brax package (``brax/envs/assets/humanoid.xml``); it is never copied
-into this repository. Edits (see :func:`build_spec`):
+The XML is read at runtime from the robot's spec (the shipped ones: the installed brax package,
+``brax/envs/assets/humanoid.xml`` and ``ant.xml``); it is never copied into this repository. Edits (see
+:func:`build_spec`):
 
 - the floor plane becomes an ``<hfield>`` of ``terrain_shape = (nrow, ncol)`` samples whose size comes from
   :func:`jaxterrain.terrain.hfield_size` (``radius_x, radius_y, elevation_z, base_z``); the hfield geom sits at
   the world origin, so the surface height at a sample is ``hfield_data * elevation_z`` metres;
-- only the two foot spheres collide with the terrain (brax's humanoid already gives every other geom
+- only the foot spheres collide with the terrain (brax's humanoid and ant already give every other geom
   ``contype = conaffinity = 0``; we check it), so there are no cylinder/ellipsoid-hfield pairs (MJX has none);
 - solver options come from the :class:`~jaxterrain.walker.env.WalkerConfig` (see ``SOLVER_SOUND``, the
   default, ``SOLVER_FAST`` and ``SOLVER_XML``).
@@ -25,15 +27,16 @@ import mujoco
 import numpy as np
 
 from jaxterrain.terrain import TerrainScale, hfield_size
+from jaxterrain.walker.robots import HUMANOID, RobotSpec, get as get_robot
 
 __all__ = ["HFIELD_NAME", "FLOOR_GEOM", "FOOT_GEOMS", "TORSO_BODY", "SolverOptions", "SOLVER_SOUND", "SOLVER_FAST",
            "SOLVER_XML", "NAMED_SOLVERS", "parse_solver", "solver_label", "humanoid_xml", "check_terrain_shape",
            "build_spec", "build_model", "metres_to_hfield", "standing_offset"]
 
 HFIELD_NAME = "terrain"
-FLOOR_GEOM = "floor"
-FOOT_GEOMS = ("left_foot", "right_foot")
-TORSO_BODY = "torso"
+FLOOR_GEOM = "floor"  # the heightfield geom's name (the robot's floor plane is replaced by it, under this name)
+FOOT_GEOMS = HUMANOID.foot_geoms  # the humanoid's (robots.HUMANOID); other robots: RobotSpec.foot_geoms
+TORSO_BODY = HUMANOID.torso_body
 
 
 class SolverOptions(NamedTuple):
@@ -86,14 +89,12 @@ def solver_label(solver: SolverOptions) -> str:
 
 
 def humanoid_xml() -> str:
-    """The text of brax's ``envs/assets/humanoid.xml`` from the installed brax package."""
-    import importlib.util
-    from pathlib import Path
+    """The text of brax's ``envs/assets/humanoid.xml`` from the installed brax package (``robots.HUMANOID.xml``)."""
+    return HUMANOID.xml()
 
-    spec = importlib.util.find_spec("brax")  # locates the package without importing it (brax imports are heavy)
-    if spec is None or not spec.submodule_search_locations:
-        raise RuntimeError("brax is not installed: the walker reads brax/envs/assets/humanoid.xml from it")
-    return (Path(list(spec.submodule_search_locations)[0]) / "envs" / "assets" / "humanoid.xml").read_text()
+
+def _robot(robot) -> RobotSpec:
+    return get_robot(robot) if isinstance(robot, str) else robot
 
 
 def check_terrain_shape(terrain_shape) -> tuple[int, int]:
@@ -104,8 +105,12 @@ def check_terrain_shape(terrain_shape) -> tuple[int, int]:
 
 
 def build_spec(terrain_shape=(256, 256), scale: TerrainScale = TerrainScale(),
-               solver: SolverOptions = SOLVER_SOUND, timestep: float = 0.003) -> mujoco.MjSpec:
-    """brax's humanoid with its floor replaced by a flat (all-zero) ``terrain_shape`` hfield at ``scale``."""
+               solver: SolverOptions = SOLVER_SOUND, timestep: float = 0.003,
+               robot: RobotSpec | str = HUMANOID) -> mujoco.MjSpec:
+    """The robot's MJCF (default brax's humanoid; a :class:`~jaxterrain.walker.robots.RobotSpec` or its name) with
+    its floor replaced by a flat (all-zero) ``terrain_shape`` hfield at ``scale``. ``ValueError`` naming the floor
+    geom, feet or torso the spec names but the MJCF lacks."""
+    robot = _robot(robot)
     nrow, ncol = check_terrain_shape(terrain_shape)
     if solver.solver not in _SOLVERS:
         raise ValueError(f"solver must be one of {sorted(_SOLVERS)}, got {solver.solver!r}")
@@ -113,8 +118,14 @@ def build_spec(terrain_shape=(256, 256), scale: TerrainScale = TerrainScale(),
         raise ValueError(f"solver iterations and ls_iterations must be >= 1, got {solver}")
     if not timestep > 0:
         raise ValueError(f"timestep must be > 0 seconds, got {timestep}")
-    spec = mujoco.MjSpec.from_string(humanoid_xml())
-    floor = spec.geom(FLOOR_GEOM)
+    spec = mujoco.MjSpec.from_string(robot.xml())
+    geoms, bodies = {g.name for g in spec.geoms}, {b.name for b in spec.bodies}
+    missing = [f"geom {n!r}" for n in (robot.floor_geom, *robot.foot_geoms) if n not in geoms]
+    missing += [f"body {robot.torso_body!r}"] if robot.torso_body not in bodies else []
+    if missing:
+        raise ValueError(f"robot {robot.name!r}: its MJCF has no {', '.join(missing)} (RobotSpec.floor_geom / "
+                         f"foot_geoms / torso_body)")
+    floor = spec.geom(robot.floor_geom)
     friction = np.array(floor.friction).copy()
     spec.delete(floor)
     size = [float(v) for v in hfield_size((nrow, ncol), scale)]
@@ -140,23 +151,30 @@ def build_spec(terrain_shape=(256, 256), scale: TerrainScale = TerrainScale(),
 
 
 def build_model(terrain_shape=(256, 256), scale: TerrainScale = TerrainScale(),
-                solver: SolverOptions = SOLVER_SOUND, timestep: float = 0.003) -> mujoco.MjModel:
-    """Compiled :func:`build_spec`; checks that only the feet can touch the terrain."""
-    model = build_spec(terrain_shape, scale, solver, timestep).compile()
+                solver: SolverOptions = SOLVER_SOUND, timestep: float = 0.003,
+                robot: RobotSpec | str = HUMANOID) -> mujoco.MjModel:
+    """Compiled :func:`build_spec`; checks that only the feet can touch the terrain, that they are spheres and that
+    no two geoms of the robot collide (``ValueError`` naming the geom)."""
+    robot = _robot(robot)
+    model = build_spec(terrain_shape, scale, solver, timestep, robot).compile()
     floor = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_GEOM, FLOOR_GEOM)
-    feet = {mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_GEOM, n) for n in FOOT_GEOMS}
+    feet = {mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_GEOM, n) for n in robot.foot_geoms}
     for g in range(model.ngeom):
         if g == floor:
             continue
         touches = (model.geom_contype[g] & model.geom_conaffinity[floor]) or (
             model.geom_conaffinity[g] & model.geom_contype[floor])
         if bool(touches) != (g in feet):
-            raise RuntimeError(f"unexpected floor contact setting for geom {model.geom(g).name!r}")
+            raise ValueError(f"robot {robot.name!r}: geom {model.geom(g).name!r} "
+                             f"{'cannot touch' if g in feet else 'touches'} the terrain; only the feet "
+                             f"({', '.join(robot.foot_geoms)}) may (contype / conaffinity)")
         if g in feet and model.geom_type[g] != mujoco.mjtGeom.mjGEOM_SPHERE:
-            raise RuntimeError("the feet must be spheres (MJX hfield collisions)")
+            raise ValueError(f"robot {robot.name!r}: foot geom {model.geom(g).name!r} must be a sphere (MJX's "
+                             f"heightfield collisions)")
         for g2 in range(model.ngeom):  # no self collisions either
             if g2 != floor and g2 != g and (model.geom_contype[g] & model.geom_conaffinity[g2]):
-                raise RuntimeError("unexpected self-collision pair")
+                raise ValueError(f"robot {robot.name!r}: geoms {model.geom(g).name!r} and {model.geom(g2).name!r} "
+                                 f"collide with each other (the walker has no self-collisions)")
     return model
 
 
@@ -174,13 +192,17 @@ def metres_to_hfield(terrain_m, elevation_z):
     return data.reshape(t.shape[:-2] + (t.shape[-2] * t.shape[-1],))
 
 
-def standing_offset(model: mujoco.MjModel) -> float:
-    """Height of the torso origin above the lowest foot-sphere bottom in the XML's default (standing) pose."""
+def standing_offset(model: mujoco.MjModel, robot: RobotSpec | str = HUMANOID) -> float:
+    """Height of the torso origin above the lowest foot-sphere bottom in the robot's start pose (its
+    ``start_joints``, else the XML's default pose)."""
+    robot = _robot(robot)
     data = mujoco.MjData(model)
+    if robot.start_joints is not None:
+        data.qpos[7:] = robot.start_joints
     mujoco.mj_kinematics(model, data)
-    torso = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_BODY, TORSO_BODY)
+    torso = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_BODY, robot.torso_body)
     bottoms = []
-    for name in FOOT_GEOMS:
+    for name in robot.foot_geoms:
         g = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_GEOM, name)
         bottoms.append(data.geom_xpos[g, 2] - model.geom_size[g, 0])
     return float(data.xpos[torso, 2] - min(bottoms))

@@ -128,7 +128,7 @@ def test_reset_step_deterministic(env, fns):
     np.testing.assert_array_equal(np.asarray(a.obs), np.asarray(b.obs))
     c = reset(jax.random.split(jax.random.PRNGKey(4), 3), terrains)
     assert np.abs(np.asarray(a.data.qpos[:, 7:]) - np.asarray(c.data.qpos[:, 7:])).max() > 1e-3  # joint noise
-    assert np.abs(np.asarray(a.data.qpos[:, 7:]) - env._qpos0[7:]).max() <= CFG.joint_noise + 1e-6
+    assert np.abs(np.asarray(a.data.qpos[:, 7:]) - env._qpos0[7:]).max() <= env.config.joint_noise + 1e-6
     action = jnp.tile(jnp.linspace(-1, 1, env.action_size), (3, 1))
     s1, s2 = step(a, action, terrains), step(b, action, terrains)
     np.testing.assert_array_equal(np.asarray(s1.data.qpos), np.asarray(s2.data.qpos))
@@ -151,7 +151,7 @@ def test_fall_terminates(env, fns, settled):
             if d[i] and done_at[i] < 0:
                 done_at[i] = t
                 assert float(state.truncation[i]) == 0.0 and float(state.failed[i]) == 0.0
-                assert float(state.metrics["torso_height"][i]) <= CFG.healthy_z_range[0]
+                assert float(state.metrics["torso_height"][i]) <= env.config.healthy_z_range[0]
         if np.all(done_at >= 0):
             break
     assert np.all(done_at >= 0), done_at

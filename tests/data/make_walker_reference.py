@@ -1,0 +1,37 @@
+"""Writes tests/data/walker_reference.npz: a humanoid walk of 30 random actions on a random terrain (CPU), made with
+the walker before the robot spec (commit 7b3c39c); tests/walker/test_robots.py checks the spec'd walker reproduces
+it bit for bit. Run from the repository root: python tests/data/make_walker_reference.py"""
+
+import os
+from pathlib import Path
+
+if __name__ == "__main__" and "xla_cpu_use_fusion_emitters" not in os.environ.get("XLA_FLAGS", ""):
+    # the test processes' XLA setting (tests/conftest.py): the same compiled program as the test's
+    os.environ["XLA_FLAGS"] = (os.environ.get("XLA_FLAGS", "") + " --xla_cpu_use_fusion_emitters=false").strip()
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from jaxterrain.terrain import TerrainScale
+from jaxterrain.walker import WalkerConfig, WalkerEnv
+
+
+def walk(config):
+    env = WalkerEnv(config)
+    terrain = jnp.asarray(np.random.default_rng(0).uniform(0, 0.3, (32, 64)), jnp.float32)
+    state = env.reset(jax.random.key(1), terrain)
+    actions = jax.random.uniform(jax.random.key(2), (30, env.action_size), minval=-1, maxval=1)
+
+    def step(s, a):
+        s = env.step(s, a, terrain)
+        return s, (s.data.qpos, s.obs, s.reward, s.done)
+
+    _, (qpos, obs, reward, done) = jax.lax.scan(step, state, actions)
+    return {"qpos": np.asarray(qpos), "obs": np.asarray(obs), "reward": np.asarray(reward), "done": np.asarray(done)}
+
+
+CONFIG = WalkerConfig(terrain_shape=(32, 64), scale=TerrainScale(cell_size=0.2, height=0.5))
+
+if __name__ == "__main__":
+    np.savez_compressed(Path(__file__).with_name("walker_reference.npz"), **walk(CONFIG))

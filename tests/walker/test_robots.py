@@ -1,0 +1,104 @@
+"""Robots as specs (``jaxterrain.walker.robots``): the humanoid walks as before the spec, the ant walks, and a spec
+that does not match its MJCF is refused naming what is missing."""
+
+from __future__ import annotations
+
+import importlib.util
+from pathlib import Path
+
+import jax
+import jax.numpy as jnp
+import mujoco
+import numpy as np
+import pytest
+
+from jaxterrain.terrain import TerrainScale
+from jaxterrain.walker import WalkerConfig, WalkerEnv
+from jaxterrain.walker import robots
+from jaxterrain.walker.model import build_model, build_spec, standing_offset
+
+DATA = Path(__file__).resolve().parents[1] / "data"
+
+
+def _reference_module():
+    spec = importlib.util.spec_from_file_location("make_walker_reference", DATA / "make_walker_reference.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+def test_the_humanoid_spec_walks_bit_for_bit_as_the_walker_before_robot_specs():
+    ref = _reference_module()
+    got = ref.walk(ref.CONFIG)
+    want = np.load(DATA / "walker_reference.npz")
+    for name in ("qpos", "obs", "reward", "done"):
+        np.testing.assert_array_equal(got[name], want[name], err_msg=name)
+    assert WalkerEnv(ref.CONFIG).config.healthy_z_range == (1.0, 2.0)  # the humanoid's defaults, resolved
+
+
+def test_the_ant_stands_on_its_four_feet_and_walks_the_heightfield():
+    config = WalkerConfig(terrain_shape=(32, 64), scale=TerrainScale(cell_size=0.2, height=0.5), robot="ant")
+    env = WalkerEnv(config)
+    assert (env.action_size, env.observation_size) == (8, 1 + 4 + 8 + 14)
+    assert env.config.healthy_z_range == (0.2, 1.0) and env.config.ctrl_cost_weight == 0.5  # brax's Ant
+    terrain = jnp.asarray(np.random.default_rng(3).uniform(0, 0.2, (32, 64)), jnp.float32)
+    state = env.reset(jax.random.key(0), terrain)
+    feet = state.data.geom_xpos[env._feet]
+    bottoms = np.asarray(feet[:, 2]) - 0.08
+    assert np.all(bottoms >= float(jnp.max(terrain)) - 0.2)  # spawned on its feet over the terrain
+    assert 0.2 < float(state.metrics["torso_height"]) < 1.0
+
+    def step(s, _):
+        s = env.step(s, jnp.zeros(8), terrain)
+        return s, s.done
+
+    state, done = jax.jit(lambda s: jax.lax.scan(step, s, None, length=60))(state)
+    assert not np.any(np.asarray(done)) and 0.2 < float(state.metrics["torso_height"]) < 1.0  # it stays up
+
+
+def test_standing_offset_uses_the_robots_start_pose():
+    ant = build_model((16, 16), robot="ant")
+    # ankles at +-1 rad (brax's init_qpos): the 0.57 m shins reach 0.48 m down, + the 0.08 m foot spheres
+    assert standing_offset(ant, "ant") == pytest.approx(0.556, abs=0.005)
+    flat = robots.ANT._replace(name="ant_flat", start_joints=None)  # qpos0: the legs splayed level with the torso
+    assert standing_offset(ant, flat) == pytest.approx(0.08, abs=0.005)
+    assert standing_offset(build_model((16, 16))) == pytest.approx(1.4 - 0.107, abs=2e-3)
+
+
+@pytest.mark.parametrize("change, message", [
+    (dict(foot_geoms=("left_foot", "no_such_foot")), "has no geom 'no_such_foot'"),
+    (dict(torso_body="no_such_torso"), "has no body 'no_such_torso'"),
+    (dict(floor_geom="ground"), "has no geom 'ground'"),
+])
+def test_a_spec_naming_parts_its_mjcf_lacks_is_refused_naming_them(change, message):
+    spec = robots.HUMANOID._replace(name="broken", **change)
+    with pytest.raises(ValueError, match=message):
+        build_spec((16, 16), robot=spec)
+
+
+def test_a_foot_that_is_not_a_sphere_or_a_body_that_touches_the_ground_is_refused():
+    with pytest.raises(ValueError, match="foot geom 'left_ankle_geom' must be a sphere"):
+        _ant_with(foot="left_ankle_geom", contype=1)
+    with pytest.raises(ValueError, match="geom 'torso_geom' touches the terrain"):
+        _ant_with(foot=None, contype=1, geom="torso_geom")
+
+
+def _ant_with(foot, contype, geom=None):
+    text = robots.ANT.xml()
+    name = geom or foot
+    text = text.replace(f'name="{name}" ', f'name="{name}" contype="{contype}" ', 1)
+    feet = robots.ANT.foot_geoms if foot is None else (foot,) + robots.ANT.foot_geoms[1:]
+    return build_model((16, 16), robot=robots.ANT._replace(name="ant_edit", xml=lambda: text, foot_geoms=feet))
+
+
+def test_robots_are_registered_by_name_and_unknown_names_are_refused(monkeypatch):
+    monkeypatch.setattr(robots, "_REGISTRY", dict(robots._REGISTRY))
+    assert robots.names()[:2] == ("humanoid", "ant")
+    with pytest.raises(ValueError, match="robot must be one of humanoid, ant, got 'dog'"):
+        WalkerEnv(WalkerConfig(terrain_shape=(16, 16), robot="dog"))
+    with pytest.raises(ValueError, match="defaults lacks"):
+        robots.register_robot(robots.ANT._replace(name="dog", defaults=()))
+    robots.register_robot(robots.ANT._replace(name="dog"))
+    assert robots.get("dog").foot_geoms == robots.ANT.foot_geoms
+    with pytest.raises(ValueError, match="already registered"):
+        robots.register_robot(robots.HUMANOID._replace(name="dog"))
