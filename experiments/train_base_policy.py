@@ -42,9 +42,9 @@ from experiments import common
 # chunk would compile once more, ~25 s).
 PRESETS: dict[str, dict[str, Any]] = common.with_preset_names({
     "smoke": dict(env_steps=4 * 40, time_budget=None, updates_per_chunk=2, num_envs=None, solver=None,
-                  eval_attempts=20, eval_best=5),
+                  eval_attempts=20, eval_best=5, robot="humanoid"),
     "gpu": dict(env_steps=410 * 122_880, time_budget=None, updates_per_chunk=10, num_envs=None, solver=None,
-                eval_attempts=20, eval_best=5),
+                eval_attempts=20, eval_best=5, robot="humanoid"),
 }, {"gpu-short": ("gpu", {"env_steps": 41 * 122_880}), "paper": "gpu"})
 # time_budget (seconds, the whole process) is the config key of runs made before --time-limit replaced --time-budget
 # (2026-11-28); no preset sets it: --time-limit MIN bounds a process now, on every preset.
@@ -67,6 +67,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="walker contact solver: sound (default: Newton 4 iterations / 16 line-search), fast, "
                              "xml, or ITERATIONS,LS_ITERATIONS,EULERDAMP such as 4,16,0; recorded with the policy, and "
                              "difficulty.evaluate then walks it under the same options")
+    parser.add_argument("--robot", default=None, metavar="NAME",
+                        help="the body to train: humanoid (default, the paper's), ant (brax's quadruped) or a robot a "
+                             "--plugin registered (jaxterrain.walker.robots); recorded with the policy")
     parser.add_argument("--no-progress", action="store_true", help="one line per chunk instead of a progress bar")
     parser.add_argument("--eval-attempts", type=int, default=None, help="flat-ground evaluation walks (default 20)")
     parser.add_argument("--eval-best", type=int, default=None, help="of which the best are averaged (default 5)")
@@ -74,13 +77,14 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--export-assets", action="store_true",
                         help="write the trained policy to --assets-dir with PROVENANCE.md")
     parser.add_argument("--assets-dir", default=None,
-                        help="where --export-assets writes (default jaxterrain/assets/base_policy/)")
+                        help="where --export-assets writes (default jaxterrain/assets/base_policy/; another robot's: "
+                             "jaxterrain/assets/base_policy_ROBOT/)")
 
 
 def overrides(args: argparse.Namespace) -> dict:
     """The settings given on the command line (None: not given)."""
     return {name: getattr(args, name) for name in ("env_steps", "time_budget", "updates_per_chunk", "num_envs",
-                                                    "solver", "eval_attempts", "eval_best")}
+                                                    "solver", "eval_attempts", "eval_best", "robot")}
 
 
 def configs():
@@ -154,7 +158,10 @@ def resolve_settings(cfg: dict) -> RunSettings:
 
     from jaxterrain import rl
 
+    from jaxterrain.walker import resolve_config
+
     env_cfg, ppo_cfg = configs()[cfg.get("preset") or "smoke"]
+    env_cfg = resolve_config(env_cfg._replace(robot=cfg.get("robot") or "humanoid"))  # runs before --robot: humanoid
     if cfg.get("solver") is not None:
         env_cfg = env_cfg._replace(solver=_solver(cfg["solver"]))
     if cfg.get("num_envs") is not None:
@@ -188,6 +195,8 @@ def write_run_info(folder: Path, settings: RunSettings, resumed: bool) -> RunFol
     path = folder / RUN_INFO
     if resumed and path.is_file():
         old = json.loads(path.read_text())
+        if isinstance(old.get("walker_config"), dict):  # run.json written before robot specs: the humanoid
+            old["walker_config"].setdefault("robot", "humanoid")
         for k in ("walker_config", "ppo_config"):
             if old.get(k) != info[k]:
                 raise SystemExit(f"--resume: {k} differs from the run's {RUN_INFO} (the library's defaults changed "
@@ -405,6 +414,13 @@ def main(args: argparse.Namespace) -> int:
 
     if args.solver is not None:
         _solver(args.solver)  # a bad --solver stops before the run folder is made
+    if args.robot is not None:
+        from jaxterrain.walker import robots
+
+        try:
+            robots.get(args.robot)
+        except ValueError as err:
+            raise common.UsageError(f"--robot: {err}") from None
     mesh = common.device_mesh(args.devices)
     folder, cfg = common.setup_resumable_run("train-base-policy", args, PRESETS, "smoke", overrides(args), EXTENDABLE)
     settings = resolve_settings(cfg)
@@ -436,7 +452,9 @@ def main(args: argparse.Namespace) -> int:
                              int(cfg["eval_best"]), steps_done)
     write_eval(run.path, result)
     if args.export_assets:
-        dest = Path(args.assets_dir) if args.assets_dir else rl.BASE_POLICY_DIR
+        robot = settings.env_config.robot
+        dest = Path(args.assets_dir) if args.assets_dir else (
+            rl.BASE_POLICY_DIR if robot == "humanoid" else rl.BASE_POLICY_DIR.parent / f"base_policy_{robot}")
         provenance = build_provenance(cfg, run, state, origin, device_name, result)
         export_policy_assets(dest, run.path, state, settings, env, provenance, result)
     return 0

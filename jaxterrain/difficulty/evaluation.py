@@ -272,10 +272,16 @@ def policy_solver(policy: Callable) -> Optional[SolverOptions]:
     return None if solver is None else SolverOptions(**solver)
 
 
+def policy_robot(policy: Callable) -> str:
+    """The robot a policy was trained on (``policy.meta["walker_config"]["robot"]``); ``"humanoid"`` for policies
+    that do not record one (every policy made before robot specs walked the humanoid)."""
+    return ((getattr(policy, "meta", None) or {}).get("walker_config") or {}).get("robot") or "humanoid"
+
+
 def default_env_config(shape: tuple[int, int], scale: Optional[TerrainScale] = None, policy: Optional[Callable] = None,
                        backend: str = "jax") -> WalkerConfig:
-    """``WalkerConfig(terrain_shape=shape, scale=scale)`` with the policy's own solver options when it records them
-    (``scale`` None: ``TerrainScale()``; ``policy`` None: the shipped base policy).
+    """``WalkerConfig(terrain_shape=shape, scale=scale)`` with the policy's own robot and solver options when it
+    records them (``scale`` None: ``TerrainScale()``; ``policy`` None: the shipped base policy).
 
     ``backend``: ``"jax"`` (MJX-JAX, the classic layout: one heightfield per env) or ``"warp"`` (MuJoCo Warp, on
     tiles: ``tiles=1``, which the rollout loops size to each call, :mod:`jaxterrain.walker.rollout`). Pass the result as
@@ -283,8 +289,10 @@ def default_env_config(shape: tuple[int, int], scale: Optional[TerrainScale] = N
     For MJX-JAX on tiles set ``tiles=1`` yourself (``config._replace(tiles=1)``)."""
     if backend not in BACKENDS:
         raise ValueError(f"backend must be one of {BACKENDS}, got {backend!r}")
-    solver = policy_solver(default_policy() if policy is None else policy)
-    config = WalkerConfig(terrain_shape=tuple(shape), scale=TerrainScale() if scale is None else scale)
+    policy = default_policy() if policy is None else policy
+    solver = policy_solver(policy)
+    config = WalkerConfig(terrain_shape=tuple(shape), scale=TerrainScale() if scale is None else scale,
+                          robot=policy_robot(policy))
     config = config if solver is None else config._replace(solver=solver)
     return config if backend == "jax" else config._replace(backend=backend, tiles=1)
 

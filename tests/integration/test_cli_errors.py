@@ -96,6 +96,7 @@ CASES = [
     (["train-gan", "--batch-size", "0"], "--batch-size must be an integer >= 1"),
     (["train-gan", "--data", "MISSING"], "--data 'MISSING': no such file or folder"),
     (["train-base-policy", "--num-envs", "0"], "--num-envs must be an integer >= 1"),
+    (["train-base-policy", "--robot", "dog"], "--robot: robot must be one of humanoid, ant, got 'dog'"),
     (["learn", "--max-evals", "0"], "--max-evals must be an integer >= 1"),
     (["learn", "--curriculum", "accel", "--accel-edits", "0"], "--accel-edits must be an integer >= 1"),
     (["curriculum", "--max-evals", "-2"], "--max-evals must be an integer >= 1"),

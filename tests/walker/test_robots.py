@@ -102,3 +102,21 @@ def test_robots_are_registered_by_name_and_unknown_names_are_refused(monkeypatch
     assert robots.get("dog").foot_geoms == robots.ANT.foot_geoms
     with pytest.raises(ValueError, match="already registered"):
         robots.register_robot(robots.HUMANOID._replace(name="dog"))
+
+
+@pytest.mark.slow
+def test_train_base_policy_trains_the_ant_and_its_policy_walks_the_ant(tmp_path):
+    """``train-base-policy --robot ant`` (smoke): the policy records its robot, and the library's evaluation builds
+    the ant's env for it (27 observations, 8 actions)."""
+    import json
+
+    from experiments.__main__ import main
+    from jaxterrain import difficulty, rl
+
+    out = tmp_path / "ant"
+    assert main(["train-base-policy", "--robot", "ant", "--out", str(out), "--no-progress"]) == 0
+    meta = json.loads((out / "policy" / "config.json").read_text())
+    assert meta["walker_config"]["robot"] == "ant" and (meta["observation_size"], meta["action_size"]) == (27, 8)
+    policy = rl.load_policy(out / "policy")
+    assert difficulty.evaluation.default_env_config((32, 64), policy=policy).robot == "ant"
+    assert 0.0 <= json.loads((out / "eval.json").read_text())["best_mean"] <= 1.0
