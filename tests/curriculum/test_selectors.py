@@ -210,8 +210,14 @@ def test_levels_move_each_env_by_legged_gyms_rule_on_its_levels_terrain():
 def test_per_env_terrains_on_tiles_equal_the_classic_layout(selector):
     """3 trials x K terrains a chunk laid out as one bank of 3 K tiles: every env reads exactly the terrain the
     classic layout gives it ([E, H, W] maps), so every record, level and policy leaf is equal."""
+    out = tiled_and_classic(small(selector, terrains_per_chunk=3, levels=4, max_epochs=8, plr_capacity=4))
+    assert len({tuple(np.asarray(t)) for t in out[True].history.terrain}) == 3  # trials differ
+
+
+def tiled_and_classic(config):
+    """3 trials of ``config`` for 8 chunks on both layouts (the toy bank, the per-env fake harness); asserts every
+    leaf of the final states is equal and returns them ``{tiled: states}``."""
     bank = toy_bank()
-    config = small(selector, terrains_per_chunk=3, levels=4, max_epochs=8, plr_capacity=4)
     k = S.get_selector(config).slots
     env, plain = _envs(3 * k)
     keys = jax.random.split(jax.random.key(2), 3)
@@ -222,7 +228,7 @@ def test_per_env_terrains_on_tiles_equal_the_classic_layout(selector):
         out[tiled] = C.make_runner(config, harness)(states, bank, 8)
     leaves = jax.tree.leaves(out[True]), jax.tree.leaves(out[False])
     assert all(np.array_equal(np.asarray(a), np.asarray(b), equal_nan=True) for a, b in zip(*leaves))
-    assert len({tuple(np.asarray(t)) for t in out[True].history.terrain}) == 3  # trials differ
+    return out
 
 
 def _envs(tiles: int):
@@ -511,16 +517,7 @@ def test_accel_edits_the_levels_it_replayed_and_inserts_them_with_their_learnabi
 
 
 def test_accel_on_tiles_equals_the_classic_layout(toy_generator):
-    bank = toy_bank()
     config = small("accel", terrains_per_chunk=3, max_epochs=8, plr_capacity=4, accel_generator=toy_generator)
-    k = S.get_selector(config).slots
-    assert k == 4  # 3 levels + the evaluation terrain
-    env, plain = _envs(3 * k)
-    keys = jax.random.split(jax.random.key(2), 3)
-    out = {}
-    for tiled in (False, True):
-        harness = per_env_harness(env, plain, tiled)
-        states = C.init_trials(keys, bank, START, config=config, harness=harness)
-        out[tiled] = C.make_runner(config, harness)(states, bank, 8)
-    leaves = jax.tree.leaves(out[True]), jax.tree.leaves(out[False])
-    assert all(np.array_equal(np.asarray(a), np.asarray(b), equal_nan=True) for a, b in zip(*leaves))
+    assert S.get_selector(config).slots == 4  # 3 levels + the evaluation terrain
+    out = tiled_and_classic(config)
+    assert len({tuple(np.asarray(g).ravel()) for g in out[True].selector.genomes}) == 3  # trials differ
