@@ -28,9 +28,9 @@ import argparse
 from experiments import common
 
 PRESETS: dict[str, dict] = common.with_preset_names({
-    "gpu": dict(suite="v1", archive=None, policy=[], size=None, seeds=None, samples=None, families=None,
+    "gpu": dict(suite="v1", archive=None, policy=[], robot=None, size=None, seeds=None, samples=None, families=None,
                 generators=None, attempts=80, best=5, headings=4, backend="auto", slots=None, chunk=None, repeat=True),
-    "smoke": dict(suite="v1", archive=None, policy=[], size=64, seeds=1, samples=4, families=["flat", "stairs_up", "gaps"],
+    "smoke": dict(suite="v1", archive=None, policy=[], robot=None, size=64, seeds=1, samples=4, families=["flat", "stairs_up", "gaps"],
                   generators=["perlin"], attempts=2, best=1, headings=1, backend="jax", slots=None, chunk=None,
                   repeat=False),
 }, {"gpu-short": "gpu", "paper": ("gpu", {"attempts": 20, "best": 5, "headings": 1})})
@@ -41,6 +41,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     common.add_run_arguments(parser, PRESETS, "smoke")
     parser.add_argument("--policy", nargs="+", default=None, metavar="DIR",
                         help="policy folders to evaluate beside the base policy (e.g. RUN/policies/trial_0)")
+    parser.add_argument("--robot", default=None, metavar="NAME",
+                        help="the base policy walked beside is this robot's shipped one (default humanoid); each "
+                             "--policy walks the robot it was trained on")
     parser.add_argument("--suite", default=None, help="held-out suite version (default v1)")
     parser.add_argument("--archive", default=None, help="walk an archive's elites instead of the suite")
     parser.add_argument("--size", type=int, default=None, help="suite heightmap side in pixels (v1: 256)")
@@ -64,18 +67,28 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def overrides(args) -> dict:
-    return dict(policy=args.policy, suite=args.suite, archive=args.archive, size=args.size, seeds=args.seeds,
+    return dict(policy=args.policy, robot=args.robot, suite=args.suite, archive=args.archive, size=args.size, seeds=args.seeds,
                 samples=args.samples, families=args.families, generators=args.generators, repeat=args.repeat,
                 backend=args.backend, slots=args.slots, chunk=args.chunk,
                 **common.protocol_overrides(args))
 
 
-def load_policies(paths) -> list:
-    """The base policy and every folder of ``paths``, loaded; UsageError naming a folder that does not load."""
+def load_policies(paths, robot: str | None = None) -> list:
+    """The base policy of ``robot`` (default the humanoid's) and every folder of ``paths``, loaded; UsageError naming
+    a folder that does not load, an unknown robot or one without a shipped base policy."""
     from experiments.common import UsageError
     from jaxterrain import rl
+    from jaxterrain.walker import robots
 
-    out = [rl.load_policy()]
+    try:
+        robots.get(robot or "humanoid")
+    except ValueError as err:
+        raise UsageError(f"--robot: {err}") from None
+    base = rl.base_policy_dir(robot or "humanoid")
+    if not (base / "policy.msgpack").is_file():
+        raise UsageError(f"--robot {robot}: no base policy is shipped for it ({base}); train one with `python -m "
+                         f"experiments train-base-policy --robot {robot} --preset gpu --export-assets`")
+    out = [rl.load_policy(None if (robot or "humanoid") == "humanoid" else base)]
     for p in paths or []:
         try:
             out.append(rl.load_policy(p))
@@ -134,7 +147,7 @@ def main(args) -> int:
     from jaxterrain.walker import resolve_backend
 
     cfg0 = {**PRESETS[args.preset or "smoke"], **{k: v for k, v in overrides(args).items() if v is not None}}
-    policies = load_policies(cfg0["policy"])  # before the run folder: a bad folder is one line, nothing left behind
+    policies = load_policies(cfg0["policy"], cfg0.get("robot"))  # before the run folder: a bad folder is one line, nothing left behind
     check_terrain_flags(cfg0)
     try:  # another robot or observation set: refused before anything is built
         suite.check_policies(policies, (64, 64), TerrainScale())

@@ -77,7 +77,8 @@ _PAPER = dict(archive=CPPN_ARCHIVE, curriculum="map", trials=10, descriptors=["r
               chunks_per_call=25, fast_compile=False, backend="auto", healthy_reward=None, update_normaliser=True,
               truncation="bootstrap", overlap=False, compact=True, policy_every=None, terrains_per_chunk=8, levels=10,
               levels_init=None, levels_promote=None, levels_demote=0.5, plr_capacity=4000, plr_replay_prob=0.8,
-              plr_staleness=0.3, plr_temperature=0.3, plr_min_fill=0.5, accel_generator=None, accel_edits=1)
+              plr_staleness=0.3, plr_temperature=0.3, plr_min_fill=0.5, accel_generator=None, accel_edits=1,
+              robot=None)
 PRESETS: dict[str, dict] = common.with_preset_names({
     "paper": _PAPER,
     "gpu-short": {**_PAPER, "max_epochs": 3000},
@@ -100,6 +101,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--threshold", type=float, default=None, help="fraction of the maximum fitness, in (0, 1]")
     parser.add_argument("--max-epochs", type=int, default=None)
     parser.add_argument("--policy", default=None, help="policy folder to start from (default: the base policy)")
+    parser.add_argument("--robot", default=None, metavar="NAME",
+                        help="start from this robot's shipped base policy (humanoid, the default, or one a --plugin "
+                             "registered; jaxterrain.walker.robots); a --policy walks the robot it was trained on")
     parser.add_argument("--chunks-per-call", type=int, default=None, help="chunks per jitted call / checkpoint")
     parser.add_argument("--num-envs", type=int, default=None, help="PPO envs per trial (all on its terrain)")
     add_fine_tuning_arguments(parser)
@@ -202,7 +206,7 @@ def fine_tuning_overrides(args) -> dict:
 
 def overrides(args) -> dict:
     return dict(archive=args.archive, curriculum=args.curriculum, trials=args.trials, threshold=args.threshold,
-                max_epochs=args.max_epochs, policy=args.policy, chunks_per_call=args.chunks_per_call,
+                max_epochs=args.max_epochs, policy=args.policy, robot=args.robot, chunks_per_call=args.chunks_per_call,
                 num_envs=args.num_envs, backend=args.backend, policy_every=args.policy_every,
                 **fine_tuning_overrides(args), **selector_overrides(args),
                 **common.protocol_overrides(args))

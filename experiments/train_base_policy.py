@@ -453,8 +453,7 @@ def main(args: argparse.Namespace) -> int:
     write_eval(run.path, result)
     if args.export_assets:
         robot = settings.env_config.robot
-        dest = Path(args.assets_dir) if args.assets_dir else (
-            rl.BASE_POLICY_DIR if robot == "humanoid" else rl.BASE_POLICY_DIR.parent / f"base_policy_{robot}")
+        dest = Path(args.assets_dir) if args.assets_dir else rl.base_policy_dir(robot)
         provenance = build_provenance(cfg, run, state, origin, device_name, result)
         export_policy_assets(dest, run.path, state, settings, env, provenance, result)
     return 0

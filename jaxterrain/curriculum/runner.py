@@ -26,6 +26,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from jaxterrain import rl
 from jaxterrain.curriculum import walker as W
 from jaxterrain.curriculum.config import CurriculumConfig, FINE_TUNED, validate_config
 from jaxterrain.curriculum.core import CHECKPOINT_COMPAT, init_trials, run_live, run_trials
@@ -35,11 +36,12 @@ from jaxterrain.qd.archive_io import load as load_archive_file
 from jaxterrain.qd.bank import from_archive
 from jaxterrain.runtime import driver, sharding
 from jaxterrain.terrain import TerrainScale
-from jaxterrain.walker import tiles
+from jaxterrain.difficulty import policy_robot
+from jaxterrain.walker import robots, tiles
 from jaxterrain.walker.layout import resolve_backend
 
 __all__ = ["BadInput", "LEGACY_TRUNCATION", "PARTIAL", "FAST_COMPILE", "PROGRAMS", "curriculum_config",
-           "with_protocol", "load_archive", "archive_digest", "check_resumable", "physics_of", "selector_slots", "walker_layout",
+           "with_protocol", "with_accel_generator", "start_policy", "load_archive", "archive_digest", "check_resumable", "physics_of", "selector_slots", "walker_layout",
            "validate", "strip_envs", "compiled", "make_block", "chunk_metrics", "inputs", "setup", "run_treatment",
            "report_cfg", "restored", "report_treatment", "export_treatment"]
 
@@ -180,6 +182,31 @@ def walker_layout(cfg: dict) -> dict:
                 worlds=trials * (envs + attempts if overlap else max(envs, attempts)))
 
 
+def start_policy(cfg: dict):
+    """The policy a learn config starts from: ``--policy``, else the shipped base policy of ``--robot`` (default the
+    humanoid's). :class:`BadInput` for an unknown robot, a robot without a shipped base policy, a policy that does
+    not load, or a ``--policy`` of another robot than ``--robot``."""
+    robot = cfg.get("robot") or "humanoid"
+    try:
+        robots.get(robot)
+    except ValueError as err:
+        raise BadInput(f"--robot: {err}") from None
+    path = cfg.get("policy")
+    if path is None and robot != "humanoid":
+        path = rl.base_policy_dir(robot)
+        if not (path / "policy.msgpack").is_file():
+            raise BadInput(f"--robot {robot}: no base policy is shipped for it ({path}); train one with `python -m "
+                           f"experiments train-base-policy --robot {robot} --preset gpu --export-assets`, or give "
+                           f"--policy")
+    try:
+        policy = W.load_policy(path)
+    except ValueError as err:
+        raise BadInput(f"--policy: {err}") from None
+    if cfg.get("robot") is not None and policy_robot(policy) != robot:
+        raise BadInput(f"--policy {path}: it walks the {policy_robot(policy)}, not --robot {robot}")
+    return policy
+
+
 def validate(cfg: dict):
     """``(CurriculumConfig, archive, policy, env)`` or :class:`BadInput` naming the parameter or file."""
     trials = cfg.get("trials")
@@ -193,10 +220,7 @@ def validate(cfg: dict):
     arch = load_archive(cfg["archive"], cfg["descriptors"])
     cfg = with_accel_generator(with_protocol(cfg, arch), arch)
     config = curriculum_config(cfg)
-    try:
-        policy = W.load_policy(cfg.get("policy"))
-    except ValueError as err:
-        raise BadInput(f"--policy: {err}") from None
+    policy = start_policy(cfg)
     shape = (256, 256) if arch.heightmaps is None else tuple(arch.heightmaps.shape[1:])
     env = W.walker_env(policy, shape, TerrainScale(), cfg["episode_length"], **walker_layout(cfg),
                        healthy_reward=cfg.get("healthy_reward"))

@@ -70,7 +70,8 @@ from jaxterrain.runtime import sharding
 from jaxterrain.rl import load_policy
 
 __all__ = ["evaluate", "rollout_distances", "fitness_fn", "protocol_distances", "keyed_distances",
-           "validate_heightmaps", "default_policy", "default_env_config", "policy_solver"]
+           "validate_heightmaps", "default_policy", "default_env_config", "policy_solver",
+           "policy_robot"]
 
 
 # ----------------------------------------------------------------------------------------------------------------

@@ -11,6 +11,7 @@ humanoid recipe). Public API::
 
 from jaxterrain.rl.checkpoint import (
     BASE_POLICY_DIR,
+    base_policy_dir,
     checkpoint_metadata,
     load_checkpoint,
     load_policy,
@@ -39,7 +40,7 @@ from jaxterrain.rl.ppo import (
 from jaxterrain.rl.training import Progress, chunk_fn, compiled_chunk, train
 
 __all__ = [
-    "BASE_POLICY_DIR", "EpisodeStats", "PPOConfig", "Progress", "RunningStats", "TrainState", "Transition",
+    "BASE_POLICY_DIR", "base_policy_dir", "EpisodeStats", "PPOConfig", "Progress", "RunningStats", "TrainState", "Transition",
     "checkpoint_metadata", "chunk_fn", "compiled_chunk", "deterministic_action", "gae", "init", "init_stats",
     "load_checkpoint", "load_policy", "loss_fn", "make_optimizer", "make_train", "normalize", "policy_fn", "ppo_loss",
     "raw_key", "reset_envs", "Ride", "ride_updates", "run_updates", "save_checkpoint", "save_policy", "train", "update",

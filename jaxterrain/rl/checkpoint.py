@@ -29,12 +29,18 @@ from jaxterrain.rl.config import PPOConfig, validate_config
 from jaxterrain.runtime import driver
 from jaxterrain.runtime.io import atomic_write_bytes, atomic_write_text
 
-__all__ = ["CHECKPOINT_FORMAT", "POLICY_FORMAT", "BASE_POLICY_DIR", "save_checkpoint", "checkpoint_metadata",
+__all__ = ["CHECKPOINT_FORMAT", "POLICY_FORMAT", "BASE_POLICY_DIR", "base_policy_dir", "save_checkpoint", "checkpoint_metadata",
            "load_checkpoint", "save_policy", "load_policy", "policy_fn"]
 
 CHECKPOINT_FORMAT = "jaxterrain.rl.checkpoint/2"
 POLICY_FORMAT = "jaxterrain.rl.policy/1"
 BASE_POLICY_DIR = Path(__file__).resolve().parent.parent / "assets" / "base_policy"
+
+
+def base_policy_dir(robot: str = "humanoid") -> Path:
+    """Where a robot's shipped base policy lives: :data:`BASE_POLICY_DIR` for the humanoid, ``assets/base_policy_<robot>/``
+    for another (``train-base-policy --robot NAME --export-assets`` writes it there; it may not exist)."""
+    return BASE_POLICY_DIR if robot == "humanoid" else BASE_POLICY_DIR.parent / f"base_policy_{robot}"
 # leaves added to TrainState since checkpoints were first written (read as the template's value when absent)
 LEGACY_DEFAULTS = (".episode.progress",)
 

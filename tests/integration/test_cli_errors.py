@@ -97,6 +97,7 @@ CASES = [
     (["train-gan", "--data", "MISSING"], "--data 'MISSING': no such file or folder"),
     (["train-base-policy", "--num-envs", "0"], "--num-envs must be an integer >= 1"),
     (["train-base-policy", "--robot", "dog"], "--robot: robot must be one of humanoid, ant, got 'dog'"),
+    (["evaluate", "--robot", "dog"], "--robot: robot must be one of humanoid, ant, got 'dog'"),
     (["learn", "--max-evals", "0"], "--max-evals must be an integer >= 1"),
     (["learn", "--curriculum", "accel", "--accel-edits", "0"], "--accel-edits must be an integer >= 1"),
     (["curriculum", "--max-evals", "-2"], "--max-evals must be an integer >= 1"),
@@ -162,6 +163,7 @@ def test_every_long_command_takes_the_same_presets_and_prints_its_config(command
 @pytest.mark.parametrize("argv, message", [
     (["--curriculum", "accel", "--accel-generator", "nope"], "learn: --accel-generator must be one of cppn, "),
     (["--curriculum", "levels", "--levels", "3", "--levels-init", "3"], "learn: --levels-init must be in [0, levels - 1"),
+    (["--robot", "dog"], "learn: --robot: robot must be one of humanoid, ant, got 'dog'"),
 ])
 def test_learn_refuses_settings_read_against_the_archive_in_one_line_and_leaves_no_run(tmp_path, monkeypatch,
                                                                                      capsys, argv, message):
