@@ -123,3 +123,16 @@ def test_train_base_policy_trains_the_ant_and_its_policy_walks_the_ant(tmp_path)
     # learn starts from a policy of the robot it names, else refuses in one line
     assert main(["learn", "--policy", str(out / "policy"), "--robot", "humanoid", "--out", str(tmp_path / "l")]) == 2
     assert not (tmp_path / "l").exists()
+
+
+def test_the_robot_tutorial_runs_as_written(monkeypatch, capsys):
+    """docs/tutorials/robot.md's Python block: a registered variant of the ant builds its walker."""
+    import re
+
+    monkeypatch.setattr(robots, "_REGISTRY", dict(robots._REGISTRY))
+    text = (Path(__file__).resolve().parents[2] / "docs" / "tutorials" / "robot.md").read_text()
+    blocks = re.findall(r"```python\n(.*?)```", text, flags=re.S)
+    assert len(blocks) == 1
+    exec(compile(blocks[0], "robot.md", "exec"), {})
+    assert capsys.readouterr().out.split() == ["8", "27", "(0.2,", "1.0)"]
+    assert robots.get("low_ant").start_joints[1] == 0.8
