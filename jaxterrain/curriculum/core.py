@@ -363,7 +363,7 @@ def init_trials(keys: jax.Array, bank: TerrainBank, policy: Any, *, config: Curr
 
 
 def run_trials(states: State, bank: TerrainBank, num_chunks: jax.Array, *, config: CurriculumConfig,
-               harness: Harness) -> State:
+               harness: Harness, on_chunk: Optional[Callable] = None) -> State:
     """Up to ``num_chunks`` chunks of every trial ([T]-batched ``states``), all trials in one vmapped step per
     chunk; stops early once every trial is done. ``num_chunks`` may be traced (no re-compile per value). Pure.
     With ``config.overlap``: steps until every running trial has done ``num_chunks`` chunks more than the least
@@ -371,7 +371,10 @@ def run_trials(states: State, bank: TerrainBank, num_chunks: jax.Array, *, confi
 
     With ``harness.layout`` every chunk first lays out the T trials' current terrains (``bank.heightmaps
     [states.terrain]`` [T, H, W] -> one terrain pytree, e.g. a bank of T tiles) and trial i trains and is evaluated
-    on its slice i."""
+    on its slice i.
+
+    ``on_chunk``: a host function ``(chunk [T] int32, hardest [T] float32, done [T] bool) -> None`` called after
+    every loop step through ``jax.debug.callback`` (progress inside a compiled block; it changes no result)."""
     one = functools.partial(_chunk, config=config, harness=harness)
     selector = get_selector(config)
     slots = selector.slots
@@ -399,7 +402,10 @@ def run_trials(states: State, bank: TerrainBank, num_chunks: jax.Array, *, confi
 
     def body(carry):
         i, s = carry
-        return i + 1, chunk(s, bank)
+        s = chunk(s, bank)
+        if on_chunk is not None:
+            jax.debug.callback(on_chunk, s.chunk, s.hardest, s.done)
+        return i + 1, s
 
     return jax.lax.while_loop(cond, body, (jnp.zeros((), jnp.int32), states))[1]
 

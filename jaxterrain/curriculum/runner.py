@@ -19,6 +19,7 @@ import functools
 import hashlib
 import json
 import re
+import sys
 import time
 from pathlib import Path
 
@@ -40,7 +41,7 @@ from jaxterrain.difficulty import policy_robot
 from jaxterrain.walker import robots, tiles
 from jaxterrain.walker.layout import resolve_backend
 
-__all__ = ["BadInput", "LEGACY_TRUNCATION", "PARTIAL", "FAST_COMPILE", "PROGRAMS", "curriculum_config",
+__all__ = ["BadInput", "ChunkProgress", "LEGACY_TRUNCATION", "PARTIAL", "FAST_COMPILE", "PROGRAMS", "curriculum_config",
            "with_protocol", "with_accel_generator", "start_policy", "load_archive", "archive_digest", "check_resumable", "physics_of", "selector_slots", "walker_layout",
            "validate", "strip_envs", "compiled", "make_block", "chunk_metrics", "inputs", "setup", "run_treatment",
            "report_cfg", "restored", "report_treatment", "export_treatment"]
@@ -251,6 +252,49 @@ def compiled(fn, fast: bool, *args):
     return lowered.compile(FAST_COMPILE if fast and jax.default_backend() == "cpu" else None)
 
 
+_LISTENERS: list = []  # the running treatment's progress function (compiled blocks call _chunk_done, shared by all)
+
+
+def _chunk_done(chunk, hardest, done) -> None:
+    """Host side of a block's per-chunk callback: hands ``(chunk [T], hardest [T], done [T])`` to the listener of
+    the treatment running now (none: nothing). Compiled programs are shared between treatments, so they call this
+    one function and the listener changes."""
+    for listen in list(_LISTENERS):
+        listen(np.asarray(chunk), np.asarray(hardest), np.asarray(done))
+
+
+class ChunkProgress:
+    """A treatment's progress inside its compiled blocks: one line on stderr at most every ``every_s`` seconds (the
+    driver's :data:`~jaxterrain.runtime.driver.PLAIN_EVERY_S`), ``desc: chunk C of N, hardest H cells (mean of the
+    trials), S s/chunk``; through ``tqdm.write`` (above a progress bar) when stderr is a terminal."""
+
+    def __init__(self, desc: str, total: int, start: int, every_s: float | None = None):
+        self.desc, self.total, self.start = desc, int(total), int(start)
+        self.every_s = float(driver.PLAIN_EVERY_S if every_s is None else every_s)
+        self.t0 = self.last = time.perf_counter()
+        self.lines: list[str] = []
+
+    def __call__(self, chunk, hardest, done) -> None:
+        now = time.perf_counter()
+        reached = int(np.max(chunk)) if chunk.size else self.start
+        if now - self.last < self.every_s and reached < self.total:
+            return
+        self.last = now
+        rate = (now - self.t0) / max(reached - self.start, 1)
+        line = (f"{self.desc}: chunk {reached} of {self.total}, hardest {float(np.mean(hardest)):.2f} cells (mean of "
+                f"{hardest.size} trials, {int(np.sum(~done))} running), {rate:.1f} s/chunk")
+        self.lines.append(line)
+        if sys.stderr.isatty():
+            try:
+                from tqdm import tqdm
+
+                tqdm.write(line, file=sys.stderr)
+                return
+            except ImportError:
+                pass
+        print(line, file=sys.stderr, flush=True)
+
+
 def make_block(config, harness, env_like):
     """``(states, bank, n) -> states`` (jit it): restart every trial's envs on its terrain, up to ``n`` chunks.
     ``states`` come without env states (:func:`strip_envs`); ``env_like`` gives one trial's env-state shapes."""
@@ -260,7 +304,8 @@ def make_block(config, harness, env_like):
         envs = jax.vmap(lambda _: zeros)(jnp.arange(trials))
         states = states._replace(policy=states.policy._replace(env_state=envs),
                                  restart=jnp.ones_like(states.restart))  # envs restart on the current terrains
-        states = run_trials(states, bank, jnp.asarray(n, jnp.int32), config=config, harness=harness)
+        states = run_trials(states, bank, jnp.asarray(n, jnp.int32), config=config, harness=harness,
+                            on_chunk=_chunk_done)
         return strip_envs(states)._replace(restart=jnp.ones_like(states.restart))  # no envs: all restart next
 
     return block
@@ -369,12 +414,16 @@ def run_treatment(cfg: dict, folder: Path, time_limit_s: float | None = None, de
                             names=arch.generator_names)
         return s, chunk_metrics(s, a, b)
 
-    states, done, _ = driver.run_chunks(
-        chunk_fn, states, total=config.max_chunks, every=int(cfg["chunks_per_call"]), start=done, history=history,
-        run_dir=folder, key_metric="hardest", desc=desc or cfg["curriculum"],
-        time_limit_s=None if time_limit_s is None else max(time_limit_s - (time.perf_counter() - t0), 1e-3),
-        unit="chunk", meta={"config": cfg, "archive_sha256": digest, "backend": physics_of(cfg)},
-        wall_s=before + time.perf_counter() - t0)
+    _LISTENERS[:] = [ChunkProgress(desc or cfg["curriculum"], config.max_chunks, done)]
+    try:
+        states, done, _ = driver.run_chunks(
+            chunk_fn, states, total=config.max_chunks, every=int(cfg["chunks_per_call"]), start=done,
+            history=history, run_dir=folder, key_metric="hardest", desc=desc or cfg["curriculum"],
+            time_limit_s=None if time_limit_s is None else max(time_limit_s - (time.perf_counter() - t0), 1e-3),
+            unit="chunk", meta={"config": cfg, "archive_sha256": digest, "backend": physics_of(cfg)},
+            wall_s=before + time.perf_counter() - t0)
+    finally:
+        _LISTENERS.clear()
     if done < config.max_chunks and not bool(np.all(np.asarray(states.done))):
         return None
     export_policies(folder, cfg, config, ppo, env, policy, bank, states, names=arch.generator_names)

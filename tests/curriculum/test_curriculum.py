@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import re
 import warnings
 
 import jax
@@ -638,10 +639,28 @@ def test_learn_time_limit_counts_set_up_and_compilation(tmp_path, tiny_archive, 
 def learn_smoke(tmp_path_factory, tiny_archive):
     """``(archive, run folder)``: ONE uninterrupted ``learn --preset smoke`` run on the 4-terrain archive, shared by
     the end-to-end test and the time-limit test (its uninterrupted reference)."""
+    import contextlib
+    import io
+
+    from jaxterrain.runtime import driver
+
     archive = tiny_archive(4, "four.npz")
     out = tmp_path_factory.mktemp("learn") / "whole"
-    assert cli("learn", "--preset", "smoke", "--archive", archive, "--out", str(out)) == 0
+    err = io.StringIO()  # not a terminal: plain progress lines (every one: PLAIN_EVERY_S = 0)
+    with pytest.MonkeyPatch.context() as mp, contextlib.redirect_stderr(err):
+        mp.setattr(driver, "PLAIN_EVERY_S", 0.0)
+        assert cli("learn", "--preset", "smoke", "--archive", archive, "--out", str(out)) == 0
+    (out.parent / "stderr.txt").write_text(err.getvalue())
     return archive, out
+
+
+def test_learn_reports_progress_after_every_chunk_inside_a_compiled_block(learn_smoke):
+    """The smoke run's blocks are 2 chunks long (``--chunks-per-call 2``): a line after chunk 1 and after chunk 3
+    comes from inside a block (the block's per-chunk host callback), not from between blocks."""
+    _, out = learn_smoke
+    lines = (out.parent / "stderr.txt").read_text().splitlines()
+    chunks = [int(m.group(1)) for m in map(re.compile(r"^map: chunk (\d+) of 4, hardest").match, lines) if m]
+    assert chunks == [1, 2, 3, 4], lines
 
 
 def test_learn_smoke_end_to_end(learn_smoke):
