@@ -1,7 +1,7 @@
 """Plugins through the front door: ``python -m experiments --plugin MODULE ...`` (before or after the command) and
-the ``jaxterrain.plugins`` entry points import a module whose generators and curricula every command then takes by
-name; a plugin that does not import is one line and exit status 2. A tiny plugin (a generator of inclined planes
-and a curriculum) runs ``evolve`` and ``learn`` at smoke size (``-m slow``)."""
+the ``jaxterrain.plugins`` entry points import a module whose generators, curricula and robots every command then
+takes by name; a plugin that does not import is one line and exit status 2. A tiny plugin (a generator of inclined
+planes, a curriculum and a robot) runs ``evolve`` and ``learn`` at smoke size (``-m slow``)."""
 
 from __future__ import annotations
 
@@ -14,8 +14,8 @@ import pytest
 from experiments import __main__ as front
 
 PLUGIN = textwrap.dedent('''
-    """A test plugin: the ``planes`` generator (inclined planes, slope and direction genes) and the
-    ``plugin_hardest_first`` curriculum (the hardest terrain of the archive, every chunk)."""
+    """A test plugin: the ``planes`` generator (inclined planes, slope and direction genes), the
+    ``plugin_hardest_first`` curriculum (the hardest terrain of the archive, every chunk) and the ``low_ant`` robot."""
     import jax.numpy as jnp
 
     from jaxterrain import curriculum, generators
@@ -50,6 +50,11 @@ PLUGIN = textwrap.dedent('''
 
 
     curriculum.register_selector("plugin_hardest_first", plugin_hardest_first)
+
+    # a robot: brax's ant crouched lower (its own start pose), under a name of its own
+    from jaxterrain.walker import register_robot, robots
+
+    register_robot(robots.ANT._replace(name="low_ant", start_joints=(0.0, 0.8, 0.0, -0.8, 0.0, -0.8, 0.0, 0.8)))
 ''')
 
 
@@ -66,9 +71,11 @@ def plugin(tmp_path, monkeypatch):
     """The plugin module, importable; what it registers is taken out of the registries again afterwards."""
     from jaxterrain.curriculum import selectors
     from jaxterrain.generators import registry
+    from jaxterrain.walker import robots
 
     monkeypatch.setattr(registry, "_FACTORIES", dict(registry._FACTORIES))
     monkeypatch.setattr(selectors, "_REGISTRY", dict(selectors._REGISTRY))
+    monkeypatch.setattr(robots, "_REGISTRY", dict(robots._REGISTRY))
     (tmp_path / "jt_test_plugin.py").write_text(PLUGIN)
     monkeypatch.syspath_prepend(str(tmp_path))
     yield "jt_test_plugin"
@@ -93,7 +100,9 @@ def test_a_plugin_that_does_not_import_is_one_line_and_status_2(argv, message, c
     assert len(err) == 1 and message in err[0], err
 
 
-def test_a_plugins_generator_and_curriculum_are_names_every_command_takes(plugin, capsys):
+def test_a_plugins_generator_curriculum_and_robot_are_names_every_command_takes(plugin, capsys):
+    assert run(["evaluate", "--robot", "low_ant"]) == 2  # without the plugin the robot is unknown
+    assert "robot must be one of humanoid, ant, got 'low_ant'" in capsys.readouterr().err
     with pytest.raises(SystemExit):  # without the plugin the names are unknown
         front.main(["learn", "--curriculum", "plugin_hardest_first", "--print-config"])
     assert "plugin_hardest_first" in capsys.readouterr().err
@@ -104,6 +113,11 @@ def test_a_plugins_generator_and_curriculum_are_names_every_command_takes(plugin
     assert json.loads(capsys.readouterr().out)["curriculum"] == "plugin_hardest_first"
     assert run(["evolve", "--plugin", plugin, "--generator", "planes", "--print-config"]) == 0
     assert json.loads(capsys.readouterr().out)["generator"] == "planes"
+    # the plugin's robot: a name --robot takes (it has no base policy yet: evaluate says how to train one)
+    assert run(["--plugin", plugin, "evaluate", "--robot", "low_ant"]) == 2
+    assert "train-base-policy --robot low_ant" in capsys.readouterr().err
+    assert run(["--plugin", plugin, "train-base-policy", "--robot", "low_ant", "--print-config"]) == 0
+    assert json.loads(capsys.readouterr().out)["robot"] == "low_ant"
 
 
 def test_installed_plugins_load_from_their_entry_points(plugin, monkeypatch):
