@@ -44,7 +44,7 @@ from experiments import common
 _PAPER = dict(generator="perlin", descriptors=["roughness", "tpi"], generations=5000, batch_size=20,
               initial_population=100, bins=50, size=256, window=30, stride=2, attempts=20, best=5, headings=1,
               checkpoint_every=250, fitness="difficulty", robot_height=None, out_of_range="clip", ranges=None,
-              store_heightmaps=True, rollout_slots=None, rollout_backend="jax")
+              store_heightmaps=True, rollout_slots=None, rollout_backend="jax", robot="humanoid")
 PRESETS: dict[str, dict] = {
     "paper": _PAPER,
     "gpu": {**_PAPER, "generations": 25, "batch_size": 4000, "checkpoint_every": 1, "rollout_slots": 16384},
@@ -74,7 +74,7 @@ def evolve_config(cfg: dict):
         headings=int(cfg.get("headings", 1)), checkpoint_every=int(cfg["checkpoint_every"]), robot_height=cfg.get("robot_height"),
         out_of_range=cfg.get("out_of_range", "clip"), store_heightmaps=bool(cfg.get("store_heightmaps", True)),
         rollout_slots=None if cfg.get("rollout_slots") is None else int(cfg["rollout_slots"]),
-        rollout_backend=str(cfg.get("rollout_backend", "jax")),
+        rollout_backend=str(cfg.get("rollout_backend", "jax")), robot=str(cfg.get("robot") or "humanoid"),
     )
 
 
@@ -100,6 +100,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="env slots of the difficulty rollout pool per device (speed only; gpu preset: 16384)")
     parser.add_argument("--backend", "--rollout-backend", dest="rollout_backend", choices=["jax", "warp"], default=None,
                         help="walker physics of the difficulty rollouts: jax (MJX, default) or warp (MuJoCo Warp)")
+    parser.add_argument("--robot", default=None, metavar="NAME",
+                        help="whose shipped base policy the walker fitness walks (default humanoid; "
+                             "jaxterrain.walker.robots, or a --plugin's); the archive records it")
     parser.add_argument("--no-heightmaps", dest="store_heightmaps", action="store_const", const=False, default=None,
                         help="do not store the elites' heightmaps in archive.npz (they can be re-rendered)")
 
@@ -109,7 +112,7 @@ def overrides(args) -> dict:
                 batch_size=args.batch_size, initial_population=args.initial_population, bins=args.bins,
                 size=args.size, checkpoint_every=args.checkpoint_every, fitness=args.fitness,
                 **common.protocol_overrides(args), store_heightmaps=args.store_heightmaps,
-                rollout_slots=args.rollout_slots, rollout_backend=args.rollout_backend)
+                rollout_slots=args.rollout_slots, rollout_backend=args.rollout_backend, robot=args.robot)
 
 
 def run_treatment(cfg: dict, generator: str, descriptors, folder: Path, clock: common.Clock, key, label: str = "",
@@ -183,6 +186,14 @@ def main(args) -> int:
     from jaxterrain import qd as A
 
     mesh = common.device_mesh(args.devices)
+    fitness = args.fitness or PRESETS.get(args.preset or "smoke", {}).get("fitness")
+    if args.robot is not None and fitness == "difficulty":  # before the run folder: one line
+        from jaxterrain import difficulty
+
+        try:
+            difficulty.robot_base_policy(args.robot)
+        except ValueError as err:
+            raise common.UsageError(f"--robot: {err}") from None
     folder, cfg = common.setup_run("evolve", args, PRESETS, "smoke", overrides(args))
     clock = common.Clock(args.time_limit)
     try:

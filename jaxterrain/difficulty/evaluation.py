@@ -67,11 +67,12 @@ from jaxterrain.walker.rollout import batched_distances, job_queue, pooled_dista
 from jaxterrain.terrain import TerrainScale, validate_scale
 from jaxterrain.walker import BACKENDS, SolverOptions, WalkerConfig, WalkerEnv
 from jaxterrain.runtime import sharding
-from jaxterrain.rl import load_policy
+from jaxterrain.rl import base_policy_dir, load_policy
+from jaxterrain.walker.robots import get as get_robot
 
 __all__ = ["evaluate", "rollout_distances", "fitness_fn", "protocol_distances", "keyed_distances",
            "validate_heightmaps", "default_policy", "default_env_config", "policy_solver",
-           "policy_robot"]
+           "policy_robot", "robot_base_policy"]
 
 
 # ----------------------------------------------------------------------------------------------------------------
@@ -406,7 +407,8 @@ def evaluate(heightmaps, key: jax.Array, attempts: Optional[int] = None, best: O
 
 
 def fitness_fn(size: int, protocol: Protocol = PAPER, scale: Optional[TerrainScale] = None,
-               slots: Optional[int] = None, smooth_first: bool = True, backend: str = "jax") -> Callable:
+               slots: Optional[int] = None, smooth_first: bool = True, backend: str = "jax",
+               robot: str = "humanoid") -> Callable:
     """Terrain fitness as a pure function, for use inside jit / scan (e.g. ``qd.evolve(fitness_fn=...)``):
     ``fitness(heightmaps [B, size, size] in [0, 1], key, needed=None) -> [B]`` float32 in [0, 1].
 
@@ -422,6 +424,8 @@ def fitness_fn(size: int, protocol: Protocol = PAPER, scale: Optional[TerrainSca
     The function's ``keyed`` attribute is its per-row-key form, ``(heightmaps [B, size, size], keys [B], needed=None)
     -> [B]`` (:func:`keyed_distances`: terrain ``b`` walks from ``keys[b]``, one pool of ``slots`` per call), which
     the sharded MAP-Elites scoring calls on each device's rows (``scoring.keyed_fitness``).
+
+    ``robot``: whose shipped base policy walks (:func:`robot_base_policy`; the humanoid's by default).
     """
     if not isinstance(size, int) or size < 4:
         raise ValueError(f"size must be an int >= 4 (heightmap side in pixels), got {size!r}")
@@ -431,13 +435,32 @@ def fitness_fn(size: int, protocol: Protocol = PAPER, scale: Optional[TerrainSca
         raise ValueError(f"backend must be one of {BACKENDS}, got {backend!r}")
     protocol = protocol_from(protocol, None, None)
     scale = validate_scale(TerrainScale() if scale is None else scale)
-    return _fitness_fn_cached(size, protocol, scale, slots, bool(smooth_first) and slots is not None, backend)
+    robot_base_policy(robot)  # an unknown robot, or one without a shipped base policy: ValueError here
+    return _fitness_fn_cached(size, protocol, scale, slots, bool(smooth_first) and slots is not None, backend, robot)
+
+
+def robot_base_policy(robot: str = "humanoid") -> Callable:
+    """The shipped base policy of ``robot``: :func:`default_policy` for the humanoid, else
+    ``rl.base_policy_dir(robot)`` (loaded once). ``ValueError`` naming the robot when it is unknown or has none."""
+    get_robot(robot)
+    if robot == "humanoid":
+        return default_policy()
+    return _robot_policy(robot)
+
+
+@functools.lru_cache(maxsize=None)
+def _robot_policy(robot: str) -> Callable:
+    folder = base_policy_dir(robot)
+    if not (folder / "policy.msgpack").is_file():
+        raise ValueError(f"robot {robot!r}: no base policy is shipped for it ({folder}); train one with `python -m "
+                         f"experiments train-base-policy --robot {robot} --preset gpu --export-assets`")
+    return load_policy(folder)
 
 
 @functools.lru_cache(maxsize=16)
 def _fitness_fn_cached(size: int, protocol: Protocol, scale: TerrainScale, slots, smooth_first: bool,
-                       backend: str = "jax") -> Callable:
-    policy = default_policy()
+                       backend: str = "jax", robot: str = "humanoid") -> Callable:
+    policy = robot_base_policy(robot)
     env = make_env(protocol_env_config(default_env_config((size, size), scale, policy, backend), protocol))
 
     def walk(distances_fn, heightmaps, keys, needed):

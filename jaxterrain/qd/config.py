@@ -11,6 +11,7 @@ import numpy as np
 
 from jaxterrain.runtime.validation import walks
 from jaxterrain.terrain import TerrainScale, validate_scale
+from jaxterrain.walker.robots import names as robot_names
 
 __all__ = ["PRNGKey", "FitnessFn", "DEFAULT_RANGES", "EvolveConfig", "Archive", "resolve_config", "config_to_dict",
            "config_from_dict"]
@@ -70,6 +71,9 @@ class EvolveConfig(NamedTuple):
         implementation's float arithmetic (fitness within 0.03, ``benchmarks/rollouts.py``'s backend check), so,
         like ``rollout_slots``, a run may resume with another value.
 
+      robot: the walker whose shipped base policy the fitness walks (``jaxterrain.walker.robots``; its policy in
+        ``rl.base_policy_dir(robot)``). The archive records it: an archive's fitness is one robot's difficulty.
+
     The run settings (and ``generations``) stay here so that config files and archive headers keep one shape; they
     are the host driver's, not the algorithm's.
     """
@@ -93,6 +97,7 @@ class EvolveConfig(NamedTuple):
     scale: TerrainScale = TerrainScale()
     rollout_backend: str = "jax"
     headings: int = 1
+    robot: str = "humanoid"
 
 
 class Archive(NamedTuple):
@@ -148,6 +153,8 @@ def resolve_config(config: EvolveConfig) -> EvolveConfig:
         positive("rollout_slots", config.rollout_slots)
     if config.rollout_backend not in ("jax", "warp"):
         raise ValueError(f"EvolveConfig.rollout_backend must be 'jax' or 'warp'; got {config.rollout_backend!r}")
+    if config.robot not in robot_names():
+        raise ValueError(f"EvolveConfig.robot must be one of {', '.join(robot_names())}; got {config.robot!r}")
     if config.robot_height is not None and not config.robot_height > 0:
         raise ValueError(f"EvolveConfig.robot_height must be > 0 metres or None; got {config.robot_height!r}")
     scale = config.scale

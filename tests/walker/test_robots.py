@@ -136,3 +136,24 @@ def test_the_robot_tutorial_runs_as_written(monkeypatch, capsys):
     exec(compile(blocks[0], "robot.md", "exec"), {})
     assert capsys.readouterr().out.split() == ["8", "27", "(0.2,", "1.0)"]
     assert robots.get("low_ant").start_joints[1] == 0.8
+
+
+def test_the_walker_fitness_and_evolve_take_a_robot_and_refuse_one_without_a_base_policy(tmp_path, monkeypatch,
+                                                                                        capsys):
+    """``EvolveConfig.robot`` (recorded in archives) chooses whose base policy the fitness walks; the humanoid's is
+    the same function as before; a robot without a shipped base policy is refused naming how to train one."""
+    from experiments.__main__ import main
+    from jaxterrain import difficulty, qd
+
+    assert qd.EvolveConfig().robot == "humanoid"
+    assert qd.config.config_from_dict(qd.config.config_to_dict(qd.EvolveConfig(robot="ant"))).robot == "ant"
+    with pytest.raises(ValueError, match="EvolveConfig.robot must be one of humanoid, ant; got 'dog'"):
+        qd.config.resolve_config(qd.EvolveConfig(robot="dog"))
+    assert difficulty.fitness_fn(128) is difficulty.fitness_fn(128, robot="humanoid")  # one cached function
+    with pytest.raises(ValueError, match="robot 'ant': no base policy is shipped .* train-base-policy --robot ant"):
+        difficulty.fitness_fn(128, robot="ant")
+    monkeypatch.chdir(tmp_path)
+    with pytest.raises(SystemExit) as stop:
+        main(["evolve", "--robot", "ant", "--fitness", "difficulty"])
+    assert stop.value.code == 2
+    assert "--robot: robot 'ant': no base policy" in capsys.readouterr().err and not (tmp_path / "runs").exists()
