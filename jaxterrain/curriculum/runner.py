@@ -222,6 +222,10 @@ def validate(cfg: dict):
     cfg = with_accel_generator(with_protocol(cfg, arch), arch)
     config = curriculum_config(cfg)
     policy = start_policy(cfg)
+    archive_robot = getattr(arch.config, "robot", None) or "humanoid"
+    if archive_robot != policy_robot(policy):
+        raise BadInput(f"--archive {cfg['archive']}: its fitness is the {archive_robot}'s, but the policy walks the "
+                       f"{policy_robot(policy)} (evolve an archive with --robot {policy_robot(policy)})")
     shape = (256, 256) if arch.heightmaps is None else tuple(arch.heightmaps.shape[1:])
     env = W.walker_env(policy, shape, TerrainScale(), cfg["episode_length"], **walker_layout(cfg),
                        healthy_reward=cfg.get("healthy_reward"))

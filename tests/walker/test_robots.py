@@ -120,8 +120,10 @@ def test_train_base_policy_trains_the_ant_and_its_policy_walks_the_ant(tmp_path)
     policy = rl.load_policy(out / "policy")
     assert difficulty.evaluation.default_env_config((32, 64), policy=policy).robot == "ant"
     assert 0.0 <= json.loads((out / "eval.json").read_text())["best_mean"] <= 1.0
-    # learn starts from a policy of the robot it names, else refuses in one line
+    # learn starts from a policy of the robot it names, else refuses in one line; an archive of the humanoid's
+    # fitness does not serve the ant
     assert main(["learn", "--policy", str(out / "policy"), "--robot", "humanoid", "--out", str(tmp_path / "l")]) == 2
+    assert main(["learn", "--policy", str(out / "policy"), "--out", str(tmp_path / "l")]) == 2
     assert not (tmp_path / "l").exists()
 
 
