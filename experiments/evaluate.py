@@ -77,18 +77,12 @@ def load_policies(paths, robot: str | None = None) -> list:
     """The base policy of ``robot`` (default the humanoid's) and every folder of ``paths``, loaded; UsageError naming
     a folder that does not load, an unknown robot or one without a shipped base policy."""
     from experiments.common import UsageError
-    from jaxterrain import rl
-    from jaxterrain.walker import robots
+    from jaxterrain import difficulty, rl
 
     try:
-        robots.get(robot or "humanoid")
+        out = [difficulty.robot_base_policy(robot or "humanoid")]
     except ValueError as err:
         raise UsageError(f"--robot: {err}") from None
-    base = rl.base_policy_dir(robot or "humanoid")
-    if not (base / "policy.msgpack").is_file():
-        raise UsageError(f"--robot {robot}: no base policy is shipped for it ({base}); train one with `python -m "
-                         f"experiments train-base-policy --robot {robot} --preset gpu --export-assets`")
-    out = [rl.load_policy(None if (robot or "humanoid") == "humanoid" else base)]
     for p in paths or []:
         try:
             out.append(rl.load_policy(p))

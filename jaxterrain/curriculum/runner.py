@@ -27,7 +27,6 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from jaxterrain import rl
 from jaxterrain.curriculum import walker as W
 from jaxterrain.curriculum.config import CurriculumConfig, FINE_TUNED, validate_config
 from jaxterrain.curriculum.core import CHECKPOINT_COMPAT, init_trials, run_live, run_trials
@@ -37,7 +36,7 @@ from jaxterrain.qd.archive_io import load as load_archive_file
 from jaxterrain.qd.bank import from_archive
 from jaxterrain.runtime import driver, sharding
 from jaxterrain.terrain import TerrainScale
-from jaxterrain.difficulty import policy_robot
+from jaxterrain.difficulty import policy_robot, robot_base_policy
 from jaxterrain.walker import robots, tiles
 from jaxterrain.walker.layout import resolve_backend
 
@@ -187,18 +186,13 @@ def start_policy(cfg: dict):
     """The policy a learn config starts from: ``--policy``, else the shipped base policy of ``--robot`` (default the
     humanoid's). :class:`BadInput` for an unknown robot, a robot without a shipped base policy, a policy that does
     not load, or a ``--policy`` of another robot than ``--robot``."""
-    robot = cfg.get("robot") or "humanoid"
+    robot, path = cfg.get("robot") or "humanoid", cfg.get("policy")
     try:
         robots.get(robot)
+        if path is None and robot != "humanoid":
+            return robot_base_policy(robot)
     except ValueError as err:
         raise BadInput(f"--robot: {err}") from None
-    path = cfg.get("policy")
-    if path is None and robot != "humanoid":
-        path = rl.base_policy_dir(robot)
-        if not (path / "policy.msgpack").is_file():
-            raise BadInput(f"--robot {robot}: no base policy is shipped for it ({path}); train one with `python -m "
-                           f"experiments train-base-policy --robot {robot} --preset gpu --export-assets`, or give "
-                           f"--policy")
     try:
         policy = W.load_policy(path)
     except ValueError as err:

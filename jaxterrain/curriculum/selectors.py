@@ -507,11 +507,11 @@ def plr_selector(config) -> Selector:
             scores, mode="drop"))
         inserted = jax.lax.fori_loop(0, k, lambda i, b: plr_insert(b, s.terrains[i], scores[i], temperature, stale),
                                      s)
-        buf = jax.tree.map(lambda a, b: jnp.where(s.replay, a, b), replayed, inserted)
+        buf = _where_levels(s.replay, replayed, inserted)
         replay = ((buf.size / buf.levels.shape[0]) >= config.plr_min_fill) & (
             jax.random.uniform(decide_key) < config.plr_replay_prob)
         sampled, entry = plr_sample(buf, sample_key, k, temperature, stale)
-        nxt = jax.tree.map(lambda a, b: jnp.where(replay, a, b), sampled, buf)
+        nxt = _where_levels(replay, sampled, buf)
         nxt = nxt._replace(terrains=jnp.where(replay, buf.levels[entry], new(new_key, bank)),
                            entry=jnp.where(replay, entry, -1), replay=replay,
                            replays=s.replays + replay.astype(jnp.int32))
