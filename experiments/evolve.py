@@ -187,11 +187,14 @@ def main(args) -> int:
 
     mesh = common.device_mesh(args.devices)
     fitness = args.fitness or PRESETS.get(args.preset or "smoke", {}).get("fitness")
-    if args.robot is not None and fitness == "difficulty":  # before the run folder: one line
+    if args.robot is not None:  # before the run folder: one line (its base policy only where the fitness walks)
         from jaxterrain import difficulty
+        from jaxterrain.walker import robots
 
         try:
-            difficulty.robot_base_policy(args.robot)
+            robots.get(args.robot)
+            if fitness == "difficulty":
+                difficulty.robot_base_policy(args.robot)
         except ValueError as err:
             raise common.UsageError(f"--robot: {err}") from None
     folder, cfg = common.setup_run("evolve", args, PRESETS, "smoke", overrides(args))

@@ -98,6 +98,7 @@ CASES = [
     (["train-base-policy", "--num-envs", "0"], "--num-envs must be an integer >= 1"),
     (["train-base-policy", "--robot", "dog"], "--robot: robot must be one of humanoid, ant, got 'dog'"),
     (["evaluate", "--robot", "dog"], "--robot: robot must be one of humanoid, ant, got 'dog'"),
+    (["evolve", "--robot", "dog"], "--robot: robot must be one of humanoid, ant, got 'dog'"),
     (["learn", "--max-evals", "0"], "--max-evals must be an integer >= 1"),
     (["learn", "--curriculum", "accel", "--accel-edits", "0"], "--accel-edits must be an integer >= 1"),
     (["curriculum", "--max-evals", "-2"], "--max-evals must be an integer >= 1"),
