@@ -76,7 +76,7 @@ _PAPER = dict(archive=CPPN_ARCHIVE, curriculum="map", trials=10, descriptors=["r
               num_unrolls=8, num_minibatches=8, update_epochs=8, learning_rate=3e-4, episode_length=1000,
               chunks_per_call=25, fast_compile=False, backend="auto", healthy_reward=None, update_normaliser=True,
               truncation="bootstrap", overlap=False, compact=True, policy_every=None, terrains_per_chunk=8, levels=10,
-              levels_init=None, levels_promote=None, levels_demote=0.5, plr_capacity=4000, plr_replay_prob=0.8,
+              levels_init=None, levels_promote=None, levels_demote=0.5, plr_capacity=None, plr_replay_prob=0.8,
               plr_staleness=0.3, plr_temperature=0.3, plr_min_fill=0.5, accel_generator=None, accel_edits=1,
               robot=None)
 PRESETS: dict[str, dict] = common.with_preset_names({
@@ -143,7 +143,8 @@ def add_selector_arguments(parser: argparse.ArgumentParser) -> None:
                              "this, in (0, 1] (default: the threshold)")
     parser.add_argument("--levels-demote", type=float, default=None,
                         help="levels: ... and down when it is below this, in [0, 1] (default 0.5: half the course)")
-    for name, kind, what in (("capacity", int, "level buffer entries, >= 1 (plr: at most the archive's terrains; 4000)"),
+    for name, kind, what in (("capacity", int, "level buffer entries, >= 1 (plr: at most the archive's terrains; default: sized to "
+                                              "fill to --plr-min-fill in the run's first tenth of chunks; 4000)"),
                              ("replay-prob", float, "the chance a chunk replays buffer terrains, in [0, 1] (0.8)"),
                              ("staleness", float, "staleness coefficient, in [0, 1] (0.3)"),
                              ("temperature", float, "rank prioritisation temperature, > 0 (0.3)"),

@@ -154,6 +154,12 @@ class CurriculumConfig(NamedTuple):
         ``maze_plr.py`` defaults 4000, 0.8, 0.3, 0.3, 0.5): entries (at most the bank's terrains), the chance a chunk
         replays, the staleness coefficient, the rank temperature (> 0), the buffer's fill before any replay.
         ``accel`` uses the same settings for its buffer of genomes (there the capacity is not bounded by the bank).
+        ``plr_capacity=None`` (the default) sizes the buffer to the run (:func:`plr_buffer_capacity`): it reaches
+        ``plr_min_fill`` within the run's first tenth of chunks. JaxUED's 4 000 fills in its first 0.2 % of updates
+        (32 new mazes an update, 30 000 updates); a chunk here brings only ``terrains_per_chunk`` new levels, so 4 000
+        would fill to half only after 250 chunks at 8 a chunk, never within a ``gpu-short`` run of 75 (measured:
+        Experiment 3b's first ``accel`` run never replayed). An explicit capacity that cannot reach ``plr_min_fill``
+        within the run is refused.
       accel_generator: ``accel``'s levels are genomes of this generator (its ``sample`` makes new levels, its
         ``mutate`` edits them); None = unset (``experiments learn`` sets the archive's generator). Must be set for
         ``accel``.
@@ -189,7 +195,7 @@ class CurriculumConfig(NamedTuple):
     levels_init: Optional[int] = None
     levels_promote: Optional[float] = None
     levels_demote: float = 0.5
-    plr_capacity: int = 4000
+    plr_capacity: Optional[int] = None
     plr_replay_prob: float = 0.8
     plr_staleness: float = 0.3
     plr_temperature: float = 0.3
@@ -277,8 +283,10 @@ def validate_config(config: CurriculumConfig) -> CurriculumConfig:
     """Raise ``ValueError`` naming the first bad field and its allowed range; return ``config`` unchanged."""
     resolve_factory(config.selector)
     for name in ("epochs_per_chunk", "steps_per_epoch", "max_epochs", "max_evals", "attempts", "best",
-                 "roughness_stride", "terrains_per_chunk", "levels", "plr_capacity", "accel_edits"):
+                 "roughness_stride", "terrains_per_chunk", "levels", "accel_edits"):
         _int_at_least(config, name, 1)
+    if config.plr_capacity is not None:
+        _int_at_least(config, "plr_capacity", 1)
     walks("CurriculumConfig", config)
     _float_in(config, "threshold", 0.0, 1.0, lo_open=True)
     _float_in(config, "max_fitness", 0.0, None, lo_open=True)
@@ -304,6 +312,15 @@ def validate_config(config: CurriculumConfig) -> CurriculumConfig:
     for name in ("plr_replay_prob", "plr_staleness", "plr_min_fill"):
         _float_in(config, name, 0.0, 1.0, lo_open=False)
     _float_in(config, "plr_temperature", 0.0, None, lo_open=True)
+    if config.selector in ("plr", "accel") and config.plr_capacity is not None:
+        fill = math.ceil(config.plr_capacity * config.plr_min_fill)
+        seen = config.terrains_per_chunk * config.max_chunks
+        if fill > seen:
+            raise ValueError(
+                f"CurriculumConfig.plr_capacity must be at most {int(seen / max(config.plr_min_fill, 1e-9))} (or None: "
+                f"sized to the run) for {config.selector}: {config.plr_capacity} fills to plr_min_fill="
+                f"{config.plr_min_fill} ({fill} levels) only after more than the run's {config.max_chunks} chunks of "
+                f"{config.terrains_per_chunk} new levels ({seen}), so it would never replay")
     if config.selector == "accel" or config.accel_generator is not None:
         accel_generator(config)
     if config.overlap and config.selector not in ("map", "roughness", "random"):  # one terrain a trial

@@ -42,22 +42,24 @@ Where ours differ from the field's (decisions, with reasons):
   start at random levels ``0 .. levels_init`` (default ``levels // 2``: legged_gym's ``max_init_terrain_level =
   5`` of 10).
   ``progress`` is each env's furthest normalised distance since the chunk's restart (``Outcome.progress``).
-- ``plr`` keeps JaxUED's ``LevelSampler`` and the defaults of its ``maze_plr.py`` (buffer of 4 000 levels, replay
-  probability 0.8 once the buffer is half full, rank prioritisation at temperature 0.3, staleness coefficient 0.3,
-  duplicates updated, not added), with a level = a bank terrain (so the buffer holds at most the bank's N) and
-  two differences: (1) a terrain's score is its *learnability* ``p (1 - p)`` (p: the fraction of its envs that
-  reached the threshold in the chunk; Rutherford et al. 2024's SFL), not MaxMC or the positive value loss, which
+- ``plr`` keeps JaxUED's ``LevelSampler`` and the defaults of its ``maze_plr.py`` (replay probability 0.8 once the
+  buffer is half full, rank prioritisation at temperature 0.3, staleness coefficient 0.3, duplicates updated, not
+  added), with a level = a bank terrain (so the buffer holds at most the bank's N) and three differences: (0) the
+  buffer is sized to the run (:func:`plr_buffer_capacity`: half full after the first tenth of its chunks; 128 at
+  ``gpu-short``), not 4 000 levels: JaxUED's buffer fills to half in its first 0.2 % of updates, while at 8 new
+  levels a chunk a 4 000 buffer would need 250 chunks, more than a 75-chunk run has; (1) a terrain's score is
+  its *learnability* ``p (1 - p)`` (p: the fraction of its envs that reached the threshold in the chunk; Rutherford et al. 2024's SFL), not MaxMC or the positive value loss, which
   need per-level value estimates that our chunk does not expose; (2) new terrains are trained on (PLR's
   "exploratory gradient updates", JaxUED's ``--exploratory_grad_updates``), not only scored as robust PLR does:
   a chunk's PPO rollouts are the only rollouts it makes, and scoring without training would spend a chunk's
   budget on evaluation.
 - ``accel`` keeps JaxUED's ``accel`` branch structure (a chunk on new levels or, with the replay probability, on
   buffer replays; the chunk after a replay on the replayed levels, each edited; new and edited levels scored and
-  inserted, replayed ones re-scored) with ``plr``'s buffer defaults and its two differences (learnability scores,
-  edited and new levels trained on, where robust ACCEL only scores them), and: a level is a genome of
+  inserted, replayed ones re-scored) with ``plr``'s buffer defaults and its differences (a buffer sized to the
+  run, learnability scores, edited and new levels trained on, where robust ACCEL only scores them), and: a level is a genome of
   ``accel_generator`` (JaxUED: a maze), a new level is the generator's random ``sample`` (JaxUED's ACCEL starts
   from empty mazes), an edit is ``accel_edits`` (default 1) applications of the generator's own ``mutate`` (the
-  paper's operator; JaxUED edits 5 maze tiles), and the buffer's capacity is ``plr_capacity`` genomes (not bound
+  paper's operator; JaxUED edits 5 maze tiles), and the buffer's capacity is :func:`plr_buffer_capacity` genomes (not bound
   by the bank). The policy is also evaluated each chunk on one bank terrain drawn uniformly (an extra slot no env
   trains on), so the paper's "hardest terrain traversed" is recorded on the archive as for ``dr``.
 - Per-env selectors evaluate (for the record of the hardest terrain traversed, the paper's metric) one terrain a
@@ -73,6 +75,7 @@ from __future__ import annotations
 
 import functools
 import importlib
+import math
 from typing import Any, Callable, NamedTuple, Optional
 
 import jax
@@ -86,7 +89,7 @@ from jaxterrain.terrain import TerrainScale
 __all__ = ["Selector", "Assignment", "Outcome", "Decision", "SequenceState", "DRState", "LevelsState", "PLRState",
            "get_selector", "register_selector", "selector_names", "sequence_selector", "dr_selector",
            "levels_selector", "plr_selector", "accel_selector", "accel_generator", "LevelBuffer", "AccelState",
-           "ACCEL_NEW", "ACCEL_REPLAY", "ACCEL_EDIT", "plr_weights", "plr_insert", "plr_sample", "learnability", "terrain_hardness", "roughness_sequence", "select", "removal_mask", "gp_params",
+           "ACCEL_NEW", "ACCEL_REPLAY", "ACCEL_EDIT", "plr_buffer_capacity", "PLR_FILL_FRACTION", "plr_weights", "plr_insert", "plr_sample", "learnability", "terrain_hardness", "roughness_sequence", "select", "removal_mask", "gp_params",
            "level_bands", "levels_rule"]
 
 
@@ -167,6 +170,21 @@ def roughness_sequence(bank: TerrainBank, stride: int) -> tuple[jax.Array, jax.A
     order = jnp.argsort(jnp.asarray(bank.descriptors)[:, 0], stable=True)
     rank = jnp.zeros(order.shape[0], jnp.int32).at[order].set(jnp.arange(order.shape[0], dtype=jnp.int32))
     return rank, (rank % stride) == 0
+
+
+PLR_FILL_FRACTION = 0.1
+"""``plr_capacity=None``: the buffer reaches ``plr_min_fill`` after this fraction of the run's chunks."""
+
+
+def plr_buffer_capacity(config) -> int:
+    """Entries of ``plr``'s and ``accel``'s level buffer: ``plr_capacity``, or with None the buffer that the new levels
+    of the run's first ``PLR_FILL_FRACTION`` of chunks (``terrains_per_chunk`` each, at least one chunk) fill to
+    ``plr_min_fill``: ``ceil(K x ceil(chunks / 10) / plr_min_fill)`` (``gpu-short``, 75 chunks of 8: 128; the
+    paper's budget, 750 chunks: 1 200). ``plr`` bounds it further by the bank's terrains."""
+    if config.plr_capacity is not None:
+        return int(config.plr_capacity)
+    new = int(config.terrains_per_chunk) * max(1, math.ceil(config.max_chunks * PLR_FILL_FRACTION))
+    return max(int(config.terrains_per_chunk), math.ceil(new / config.plr_min_fill) if config.plr_min_fill > 0 else new)
 
 
 def select(score: jax.Array, available: jax.Array, hardness: jax.Array) -> jax.Array:
@@ -490,7 +508,7 @@ def plr_selector(config) -> Selector:
         return jax.random.randint(key, (k,), 0, bank.fitness.shape[0], dtype=jnp.int32)
 
     def init(key, bank):
-        c = min(int(config.plr_capacity), int(bank.fitness.shape[0]))
+        c = min(plr_buffer_capacity(config), int(bank.fitness.shape[0]))
         zi = jnp.zeros((), jnp.int32)
         return PLRState(levels=jnp.full((c,), -1, jnp.int32), scores=jnp.full((c,), -jnp.inf, jnp.float32),
                         timestamps=jnp.zeros((c,), jnp.int32), size=zi, episode_count=zi, terrains=new(key, bank),
@@ -608,7 +626,7 @@ def accel_selector(config) -> Selector:
     def init(key, bank):
         new_key, eval_key = jax.random.split(key)
         genomes = fresh(new_key)
-        c = int(config.plr_capacity)
+        c = plr_buffer_capacity(config)
         buffer = LevelBuffer(levels=jax.tree.map(lambda a: jnp.zeros((c,) + a.shape[1:], a.dtype), genomes),
                              scores=jnp.full((c,), -jnp.inf, jnp.float32), timestamps=jnp.zeros((c,), jnp.int32),
                              size=jnp.zeros((), jnp.int32), episode_count=jnp.zeros((), jnp.int32))

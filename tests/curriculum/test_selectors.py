@@ -281,10 +281,25 @@ def test_a_users_selector_runs_by_module_and_name_without_editing_the_library(mo
     (dict(selector="accel"), "accel_generator must be one of cppn, .*got None"),
     (dict(selector="accel", accel_generator="nope"), "accel_generator must be one of .*got 'nope'"),
     (dict(selector="accel", accel_generator="perlin", accel_edits=0), "accel_edits must be an integer >= 1"),
+    (dict(selector="plr", plr_capacity=0), "plr_capacity must be an integer >= 1"),
+    # JaxUED's 4 000 at gpu-short (75 chunks of 8 new levels): half full after 250 chunks, so it would never replay
+    (dict(selector="plr", max_epochs=3000, plr_capacity=4000), r"plr_capacity must be at most 1200 .*never replay"),
 ])
 def test_selector_settings_are_refused_with_the_field_and_its_range(fields, message):
     with pytest.raises(ValueError, match=message):
         C.validate_config(C.CurriculumConfig(**fields))
+
+
+def test_the_default_level_buffer_fills_to_min_fill_in_the_first_tenth_of_the_run():
+    """plr_capacity=None: K x ceil(chunks / 10) new levels fill it to plr_min_fill (gpu-short 128, the paper 1 200)."""
+    gpu_short = C.CurriculumConfig(selector="plr", max_epochs=3000)  # 75 chunks of 40 epochs, 8 terrains a chunk
+    assert gpu_short.max_chunks == 75 and S.plr_buffer_capacity(gpu_short) == 128
+    assert S.plr_buffer_capacity(gpu_short._replace(max_epochs=30000)) == 1200
+    assert S.plr_buffer_capacity(gpu_short._replace(plr_min_fill=0.25)) == 256
+    assert S.plr_buffer_capacity(gpu_short._replace(max_epochs=40)) == 16  # one chunk: at least one chunk's levels
+    assert S.plr_buffer_capacity(gpu_short._replace(plr_capacity=300)) == 300
+    C.validate_config(gpu_short._replace(plr_capacity=1200))  # fills to half with the run's last new levels
+    C.validate_config(gpu_short._replace(selector="dr", plr_capacity=4000))  # not a buffer selector: not checked
 
 
 def test_a_checkpoint_of_the_state_before_the_protocol_restores_into_the_selector_state(tmp_path):

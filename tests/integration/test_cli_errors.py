@@ -164,6 +164,7 @@ def test_every_long_command_takes_the_same_presets_and_prints_its_config(command
 @pytest.mark.parametrize("argv, message", [
     (["--curriculum", "accel", "--accel-generator", "nope"], "learn: --accel-generator must be one of cppn, "),
     (["--curriculum", "levels", "--levels", "3", "--levels-init", "3"], "learn: --levels-init must be in [0, levels - 1"),
+    (["--curriculum", "plr", "--plr-capacity", "100000"], "learn: --plr-capacity must be at most "),
     (["--robot", "dog"], "learn: --robot: robot must be one of humanoid, ant, got 'dog'"),
 ])
 def test_learn_refuses_settings_read_against_the_archive_in_one_line_and_leaves_no_run(tmp_path, monkeypatch,
