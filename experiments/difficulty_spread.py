@@ -6,9 +6,14 @@ For each height scale and generator this samples ``--n`` random genomes, renders
 ``jaxterrain.difficulty.evaluate`` (``--attempts``, ``--best``), and writes:
 
 - ``fitness.csv``   height, generator, index, fitness
-- ``spread.md``     per height and generator: mean, quantiles 10/50/90 %, share in [0.1, 0.9]
+- ``spread.md``     per height and generator: mean, quantiles 10/50/90 %, share in [0.1, 0.9]; and two anchors at
+                    1.0 m height scale: flat ground and a 1 m wall (0.4 m thick) across the middle of the course
+                    (a calibrated walker crosses the first and is stopped by the second)
 - ``spread.png``    fitness histograms, one panel per height scale
 - ``config.json``
+
+``--robot NAME`` walks that robot's shipped base policy (``jaxterrain.difficulty.robot_base_policy``; default the
+humanoid's).
 """
 
 from __future__ import annotations
@@ -26,6 +31,18 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--generators", nargs="*", default=None, help="default: every generator that loads")
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--out", default=None, help="run folder (default runs/difficulty-spread-<time>)")
+    parser.add_argument("--robot", default="humanoid", metavar="NAME",
+                        help="walk this robot's shipped base policy (default humanoid)")
+
+
+def anchor_maps(size: int = 256):
+    """``{name: [size, size] float32 heightmap}``: flat ground and a wall of height value 1.0 (1 m at the 1.0 m
+    height scale), 10 cells thick (0.4 m at 0.04 m cells), across every row in the middle of the course."""
+    import numpy as np
+
+    wall = np.zeros((size, size), np.float32)
+    wall[:, size // 2 - 5:size // 2 + 5] = 1.0
+    return {"flat": np.zeros((size, size), np.float32), "wall_1m": wall}
 
 
 def main(args: argparse.Namespace) -> int:
@@ -48,6 +65,10 @@ def main(args: argparse.Namespace) -> int:
         raise UsageError("--terrains must be >= 1")
     if any(h <= 0 for h in args.heights):
         raise UsageError("--heights must all be > 0 (metres)")
+    try:
+        policy = difficulty.robot_base_policy(args.robot)
+    except ValueError as err:
+        raise UsageError(f"--robot: {err}") from None
     run = run_folder("difficulty-spread", args.out)
     run.mkdir(parents=True, exist_ok=True)
     write_config(run, {**vars(args), "command": "difficulty-spread"})
@@ -69,11 +90,17 @@ def main(args: argparse.Namespace) -> int:
         for name, hm in maps.items():
             t0 = time.perf_counter()
             fit = np.asarray(difficulty.evaluate(hm, jax.random.key(args.seed + 1), attempts=args.attempts,
-                                                 best=args.best, scale=scale))
+                                                 best=args.best, scale=scale, policy=policy))
             results[(height, name)] = fit
             print(f"height {height:.2f} m  {name:15s} fitness mean {fit.mean():.3f}  "
                   f"q10/50/90 {np.quantile(fit, 0.1):.2f}/{np.median(fit):.2f}/{np.quantile(fit, 0.9):.2f}  "
                   f"({time.perf_counter() - t0:.0f} s)", flush=True)
+
+    anchors = anchor_maps()
+    fit = np.asarray(difficulty.evaluate(np.stack(list(anchors.values())), jax.random.key(args.seed + 2),
+                                         attempts=args.attempts, best=args.best, scale=TerrainScale(), policy=policy))
+    anchor_fit = dict(zip(anchors, fit.tolist()))
+    print("anchors at 1.0 m: " + ", ".join(f"{k} {v:.3f}" for k, v in anchor_fit.items()), flush=True)
 
     out = io.StringIO()
     w = csv.writer(out)
@@ -81,9 +108,13 @@ def main(args: argparse.Namespace) -> int:
     for (height, name), fit in results.items():
         for i, f in enumerate(fit):
             w.writerow([height, name, i, f"{f:.4f}"])
+    for name, f in anchor_fit.items():
+        w.writerow([TerrainScale().height, f"anchor:{name}", 0, f"{f:.4f}"])
     atomic_write_text(run / "fitness.csv", out.getvalue())
 
-    lines = [f"# fitness spread ({args.n} random terrains per generator, best {args.best} of {args.attempts})", "",
+    lines = [f"# fitness spread ({args.robot}: {args.n} random terrains per generator, best {args.best} of "
+             f"{args.attempts})", "",
+             "Anchors at the 1.0 m height scale: " + ", ".join(f"{k} {v:.3f}" for k, v in anchor_fit.items()), "",
              "| height (m) | generator | mean | q10 | median | q90 | share in [0.1, 0.9] |", "|---|---|---|---|---|---|---|"]
     for (height, name), fit in results.items():
         inside = np.mean((fit >= 0.1) & (fit <= 0.9))

@@ -152,10 +152,28 @@ def test_the_walker_fitness_and_evolve_take_a_robot_and_refuse_one_without_a_bas
     with pytest.raises(ValueError, match="EvolveConfig.robot must be one of humanoid, ant; got 'dog'"):
         qd.config.resolve_config(qd.EvolveConfig(robot="dog"))
     assert difficulty.fitness_fn(128) is difficulty.fitness_fn(128, robot="humanoid")  # one cached function
-    with pytest.raises(ValueError, match="robot 'ant': no base policy is shipped .* train-base-policy --robot ant"):
-        difficulty.fitness_fn(128, robot="ant")
+    monkeypatch.setattr(robots, "_REGISTRY", dict(robots._REGISTRY))
+    robots.register_robot(robots.ANT._replace(name="dog"))  # a robot nobody trained
+    with pytest.raises(ValueError, match="robot 'dog': no base policy is shipped .* train-base-policy --robot dog"):
+        difficulty.fitness_fn(128, robot="dog")
     monkeypatch.chdir(tmp_path)
     with pytest.raises(SystemExit) as stop:
-        main(["evolve", "--robot", "ant", "--fitness", "difficulty"])
+        main(["evolve", "--robot", "dog", "--fitness", "difficulty"])
     assert stop.value.code == 2
-    assert "--robot: robot 'ant': no base policy" in capsys.readouterr().err and not (tmp_path / "runs").exists()
+    assert "--robot: robot 'dog': no base policy" in capsys.readouterr().err and not (tmp_path / "runs").exists()
+
+
+def test_the_ant_ships_a_base_policy_that_records_its_robot_and_passed_the_bar():
+    """``jaxterrain/assets/base_policy_ant/``: the ant's policy (27 observations, 8 actions), its walker config and
+    its flat-ground evaluation (best 5 of 20 >= 0.95), loaded by ``difficulty.robot_base_policy("ant")``."""
+    import json
+
+    from jaxterrain import difficulty, rl
+
+    folder = rl.base_policy_dir("ant")
+    policy = difficulty.robot_base_policy("ant")
+    assert difficulty.policy_robot(policy) == "ant"
+    assert (policy.observation_size, policy.action_size) == (27, 8)
+    result = json.loads((folder / "eval.json").read_text())
+    assert result["attempts"] == 20 and result["best"] == 5 and result["best_mean"] >= 0.95
+    assert "train-base-policy --robot ant --preset gpu" in (folder / "PROVENANCE.md").read_text()
