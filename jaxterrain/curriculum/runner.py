@@ -419,7 +419,7 @@ def run_treatment(cfg: dict, folder: Path, time_limit_s: float | None = None, de
             history=history, run_dir=folder, key_metric="hardest", desc=desc or cfg["curriculum"],
             time_limit_s=None if time_limit_s is None else max(time_limit_s - (time.perf_counter() - t0), 1e-3),
             unit="chunk", meta={"config": cfg, "archive_sha256": digest, "backend": physics_of(cfg)},
-            wall_s=before + time.perf_counter() - t0)
+            wall_s=before + time.perf_counter() - t0, fit_to_limit=True)  # the block's length is traced
     finally:
         _LISTENERS.clear()
     if done < config.max_chunks and not bool(np.all(np.asarray(states.done))):

@@ -298,7 +298,7 @@ def run_chunks(chunk_fn: ChunkFn, state: Any, *, total: int, every: int, start: 
                history: Optional[dict] = None, run_dir: str | os.PathLike | None = None,
                key_metric: Optional[str] = None, time_limit_s: Optional[float] = None,
                progress: bool | Callable[[dict], None] = True, desc: str = "", unit: str = "step",
-               meta: Optional[dict] = None, wall_s: float = 0.0) -> tuple[Any, int, dict]:
+               meta: Optional[dict] = None, wall_s: float = 0.0, fit_to_limit: bool = False) -> tuple[Any, int, dict]:
     """Run steps ``[start, total)`` as ``chunk_fn(state, a, b)`` calls of at most ``every`` steps.
 
     Args:
@@ -310,7 +310,10 @@ def run_chunks(chunk_fn: ChunkFn, state: Any, *, total: int, every: int, start: 
       run_dir: folder of ``checkpoint.npz``, ``metrics.csv`` and ``tb/``; None writes nothing.
       key_metric: the metric shown beside the progress bar.
       time_limit_s: the seconds (from the call) the run may take: stop after the chunk in which they passed, or
-        before a chunk predicted to end past them.
+        before a chunk predicted (at the fastest seconds per step so far) to end past them.
+      fit_to_limit: ``chunk_fn`` takes any ``stop - start`` without re-compiling (e.g. a traced step count), so
+        a chunk predicted to end past the time limit is shortened to the steps that fit instead of skipped: the
+        limit is then honoured to within one step, not one chunk.
       progress: True for a tqdm bar on stderr (plain lines, at most one per :data:`PLAIN_EVERY_S` seconds, where
         stderr is not a terminal); a callable receives a dict per chunk (``done``, ``total``,
         ``seconds``, ``steps_per_s`` and the latest value of every metric); False is silent.
@@ -336,7 +339,14 @@ def run_chunks(chunk_fn: ChunkFn, state: Any, *, total: int, every: int, start: 
     rate = float("inf")  # the fastest seconds per step so far
     try:
         while done < total:
-            stop = min(done + every, total)
+            n = min(every, total - done)
+            if time_limit_s is not None and done > start:  # the rate is known: does the next chunk fit?
+                left = time_limit_s - (time.perf_counter() - t0)
+                if rate * n > left:
+                    n = min(n, int(left // rate)) if fit_to_limit and left > 0 else 0
+                if n < 1:
+                    break
+            stop = done + n
             t1 = time.perf_counter()
             state, metrics = chunk_fn(state, done, stop)
             _extend(history, metrics, stop - done)
@@ -357,9 +367,6 @@ def run_chunks(chunk_fn: ChunkFn, state: Any, *, total: int, every: int, start: 
                 bar.update(stop - bar.n)
             elif callable(progress):
                 progress(info)
-            predicted = rate * (min(done + every, total) - done)  # the next chunk at the fastest rate so far
-            if time_limit_s is not None and done < total and time.perf_counter() - t0 + predicted > time_limit_s:
-                break
     finally:
         if bar is not None and not isinstance(bar, _PlainProgress):
             bar.close()

@@ -105,6 +105,27 @@ def test_time_limit_skips_a_chunk_predicted_to_end_past_it():
     assert done == 2
 
 
+def test_time_limit_shortens_the_last_chunk_when_any_length_runs_without_recompiling():
+    """fit_to_limit: a chunk predicted to end past the limit runs the steps that still fit (the curriculum's block,
+    whose length is traced), so the limit holds to within one step, not one chunk of ``every`` steps."""
+    import time
+
+    calls = []
+
+    def per_step(state, start, stop):
+        calls.append((start, stop))
+        time.sleep(0.1 * (stop - start))
+        return state, {"x": np.zeros(stop - start, np.float32)}  # no compile: the rate is the sleep's
+
+    # 5 steps take 0.5 s; 0.3 s are left: 2 more steps fit, a 3rd would not
+    _, done, hist = driver.run_chunks(per_step, make_state(), total=20, every=5, time_limit_s=0.8, progress=False,
+                                      fit_to_limit=True)
+    assert calls == [(0, 5), (5, 7)] and done == 7 and len(hist["x"]) == 7
+    calls.clear()  # without it, the chunk that does not fit is skipped whole
+    _, done, _ = driver.run_chunks(per_step, make_state(), total=20, every=5, time_limit_s=0.8, progress=False)
+    assert calls == [(0, 5)] and done == 5
+
+
 def test_progress_callable_and_batched_metrics():
     seen = []
 
