@@ -1,5 +1,9 @@
 """Walker rollout throughput on the GPU machine, against raw MJX (XML solver options) and MuJoCo C's rollout.
 
+Every part walks / simulates one robot, ``--robot NAME`` (default ``humanoid``; shipped: ``humanoid``, ``ant``,
+``jaxterrain.walker.robots``): its ``WalkerConfig(robot=NAME)`` defaults, its MJCF on the heightfield (raw MJX and
+MuJoCo C step the same model) and its shipped base policy. The result JSON and the printed header name the robot.
+
 Measures, in one run (every figure after a warm-up / compile, device work waited for with block_until_ready):
 
 1. ours: physics steps/s of the batched walker (``jaxterrain.walker.WalkerEnv``, its default solver
@@ -24,11 +28,13 @@ Measures, in one run (every figure after a warm-up / compile, device work waited
    Perlin terrains, with the largest per-terrain fitness difference against the first backend (issue 14's bar:
    0.03).
 
-The policy is the shipped base policy when ``jaxterrain.rl.load_policy()`` finds it, else an MLP of the PPO config's
-size with random parameters (said in the output). Terrains: Perlin terrains from ``jaxterrain.generators`` (a bank
-of ``--bank`` distinct maps, tiled to one per env), heights ``* scale.height`` metres.
+The policy is the robot's shipped base policy when ``jaxterrain.difficulty.robot_base_policy(robot)`` finds it (the
+humanoid's: ``jaxterrain.rl.load_policy()``), else an MLP of the PPO config's size with random parameters (said in the
+output). Terrains: Perlin terrains from ``jaxterrain.generators`` (a bank of ``--bank`` distinct maps, tiled to one
+per env), heights ``* scale.height`` metres.
 
     python benchmarks/rollouts.py --out runs/rollouts.json
+    python benchmarks/rollouts.py --robot ant --out runs/rollouts_ant.json
 
 Every batch size is one XLA compile (~0.5-1 min on the GPU machine; MJX-Warp compiles in seconds); to stay inside a
 10-minute command, split: ``--skip eval,solver,backend`` (throughput table) and ``--skip ours,raw,c`` (difficulty
@@ -89,12 +95,12 @@ def terrain_bank(key, n: int, size: int) -> jax.Array:
         return h
 
 
-def make_policy(env: WalkerEnv, key):
-    """(policy(obs) -> action, description)."""
+def make_policy(env: WalkerEnv, key, robot: str = "humanoid"):
+    """(policy(obs) -> action, description): ``robot``'s shipped base policy, else a random MLP of the PPO size."""
     from jaxterrain import rl
 
     try:
-        policy = rl.load_policy()
+        policy = difficulty.robot_base_policy(robot)
         if int(policy.observation_size) == env.observation_size:
             return policy, f"shipped base policy ({policy.path})"
         log("shipped policy has another observation size; using a random MLP")
@@ -329,6 +335,8 @@ def backend_check(cfg, policy, backends, n_flat, perlin_m, attempts=20, best=5):
 def parse_args(argv=None) -> argparse.Namespace:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--out", default=None, help="JSON result path")
+    p.add_argument("--robot", default="humanoid", metavar="NAME",
+                   help=f"the robot every part walks / simulates: {', '.join(walker.robots.names())}")
     p.add_argument("--batch-sizes", default="8192,32768", help="ours: envs per batch")
     p.add_argument("--raw-batch-sizes", default="32768", help="raw MJX (every --raw-solvers): envs per batch")
     p.add_argument("--env-steps", type=int, default=100, help="env steps per timed call (x5 physics steps)")
@@ -352,6 +360,10 @@ def parse_args(argv=None) -> argparse.Namespace:
     p.add_argument("--check-perlin", type=int, default=64, help="backend check: Perlin terrains (x 20 attempts)")
     p.add_argument("--skip", default="", help="comma list of parts to skip: ours,raw,c,eval,solver,backend")
     args = p.parse_args(argv)
+    try:
+        walker.robots.get(args.robot)
+    except ValueError as err:  # one line, before anything compiles
+        p.exit(2, f"{p.prog}: error: --robot: {err}\n")
     for v in filter(None, args.backend.split(",")):
         if v not in walker.BACKENDS:
             p.error(f"--backend: {v!r} is not one of {walker.BACKENDS}")
@@ -517,16 +529,18 @@ def main(argv=None):
     env_info = environment()
     log("environment", env_info)
     scale = TerrainScale(cell_size=args.cell_size)
-    cfg = WalkerConfig(terrain_shape=(args.size, args.size), scale=scale)
+    cfg = WalkerConfig(terrain_shape=(args.size, args.size), scale=scale, robot=args.robot)
     env = WalkerEnv(cfg)
-    policy, policy_desc = make_policy(env, jax.random.PRNGKey(0))
+    log("robot:", args.robot)
+    policy, policy_desc = make_policy(env, jax.random.PRNGKey(0), args.robot)
     log("policy:", policy_desc)
     bank = terrain_bank(jax.random.PRNGKey(11), args.bank, args.size)
     variants, skipped = runnable_variants(backends, [v for v in args.layout.split(",") if v])
     for why in skipped:
         log("skipped", why)
     result = {"environment": env_info, "variants": [list(v) for v in variants], "skipped": skipped,
-              "policy": policy_desc, "solver_ours": cfg.solver._asdict(), "solver_xml": SOLVER_XML._asdict(),
+              "robot": args.robot, "policy": policy_desc, "solver_ours": cfg.solver._asdict(),
+              "solver_xml": SOLVER_XML._asdict(),
               "terrain": {"shape": [args.size, args.size], "scale": scale._asdict(), "distinct": args.bank},
               "ours": [], "raw_mjx_xml": [], "raw_mjx_sound": [], "mujoco_c": [], "difficulty": []}
     bench = Bench(args, cfg, env, policy, bank, bank * scale.height, variants, [], result)
@@ -541,7 +555,8 @@ def main(argv=None):
                          "speedup_vs_c": best_ours / best_c if best_c else None}
     bench.save()
     print()
-    print(f"device: {env_info['device']}; policy: {policy_desc}; terrains: per-env {args.size}x{args.size}")
+    print(f"device: {env_info['device']}; robot: {args.robot}; policy: {policy_desc}; "
+          f"terrains: per-env {args.size}x{args.size}")
     print(markdown_table(bench.rows, ["what", "backend", "batch", "M steps/s", "seconds", "compile+1st s", "note"]))
     print(f"\nours best {best_ours / 1e6:.2f} M physics steps/s; vs MuJoCo C (XML solver) "
           f"{(best_ours / best_c) if best_c else float('nan'):.1f}x")

@@ -146,6 +146,9 @@ def validate_heightmaps(heightmaps, name: str = "heightmaps") -> jax.Array:
         raise ValueError(f"{name} must be an array [B, H, W], got {type(heightmaps).__name__}")
     if len(shape) != 3 or shape[0] < 1 or shape[1] < 4 or shape[2] < 4:
         raise ValueError(f"{name} must have shape [B, H, W] with B >= 1 and H, W >= 4, got {tuple(shape)}")
+    dtype = getattr(heightmaps, "dtype", None)
+    if dtype is None or np.dtype(dtype).kind not in "biuf":
+        raise ValueError(f"{name} must be a real-valued (float) array [B, H, W], got dtype {dtype}")
     h = jnp.asarray(heightmaps, jnp.float32)
     finite, lo, hi = (v.item() for v in jax.device_get((jnp.all(jnp.isfinite(h)), jnp.min(h), jnp.max(h))))
     if not finite:

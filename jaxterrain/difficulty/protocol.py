@@ -7,10 +7,12 @@ protocol's walked distances into a fitness (:func:`best_of`, :func:`rotate_headi
 from __future__ import annotations
 
 import numbers
+import operator
 from typing import NamedTuple, Optional
 
 import jax
 import jax.numpy as jnp
+import numpy as np
 
 from jaxterrain.walker import WalkerConfig
 
@@ -85,7 +87,7 @@ class Protocol(NamedTuple):
             raise ValueError(f"protocol.best must be an int in [1, attempts / headings = {attempts // headings}] "
                              f"(the best attempts kept per heading), got {self.best!r}")
         try:
-            spread = float(self.start_spread)
+            spread = float("nan") if isinstance(self.start_spread, (str, bytes, bool)) else float(self.start_spread)
         except (TypeError, ValueError):
             spread = float("nan")
         if not (spread >= 0.0 and spread < float("inf")):
@@ -133,10 +135,34 @@ def protocol_from(protocol: Optional[Protocol], attempts: Optional[int], best: O
 # ----------------------------------------------------------------------------------------------------------------
 # From a protocol's distances to a fitness (pure; jit / vmap them yourself)
 # ----------------------------------------------------------------------------------------------------------------
+def _check_distances(distances, where: str = "distances") -> tuple:
+    """The static shape of ``distances`` (a real array, traced or not), or ``ValueError`` naming it."""
+    shape, dtype = getattr(distances, "shape", None), getattr(distances, "dtype", None)
+    if shape is None or dtype is None:
+        try:
+            distances = np.asarray(distances)
+        except (TypeError, ValueError):
+            raise ValueError(f"{where} must be a real array [B, attempts]; got {type(distances).__name__}") from None
+        shape, dtype = distances.shape, distances.dtype
+    if np.dtype(dtype).kind not in "biuf":
+        raise ValueError(f"{where} must be a real array [B, attempts]; got dtype {dtype}")
+    return tuple(shape)
+
+
 def best_of(distances: jax.Array, best: int) -> jax.Array:
-    """``[B, attempts]`` -> ``[B]``: mean of the ``best`` largest distances per row (NaN counted as 0)."""
+    """``[B, attempts]`` -> ``[B]``: mean of the ``best`` largest distances per row (NaN counted as 0).
+    (Any leading axes ``[..., attempts]`` are kept.) ``best`` must be an int in ``[1, attempts]``."""
+    shape = _check_distances(distances)
+    if len(shape) < 1:
+        raise ValueError(f"distances must have shape [B, attempts]; got shape {shape}")
+    try:
+        k = None if isinstance(best, (bool, np.bool_)) else operator.index(best)  # ints, numpy / concrete jax ints
+    except TypeError:
+        k = None
+    if k is None or not 1 <= k <= shape[-1]:
+        raise ValueError(f"best must be an int in [1, attempts = {shape[-1]}] (distances' last axis), got {best!r}")
     d = jnp.nan_to_num(jnp.asarray(distances, jnp.float32), nan=0.0, posinf=0.0, neginf=0.0)
-    return jnp.mean(jax.lax.top_k(d, best)[0], axis=-1)
+    return jnp.mean(jax.lax.top_k(d, k)[0], axis=-1)
 
 
 def rotate_headings(terrains: jax.Array, headings: int) -> jax.Array:
@@ -144,8 +170,11 @@ def rotate_headings(terrains: jax.Array, headings: int) -> jax.Array:
     ``jnp.rot90(., HEADING_TURNS[headings][i])``, so that walking +x on it walks the original along +x, +y, -x or -y
     (rows are y, columns x: ``rot90(m, 1)[i, j] = m[j, W - 1 - i]``, its +x is the original's +y). ``headings`` must
     be 1, 2 or 4; for more than 1 the maps must be square (H == W)."""
-    if headings not in HEADING_TURNS:
+    if isinstance(headings, bool) or headings not in HEADING_TURNS:
         raise ValueError(f"headings must be one of {sorted(HEADING_TURNS)}, got {headings!r}")
+    if len(getattr(terrains, "shape", ())) != 3:
+        raise ValueError(f"terrains must have shape [B, H, W]; got "
+                         f"{tuple(terrains.shape) if hasattr(terrains, 'shape') else type(terrains).__name__}")
     if headings == 1:
         return terrains
     b, h, w = terrains.shape
@@ -158,7 +187,8 @@ def rotate_headings(terrains: jax.Array, headings: int) -> jax.Array:
 def aggregate(distances: jax.Array, protocol: Protocol) -> jax.Array:
     """``[B, attempts]`` distances, heading-major (attempt ``a`` on heading ``a // per_heading``) -> fitness ``[B]``:
     per heading the mean of the ``protocol.best`` largest, then ``protocol.rule`` over headings. With one heading
-    this is :func:`best_of` exactly."""
+    this is :func:`best_of` exactly. ``ValueError`` for a bad protocol or distances of another shape."""
+    protocol = _check_protocol_distances(distances, protocol)
     if protocol.headings == 1:
         return best_of(distances, protocol.best)
     per = heading_scores(distances, protocol)  # [B, headings]
@@ -167,13 +197,28 @@ def aggregate(distances: jax.Array, protocol: Protocol) -> jax.Array:
 
 def by_heading(distances: jax.Array, protocol: Protocol) -> jax.Array:
     """``[B, attempts]`` -> ``[B, headings, per_heading]``: the attempts of each heading."""
+    protocol = _check_protocol_distances(distances, protocol)
     d = jnp.asarray(distances)
     return d.reshape(d.shape[0], protocol.headings, protocol.per_heading)
 
 
 def heading_scores(distances: jax.Array, protocol: Protocol) -> jax.Array:
     """``[B, attempts]`` -> ``[B, headings]``: each heading's mean of its ``protocol.best`` largest distances."""
+    protocol = _check_protocol_distances(distances, protocol)
     return best_of(by_heading(distances, protocol), protocol.best)
+
+
+def _check_protocol_distances(distances, protocol) -> "Protocol":
+    """``protocol`` validated (plain Python fields), after checking that ``distances`` is ``[B, protocol.attempts]``
+    (static shapes: also under jit); ``ValueError`` naming the argument otherwise."""
+    if not isinstance(protocol, Protocol):
+        raise ValueError(f"protocol must be a difficulty.Protocol, got {type(protocol).__name__}")
+    protocol = protocol.validate()
+    shape = _check_distances(distances)
+    if len(shape) != 2 or shape[1] != protocol.attempts:
+        raise ValueError(f"distances must have shape [B, protocol.attempts = {protocol.attempts}] (heading-major); "
+                         f"got shape {shape}")
+    return protocol
 
 
 # The public home of the protocol is jaxterrain.difficulty (docs, pickles and error messages name it).

@@ -118,6 +118,9 @@ def check_heights(h: jax.Array, single: bool = False) -> None:
     """Host-side check of concrete heightmaps ``[B, H, W]``: every value finite and in [0, 1], else a ``ValueError``
     naming ``heightmaps``, the first bad map and the allowed range. Skipped for traced values (inside jit / vmap /
     scan: MAP-Elites computes features inside ``lax.scan``) and for empty batches."""
+    if len(getattr(h, "shape", ())) != 3:
+        raise ValueError(f"heightmaps must have shape [B, H, W]; got "
+                         f"{tuple(h.shape) if hasattr(h, 'shape') else type(h).__name__}")
     if isinstance(h, jax.core.Tracer) or h.size == 0:
         return
     nan, lo, hi = (np.asarray(a) for a in _value_stats(h))
@@ -144,7 +147,15 @@ def _check_int(name: str, value, low: int, high: int | None) -> int:
 
 
 def check_window(shape, window, stride) -> tuple[int, int]:
-    h, w = int(shape[-2]), int(shape[-1])
+    """``(window, stride)`` as ints after checking them against a ``[..., H, W]`` heightmap ``shape``; ``ValueError``
+    naming the parameter otherwise."""
+    try:
+        dims = tuple(shape)
+        if len(dims) < 2 or not all(isinstance(d, (int, np.integer)) and not isinstance(d, bool) for d in dims[-2:]):
+            raise TypeError
+    except TypeError:
+        raise ValueError(f"shape must be the [..., H, W] shape of heightmaps (integers); got {shape!r}") from None
+    h, w = int(dims[-2]), int(dims[-1])
     if min(h, w) < 2:
         raise ValueError(f"heightmaps of {h} x {w} pixels are too small: every window needs at least 2 x 2")
     window = _check_int("window", window, 2, min(h, w))
@@ -159,8 +170,9 @@ def output_shape(shape: Sequence[int], window: int, stride: int) -> tuple[int, i
 
 
 def window_centre(window: int) -> int:
-    """Row (= column) of the centre pixel inside a window: ``window // 2`` (see the module docstring)."""
-    return window // 2
+    """Row (= column) of the centre pixel inside a window: ``window // 2`` (see the module docstring); ``window`` an
+    integer >= 1."""
+    return _check_int("window", window, 1, None) // 2
 
 
 # ----------------------------------------------------------------------------------------------------------------

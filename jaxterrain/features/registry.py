@@ -6,7 +6,7 @@ or plugin registers (:func:`register_descriptor`); :func:`descriptors` computes 
 
 from __future__ import annotations
 
-from typing import Callable, NamedTuple, Sequence
+from typing import Callable, Iterable, NamedTuple, Sequence
 
 import jax
 import jax.numpy as jnp
@@ -101,7 +101,7 @@ def descriptors(
     """
     if isinstance(names, str):
         names = (names,)
-    if names is None or not all(isinstance(n, str) for n in names):
+    if names is None or not isinstance(names, Iterable) or not all(isinstance(n, str) for n in names):
         raise ValueError(f"names must be a sequence of descriptor names out of {descriptor_names()}; got {names!r}")
     names = tuple(names)
     if not names:

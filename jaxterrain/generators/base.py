@@ -33,7 +33,7 @@ import jax.numpy as jnp
 import numpy as np
 
 __all__ = ["Genome", "PRNGKey", "RENDER_CHUNK", "GenomeSpec", "spec", "Generator", "is_traced", "check_count",
-           "chunked_render", "mark_checked", "checked", "uniform_genomes", "gaussian_mutation",
+           "check_key", "chunked_render", "mark_checked", "checked", "uniform_genomes", "gaussian_mutation",
            "check_vector_genomes", "vector_generator"]
 
 Genome = Any  # an array [B, G] or a pytree of arrays with leading axis B
@@ -121,6 +121,21 @@ def check_count(n: Any, name: str, what: str = "n") -> int:
     return value
 
 
+def check_key(key: Any, name: str) -> None:
+    """``key`` must be one JAX PRNG key: a typed key ``jax.random.key(seed)`` of shape ``[]``, or a raw ``uint32``
+    key ``jax.random.PRNGKey(seed)`` (``[2]``; ``[4]`` for the rbg implementations); ``ValueError`` naming ``key``
+    otherwise. Only the (static) dtype and shape are read, so traced keys are checked too."""
+    dtype, shape = getattr(key, "dtype", None), getattr(key, "shape", None)
+    if dtype is not None and shape is not None:
+        if jax.dtypes.issubdtype(dtype, jax.dtypes.prng_key):
+            if tuple(shape) == ():
+                return
+        elif np.dtype(dtype) == np.uint32 and tuple(shape) in ((2,), (4,)):
+            return
+    what = f"shape {tuple(shape)}, dtype {dtype}" if dtype is not None and shape is not None else repr(key)
+    raise ValueError(f"{name}: key must be one JAX PRNG key (jax.random.key(seed)); got {what}")
+
+
 def chunked_render(render_one: Callable[[Genome], jax.Array], chunk: int = RENDER_CHUNK) -> Callable[[Genome], jax.Array]:
     """``jit`` of ``genomes[B, ...] -> maps[B, H, W]``: ``vmap(render_one)`` for ``B <= chunk``, else ``lax.map`` over
     chunks of ``chunk`` genomes (the last, partial chunk vmapped on its own), so the temporaries are those of one
@@ -148,11 +163,14 @@ def checked(gen: "Generator") -> "Generator":
     if not getattr(sample, "__jaxterrain_checked__", False):
         @mark_checked
         def sample(key: PRNGKey, n: int, _sample=gen.sample, _name=gen.name):
-            return _sample(key, check_count(n, _name))
+            n = check_count(n, _name)
+            check_key(key, _name)
+            return _sample(key, n)
 
     if not getattr(mutate, "__jaxterrain_checked__", False):
         @mark_checked
-        def mutate(key: PRNGKey, genomes: Genome, _mutate=gen.mutate, _validate=gen.validate):
+        def mutate(key: PRNGKey, genomes: Genome, _mutate=gen.mutate, _validate=gen.validate, _name=gen.name):
+            check_key(key, _name)
             if not is_traced(genomes):
                 _validate(genomes)
             return _mutate(key, genomes)
@@ -258,7 +276,9 @@ def vector_generator(
 
     @mark_checked
     def sample(key: PRNGKey, n: int) -> jax.Array:
-        return sample_jit(key, check_count(n, name))
+        n = check_count(n, name)
+        check_key(key, name)
+        return sample_jit(key, n)
 
     def validate(genomes: Any) -> None:
         g = check_vector_genomes(genomes, gspec, name)
@@ -267,6 +287,7 @@ def vector_generator(
 
     @mark_checked
     def mutate(key: PRNGKey, genomes: jax.Array) -> jax.Array:
+        check_key(key, name)
         if not is_traced(genomes):
             validate(genomes)
         return mutate_jit(key, jnp.asarray(genomes, jnp.float32))

@@ -108,6 +108,7 @@ from jaxterrain.generators.base import (
     PRNGKey,
     mark_checked,
     check_count,
+    check_key,
     chunked_render,
     is_traced,
 )
@@ -159,6 +160,7 @@ def cppn(size: int = 256, max_nodes: int = 32, max_connections: int = 128, confi
 
     @mark_checked
     def mutate(key: PRNGKey, genomes: CPPNGenome) -> CPPNGenome:
+        check_key(key, "cppn")
         if not is_traced(genomes):
             validate(genomes)
         return mutate_jit(key, CPPNGenome(*genomes))
@@ -177,7 +179,9 @@ def cppn(size: int = 256, max_nodes: int = 32, max_connections: int = 128, confi
 
     @mark_checked
     def sample(key: PRNGKey, n: int) -> CPPNGenome:
-        return sample_jit(key, check_count(n, "cppn"))
+        n = check_count(n, "cppn")
+        check_key(key, "cppn")
+        return sample_jit(key, n)
 
     def render(genomes: CPPNGenome) -> jax.Array:
         if not is_traced(genomes):

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import functools
+import inspect
 import numbers
 from typing import Callable
 
@@ -45,4 +46,16 @@ def get(name: str, **options) -> Generator:
     size = options.get("size", 1)
     if not isinstance(size, numbers.Integral) or isinstance(size, bool) or size < 1:
         raise ValueError(f"generators.get({name!r}): size must be an integer >= 1 (pixels); got {size!r}")
-    return _cached(name, tuple(sorted(options.items())))
+    params = inspect.signature(_FACTORIES[name]).parameters
+    if not any(p.kind is inspect.Parameter.VAR_KEYWORD for p in params.values()):
+        unknown = sorted(set(options) - set(params))
+        if unknown:
+            raise ValueError(f"generators.get({name!r}): unknown option(s) {unknown}; {name} takes "
+                             f"{', '.join(params) or 'no options'}")
+    key = tuple(sorted(options.items()))
+    try:
+        hash(key)
+    except TypeError:
+        raise ValueError(f"generators.get({name!r}): option values must be hashable (generators are cached per "
+                         f"options); got {options!r}") from None
+    return _cached(name, key)

@@ -4,6 +4,7 @@
 from __future__ import annotations
 
 import math
+import numbers
 from typing import Callable, NamedTuple
 
 import jax
@@ -134,19 +135,32 @@ class Archive(NamedTuple):
 
 
 def resolve_config(config: EvolveConfig) -> EvolveConfig:
-    """Check ``config`` on the host and fill in ``ranges`` from :data:`DEFAULT_RANGES`. Raises ``ValueError``."""
+    """Check ``config`` on the host and fill in ``ranges`` from :data:`DEFAULT_RANGES`. Raises ``ValueError`` naming
+    the field, what it allows and the value it got."""
+    if not isinstance(config, EvolveConfig):
+        raise ValueError(f"config must be a qd.EvolveConfig; got {type(config).__name__}")
+
     def positive(name, value, minimum=1):
-        if int(value) != value or value < minimum:
+        # ints only (numpy ints too): a float, a bool, None or a string is refused, as a float bins or window would
+        # only fail later inside JAX
+        if not isinstance(value, numbers.Integral) or isinstance(value, bool) or value < minimum:
             raise ValueError(f"EvolveConfig.{name} must be an integer >= {minimum}; got {value!r}")
 
     positive("generations", config.generations, 0)
-    for name in ("batch_size", "initial_population", "bins", "window", "stride", "attempts", "best",
-                 "checkpoint_every", "traversable_window"):
+    for name in ("batch_size", "initial_population", "bins", "stride", "attempts", "best", "headings",
+                 "checkpoint_every"):
         positive(name, getattr(config, name))
+    for name in ("window", "traversable_window"):  # features' windows are at least 2 x 2
+        positive(name, getattr(config, name), 2)
     walks("EvolveConfig", config)
+    if isinstance(config.descriptors, str) or not isinstance(config.descriptors, (tuple, list)):
+        raise ValueError(f"EvolveConfig.descriptors must be two different descriptor names; got "
+                         f"{config.descriptors!r}")
     names = tuple(config.descriptors)
-    if len(names) != 2 or len(set(names)) != 2:
+    if len(names) != 2 or len(set(names)) != 2 or not all(isinstance(n, str) and n for n in names):
         raise ValueError(f"EvolveConfig.descriptors must be two different descriptor names; got {names!r}")
+    if not isinstance(config.store_heightmaps, (bool, np.bool_)):
+        raise ValueError(f"EvolveConfig.store_heightmaps must be True or False; got {config.store_heightmaps!r}")
     if config.out_of_range not in ("clip", "reject"):
         raise ValueError(f"EvolveConfig.out_of_range must be 'clip' or 'reject'; got {config.out_of_range!r}")
     if config.rollout_slots is not None:
@@ -155,14 +169,18 @@ def resolve_config(config: EvolveConfig) -> EvolveConfig:
         raise ValueError(f"EvolveConfig.rollout_backend must be 'jax' or 'warp'; got {config.rollout_backend!r}")
     if config.robot not in robot_names():
         raise ValueError(f"EvolveConfig.robot must be one of {', '.join(robot_names())}; got {config.robot!r}")
-    if config.robot_height is not None and not config.robot_height > 0:
+    if config.robot_height is not None and not (
+            isinstance(config.robot_height, numbers.Real) and not isinstance(config.robot_height, bool)
+            and math.isfinite(config.robot_height) and config.robot_height > 0):
         raise ValueError(f"EvolveConfig.robot_height must be > 0 metres or None; got {config.robot_height!r}")
-    scale = config.scale
-    if isinstance(scale, dict):
-        scale = TerrainScale(**scale)
-    elif not isinstance(scale, TerrainScale) and isinstance(scale, (tuple, list)):
-        scale = TerrainScale(*scale)
     try:
+        scale = config.scale
+        if isinstance(scale, dict):
+            scale = _scale_from_dict(scale)
+        elif not isinstance(scale, TerrainScale) and isinstance(scale, (tuple, list)):
+            if len(scale) != 2:
+                raise ValueError(f"scale must be (cell_size, height); got {scale!r}")
+            scale = TerrainScale(*scale)
         scale = validate_scale(scale)
     except ValueError as err:
         raise ValueError(f"EvolveConfig.scale: {err}") from err
@@ -175,11 +193,32 @@ def resolve_config(config: EvolveConfig) -> EvolveConfig:
             )
         ranges = tuple(DEFAULT_RANGES[n] for n in names)
     else:
-        ranges = tuple(config.ranges)
-    ranges = tuple((float(lo), float(hi)) for lo, hi in ranges)
+        ranges = config.ranges
+    try:
+        if isinstance(ranges, (str, bytes)) or any(isinstance(r, (str, bytes)) or len(r) != 2 for r in ranges):
+            raise TypeError
+        ranges = tuple((_number(lo), _number(hi)) for lo, hi in ranges)
+    except (TypeError, ValueError):
+        raise ValueError(f"EvolveConfig.ranges must be two finite (lo, hi) pairs with hi > lo; got "
+                         f"{config.ranges!r}") from None
     if len(ranges) != 2 or any(not (math.isfinite(lo) and math.isfinite(hi) and hi > lo) for lo, hi in ranges):
         raise ValueError(f"EvolveConfig.ranges must be two finite (lo, hi) pairs with hi > lo; got {config.ranges!r}")
     return config._replace(descriptors=names, ranges=ranges, scale=scale)
+
+
+def _number(v) -> float:
+    """``float(v)`` for a real number (not a bool or a string); TypeError otherwise."""
+    if isinstance(v, (bool, str, bytes)) or not isinstance(v, (numbers.Real, np.ndarray)):
+        raise TypeError
+    return float(v)
+
+
+def _scale_from_dict(d: dict) -> TerrainScale:
+    """A :class:`TerrainScale` from its JSON form; ``ValueError`` naming unknown fields."""
+    unknown = set(d) - set(TerrainScale._fields)
+    if unknown:
+        raise ValueError(f"unknown TerrainScale field(s) {sorted(unknown)}; known: {list(TerrainScale._fields)}")
+    return TerrainScale(**d)
 
 
 def config_to_dict(config: EvolveConfig) -> dict:
@@ -200,7 +239,14 @@ def config_from_dict(d: dict) -> EvolveConfig:
     if "descriptors" in d:
         d["descriptors"] = tuple(d["descriptors"])
     if d.get("ranges") is not None:
-        d["ranges"] = tuple(tuple(float(v) for v in r) for r in d["ranges"])
+        try:
+            d["ranges"] = tuple(tuple(_number(v) for v in r) for r in d["ranges"])
+        except (TypeError, ValueError):
+            raise ValueError(f"EvolveConfig.ranges must be two finite (lo, hi) pairs with hi > lo; got "
+                             f"{d['ranges']!r}") from None
     if isinstance(d.get("scale"), dict):  # absent in files written before the field existed: the default scale
-        d["scale"] = TerrainScale(**d["scale"])
+        try:
+            d["scale"] = _scale_from_dict(d["scale"])
+        except ValueError as err:
+            raise ValueError(f"EvolveConfig.scale: {err}") from None
     return EvolveConfig(**d)

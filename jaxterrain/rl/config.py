@@ -119,6 +119,8 @@ class PPOConfig(NamedTuple):
 
 def validate_config(config: PPOConfig) -> PPOConfig:
     """Raise ``ValueError`` naming the first bad field and its allowed range; return ``config`` unchanged."""
+    if not isinstance(config, PPOConfig):
+        raise ValueError(f"config must be an rl.PPOConfig; got {type(config).__name__}")
     for name in ("num_envs", "unroll_length", "num_unrolls", "num_minibatches", "update_epochs"):
         int_at_least("PPOConfig", config, name, 1)
     if (config.num_envs * config.num_unrolls) % config.num_minibatches:
@@ -135,24 +137,37 @@ def validate_config(config: PPOConfig) -> PPOConfig:
         "min_std": (0.0, None, True),
         "init_std": (0.0, None, False),
     }
-    for name, (lo, hi, lo_inclusive) in ranges.items():
+    def number(name):
+        raw = getattr(config, name)
         try:
-            v = float(getattr(config, name))
+            if isinstance(raw, (bool, str, bytes)):
+                raise TypeError
+            return float(raw)
         except (TypeError, ValueError):
-            raise ValueError(f"PPOConfig.{name} must be a finite number, got {getattr(config, name)!r}") from None
+            raise ValueError(f"PPOConfig.{name} must be a finite number, got {raw!r}") from None
+
+    for name, (lo, hi, lo_inclusive) in ranges.items():
+        v = number(name)
         ok = math.isfinite(v) and (v >= lo if lo_inclusive else v > lo) and (hi is None or v <= hi)
         if not ok:
             lo_s = f"{'>=' if lo_inclusive else '>'} {lo}"
             hi_s = f" and <= {hi}" if hi is not None else ""
             raise ValueError(f"PPOConfig.{name} must be a finite number {lo_s}{hi_s}, got {v!r}")
     for name in ("entropy_coef", "vf_coef"):
-        if float(getattr(config, name)) < 0:
-            raise ValueError(f"PPOConfig.{name} must be >= 0, got {getattr(config, name)!r}")
-    if config.max_grad_norm is not None and not float(config.max_grad_norm) > 0:
-        raise ValueError(f"PPOConfig.max_grad_norm must be None (off) or > 0, got {config.max_grad_norm!r}")
+        v = number(name)
+        if not (math.isfinite(v) and v >= 0):
+            raise ValueError(f"PPOConfig.{name} must be a finite number >= 0, got {getattr(config, name)!r}")
+    if config.max_grad_norm is not None:
+        v = number("max_grad_norm")
+        if not (math.isfinite(v) and v > 0):
+            raise ValueError(f"PPOConfig.max_grad_norm must be None (off) or a finite number > 0, got "
+                             f"{config.max_grad_norm!r}")
+    for name in ("normalize_observations", "update_normaliser", "normalize_advantage"):
+        if not isinstance(getattr(config, name), bool):
+            raise ValueError(f"PPOConfig.{name} must be True or False, got {getattr(config, name)!r}")
     for name in ("policy_hidden", "value_hidden"):
         v = getattr(config, name)
-        if not isinstance(v, tuple) or not all(isinstance(s, int) and s >= 1 for s in v):
+        if not isinstance(v, tuple) or not all(isinstance(s, int) and not isinstance(s, bool) and s >= 1 for s in v):
             raise ValueError(f"PPOConfig.{name} must be a tuple of integers >= 1, got {v!r}")
     one_of("PPOConfig", config, "activation", ACTIVATIONS)
     one_of("PPOConfig", config, "action_distribution", DISTRIBUTIONS)

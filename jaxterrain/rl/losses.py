@@ -29,6 +29,15 @@ def gae(rewards: jax.Array, values: jax.Array, dones: jax.Array, last_value: jax
       ``delta_t = r_t + gamma (1 - term_t) V(s_{t+1}) - V(s_t)``, ``A_t = delta_t + gamma lam (1 - done_t) A_{t+1}``,
       ``target_t = A_t + V(s_t)``; gradients are stopped.
     """
+    shape = tuple(jnp.shape(values))
+    if len(shape) < 1:
+        raise ValueError(f"values must have shape [T, B]; got shape {shape}")
+    for name, a in (("rewards", rewards), ("dones", dones), ("truncations", truncations)):
+        if a is not None and tuple(jnp.shape(a)) != shape:
+            raise ValueError(f"{name} must have the shape of values [T, B] = {shape}; got shape {tuple(jnp.shape(a))}")
+    if tuple(jnp.shape(last_value)) != shape[1:]:
+        raise ValueError(f"last_value must have shape [B] = {shape[1:]} (values without its time axis); got shape "
+                         f"{tuple(jnp.shape(last_value))}")
     if truncations is None:
         truncations = jnp.zeros_like(dones)
     keep = 1.0 - truncations

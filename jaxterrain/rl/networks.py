@@ -8,6 +8,7 @@ from typing import NamedTuple, Sequence
 import flax.linen as nn
 import jax
 import jax.numpy as jnp
+import numpy as np
 
 from jaxterrain.rl.config import PPOConfig
 
@@ -33,13 +34,18 @@ class RunningStats(NamedTuple):
 
 
 def init_stats(observation_size: int) -> RunningStats:
-    """Empty statistics: normalisation is the identity until the first update."""
+    """Empty statistics: normalisation is the identity until the first update. ``observation_size``: an integer
+    >= 1."""
+    if not isinstance(observation_size, (int, np.integer)) or isinstance(observation_size, bool) \
+            or observation_size < 1:
+        raise ValueError(f"observation_size must be an integer >= 1; got {observation_size!r}")
     z = jnp.zeros((observation_size,), jnp.float32)
     return RunningStats(jnp.zeros((), jnp.float32), z, z)
 
 
 def update_stats(stats: RunningStats, obs: jax.Array) -> RunningStats:
     """Merge a batch ``obs [..., O]`` into ``stats`` (Chan et al. parallel Welford update)."""
+    _check_obs(stats, obs)
     x = jnp.reshape(obs, (-1, obs.shape[-1])).astype(jnp.float32)
     n_b = jnp.asarray(x.shape[0], jnp.float32)
     mean_b = jnp.mean(x, axis=0)
@@ -59,7 +65,16 @@ def stats_std(stats: RunningStats) -> jax.Array:
 
 def normalize(stats: RunningStats, obs: jax.Array) -> jax.Array:
     """``(obs - mean) / std`` for ``obs [..., O]``."""
+    _check_obs(stats, obs)
     return (obs - stats.mean) / stats_std(stats)
+
+
+def _check_obs(stats: RunningStats, obs) -> None:
+    """``obs`` must be ``[..., O]`` with the statistics' ``O`` (static shapes: a trace-time check under jit)."""
+    shape, size = tuple(getattr(obs, "shape", ())), tuple(getattr(stats.mean, "shape", ()))[-1:]
+    if len(shape) < 1 or shape[-1:] != size:
+        raise ValueError(f"obs must have shape [..., O] with O = {size[0] if size else '?'} (the statistics' "
+                         f"observation size); got shape {shape}")
 
 
 # ----------------------------------------------------------------------------------------------------------------

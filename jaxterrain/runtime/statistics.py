@@ -18,6 +18,7 @@ rliable is imported inside the functions that bootstrap: it imports ``arch`` (pa
 
 from __future__ import annotations
 
+import numbers
 import warnings
 from typing import Mapping, NamedTuple
 
@@ -39,7 +40,10 @@ class Interval(NamedTuple):
 def score_matrix(scores) -> np.ndarray:
     """``scores`` as a float64 ``[runs, tasks]`` matrix; ValueError (one line) for another shape or a non-finite
     value."""
-    x = np.asarray(scores, np.float64)
+    try:
+        x = np.asarray(scores, np.float64)
+    except (TypeError, ValueError):
+        raise ValueError(f"scores must be a [runs, tasks] matrix of numbers; got {type(scores).__name__}") from None
     if x.ndim != 2 or x.shape[0] < 1 or x.shape[1] < 1:
         raise ValueError(f"scores must be a [runs, tasks] matrix with at least one of each; got shape {x.shape}")
     if not np.all(np.isfinite(x)):
@@ -63,6 +67,21 @@ def probability_of_improvement(x, y) -> float:
         raise ValueError(f"probability_of_improvement: x has {x.shape[1]} tasks, y {y.shape[1]}")
     a, b = x[:, None, :], y[None, :, :]
     return float(np.mean((a > b).mean(axis=(0, 1)) + 0.5 * (a == b).mean(axis=(0, 1))))
+
+
+def _check_bootstrap(reps, seed, confidence) -> None:
+    """The bootstrap's settings: ``reps`` an integer >= 1, ``seed`` an integer in [0, 2**32 - 1], ``confidence`` a
+    number in (0, 1); ``ValueError`` naming the one that is not."""
+    def is_int(v):
+        return isinstance(v, numbers.Integral) and not isinstance(v, bool)
+
+    if not is_int(reps) or reps < 1:
+        raise ValueError(f"reps must be an integer >= 1; got {reps!r}")
+    if not is_int(seed) or not 0 <= seed < 2 ** 32:
+        raise ValueError(f"seed must be an integer in [0, 2**32 - 1]; got {seed!r}")
+    if (not isinstance(confidence, numbers.Real) or isinstance(confidence, bool)
+            or not 0.0 < float(confidence) < 1.0):
+        raise ValueError(f"confidence must be in (0, 1); got {confidence!r}")
 
 
 def _bootstrap(score_dict: dict, func, reps: int, seed: int, confidence: float):
@@ -91,10 +110,9 @@ def interval_estimates(scores: Mapping[str, np.ndarray], reps: int = 2000, seed:
     """``{name: {"iqm": Interval, "mean": Interval}}`` for each method's ``[runs, tasks]`` scores: the point
     estimates over all scores, the ``confidence`` interval from ``reps`` stratified-bootstrap resamples of the runs
     (percentile method, rliable's defaults otherwise)."""
-    if not 0.0 < confidence < 1.0:
-        raise ValueError(f"confidence must be in (0, 1); got {confidence}")
-    if int(reps) < 1:
-        raise ValueError(f"reps must be an integer >= 1; got {reps}")
+    _check_bootstrap(reps, seed, confidence)
+    if not isinstance(scores, Mapping):
+        raise ValueError(f"scores must be a mapping {{name: [runs, tasks] scores}}; got {type(scores).__name__}")
     mats = {k: score_matrix(v) for k, v in scores.items()}
     both = lambda s: np.array([stats.trim_mean(s.ravel(), 0.25), s.mean()])  # noqa: E731
     point, ci = _bootstrap(mats, both, reps, seed, confidence)
@@ -106,17 +124,31 @@ def improvement(pairs: Mapping[str, tuple], reps: int = 2000, seed: int = 0,
                 confidence: float = 0.95) -> dict[str, Interval]:
     """``{name: Interval}`` of :func:`probability_of_improvement` for each ``name: (x, y)`` pair, with its
     stratified-bootstrap interval (each method's runs resampled within each task)."""
+    _check_bootstrap(reps, seed, confidence)
+    if not isinstance(pairs, Mapping) or not all(isinstance(v, (tuple, list)) and len(v) == 2 for v in pairs.values()):
+        raise ValueError("pairs must be a mapping {name: (x, y)} of two [runs, tasks] score matrices each")
     mats = {k: [score_matrix(x), score_matrix(y)] for k, (x, y) in pairs.items()}
+    for k, (x, y) in mats.items():
+        if x.shape[1] != y.shape[1]:
+            raise ValueError(f"pairs[{k!r}]: x has {x.shape[1]} tasks, y {y.shape[1]}")
     point, ci = _bootstrap(mats, probability_of_improvement, reps, seed, confidence)
     return {k: Interval(float(point[k]), float(np.ravel(ci[k])[0]), float(np.ravel(ci[k])[1])) for k in mats}
 
 
 def rank_correlation(x, y) -> dict[str, float]:
     """Spearman's rho and Kendall's tau (tau-b: ties allowed) of two equally long 1-D samples, with their two-sided
-    p-values and ``n``. NaN where one sample is constant."""
-    a, b = np.asarray(x, np.float64).ravel(), np.asarray(y, np.float64).ravel()
+    p-values and ``n``. NaN where one sample is constant. ``ValueError`` for a NaN or inf in either sample."""
+    try:
+        a, b = np.asarray(x, np.float64).ravel(), np.asarray(y, np.float64).ravel()
+    except (TypeError, ValueError):
+        raise ValueError("rank_correlation: x and y must be 1-D samples of numbers; got "
+                         f"{type(x).__name__} and {type(y).__name__}") from None
     if a.shape != b.shape or a.size < 3:
         raise ValueError(f"rank_correlation needs two samples of equal length >= 3; got {a.size} and {b.size}")
+    for name, v in (("x", a), ("y", b)):
+        if not np.all(np.isfinite(v)):
+            raise ValueError(f"rank_correlation: {name} must be finite (a NaN or inf has no rank); got "
+                             f"{int(np.sum(~np.isfinite(v)))} non-finite of {v.size}")
     if np.ptp(a) == 0 or np.ptp(b) == 0:
         return {"spearman": float("nan"), "spearman_p": float("nan"), "kendall": float("nan"),
                 "kendall_p": float("nan"), "n": int(a.size)}

@@ -102,9 +102,20 @@ def cell_scores(fitness, family, level) -> tuple[list, np.ndarray]:
     """The suite's cells as tasks: ``(cells, scores)`` with ``cells`` the ``(family, level)`` pairs in order of first
     appearance and ``scores`` [P, C] the mean fitness of each cell's terrains (its seeds) for each of the ``P``
     policies of ``fitness`` [P, N]. ``family`` / ``level``: [N], the terrains' (``Suite.family``, ``Suite.level``
-    or ``read_fitness``'s)."""
-    f = np.atleast_2d(np.asarray(fitness, np.float64))
+    or ``read_fitness``'s). ``ValueError`` naming the argument for other shapes or a NaN / inf fitness."""
+    try:
+        f = np.atleast_2d(np.asarray(fitness, np.float64))
+    except (TypeError, ValueError):
+        raise ValueError(f"fitness must be a [P, N] array of numbers; got {type(fitness).__name__}") from None
     fam, lv = np.asarray(family), np.asarray(level)
+    if f.ndim != 2 or f.shape[1] < 1:
+        raise ValueError(f"fitness must have shape [P, N] (or [N]) with N >= 1; got shape {f.shape}")
+    if not np.all(np.isfinite(f)):
+        raise ValueError("fitness must be finite (a NaN or inf would poison its cell's mean)")
+    for name, a in (("family", fam), ("level", lv)):
+        if a.shape != (f.shape[1],):
+            raise ValueError(f"{name} must have shape [N] = ({f.shape[1]},) like fitness' last axis; got shape "
+                             f"{a.shape}")
     cells = list(dict.fromkeys(zip(fam.tolist(), lv.tolist())))
     scores = np.stack([f[:, (fam == c[0]) & (lv == c[1])].mean(axis=1) for c in cells], axis=1)
     return cells, scores

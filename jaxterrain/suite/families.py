@@ -68,7 +68,10 @@ def _axes(size: int, scale: TerrainScale) -> tuple[np.ndarray, np.ndarray]:
 
 
 def edge_distance(size: int, scale: TerrainScale) -> np.ndarray:
-    """``[size, size]`` metres from each pixel to the nearest map edge."""
+    """``[size, size]`` metres from each pixel to the nearest map edge (``size`` an integer >= 2 pixels)."""
+    if not isinstance(size, (int, np.integer)) or isinstance(size, bool) or size < 2:
+        raise ValueError(f"size must be an integer >= 2 pixels; got {size!r}")
+    scale = validate_scale(scale)
     x, y = _axes(size, scale)
     half = (size - 1) * float(scale.cell_size) / 2.0
     return half - np.maximum(np.abs(x), np.abs(y))
@@ -182,12 +185,19 @@ def family_names() -> tuple[str, ...]:
 def build_terrain(name: str, value: float, size: int = 256, scale: TerrainScale = TerrainScale(),
                   rng: np.random.Generator | None = None) -> np.ndarray:
     """One heightmap ``[size, size]`` float32 in [0, 1] of family ``name`` at parameter ``value`` (metres / scale
-    height, clipped). ValueError naming the parameter for an unknown family or a size below 16 pixels."""
-    if name not in FAMILIES:
+    height, clipped). ValueError naming the parameter for an unknown family, a size below 16 pixels, a ``value``
+    that is not a finite number >= 0 (every family's parameter is a grade, a height or a width) or an ``rng`` that is
+    not a ``numpy.random.Generator``."""
+    if not isinstance(name, str) or name not in FAMILIES:
         raise ValueError(f"family must be one of {', '.join(FAMILIES)}; got {name!r}")
     if not isinstance(size, (int, np.integer)) or isinstance(size, bool) or size < 16:
         raise ValueError(f"size must be an integer >= 16 pixels; got {size!r}")
+    if isinstance(value, (bool, str, bytes)) or not isinstance(value, (int, float, np.integer, np.floating)) \
+            or not (np.isfinite(value) and value >= 0):
+        raise ValueError(f"value must be a finite number >= 0 (the family's {FAMILIES[name].unit}); got {value!r}")
     scale = validate_scale(scale)
+    if rng is not None and not isinstance(rng, np.random.Generator):
+        raise ValueError(f"rng must be a numpy.random.Generator or None; got {type(rng).__name__}")
     rng = np.random.default_rng(0) if rng is None else rng
     metres = FAMILIES[name].build(float(value), int(size), scale, rng)
     return np.clip(metres / float(scale.height), 0.0, 1.0).astype(np.float32)

@@ -94,7 +94,8 @@ class Suite(NamedTuple):
 def descriptor_levels(heightmaps, levels: int = LEVELS) -> tuple[np.ndarray, np.ndarray]:
     """``(level [B] int, distance [B] float32)``: each heightmap's cell distance from cell (0, 0) on the 50 x 50 grid
     of ``(roughness, tpi)`` (window 30, stride 2, clipped into :data:`DEFAULT_RANGES`, as archives bin them) and the
-    band of width ``70.71 / levels`` it falls in."""
+    band of width ``70.71 / levels`` it falls in (``levels`` an integer >= 1)."""
+    _check("levels", levels, 1)
     d = np.asarray(features.descriptors(heightmaps, names=DESCRIPTORS, window=30, stride=2), np.float64)
     lo = np.array([DEFAULT_RANGES[n][0] for n in DESCRIPTORS])
     hi = np.array([DEFAULT_RANGES[n][1] for n in DESCRIPTORS])

@@ -31,6 +31,7 @@ from __future__ import annotations
 import numbers
 from typing import NamedTuple, Sequence
 
+import jax
 import jax.numpy as jnp
 import numpy as np
 
@@ -84,14 +85,25 @@ def validate_scale(scale) -> TerrainScale:
                                                      and np.issubdtype(np.dtype(value.dtype), np.number))
         if not numeric or isinstance(value, bool):
             raise ValueError(f"TerrainScale.{name} must be a finite number of metres > 0; got {value!r}")
+        if isinstance(value, jax.Array) and not isinstance(value, jax.core.Tracer):  # a concrete [] jax array
+            _check_positive(name, np.asarray(value))
     _check_positive("cell_size", scale.cell_size)
     _check_positive("height", scale.height)
     return scale
 
 
 def to_metres(heightmaps, scale: TerrainScale = TerrainScale()):
-    """Heights in metres: ``heightmaps * scale.height``, same shape (``[B, H, W]`` or ``[H, W]``) float32."""
+    """Heights in metres: ``heightmaps * scale.height``, same shape (``[B, H, W]`` or ``[H, W]``) float32.
+    ``ValueError`` naming ``heightmaps`` for another rank or a non-real dtype."""
     validate_scale(scale)
+    try:
+        h = jnp.asarray(heightmaps)
+    except (TypeError, ValueError):
+        raise ValueError(f"heightmaps must be a real array [B, H, W] or [H, W]; got {type(heightmaps).__name__}") \
+            from None
+    if h.dtype.kind not in "biuf" or h.ndim not in (2, 3):
+        raise ValueError(f"heightmaps must be a real array [B, H, W] or [H, W]; got shape {tuple(h.shape)}, "
+                         f"dtype {h.dtype}")
     return jnp.asarray(heightmaps, jnp.float32) * jnp.float32(scale.height)
 
 
@@ -106,9 +118,16 @@ def hfield_size(shape: Sequence[int], scale: TerrainScale = TerrainScale(), base
       ``(radius_x, radius_y, elevation_z, base_z)`` Python floats.
     """
     validate_scale(scale)
-    if len(shape) < 2 or int(shape[-1]) < 2 or int(shape[-2]) < 2:
-        raise ValueError(f"shape must be [..., H, W] with H, W >= 2; got {tuple(shape)}")
-    if not (np.isfinite(base) and base > 0):
+    try:
+        dims = tuple(shape)
+    except TypeError:
+        raise ValueError(f"shape must be [..., H, W] with H, W >= 2; got {shape!r}") from None
+    whole = lambda d: (isinstance(d, numbers.Real) and not isinstance(d, bool)  # noqa: E731
+                       and np.isfinite(d) and d == int(d))
+    if len(dims) < 2 or not all(whole(d) for d in dims[-2:]) or int(dims[-1]) < 2 or int(dims[-2]) < 2:
+        raise ValueError(f"shape must be [..., H, W] with H, W >= 2; got {dims}")
+    if (isinstance(base, (bool, str, bytes)) or not isinstance(base, numbers.Real)
+            or not (np.isfinite(base) and base > 0)):
         raise ValueError(f"base must be a finite number of metres > 0; got {base!r}")
     nrow, ncol = int(shape[-2]), int(shape[-1])
     return (

@@ -78,7 +78,7 @@ import numpy as np
 with contextlib.redirect_stdout(io.StringIO()) if importlib.util.find_spec("warp") is None else contextlib.nullcontext():
     from mujoco import mjx
 
-from jaxterrain.terrain import hfield_size
+from jaxterrain.terrain import hfield_size, validate_scale
 from jaxterrain.walker import tiles as _tiles
 from jaxterrain.walker.model import (
     SOLVER_SOUND,
@@ -166,39 +166,100 @@ class WalkerState(NamedTuple):
 
 def resolve_config(config: WalkerConfig) -> WalkerConfig:
     """``config`` with every :data:`~jaxterrain.walker.robots.ROBOT_FIELDS` field that is None set to its robot's
-    default (``ValueError`` for an unknown robot)."""
+    default, after checking every field on the host (no model is built): ``ValueError`` naming the field and what
+    it allows (an unknown robot, a terrain smaller than 4 x 4, a non-positive step count, a NaN length, ...). The
+    checks that need the robot's model (the track length, ``start_spread`` against the map's width) are
+    :class:`WalkerEnv`'s."""
+    if not isinstance(config, WalkerConfig):
+        raise ValueError(f"config must be a walker.WalkerConfig; got {type(config).__name__}")
     robot = get_robot(config.robot)
-    return config._replace(**{f: robot.default(f) for f in ROBOT_FIELDS if getattr(config, f) is None})
+    config = config._replace(**{f: robot.default(f) for f in ROBOT_FIELDS if getattr(config, f) is None})
+    _check_config(config)
+    return config
+
+
+def _real(name: str, value, lo: float | None = None, lo_open: bool = False) -> float:
+    """``value`` as a finite float (>= ``lo``, or > it when ``lo_open``), or ``ValueError`` naming ``name``."""
+    bound = "" if lo is None else f" {'>' if lo_open else '>='} {lo:g}"
+    try:
+        if isinstance(value, (bool, str, bytes)):
+            raise TypeError
+        v = float(value)
+    except (TypeError, ValueError):
+        raise ValueError(f"{name} must be a finite number{bound}, got {value!r}") from None
+    if not np.isfinite(v) or (lo is not None and (v <= lo if lo_open else v < lo)):
+        raise ValueError(f"{name} must be a finite number{bound}, got {value!r}")
+    return v
+
+
+def _int(name: str, value, lo: int) -> int:
+    if not isinstance(value, (int, np.integer)) or isinstance(value, (bool, np.bool_)) or value < lo:
+        raise ValueError(f"{name} must be an integer >= {lo}, got {value!r}")
+    return int(value)
+
+
+def _pair(name: str, value) -> tuple:
+    try:
+        if isinstance(value, (str, bytes)) or len(value) != 2:
+            raise TypeError
+    except TypeError:
+        raise ValueError(f"{name} must be a pair (low, high), got {value!r}") from None
+    return tuple(value)
 
 
 def _check_config(c: WalkerConfig) -> None:
     check_terrain_shape(c.terrain_shape)
-    if not (c.scale.cell_size > 0 and c.scale.height > 0):
-        raise ValueError(f"scale.cell_size and scale.height must be > 0, got {c.scale}")
-    if c.n_frames < 1:
-        raise ValueError(f"n_frames must be >= 1, got {c.n_frames}")
-    if c.episode_length < 1:
-        raise ValueError(f"episode_length must be >= 1, got {c.episode_length}")
-    lo, hi = c.healthy_z_range
-    if not lo < hi:
+    try:
+        validate_scale(c.scale)
+    except ValueError as err:
+        raise ValueError(f"scale.cell_size and scale.height must be > 0: {err}") from None
+    if not isinstance(c.solver, SolverOptions):
+        raise ValueError(f"solver must be a walker.SolverOptions (see walker.parse_solver), got {c.solver!r}")
+    _real("timestep", c.timestep, 0.0, lo_open=True)
+    if not isinstance(c.n_frames, (int, np.integer)) or isinstance(c.n_frames, bool) or c.n_frames < 1:
+        raise ValueError(f"n_frames must be >= 1, got {c.n_frames!r}")
+    if not isinstance(c.episode_length, (int, np.integer)) or isinstance(c.episode_length, bool) \
+            or c.episode_length < 1:
+        raise ValueError(f"episode_length must be >= 1, got {c.episode_length!r}")
+    for name in ("start_margin", "goal_margin", "side_margin", "spawn_clearance"):
+        _real(name, getattr(c, name), 0.0)
+    _real("max_qvel", c.max_qvel, 0.0, lo_open=True)
+    for name in ("forward_reward_weight", "healthy_reward", "ctrl_cost_weight"):
+        _real(name, getattr(c, name))
+    lo, hi = _pair("healthy_z_range", c.healthy_z_range)
+    if not _real("healthy_z_range", lo) < _real("healthy_z_range", hi):
         raise ValueError(f"healthy_z_range must be (low, high) with low < high, got {c.healthy_z_range}")
-    if c.joint_noise < 0 or c.qvel_noise < 0:
-        raise ValueError(f"joint_noise and qvel_noise must be >= 0, got {c.joint_noise}, {c.qvel_noise}")
-    if not (np.isfinite(c.start_spread) and c.start_spread >= 0):
-        raise ValueError(f"start_spread must be a finite number >= 0 (metres), got {c.start_spread}")
-    if min(c.scan_points) < 1:
+    for name in ("joint_noise", "qvel_noise"):
+        _real(name, getattr(c, name), 0.0)
+    if not isinstance(c.start_spread, (bool, str, bytes)):
+        try:
+            spread = float(c.start_spread)
+        except (TypeError, ValueError):
+            spread = float("nan")
+    else:
+        spread = float("nan")
+    if not (np.isfinite(spread) and spread >= 0):
+        raise ValueError(f"start_spread must be a finite number >= 0 (metres), got {c.start_spread!r}")
+    if not isinstance(c.height_scan, (bool, np.bool_)):
+        raise ValueError(f"height_scan must be True or False, got {c.height_scan!r}")
+    for name in ("scan_x", "scan_y"):
+        for v in _pair(name, getattr(c, name)):
+            _real(name, v)
+    points = _pair("scan_points", c.scan_points)
+    if not all(isinstance(p, (int, np.integer)) and not isinstance(p, bool) for p in points) or min(points) < 1:
         raise ValueError(f"scan_points must be >= 1 each, got {c.scan_points}")
     if c.backend not in BACKENDS:
         raise ValueError(f"backend must be one of {BACKENDS}, got {c.backend!r}")
-    if int(c.tiles) != c.tiles or c.tiles < 0:
-        raise ValueError(f"tiles must be an integer >= 0, got {c.tiles!r}")
+    _int("tiles", c.tiles, 0)
     if c.backend == "warp" and c.tiles < 1:
         raise ValueError("backend='warp' needs tiles >= 1: MuJoCo Warp shares one heightfield across all envs, so "
                          "per-env terrains come from a bank of tiles (WalkerConfig(tiles=T), env.make_bank)")
-    if min(c.warp_worlds, c.warp_contacts, c.warp_njmax) < 1:
-        raise ValueError(f"warp_worlds, warp_contacts and warp_njmax must be >= 1, got {c.warp_worlds}, "
-                         f"{c.warp_contacts}, {c.warp_njmax}")
-    h, w = c.terrain_shape
+    for name in ("warp_worlds", "warp_contacts", "warp_njmax"):
+        if not isinstance(getattr(c, name), (int, np.integer)) or isinstance(getattr(c, name), bool) \
+                or getattr(c, name) < 1:
+            raise ValueError(f"warp_worlds, warp_contacts and warp_njmax must be >= 1, got {c.warp_worlds}, "
+                             f"{c.warp_contacts}, {c.warp_njmax}")
+    h, w = check_terrain_shape(c.terrain_shape)
     rows, cols = _tiles.grid(max(c.tiles, 1))
     if c.tiles and rows * h * cols * w >= 2 ** 31:
         raise ValueError(f"{c.tiles} tiles of {h} x {w} exceed MuJoCo's int32 heightfield size")
@@ -211,6 +272,8 @@ def sample_heights(terrain: jax.Array, x: jax.Array, y: jax.Array, radius_x: flo
     Uses MuJoCo's hfield grid (column j at x = -radius_x + j * 2 radius_x / (W - 1), row i likewise in y);
     points outside are clamped to the border. Sample values are clipped to [0, max_height] like the physics.
     """
+    if len(jnp.shape(terrain)) != 2:
+        raise ValueError(f"terrain must have shape [H, W]; got shape {tuple(jnp.shape(terrain))}")
     h, w = terrain.shape
     u = jnp.clip((x + radius_x) / (2.0 * radius_x) * (w - 1), 0.0, w - 1.0)
     v = jnp.clip((y + radius_y) / (2.0 * radius_y) * (h - 1), 0.0, h - 1.0)
@@ -555,5 +618,10 @@ class WalkerEnv:
 
 
 def flat_terrain(config: WalkerConfig = WalkerConfig(), height: float = 0.0) -> jax.Array:
-    """A flat ``config.terrain_shape`` float32 terrain at ``height`` metres."""
+    """A flat ``config.terrain_shape`` float32 terrain at ``height`` metres (a finite number)."""
+    if not isinstance(config, WalkerConfig):
+        raise ValueError(f"config must be a walker.WalkerConfig; got {type(config).__name__}")
+    check_terrain_shape(config.terrain_shape)
+    if not isinstance(height, jax.core.Tracer):
+        _real("height", height)
     return jnp.full(tuple(config.terrain_shape), height, jnp.float32)

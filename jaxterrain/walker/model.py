@@ -26,6 +26,7 @@ from typing import NamedTuple
 import mujoco
 import numpy as np
 
+from jaxterrain.runtime.validation import positive
 from jaxterrain.terrain import TerrainScale, hfield_size
 from jaxterrain.walker.robots import HUMANOID, RobotSpec, get as get_robot
 
@@ -98,10 +99,19 @@ def _robot(robot) -> RobotSpec:
 
 
 def check_terrain_shape(terrain_shape) -> tuple[int, int]:
-    shape = tuple(int(s) for s in terrain_shape)
-    if len(shape) != 2 or min(shape) < 4:
+    """``terrain_shape`` as ``(nrow, ncol)`` Python ints, each a whole number >= 4; ``ValueError`` naming it
+    otherwise (a fraction, a string, a bool, another length)."""
+    def whole(s):
+        return (isinstance(s, (int, float, np.integer, np.floating)) and not isinstance(s, (bool, np.bool_))
+                and np.isfinite(s) and s == int(s))
+
+    try:
+        dims = tuple(terrain_shape)
+    except TypeError:
+        dims = ()
+    if len(dims) != 2 or not all(whole(s) for s in dims) or min(int(s) for s in dims) < 4:
         raise ValueError(f"terrain_shape must be (nrow, ncol) with both >= 4, got {terrain_shape!r}")
-    return shape  # type: ignore[return-value]
+    return tuple(int(s) for s in dims)  # type: ignore[return-value]
 
 
 def build_spec(terrain_shape=(256, 256), scale: TerrainScale = TerrainScale(),
@@ -187,7 +197,10 @@ def metres_to_hfield(terrain_m, elevation_z):
     """
     import jax.numpy as jnp
 
+    positive("elevation_z (metres)", elevation_z)  # concrete values only: traced ones pass unchecked
     t = jnp.asarray(terrain_m, jnp.float32)
+    if t.ndim < 2:
+        raise ValueError(f"terrain_m must have shape [..., H, W]; got shape {tuple(t.shape)}")
     data = jnp.clip(t / elevation_z, 0.0, 1.0)
     return data.reshape(t.shape[:-2] + (t.shape[-2] * t.shape[-1],))
 

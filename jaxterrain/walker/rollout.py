@@ -138,6 +138,11 @@ def job_queue(needed: jax.Array, priority: Optional[jax.Array] = None) -> tuple[
     priority counts as lowest.
     """
     needed = jnp.asarray(needed, bool)
+    if needed.ndim != 1:
+        raise ValueError(f"needed must have shape [J]; got shape {tuple(needed.shape)}")
+    if priority is not None and tuple(jnp.shape(priority)) != tuple(needed.shape):
+        raise ValueError(f"priority must have the shape of needed [J] = {tuple(needed.shape)}; got shape "
+                         f"{tuple(jnp.shape(priority))}")
     if priority is None:
         queue = jnp.argsort(~needed, stable=True)
     else:
