@@ -216,11 +216,8 @@ def _check_config(c: WalkerConfig) -> None:
     if not isinstance(c.solver, SolverOptions):
         raise ValueError(f"solver must be a walker.SolverOptions (see walker.parse_solver), got {c.solver!r}")
     _real("timestep", c.timestep, 0.0, lo_open=True)
-    if not isinstance(c.n_frames, (int, np.integer)) or isinstance(c.n_frames, bool) or c.n_frames < 1:
-        raise ValueError(f"n_frames must be >= 1, got {c.n_frames!r}")
-    if not isinstance(c.episode_length, (int, np.integer)) or isinstance(c.episode_length, bool) \
-            or c.episode_length < 1:
-        raise ValueError(f"episode_length must be >= 1, got {c.episode_length!r}")
+    _int("n_frames", c.n_frames, 1)
+    _int("episode_length", c.episode_length, 1)
     for name in ("start_margin", "goal_margin", "side_margin", "spawn_clearance"):
         _real(name, getattr(c, name), 0.0)
     _real("max_qvel", c.max_qvel, 0.0, lo_open=True)
@@ -231,15 +228,7 @@ def _check_config(c: WalkerConfig) -> None:
         raise ValueError(f"healthy_z_range must be (low, high) with low < high, got {c.healthy_z_range}")
     for name in ("joint_noise", "qvel_noise"):
         _real(name, getattr(c, name), 0.0)
-    if not isinstance(c.start_spread, (bool, str, bytes)):
-        try:
-            spread = float(c.start_spread)
-        except (TypeError, ValueError):
-            spread = float("nan")
-    else:
-        spread = float("nan")
-    if not (np.isfinite(spread) and spread >= 0):
-        raise ValueError(f"start_spread must be a finite number >= 0 (metres), got {c.start_spread!r}")
+    _real("start_spread (metres)", c.start_spread, 0.0)
     if not isinstance(c.height_scan, (bool, np.bool_)):
         raise ValueError(f"height_scan must be True or False, got {c.height_scan!r}")
     for name in ("scan_x", "scan_y"):
@@ -255,10 +244,7 @@ def _check_config(c: WalkerConfig) -> None:
         raise ValueError("backend='warp' needs tiles >= 1: MuJoCo Warp shares one heightfield across all envs, so "
                          "per-env terrains come from a bank of tiles (WalkerConfig(tiles=T), env.make_bank)")
     for name in ("warp_worlds", "warp_contacts", "warp_njmax"):
-        if not isinstance(getattr(c, name), (int, np.integer)) or isinstance(getattr(c, name), bool) \
-                or getattr(c, name) < 1:
-            raise ValueError(f"warp_worlds, warp_contacts and warp_njmax must be >= 1, got {c.warp_worlds}, "
-                             f"{c.warp_contacts}, {c.warp_njmax}")
+        _int(name, getattr(c, name), 1)
     h, w = check_terrain_shape(c.terrain_shape)
     rows, cols = _tiles.grid(max(c.tiles, 1))
     if c.tiles and rows * h * cols * w >= 2 ** 31:
