@@ -113,8 +113,8 @@ class WalkerConfig(NamedTuple):
     episode_length: int = 1000  # env steps (15 s)
     # track
     start_margin: Optional[float] = None  # x_start = -radius_x + start_margin (humanoid: 0.5; the ant's legs: 1.0)
-    goal_margin: float = 0.5  # x_goal = radius_x - goal_margin
-    side_margin: float = 0.3  # fall when |y| > radius_y - side_margin
+    goal_margin: Optional[float] = None  # x_goal = radius_x - goal_margin (humanoid: 0.5; the ant's reach: 1.3)
+    side_margin: Optional[float] = None  # fall when |y| > radius_y - side_margin (humanoid: 0.3; the ant: 1.3)
     start_spread: float = 0.0  # start y uniform in [-start_spread, start_spread] m (0: y = 0, no key drawn)
     spawn_clearance: float = 0.01  # lowest foot this far above the highest terrain under the start
     # termination

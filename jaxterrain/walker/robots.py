@@ -26,7 +26,7 @@ from typing import Callable, NamedTuple, Optional
 
 __all__ = ["RobotSpec", "HUMANOID", "ANT", "ROBOT_FIELDS", "register_robot", "get", "names", "brax_asset"]
 
-ROBOT_FIELDS = ("start_margin", "healthy_z_range", "forward_reward_weight", "healthy_reward", "ctrl_cost_weight", "joint_noise",
+ROBOT_FIELDS = ("start_margin", "goal_margin", "side_margin", "healthy_z_range", "forward_reward_weight", "healthy_reward", "ctrl_cost_weight", "joint_noise",
                 "qvel_noise", "warp_contacts", "warp_njmax")
 """The :class:`~jaxterrain.walker.WalkerConfig` fields whose default (None) is the robot's (``RobotSpec.defaults``)."""
 
@@ -71,7 +71,7 @@ def brax_asset(filename: str) -> Callable[[], str]:
 
 HUMANOID = RobotSpec(
     name="humanoid", xml=brax_asset("humanoid.xml"), foot_geoms=("left_foot", "right_foot"), torso_body="torso",
-    defaults=(("start_margin", 0.5), ("healthy_z_range", (1.0, 2.0)), ("forward_reward_weight", 1.25), ("healthy_reward", 5.0),
+    defaults=(("start_margin", 0.5), ("goal_margin", 0.5), ("side_margin", 0.3), ("healthy_z_range", (1.0, 2.0)), ("forward_reward_weight", 1.25), ("healthy_reward", 5.0),
               ("ctrl_cost_weight", 0.1), ("joint_noise", 0.1), ("qvel_noise", 0.1),
               # 2 feet x up to 4 hfield contacts; 8 contacts x 4 rows + 17 joint limits = 49 rows at most
               ("warp_contacts", 8), ("warp_njmax", 64)),
@@ -82,8 +82,10 @@ ANT = RobotSpec(
     foot_geoms=("left_foot_geom", "right_foot_geom", "third_foot_geom", "fourth_foot_geom"), torso_body="torso",
     # brax's init_qpos (ant.xml's custom numeric): hips 0, ankles +-1 rad, the legs reaching down
     start_joints=(0.0, 1.0, 0.0, -1.0, 0.0, -1.0, 0.0, 1.0),
-    # start 1 m in from the edge: its back feet reach 0.6 m behind the torso (0.5 m would put them off the terrain)
-    defaults=(("start_margin", 1.0), ("healthy_z_range", (0.2, 1.0)), ("forward_reward_weight", 1.0), ("healthy_reward", 1.0),
+    # start 1 m in from the edge: its back feet reach 0.6 m behind the torso (0.5 m would put them off the terrain);
+    # goal and side margins 1.3 m: a foot sphere reaches 1.21 m from the torso's centre (hip 0.28 + leg 0.28 + ankle
+    # 0.57 + foot radius 0.08), plus one cell of the seam between tiles, so it never touches a neighbouring tile
+    defaults=(("start_margin", 1.0), ("goal_margin", 1.3), ("side_margin", 1.3), ("healthy_z_range", (0.2, 1.0)), ("forward_reward_weight", 1.0), ("healthy_reward", 1.0),
               ("ctrl_cost_weight", 0.5), ("joint_noise", 0.1), ("qvel_noise", 0.1),
               # 4 feet x up to 4 hfield contacts; 16 contacts x 4 rows + 8 joint limits = 72 rows at most
               ("warp_contacts", 16), ("warp_njmax", 96)),

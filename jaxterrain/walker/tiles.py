@@ -24,8 +24,10 @@ jit-able), read them back with ``WalkerEnv.bank_terrains``.
 Differences to a single-terrain heightfield, both outside a walk that is still running: between two neighbouring
 tiles the surface spans one cell linearly from one tile's edge to the next (a single heightfield has no ground past
 its edge), and MuJoCo's heightfield ``base_z`` box is one box under all tiles. The walker ends its episode when its
-torso is ``side_margin`` (0.3 m) from a side edge or ``goal_margin`` (0.5 m) from the front edge, so a foot can
-only reach the seam near an episode's end.
+torso is ``side_margin`` from a side edge or ``goal_margin`` from the front edge, each the robot's reach (humanoid
+0.3 / 0.5 m, ant 1.3 / 1.3 m: :data:`~jaxterrain.walker.robots.ROBOT_FIELDS`), so a foot walking forward never
+touches a neighbouring tile. Backwards the episode ends ``start_margin / 2`` from the back edge: a walker that backs
+up behind its start (the ant: by more than 0.2 m) may touch the tile behind.
 
 Callers that walk on tiles (each also keeps the classic ``terrain [H, W]`` layout, ``tiles = 0``):
 

@@ -177,3 +177,20 @@ def test_the_ant_ships_a_base_policy_that_records_its_robot_and_passed_the_bar()
     result = json.loads((folder / "eval.json").read_text())
     assert result["attempts"] == 20 and result["best"] == 5 and result["best_mean"] >= 0.95
     assert "train-base-policy --robot ant --preset gpu" in (folder / "PROVENANCE.md").read_text()
+
+
+def test_the_ants_walk_on_a_tile_does_not_touch_its_neighbour_tile():
+    """The ant's feet reach 1.2 m from its torso, so its goal and side margins are its reach (1.3 m): walking a flat
+    tile whose +x neighbour is a tall Perlin tile, it reaches the goal as on the classic layout (with the humanoid's
+    0.5 / 0.3 m margins it stepped onto the neighbour: 0.65 against 1.00 here, measured 2026-11-28)."""
+    from jaxterrain import difficulty, generators
+
+    size = 96  # 3.84 m: the smallest square whose track (3.84 - 1.0 - 1.3 = 1.54 m) passes the env's checks
+    gen = generators.get("perlin", size=size)
+    tall = jnp.clip(jnp.asarray(gen.render(gen.sample(jax.random.PRNGKey(11), 1)), jnp.float32), 0.0, 1.0)
+    terrains = jnp.concatenate([jnp.zeros((1, size, size)), tall])  # tile 0 flat, tile 1 (its +x neighbour) tall
+    config = WalkerConfig(terrain_shape=(size, size), robot="ant", episode_length=120, tiles=2, warp_worlds=8)
+    assert (robots.ANT.default("goal_margin"), robots.ANT.default("side_margin")) == (1.3, 1.3)
+    d = np.asarray(difficulty.rollout_distances(terrains, jax.random.PRNGKey(5), 4, policy=difficulty.robot_base_policy("ant"),
+                                                env_config=config))
+    np.testing.assert_array_equal(d[0], 1.0)  # the flat tile walked to its goal, every attempt
