@@ -266,7 +266,8 @@ def sample_latents(key: jax.Array, n: int, latent: int = 50) -> jax.Array:
 def make_render_one(config: GanConfig, variables: dict, size: int | None = None):
     """``latent[latent] -> [size, size]`` float32 in [0, 1], the inference forward pass (running BN averages).
 
-    When ``size`` differs from ``config.size`` the output is resampled (linear, antialiased) and clipped to [0, 1].
+    When ``size`` differs from ``config.size`` the output is resampled (linear, antialiased); either way it is
+    clipped to [0, 1] (the normalisation may round one ulp past it).
     """
     generator, _ = make_modules(config)
     size = config.size if size is None else int(size)
@@ -274,8 +275,9 @@ def make_render_one(config: GanConfig, variables: dict, size: int | None = None)
     def render_one(z: jax.Array) -> jax.Array:
         out = generator.apply(variables, z[None].astype(jnp.float32), train=False)[0]
         if size != config.size:
-            out = jnp.clip(jax.image.resize(out, (size, size), "linear", antialias=True), 0.0, 1.0)
-        return out
+            out = jax.image.resize(out, (size, size), "linear", antialias=True)
+        # the per-terrain min-max normalisation can round one ulp past 1 on a GPU (seen on an H200, 2026-11-28)
+        return jnp.clip(out, 0.0, 1.0)
 
     return render_one
 
