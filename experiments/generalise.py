@@ -84,6 +84,12 @@ def main(args: argparse.Namespace) -> int:
     if not folders:
         raise UsageError(f"no treatment with heldout/fitness.csv and summary.json in {', '.join(map(str, args.runs))}")
     ts = [load_treatment(f) for f in folders]
+    seen: dict[str, Path] = {}
+    for t in ts:
+        if t["label"] in seen:
+            raise UsageError(f"two treatments named {t['label']!r} ({seen[t['label']]}, {t['folder']}): pass the "
+                             f"treatment folders you want instead of their runs")
+        seen[t["label"]] = t["folder"]
     first = ts[0]
     for t in ts[1:]:
         if not (np.array_equal(t["family"], first["family"]) and np.array_equal(t["level"], first["level"])):

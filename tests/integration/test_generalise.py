@@ -83,3 +83,20 @@ def test_generalise_refuses_folders_without_evaluations(tmp_path):
         cli("generalise", str(tmp_path / "missing"))
     with pytest.raises(SystemExit):
         cli("generalise", str(tmp_path / "empty"), "--reps", "0")
+
+
+def test_generalise_refuses_two_treatments_of_one_name_and_takes_treatment_folders(tmp_path, capsys):
+    """Two runs that both hold a ``cppn-plr`` (a re-run beside the first) are refused, naming both; passing the
+    treatment folders themselves picks one."""
+    for run in ("first", "rerun"):
+        write_treatment(tmp_path / run / "cppn-plr", np.linspace(0.4, 0.45, 2)[:, None], 0.3, [10, 11])
+    write_treatment(tmp_path / "first" / "cppn-dr", np.linspace(0.5, 0.55, 2)[:, None], 0.3, [12, 13])
+    with pytest.raises(SystemExit):
+        cli("generalise", str(tmp_path / "first"), str(tmp_path / "rerun"))
+    err = capsys.readouterr().err
+    assert "two treatments named 'cppn plr'" in err and "first/cppn-plr" in err and "rerun/cppn-plr" in err
+    out = tmp_path / "both"
+    assert cli("generalise", str(tmp_path / "first" / "cppn-dr"), str(tmp_path / "rerun" / "cppn-plr"),
+               "--reps", "20", "--out", str(out)) == 0
+    assert {r["treatment"] for r in csv.DictReader((out / "intervals.csv").open())} == {"cppn dr", "cppn plr",
+                                                                                      "base policy"}
