@@ -24,7 +24,7 @@ def test_default_is_the_humanoid():
 
 
 def test_ant_walks_its_shipped_policy():
-    args = rollouts.parse_args(["--robot", "ant", "--size", "64"])  # 32 x 4 cm: too short for the ant's 1 m margin
+    args = rollouts.parse_args(["--robot", "ant", "--size", "96"])  # 3.84 m: the ant needs 1.0 + 1.3 m of margins
     env = rollouts.WalkerEnv(rollouts.WalkerConfig(terrain_shape=(args.size, args.size), robot=args.robot))
     policy, desc = rollouts.make_policy(env, jax.random.PRNGKey(0), args.robot)
     assert env.action_size == 8 and policy.action_size == 8
