@@ -1,7 +1,7 @@
 """Experiment 2's costs on the GPU machine: a curriculum chunk, its parts, and bare PPO, in one run.
 
     python benchmarks/curriculum.py [--archive A.npz] [--trials 1,10] [--chunks 2] [--parts] [--curricula map,dr]
-        [--num-envs N --num-unrolls U] [--overlap off,on] [--truncation mask,bootstrap] [--start RUN]
+        [--recipe paper|wide] [--num-envs N --num-unrolls U] [--overlap off,on] [--truncation mask,bootstrap] [--start RUN]
         [--out result.json]
 
 Builds exactly what ``python -m experiments learn --preset gpu-short`` builds (``experiments.runner.setup``: the bank
@@ -82,6 +82,10 @@ def learn_cfg(args, trials: int, overlap: bool = False, truncation: str | None =
         cfg["backend"] = args.backend
     elif args.backend not in (None, "jax"):
         raise SystemExit(f"this learn command has no backend setting; --backend {args.backend} is not available")
+    if args.recipe:
+        from jaxterrain.curriculum import recipe
+
+        cfg.update(recipe=args.recipe, **recipe(args.recipe))
     if args.num_envs:
         cfg["num_envs"] = args.num_envs
     if args.num_unrolls:
@@ -229,6 +233,8 @@ def main() -> None:
     p.add_argument("--chunks", type=int, default=2, help="chunks per timed block call")
     p.add_argument("--repeats", type=int, default=2, help="bare PPO: timed calls")
     p.add_argument("--num-envs", type=int, default=None, help="PPO envs per trial (default: the preset's)")
+    p.add_argument("--recipe", choices=("paper", "wide"), default=None,
+                   help="learn's --recipe: the update's shape (jaxterrain.curriculum.RECIPES; before --num-envs)")
     p.add_argument("--num-unrolls", type=int, default=None,
                    help="PPO unrolls per update (default: the preset's); e.g. --num-envs 2000 --num-unrolls 2 keeps "
                         "40 000 env steps per update in a quarter of the sequential env steps")

@@ -68,6 +68,7 @@ CPPN_ARCHIVE = common.shipped("archives/cppn_headings.npz")
 reseated under ``difficulty.HEADINGS``; package data (``jaxterrain/assets/archives/``, a copy of
 ``docs/results/exp2_cppn_headings_archive.npz``), so ``learn`` runs from any folder."""
 BACKENDS = ("auto", "jax", "warp")  # jaxterrain.walker.layout.BACKEND_CHOICES (literal: --help imports no JAX)
+RECIPE_NAMES = ("paper", "wide")  # jaxterrain.curriculum.RECIPES (literal, as BACKENDS; a test keeps them equal)
 _PAPER = dict(archive=CPPN_ARCHIVE, curriculum="map", trials=10, descriptors=["roughness", "tpi"], policy=None,
               epochs_per_chunk=40, steps_per_epoch=4000, max_epochs=30000, threshold=0.9, max_fitness=1.0,
               max_evals=100, attempts=None, best=None, headings=None, kappa=0.05, rho=0.4, sigma_f=1.0, noise=0.001,
@@ -78,14 +79,14 @@ _PAPER = dict(archive=CPPN_ARCHIVE, curriculum="map", trials=10, descriptors=["r
               truncation="bootstrap", overlap=False, compact=True, policy_every=None, terrains_per_chunk=8, levels=10,
               levels_init=None, levels_promote=None, levels_demote=0.5, plr_capacity=None, plr_replay_prob=0.8,
               plr_staleness=0.3, plr_temperature=0.3, plr_min_fill=0.5, accel_generator=None, accel_edits=1,
-              robot=None)
+              robot=None, recipe="paper")
 PRESETS: dict[str, dict] = common.with_preset_names({
     "paper": _PAPER,
     "gpu-short": {**_PAPER, "max_epochs": 3000},
     "smoke": {**_PAPER, "trials": 2, "epochs_per_chunk": 1, "steps_per_epoch": 80, "max_epochs": 4, "max_evals": 2,
               "attempts": 2, "best": 1, "headings": 1, "num_envs": 4, "num_unrolls": 2, "num_minibatches": 2,
               "update_epochs": 1, "episode_length": 100, "chunks_per_call": 2, "fast_compile": True,
-              "compact": False},
+              "compact": False, "recipe": None},  # its own tiny update (4 envs x 10 x 2), no recipe's
 }, {"gpu": "paper"})
 
 
@@ -167,11 +168,16 @@ def selector_overrides(args) -> dict:
 
 
 def add_fine_tuning_arguments(parser: argparse.ArgumentParser, scope: str = "") -> None:
-    """``--freeze-normaliser``, ``--healthy-reward``, ``--learning-rate``, ``--truncation``, ``--max-evals``,
-    ``--overlap`` and ``--compact`` / ``--no-compact`` (config ``update_normaliser`` / ``healthy_reward`` /
-    ``learning_rate`` / ``truncation`` / ``max_evals`` / ``overlap`` / ``compact``, read back by
-    :func:`fine_tuning_overrides`), shared with ``curriculum`` (``scope`` is added to the help, e.g. ", in every
-    treatment")."""
+    """``--recipe``, ``--freeze-normaliser``, ``--healthy-reward``, ``--learning-rate``, ``--truncation``,
+    ``--max-evals``, ``--overlap`` and ``--compact`` / ``--no-compact`` (config ``recipe`` and the update's shape /
+    ``update_normaliser`` / ``healthy_reward`` / ``learning_rate`` / ``truncation`` / ``max_evals`` / ``overlap`` /
+    ``compact``, read back by :func:`fine_tuning_overrides`), shared with ``curriculum`` (``scope`` is added to the
+    help, e.g. ", in every treatment")."""
+    parser.add_argument("--recipe", choices=RECIPE_NAMES, default=None,
+                        help=f"how fine-tuning PPO collects each 40 000-step update{scope}: paper (500 envs per trial "
+                             f"x 8 x 10 steps; every preset but smoke) or wide (4 000 envs x 10 steps: 8x fewer "
+                             f"sequential steps, 8x the envs); jaxterrain.curriculum.RECIPES (--num-envs overrides its "
+                             f"envs)")
     parser.add_argument("--freeze-normaliser", dest="update_normaliser", action="store_const", const=False,
                         default=None, help=f"keep the base policy's observation statistics fixed during fine-tuning"
                                            f"{scope} (default: they keep merging the fine-tuning data, as brax's PPO)")
@@ -199,18 +205,27 @@ def add_fine_tuning_arguments(parser: argparse.ArgumentParser, scope: str = "") 
 
 
 def fine_tuning_overrides(args) -> dict:
-    """The config values of :func:`add_fine_tuning_arguments`' flags (None = not given)."""
+    """The config values of :func:`add_fine_tuning_arguments`' flags (None = not given); ``--recipe NAME`` sets
+    ``recipe`` and the update's shape (``num_envs``, ``unroll_length``, ``num_unrolls``, ``num_minibatches``,
+    ``update_epochs``: ``jaxterrain.curriculum.RECIPES[NAME]``)."""
+    shape = {}
+    if args.recipe is not None:
+        from jaxterrain.curriculum.config import recipe
+
+        shape = {"recipe": args.recipe, **recipe(args.recipe)}
     return dict(healthy_reward=args.healthy_reward, update_normaliser=args.update_normaliser,
                 learning_rate=args.learning_rate, truncation=args.truncation, max_evals=args.max_evals,
-                overlap=args.overlap, compact=args.compact)
+                overlap=args.overlap, compact=args.compact, **shape)
 
 
 def overrides(args) -> dict:
-    return dict(archive=args.archive, curriculum=args.curriculum, trials=args.trials, threshold=args.threshold,
-                max_epochs=args.max_epochs, policy=args.policy, robot=args.robot, chunks_per_call=args.chunks_per_call,
-                num_envs=args.num_envs, backend=args.backend, policy_every=args.policy_every,
-                **fine_tuning_overrides(args), **selector_overrides(args),
-                **common.protocol_overrides(args))
+    out = dict(archive=args.archive, curriculum=args.curriculum, trials=args.trials, threshold=args.threshold,
+               max_epochs=args.max_epochs, policy=args.policy, robot=args.robot, chunks_per_call=args.chunks_per_call,
+               backend=args.backend, policy_every=args.policy_every, **fine_tuning_overrides(args),
+               **selector_overrides(args), **common.protocol_overrides(args))
+    if args.num_envs is not None or "num_envs" not in out:  # --num-envs over --recipe's envs
+        out["num_envs"] = args.num_envs
+    return out
 
 
 def main(args) -> int:

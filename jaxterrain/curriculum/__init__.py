@@ -27,7 +27,7 @@ from jaxterrain.curriculum.analysis import (
     milestone_summary,
     terrain_runs,
 )
-from jaxterrain.curriculum.config import FINE_TUNING, CurriculumConfig, SELECTORS, validate_config
+from jaxterrain.curriculum.config import FINE_TUNING, RECIPES, CurriculumConfig, SELECTORS, recipe, validate_config
 from jaxterrain.curriculum.selectors import (
     Assignment,
     Decision,
@@ -56,7 +56,7 @@ from jaxterrain.curriculum.core import (
 )
 
 __all__ = [
-    "Assignment", "CurriculumConfig", "Decision", "FINE_TUNING", "Outcome", "Selector", "get_selector",
+    "Assignment", "CurriculumConfig", "Decision", "FINE_TUNING", "Outcome", "RECIPES", "recipe", "Selector", "get_selector",
     "register_selector", "selector_names", "selectors", "Harness", "History", "MILESTONES", "PAPER_TABLE2", "SELECTORS", "State", "first_epochs",
     "format_milestone", "gp", "gp_params", "outputs", "runner", "walker", "hardest_curve", "init", "init_trials", "live_rows", "make_runner",
     "milestone_summary", "removal_mask", "roughness_sequence", "run_live", "run_trials", "select", "step",

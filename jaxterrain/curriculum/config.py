@@ -84,7 +84,7 @@ from jaxterrain.difficulty import Protocol
 from jaxterrain.rl.config import PPOConfig, validate_config as validate_ppo_config
 from jaxterrain.runtime.validation import int_at_least, known_fields, one_of, walks
 
-__all__ = ["CurriculumConfig", "validate_config", "SELECTORS", "FINE_TUNED", "FINE_TUNING"]
+__all__ = ["CurriculumConfig", "validate_config", "SELECTORS", "FINE_TUNED", "FINE_TUNING", "RECIPES", "recipe"]
 
 SELECTORS = ("map", "roughness", "random", "dr", "levels", "plr", "accel")  # built in; selectors.selector_names() adds registered ones
 GP_EVALUATIONS = ("final", "best")
@@ -97,6 +97,30 @@ FINE_TUNED = ("num_envs", "unroll_length", "num_unrolls", "num_minibatches", "up
               "update_normaliser", "truncation")
 FINE_TUNING = PPOConfig(num_envs=500, unroll_length=10, num_unrolls=8, num_minibatches=8, update_epochs=8,
                         learning_rate=3e-4, update_normaliser=True, truncation="bootstrap")
+
+RECIPES: dict[str, dict[str, int]] = {
+    "paper": {"num_envs": 500, "unroll_length": 10, "num_unrolls": 8, "num_minibatches": 8, "update_epochs": 8},
+    "wide": {"num_envs": 4000, "unroll_length": 10, "num_unrolls": 1, "num_minibatches": 8, "update_epochs": 8},
+}
+"""How fine-tuning PPO collects a chunk's env steps (``learn --recipe NAME``; the :data:`FINE_TUNED` fields that
+shape an update). Both take 40 000 env steps per update (4 updates per 160 000-step chunk) and train on them alike
+(8 epochs of 8 minibatches of 5 000, GAE over 10-step segments); they differ in where the steps come from:
+
+- ``paper`` (:data:`FINE_TUNING`): 500 envs per trial, 8 consecutive 10-step segments each per update: every env
+  walks 320 steps a chunk (longer than a traversal), but the chunk is 320 sequential env steps, and 10 trials are
+  5 000 envs, a third of a GPU's walker throughput (``benchmarks/RESULTS.md``).
+- ``wide``: 4 000 envs per trial, one 10-step segment each per update (legged_gym and Isaac Lab: 4 096 envs x 24
+  steps): 40 sequential env steps a chunk, 40 000 envs for 10 trials. Each env walks only 40 steps a chunk, so on a
+  terrain new to the trial (all envs restart there) the first chunk sees only the first ~1.2 m of the course; whole
+  walks take ~5 chunks.
+"""
+
+
+def recipe(name: str) -> dict[str, int]:
+    """The :data:`RECIPES` entry ``name`` (a copy); ``ValueError`` naming the choices."""
+    if name not in RECIPES:
+        raise ValueError(f"recipe must be one of {', '.join(RECIPES)}, got {name!r}")
+    return dict(RECIPES[name])
 
 
 class CurriculumConfig(NamedTuple):

@@ -28,7 +28,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from jaxterrain.curriculum import walker as W
-from jaxterrain.curriculum.config import CurriculumConfig, FINE_TUNED, validate_config
+from jaxterrain.curriculum.config import RECIPES, CurriculumConfig, FINE_TUNED, validate_config
 from jaxterrain.curriculum.core import CHECKPOINT_COMPAT, init_trials, run_live, run_trials
 from jaxterrain.curriculum.outputs import PARTIAL, export_policies, write_outputs
 from jaxterrain.curriculum.selectors import get_selector
@@ -60,14 +60,17 @@ def curriculum_config(cfg: dict):
     """The :class:`jaxterrain.curriculum.CurriculumConfig` of a learn config dict (validated). The dict is flat: the
     curriculum's fields and its fine-tuning PPO's (``num_envs``, ..., ``learning_rate``: ``CurriculumConfig.ppo``)
     side by side, with ``curriculum`` as the selector; ``CurriculumConfig.from_json_dict`` reads that layout."""
+    if cfg.get("recipe") is not None and cfg["recipe"] not in RECIPES:
+        raise BadInput(f"--recipe must be one of {', '.join(RECIPES)}, got {cfg['recipe']!r}")
     fields = {k: v for k, v in cfg.items() if k in FINE_TUNED or (k in CurriculumConfig._fields and k != "ppo")}
     fields.setdefault("truncation", LEGACY_TRUNCATION)
     try:
         return validate_config(CurriculumConfig.from_json_dict({**fields, "selector": cfg["curriculum"]}))
     except (ValueError, TypeError) as err:  # a field is its flag's name: --levels-init (CurriculumConfig.levels_init)
+        err = re.sub(r"CurriculumConfig\.ppo\b", "--recipe / --num-envs (the update's shape)", str(err))
         raise BadInput(re.sub(r"CurriculumConfig\.selector\b", "--curriculum", re.sub(
             r"CurriculumConfig\.(?!selector\b)([a-z_]+)\b", lambda m: f"--{m.group(1).replace('_', '-')}",
-            str(err)))) from None
+            err))) from None
 
 
 def with_protocol(cfg: dict, arch) -> dict:

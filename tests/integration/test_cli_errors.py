@@ -166,6 +166,8 @@ def test_every_long_command_takes_the_same_presets_and_prints_its_config(command
     (["--curriculum", "levels", "--levels", "3", "--levels-init", "3"], "learn: --levels-init must be in [0, levels - 1"),
     (["--curriculum", "plr", "--plr-capacity", "100000"], "learn: --plr-capacity must be at most "),
     (["--robot", "dog"], "learn: --robot: robot must be one of humanoid, ant, got 'dog'"),
+    (["--recipe", "wide"], "learn: --recipe / --num-envs (the update's shape): num_envs x unroll_length x num_unrolls "
+                           "(40000) must divide epochs_per_chunk x steps_per_epoch (80)"),  # smoke's 80-step chunks
 ])
 def test_learn_refuses_settings_read_against_the_archive_in_one_line_and_leaves_no_run(tmp_path, monkeypatch,
                                                                                      capsys, argv, message):
@@ -176,3 +178,34 @@ def test_learn_refuses_settings_read_against_the_archive_in_one_line_and_leaves_
     assert len(err.splitlines()) == 1 and err.startswith(message), err
     runs = tmp_path / "runs"
     assert not runs.exists() or not any(runs.iterdir())  # the run folder made for it was removed again
+
+
+def test_recipes_shape_the_update_and_num_envs_overrides_theirs(capsys):
+    """``--recipe NAME`` sets the update's shape from ``jaxterrain.curriculum.RECIPES`` (``paper``: the presets'
+    500 x 10 x 8; ``wide``: 4 000 x 10 x 1, the same 40 000 env steps per update), in ``learn`` and ``curriculum``;
+    ``--num-envs`` still wins; the curriculum built from it trains with that PPO shape."""
+    from experiments import learn
+    from jaxterrain.curriculum import FINE_TUNING, RECIPES, recipe, runner
+
+    assert learn.RECIPE_NAMES == tuple(RECIPES)
+    assert RECIPES["paper"] == {k: getattr(FINE_TUNING, k) for k in RECIPES["paper"]}
+    assert {k: v for k, v in learn.PRESETS["gpu-short"].items() if k in RECIPES["paper"]} == RECIPES["paper"]
+    steps = lambda r: r["num_envs"] * r["unroll_length"] * r["num_unrolls"]  # noqa: E731
+    assert steps(RECIPES["wide"]) == steps(RECIPES["paper"]) == 40_000
+    with pytest.raises(ValueError, match="recipe must be one of paper, wide, got 'narrow'"):
+        recipe("narrow")
+
+    def printed(*argv):
+        with pytest.raises(SystemExit):
+            cli.main([*argv, "--print-config"])
+        return json.loads(capsys.readouterr().out)
+
+    for command in ("learn", "curriculum"):
+        wide = printed(command, "--preset", "gpu-short", "--recipe", "wide")
+        assert wide["recipe"] == "wide" and {k: wide[k] for k in RECIPES["wide"]} == RECIPES["wide"], command
+    assert printed("learn", "--preset", "gpu-short")["recipe"] == "paper"
+    mine = printed("learn", "--preset", "gpu-short", "--recipe", "wide", "--num-envs", "2000")
+    assert (mine["num_envs"], mine["num_unrolls"]) == (2000, 1)
+    cfg = printed("learn", "--preset", "gpu-short", "--recipe", "wide")
+    ppo = runner.curriculum_config({**cfg, "attempts": 20, "best": 5, "headings": 4}).ppo  # the archive's protocol
+    assert (ppo.num_envs, ppo.unroll_length, ppo.num_unrolls) == (4000, 10, 1)
