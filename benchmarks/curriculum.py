@@ -123,6 +123,14 @@ def trial_switches(states, before) -> np.ndarray:
     return out
 
 
+def chunk_kinds(config, states) -> dict:
+    """``{"replay_chunks" / "edit_chunks": [T]}``, the selector's own counts so far (plr, accel; else empty)."""
+    from jaxterrain.curriculum import get_selector
+
+    summary = jax.vmap(get_selector(config).summary)(states.selector)
+    return {k: np.asarray(v) for k, v in summary.items() if k in ("replay_chunks", "edit_chunks")}
+
+
 def measure_block(args, trials: int, overlap: bool = False, truncation: str | None = None,
                   curriculum: str | None = None) -> dict:
     """The learn command's block at ``trials``: compile seconds, seconds per chunk, env steps/s."""
@@ -137,22 +145,26 @@ def measure_block(args, trials: int, overlap: bool = False, truncation: str | No
         states = start = start_states(args.start, states)
     states, first = timed(block, states, bank, 1)  # first call: a chunk (and any lazy work)
     before = np.asarray(states.chunk)
+    kinds_before = chunk_kinds(config, states)
     pending = np.ones(trials, bool) if states.pending is None else np.asarray(states.pending)
     states, t = timed(block, states, bank, args.chunks)
     chunks = np.asarray(states.chunk) - before
     switched = trial_switches(states, before)
+    kinds = {k: float(np.mean(v - kinds_before[k])) for k, v in chunk_kinds(config, states).items()}
     # loop steps: one per chunk; with overlap one more per switch and where nothing was pending at the start (the
     # last step of a trial that switched may fall outside the block: an upper bound)
     steps = int(np.max(chunks + (switched + ~pending if overlap else 0)))
     done = float(np.mean(chunks))
     per_chunk = t / done
     row = {"part": "block (learn)" + (", overlap" if overlap else ""), "curriculum": cfg["curriculum"],
+           "recipe": cfg.get("recipe"), "num_envs": cfg["num_envs"], "num_unrolls": cfg["num_unrolls"],
            "trials": trials,
            "truncation": cfg["truncation"], "compile_s": compile_s,
            "first_chunk_s": first, "s_per_chunk": per_chunk,
            "env_steps_per_s": trials * config.steps_per_chunk / per_chunk, "chunks_done": done,
            "chunk_reached": int(np.max(np.asarray(states.chunk))), "switches": int(np.sum(switched)),
-           "loop_steps": steps, "s_per_step": t / steps, "hardest_mean": float(np.mean(np.asarray(states.hardest)))}
+           "loop_steps": steps, "s_per_step": t / steps, "hardest_mean": float(np.mean(np.asarray(states.hardest))),
+           **{f"{k}_timed": v for k, v in kinds.items()}}  # plr / accel: mean replay (edit) chunks per trial timed
     if args.parts and runner.selector_slots(cfg) == 1:  # the parts of a one-terrain curriculum
         row.update(measure_parts(cfg, config, bank, policy, env, trials, start))
     return row
@@ -306,9 +318,9 @@ def main() -> None:
         if trials in blocks:
             ratios[f"overlap_speedup_T{trials}"] = blocks[trials]["s_per_chunk"] / row["s_per_chunk"]
     print()
-    cols = ["part", "curriculum", "trials", "truncation", "compile_s", "s_per_chunk", "env_steps_per_s", "chunks_done", "switches",
+    cols = ["part", "curriculum", "recipe", "num_envs", "trials", "truncation", "compile_s", "s_per_chunk", "env_steps_per_s", "chunks_done", "switches",
             "loop_steps", "s_per_step", "train_s_per_chunk", "eval_s_per_chunk", "train_seq_steps", "eval_seq_steps",
-            "train_compile_s", "eval_compile_s"]
+            "train_compile_s", "eval_compile_s", "replay_chunks_timed", "edit_chunks_timed"]
     print(common.markdown_table(rows, cols))
     print(ratios, flush=True)
     common.write_json(args.out, {"environment": env, "rows": rows, "ratios": ratios})
