@@ -41,7 +41,7 @@ def test_curriculum_parts_on_the_learn_commands_layout(backend):
     if backend == "warp" and not warp_available()[0]:
         pytest.skip(warp_available()[1])
     curriculum = load_benchmark("curriculum")
-    args = argparse.Namespace(preset="smoke", archive=None, backend=backend, num_envs=None, num_unrolls=None,
+    args = argparse.Namespace(preset="smoke", archive=None, backend=backend, num_envs=None, num_unrolls=None, recipe=None,
                               headings=2, chunks=1, parts=True, start=None)
     row = curriculum.measure_block(args, 2)
     assert row["chunks_done"] == 1 and row["chunk_reached"] == 2  # one timed chunk after an untimed one
@@ -61,7 +61,7 @@ def test_curriculum_parts_from_restored_states():
     import jax.numpy as jnp
 
     curriculum = load_benchmark("curriculum")
-    args = argparse.Namespace(preset="smoke", archive=None, backend=None, num_envs=None, num_unrolls=None,
+    args = argparse.Namespace(preset="smoke", archive=None, backend=None, num_envs=None, num_unrolls=None, recipe=None,
                               headings=None)
     cfg = curriculum.learn_cfg(args, 2)
     config, arch, policy, env = curriculum.runner.validate(cfg)
@@ -86,7 +86,7 @@ def test_curriculum_bare_ppo_on_a_tiled_walker(monkeypatch):
     plain = curriculum.learn_cfg
     monkeypatch.setattr(curriculum, "learn_cfg", lambda args, trials, overlap=False, truncation=None: plain(
         args, trials, True, truncation))  # overlap: the walker on tiles
-    args = argparse.Namespace(preset="smoke", archive=None, backend=None, num_envs=None, num_unrolls=None,
+    args = argparse.Namespace(preset="smoke", archive=None, backend=None, num_envs=None, num_unrolls=None, recipe=None,
                               headings=None, repeats=1)
     for truncation in ("mask", "bootstrap"):
         row = curriculum.measure_ppo(args, truncation)
