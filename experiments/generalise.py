@@ -4,6 +4,7 @@
     for T in runs/exp3/*/policies; do                                                      # each one's 10 walkers
         python -m experiments evaluate --preset gpu --policy $T/trial_* --out ${T%/policies}/heldout; done
     python -m experiments generalise runs/exp3                                             # this command (CPU)
+    python -m experiments generalise runs/exp3 wide=runs/wide/cppn-map --out runs/compare     # LABEL=FOLDER
 
 Reads every treatment of the RUN folders: a folder with ``heldout/fitness.csv`` (or ``fitness.csv.gz``: the held-out
 evaluation of its walkers, as ``evaluate`` writes it, the base policy beside them) and ``summary.json`` (``learn``'s:
@@ -30,25 +31,45 @@ BASE = "base policy"
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("runs", nargs="+", type=Path, metavar="RUN",
-                        help="curriculum (or learn) run folders whose treatments have heldout/fitness.csv")
+    parser.add_argument("runs", nargs="+", type=labelled_path, metavar="RUN",
+                        help="curriculum (or learn) run folders whose treatments have heldout/fitness.csv, or those "
+                             "treatment folders; LABEL=FOLDER names a treatment LABEL (a run's: 'LABEL <treatment>')")
     parser.add_argument("--out", type=Path, default=None, help="output folder (default: RUN/generalisation)")
     parser.add_argument("--reps", type=int, default=2000, help="bootstrap resamples per interval")
     parser.add_argument("--seed", type=int, default=0, help="seed of the bootstrap")
 
 
-def treatment_folders(runs) -> list[Path]:
-    """Every folder of ``runs`` (itself or a direct subfolder) holding a held-out evaluation and a summary, sorted."""
+class LabelledPath(type(Path())):
+    """A RUN argument: the folder, and the ``LABEL`` of ``LABEL=FOLDER`` (None without one)."""
+
+    label: str | None = None
+
+
+def labelled_path(text: str) -> LabelledPath:
+    """``"LABEL=FOLDER"`` or ``"FOLDER"`` (a LABEL has no ``/``; a folder whose name holds ``=`` is given with
+    ``./``)."""
+    label, sep, rest = text.partition("=")
+    path = LabelledPath(rest if sep and label and "/" not in label else text)
+    path.label = label if sep and label and "/" not in label else None
+    return path
+
+
+def treatment_folders(runs) -> list[tuple[Path, str | None]]:
+    """``(folder, label)`` of every folder of ``runs`` (itself or a direct subfolder) holding a held-out evaluation
+    and a summary, sorted; the label from ``LABEL=``: LABEL for the run folder itself, ``"LABEL <name>"`` for its
+    subfolders, else None (the folder's name)."""
     out = []
     for run in runs:
+        label = getattr(run, "label", None)
         for d in [run, *sorted(p for p in run.iterdir() if p.is_dir())]:
             if (d / "summary.json").is_file() and any((d / "heldout" / f).is_file()
                                                        for f in ("fitness.csv", "fitness.csv.gz")):
-                out.append(d)
+                own = None if label is None else label if d == run else f"{label} {d.name.replace('-', ' ')}"
+                out.append((d, own))
     return out
 
 
-def load_treatment(folder: Path) -> dict:
+def load_treatment(folder: Path, label: str | None = None) -> dict:
     """One treatment: its label, trials' hardest cell traversed, the held-out evaluation (trials in trial order, the
     base policy's rows apart)."""
     from jaxterrain import suite
@@ -61,7 +82,7 @@ def load_treatment(folder: Path) -> dict:
     if not walkers:
         raise SystemExit(f"{path}: no policies/trial_K walker in it")
     hardest = summary["hardest"]
-    return {"label": folder.name.replace("-", " "), "folder": folder, "family": ev.family, "level": ev.level,
+    return {"label": label or folder.name.replace("-", " "), "folder": folder, "family": ev.family, "level": ev.level,
             "trials": [t for t, _ in walkers], "fitness": ev.fitness[[i for _, i in walkers]],
             "hardest": [float(hardest[t]) for t, _ in walkers],
             "base": ev.fitness[[i for i, n in enumerate(ev.policies) if n == "base"]]}
@@ -83,12 +104,12 @@ def main(args: argparse.Namespace) -> int:
     folders = treatment_folders(args.runs)
     if not folders:
         raise UsageError(f"no treatment with heldout/fitness.csv and summary.json in {', '.join(map(str, args.runs))}")
-    ts = [load_treatment(f) for f in folders]
+    ts = [load_treatment(f, label) for f, label in folders]
     seen: dict[str, Path] = {}
     for t in ts:
         if t["label"] in seen:
             raise UsageError(f"two treatments named {t['label']!r} ({seen[t['label']]}, {t['folder']}): pass the "
-                             f"treatment folders you want instead of their runs")
+                             f"treatment folders you want, or name them: LABEL=FOLDER")
         seen[t["label"]] = t["folder"]
     first = ts[0]
     for t in ts[1:]:

@@ -87,7 +87,7 @@ def test_generalise_refuses_folders_without_evaluations(tmp_path):
 
 def test_generalise_refuses_two_treatments_of_one_name_and_takes_treatment_folders(tmp_path, capsys):
     """Two runs that both hold a ``cppn-plr`` (a re-run beside the first) are refused, naming both; passing the
-    treatment folders themselves picks one."""
+    treatment folders themselves picks one, and ``LABEL=FOLDER`` names them apart."""
     for run in ("first", "rerun"):
         write_treatment(tmp_path / run / "cppn-plr", np.linspace(0.4, 0.45, 2)[:, None], 0.3, [10, 11])
     write_treatment(tmp_path / "first" / "cppn-dr", np.linspace(0.5, 0.55, 2)[:, None], 0.3, [12, 13])
@@ -100,3 +100,12 @@ def test_generalise_refuses_two_treatments_of_one_name_and_takes_treatment_folde
                "--reps", "20", "--out", str(out)) == 0
     assert {r["treatment"] for r in csv.DictReader((out / "intervals.csv").open())} == {"cppn dr", "cppn plr",
                                                                                       "base policy"}
+    # LABEL=FOLDER names them: a treatment folder LABEL, a run's treatments "LABEL <name>"
+    assert cli("generalise", str(tmp_path / "first"), f"sized={tmp_path / 'rerun' / 'cppn-plr'}", "--reps", "20",
+               "--out", str(out)) == 0
+    assert {r["treatment"] for r in csv.DictReader((out / "intervals.csv").open())} == {
+        "cppn dr", "cppn plr", "sized", "base policy"}
+    assert cli("generalise", f"a={tmp_path / 'first'}", f"b={tmp_path / 'rerun'}", "--reps", "20",
+               "--out", str(out)) == 0
+    assert {r["treatment"] for r in csv.DictReader((out / "intervals.csv").open())} == {
+        "a cppn dr", "a cppn plr", "b cppn plr", "base policy"}
