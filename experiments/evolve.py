@@ -197,6 +197,15 @@ def main(args) -> int:
                 difficulty.robot_base_policy(args.robot)
         except ValueError as err:
             raise common.UsageError(f"--robot: {err}") from None
+    if fitness == "difficulty":  # the walker fitness needs terrains the robot has a track on (its margins)
+        from jaxterrain.walker import WalkerConfig, min_terrain_side
+
+        cfg0 = {**PRESETS.get(args.preset or "smoke", {}), **{k: v for k, v in overrides(args).items() if v is not None}}
+        robot = cfg0.get("robot") or "humanoid"
+        need = min_terrain_side(WalkerConfig(robot=robot))
+        if cfg0.get("size") is not None and int(cfg0["size"]) < need:
+            raise common.UsageError(f"--size must be >= {need} pixels for the walker fitness of robot {robot} (its "
+                                    f"episode margins at 4 cm a pixel); got {cfg0['size']}")
     folder, cfg = common.setup_run("evolve", args, PRESETS, "smoke", overrides(args))
     clock = common.Clock(args.time_limit)
     try:

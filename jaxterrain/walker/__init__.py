@@ -22,8 +22,8 @@ Per-env terrains as tiles of one heightfield (needed by the MuJoCo Warp backend,
 
 from jaxterrain.walker import robots
 from jaxterrain.walker.robots import RobotSpec, register_robot
-from jaxterrain.walker.env import (BACKENDS, WalkerConfig, WalkerEnv, WalkerState, flat_terrain, resolve_config,
-                                   sample_heights)
+from jaxterrain.walker.env import (BACKENDS, WalkerConfig, WalkerEnv, WalkerState, flat_terrain, min_terrain_side,
+                                   resolve_config, sample_heights)
 from jaxterrain.walker.model import (
     NAMED_SOLVERS,
     SOLVER_FAST,
@@ -48,7 +48,7 @@ __all__ = [
     "robots",
     "RobotSpec",
     "register_robot",
-    "resolve_config",
+    "resolve_config", "min_terrain_side",
     "layout",
     "rollout",
     "BACKEND_CHOICES",

@@ -91,8 +91,8 @@ from jaxterrain.walker.model import (
 from jaxterrain.walker.robots import ROBOT_FIELDS, get as get_robot
 from jaxterrain.walker.tiles import Tile, TileBank
 
-__all__ = ["BACKENDS", "PARK_HEIGHT", "WalkerConfig", "WalkerState", "resolve_config", "sample_heights", "WalkerEnv",
-           "flat_terrain"]
+__all__ = ["BACKENDS", "PARK_HEIGHT", "WalkerConfig", "WalkerState", "resolve_config", "min_terrain_side",
+           "sample_heights", "WalkerEnv", "flat_terrain"]
 
 BACKENDS = ("jax", "warp")
 PARK_HEIGHT = 100.0  # m above the terrain's top where WalkerEnv.park puts walkers whose outcome is recorded
@@ -176,6 +176,20 @@ def resolve_config(config: WalkerConfig) -> WalkerConfig:
     config = config._replace(**{f: robot.default(f) for f in ROBOT_FIELDS if getattr(config, f) is None})
     _check_config(config)
     return config
+
+
+def min_terrain_side(config: WalkerConfig = WalkerConfig()) -> int:
+    """The fewest samples per side of a square terrain that :class:`WalkerEnv` takes for ``config``'s robot at
+    ``config.scale`` (its ``terrain_shape`` is ignored): a track longer than 0.5 m between ``start_margin`` and
+    ``goal_margin``, and more than 0.2 m inside the two ``side_margin`` s (plus ``start_spread`` and 0.5 m when a
+    spread is set). The humanoid at 4 cm: 39; the ant (1.0 / 1.3 / 1.3 m margins): 77."""
+    c = resolve_config(config._replace(terrain_shape=(4, 4)))
+    for n in range(4, 1 << 16):
+        radius_x, radius_y = hfield_size((n, n), c.scale)[:2]
+        track, width = 2 * radius_x - c.start_margin - c.goal_margin, radius_y - c.side_margin
+        if track > 0.5 and width > 0.2 and (c.start_spread == 0 or c.start_spread <= width - 0.5):
+            return n
+    raise ValueError(f"no terrain up to {1 << 16} samples a side fits the margins of {c}")
 
 
 def _real(name: str, value, lo: float | None = None, lo_open: bool = False) -> float:

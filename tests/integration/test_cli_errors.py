@@ -98,6 +98,10 @@ CASES = [
     (["train-base-policy", "--num-envs", "0"], "--num-envs must be an integer >= 1"),
     (["train-base-policy", "--robot", "dog"], "--robot: robot must be one of humanoid, ant, got 'dog'"),
     (["evaluate", "--robot", "dog"], "--robot: robot must be one of humanoid, ant, got 'dog'"),
+    (["evaluate", "--robot", "ant", "--size", "64"], "--size must be >= 77 pixels for robot ant"),
+    (["evolve", "--fitness", "difficulty"], "--size must be >= 39 pixels for the walker fitness of robot humanoid"),
+    (["evolve", "--robot", "ant", "--fitness", "difficulty", "--size", "64"],
+     "--size must be >= 77 pixels for the walker fitness of robot ant"),
     (["evolve", "--robot", "dog"], "--robot: robot must be one of humanoid, ant, got 'dog'"),
     (["learn", "--max-evals", "0"], "--max-evals must be an integer >= 1"),
     (["learn", "--curriculum", "accel", "--accel-edits", "0"], "--accel-edits must be an integer >= 1"),
@@ -209,3 +213,18 @@ def test_recipes_shape_the_update_and_num_envs_overrides_theirs(capsys):
     cfg = printed("learn", "--preset", "gpu-short", "--recipe", "wide")
     ppo = runner.curriculum_config({**cfg, "attempts": 20, "best": 5, "headings": 4}).ppo  # the archive's protocol
     assert (ppo.num_envs, ppo.unroll_length, ppo.num_unrolls) == (4000, 10, 1)
+
+
+def test_evaluate_raises_a_presets_size_to_one_the_robot_fits(capsys):
+    """The smoke preset's 64-pixel suite is too small for the ant (1.0 + 1.3 m of margins at 4 cm a pixel): the
+    size becomes the next multiple of 32 that fits, said on stderr and recorded; the humanoid keeps 64."""
+    import argparse
+
+    from experiments import evaluate
+    from jaxterrain import difficulty
+
+    for robot, size in (("ant", 96), ("humanoid", 64)):
+        args, cfg0 = argparse.Namespace(size=None, preset="smoke"), {"size": 64, "archive": None}
+        evaluate.fit_size(args, cfg0, [difficulty.robot_base_policy(robot)])
+        assert cfg0["size"] == size and args.size == (size if robot == "ant" else None), robot
+    assert "--size 96 (the smoke preset's 64 pixels are too small for robot ant)" in capsys.readouterr().err

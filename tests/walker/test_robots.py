@@ -194,3 +194,15 @@ def test_the_ants_walk_on_a_tile_does_not_touch_its_neighbour_tile():
     d = np.asarray(difficulty.rollout_distances(terrains, jax.random.PRNGKey(5), 4, policy=difficulty.robot_base_policy("ant"),
                                                 env_config=config))
     np.testing.assert_array_equal(d[0], 1.0)  # the flat tile walked to its goal, every attempt
+
+
+def test_min_terrain_side_is_the_smallest_terrain_the_env_takes():
+    """``walker.min_terrain_side``: the humanoid's 0.5 / 0.5 / 0.3 m margins need 39 samples at 4 cm, the ant's 1.0
+    / 1.3 / 1.3 m 77; the env takes that side and refuses one less."""
+    from jaxterrain.walker import min_terrain_side
+
+    for robot, side in (("humanoid", 39), ("ant", 77)):
+        assert min_terrain_side(WalkerConfig(robot=robot)) == side
+        WalkerEnv(WalkerConfig(robot=robot, terrain_shape=(side, side)))
+        with pytest.raises(ValueError, match="terrain too"):
+            WalkerEnv(WalkerConfig(robot=robot, terrain_shape=(side - 1, side - 1)))
