@@ -164,7 +164,7 @@ def main(args) -> int:
     from jaxterrain.terrain import TerrainScale
     from jaxterrain.walker import resolve_backend
 
-    cfg0 = {**PRESETS[args.preset or "smoke"], **{k: v for k, v in overrides(args).items() if v is not None}}
+    cfg0 = common.preset_with_flags(PRESETS, args, overrides(args))
     policies = load_policies(cfg0["policy"], cfg0.get("robot"))  # before the run folder: a bad folder is one line, nothing left behind
     check_terrain_flags(cfg0)
     fit_size(args, cfg0, policies)

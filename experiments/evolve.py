@@ -200,7 +200,7 @@ def main(args) -> int:
     if fitness == "difficulty":  # the walker fitness needs terrains the robot has a track on (its margins)
         from jaxterrain.walker import WalkerConfig, min_terrain_side
 
-        cfg0 = {**PRESETS.get(args.preset or "smoke", {}), **{k: v for k, v in overrides(args).items() if v is not None}}
+        cfg0 = common.preset_with_flags(PRESETS, args, overrides(args))
         robot = cfg0.get("robot") or "humanoid"
         need = min_terrain_side(WalkerConfig(robot=robot))
         if cfg0.get("size") is not None and int(cfg0["size"]) < need:
