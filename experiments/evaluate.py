@@ -111,27 +111,29 @@ def check_terrain_flags(cfg: dict) -> None:
         raise UsageError(f"--archive {cfg['archive']}: no such file")
 
 
-def fit_size(args, cfg0: dict, policies) -> None:
+def fit_size(args, cfg0: dict, policies) -> int:
     """A terrain side every policy's robot can walk (``walker.min_terrain_side``): a ``--size`` below it is refused
     naming it; a preset's (smoke: 64 pixels) is raised to the next multiple of 32 that fits, said on stderr, and
-    recorded in the run's config as if given (``args.size``)."""
+    recorded in the run's config as if given (``args.size``). Returns a side the policies can be checked on: the
+    size, or the robots' minimum where the suite's own size (None) or an archive's terrains are walked."""
     from experiments.common import UsageError
     from jaxterrain import difficulty
     from jaxterrain.walker import WalkerConfig, min_terrain_side
 
     size = cfg0["size"]
-    if size is None or cfg0["archive"]:
-        return
     robots = sorted({difficulty.policy_robot(p) for p in policies})
     need = max(min_terrain_side(WalkerConfig(robot=r)) for r in robots)
+    if size is None or cfg0["archive"]:
+        return need
     if size >= need:
-        return
+        return size
     if args.size is not None:
         raise UsageError(f"--size must be >= {need} pixels for robot {', '.join(robots)} (its episode margins at "
                          f"4 cm a pixel); got {size}")
     args.size = cfg0["size"] = -(-need // 32) * 32
     print(f"evaluate: --size {args.size} (the {args.preset or 'smoke'} preset's {size} pixels are too small for robot "
           f"{', '.join(robots)})", file=sys.stderr)
+    return args.size
 
 
 def terrains(cfg: dict):
@@ -167,8 +169,7 @@ def main(args) -> int:
     cfg0 = common.preset_with_flags(PRESETS, args, overrides(args))
     policies = load_policies(cfg0["policy"], cfg0.get("robot"))  # before the run folder: a bad folder is one line, nothing left behind
     check_terrain_flags(cfg0)
-    fit_size(args, cfg0, policies)
-    side = cfg0["size"] or (suite.VERSIONS[cfg0["suite"]]["size"] if not cfg0["archive"] else 256)
+    side = fit_size(args, cfg0, policies)
     try:  # another robot or observation set: refused before anything is built
         suite.check_policies(policies, (side, side), TerrainScale())
     except ValueError as err:

@@ -49,8 +49,9 @@ def labelled_path(text: str) -> LabelledPath:
     """``"LABEL=FOLDER"`` or ``"FOLDER"`` (a LABEL has no ``/``; a folder whose name holds ``=`` is given with
     ``./``)."""
     label, sep, rest = text.partition("=")
-    path = LabelledPath(rest if sep and label and "/" not in label else text)
-    path.label = label if sep and label and "/" not in label else None
+    named = bool(sep and label and "/" not in label)
+    path = LabelledPath(rest if named else text)
+    path.label = label if named else None
     return path
 
 
