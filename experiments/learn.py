@@ -176,7 +176,8 @@ def add_fine_tuning_arguments(parser: argparse.ArgumentParser, scope: str = "") 
     parser.add_argument("--recipe", choices=RECIPE_NAMES, default=None,
                         help=f"how fine-tuning PPO collects each 40 000-step update{scope}: paper (500 envs per trial "
                              f"x 8 x 10 steps; every preset but smoke) or wide (4 000 envs x 10 steps: 8x fewer "
-                             f"sequential steps, 8x the envs); jaxterrain.curriculum.RECIPES (--num-envs overrides its "
+                             f"sequential steps, 8x the envs; 1.35x faster on an H200 but lower held-out scores: "
+                             f"docs/results/wide_recipe.md); jaxterrain.curriculum.RECIPES (--num-envs overrides its "
                              f"envs)")
     parser.add_argument("--freeze-normaliser", dest="update_normaliser", action="store_const", const=False,
                         default=None, help=f"keep the base policy's observation statistics fixed during fine-tuning"

@@ -112,7 +112,9 @@ shape an update). Both take 40 000 env steps per update (4 updates per 160 000-s
 - ``wide``: 4 000 envs per trial, one 10-step segment each per update (legged_gym and Isaac Lab: 4 096 envs x 24
   steps): 40 sequential env steps a chunk, 40 000 envs for 10 trials. Each env walks only 40 steps a chunk, so on a
   terrain new to the trial (all envs restart there) the first chunk sees only the first ~1.2 m of the course; whole
-  walks take ~5 chunks.
+  walks take ~5 chunks. Measured (``gpu-short``, CPPN and Perlin maps, 10 trials each, one H200, 2026-11-28): 1.35x
+  faster per chunk at 10 trials, the hardest archive cell within noise, but the held-out IQM lower with intervals
+  apart (0.333 against 0.346, 0.379 against 0.403; ``docs/results/wide_recipe.md``), so ``paper`` stays the default.
 """
 
 
