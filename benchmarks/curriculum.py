@@ -2,7 +2,7 @@
 
     python benchmarks/curriculum.py [--archive A.npz] [--trials 1,10] [--chunks 2] [--parts] [--curricula map,dr]
         [--recipe paper|wide] [--num-envs N --num-unrolls U] [--overlap off,on] [--truncation mask,bootstrap] [--start RUN]
-        [--out result.json]
+        [--devices 1,2] [--out result.json]
 
 Builds exactly what ``python -m experiments learn --preset gpu-short`` builds (``experiments.runner.setup``: the bank
 of the archive, the base policy, the walker, the compiled block of chunks) and measures, each after its compile (the
@@ -29,6 +29,9 @@ given (``mask,bootstrap,mask`` brackets the one with the other, to see the machi
 bootstrap's seconds per chunk over the mean of mask's; the other ratios use the first mode given.
 ``--curricula map,dr,levels`` times the block of each curriculum (the first the peer): ``dr_vs_map_T10`` is dr's env
 steps/s over map's at 10 trials (issue 46: a per-env selector costs at most 10 %, ratio >= 0.9).
+``--devices 1,2`` times each block with its trials split over that many devices (``learn --devices N``:
+``curriculum.make_runner`` over a mesh; without the flag, the one-device runner): ``devices_N_vs_1_T{trials}`` is
+the env steps/s on N devices over one's (issue 48: >= 1.8x on 2 GPUs).
 ``--start RUN`` starts every block from the checkpoint of a ``learn`` run of the same preset and trial count (e.g.
 the paper run at chunk 550, where terrains change less often than in the first chunks) instead of chunk 0; pass
 the run's ``--archive`` too. With ``--parts`` the parts then time each trial's restored policy on its current
@@ -61,6 +64,7 @@ from jaxterrain.curriculum import runner  # noqa: E402
 from jaxterrain import rl  # noqa: E402
 from jaxterrain.rl.config import TRUNCATIONS  # noqa: E402
 from jaxterrain.curriculum import walker as W  # noqa: E402
+from jaxterrain.runtime import sharding  # noqa: E402
 
 
 def timed(fn, *args):
@@ -132,12 +136,14 @@ def chunk_kinds(config, states) -> dict:
 
 
 def measure_block(args, trials: int, overlap: bool = False, truncation: str | None = None,
-                  curriculum: str | None = None) -> dict:
-    """The learn command's block at ``trials``: compile seconds, seconds per chunk, env steps/s."""
+                  curriculum: str | None = None, devices: int | None = None) -> dict:
+    """The learn command's block at ``trials``: compile seconds, seconds per chunk, env steps/s; ``devices``: the
+    trials split over that many devices (a mesh, as ``learn --devices N``; None: the one-device runner)."""
     cfg = learn_cfg(args, trials, overlap, truncation, curriculum)
     config, arch, policy, env = runner.validate(cfg)
+    mesh = None if devices is None else sharding.setup(devices)
     t0 = time.perf_counter()
-    bank, block, states = runner.setup(cfg, config, arch, policy, env)
+    bank, block, states = runner.setup(cfg, config, arch, policy, env, mesh)
     jax.block_until_ready(states)
     compile_s = time.perf_counter() - t0
     start = None  # --start's restored states, for the parts
@@ -158,7 +164,7 @@ def measure_block(args, trials: int, overlap: bool = False, truncation: str | No
     per_chunk = t / done
     row = {"part": "block (learn)" + (", overlap" if overlap else ""), "curriculum": cfg["curriculum"],
            "recipe": cfg.get("recipe"), "num_envs": cfg["num_envs"], "num_unrolls": cfg["num_unrolls"],
-           "trials": trials,
+           "trials": trials, "devices": devices or 1,
            "truncation": cfg["truncation"], "compile_s": compile_s,
            "first_chunk_s": first, "s_per_chunk": per_chunk,
            "env_steps_per_s": trials * config.steps_per_chunk / per_chunk, "chunks_done": done,
@@ -262,8 +268,14 @@ def main() -> None:
     p.add_argument("--curricula", default=None,
                    help="comma list of learn --curriculum names timed as blocks, the first the peer of the others' "
                         "ratios (e.g. map,dr,levels: the per-env selectors' cost; default: the preset's)")
+    p.add_argument("--devices", default=None,
+                   help="comma list of device counts, each block timed with its trials split over that many devices "
+                        "(learn --devices N; default: the one-device runner)")
     p.add_argument("--out", default=None)
     args = p.parse_args()
+    device_counts = [None] if args.devices is None else [int(n) for n in args.devices.split(",")]
+    if any(n is not None and not 1 <= n <= jax.device_count() for n in device_counts):
+        p.error(f"--devices: counts from 1 to the {jax.device_count()} devices here; got {args.devices!r}")
     modes = [{"off": False, "on": True}[m] for m in args.overlap.split(",")]
     truncations = (args.truncation or learn.PRESETS[args.preset]["truncation"]).split(",")
     if not set(truncations) <= set(TRUNCATIONS):
@@ -281,23 +293,32 @@ def main() -> None:
         for overlap in modes:
             for truncation in truncations:
                 for curriculum in curricula:
-                    rows.append(measure_block(args, trials, overlap, truncation, curriculum))
-                    print(rows[-1], flush=True)
+                    for devices in device_counts:
+                        rows.append(measure_block(args, trials, overlap, truncation, curriculum, devices))
+                        print(rows[-1], flush=True)
     ratios = {}
     first, reference = truncations[0], curricula[0]  # the reference mode / curriculum of every other ratio
-    blocks = {r["trials"]: r for r in rows if r["part"] == "block (learn)" and r["truncation"] == first
+    one = device_counts[0] or 1  # the device count of the ratios below but devices_N_vs_1
+    rows_one = [r for r in rows if r.get("devices", 1) == one]
+    blocks = {r["trials"]: r for r in rows_one if r["part"] == "block (learn)" and r["truncation"] == first
               and r["curriculum"] == reference}
-    for r in rows:  # each curriculum's env steps/s over the first's, same trials, mode and truncation
-        peer = next((q for q in rows if q["part"] == r["part"] and q["trials"] == r["trials"]
+    for r in rows:  # each device count's env steps/s over one device's, same block otherwise
+        peer = next((q for q in rows if q.get("devices") == 1 and all(q.get(k) == r.get(k) for k in
+                     ("part", "trials", "truncation", "curriculum"))), None)
+        if r["part"].startswith("block") and r["devices"] > 1 and peer is not None:
+            ratios[f"devices_{r['devices']}_vs_1_T{r['trials']}" + (", overlap" in r["part"]) * "_overlap"] = (
+                r["env_steps_per_s"] / peer["env_steps_per_s"])
+    for r in rows_one:  # each curriculum's env steps/s over the first's, same trials, mode and truncation
+        peer = next((q for q in rows_one if q["part"] == r["part"] and q["trials"] == r["trials"]
                      and q["truncation"] == r["truncation"] and q["curriculum"] == reference), None)
         if r["part"].startswith("block") and r["curriculum"] != reference and peer is not None:
             ratios[f"{r['curriculum']}_vs_{reference}_T{r['trials']}"] = r["env_steps_per_s"] / peer["env_steps_per_s"]
-    overlapped = {r["trials"]: r for r in rows if r["part"] == "block (learn), overlap" and r["truncation"] == first
+    overlapped = {r["trials"]: r for r in rows_one if r["part"] == "block (learn), overlap" and r["truncation"] == first
                   and r["curriculum"] == reference}
     for part, name in (("bare PPO (one terrain)", "ppo"), ("block (learn)", "block"),
                        ("block (learn), overlap", "block_overlap")):
-        for trials in sorted({r["trials"] for r in rows if r["part"] == part}):
-            mode = {t: [r["s_per_chunk"] for r in rows
+        for trials in sorted({r["trials"] for r in rows_one if r["part"] == part}):
+            mode = {t: [r["s_per_chunk"] for r in rows_one
                         if (r["part"], r["trials"], r["truncation"]) == (part, trials, t)] for t in TRUNCATIONS}
             if mode["mask"] and mode["bootstrap"]:
                 ratios[f"bootstrap_cost_{name}_T{trials}"] = float(np.mean(mode["bootstrap"]) / np.mean(mode["mask"]))
@@ -318,7 +339,7 @@ def main() -> None:
         if trials in blocks:
             ratios[f"overlap_speedup_T{trials}"] = blocks[trials]["s_per_chunk"] / row["s_per_chunk"]
     print()
-    cols = ["part", "curriculum", "recipe", "num_envs", "trials", "truncation", "compile_s", "s_per_chunk", "env_steps_per_s", "chunks_done", "switches",
+    cols = ["part", "curriculum", "recipe", "num_envs", "trials", "devices", "truncation", "compile_s", "s_per_chunk", "env_steps_per_s", "chunks_done", "switches",
             "loop_steps", "s_per_step", "train_s_per_chunk", "eval_s_per_chunk", "train_seq_steps", "eval_seq_steps",
             "train_compile_s", "eval_compile_s", "replay_chunks_timed", "edit_chunks_timed"]
     print(common.markdown_table(rows, cols))
