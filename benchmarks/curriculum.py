@@ -2,7 +2,7 @@
 
     python benchmarks/curriculum.py [--archive A.npz] [--trials 1,10] [--chunks 2] [--parts] [--curricula map,dr]
         [--recipe paper|wide] [--num-envs N --num-unrolls U] [--overlap off,on] [--truncation mask,bootstrap] [--start RUN]
-        [--devices 1,2] [--out result.json]
+        [--devices 1,2] [--robot NAME] [--out result.json]
 
 Builds exactly what ``python -m experiments learn --preset gpu-short`` builds (``experiments.runner.setup``: the bank
 of the archive, the base policy, the walker, the compiled block of chunks) and measures, each after its compile (the
@@ -96,6 +96,8 @@ def learn_cfg(args, trials: int, overlap: bool = False, truncation: str | None =
         cfg["num_unrolls"] = args.num_unrolls
     if args.headings:
         cfg["headings"] = args.headings
+    if args.robot:
+        cfg["robot"] = args.robot
     return cfg
 
 
@@ -164,7 +166,7 @@ def measure_block(args, trials: int, overlap: bool = False, truncation: str | No
     per_chunk = t / done
     row = {"part": "block (learn)" + (", overlap" if overlap else ""), "curriculum": cfg["curriculum"],
            "recipe": cfg.get("recipe"), "num_envs": cfg["num_envs"], "num_unrolls": cfg["num_unrolls"],
-           "trials": trials, "devices": devices or 1,
+           "trials": trials, "devices": devices or 1, "robot": cfg.get("robot") or "humanoid",
            "truncation": cfg["truncation"], "compile_s": compile_s,
            "first_chunk_s": first, "s_per_chunk": per_chunk,
            "env_steps_per_s": trials * config.steps_per_chunk / per_chunk, "chunks_done": done,
@@ -268,6 +270,9 @@ def main() -> None:
     p.add_argument("--curricula", default=None,
                    help="comma list of learn --curriculum names timed as blocks, the first the peer of the others' "
                         "ratios (e.g. map,dr,levels: the per-env selectors' cost; default: the preset's)")
+    p.add_argument("--robot", default=None, metavar="NAME",
+                   help="learn --robot NAME (its base policy; pass its --archive too, e.g. the ant's "
+                        "docs/results/ant_gpushort/archive/archive.npz)")
     p.add_argument("--devices", default=None,
                    help="comma list of device counts, each block timed with its trials split over that many devices "
                         "(learn --devices N; default: the one-device runner)")
@@ -339,7 +344,7 @@ def main() -> None:
         if trials in blocks:
             ratios[f"overlap_speedup_T{trials}"] = blocks[trials]["s_per_chunk"] / row["s_per_chunk"]
     print()
-    cols = ["part", "curriculum", "recipe", "num_envs", "trials", "devices", "truncation", "compile_s", "s_per_chunk", "env_steps_per_s", "chunks_done", "switches",
+    cols = ["part", "robot", "curriculum", "recipe", "num_envs", "trials", "devices", "truncation", "compile_s", "s_per_chunk", "env_steps_per_s", "chunks_done", "switches",
             "loop_steps", "s_per_step", "train_s_per_chunk", "eval_s_per_chunk", "train_seq_steps", "eval_seq_steps",
             "train_compile_s", "eval_compile_s", "replay_chunks_timed", "edit_chunks_timed"]
     print(common.markdown_table(rows, cols))
