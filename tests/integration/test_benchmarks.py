@@ -42,7 +42,7 @@ def test_curriculum_parts_on_the_learn_commands_layout(backend):
         pytest.skip(warp_available()[1])
     curriculum = load_benchmark("curriculum")
     args = argparse.Namespace(preset="smoke", archive=None, backend=backend, num_envs=None, num_unrolls=None, recipe=None,
-                              headings=2, chunks=1, parts=True, start=None)
+                              robot=None, headings=2, chunks=1, parts=True, start=None)
     row = curriculum.measure_block(args, 2)
     assert row["chunks_done"] == 1 and row["chunk_reached"] == 2  # one timed chunk after an untimed one
     assert row["train_s_per_chunk"] > 0 and row["eval_s_per_chunk"] > 0
@@ -62,7 +62,7 @@ def test_curriculum_parts_from_restored_states():
 
     curriculum = load_benchmark("curriculum")
     args = argparse.Namespace(preset="smoke", archive=None, backend=None, num_envs=None, num_unrolls=None, recipe=None,
-                              headings=None)
+                              robot=None, headings=None)
     cfg = curriculum.learn_cfg(args, 2)
     config, arch, policy, env = curriculum.runner.validate(cfg)
     bank, block, states = curriculum.runner.setup(cfg, config, arch, policy, env)
@@ -87,7 +87,7 @@ def test_curriculum_bare_ppo_on_a_tiled_walker(monkeypatch):
     monkeypatch.setattr(curriculum, "learn_cfg", lambda args, trials, overlap=False, truncation=None: plain(
         args, trials, True, truncation))  # overlap: the walker on tiles
     args = argparse.Namespace(preset="smoke", archive=None, backend=None, num_envs=None, num_unrolls=None, recipe=None,
-                              headings=None, repeats=1)
+                              robot=None, headings=None, repeats=1)
     for truncation in ("mask", "bootstrap"):
         row = curriculum.measure_ppo(args, truncation)
         assert row["truncation"] == truncation and row["env_steps_per_s"] > 0
@@ -117,3 +117,26 @@ def test_curriculum_start_reads_plain_and_overlapped_checkpoints(tmp_path, saved
     assert over.chunk.tolist() == [7, 9] and over.pending.tolist() == ([True, False] if saved_overlap else [False] * 2)
     with pytest.raises(SystemExit, match="no checkpoint there"):
         curriculum.start_states(tmp_path / "none", S(jnp.zeros(2, jnp.int32), None))
+
+
+@pytest.mark.slow
+def test_curriculum_devices_split_the_trials_without_changing_them(tmp_path):
+    """benchmarks/curriculum.py --devices 1,2 times the learn block on one device and with its trials split over two
+    (learn --devices 2), and prints their ratio; a trial's chunks depend only on its own state, so both reach the
+    same hardest cells (on 2 forced CPU devices, a subprocess)."""
+    import json
+    from pathlib import Path
+
+    from devices import run_on_devices
+
+    script = Path(__file__).resolve().parents[2] / "benchmarks" / "curriculum.py"
+    out = tmp_path / "devices.json"
+    run_on_devices(f"import sys, runpy; sys.argv = ['curriculum.py', '--preset', 'smoke', '--trials', '2', "
+                   f"'--chunks', '1', '--skip-ppo', '--devices', '1,2', '--out', {str(out)!r}]; "
+                   f"runpy.run_path({str(script)!r}, run_name='__main__')", devices=2, timeout=1200)
+    result = json.loads(out.read_text())
+    rows = result["rows"]
+    assert [r["devices"] for r in rows] == [1, 2] and all(r["robot"] == "humanoid" for r in rows)
+    assert rows[0]["hardest_mean"] == rows[1]["hardest_mean"] and rows[0]["switches"] == rows[1]["switches"]
+    ratio = result["ratios"]["devices_2_vs_1_T2"]
+    assert ratio == rows[1]["env_steps_per_s"] / rows[0]["env_steps_per_s"] > 0
