@@ -241,7 +241,8 @@ def measure_ppo(args, truncation: str | None = None) -> dict:
         state, t = timed(run, state, terrain)
         times.append(t)
     t = float(np.median(times))
-    return {"part": "bare PPO (one terrain)", "trials": 1, "truncation": cfg["truncation"], "compile_s": compile_s,
+    return {"part": "bare PPO (one terrain)", "robot": cfg.get("robot") or "humanoid", "trials": 1, "devices": 1,
+            "truncation": cfg["truncation"], "compile_s": compile_s,
             "s_per_chunk": t, "env_steps_per_s": config.steps_per_chunk / t}
 
 
@@ -304,15 +305,15 @@ def main() -> None:
     ratios = {}
     first, reference = truncations[0], curricula[0]  # the reference mode / curriculum of every other ratio
     one = device_counts[0] or 1  # the device count of the ratios below but devices_N_vs_1
-    rows_one = [r for r in rows if r.get("devices", 1) == one]
+    rows_one = [r for r in rows if r["devices"] == one or not r["part"].startswith("block")]  # bare PPO: 1 device
     blocks = {r["trials"]: r for r in rows_one if r["part"] == "block (learn)" and r["truncation"] == first
               and r["curriculum"] == reference}
     for r in rows:  # each device count's env steps/s over one device's, same block otherwise
-        peer = next((q for q in rows if q.get("devices") == 1 and all(q.get(k) == r.get(k) for k in
+        peer = next((q for q in rows if q["devices"] == 1 and all(q.get(k) == r.get(k) for k in
                      ("part", "trials", "truncation", "curriculum"))), None)
         if r["part"].startswith("block") and r["devices"] > 1 and peer is not None:
-            ratios[f"devices_{r['devices']}_vs_1_T{r['trials']}" + (", overlap" in r["part"]) * "_overlap"] = (
-                r["env_steps_per_s"] / peer["env_steps_per_s"])
+            suffix = "_overlap" if r["part"].endswith("overlap") else ""
+            ratios[f"devices_{r['devices']}_vs_1_T{r['trials']}{suffix}"] = r["env_steps_per_s"] / peer["env_steps_per_s"]
     for r in rows_one:  # each curriculum's env steps/s over the first's, same trials, mode and truncation
         peer = next((q for q in rows_one if q["part"] == r["part"] and q["trials"] == r["trials"]
                      and q["truncation"] == r["truncation"] and q["curriculum"] == reference), None)
