@@ -314,10 +314,11 @@ def main() -> None:
         if r["part"].startswith("block") and r["devices"] > 1 and peer is not None:
             suffix = "_overlap" if r["part"].endswith("overlap") else ""
             ratios[f"devices_{r['devices']}_vs_1_T{r['trials']}{suffix}"] = r["env_steps_per_s"] / peer["env_steps_per_s"]
-    for r in rows_one:  # each curriculum's env steps/s over the first's, same trials, mode and truncation
-        peer = next((q for q in rows_one if q["part"] == r["part"] and q["trials"] == r["trials"]
+    block_rows = [r for r in rows_one if r["part"].startswith("block")]  # bare PPO has no curriculum
+    for r in block_rows:  # each curriculum's env steps/s over the first's, same trials, mode and truncation
+        peer = next((q for q in block_rows if q["part"] == r["part"] and q["trials"] == r["trials"]
                      and q["truncation"] == r["truncation"] and q["curriculum"] == reference), None)
-        if r["part"].startswith("block") and r["curriculum"] != reference and peer is not None:
+        if r["curriculum"] != reference and peer is not None:
             ratios[f"{r['curriculum']}_vs_{reference}_T{r['trials']}"] = r["env_steps_per_s"] / peer["env_steps_per_s"]
     overlapped = {r["trials"]: r for r in rows_one if r["part"] == "block (learn), overlap" and r["truncation"] == first
                   and r["curriculum"] == reference}
