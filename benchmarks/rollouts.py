@@ -11,7 +11,9 @@ Measures, in one run (every figure after a warm-up / compile, device work waited
    env.step, auto-reset on done), every env on its own 256 x 256 terrain, at several batch sizes, for every
    ``--backend`` (``jax``: MJX-JAX, ``warp``: MJX-Warp) and ``--layout`` (``classic``: each env carries its own
    heightfield in a batched model field, MJX-JAX only; ``tiles``: one heightfield holding the ``--bank`` terrains
-   as tiles, env ``i`` on tile ``i % bank``, see ``jaxterrain.walker.tiles``); Warp runs only the tiles layout;
+   as tiles, env ``i`` on tile ``i % bank``, see ``jaxterrain.walker.tiles``; ``shared``: one heightfield of ONE
+   terrain, the bank's first, under every env, i.e. a bank of one tile: the peer that says what the tiles cost);
+   Warp runs the tiles and shared layouts;
 2. (a) raw MJX with the XML's solver options (Newton, iterations 8, ls_iterations 50, Euler damping) and random
    actions on the same terrains, plus raw MJX with our options (the policy/env overhead is the difference) and
    any others (``--raw-solvers``, e.g. ``fast``: brax's Newton 1 / 4), per backend / layout as in 1.;
@@ -123,9 +125,9 @@ def make_policy(env: WalkerEnv, key, robot: str = "humanoid"):
 def per_env_terrains(env, bank_m, b):
     """(terrain argument of a vmapped reset/step for ``b`` envs, its in_axes): ``[b, H, W]`` copies of the bank
     (classic layout) or the bank's tiles ``i % bank`` (tiled env)."""
+    if env.tiles:  # tiles: env.tiles == the bank's size; shared: one tile, the bank's first terrain
+        return env.make_bank(bank_m[:env.tiles]).at(jnp.arange(b) % env.tiles), walker.TILE_AXES
     k = bank_m.shape[0]
-    if env.tiles:
-        return env.make_bank(bank_m).at(jnp.arange(b) % k), walker.TILE_AXES
     return jnp.tile(bank_m, (-(-b // k), 1, 1))[:b], 0
 
 
@@ -355,7 +357,8 @@ def parse_args(argv=None) -> argparse.Namespace:
     p.add_argument("--check-solvers", default="sound;xml", help="';' list of solvers for the flat-ground check")
     p.add_argument("--backend", default="jax", help="comma list of physics backends for ours / raw: jax, warp")
     p.add_argument("--layout", default="classic,tiles", help="comma list of terrain layouts for ours / raw: classic "
-                   "(per-env heightfield, jax only), tiles (one heightfield of --bank tiles)")
+                   "(per-env heightfield, jax only), tiles (one heightfield of --bank tiles), shared (one heightfield of one "
+                   "terrain under every env)")
     p.add_argument("--check-flat", type=int, default=8, help="backend check: flat terrains (x 20 attempts)")
     p.add_argument("--check-perlin", type=int, default=64, help="backend check: Perlin terrains (x 20 attempts)")
     p.add_argument("--skip", default="", help="comma list of parts to skip: ours,raw,c,eval,solver,backend")
@@ -366,10 +369,10 @@ def parse_args(argv=None) -> argparse.Namespace:
         p.exit(2, f"{p.prog}: error: --robot: {err}\n")
     for v in filter(None, args.backend.split(",")):
         if v not in walker.BACKENDS:
-            p.error(f"--backend: {v!r} is not one of {walker.BACKENDS}")
+            p.exit(2, f"{p.prog}: error: --backend: {v!r} is not one of {walker.BACKENDS}\n")
     for v in filter(None, args.layout.split(",")):
-        if v not in ("classic", "tiles"):
-            p.error(f"--layout: {v!r} is not classic or tiles")
+        if v not in ("classic", "tiles", "shared"):
+            p.exit(2, f"{p.prog}: error: --layout: {v!r} is not classic, tiles or shared\n")
     return args
 
 
@@ -393,8 +396,8 @@ class Bench(NamedTuple):
 
     def variant_env(self, backend: str, layout: str, b: int, solver=None) -> WalkerEnv:
         c = self.cfg if solver is None else self.cfg._replace(solver=solver)
-        if layout == "tiles":
-            c = c._replace(backend=backend, tiles=self.args.bank, warp_worlds=max(b, 1))
+        if layout in ("tiles", "shared"):
+            c = c._replace(backend=backend, tiles=self.args.bank if layout == "tiles" else 1, warp_worlds=max(b, 1))
         return WalkerEnv(c)
 
     def add(self, row: dict) -> None:
@@ -407,14 +410,14 @@ class Bench(NamedTuple):
 
 
 def runnable_variants(backends: list[str], layouts: list[str]) -> tuple[list, list[str]]:
-    """([(backend, layout)] to run, [why each other one is skipped]): Warp runs the tiles layout only, and only
-    where it imports."""
+    """([(backend, layout)] to run, [why each other one is skipped]): Warp runs the tiles and shared layouts only,
+    and only where it imports."""
     warp_ok, warp_why = walker.warp_available()
     variants, skipped = [], []
     for backend in backends:
         for layout in layouts:
             if backend == "warp" and layout == "classic":
-                continue  # MuJoCo Warp shares one heightfield across worlds: tiles only
+                continue  # MuJoCo Warp shares one heightfield across worlds: tiles or shared only
             if backend == "warp" and not warp_ok:
                 skipped.append(f"{backend}/{layout}: {warp_why}")
                 continue
