@@ -1,7 +1,8 @@
 """A bank of terrain tiles in ONE heightfield: per-env terrains without a batched model field.
 
 MuJoCo Warp shares ``hfield_data`` across worlds, and MJX-Warp drops a batched ``geom_dataid``
-(google-deepmind/mujoco_warp#1473, google-deepmind/mujoco#3258), so the per-env ``model.replace(hfield_data=...)``
+(google-deepmind/mujoco_warp#1473, google-deepmind/mujoco#3258; MJX 3.17 refuses a per-world one on both backends,
+``benchmarks/layouts.py``), so the per-env ``model.replace(hfield_data=...)``
 of the classic walker cannot run under ``impl="warp"``. Instead (the legged_gym / Isaac Lab layout) the model holds
 ONE large heightfield made of ``T`` tiles, each exactly a ``terrain_shape = (H, W)`` terrain at the same cell size,
 and every environment is spawned on its own tile. Worlds never interact, so any number of environments may share a
