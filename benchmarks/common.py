@@ -51,6 +51,20 @@ def median_time(fn: Callable[[Any], Any], inputs: Sequence[Any], repeats: int = 
     return statistics.median(times)
 
 
+def first_and_best(call: Callable[[int], Any], repeats: int) -> tuple[float, float, Any]:
+    """``(first_s, best_s, out)``: the wall time of ``call(0)`` (compile and first call), the best of ``call(1)`` ..
+    ``call(repeats)``, and the last call's output; device work waited for with ``block_until_ready``."""
+    t0 = time.perf_counter()
+    out = block(call(0))
+    first = time.perf_counter() - t0
+    times = []
+    for i in range(1, repeats + 1):
+        t0 = time.perf_counter()
+        out = block(call(i))
+        times.append(time.perf_counter() - t0)
+    return first, min(times), out
+
+
 def write_json(path: str | os.PathLike | None, payload: dict[str, Any]) -> None:
     if not path:
         return

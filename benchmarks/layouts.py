@@ -37,7 +37,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 import mujoco  # noqa: E402
 from mujoco import mjx  # noqa: E402
 
-from common import block, environment, markdown_table, write_json  # noqa: E402
+from common import environment, first_and_best, markdown_table, write_json  # noqa: E402
 from rollouts import terrain_bank  # noqa: E402  (the Perlin bank rollouts.py times)
 from jaxterrain import walker  # noqa: E402
 from jaxterrain.walker import TILE_AXES, WalkerConfig, WalkerEnv  # noqa: E402
@@ -111,15 +111,8 @@ def raw_rate(step, model, data, b: int, steps: int, repeats: int) -> dict:
 
         return jax.lax.scan(body, data, jax.random.split(key, steps))[0]
 
-    t0 = time.perf_counter()
-    out = block(run(model, data, jax.random.PRNGKey(2)))
-    first = time.perf_counter() - t0
-    times = []
-    for r in range(repeats):
-        t0 = time.perf_counter()
-        out = block(run(model, data, jax.random.PRNGKey(3 + r)))
-        times.append(time.perf_counter() - t0)
-    return {"steps_per_s": b * steps / min(times), "first_call_s": first,
+    first, best, out = first_and_best(lambda i: run(model, data, jax.random.PRNGKey(2 + i)), repeats)
+    return {"steps_per_s": b * steps / best, "first_call_s": first,
             "nan_fraction": float(jnp.mean(~jnp.all(jnp.isfinite(out.qpos), axis=1)))}
 
 
@@ -151,7 +144,7 @@ def time_layouts(args, perworld: bool) -> list[dict]:
             data = data.replace(qpos=data.qpos.at[:, 0].add(-x0).at[:, 1].add(-y0))
             step = perworld_step(mjx.put_model(m, impl=args.backend), floor)
             asset = jnp.arange(b, dtype=jnp.int32) % args.bank
-            r = raw_rate(lambda a, d: step(a, d), asset, data, b, args.steps, args.repeats)
+            r = raw_rate(step, asset, data, b, args.steps, args.repeats)
             rows.append({"layout": "perworld", "batch": b, "terrains": args.bank, **r})
             log(rows[-1])
     return rows

@@ -64,7 +64,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 import mujoco  # noqa: E402
 from mujoco import mjx  # noqa: E402
 
-from common import block, environment, markdown_table, write_json  # noqa: E402
+from common import block, environment, first_and_best, markdown_table, write_json  # noqa: E402
 from jaxterrain import difficulty  # noqa: E402
 from jaxterrain.difficulty import evaluation
 from jaxterrain.terrain import TerrainScale  # noqa: E402
@@ -188,15 +188,7 @@ def bench_raw_mjx(env, terrains_m, phys_steps, repeats, axes=0):
         hdata = jnp.clip(terrains / env.elevation_z, 0, 1).reshape(b, -1)
         return jax.vmap(lambda d, h, k: one(d, mx.replace(hfield_data=h), k))(data, hdata, keys)
 
-    t0 = time.perf_counter()
-    out = block(run(init, terrains_m, jax.random.PRNGKey(2)))
-    compile_s = time.perf_counter() - t0
-    times = []
-    for r in range(repeats):
-        t0 = time.perf_counter()
-        out = block(run(init, terrains_m, jax.random.PRNGKey(3 + r)))
-        times.append(time.perf_counter() - t0)
-    best = min(times)
+    compile_s, best, out = first_and_best(lambda i: run(init, terrains_m, jax.random.PRNGKey(2 + i)), repeats)
     return {"steps_per_s": b * phys_steps / best, "seconds": best, "first_call_s": compile_s,
             "nan_fraction": float(jnp.mean(~jnp.all(jnp.isfinite(out.qpos), axis=1)))}
 
