@@ -46,7 +46,8 @@ default archive is the CPPN's shipped paper-budget archive, reseated under ``dif
 instead of ``summary.json``, which marks a finished run): the per-trial history survives a machine that is given
 back with the checkpoint on it.
 
-Writes into the run folder: ``config.json``, ``checkpoint.npz`` + ``metrics.csv`` + ``tb/`` (the driver's),
+Writes into the run folder: ``config.json``, ``checkpoint.npz`` + ``tb/`` (the driver's, per block), ``metrics.csv``
+(a row per chunk, written after every chunk, inside a block too; per block with ``--devices`` > 1),
 ``history.csv`` (one row per trial and chunk), ``sequences.csv`` (each trial's terrains in order), ``milestones.csv``
 / ``.md`` (Table 2's row), ``curve.png`` (hardest terrain traversed vs epoch, mean +- 1 standard error) and
 ``summary.json``, and every trial's walker in ``policies/trial_K/`` (``rl.load_policy`` reads it; ``python -m

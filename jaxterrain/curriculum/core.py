@@ -373,8 +373,9 @@ def run_trials(states: State, bank: TerrainBank, num_chunks: jax.Array, *, confi
     [states.terrain]`` [T, H, W] -> one terrain pytree, e.g. a bank of T tiles) and trial i trains and is evaluated
     on its slice i.
 
-    ``on_chunk``: a host function ``(chunk [T] int32, hardest [T] float32, done [T] bool) -> None`` called after
-    every loop step through ``jax.debug.callback`` (progress inside a compiled block; it changes no result)."""
+    ``on_chunk``: a host function ``(chunk [T] int32, hardest [T] float32, done [T] bool, history) -> None``
+    (``history``: the trials' :class:`History`, leaves ``[T, C]``) called after every loop step through
+    ``jax.debug.callback`` (progress and metrics inside a compiled block; it changes no result)."""
     one = functools.partial(_chunk, config=config, harness=harness)
     selector = get_selector(config)
     slots = selector.slots
@@ -404,7 +405,7 @@ def run_trials(states: State, bank: TerrainBank, num_chunks: jax.Array, *, confi
         i, s = carry
         s = chunk(s, bank)
         if on_chunk is not None:
-            jax.debug.callback(on_chunk, s.chunk, s.hardest, s.done)
+            jax.debug.callback(on_chunk, s.chunk, s.hardest, s.done, s.history)
         return i + 1, s
 
     return jax.lax.while_loop(cond, body, (jnp.zeros((), jnp.int32), states))[1]

@@ -29,7 +29,7 @@ import numpy as np
 
 from jaxterrain.curriculum import walker as W
 from jaxterrain.curriculum.config import RECIPES, CurriculumConfig, FINE_TUNED, validate_config
-from jaxterrain.curriculum.core import CHECKPOINT_COMPAT, init_trials, run_live, run_trials
+from jaxterrain.curriculum.core import CHECKPOINT_COMPAT, init_trials, live_rows, run_live, run_trials
 from jaxterrain.curriculum.outputs import PARTIAL, export_policies, write_outputs
 from jaxterrain.curriculum.selectors import get_selector
 from jaxterrain.qd.archive_io import load as load_archive_file
@@ -40,7 +40,7 @@ from jaxterrain.difficulty import policy_robot, robot_base_policy
 from jaxterrain.walker import robots, tiles
 from jaxterrain.walker.layout import resolve_backend
 
-__all__ = ["BadInput", "ChunkProgress", "LEGACY_TRUNCATION", "PARTIAL", "FAST_COMPILE", "PROGRAMS", "curriculum_config",
+__all__ = ["BadInput", "ChunkMetrics", "ChunkProgress", "LEGACY_TRUNCATION", "PARTIAL", "FAST_COMPILE", "PROGRAMS", "curriculum_config",
            "with_protocol", "with_accel_generator", "start_policy", "load_archive", "archive_digest", "check_resumable", "physics_of", "selector_slots", "walker_layout",
            "validate", "strip_envs", "compiled", "make_block", "chunk_metrics", "inputs", "setup", "run_treatment",
            "report_cfg", "restored", "report_treatment", "export_treatment"]
@@ -256,12 +256,46 @@ def compiled(fn, fast: bool, *args):
 _LISTENERS: list = []  # the running treatment's progress function (compiled blocks call _chunk_done, shared by all)
 
 
-def _chunk_done(chunk, hardest, done) -> None:
-    """Host side of a block's per-chunk callback: hands ``(chunk [T], hardest [T], done [T])`` to the listener of
-    the treatment running now (none: nothing). Compiled programs are shared between treatments, so they call this
-    one function and the listener changes."""
+def _chunk_done(chunk, hardest, done, history) -> None:
+    """Host side of a block's per-chunk callback: hands ``(chunk [T], hardest [T], done [T], history)`` to the
+    listeners of the treatment running now (none: nothing). Compiled programs are shared between treatments, so they
+    call this one function and the listeners change."""
     for listen in list(_LISTENERS):
-        listen(np.asarray(chunk), np.asarray(hardest), np.asarray(done))
+        listen(np.asarray(chunk), np.asarray(hardest), np.asarray(done), history)
+
+
+class ChunkMetrics:
+    """A treatment's ``metrics.csv`` inside its compiled blocks: after every chunk, the rows (:func:`chunk_metrics`)
+    of the chunks that every trial still running has finished, up to the block's end, from the block's per-chunk
+    callback; the driver writes the same rows again at the block's end, with TensorBoard's. Call :meth:`begin`
+    before each block: the trials' history so far and the rows the block computes (``compact``: ``core.live_rows``,
+    else all), so a block of fewer rows updates its own trials. Not for a mesh of several devices (a callback there
+    sees one device's rows): there metrics.csv moves per block."""
+
+    def __init__(self, folder: Path, compact: bool):
+        self.folder, self.compact = Path(folder), bool(compact)
+        self.history = self.rows = None
+        self.stop = self.written = 0
+
+    def begin(self, states, stop: int) -> None:
+        """Before a block that ends at chunk ``stop``: host copies of ``states.history`` and the block's rows."""
+        self.history = type(states.history)(*(np.array(x) for x in states.history))  # [T, C] each
+        done = np.asarray(states.done, bool)
+        self.rows = live_rows(done) if self.compact else np.arange(done.size)
+        self.stop, self.written = int(stop), int(np.min(np.asarray(states.chunk)))
+
+    def __call__(self, chunk, hardest, done, history) -> None:
+        if self.history is None or chunk.shape[0] != self.rows.size:
+            return
+        for full, part in zip(self.history, history):
+            full[self.rows] = np.asarray(part)
+        running = ~np.asarray(done, bool)
+        upto = min(int(np.min(chunk[running])) if running.any() else int(np.max(chunk)), self.stop)
+        if upto <= self.written:
+            return
+        self.written = upto
+        metrics = history_metrics(self.history, 0, upto)
+        driver.write_metrics_csv(self.folder, {k: [float(x) for x in v] for k, v in metrics.items()})
 
 
 class ChunkProgress:
@@ -275,7 +309,7 @@ class ChunkProgress:
         self.t0 = self.last = time.perf_counter()
         self.lines: list[str] = []
 
-    def __call__(self, chunk, hardest, done) -> None:
+    def __call__(self, chunk, hardest, done, history=None) -> None:
         now = time.perf_counter()
         reached = int(np.max(chunk)) if chunk.size else self.start
         if now - self.last < self.every_s and reached < self.total:
@@ -315,7 +349,11 @@ def make_block(config, harness, env_like):
 def chunk_metrics(states, start: int, stop: int) -> dict:
     """Per-chunk ``[stop - start]`` metrics over trials: hardest (mean, a finished trial keeps its last value),
     evaluation (mean of the trials still running), trials still running."""
-    h = states.history
+    return history_metrics(states.history, start, stop)
+
+
+def history_metrics(h, start: int, stop: int) -> dict:
+    """:func:`chunk_metrics` of the trials' ``History`` ``h`` (leaves ``[T, C]``, host or device arrays)."""
     hardest = np.asarray(h.hardest, np.float64)
     epoch = np.asarray(h.epoch)
     carried = np.zeros_like(hardest)
@@ -407,15 +445,21 @@ def run_treatment(cfg: dict, folder: Path, time_limit_s: float | None = None, de
     every = int(cfg.get("policy_every") or 0)  # snapshots of the walkers along the run
     ppo = config.ppo_config(policy.config)
 
+    one_device = mesh is None or mesh.size == 1  # several: each callback sees its device's rows only
+    metrics_csv = ChunkMetrics(folder, cfg.get("compact", True)) if one_device else None
+
     def chunk_fn(s, a, b):
         if not bool(np.all(np.asarray(s.done))):
+            if metrics_csv is not None:
+                metrics_csv.begin(s, b)
             s = block(s, bank, b - a)
         if every and b // every > a // every:
             export_policies(folder, cfg, config, ppo, env, policy, bank, s, subdir=f"chunk_{b:05d}",
                             names=arch.generator_names)
         return s, chunk_metrics(s, a, b)
 
-    _LISTENERS[:] = [ChunkProgress(desc or cfg["curriculum"], config.max_chunks, done)]
+    _LISTENERS[:] = [ChunkProgress(desc or cfg["curriculum"], config.max_chunks, done)] + (
+        [metrics_csv] if metrics_csv is not None else [])
     try:
         states, done, _ = driver.run_chunks(
             chunk_fn, states, total=config.max_chunks, every=int(cfg["chunks_per_call"]), start=done,

@@ -55,7 +55,7 @@ import numpy as np
 from jaxterrain.runtime.io import atomic_save_npz, atomic_write_text
 
 __all__ = ["CHECKPOINT_NAME", "METRICS_NAME", "PLAIN_EVERY_S", "MetricLog", "load_checkpoint", "read_meta", "restore", "run_chunks",
-           "save_checkpoint"]
+           "save_checkpoint", "write_metrics_csv"]
 
 FORMAT = "jaxterrain-checkpoint"
 VERSION = 1
@@ -220,13 +220,7 @@ class MetricLog:
     def write(self, history: dict, start: int, stop: int) -> None:
         """Log steps ``[start, stop)`` of ``history`` (name -> list with one value per step from 0)."""
         names = sorted(history)
-        buf = io.StringIO()
-        w = csv.writer(buf)
-        w.writerow(["step"] + names)
-        n = max((len(v) for v in history.values()), default=0)
-        for i in range(n):
-            w.writerow([self.offset + i + 1] + [_fmt(history[k][i]) if i < len(history[k]) else "" for k in names])
-        atomic_write_text(self.run_dir / METRICS_NAME, buf.getvalue())
+        write_metrics_csv(self.run_dir, history, self.offset)
         if self._tb is not None:
             for name in names:
                 for i in range(start, min(stop, len(history[name]))):
@@ -238,6 +232,20 @@ class MetricLog:
     def close(self) -> None:
         if self._tb is not None:
             self._tb.close()
+
+
+def write_metrics_csv(run_dir: str | os.PathLike, history: dict, offset: int = 0) -> None:
+    """``run_dir/metrics.csv``, atomically: a ``step`` column (from ``offset + 1``) and one per name of ``history``
+    (name -> list with one value per step from 0), sorted by name. :class:`MetricLog` writes it after every chunk; a
+    caller that knows rows inside a chunk (e.g. a compiled block's per-chunk callback) may write more of them."""
+    names = sorted(history)
+    buf = io.StringIO()
+    w = csv.writer(buf)
+    w.writerow(["step"] + names)
+    n = max((len(v) for v in history.values()), default=0)
+    for i in range(n):
+        w.writerow([offset + i + 1] + [_fmt(history[k][i]) if i < len(history[k]) else "" for k in names])
+    atomic_write_text(Path(run_dir) / METRICS_NAME, buf.getvalue())
 
 
 def _fmt(v: float) -> str:

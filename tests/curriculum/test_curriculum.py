@@ -644,13 +644,24 @@ def learn_smoke(tmp_path_factory, tiny_archive):
 
     from jaxterrain.runtime import driver
 
+    from jaxterrain.curriculum import runner
+
     archive = tiny_archive(4, "four.npz")
     out = tmp_path_factory.mktemp("learn") / "whole"
     err = io.StringIO()  # not a terminal: plain progress lines (every one: PLAIN_EVERY_S = 0)
+    seen = []  # metrics.csv as the per-chunk callback left it, after every chunk
+    listen = runner.ChunkMetrics.__call__
+
+    def snapshot(self, *args):
+        listen(self, *args)
+        seen.append((out / "metrics.csv").read_text() if (out / "metrics.csv").exists() else "")
+
     with pytest.MonkeyPatch.context() as mp, contextlib.redirect_stderr(err):
         mp.setattr(driver, "PLAIN_EVERY_S", 0.0)
+        mp.setattr(runner.ChunkMetrics, "__call__", snapshot)
         assert cli("learn", "--preset", "smoke", "--archive", archive, "--out", str(out)) == 0
     (out.parent / "stderr.txt").write_text(err.getvalue())
+    (out.parent / "metrics_seen.json").write_text(json.dumps(seen))
     return archive, out
 
 
@@ -661,6 +672,18 @@ def test_learn_reports_progress_after_every_chunk_inside_a_compiled_block(learn_
     lines = (out.parent / "stderr.txt").read_text().splitlines()
     chunks = [int(m.group(1)) for m in map(re.compile(r"^map: chunk (\d+) of 4, hardest").match, lines) if m]
     assert chunks == [1, 2, 3, 4], lines
+
+
+def test_learn_writes_metrics_csv_after_every_chunk_inside_a_compiled_block(learn_smoke):
+    """metrics.csv gains a row after every chunk, inside a block too (after chunks 1 and 3 of the smoke run's 2-chunk
+    blocks), and each of those files is the start of the run's final metrics.csv: the driver's rows at a block's
+    end are the ones the callback wrote."""
+    _, out = learn_smoke
+    seen = json.loads((out.parent / "metrics_seen.json").read_text())
+    final = (out / "metrics.csv").read_text().splitlines()
+    assert final[0] == "step,evaluation,hardest,trials_running" and len(final) == 1 + 4
+    assert [len(text.splitlines()) for text in seen] == [2, 3, 4, 5]
+    assert all(text.splitlines() == final[:len(text.splitlines())] for text in seen)
 
 
 def test_learn_smoke_end_to_end(learn_smoke):
