@@ -31,15 +31,21 @@ def leaf(tree, path: str):
 
 
 @pytest.mark.parametrize("case", sorted(CASES))
-def test_the_papers_curricula_reproduce_the_loop_before_the_protocol_bit_for_bit(case):
+def test_the_papers_curricula_reproduce_the_loop_before_the_protocol(case):
     """map (two settings, and overlapped), roughness, random (and overlapped): 3 trials to the end with a keyed
-    fake harness, every history entry, counter, policy leaf, key and GP observation as stored at commit cb463e4."""
+    fake harness, every history entry, counter, policy leaf, key and GP observation as stored at commit cb463e4:
+    integers (terrains chosen, counters, keys) exactly, floats within 1e-5 relative (a stored reference: float32
+    reductions and the GP's Cholesky may differ in the last bits on another CPU or jax version)."""
     ref = np.load(DATA / "selector_reference.npz")
     states = reference_case(*CASES[case])
     names = [k.split("/", 1)[1] for k in ref.files if k.startswith(case + "/")]
     assert len(names) == 19
     for name in names:
-        np.testing.assert_array_equal(leaf(states, name), ref[f"{case}/{name}"], err_msg=name)
+        got, want = leaf(states, name), ref[f"{case}/{name}"]
+        if np.issubdtype(want.dtype, np.floating):  # float32 sums and the GP's Cholesky: last bits vary by CPU
+            np.testing.assert_allclose(got, want, rtol=1e-5, atol=1e-6, err_msg=name)
+        else:  # decisions, counters and keys: exact
+            np.testing.assert_array_equal(got, want, err_msg=name)
 
 
 # ---------------------------------------------------------------------------------------------------------------

@@ -1,6 +1,7 @@
 """Writes tests/data/walker_reference.npz: a humanoid walk of 30 random actions on a random terrain (CPU), made with
 the walker before the robot spec (commit 7b3c39c); tests/walker/test_robots.py checks the spec'd walker reproduces
-it bit for bit. Run from the repository root: python tests/data/make_walker_reference.py"""
+it within the float32 tolerances stated there (not bit for bit: physics differs in the last bits across
+CPUs and jax versions). Run from the repository root: python tests/data/make_walker_reference.py"""
 
 import os
 from pathlib import Path

@@ -27,12 +27,23 @@ def _reference_module():
     return module
 
 
-def test_the_humanoid_spec_walks_bit_for_bit_as_the_walker_before_robot_specs():
+# A stored walk is compared with a tolerance, never bit for bit: float32 MJX physics over 30 steps with contacts
+# differs in the last bits across CPUs, XLA builds and jax versions. Measured against the stored walk (2026-11-29,
+# jax 0.10.2, Intel Xeon and AMD EPYC): qpos up to 1.0e-4, obs up to 1.7e-3 (velocities, |obs| up to 21), reward
+# up to 8e-5, done equal. The tolerances are 10x that; a changed walker (reward weights, start pose, frame skip,
+# observation layout) moves these by 1e-1 or more.
+WALK_TOLERANCE = {"qpos": 1e-3, "obs": 2e-2, "reward": 1e-3}
+
+
+def test_the_humanoid_spec_walks_as_the_walker_before_robot_specs_within_float32_tolerance():
     ref = _reference_module()
     got = ref.walk(ref.CONFIG)
     want = np.load(DATA / "walker_reference.npz")
-    for name in ("qpos", "obs", "reward", "done"):
-        np.testing.assert_array_equal(got[name], want[name], err_msg=name)
+    for name, atol in WALK_TOLERANCE.items():
+        np.testing.assert_allclose(got[name], want[name], atol=atol, rtol=0, err_msg=name)
+    np.testing.assert_array_equal(got["done"], want["done"])
+    # the walk moves far more than the tolerance, so the comparison can tell walks apart
+    assert np.abs(want["qpos"][-1] - want["qpos"][0]).max() > 100 * WALK_TOLERANCE["qpos"]
     assert WalkerEnv(ref.CONFIG).config.healthy_z_range == (1.0, 2.0)  # the humanoid's defaults, resolved
 
 
