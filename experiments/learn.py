@@ -11,8 +11,9 @@ terrains a chunk, each env on one), ``levels`` (legged_gym's terrain levels over
 ``module:object`` (your own :class:`jaxterrain.curriculum.Selector`; ``jaxterrain.curriculum.selectors``). Every trial starts from the shipped base
 policy (``--policy DIR`` for another), and the ``--trials`` trials run together (vmap) in one jitted function per
 block of ``chunks_per_call`` chunks (a chunk = 40 epochs of 4 000 env steps + one evaluation; the curriculum's
-choices: ``jaxterrain.curriculum.config``). At the start of every block each trial's envs restart on its current
-terrain, so a checkpoint needs no physics state of thousands of envs and a resumed run equals an uninterrupted one.
+choices: ``jaxterrain.curriculum.config``). The trials' env states ride from block to block and into every
+checkpoint (about 10 MB per trial at 500 envs on MJX), so a run stopped after any chunk (``--time-limit``, whose first
+block is one chunk that measures the rate) and resumed equals an uninterrupted one.
 Once some trials have finished (the map curriculum can empty a trial's map long before the epoch budget), a block
 computes only the trials still running, padded with finished ones to a power of two (``curriculum.run_live``; the
 same states, one compile per block size); ``--no-compact`` keeps every trial in every block (the smoke preset's

@@ -166,7 +166,7 @@ class CurriculumConfig(NamedTuple):
       overlap: evaluate each chunk's policy while the next chunk trains, its walks stepped in the same physics
         calls as the PPO envs (``rl.ride_updates``); the next chunk trains on the current terrain on the chance that
         the evaluation keeps the trial there, and trains again when it does not. The same curriculum (the same
-        keys, policies, evaluations and choices; only where the envs restart between blocks of chunks differs) in
+        keys, policies, evaluations and choices, given the same env states) in
         fewer physics calls: see :func:`jaxterrain.curriculum.core.step`. Needs a harness with ``train_evaluate``
         (the walker's on tiles). One-terrain selectors only (``map``, ``roughness``, ``random``).
       terrains_per_chunk: ``dr``'s, ``plr``'s and ``accel``'s terrains per chunk (the envs dealt round-robin over them), >= 1.

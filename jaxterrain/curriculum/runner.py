@@ -42,7 +42,7 @@ from jaxterrain.walker.layout import resolve_backend
 
 __all__ = ["BadInput", "ChunkMetrics", "ChunkProgress", "LEGACY_TRUNCATION", "PARTIAL", "FAST_COMPILE", "PROGRAMS", "curriculum_config",
            "with_protocol", "with_accel_generator", "start_policy", "load_archive", "archive_digest", "check_resumable", "physics_of", "selector_slots", "walker_layout",
-           "validate", "strip_envs", "compiled", "make_block", "chunk_metrics", "inputs", "setup", "run_treatment",
+           "validate", "strip_envs", "ENV_STATES", "compiled", "make_block", "chunk_metrics", "inputs", "setup", "run_treatment",
            "report_cfg", "restored", "report_treatment", "export_treatment"]
 
 LEGACY_TRUNCATION = "mask"
@@ -237,8 +237,15 @@ def validate(cfg: dict):
 # The treatment
 # ----------------------------------------------------------------------------------------------------------------
 def strip_envs(states):
-    """The carried state without the envs' physics (restarted at every block)."""
+    """The carried state without the envs' physics: what a report reads from a checkpoint (the env states of a
+    MuJoCo Warp run have another structure than MJX-JAX's, and nothing is stepped)."""
     return states._replace(policy=states.policy._replace(env_state=None))
+
+
+ENV_STATES = ".policy.env_state"
+"""The checkpoint leaves of the trials' env states (``State.policy.env_state``). Checkpoints written before they
+were carried (2026-11-29) lack them and stored ``restart`` True: restored, their envs restart on the current
+terrains, as they did at every block then."""
 
 
 FAST_COMPILE = {"xla_backend_optimization_level": 0, "xla_llvm_disable_expensive_passes": True,
@@ -330,18 +337,14 @@ class ChunkProgress:
         print(line, file=sys.stderr, flush=True)
 
 
-def make_block(config, harness, env_like):
-    """``(states, bank, n) -> states`` (jit it): restart every trial's envs on its terrain, up to ``n`` chunks.
-    ``states`` come without env states (:func:`strip_envs`); ``env_like`` gives one trial's env-state shapes."""
+def make_block(config, harness):
+    """``(states, bank, n) -> states`` (jit it): up to ``n`` chunks of every trial. The trials' env states ride in
+    ``states`` from block to block (and into every checkpoint), so where the blocks are cut changes nothing: a run
+    stopped after any chunk and resumed equals the uninterrupted run. Envs restart only where the curriculum says
+    (``State.restart``: the start, a terrain switch)."""
     def block(states, bank, n):
-        trials = states.done.shape[0]
-        zeros = jax.tree.map(jnp.zeros_like, env_like)  # vmap broadcasts (MuJoCo Warp's shared buffers stay shared)
-        envs = jax.vmap(lambda _: zeros)(jnp.arange(trials))
-        states = states._replace(policy=states.policy._replace(env_state=envs),
-                                 restart=jnp.ones_like(states.restart))  # envs restart on the current terrains
-        states = run_trials(states, bank, jnp.asarray(n, jnp.int32), config=config, harness=harness,
-                            on_chunk=_chunk_done)
-        return strip_envs(states)._replace(restart=jnp.ones_like(states.restart))  # no envs: all restart next
+        return run_trials(states, bank, jnp.asarray(n, jnp.int32), config=config, harness=harness,
+                          on_chunk=_chunk_done)
 
     return block
 
@@ -374,7 +377,8 @@ PROGRAMS: dict = {}  # (config, ppo, walker, trials, bank shape, fast, mesh) -> 
 def inputs(cfg: dict, config, arch, policy, env):
     """What a treatment's programs start from: ``(bank, ppo, harness, start, keys, init)``: the archive's terrain
     bank, the fine-tuning PPOConfig, the walker harness, the starting policy state, the trials' keys [trials] and
-    ``init(keys, bank, start)`` -> the initial trial states without env states (pure: jit or ``eval_shape`` it)."""
+    ``init(keys, bank, start)`` -> the initial trial states, their env states zeros due for a restart on the first
+    terrains (pure: jit or ``eval_shape`` it)."""
     bank = from_archive(arch)
     ppo = config.ppo_config(policy.config)
     harness = W.walker_harness(env, ppo, config)
@@ -382,7 +386,10 @@ def inputs(cfg: dict, config, arch, policy, env):
     keys = jax.random.split(jax.random.fold_in(jax.random.key(int(cfg["seed"])), 2), int(cfg["trials"]))
 
     def init(k, b, s):
-        return strip_envs(init_trials(k, b, s, config=config, harness=harness))
+        states = init_trials(k, b, s, config=config, harness=harness)  # restart: True (the first chunk resets)
+        zeros = jax.tree.map(jnp.zeros_like, s.env_state)  # vmap broadcasts (MuJoCo Warp's shared buffers too)
+        envs = jax.vmap(lambda _: zeros)(jnp.arange(states.done.shape[0]))
+        return states._replace(policy=states.policy._replace(env_state=envs))
 
     return bank, ppo, harness, start, keys, init
 
@@ -397,8 +404,7 @@ def setup(cfg: dict, config, arch, policy, env, mesh=None):
     fast = bool(cfg.get("fast_compile", False))
     sig = (config, ppo, env.config, int(cfg["trials"]), tuple(bank.heightmaps.shape), fast, mesh)
     if sig not in PROGRAMS:
-        PROGRAMS[sig] = (compiled(init_fn, fast, keys, bank, start), make_block(config, harness, start.env_state),
-                          {})
+        PROGRAMS[sig] = (compiled(init_fn, fast, keys, bank, start), make_block(config, harness), {})
     init, block, blocks = PROGRAMS[sig]  # blocks: trial count -> the block compiled for it
     states = init(keys, bank, start)
     if mesh is not None:  # the trials split over the devices; inputs whole on the mesh (whence the init's)
@@ -434,7 +440,7 @@ def run_treatment(cfg: dict, folder: Path, time_limit_s: float | None = None, de
     digest = check_resumable(folder, cfg, arch)
     t0 = time.perf_counter()
     bank, block, states = setup(cfg, config, arch, policy, env, mesh)
-    restored = driver.restore(folder, like=states, **CHECKPOINT_COMPAT)
+    restored = driver.restore(folder, like=states, **CHECKPOINT_COMPAT, optional=(ENV_STATES,))
     done, history, before = 0, None, 0.0  # before: wall seconds of the commands that ran it so far
     if restored is not None:
         states, done, history, saved = restored
@@ -500,7 +506,8 @@ def restored(cfg: dict, folder: Path) -> tuple:
             return jax.random.wrap_key_data(jnp.zeros(data.shape, data.dtype))
         return jnp.zeros(spec.shape, spec.dtype)
 
-    states, done, _, saved = driver.restore(folder, like=jax.tree.map(zeros, shapes), **CHECKPOINT_COMPAT)
+    like = strip_envs(jax.tree.map(zeros, shapes))  # the env states are not read (Warp's are shaped otherwise)
+    states, done, _, saved = driver.restore(folder, like=like, **CHECKPOINT_COMPAT)
     return config, arch, policy, env, bank, states, done, saved
 
 

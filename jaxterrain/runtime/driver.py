@@ -24,7 +24,10 @@ of ``every`` steps the driver
   writes the same as plain lines (a log file gets no carriage returns);
 * stops early (``done < total``; resume later) once ``time_limit_s`` has passed, or before a chunk that would end
   past it: the next chunk is predicted from the fastest rate (seconds per step) of the chunks so far, so a first
-  chunk that compiled makes the prediction cautious; at least one chunk always runs.
+  chunk that compiled makes the prediction cautious; at least one chunk always runs. With ``fit_to_limit`` (a
+  chunk function that takes any length without re-compiling) the first chunk under a time limit is ONE step (a
+  probe of the rate) and later chunks are cut to the steps that fit, so the limit holds to within one step from
+  the first chunk on.
 
 Checkpoint format (``checkpoint.npz``, uncompressed npz): ``header`` = uint8 UTF-8 JSON ``{"format":
 "jaxterrain-checkpoint", "version": 1, "done": int, "meta": {...}, "leaves": [names], "keys": [names of typed-key
@@ -114,7 +117,7 @@ def _read(path: Path, header_only: bool = False) -> tuple[dict, dict]:
 
 
 def load_checkpoint(path: str | os.PathLike, like: Any, *, aliases: Optional[dict] = None,
-                    defaults: tuple = ()) -> tuple[Any, int, dict, dict]:
+                    defaults: tuple = (), optional: tuple = ()) -> tuple[Any, int, dict, dict]:
     """Read a :func:`save_checkpoint` file into the structure of ``like``: ``(state, done, history, meta)``.
 
     Every leaf of ``like`` must be stored with the same shape and dtype (``ValueError`` naming the file and leaf
@@ -122,7 +125,8 @@ def load_checkpoint(path: str | os.PathLike, like: Any, *, aliases: Optional[dic
 
     Files of an older state layout: ``aliases`` maps a leaf's name (``jax.tree_util.keystr`` of its path) to the
     name an older version stored it under (read when the name itself is absent); a leaf whose name ends with one of
-    ``defaults`` and is absent takes ``like``'s value (a field added since, e.g. ``".episode.progress"``).
+    ``defaults``, or starts with one of ``optional`` (a subtree added since, e.g. ``".policy.env_state"``), and is
+    absent takes ``like``'s value (a field added since, e.g. ``".episode.progress"``).
     """
     path = Path(path)
     header, members = _read(path)
@@ -132,7 +136,9 @@ def load_checkpoint(path: str | os.PathLike, like: Any, *, aliases: Optional[dic
         stored = members.get(f"leaf:{name}")
         if stored is None and aliases and name in aliases:
             stored = members.get(f"leaf:{aliases[name]}")
-        if stored is None and any(name.endswith(d) for d in defaults):
+        if stored is None and (any(name.endswith(d) for d in defaults)
+                               or any(name == o or name.startswith(o + ".") or name.startswith(o + "[")
+                                      for o in optional)):
             leaves.append(ref)
             continue
         if stored is None:
@@ -320,8 +326,10 @@ def run_chunks(chunk_fn: ChunkFn, state: Any, *, total: int, every: int, start: 
       time_limit_s: the seconds (from the call) the run may take: stop after the chunk in which they passed, or
         before a chunk predicted (at the fastest seconds per step so far) to end past them.
       fit_to_limit: ``chunk_fn`` takes any ``stop - start`` without re-compiling (e.g. a traced step count), so
-        a chunk predicted to end past the time limit is shortened to the steps that fit instead of skipped: the
-        limit is then honoured to within one step, not one chunk.
+        a chunk predicted to end past the time limit is shortened to the steps that fit instead of skipped, and
+        under a time limit the first chunk is one step (the rate is not known before it): the limit is then
+        honoured to within one step, not one chunk, from the first chunk on. ``chunk_fn``'s results must not
+        depend on where the chunks are cut (the curriculum's blocks carry their env states).
       progress: True for a tqdm bar on stderr (plain lines, at most one per :data:`PLAIN_EVERY_S` seconds, where
         stderr is not a terminal); a callable receives a dict per chunk (``done``, ``total``,
         ``seconds``, ``steps_per_s`` and the latest value of every metric); False is silent.
@@ -348,6 +356,8 @@ def run_chunks(chunk_fn: ChunkFn, state: Any, *, total: int, every: int, start: 
     try:
         while done < total:
             n = min(every, total - done)
+            if time_limit_s is not None and fit_to_limit and done == start:
+                n = 1  # a probe: the rate is not known yet, and a chunk may be cut anywhere
             if time_limit_s is not None and done > start:  # the rate is known: does the next chunk fit?
                 left = time_limit_s - (time.perf_counter() - t0)
                 if rate * n > left:

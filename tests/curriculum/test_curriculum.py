@@ -862,10 +862,10 @@ def test_learn_writes_every_trials_walker_as_a_loadable_policy(tmp_path, learn_s
 
 def test_learn_killed_by_its_time_limit_resumes_to_the_uninterrupted_curves(tmp_path, learn_smoke, tiny_archive,
                                                                             capsys, monkeypatch):
-    """Issue 13: a treatment stopped after its first block (``--time-limit``, as a killed run restarts from its last
-    checkpoint) and resumed ends with the same history, sequences and milestones as an uninterrupted one (same
-    device, same seed: the module's smoke run). The compiled block is shared with the other smoke runs of this
-    module. A resume whose archive file was replaced meanwhile, or whose `auto` backend would now pick other physics
+    """Issues 13 and 59: a treatment stopped by ``--time-limit`` after its first chunk, INSIDE the uninterrupted
+    run's first 2-chunk block (the env states ride in the checkpoint), and resumed ends with the same history,
+    sequences and milestones as the uninterrupted one, bit for bit (same device, same seed: the module's smoke
+    run). The compiled block is shared with the other smoke runs of this module. A resume whose archive file was replaced meanwhile, or whose `auto` backend would now pick other physics
     than the checkpoint's, is refused in one line, before anything compiles."""
     import shutil
 
@@ -906,10 +906,11 @@ def test_learn_killed_by_its_time_limit_resumes_to_the_uninterrupted_curves(tmp_
         assert cli("learn", "--resume", str(parts), "--report") == 0  # the checkpoint's outputs, nothing trained
         (parts / "config.json").write_text(json.dumps(cfg))
     partial = json.loads((parts / "summary_partial.json").read_text())
-    assert partial["partial"] and partial["chunks_done"] == 2 and not (parts / "summary.json").exists()
+    assert partial["partial"] and partial["chunks_done"] == 1 and not (parts / "summary.json").exists()
     assert partial["seconds"] > 0  # the wall time so far (checkpoint meta), set-up and compilation included
     rows = (parts / "history.csv").read_text().splitlines()[1:]
-    assert rows and all(r.split(",")[1] in ("0", "1") for r in rows)  # the two chunks of the first block
+    assert rows and all(r.split(",")[1] == "0" for r in rows)  # the probe chunk, half of the first block
+    assert any(k.startswith("leaf:" + runner.ENV_STATES + ".") for k in np.load(parts / "checkpoint.npz").files)
     with pytest.raises(SystemExit):
         cli("learn", "--preset", "smoke", "--report", "--out", str(tmp_path / "nothing"))
     assert not (tmp_path / "nothing").exists()
@@ -961,7 +962,7 @@ def test_a_warp_checkpoint_is_reported_through_the_mjx_layout(tmp_path, monkeypa
 
     monkeypatch.setattr(walker.tiles, "warp_available", lambda: (False, "MuJoCo Warp is not installed"))
     assert cli("learn", "--resume", str(run), "--report") == 0
-    assert json.loads((run / "summary_partial.json").read_text())["chunks_done"] == 2
+    assert json.loads((run / "summary_partial.json").read_text())["chunks_done"] == 1  # the time limit's probe
     cfg = json.loads((run / "config.json").read_text())
     (run / "config.json").write_text(json.dumps({**cfg, "backend": "auto"}))
     assert cli("learn", "--resume", str(run)) == 2  # auto -> jax here; the checkpoint was written on warp

@@ -100,14 +100,17 @@ def test_time_limit_skips_a_chunk_predicted_to_end_past_it():
         time.sleep(0.2)
         return chunk(state, start, stop)
 
+    chunk(make_state(), 0, 1)  # compiled before the clock starts (alone, this test's first chunk would compile)
     # after 2 chunks (0.4 s) the 3rd would end at 0.6 s > 0.5 s: stop there, not after it
     _, done, _ = driver.run_chunks(timed, make_state(), total=10, every=1, time_limit_s=0.5, progress=False)
     assert done == 2
 
 
 def test_time_limit_shortens_the_last_chunk_when_any_length_runs_without_recompiling():
-    """fit_to_limit: a chunk predicted to end past the limit runs the steps that still fit (the curriculum's block,
-    whose length is traced), so the limit holds to within one step, not one chunk of ``every`` steps."""
+    """fit_to_limit: the first chunk under a time limit is one step (a probe of the rate, so a long first chunk
+    cannot overrun it: issue 59), and a chunk predicted to end past the limit runs the steps that still fit (the
+    curriculum's block, whose length is traced), so the limit holds to within one step, not one chunk of ``every``
+    steps, the first chunk included."""
     import time
 
     calls = []
@@ -117,10 +120,13 @@ def test_time_limit_shortens_the_last_chunk_when_any_length_runs_without_recompi
         time.sleep(0.1 * (stop - start))
         return state, {"x": np.zeros(stop - start, np.float32)}  # no compile: the rate is the sleep's
 
-    # 5 steps take 0.5 s; 0.3 s are left: 2 more steps fit, a 3rd would not
-    _, done, hist = driver.run_chunks(per_step, make_state(), total=20, every=5, time_limit_s=0.8, progress=False,
+    # a probe of one step (0.1 s: the rate), then 5 steps (0.6 s in all); 0.25 s are left: 2 more steps fit
+    start = time.perf_counter()
+    _, done, hist = driver.run_chunks(per_step, make_state(), total=20, every=5, time_limit_s=0.85, progress=False,
                                       fit_to_limit=True)
-    assert calls == [(0, 5), (5, 7)] and done == 7 and len(hist["x"]) == 7
+    seconds = time.perf_counter() - start
+    assert calls[:2] == [(0, 1), (1, 6)] and calls[2][0] == 6 and done == calls[-1][1] and len(hist["x"]) == done
+    assert 7 <= done <= 8 and seconds < 0.85 + 0.1 + 0.05  # within one step of the limit
     calls.clear()  # without it, the chunk that does not fit is skipped whole
     _, done, _ = driver.run_chunks(per_step, make_state(), total=20, every=5, time_limit_s=0.8, progress=False)
     assert calls == [(0, 5)] and done == 5
@@ -223,3 +229,23 @@ def test_damaged_latest_checkpoint_names_the_previous_one(tmp_path):
     latest.write_bytes(latest.read_bytes()[:-200])
     with pytest.raises(ValueError, match=r"checkpoint.npz.*mv .*checkpoint.prev.npz"):
         driver.restore(tmp_path, make_state())
+
+
+def test_optional_subtrees_absent_from_an_older_checkpoint_take_the_templates_values(tmp_path):
+    """``optional`` prefixes: a checkpoint written before a subtree existed (the curriculum's env states) restores
+    with the template's values there and the stored values everywhere else; a leaf outside the prefixes stays
+    required, and a stored subtree is read, not replaced."""
+    old = {"a": jnp.arange(3.0), "envs": None}
+    driver.save_checkpoint(tmp_path / "c.npz", old, done=2)
+    like = {"a": jnp.zeros(3), "envs": {"q": jnp.full((2, 4), 7.0), "v": jnp.ones(2)}}
+    state, done, _, _ = driver.load_checkpoint(tmp_path / "c.npz", like, optional=("['envs']",))
+    assert done == 2 and state["a"].tolist() == [0.0, 1.0, 2.0]
+    np.testing.assert_array_equal(state["envs"]["q"], np.full((2, 4), 7.0))
+    with pytest.raises(ValueError, match=r"has no leaf \"\['envs'\]\['q'\]\""):
+        driver.load_checkpoint(tmp_path / "c.npz", like)
+    with pytest.raises(ValueError, match="has no leaf"):  # a prefix of a NAME is not a prefix of the path
+        driver.load_checkpoint(tmp_path / "c.npz", like, optional=("['env",))
+    new = {"a": jnp.arange(3.0), "envs": {"q": jnp.zeros((2, 4)), "v": jnp.arange(2.0)}}
+    driver.save_checkpoint(tmp_path / "n.npz", new, done=3)
+    state, _, _, _ = driver.load_checkpoint(tmp_path / "n.npz", like, optional=("['envs']",))
+    assert state["envs"]["v"].tolist() == [0.0, 1.0] and float(state["envs"]["q"].max()) == 0.0
