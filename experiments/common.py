@@ -47,7 +47,8 @@ _INT_MIN = {
     **dict.fromkeys(("window", "windows"), 2),
     **dict.fromkeys(("mutation_steps", "walk", "quality_samples", "levels_init"), 0),
 }
-_FLOAT_POSITIVE = ("plr_temperature", "time_limit", "time_budget", "env_steps", "lr", "learning_rate", "heights", "robot_height")
+_FLOAT_POSITIVE = ("plr_temperature", "time_limit", "time_budget", "env_steps", "lr", "learning_rate", "heights", "robot_height",
+                   "band_width")
 _FLOAT_NONNEGATIVE = ("r1", "healthy_reward")
 _FLOAT_UNIT = ("threshold", "levels_promote")  # in (0, 1]
 _FLOAT_FRACTION = ("levels_demote", "plr_replay_prob", "plr_staleness", "plr_min_fill")  # in [0, 1]
@@ -155,7 +156,10 @@ def check_values(values: dict, where=flag) -> None:
 
     ``where(key)`` names a value in the message (default: its flag). Fitness names are checked against
     :data:`FITNESSES`, generator and descriptor names against their registries (importing the library, which
-    registers the learned ``traversability`` descriptor; running nothing). Raises :class:`UsageError`."""
+    registers the learned ``traversability`` descriptor; running nothing), a ``size`` against each generator named
+    (``generators.get(name, size=size)``: diamond-square takes powers of two), a ``robot`` against the registered
+    robots and a ``module:object`` curriculum (``curriculum`` / ``baseline``) by importing it. Raises
+    :class:`UsageError`."""
     for key, value in values.items():
         if value is None:
             continue
@@ -199,6 +203,31 @@ def check_values(values: dict, where=flag) -> None:
                     names = ", ".join(generators.names())
                     raise UsageError(f"{where(key)}: unknown generator {v!r}; choose from {names} (or one a --plugin "
                                      f"registers)")
+            size = values.get("size")
+            if isinstance(size, int) and not isinstance(size, bool) and size >= 1:
+                for v in items:
+                    try:
+                        generators.get(v, size=size)
+                    except (ValueError, OSError) as err:  # e.g. diamond-square's powers of two, missing weights
+                        text = str(err).splitlines()[0].removeprefix(f"{v}: ")
+                        raise UsageError(f"{where('size')} {size} does not suit generator {v!r} ({where(key)}): {text}") \
+                            from None
+        elif key == "robot":
+            from jaxterrain.walker import robots
+
+            try:
+                robots.get(value)
+            except (TypeError, ValueError) as err:  # e.g. --robot '' (which used to walk the humanoid)
+                raise UsageError(f"{where(key)}: {err}") from None
+        elif key in ("curriculum", "baseline"):
+            for v in items:
+                if isinstance(v, str) and ":" in v:  # module:object: the user's module, imported once here
+                    from jaxterrain.curriculum import selectors
+
+                    try:
+                        selectors.resolve_factory(v)
+                    except ValueError as err:
+                        raise UsageError(f"{where(key)} {str(err).split(' ', 1)[1]}") from None
     for key, bound in _AT_MOST:
         v, b = values.get(key), values.get(bound)
         for item in v if isinstance(v, (list, tuple)) else [v]:

@@ -32,6 +32,7 @@ import argparse
 import csv
 import io
 import json
+import shutil
 import sys
 import time
 from pathlib import Path
@@ -88,6 +89,21 @@ def parse_archives(items) -> dict | None:
             raise SystemExit(f"--archives: expected NAME=PATH, got {item!r}")
         out[name] = path
     return out
+
+
+def check_config(args, cfg: dict) -> None:
+    """Before a run folder: every ``--archives`` file reads as an archive a curriculum can use
+    (``runner.load_archive``; read again per treatment), and every curriculum flag given belongs to the map
+    curriculum or a ``--baseline`` (``learn.check_selector_flags``); :class:`~experiments.common.UsageError`."""
+    from jaxterrain.curriculum import runner
+
+    for name, path in sorted(cfg["archives"].items()):
+        try:
+            runner.load_archive(path, cfg["descriptors"])
+        except runner.BadInput as err:
+            text = str(err).removeprefix(f"--archive {path}: ")
+            raise common.UsageError(f"--archives {name}={path}: {text}") from None
+    learn.check_selector_flags(args, ["map", *baselines(cfg)], "--baseline")
 
 
 def treatments(cfg: dict, folder: Path) -> list[tuple[str, str, str]]:
@@ -274,7 +290,7 @@ def main(args) -> int:
                 **learn.fine_tuning_overrides(args), **learn.selector_overrides(args),
                 **common.protocol_overrides(args))
     mesh = common.device_mesh(args.devices)
-    folder, cfg = common.setup_run("curriculum", args, PRESETS, "smoke", over)
+    folder, cfg = common.setup_run("curriculum", args, PRESETS, "smoke", over, check=lambda c: check_config(args, c))
     start = time.perf_counter()
     limit = None if args.time_limit is None else 60.0 * args.time_limit
     try:
@@ -286,6 +302,9 @@ def main(args) -> int:
                                   physics=not args.report)
     except runner.BadInput as err:
         print(f"curriculum: {err}", file=sys.stderr)
+        if args.resume is None and {p.name for p in folder.iterdir()} <= {common.CONFIG_NAME, common.PROVENANCE_NAME,
+                                                                          "combined_archive.npz"}:
+            shutil.rmtree(folder)  # nothing of a run in it yet (as learn)
         return 2
     if args.report:
         return report(folder, cfg, plan)

@@ -81,7 +81,7 @@ def load_policies(paths, robot: str | None = None) -> list:
     from jaxterrain import difficulty, rl
 
     try:
-        out = [difficulty.robot_base_policy(robot or "humanoid")]
+        out = [difficulty.robot_base_policy("humanoid" if robot is None else robot)]
     except ValueError as err:
         raise UsageError(f"--robot: {err}") from None
     for p in paths or []:
@@ -93,7 +93,8 @@ def load_policies(paths, robot: str | None = None) -> list:
 
 
 def check_terrain_flags(cfg: dict) -> None:
-    """UsageError naming the flag for an unknown suite or family, a size below 32 pixels or a missing archive."""
+    """UsageError naming the flag for an unknown suite or family, a size below 32 pixels or an archive that is
+    missing or does not read (it is read again when walked)."""
     from pathlib import Path
 
     from experiments.common import UsageError
@@ -109,6 +110,13 @@ def check_terrain_flags(cfg: dict) -> None:
         raise UsageError(f"--size must be an integer >= 32 pixels; got {cfg['size']}")
     if cfg["archive"] and not Path(cfg["archive"]).is_file():
         raise UsageError(f"--archive {cfg['archive']}: no such file")
+    if cfg["archive"]:
+        from jaxterrain import qd
+
+        try:
+            qd.load(cfg["archive"])
+        except (OSError, ValueError) as err:
+            raise UsageError(f"--archive {cfg['archive']}: {str(err).splitlines()[0]}") from None
 
 
 def fit_size(args, cfg0: dict, policies) -> int:

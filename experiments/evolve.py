@@ -142,6 +142,14 @@ def run_treatment(cfg: dict, generator: str, descriptors, folder: Path, clock: c
     return arch
 
 
+def check_robot_walks(args, cfg: dict) -> None:
+    """``--robot`` only with a fitness that walks a robot (``difficulty``, the walker's): with ``slope`` it would
+    be recorded in the archive yet walk nothing; :class:`~experiments.common.UsageError`."""
+    if args.robot is not None and cfg.get("fitness") != "difficulty":
+        raise common.UsageError(f"--robot {args.robot}: only the walker fitness walks a robot (--fitness difficulty); "
+                                f"this run's fitness is {cfg.get('fitness')!r}, which walks none")
+
+
 def fitness_fn(name: str):
     """The ``fitness_fn`` of ``qd.evolve`` for ``--fitness NAME``: ``jaxterrain.difficulty.FITNESSES[name]``, where None (the
     walker, ``"difficulty"``) lets ``qd.evolve`` build it from the config (attempts, best, rollout slots and
@@ -206,7 +214,8 @@ def main(args) -> int:
         if cfg0.get("size") is not None and int(cfg0["size"]) < need:
             raise common.UsageError(f"--size must be >= {need} pixels for the walker fitness of robot {robot} (its "
                                     f"episode margins at 4 cm a pixel); got {cfg0['size']}")
-    folder, cfg = common.setup_run("evolve", args, PRESETS, "smoke", overrides(args))
+    folder, cfg = common.setup_run("evolve", args, PRESETS, "smoke", overrides(args),
+                                   check=lambda c: check_robot_walks(args, c))
     clock = common.Clock(args.time_limit)
     try:
         arch = run_treatment(cfg, cfg["generator"], cfg["descriptors"], folder, clock, jax.random.key(cfg["seed"]),

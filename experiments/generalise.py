@@ -72,17 +72,36 @@ def treatment_folders(runs) -> list[tuple[Path, str | None]]:
 
 def load_treatment(folder: Path, label: str | None = None) -> dict:
     """One treatment: its label, trials' hardest cell traversed, the held-out evaluation (trials in trial order, the
-    base policy's rows apart)."""
+    base policy's rows apart). A :class:`~experiments.common.UsageError` naming the file (and the row or field) when
+    either file is damaged."""
+    import math
+
+    from experiments.common import UsageError
     from jaxterrain import suite
 
     path = folder / "heldout" / "fitness.csv"
-    ev = suite.read_fitness(path if path.is_file() else path.with_suffix(".csv.gz"))
-    summary = json.loads((folder / "summary.json").read_text())
-    trial = lambda name: int(name.rsplit("trial_", 1)[1]) if "trial_" in name else -1  # noqa: E731
+    path = path if path.is_file() else path.with_suffix(".csv.gz")
+    try:
+        ev = suite.read_fitness(path)
+    except (OSError, ValueError) as err:
+        raise UsageError(str(err).splitlines()[0]) from None
+    summary_path = folder / "summary.json"
+    try:
+        summary = json.loads(summary_path.read_text())
+    except (OSError, ValueError) as err:
+        raise UsageError(f"{summary_path}: not readable JSON ({type(err).__name__}: {err})") from None
+    trial = lambda name: int(name.rsplit("trial_", 1)[1]) if name.rsplit("trial_", 1)[-1].isdigit() else -1  # noqa: E731
     walkers = sorted((trial(n), i) for i, n in enumerate(ev.policies) if n != "base" and trial(n) >= 0)
     if not walkers:
-        raise SystemExit(f"{path}: no policies/trial_K walker in it")
-    hardest = summary["hardest"]
+        raise UsageError(f"{path}: no policies/trial_K walker in it")
+    hardest = summary.get("hardest") if isinstance(summary, dict) else None
+    if not isinstance(hardest, list) or not all(isinstance(v, (int, float)) and not isinstance(v, bool)
+                                                and math.isfinite(v) for v in hardest):
+        raise UsageError(f"{summary_path}: field 'hardest' must be a list of finite numbers (each trial's hardest "
+                         f"cell traversed); got {hardest!r}"[:300])
+    if len(hardest) <= walkers[-1][0]:
+        raise UsageError(f"{summary_path}: field 'hardest' has {len(hardest)} trials, but {path} holds the walker of "
+                         f"trial {walkers[-1][0]}")
     return {"label": label or folder.name.replace("-", " "), "folder": folder, "family": ev.family, "level": ev.level,
             "trials": [t for t, _ in walkers], "fitness": ev.fitness[[i for _, i in walkers]],
             "hardest": [float(hardest[t]) for t, _ in walkers],

@@ -171,43 +171,54 @@ def resolve_protocol(cfg: dict):
     if cfg.get("protocol") is None:
         return None
     if cfg["protocol"] not in PROTOCOLS:
-        raise SystemExit(f"protocol must be one of {PROTOCOLS}, got {cfg['protocol']!r}")
+        raise common.UsageError(f"--protocol must be one of {', '.join(PROTOCOLS)}; got {cfg['protocol']!r}")
     base = difficulty.PAPER if cfg["protocol"] == "paper" else difficulty.HEADINGS
     fields = {k: cfg.get(k) for k in ("attempts", "best", "headings", "start_spread", "rule")}
     try:
         return base._replace(**{k: v for k, v in fields.items() if v is not None}).validate()
     except ValueError as err:
-        raise SystemExit(str(err)) from err
+        raise common.UsageError(f"--protocol / --attempts / --best / --headings / --start-spread / --rule: "
+                                f"{str(err).splitlines()[0]}") from None
+
+
+def parse_slots(value) -> int | str | None:
+    """``--slots``: None, ``"all"``, ``"auto"`` or an integer >= 1 (also as text); :class:`~experiments.common.UsageError`
+    otherwise."""
+    if value in (None, "all", "auto"):
+        return value
+    try:
+        slots = int(value)
+    except (TypeError, ValueError):
+        slots = 0
+    if isinstance(value, bool) or slots < 1 or (isinstance(value, float) and value != slots):
+        raise common.UsageError(f"--slots must be an integer >= 1, 'all' or 'auto'; got {value!r}")
+    return slots
 
 
 def resolve_slots(value) -> int | None:
     """``"auto"`` -> 16 384 on a GPU / TPU, None (all at once) on a CPU; ``"all"`` / None -> None; else an int."""
     import jax
 
+    value = parse_slots(value)
     if value in (None, "all"):
         return None
     if value == "auto":
         return None if jax.default_backend() == "cpu" else 16384
-    try:
-        slots = int(value)
-    except (TypeError, ValueError):
-        slots = 0
-    if slots < 1:
-        raise SystemExit(f"--slots must be an int >= 1, 'all' or 'auto', got {value!r}")
-    return slots
+    return value
 
 
 def load_elites(path: str) -> dict:
-    """The filled cells of an archive: ``{"archive", "name", "cells" [N], "bins" [N, 2], "fitness" [N]}``."""
+    """The filled cells of an archive: ``{"archive", "name", "cells" [N], "bins" [N, 2], "fitness" [N]}``; a
+    :class:`~experiments.common.UsageError` naming the file when it is not a readable archive or has no elite."""
     from jaxterrain import qd as A
 
     try:
         arch = A.load(path)
     except (OSError, ValueError) as err:
-        raise SystemExit(f"cannot read archive {path}: {err}") from err
+        raise common.UsageError(f"archive {path}: cannot read it: {str(err).splitlines()[0]}") from None
     cells = np.flatnonzero(np.asarray(arch.source) >= 0)
     if cells.size == 0:
-        raise SystemExit(f"archive {path} has no filled cell")
+        raise common.UsageError(f"archive {path} has no filled cell")
     return {"archive": arch, "name": Path(path).name.removesuffix(".npz"), "cells": cells,
             "bins": A.cell_bins(cells, int(arch.config.bins)), "fitness": np.asarray(arch.fitness, np.float32)[cells]}
 
@@ -407,27 +418,33 @@ def plot(path: Path, results: list[tuple[str, dict, list[dict]]], cfg: dict) -> 
 
 
 def check_config(cfg: dict) -> None:
-    """Before a run folder: at least one archive, each an existing file."""
+    """Before a run folder: at least one archive, each an existing file that reads as an archive with elites
+    (:func:`load_elites`; read again when walked, not kept); ``--slots``, ``--distance``, the protocol's fields
+    and ``--reseat``'s needs."""
     if not cfg.get("archives"):
         raise common.UsageError("give at least one archive.npz (ARCHIVE ...)")
     for path in cfg["archives"]:
         if not Path(path).is_file():
             raise common.UsageError(f"archive {path}: no such file")
+    parse_slots(cfg.get("slots"))
+    if cfg.get("distance") not in DISTANCES:
+        raise common.UsageError(f"--distance must be one of {', '.join(DISTANCES)}; got {cfg.get('distance')!r}")
+    protocol = resolve_protocol(cfg)
+    if cfg.get("reseat") and (protocol is None or cfg.get("sample") is not None):
+        raise common.UsageError("--reseat needs --protocol (every elite walked again) and no --sample")
+    if cfg.get("reseat") and (protocol.start_spread != 0.0 or protocol.rule != "mean"):
+        raise common.UsageError("--reseat: an archive records the protocol's attempts, best and headings only; not "
+                                "with --start-spread or --rule min")
+    for path in cfg["archives"]:
+        load_elites(path)
 
 
 def main(args) -> int:
     import jax
 
     folder, cfg = common.setup_run("gradient", args, PRESETS, "default", overrides(args), check=check_config)
-    if cfg["distance"] not in DISTANCES:
-        raise SystemExit(f"distance must be one of {DISTANCES}, got {cfg['distance']!r}")
     protocol = resolve_protocol(cfg)
     slots = resolve_slots(cfg.get("slots"))
-    if cfg.get("reseat") and (protocol is None or cfg.get("sample") is not None):
-        raise SystemExit("--reseat needs --protocol (every elite walked again) and no --sample")
-    if cfg.get("reseat") and (protocol.start_spread != 0.0 or protocol.rule != "mean"):
-        raise SystemExit("--reseat: an archive records the protocol's attempts, best and headings only; not with "
-                         "--start-spread or --rule min")
     key = jax.random.key(int(cfg["seed"]))
     all_bands, all_summary, results = [], [], []
     for i, path in enumerate(cfg["archives"]):

@@ -7,7 +7,8 @@
 ``--curriculum``: ``map`` (the paper's IT&E map-based curriculum), ``roughness`` (standard CL: the terrains sorted by
 roughness, every fifth, in order), ``random`` (uniform over the archive), ``dr`` (domain randomisation: ``--terrains-per-chunk``
 terrains a chunk, each env on one), ``levels`` (legged_gym's terrain levels over bands of the archive), ``plr``
-(prioritised level replay over the archive's terrains), or
+(prioritised level replay over the archive's terrains; a curriculum's own flag, e.g. ``--plr-capacity``, with
+another built-in one is refused), or
 ``module:object`` (your own :class:`jaxterrain.curriculum.Selector`; ``jaxterrain.curriculum.selectors``). Every trial starts from the shipped base
 policy (``--policy DIR`` for another), and the ``--trials`` trials run together (vmap) in one jitted function per
 block of ``chunks_per_call`` chunks (a chunk = 40 epochs of 4 000 env steps + one evaluation; the curriculum's
@@ -132,7 +133,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def add_selector_arguments(parser: argparse.ArgumentParser) -> None:
-    """The per-env curricula's settings (``dr``, ``levels``; CurriculumConfig's fields of the same names)."""
+    """The per-env curricula's settings (``dr``, ``levels``, ``plr``, ``accel``; CurriculumConfig's fields of the
+    same names). One given with a built-in curriculum that does not read it is refused (:func:`check_selector_flags`)."""
     parser.add_argument("--terrains-per-chunk", type=int, default=None,
                         help="dr, plr: terrains per trial and chunk, the envs dealt round-robin over them, >= 1 "
                              "(default 8)")
@@ -167,6 +169,24 @@ def selector_overrides(args) -> dict:
                 plr_replay_prob=args.plr_replay_prob, plr_staleness=args.plr_staleness,
                 plr_temperature=args.plr_temperature, plr_min_fill=args.plr_min_fill,
                 accel_generator=args.accel_generator, accel_edits=args.accel_edits)
+
+
+def check_selector_flags(args, curricula, option: str = "--curriculum") -> None:
+    """A curriculum's own flag (``--plr-capacity``, ``--levels``, ...: ``CurriculumConfig.SELECTOR_FIELDS``) given
+    on the command line must belong to one of ``curricula`` (the run's built-in selectors), else it would be
+    accepted and ignored: :class:`~experiments.common.UsageError` naming the curricula it belongs to. Only flags the
+    user typed count (a preset or ``--config`` sets every key); a registered or ``module:object`` curriculum may
+    read any field, so with one nothing is refused."""
+    from jaxterrain.curriculum.config import SELECTOR_FIELDS, SELECTORS
+
+    if any(c not in SELECTORS for c in curricula):
+        return
+    for key, value in selector_overrides(args).items():
+        owners = SELECTOR_FIELDS.get(key, ())
+        if value is not None and owners and not set(owners) & set(curricula):
+            raise common.UsageError(f"{common.flag(key)} belongs to {option} {' or '.join(owners)}; this run's "
+                                    f"{'curricula are' if len(curricula) > 1 else option + ' is'} "
+                                    f"{', '.join(curricula)}")
 
 
 def add_fine_tuning_arguments(parser: argparse.ArgumentParser, scope: str = "") -> None:
@@ -239,7 +259,8 @@ def main(args) -> int:
     if args.export_policies and args.resume is None:
         raise common.UsageError("--export-policies needs --resume RUN (the run whose walkers to write)")
     mesh = common.device_mesh(args.devices)
-    folder, cfg = common.setup_run("learn", args, PRESETS, "smoke", overrides(args))
+    folder, cfg = common.setup_run("learn", args, PRESETS, "smoke", overrides(args),
+                                   check=lambda c: check_selector_flags(args, [c["curriculum"]]))
     try:  # cheap: files and values, before the run folder fills up or anything compiles
         readonly = args.report or args.export_policies
         arch = runner.validate(runner.report_cfg(cfg) if readonly else cfg)[1]

@@ -58,7 +58,10 @@ def main(args: argparse.Namespace) -> int:
     if args.policy is not None:
         from jaxterrain.rl import load_policy
 
-        policy = load_policy(args.policy)
+        try:
+            policy = load_policy(args.policy)
+        except (OSError, ValueError) as err:
+            raise UsageError(f"--policy {args.policy}: {str(err).splitlines()[0]}") from None
     path = write_report(args.runs, out, title=args.title, videos=not args.no_videos, video_steps=args.steps,
                         video_frames=args.frames, video_size=(args.width, args.height), thumb=args.thumb,
                         seed=args.seed, policy=policy, progress=lambda s: print(s, flush=True))

@@ -204,18 +204,37 @@ def make_config(cfg: dict):
 
 
 def check_config(cfg: dict) -> None:
-    """Before a run folder: the size fits the architecture (``GanConfig.check``), as a one-line error."""
+    """Before a run folder: the size fits the architecture (``GanConfig.check``) and ``--data`` reads as DEM tiles
+    (:func:`read_dems`), each as a one-line error."""
     try:
         make_config(cfg)
     except ValueError as err:
         raise common.UsageError(f"--size / the preset's architecture: {str(err).splitlines()[0]}") from None
+    read_dems(cfg.get("data"))
+
+
+_DEMS: dict = {}  # the tiles read by check_config, reused by load_training_data (read once)
+
+
+def read_dems(data: str | None) -> list:
+    """``dem.load_dems`` of ``--data`` (None: matplotlib's sample DEMs), read once per run; a file or folder that
+    holds no readable DEM tile (an unknown extension, a damaged or too small tile) is a :class:`UsageError` naming
+    ``--data`` and the file."""
+    from jaxterrain.terrain import dem
+
+    if data not in _DEMS:
+        try:
+            _DEMS[data] = dem.load_dems(data, min(dem.DEFAULT_SCALES))
+        except (OSError, ValueError) as err:
+            raise common.UsageError(f"--data {data}: {str(err).splitlines()[0]}") from None
+    return _DEMS[data]
 
 
 def load_training_data(data: str | None) -> TrainingData:
     """Load the DEM tiles of ``--data`` (default: matplotlib's sample DEMs) and stack them for the device."""
     from jaxterrain.terrain import dem
 
-    dems = dem.load_dems(data, min(dem.DEFAULT_SCALES))
+    dems = read_dems(data)
     tiles = dem.stack_tiles([z for _, z in dems])
     description = (f"{'matplotlib sample DEMs' if data is None else data}: "
                    + ", ".join(f"{n} ({z.shape[0]} x {z.shape[1]})" for n, z in dems))

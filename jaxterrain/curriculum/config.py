@@ -77,6 +77,7 @@ randomisation, ``terrains_per_chunk`` terrains a chunk), ``"levels"`` (legged_gy
 from __future__ import annotations
 
 import math
+import numbers
 from typing import NamedTuple, Optional
 
 from jaxterrain.curriculum.selectors import accel_generator, resolve_factory
@@ -84,9 +85,20 @@ from jaxterrain.difficulty import Protocol
 from jaxterrain.rl.config import PPOConfig, validate_config as validate_ppo_config
 from jaxterrain.runtime.validation import int_at_least, known_fields, one_of, walks
 
-__all__ = ["CurriculumConfig", "validate_config", "SELECTORS", "FINE_TUNED", "FINE_TUNING", "RECIPES", "recipe"]
+__all__ = ["CurriculumConfig", "validate_config", "SELECTORS", "SELECTOR_FIELDS", "FINE_TUNED", "FINE_TUNING",
+           "RECIPES", "recipe"]
 
 SELECTORS = ("map", "roughness", "random", "dr", "levels", "plr", "accel")  # built in; selectors.selector_names() adds registered ones
+SELECTOR_FIELDS: dict[str, tuple[str, ...]] = {
+    "terrains_per_chunk": ("dr", "plr", "accel"),
+    **dict.fromkeys(("levels", "levels_init", "levels_promote", "levels_demote"), ("levels",)),
+    **dict.fromkeys(("plr_capacity", "plr_replay_prob", "plr_staleness", "plr_temperature", "plr_min_fill"),
+                    ("plr", "accel")),
+    **dict.fromkeys(("accel_generator", "accel_edits"), ("accel",)),
+}
+"""The :class:`CurriculumConfig` fields that only some built-in selectors read, and which: any other built-in
+selector ignores them (``experiments learn`` refuses such a flag given with another ``--curriculum``; a registered
+or ``module:object`` selector may read any field)."""
 GP_EVALUATIONS = ("final", "best")
 REMOVAL_TIES = ("nearer", "keep", "remove")
 CREDITS = ("threshold", "finished")
@@ -275,7 +287,10 @@ class CurriculumConfig(NamedTuple):
     def from_json_dict(cls, d: dict) -> "CurriculumConfig":
         """Inverse of :meth:`to_json_dict`; also reads the flat layout (the :data:`FINE_TUNED` fields beside the
         others, as ``experiments learn``'s ``config.json`` and configs written before ``ppo`` existed hold them).
-        Missing fields take their defaults; unknown keys raise ``ValueError``."""
+        Missing fields take their defaults; unknown keys, or ``d`` not a dict, raise ``ValueError``."""
+        if not isinstance(d, dict):
+            raise ValueError(f"CurriculumConfig.from_json_dict: needs a dict of fields (as to_json_dict writes); got "
+                             f"{type(d).__name__}")
         d = dict(d)
         ppo = {name: d.pop(name) for name in FINE_TUNED if name in d}
         nested = d.pop("ppo", None) or {}
@@ -286,10 +301,9 @@ class CurriculumConfig(NamedTuple):
 
 def _float_in(config, name: str, lo: float, hi: Optional[float], lo_open: bool, hi_open: bool = False) -> None:
     v = getattr(config, name)
-    try:
-        f = float(v)
-    except (TypeError, ValueError):
-        raise ValueError(f"CurriculumConfig.{name} must be a number, got {v!r}") from None
+    if isinstance(v, bool) or not isinstance(v, numbers.Real):  # not a string that float() would read
+        raise ValueError(f"CurriculumConfig.{name} must be a number, got {v!r}")
+    f = float(v)
     ok = math.isfinite(f) and (f > lo if lo_open else f >= lo) and (hi is None or (f < hi if hi_open else f <= hi))
     if not ok:
         left, right = "(" if lo_open else "[", ")" if (hi is None or hi_open) else "]"

@@ -702,12 +702,19 @@ def selector_names() -> tuple[str, ...]:
 
 
 def _imported(spec: str) -> Callable[[Any], Selector]:
-    """``module:object`` -> the object (a factory ``config -> Selector``, or a :class:`Selector`)."""
+    """``module:object`` -> the object (a factory ``config -> Selector``, or a :class:`Selector`); ``ValueError``
+    naming ``spec`` when the module does not import (whatever it raises: it is the user's code) or lacks the
+    object, or the object is neither callable nor a Selector."""
     module, _, attr = spec.partition(":")
     try:
         obj = getattr(importlib.import_module(module), attr)
-    except (ImportError, AttributeError) as err:
-        raise ValueError(f"CurriculumConfig.selector {spec!r}: cannot import it ({err})") from None
+    except Exception as err:  # noqa: BLE001 - any failure of the user's module is reported in one line
+        text = str(err).splitlines()[0] if str(err) else ""
+        raise ValueError(f"CurriculumConfig.selector {spec!r}: cannot import it ({type(err).__name__}: {text})") \
+            from None
+    if not isinstance(obj, Selector) and not callable(obj):
+        raise ValueError(f"CurriculumConfig.selector {spec!r}: {type(obj).__name__} is neither a Selector nor a "
+                         f"factory (config -> Selector)")
     return (lambda config: obj) if isinstance(obj, Selector) else obj
 
 

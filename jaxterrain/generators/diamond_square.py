@@ -129,7 +129,8 @@ def diamond_square(size: int = 256) -> Generator:
     """Diamond-square generator producing ``[B, size, size]`` float32 maps in [0, 1]; see the module docstring."""
     size = int(size)
     if size < 2 or size & (size - 1):
-        raise ValueError(f"diamond_square: size must be a power of two >= 2 (grid 2^n + 1); got {size}")
+        raise ValueError(f"diamond_square: size must be a power of two >= 2 (..., 64, 128, 256, 512, ...: the grid "
+                         f"has 2^n + 1 points a side); got {size}")
 
     def render_one(genome: jax.Array) -> jax.Array:
         return render_diamond_square(genome, size)

@@ -41,6 +41,9 @@ def get(name: str, **options) -> Generator:
 
     Its ``sample`` rejects a count that is not an integer >= 1 and its ``mutate`` checks concrete genomes (as
     ``validate`` does), also for a factory that does not check them itself (:func:`base.checked`)."""
+    if not isinstance(name, str):
+        raise ValueError(f"generators.get: name must be a generator name (a str, one of {', '.join(names())}); got "
+                         f"{name!r}")
     if name not in _FACTORIES:
         raise ValueError(f"unknown generator {name!r}; choose one of {', '.join(names())}")
     size = options.get("size", 1)

@@ -133,6 +133,12 @@ def save(path: str | os.PathLike, archive: Archive) -> Path:
 def _open_npz(path: Path, what: str):
     if not path.exists():
         raise FileNotFoundError(f"{what} file {str(path)!r} does not exist")
+    with open(path, "rb") as f:
+        magic = f.read(6)
+    if magic == b"\x93NUMPY":  # a lone .npy array (e.g. renamed to .npz)
+        raise ValueError(f"{str(path)!r}: one .npy array, not an .npz {what} file")
+    if not magic.startswith(b"PK"):  # np.load would try to unpickle it and say so
+        raise ValueError(f"{str(path)!r}: not an .npz {what} file (no zip header)")
     try:
         data = np.load(path, allow_pickle=False)
         members = {name: data[name] for name in data.files}  # reads (and CRC-checks) every member
@@ -165,15 +171,32 @@ def load(path: str | os.PathLike) -> Archive:
         raise ValueError(
             f"{str(path)!r}: archive format version {header.get('version')!r}; this reader knows {VERSION}"
         )
+    missing = [k for k in ("config", "cells", "generator_names", "genomes", "metrics", "heightmaps") if k not in header]
+    if missing:
+        raise ValueError(f"{str(path)!r}: incomplete header (no field {', '.join(map(repr, missing))})")
+    cells, names, trees = header["cells"], header["generator_names"], header["genomes"]
+    metric_names, hm_header = header["metrics"], header["heightmaps"]
+    if not isinstance(cells, int) or isinstance(cells, bool) or cells < 1:
+        raise ValueError(f"{str(path)!r}: header field 'cells' must be an integer >= 1; got {cells!r}")
+    for field, value in (("generator_names", names), ("metrics", metric_names)):
+        if not isinstance(value, list) or not all(isinstance(v, str) for v in value):
+            raise ValueError(f"{str(path)!r}: header field {field!r} must be a list of names; got {value!r}")
+    if not isinstance(trees, list):
+        raise ValueError(f"{str(path)!r}: header field 'genomes' must be a list (one tree per generator); got "
+                         f"{trees!r}")
+    shape = None if not isinstance(hm_header, dict) else hm_header.get("shape")
+    if hm_header is not None and not (isinstance(shape, list) and len(shape) == 3 and all(
+            isinstance(v, int) and not isinstance(v, bool) and v >= 0 for v in shape)):
+        raise ValueError(f"{str(path)!r}: header field 'heightmaps' must be null or {{\"shape\": [N, H, W], ...}}; got "
+                         f"{hm_header!r}")
+    names = tuple(names)
+    if not isinstance(header["config"], dict):
+        raise ValueError(f"{str(path)!r}: header field 'config' must be a JSON object (the EvolveConfig); got "
+                         f"{header['config']!r}")
     try:
         config = resolve_config(config_from_dict(header["config"]))
-        cells = int(header["cells"])
-        names = tuple(header["generator_names"])
-        trees = header["genomes"]
-        metric_names = header["metrics"]
-        hm_header = header["heightmaps"]
-    except (KeyError, TypeError) as err:
-        raise ValueError(f"{str(path)!r}: incomplete header ({err})") from err
+    except (KeyError, TypeError, ValueError) as err:
+        raise ValueError(f"{str(path)!r}: header field 'config': {err}") from err
     if cells != config.bins**2 or len(trees) != len(names):
         raise ValueError(f"{str(path)!r}: header is inconsistent (cells {cells}, bins {config.bins})")
     fitness = _need(path, m, "fitness", (cells,), np.float32)
@@ -185,14 +208,21 @@ def load(path: str | os.PathLike) -> Archive:
     genomes = []
     for i, tree in enumerate(trees):
         leaves = []
-        for k in range(_count_leaves(tree)):
+        try:
+            count = _count_leaves(tree)
+        except (KeyError, TypeError, AttributeError) as err:
+            raise ValueError(f"{str(path)!r}: header field 'genomes' [{i}] is not a genome tree ({err!r})") from None
+        for k in range(count):
             name = f"genome_{i}_{k}"
             if name not in m:
                 raise ValueError(f"{str(path)!r}: member {name!r} is missing")
             if m[name].ndim < 1 or m[name].shape[0] != cells:
                 raise ValueError(f"{str(path)!r}: member {name!r} has shape {m[name].shape}; expected [{cells}, ...]")
             leaves.append(m[name])
-        genomes.append(_unflatten(tree, leaves))
+        try:
+            genomes.append(_unflatten(tree, leaves))
+        except (KeyError, TypeError, IndexError, ValueError) as err:
+            raise ValueError(f"{str(path)!r}: header field 'genomes' [{i}]: {err}") from None
     maps = None
     if hm_header is not None:
         n_filled = int(np.sum(source >= 0))

@@ -170,9 +170,21 @@ def _read_policy(folder: Path, weights: Path):
         raise ValueError(f"{cfg_path}: not a readable policy config ({err})") from err
     if meta.get("format") != POLICY_FORMAT:
         raise ValueError(f"{cfg_path}: not a {POLICY_FORMAT} policy (format={meta.get('format')!r})")
+    for field in ("observation_size", "action_size"):
+        value = meta.get(field)
+        if not isinstance(value, int) or isinstance(value, bool) or value < 1:
+            raise ValueError(f"{cfg_path}: field {field!r} must be an integer >= 1; got {value!r}")
+    action_size, observation_size = meta["action_size"], meta["observation_size"]
+    walker = meta.get("walker_config")
+    if walker is not None and not isinstance(walker, dict):
+        raise ValueError(f"{cfg_path}: field 'walker_config' must be a JSON object (the WalkerConfig the policy was "
+                         f"trained in) or absent; got {walker!r}")
+    for field, kind, what in (("robot", str, "a robot name"), ("solver", dict, "a JSON object of SolverOptions")):
+        value = (walker or {}).get(field)
+        if value is not None and not isinstance(value, kind):
+            raise ValueError(f"{cfg_path}: field 'walker_config.{field}' must be {what} or absent; got {value!r}")
     try:
         config = validate_config(PPOConfig.from_json_dict(meta["ppo_config"]))
-        action_size, observation_size = int(meta["action_size"]), int(meta["observation_size"])
     except (KeyError, TypeError, ValueError) as err:
         raise ValueError(f"{cfg_path}: incomplete policy config ({err!r})") from err
     try:

@@ -63,7 +63,10 @@ def evaluate_policies(policies: Sequence[Callable], heightmaps, key: jax.Array, 
     ``protocol``: the walks (default :data:`HEADINGS`: 20 in each of 4 headings, best 5 per heading, mean over
     headings); ``backend``: ``"jax"`` (MJX) or ``"warp"`` (MuJoCo Warp on tiles); ``slots`` / ``chunk``: a rollout
     pool and terrains per call (:func:`jaxterrain.difficulty.evaluate`), to bound device memory on large suites.
-    Every policy walks with ``key``."""
+    Every policy walks with ``key``. ValueError for no policy at all."""
+    if isinstance(policies, (str, bytes)) or len(policies) == 0:
+        raise ValueError(f"policies: give at least one policy (a sequence of rl.load_policy policies); got "
+                         f"{policies!r}")
     h = difficulty.validate_heightmaps(heightmaps)
     scale = TerrainScale() if scale is None else scale
     configs = check_policies(policies, tuple(h.shape[1:]), scale, backend)

@@ -113,16 +113,17 @@ def load(name: str = "v1", *, size: int | None = None, seeds: int | None = None,
          families: Sequence[str] | None = None, generator_names: Sequence[str] | None = None,
          scale: TerrainScale = TerrainScale()) -> Suite:
     """Build suite ``name`` (:data:`VERSIONS`), deterministic from :data:`SEED`; keyword arguments (``size``, ``seeds``, ``samples``, ``families``, ``generator_names``) override the
-    version's settings for a smaller build (a test's). ValueError naming the parameter for an unknown version or
-    family, or a bad size."""
+    version's settings for a smaller build (a test's); one name alone (``families="flat"``) is a list of one.
+    ValueError naming the parameter for an unknown version or family, or a bad size."""
     if name not in VERSIONS:
         raise ValueError(f"suite must be one of {', '.join(VERSIONS)}; got {name!r}")
     spec = VERSIONS[name]
     size = spec["size"] if size is None else size
     seeds = spec["seeds"] if seeds is None else seeds
     samples = spec["samples"] if samples is None else samples
-    fams = tuple(spec["families"] if families is None else families)
-    gens = tuple(spec["generators"] if generator_names is None else generator_names)
+    fams = tuple(spec["families"] if families is None else [families] if isinstance(families, str) else families)
+    gens = tuple(spec["generators"] if generator_names is None
+                 else [generator_names] if isinstance(generator_names, str) else generator_names)
     _check("size", size, 32)
     _check("seeds", seeds, 1)
     _check("samples", samples, 1)

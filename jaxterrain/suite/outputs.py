@@ -114,17 +114,33 @@ class Evaluation(NamedTuple):
 
 def read_fitness(path) -> Evaluation:
     """Read ``fitness.csv`` as :func:`write_evaluation` writes it (``path`` may end in ``.gz``); ValueError naming
-    the file when the policies do not cover the same terrains in the same order."""
+    the file when the policies do not cover the same terrains in the same order, or naming the file and the row
+    (its line) for a missing column or a value that is not a number (a fitness: finite, in [0, 1])."""
     path = Path(path)
     raw = path.read_bytes()
-    text = (gzip.decompress(raw) if path.suffix == ".gz" else raw).decode()
-    rows = list(csv.DictReader(io.StringIO(text)))
-    names = list(dict.fromkeys(r["policy"] for r in rows))
-    per = {n: [r for r in rows if r["policy"] == n] for n in names}
-    terrain = lambda r: (r["family"], int(r["level"]), int(r["seed"]))  # noqa: E731
-    first = [terrain(r) for r in per[names[0]]] if names else []
-    if not names or any([terrain(r) for r in per[n]] != first for n in names):
+    try:
+        text = (gzip.decompress(raw) if path.suffix == ".gz" else raw).decode()
+    except (OSError, EOFError, UnicodeDecodeError) as err:
+        raise ValueError(f"{path}: not a readable fitness.csv ({type(err).__name__}: {err})") from None
+    reader = csv.DictReader(io.StringIO(text))
+    missing = [c for c in ("policy", "family", "level", "seed", "fitness") if c not in (reader.fieldnames or [])]
+    if missing:
+        raise ValueError(f"{path}: not an evaluation's fitness.csv (no column {', '.join(missing)})")
+    rows = []
+    for line, r in enumerate(reader, start=2):  # line 1: the header
+        try:
+            level, seed, fitness = int(r["level"]), int(r["seed"]), float(r["fitness"])
+        except (TypeError, ValueError):
+            raise ValueError(f"{path}, line {line}: level and seed must be integers and fitness a number; got "
+                             f"level={r['level']!r}, seed={r['seed']!r}, fitness={r['fitness']!r}") from None
+        if not 0.0 <= fitness <= 1.0:  # also NaN
+            raise ValueError(f"{path}, line {line}: fitness must be a finite number in [0, 1]; got {r['fitness']!r}")
+        rows.append((r["policy"], (r["family"], level, seed), fitness))
+    names = list(dict.fromkeys(r[0] for r in rows))
+    per = {n: [r for r in rows if r[0] == n] for n in names}
+    first = [r[1] for r in per[names[0]]] if names else []
+    if not names or any([r[1] for r in per[n]] != first for n in names):
         raise ValueError(f"{path}: not an evaluation's fitness.csv (every policy on the same terrains, in order)")
     return Evaluation(names, np.array([t[0] for t in first]), np.array([t[1] for t in first], np.int64),
                       np.array([t[2] for t in first], np.int64),
-                      np.array([[float(r["fitness"]) for r in per[n]] for n in names], np.float64))
+                      np.array([[r[2] for r in per[n]] for n in names], np.float64))

@@ -91,8 +91,19 @@ def save_npy(path: str | os.PathLike, heightmap) -> Path:
 
 
 def load_npy(path: str | os.PathLike) -> np.ndarray:
-    """Read a heightmap written by :func:`save_npy` -> float32 ``[H, W]`` (or ``[B, H, W]``)."""
-    h = np.load(path, allow_pickle=False)
+    """Read a heightmap written by :func:`save_npy` -> float32 ``[H, W]`` (or ``[B, H, W]``); ``ValueError`` naming
+    the file when it is not a ``.npy`` array of real numbers (``FileNotFoundError`` when it is missing)."""
+    with open(path, "rb") as f:  # FileNotFoundError names the file
+        magic = f.read(6)
+    if magic != b"\x93NUMPY":  # np.load would try to unpickle it and say so
+        raise ValueError(f"{path}: not a .npy heightmap (the file does not start with NumPy's .npy header)")
+    try:
+        h = np.load(path, allow_pickle=False)
+    except (OSError, ValueError, EOFError) as err:
+        raise ValueError(f"{path}: not a readable .npy heightmap ({type(err).__name__}: "
+                         f"{str(err).splitlines()[0] if str(err) else 'truncated'})") from None
+    if h.dtype.kind not in "biuf":
+        raise ValueError(f"{path}: expected an array of real numbers; got dtype {h.dtype}")
     if h.ndim not in (2, 3):
         raise ValueError(f"{path}: expected an [H, W] or [B, H, W] array; got shape {h.shape}")
     return h.astype(np.float32)

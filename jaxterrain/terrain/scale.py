@@ -49,14 +49,26 @@ class _TerrainScaleFields(NamedTuple):
 
 
 def _check_positive(name: str, value) -> None:
-    # Only concrete numbers are checked: JAX may rebuild the tuple with tracers or placeholders (pytree unflatten);
-    # a string or a bool is never a length
-    if isinstance(value, (str, bytes, bool)):
-        raise ValueError(f"TerrainScale.{name} must be a finite number of metres > 0; got {value!r}")
-    if isinstance(value, numbers.Real) or (isinstance(value, np.ndarray) and value.ndim == 0):
+    # A length is a real scalar: a Python / NumPy number, a [] array, or a [] tracer inside jit / vmap (checked for
+    # its shape only). JAX rebuilds the tuple from its leaves (pytree unflatten: tracers, placeholders) without
+    # coming here (:func:`_unflatten`), so anything else given to the constructor is refused.
+    what = f"TerrainScale.{name} must be a finite number of metres > 0"
+    if isinstance(value, jax.core.Tracer):
+        if np.ndim(value) != 0:
+            raise ValueError(f"{what} (a scalar); got an array of shape {np.shape(value)}")
+        return
+    if isinstance(value, (str, bytes, bool, np.bool_)) or value is None:
+        raise ValueError(f"{what}; got {value!r}")
+    if isinstance(value, numbers.Real):
         v = float(value)
-        if not (np.isfinite(v) and v > 0):
-            raise ValueError(f"TerrainScale.{name} must be a finite number of metres > 0; got {value!r}")
+    elif isinstance(value, (np.ndarray, jax.Array)) and np.issubdtype(np.dtype(value.dtype), np.number):
+        if np.ndim(value) != 0:
+            raise ValueError(f"{what} (a scalar); got an array of shape {np.shape(value)}")
+        v = float(np.asarray(value))
+    else:
+        raise ValueError(f"{what}; got {value!r}")
+    if not (np.isfinite(v) and v > 0):
+        raise ValueError(f"{what}; got {value!r}")
 
 
 class TerrainScale(_TerrainScaleFields):
@@ -65,6 +77,11 @@ class TerrainScale(_TerrainScaleFields):
     Attributes:
       cell_size: metres between neighbouring pixels (> 0), default 0.04.
       height: metres for heightmap value 1.0 (> 0), default 1.0.
+
+    Each must be a finite real scalar > 0 (a Python or NumPy number, a ``[]`` array; a ``[]`` tracer inside
+    ``jit`` / ``vmap``): anything else (None, a string, an array of another shape) is a ``ValueError`` naming the
+    field. JAX's own rebuilding of the tuple from its leaves (pytree unflatten: tracers, placeholders) is not
+    checked, nor is ``TerrainScale._make(fields)`` (e.g. ``vmap``'s ``in_axes=TerrainScale._make((None, 0))``).
     """
 
     __slots__ = ()
@@ -73,6 +90,16 @@ class TerrainScale(_TerrainScaleFields):
         _check_positive("cell_size", cell_size)
         _check_positive("height", height)
         return super().__new__(cls, cell_size, height)
+
+
+def _unflatten(_, children) -> TerrainScale:
+    """Pytree unflatten: the fields as JAX gives them (tracers, placeholders, sentinels), unchecked."""
+    return tuple.__new__(TerrainScale, tuple(children))
+
+
+jax.tree_util.register_pytree_with_keys(
+    TerrainScale, lambda s: (((jax.tree_util.GetAttrKey("cell_size"), s.cell_size),
+                              (jax.tree_util.GetAttrKey("height"), s.height)), None), _unflatten)
 
 
 def validate_scale(scale) -> TerrainScale:

@@ -715,8 +715,9 @@ def test_learn_runs_the_per_env_curricula_end_to_end(tmp_path, tiny_archive, cur
     (each env's progress read from PPO's episode record), the selector's own summary, every trial's walker."""
     archive = tiny_archive(4, "four.npz")
     out = tmp_path / curriculum
-    assert cli("learn", "--preset", "smoke", "--archive", archive, "--curriculum", curriculum, "--levels", "2",
-               "--terrains-per-chunk", "3", "--out", str(out)) == 0
+    own = ["--levels", "2"] if curriculum == "levels" else ["--terrains-per-chunk", "3"]  # another's is refused
+    assert cli("learn", "--preset", "smoke", "--archive", archive, "--curriculum", curriculum, *own,
+               "--out", str(out)) == 0
     summary = json.loads((out / "summary.json").read_text())
     assert summary["epochs"] == [4, 4] and summary["ended_without_terrains"] == [False, False]
     if curriculum == "levels":

@@ -299,7 +299,7 @@ EVOLVE_BREAKS = {
     "store_heightmaps": st.sampled_from(["yes", 1, None, 0.0]),
     "rollout_slots": st.one_of(st.integers(-3, 0), st.sampled_from([2.5, "8", True])),
     "scale": st.sampled_from([None, (0.04,), (0.0, 1.0), {"cell_size": -1.0}, {"bogus": 1.0}, "1m",
-                              TerrainScale(height=None), TerrainScale(cell_size=[0.04])]),
+                              TerrainScale._make((0.04, None)), TerrainScale._make(([0.04], 1.0))]),
     "rollout_backend": st.sampled_from(["mjx", None, "JAX"]),
     "robot": st.sampled_from(["dog", None, ""]),
 }
@@ -629,7 +629,7 @@ def test_valid_walker_configs_resolve_to_their_robots_defaults(h, w, robot, spre
 
 WALKER_BREAKS = {
     "terrain_shape": st.sampled_from([(2, 32), (32,), (32, 32, 32), (16.5, 16), ("a", "b"), 32, None, (True, 8)]),
-    "scale": st.sampled_from([TerrainScale(height=None), (0.04, 1.0), None]),
+    "scale": st.sampled_from([TerrainScale._make((0.04, None)), (0.04, 1.0), None]),
     "solver": st.sampled_from(["sound", None, (4, 16)]),
     "timestep": st.one_of(st.floats(max_value=0.0), NON_FINITE, NOT_NUMBERS),
     "n_frames": st.one_of(st.integers(-3, 0), NOT_INTS),
@@ -716,7 +716,7 @@ def test_bad_family_arguments_are_named(field, data):
     bad = {"name": st.sampled_from(["lava", "", None, 3]),
            "value": st.one_of(st.floats(max_value=-1e-9), NON_FINITE, NOT_NUMBERS, st.booleans()),
            "size": st.one_of(st.integers(-3, 15), NOT_INTS),
-           "scale": st.sampled_from([None, (0.04, 1.0), TerrainScale(height=None)]),
+           "scale": st.sampled_from([None, (0.04, 1.0), TerrainScale._make((0.04, None))]),
            "rng": st.sampled_from([0, "rng", np.random.RandomState(0)])}[field]
     args = dict(name="waves", value=0.1, size=16, scale=TerrainScale(), rng=None)
     args[field] = data.draw(bad)

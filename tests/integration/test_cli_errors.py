@@ -30,9 +30,13 @@ def run_cli(args: list[str], cwd: Path) -> subprocess.CompletedProcess:
     (["features", "--windows", "0"], "--windows"),
     (["coverage", "--generators", "perlin", "nope"], "--generators"),
     (["evolve", "--out", "FILE"], "--out"),
+    (["gradient", "RANDOM.npz"], "archive RANDOM.npz"),
+    (["learn", "--curriculum", "badmod:factory"], "--curriculum 'badmod:factory'"),
+    (["learn", "--curriculum", "map", "--plr-capacity", "5"], "--plr-capacity"),
 ])
 def test_subprocess_one_line_error_before_any_compile(tmp_path, args, flag):
     (tmp_path / "FILE").write_text("not a folder\n")
+    make_inputs(tmp_path)
     start = time.perf_counter()
     r = run_cli(args, tmp_path)
     seconds = time.perf_counter() - start
@@ -42,6 +46,25 @@ def test_subprocess_one_line_error_before_any_compile(tmp_path, args, flag):
     assert "Traceback" not in r.stderr and r.stdout == ""
     assert not (tmp_path / "runs").exists()
     assert seconds < 60
+
+
+ARCHIVE = ROOT / "docs" / "results" / "exp2_perlin_headings_archive.npz"
+
+
+def make_inputs(folder: Path) -> None:
+    """The bad inputs of issue 59's probe, in ``folder``: ``A.npz`` (a good archive), ``RANDOM.npz`` (random
+    bytes), ``NPY.npz`` (an .npy array renamed), ``afile`` (text), ``RUN/`` (a run folder) and ``badmod.py`` (a
+    module that raises on import; ``python -m`` and the tests import from ``folder``)."""
+    import numpy as np
+
+    (folder / "A.npz").write_bytes(ARCHIVE.read_bytes())
+    (folder / "RANDOM.npz").write_bytes(np.random.default_rng(0).bytes(1000))
+    np.save(folder / "NPY.npy", np.zeros((4, 4), np.float32))
+    (folder / "NPY.npy").rename(folder / "NPY.npz")
+    (folder / "afile").write_text("hello\n")
+    (folder / "RUN").mkdir(exist_ok=True)
+    (folder / "RUN" / "config.json").write_text("{}")
+    (folder / "badmod.py").write_text("raise RuntimeError('boom')\n")
 
 
 def _main(argv, capsys) -> str:
@@ -109,6 +132,41 @@ CASES = [
     (["curriculum", "--chunks-per-call", "0"], "--chunks-per-call must be an integer >= 1"),
     (["train-base-policy", "--env-steps", "-5"], "--env-steps must be a finite number > 0"),
     (["train-base-policy", "--eval-attempts", "2", "--eval-best", "5"], "--eval-best must be <= --eval-attempts"),
+    # issue 59's probe: tracebacks, run folders left behind, flags accepted and ignored
+    (["train-gan", "--data", "afile"], "--data afile: DEM afile: unknown extension '(none)'; use one of .tif, .tiff"),
+    (["report", "RUN", "--policy", "missing"], "--policy missing: no policy.msgpack in missing"),
+    (["evolve", "--generator", "diamond_square", "--size", "100"],
+     "--size 100 does not suit generator 'diamond_square' (--generator): size must be a power of two >= 2 (..., 64, "
+     "128, 256"),
+    (["coverage", "--size", "100"], "--size 100 does not suit generator 'diamond_square' (preset 'smoke': 'generators'): size must be"),
+    (["gradient", "--band-width", "-1", "A.npz"], "--band-width must be a finite number > 0; got -1.0"),
+    (["gradient", "RANDOM.npz"], "archive RANDOM.npz: cannot read it: 'RANDOM.npz': not an .npz archive file"),
+    (["gradient", "NPY.npz"], "archive NPY.npz: cannot read it: 'NPY.npz': one .npy array, not an .npz archive"),
+    (["gradient", "--slots", "bogus", "A.npz"], "--slots must be an integer >= 1, 'all' or 'auto'; got 'bogus'"),
+    (["gradient", "--slots", "0", "A.npz"], "--slots must be an integer >= 1, 'all' or 'auto'; got '0'"),
+    (["gradient", "--reseat", "A.npz"], "--reseat needs --protocol"),
+    (["gradient", "--protocol", "paper", "--best", "30", "A.npz"], "--protocol / --attempts / --best"),
+    (["curriculum", "--archives", "cppn=missing.npz"], "--archives cppn=missing.npz: archive file 'missing.npz' does "
+                                                       "not exist"),
+    (["curriculum", "--archives", "cppn=RANDOM.npz"], "--archives cppn=RANDOM.npz: 'RANDOM.npz': not an .npz archive"),
+    (["evaluate", "--archive", "RANDOM.npz"], "--archive RANDOM.npz: 'RANDOM.npz': not an .npz archive file"),
+    (["evaluate", "--robot", ""], "--robot: robot must be one of humanoid, ant, got ''"),
+    (["learn", "--robot", ""], "--robot: robot must be one of humanoid, ant, got ''"),
+    (["learn", "--robot", "dog"], "--robot: robot must be one of humanoid, ant, got 'dog'"),  # before the run folder now
+    (["learn", "--curriculum", "badmod:factory"], "--curriculum 'badmod:factory': cannot import it (RuntimeError: boom)"),
+    (["learn", "--curriculum", "no_such_module_xyz:f"], "--curriculum 'no_such_module_xyz:f': cannot import it "
+                                                        "(ModuleNotFoundError"),
+    (["curriculum", "--baseline", "badmod:factory"], "--baseline 'badmod:factory': cannot import it (RuntimeError"),
+    (["learn", "--curriculum", "map", "--plr-capacity", "5"],
+     "--plr-capacity belongs to --curriculum plr or accel; this run's --curriculum is map"),
+    (["learn", "--levels", "3"], "--levels belongs to --curriculum levels; this run's --curriculum is map"),
+    (["learn", "--curriculum", "plr", "--accel-edits", "2"], "--accel-edits belongs to --curriculum accel; this run's "
+                                                             "--curriculum is plr"),
+    (["curriculum", "--plr-min-fill", "0.5"], "--plr-min-fill belongs to --baseline plr or accel; this run's curricula "
+                                              "are map, roughness"),
+    (["evolve", "--robot", "ant"], "--robot ant: only the walker fitness walks a robot (--fitness difficulty); this "
+                                   "run's fitness is 'slope', which walks none"),
+    (["evolve", "--robot", "humanoid", "--fitness", "slope"], "--robot humanoid: only the walker fitness walks a robot"),
 ]
 
 
@@ -119,11 +177,46 @@ def test_bad_flags_name_the_flag(tmp_path, monkeypatch, capsys, argv, message):
     (tmp_path / "OTHER").mkdir()
     (tmp_path / "OTHER" / "config.json").write_text(json.dumps({"command": "features", "seed": 0}))
     (tmp_path / "BAD.json").write_text(json.dumps({"generations": -3}))
+    make_inputs(tmp_path)
+    monkeypatch.syspath_prepend(str(tmp_path))  # badmod
     if argv[0] not in cli.COMMANDS:
         pytest.skip(f"no command {argv[0]}")
     err = _main(argv, capsys)
     assert err.startswith(f"python -m experiments {argv[0]}: error: "), err
     assert message in err, err
+    assert not (tmp_path / "runs").exists()
+
+
+SELECTOR_VALUES = {"terrains_per_chunk": "2", "levels": "3", "levels_init": "1", "levels_promote": "0.9",
+                   "levels_demote": "0.5", "plr_capacity": "5", "plr_replay_prob": "0.5", "plr_staleness": "0.5",
+                   "plr_temperature": "0.5", "plr_min_fill": "0.5", "accel_generator": "perlin", "accel_edits": "2"}
+
+
+@pytest.mark.parametrize("field", sorted(SELECTOR_VALUES))
+def test_a_curriculum_flag_is_refused_with_another_curriculum_and_taken_with_its_own(field, tmp_path, monkeypatch,
+                                                                                     capsys):
+    """Every curriculum's own flag (``CurriculumConfig.SELECTOR_FIELDS``), given on the command line, is refused
+    with a built-in curriculum that ignores it, naming the curricula it belongs to; with its own (or a --config
+    that names its own, whose other curricula's keys are set) it is taken."""
+    from experiments.common import flag
+    from jaxterrain.curriculum.config import SELECTOR_FIELDS, SELECTORS
+
+    assert sorted(SELECTOR_FIELDS) == sorted(SELECTOR_VALUES)
+    monkeypatch.chdir(tmp_path)
+    owners = SELECTOR_FIELDS[field]
+    other = next(c for c in SELECTORS if c not in owners)
+    given = [flag(field), SELECTOR_VALUES[field]]
+    err = _main(["learn", "--curriculum", other, *given], capsys)
+    assert f"learn: error: {flag(field)} belongs to --curriculum {' or '.join(owners)}; this run's --curriculum is " \
+           f"{other}" in err, err
+    for argv in (["--curriculum", owners[0]], ["--config", "OWN.json"]):
+        config = {**__import__("experiments.learn").learn.PRESETS["smoke"], "curriculum": owners[0]}
+        (tmp_path / "OWN.json").write_text(json.dumps(config))
+        with pytest.raises(SystemExit) as exit_:
+            cli.main(["learn", *argv, *given, "--print-config"])
+        assert exit_.value.code == 0, capsys.readouterr().err
+        printed = json.loads(capsys.readouterr().out)
+        assert str(printed[field]) == SELECTOR_VALUES[field] and printed["curriculum"] == owners[0]
     assert not (tmp_path / "runs").exists()
 
 
@@ -169,7 +262,6 @@ def test_every_long_command_takes_the_same_presets_and_prints_its_config(command
     (["--curriculum", "accel", "--accel-generator", "nope"], "learn: --accel-generator must be one of cppn, "),
     (["--curriculum", "levels", "--levels", "3", "--levels-init", "3"], "learn: --levels-init must be in [0, levels - 1"),
     (["--curriculum", "plr", "--plr-capacity", "100000"], "learn: --plr-capacity must be at most "),
-    (["--robot", "dog"], "learn: --robot: robot must be one of humanoid, ant, got 'dog'"),
     (["--recipe", "wide"], "learn: --recipe / --num-envs (the update's shape): num_envs x unroll_length x num_unrolls "
                            "(40000) must divide epochs_per_chunk x steps_per_epoch (80)"),  # smoke's 80-step chunks
 ])

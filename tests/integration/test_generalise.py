@@ -109,3 +109,35 @@ def test_generalise_refuses_two_treatments_of_one_name_and_takes_treatment_folde
                "--out", str(out)) == 0
     assert {r["treatment"] for r in csv.DictReader((out / "intervals.csv").open())} == {
         "a cppn dr", "a cppn plr", "b cppn plr", "base policy"}
+
+
+@pytest.mark.parametrize("damage, message", [
+    ("summary", "summary.json: not readable JSON (JSONDecodeError"),
+    ("hardest", "summary.json: field 'hardest' must be a list of finite numbers"),
+    ("short", "summary.json: field 'hardest' has 2 trials, but "),
+    ("nan", "heldout/fitness.csv, line 3: fitness must be a finite number in [0, 1]; got 'nan'"),
+    ("text", "heldout/fitness.csv, line 3: level and seed must be integers and fitness a number"),
+])
+def test_generalise_names_the_damaged_file_and_row_in_one_line(tmp_path, capsys, damage, message):
+    """issue 59: a damaged ``summary.json`` or a NaN in ``fitness.csv`` ended in tracebacks naming neither file nor
+    row."""
+    folder = tmp_path / "run" / "t-map"
+    write_treatment(folder, np.linspace(0.7, 0.75, 4)[:, None], 0.3, [30, 31, 32, 33])
+    summary, fitness = folder / "summary.json", folder / "heldout" / "fitness.csv"
+    if damage == "summary":
+        summary.write_text('{"hardest": [1, 2')
+    elif damage == "hardest":
+        summary.write_text(json.dumps({"hardest": ["far", 2, 3, 4]}))
+    elif damage == "short":
+        summary.write_text(json.dumps({"hardest": [1, 2]}))
+    else:
+        lines = fitness.read_text().splitlines()
+        lines[2] = lines[2].rsplit(",", 1)[0] + (",nan" if damage == "nan" else ",high")
+        fitness.write_text("\n".join(lines) + "\n")
+    with pytest.raises(SystemExit) as exit_:
+        cli("generalise", str(tmp_path / "run"), "--reps", "10")
+    err = capsys.readouterr().err.strip()
+    assert exit_.value.code == 2 and len(err.splitlines()) == 1, err
+    assert err.startswith("python -m experiments generalise: error: ") and message in err, err
+    assert str(folder) in err
+    assert not (tmp_path / "run" / "generalisation").exists()

@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 
 from experiments import gradient as G
+from experiments.common import UsageError
 from jaxterrain import qd
 
 RESULTS = Path(__file__).resolve().parents[2] / "docs" / "results"
@@ -91,7 +92,7 @@ def test_stored_gradient_command_reproduces_issue_13(tmp_path):
     assert len(summary) == 1 and float(summary[0]["spearman"]) < -0.5
     for name in ("gradient.md", "gradient.png", "config.json"):
         assert (tmp_path / "run" / name).stat().st_size > 0
-    with pytest.raises(SystemExit, match="headings"):
+    with pytest.raises(UsageError, match="headings"):  # one line of python -m experiments, exit status 2
         G.resolve_protocol({"protocol": "headings", "headings": 3})
 
 
@@ -104,9 +105,10 @@ def G_args(argv):
 
 
 def test_reseat_needs_a_protocol(tmp_path):
-    with pytest.raises(SystemExit, match="--reseat needs --protocol"):
+    with pytest.raises(UsageError, match="--reseat needs --protocol"):
         G.main(G_args([str(RESULTS / "exp1b_gpu_sound_perlin_archive.npz"), "--reseat", "--out",
                        str(tmp_path / "run")]))
+    assert not (tmp_path / "run").exists()  # refused before the run folder
 
 
 @pytest.mark.slow  # 40 s on 2 CPU cores (renders the 1 096 genomes twice); the rule itself: test_map_elites' reseat
