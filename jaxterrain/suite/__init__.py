@@ -14,7 +14,7 @@
 """
 
 from jaxterrain.suite.evaluation import THRESHOLD, cell_scores, check_policies, evaluate_policies, level_fitness, passed_levels
-from jaxterrain.suite.families import FAMILIES, Family, START_STRIP, build_terrain, edge_distance, family_names
+from jaxterrain.suite.families import FAMILIES, Family, START_STRIP, build_terrain, edge_distance, family_names, misfit, room
 from jaxterrain.suite.heldout import GENERATORS, LEVELS, SEED, Suite, VERSIONS, archive_suite, descriptor_levels, load
 from jaxterrain.suite.outputs import Evaluation, level_table, read_fitness, plot_levels, plot_suite, write_evaluation
 
@@ -25,6 +25,8 @@ __all__ = [
     "build_terrain",
     "edge_distance",
     "family_names",
+    "misfit",
+    "room",
     "GENERATORS",
     "LEVELS",
     "SEED",

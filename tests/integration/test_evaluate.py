@@ -1,6 +1,6 @@
-"""``python -m experiments evaluate`` at its smoke size on a CPU: the base policy, a copy of it and a walker with no
-policy (zero weights) on three suite families; the files it writes agree with each other and with the walks, and a
-policy for another observation set is refused before anything is written."""
+"""``python -m experiments evaluate`` at its smoke size (128 pixels) on a CPU: the base policy, a copy of it and a
+walker with no policy (zero weights) on two suite families; the files it writes agree with each other and with the
+walks, and a policy for another observation set is refused before anything is written."""
 
 from __future__ import annotations
 
@@ -92,3 +92,14 @@ def test_a_policy_for_another_robot_is_refused_before_anything_is_written(tmp_pa
     with pytest.raises(ValueError, match="not a policy loaded by rl.load_policy"):
         suite.check_policies([lambda obs: obs], (64, 64), suite.load("v1", size=64, families=("flat",),
                                                                      generator_names=()).scale)
+
+
+def test_a_size_that_holds_none_of_the_families_is_one_line(tmp_path, capsys):
+    """``--size 64`` leaves 0.26 m of ground inside the 1 m start strips: no trench of ``gaps`` fits, so a suite of
+    gaps alone is refused, with the reason, before anything walks."""
+    with pytest.raises(SystemExit) as stop:
+        cli("evaluate", "--preset", "smoke", "--size", "64", "--families", "gaps", "--generators", "--out",
+            str(tmp_path / "x"))
+    err = capsys.readouterr().err.strip().splitlines()
+    assert stop.value.code == 2 and len(err) == 1
+    assert "--size 64 pixels holds none of the families asked for: gaps needs 1.20 m" in err[0]
