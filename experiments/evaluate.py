@@ -18,8 +18,10 @@ not fit the map at ``--size`` (a 64-pixel map has 0.26 m of ground inside its 1 
 one step of ``stairs_up``) is dropped, said on stderr and in ``summary.md`` (``jaxterrain.suite.misfit``).
 
 Writes into the run folder: ``config.json``, ``fitness.csv`` (policy, family, level, seed, value, unit, fitness),
-``levels.csv`` (policy, family, highest level passed at mean fitness >= 0.9, -1 for none, and the mean fitness per
-level), ``summary.md`` (policies x families), ``levels.png`` (the same, coloured by the highest level passed),
+``levels.csv`` (policy, family, the highest level passed with every level below it passed too, a level passing at
+mean fitness >= 0.9, -1 for none, and the mean fitness per level), ``summary.md`` (policies x families, policies
+labelled by their folders relative to a common parent, and the families dropped at this size), ``levels.png`` (the
+same, coloured by the share of each family's levels passed),
 ``suite.png`` (a terrain of every family at its easiest, middle and hardest level) and ``timing.json``.
 """
 
