@@ -12,12 +12,16 @@ family ``archive``, levels = bands of 7.07 cells of distance from cell (0, 0)), 
 another robot or observation set is refused with one line naming its folder, before the run folder is made.
 
 Presets: ``gpu`` (suite v1 at 256 x 256, 3 terrains per level, the HEADINGS protocol; the base policy walks twice
-and the second, compiled call is timed) and ``smoke`` (CPU, about a minute: three families and Perlin samples built
-at 64 x 64, one terrain per level, 2 walks along +x, best 1; not ``v1``'s terrains).
+and the second, compiled call is timed) and ``smoke`` (CPU, a few minutes: three families and Perlin samples built
+at 128 x 128, one terrain per level, 2 walks along +x, best 1; not ``v1``'s terrains). A family whose features do
+not fit the map at ``--size`` (a 64-pixel map has 0.26 m of ground inside its 1 m start strips: no trench of ``gaps``,
+one step of ``stairs_up``) is dropped, said on stderr and in ``summary.md`` (``jaxterrain.suite.misfit``).
 
 Writes into the run folder: ``config.json``, ``fitness.csv`` (policy, family, level, seed, value, unit, fitness),
-``levels.csv`` (policy, family, highest level passed at mean fitness >= 0.9, -1 for none, and the mean fitness per
-level), ``summary.md`` (policies x families), ``levels.png`` (the same, coloured by the highest level passed),
+``levels.csv`` (policy, family, the highest level passed with every level below it passed too, a level passing at
+mean fitness >= 0.9, -1 for none, and the mean fitness per level), ``summary.md`` (policies x families, policies
+labelled by their folders relative to a common parent, and the families dropped at this size), ``levels.png`` (the
+same, coloured by the share of each family's levels passed),
 ``suite.png`` (a terrain of every family at its easiest, middle and hardest level) and ``timing.json``.
 """
 
@@ -31,7 +35,7 @@ from experiments import common
 PRESETS: dict[str, dict] = common.with_preset_names({
     "gpu": dict(suite="v1", archive=None, policy=[], robot=None, size=None, seeds=None, samples=None, families=None,
                 generators=None, attempts=80, best=5, headings=4, backend="auto", slots=None, chunk=None, repeat=True),
-    "smoke": dict(suite="v1", archive=None, policy=[], robot=None, size=64, seeds=1, samples=4, families=["flat", "stairs_up", "gaps"],
+    "smoke": dict(suite="v1", archive=None, policy=[], robot=None, size=128, seeds=1, samples=4, families=["flat", "stairs_up", "gaps"],
                   generators=["perlin"], attempts=2, best=1, headings=1, backend="jax", slots=None, chunk=None,
                   repeat=False),
 }, {"gpu-short": "gpu", "paper": ("gpu", {"attempts": 20, "best": 5, "headings": 1})})
@@ -121,7 +125,7 @@ def check_terrain_flags(cfg: dict) -> None:
 
 def fit_size(args, cfg0: dict, policies) -> int:
     """A terrain side every policy's robot can walk (``walker.min_terrain_side``): a ``--size`` below it is refused
-    naming it; a preset's (smoke: 64 pixels) is raised to the next multiple of 32 that fits, said on stderr, and
+    naming it; a preset's (smoke: 128 pixels) is raised to the next multiple of 32 that fits, said on stderr, and
     recorded in the run's config as if given (``args.size``). Returns a side the policies can be checked on: the
     size, or the robots' minimum where the suite's own size (None) or an archive's terrains are walked."""
     from experiments.common import UsageError
@@ -189,6 +193,8 @@ def main(args) -> int:
     build_s = time.perf_counter() - t0
     protocol = difficulty.Protocol(int(cfg["attempts"]), int(cfg["best"]), int(cfg["headings"]))
     backend = resolve_backend(cfg["backend"])
+    for fam, why in s.dropped.items():
+        print(f"evaluate: family {fam} dropped at --size {cfg['size']}: {why}", file=sys.stderr)
     print(f"{s.name}: {s.size} terrains, {len(s.families())} families; {len(policies)} policies on {backend}, "
           f"{protocol.attempts} walks each (best {protocol.best} per heading, {protocol.headings} headings)", flush=True)
     key = jax.random.fold_in(jax.random.key(int(cfg["seed"])), 3)

@@ -4,7 +4,8 @@
   gaps, waves, roughness, flat), each at graded levels of one physical parameter;
 - :mod:`~jaxterrain.suite.heldout`: versioned suites (:func:`load`, ``"v1"``): every family at every level and
   fresh random samples of each generator binned by descriptor distance, deterministic from :data:`SEED`;
-- :mod:`~jaxterrain.suite.evaluation`: :func:`evaluate_policies` (``[P, N]`` fitness) and :func:`passed_levels`;
+- :mod:`~jaxterrain.suite.evaluation`: :func:`evaluate_policies` (``[P, N]`` fitness) and :func:`passed_levels` (the
+  highest level of each family passed with every level below it passed);
 - :mod:`~jaxterrain.suite.outputs`: an evaluation's files (CSV, Markdown, figures).
 
     from jaxterrain import rl, suite
@@ -13,10 +14,12 @@
     suite.passed_levels(fitness[0], s)
 """
 
-from jaxterrain.suite.evaluation import THRESHOLD, cell_scores, check_policies, evaluate_policies, level_fitness, passed_levels
-from jaxterrain.suite.families import FAMILIES, Family, START_STRIP, build_terrain, edge_distance, family_names
+from jaxterrain.suite.evaluation import (THRESHOLD, cell_scores, check_policies, evaluate_policies, highest_level_passed,
+                                        level_fitness, passed_levels)
+from jaxterrain.suite.families import FAMILIES, Family, START_STRIP, build_terrain, edge_distance, family_names, misfit, room
 from jaxterrain.suite.heldout import GENERATORS, LEVELS, SEED, Suite, VERSIONS, archive_suite, descriptor_levels, load
-from jaxterrain.suite.outputs import Evaluation, level_table, read_fitness, plot_levels, plot_suite, write_evaluation
+from jaxterrain.suite.outputs import (Evaluation, level_table, read_fitness, plot_levels, plot_suite, short_names,
+                                     write_evaluation)
 
 __all__ = [
     "FAMILIES",
@@ -25,6 +28,8 @@ __all__ = [
     "build_terrain",
     "edge_distance",
     "family_names",
+    "misfit",
+    "room",
     "GENERATORS",
     "LEVELS",
     "SEED",
@@ -39,10 +44,12 @@ __all__ = [
     "level_table",
     "plot_levels",
     "plot_suite",
+    "short_names",
     "THRESHOLD",
     "cell_scores",
     "check_policies",
     "evaluate_policies",
+    "highest_level_passed",
     "level_fitness",
     "passed_levels",
 ]

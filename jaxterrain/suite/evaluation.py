@@ -1,8 +1,12 @@
 """Walkers on terrains they never saw: the fitness of policies on a held-out suite (or any heightmaps), and the
-highest level of each family they pass.
+highest level of each family they pass with every level below it passed too.
 
     fitness = evaluate_policies([rl.load_policy(), rl.load_policy(run / "policies/trial_0")], suite.heightmaps, key)
-    levels = passed_levels(fitness[1], suite)          # {family: highest level passed at fitness >= 0.9, or -1}
+    levels = passed_levels(fitness[1], suite)          # {family: highest level k with levels 0..k passed, or -1}
+
+A level is passed when the mean fitness of its terrains is >= :data:`THRESHOLD` (0.9). A level passed above a failed
+one does not count: a walker that fails stairs at 0.09 m and passes them at 0.19 m (a fluke of the seeds) has passed
+the stairs up to 0.06 m, not 0.19 m.
 
 Fitness is :func:`jaxterrain.difficulty.evaluate`'s (the walker's normalised distance under a
 :class:`~jaxterrain.difficulty.Protocol`, :data:`~jaxterrain.difficulty.HEADINGS` by default), each policy walking
@@ -26,7 +30,8 @@ from jaxterrain.suite.heldout import Suite
 from jaxterrain.terrain import TerrainScale
 from jaxterrain.walker.layout import make_env
 
-__all__ = ["THRESHOLD", "cell_scores", "check_policies", "evaluate_policies", "level_fitness", "passed_levels"]
+__all__ = ["THRESHOLD", "cell_scores", "check_policies", "evaluate_policies", "highest_level_passed", "level_fitness",
+           "passed_levels"]
 
 THRESHOLD = 0.9
 """A level is passed when the mean fitness of its terrains reaches this (the paper's traversability threshold)."""
@@ -91,14 +96,31 @@ def level_fitness(fitness, suite: Suite) -> dict[str, np.ndarray]:
     return out
 
 
+def highest_level_passed(per_level, threshold: float = THRESHOLD) -> int:
+    """The highest level ``k`` such that every level ``0..k`` is passed (mean fitness ``per_level[lv] >=
+    threshold``), -1 when the first level fails. ``per_level``: [levels] mean fitness, easiest first; a NaN (a level
+    the suite lacks, e.g. a generator band no random genome reached) is neither passed nor failed: it is stepped over.
+
+    >>> highest_level_passed([0.95, 0.93, 0.5, 0.91])   # level 3 passes, but above the failed level 2
+    1
+    >>> highest_level_passed([float("nan"), 0.95, 0.92])
+    2
+    """
+    k = -1
+    for lv, m in enumerate(np.asarray(per_level, np.float64)):
+        if np.isnan(m):
+            continue
+        if m < threshold:
+            break
+        k = lv
+    return k
+
+
 def passed_levels(fitness, suite: Suite, threshold: float = THRESHOLD) -> dict[str, int]:
-    """``{family: the highest level whose mean fitness is >= threshold}`` (-1: none). ``fitness``: [N], one
-    policy's."""
-    out = {}
-    for fam, per_level in level_fitness(fitness, suite).items():
-        ok = np.flatnonzero(np.nan_to_num(per_level, nan=-1.0) >= threshold)
-        out[fam] = int(ok.max()) if ok.size else -1
-    return out
+    """``{family: the highest level passed with every level below it passed}`` (:func:`highest_level_passed` of
+    :func:`level_fitness`; -1: level 0 fails). ``fitness``: [N], one policy's."""
+    return {fam: highest_level_passed(per_level, threshold)
+            for fam, per_level in level_fitness(fitness, suite).items()}
 
 
 def cell_scores(fitness, family, level) -> tuple[list, np.ndarray]:

@@ -25,6 +25,27 @@ map ``L = (size - 1) * cell_size`` wide): pyramids rise with ``d``, rings are li
 | ``waves`` | amplitude 0.02 -> 0.30 m | ``value * (sin(2 pi x / 2 m) + sin(2 pi y / 2 m)) / 2`` |
 | ``rough`` | amplitude 0.01 -> 0.10 m | uniform noise in [-value, value] on 0.12 m blocks |
 | ``flat`` | - | flat ground (one level) |
+
+A family only shows its levels on a map large enough to hold them: ``Family.extent`` is the ground (metres) it needs
+between the start strip and the map's centre, and :func:`room` what a map of ``size`` pixels at ``scale`` has
+(``L / 2 - START_STRIP``). A 64-pixel map at 4 cm has 0.26 m: no trench of ``gaps`` starts in it (they begin 0.3 m
+in) and ``stairs_up`` is one step. :func:`misfit` says why a family does not fit; ``suite.load`` drops those
+families and the suite says so (``Suite.dropped``). :func:`build_terrain` itself builds any family at any size.
+
+| family | extent (m) | what it must hold |
+| --- | --- | --- |
+| ``flat`` | 0 | - |
+| ``slope_up``, ``slope_down`` | 2.0 | the steepest grade's (0.50) whole slope, up to its 1 m plateau (down to its pit) |
+| ``stairs_up``, ``stairs_down`` | 0.93 | the tallest step's (0.21 m) whole flight: 4 risers, 3 whole 0.31 m treads |
+| ``boxes`` | 0.8 | two 0.4 m boxes |
+| ``obstacles`` | 1.0 | the largest (1.0 m) rectangle |
+| ``stepping_stones`` | 1.1 | a 0.6 m stone and the widest (0.50 m) gap |
+| ``gaps`` | 1.2 | the widest (0.60 m) trench, 0.3 m in, and 0.3 m of ground beyond it |
+| ``waves`` | 2.0 | the 1 m fade-in and half a 2 m wavelength at full amplitude |
+| ``rough`` | 0.48 | four 0.12 m blocks |
+
+``v1`` (256 pixels at 4 cm: 4.1 m of room) holds every family; so does any map of 160 pixels or more at 4 cm
+(2.18 m); 128 pixels (1.54 m) holds all but the slopes and waves.
 """
 
 from __future__ import annotations
@@ -35,7 +56,7 @@ import numpy as np
 
 from jaxterrain.terrain import TerrainScale, validate_scale
 
-__all__ = ["START_STRIP", "Family", "FAMILIES", "family_names", "build_terrain", "edge_distance"]
+__all__ = ["START_STRIP", "Family", "FAMILIES", "family_names", "build_terrain", "edge_distance", "room", "misfit"]
 
 START_STRIP = 1.0
 """Metres of flat ground along every edge (the walker spawns 0.5 m from its edge)."""
@@ -43,17 +64,26 @@ START_STRIP = 1.0
 TREAD = 0.31  # legged_gym's stair tread (m)
 TOP = 1.0  # metres: the plateau of the pyramids (the default TerrainScale's full height)
 DEEP = 0.5  # metres: the depth of stepping-stone gaps and trenches (the walker cannot climb out)
+BOX = 0.4  # metres: the side of a box cell
+STONE = 0.6  # metres: the side of a stepping stone
+TRENCH_START, TRENCH_EVERY = 0.3, 1.2  # metres past the start strip to the first trench, and between trenches
+WAVELENGTH, FADE_IN = 2.0, 1.0  # metres: the waves' wavelength and the ramp over which they fade in
+BLOCK = 0.12  # metres: the side of a rough block
 
 
 class Family(NamedTuple):
     """A terrain family: ``build(value, size, scale, rng) -> [size, size]`` metres, the parameter's ``unit``, its
-    values at ``levels`` graded levels from ``lo`` (easiest) to ``hi`` (hardest), evenly spaced."""
+    values at ``levels`` graded levels from ``lo`` (easiest) to ``hi`` (hardest), evenly spaced; ``extent`` the
+    metres of ground it needs between the start strip and the map's centre to show its hardest level, ``holds`` what
+    that ground must hold (for :func:`misfit`'s reason)."""
 
     build: Callable[..., np.ndarray]
     unit: str
     lo: float
     hi: float
     levels: int = 10
+    extent: float = 0.0
+    holds: str = ""
 
     def values(self) -> np.ndarray:
         """[levels] float64: the parameter at each level, easiest first."""
@@ -105,7 +135,7 @@ def _inverted(build):
     return inverted
 
 
-def _boxes(height, size, scale, rng, cell: float = 0.4):
+def _boxes(height, size, scale, rng, cell: float = BOX):
     x, y = _axes(size, scale)
     half = x.max()
     ix, iy = np.floor((x + half) / cell).astype(int), np.floor((y + half) / cell).astype(int)
@@ -126,7 +156,7 @@ def _obstacles(height, size, scale, rng, count: int = 40, base: float = 0.3):
     return np.where(_strip(size, scale), base, h)
 
 
-def _stepping_stones(gap, size, scale, rng, stone: float = 0.6):
+def _stepping_stones(gap, size, scale, rng, stone: float = STONE):
     x, y = _axes(size, scale)
     pitch = stone + gap
     ox, oy = rng.uniform(0.0, pitch, 2)
@@ -134,21 +164,21 @@ def _stepping_stones(gap, size, scale, rng, stone: float = 0.6):
     return np.where(on | _strip(size, scale), DEEP, 0.0)
 
 
-def _gaps(width, size, scale, rng, every: float = 1.2):
+def _gaps(width, size, scale, rng, every: float = TRENCH_EVERY):
     inner = _inner(size, scale)
-    trench = (inner > 0.3) & ((inner - 0.3) % every < width)
+    trench = (inner > TRENCH_START) & ((inner - TRENCH_START) % every < width)
     return np.where(trench, 0.0, DEEP)
 
 
-def _waves(amplitude, size, scale, rng, wavelength: float = 2.0, base: float = 0.5):
+def _waves(amplitude, size, scale, rng, wavelength: float = WAVELENGTH, base: float = 0.5):
     x, y = _axes(size, scale)
     px, py = rng.uniform(0.0, 2 * np.pi, 2)
     wave = (np.sin(2 * np.pi * x / wavelength + px) + np.sin(2 * np.pi * y / wavelength + py)) / 2
-    ramp = np.clip(_inner(size, scale) / 1.0, 0.0, 1.0)  # fades in over the first metre past the strip
+    ramp = np.clip(_inner(size, scale) / FADE_IN, 0.0, 1.0)  # fades in over the first metre past the strip
     return base + amplitude * wave * ramp
 
 
-def _rough(amplitude, size, scale, rng, block: float = 0.12, base: float = 0.5):
+def _rough(amplitude, size, scale, rng, block: float = BLOCK, base: float = 0.5):
     x, y = _axes(size, scale)
     half = x.max()
     ix, iy = np.floor((x + half) / block).astype(int), np.floor((y + half) / block).astype(int)
@@ -161,18 +191,23 @@ def _flat(value, size, scale, rng):
     return np.zeros((size, size))
 
 
+_SLOPE = (TOP / 0.50, "the steepest grade's (0.50) whole slope to its 1 m plateau")
+_FLIGHT = ((np.floor(TOP / 0.21) - 1) * TREAD, "the tallest step's (0.21 m) whole flight of 4 risers on 0.31 m treads")
 FAMILIES: dict[str, Family] = {
     "flat": Family(_flat, "-", 0.0, 0.0, levels=1),
-    "slope_up": Family(_slope, "grade", 0.05, 0.50),
-    "slope_down": Family(_inverted(_slope), "grade", 0.05, 0.50),
-    "stairs_up": Family(_stairs, "m step", 0.03, 0.21),
-    "stairs_down": Family(_inverted(_stairs), "m step", 0.03, 0.21),
-    "boxes": Family(_boxes, "m height", 0.02, 0.20),
-    "obstacles": Family(_obstacles, "m height", 0.03, 0.25),
-    "stepping_stones": Family(_stepping_stones, "m gap", 0.05, 0.50),
-    "gaps": Family(_gaps, "m width", 0.05, 0.60),
-    "waves": Family(_waves, "m amplitude", 0.02, 0.30),
-    "rough": Family(_rough, "m amplitude", 0.01, 0.10),
+    "slope_up": Family(_slope, "grade", 0.05, 0.50, 10, *_SLOPE),
+    "slope_down": Family(_inverted(_slope), "grade", 0.05, 0.50, 10, *_SLOPE),
+    "stairs_up": Family(_stairs, "m step", 0.03, 0.21, 10, *_FLIGHT),
+    "stairs_down": Family(_inverted(_stairs), "m step", 0.03, 0.21, 10, *_FLIGHT),
+    "boxes": Family(_boxes, "m height", 0.02, 0.20, 10, 2 * BOX, "two 0.4 m boxes"),
+    "obstacles": Family(_obstacles, "m height", 0.03, 0.25, 10, 1.0, "the largest (1.0 m) rectangle"),
+    "stepping_stones": Family(_stepping_stones, "m gap", 0.05, 0.50, 10, STONE + 0.50,
+                              "a 0.6 m stone and the widest (0.50 m) gap"),
+    "gaps": Family(_gaps, "m width", 0.05, 0.60, 10, TRENCH_START + 0.60 + 0.3,
+                   "the widest (0.60 m) trench, 0.3 m in, and 0.3 m of ground beyond it"),
+    "waves": Family(_waves, "m amplitude", 0.02, 0.30, 10, FADE_IN + WAVELENGTH / 2,
+                    "the 1 m fade-in and half a 2 m wave at full amplitude"),
+    "rough": Family(_rough, "m amplitude", 0.01, 0.10, 10, 4 * BLOCK, "four 0.12 m blocks"),
 }
 """The held-out families by name, in the order tables list them."""
 
@@ -182,12 +217,30 @@ def family_names() -> tuple[str, ...]:
     return tuple(FAMILIES)
 
 
+def room(size: int, scale: TerrainScale = TerrainScale()) -> float:
+    """Metres of ground between the start strip and the centre of a ``size`` x ``size`` map at ``scale``
+    (``(size - 1) * cell_size / 2 - START_STRIP``; negative when the strips overlap)."""
+    return (size - 1) * float(validate_scale(scale).cell_size) / 2.0 - START_STRIP
+
+
+def misfit(name: str, size: int, scale: TerrainScale = TerrainScale()) -> str | None:
+    """Why family ``name`` does not fit a ``size`` x ``size`` map at ``scale`` (its ``extent`` is more than the map's
+    :func:`room`), in one line; None when it fits."""
+    fam, have = FAMILIES[name], room(size, scale)
+    if have + 1e-9 >= fam.extent:
+        return None
+    cell = float(validate_scale(scale).cell_size)
+    return (f"needs {fam.extent:.2f} m inside the start strip for {fam.holds}; {size} pixels of {cell:g} m have "
+            f"{max(have, 0.0):.2f} m")
+
+
 def build_terrain(name: str, value: float, size: int = 256, scale: TerrainScale = TerrainScale(),
                   rng: np.random.Generator | None = None) -> np.ndarray:
     """One heightmap ``[size, size]`` float32 in [0, 1] of family ``name`` at parameter ``value`` (metres / scale
     height, clipped). ValueError naming the parameter for an unknown family, a size below 16 pixels, a ``value``
     that is not a finite number >= 0 (every family's parameter is a grade, a height or a width) or an ``rng`` that is
-    not a ``numpy.random.Generator``."""
+    not a ``numpy.random.Generator``. A map too small for the family (:func:`misfit`) is built all the same, cut
+    down: ``suite.load`` drops such families."""
     if not isinstance(name, str) or name not in FAMILIES:
         raise ValueError(f"family must be one of {', '.join(FAMILIES)}; got {name!r}")
     if not isinstance(size, (int, np.integer)) or isinstance(size, bool) or size < 16:

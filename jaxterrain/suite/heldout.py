@@ -18,7 +18,9 @@
   ``Suite.missing``.
 
 Smaller builds (``size``, ``seeds``, ``samples``, ``families``, ``generator_names``) are for tests on a CPU; their
-terrains are not ``v1``'s and ``Suite.name`` says what was built.
+terrains are not ``v1``'s and ``Suite.name`` says what was built. A family whose features do not fit the map
+(``families.misfit``: a 64-pixel map at 4 cm has 0.26 m of ground inside its start strips, too little for a trench of
+``gaps`` or a flight of ``stairs_up``) is dropped, and said so in ``Suite.dropped``; v1's 256 pixels hold every family.
 """
 
 from __future__ import annotations
@@ -32,7 +34,7 @@ from jaxterrain import features, generators
 from jaxterrain.qd.bank import from_archive
 from jaxterrain.qd.config import DEFAULT_RANGES
 from jaxterrain.qd.grid import GRID_BINS, MAX_DISTANCE_50, cell_distance
-from jaxterrain.suite.families import FAMILIES, build_terrain
+from jaxterrain.suite.families import FAMILIES, build_terrain, misfit
 from jaxterrain.terrain import TerrainScale
 
 __all__ = ["SEED", "VERSIONS", "GENERATORS", "LEVELS", "Suite", "load", "descriptor_levels", "archive_suite"]
@@ -64,6 +66,8 @@ class Suite(NamedTuple):
       unit: dict family -> unit of ``value``.
       scale: the :class:`TerrainScale` the heightmaps are meant at.
       missing: generators left out, with the reason.
+      dropped: families left out because their features do not fit the map at this size
+        (:func:`~jaxterrain.suite.families.misfit`), with the reason; empty for ``v1``.
     """
 
     name: str
@@ -75,6 +79,7 @@ class Suite(NamedTuple):
     unit: dict
     scale: TerrainScale
     missing: dict
+    dropped: dict = {}  # read-only: a shared default
 
     @property
     def size(self) -> int:
@@ -112,9 +117,12 @@ def _check(name, value, lo):
 def load(name: str = "v1", *, size: int | None = None, seeds: int | None = None, samples: int | None = None,
          families: Sequence[str] | None = None, generator_names: Sequence[str] | None = None,
          scale: TerrainScale = TerrainScale()) -> Suite:
-    """Build suite ``name`` (:data:`VERSIONS`), deterministic from :data:`SEED`; keyword arguments (``size``, ``seeds``, ``samples``, ``families``, ``generator_names``) override the
-    version's settings for a smaller build (a test's); one name alone (``families="flat"``) is a list of one.
-    ValueError naming the parameter for an unknown version or family, or a bad size."""
+    """Build suite ``name`` (:data:`VERSIONS`), deterministic from :data:`SEED`; keyword arguments (``size``,
+    ``seeds``, ``samples``, ``families``, ``generator_names``, ``scale``) override the version's settings for a
+    smaller build (a test's); one name alone (``families="flat"``) is a list of one. A family too large for the map
+    (``families.misfit``) is dropped and named, with the reason, in ``Suite.dropped`` (a kept family's terrains do
+    not change: its random parts are seeded by its place in ``families``, dropped families counted). ValueError naming the parameter for an unknown version or family, a
+    bad size, or a size that holds none of the families asked for (and no generator is asked for)."""
     if name not in VERSIONS:
         raise ValueError(f"suite must be one of {', '.join(VERSIONS)}; got {name!r}")
     spec = VERSIONS[name]
@@ -131,17 +139,24 @@ def load(name: str = "v1", *, size: int | None = None, seeds: int | None = None,
     if unknown:
         raise ValueError(f"families / generators: unknown {', '.join(map(repr, unknown))}; families are "
                          f"{', '.join(FAMILIES)}, generators {', '.join(generators.names())}")
-    custom = (size, seeds, samples, fams, gens) != (spec["size"], spec["seeds"], spec["samples"],
-                                                    tuple(spec["families"]), tuple(spec["generators"]))
+    custom = (size, seeds, samples, fams, gens, scale) != (spec["size"], spec["seeds"], spec["samples"],
+                                                           tuple(spec["families"]), tuple(spec["generators"]),
+                                                           TerrainScale())
     maps, family, level, seed, value = [], [], [], [], []
-    for f_index, f in enumerate(fams):
+    dropped = {f: why for f in fams if (why := misfit(f, size, scale)) is not None}
+    if fams and len(dropped) == len(fams) and not gens:
+        raise ValueError(f"size {size} pixels holds none of the families asked for: "
+                         + "; ".join(f"{f} {why}" for f, why in dropped.items()))
+    for f_index, f in enumerate(fams):  # the rng keeps each family's place in `fams`, dropped ones counted
+        if f in dropped:
+            continue
         fam = FAMILIES[f]
         for lv, v in enumerate(fam.values()):
             for s in range(seeds if fam.levels > 1 else 1):
                 rng = np.random.default_rng((SEED, f_index, lv, s))
                 maps.append(build_terrain(f, v, size, scale, rng))
                 family.append(f), level.append(lv), seed.append(s), value.append(float(v))
-    unit = {f: FAMILIES[f].unit for f in fams}
+    unit = {f: FAMILIES[f].unit for f in fams if f not in dropped}
     missing = {}
     for g_index, g in enumerate(gens):
         try:
@@ -157,10 +172,14 @@ def load(name: str = "v1", *, size: int | None = None, seeds: int | None = None,
                 maps.append(hm[i]), family.append(f"gen:{g}"), level.append(k)
                 seed.append(s), value.append(float(dist[i]))
         unit[f"gen:{g}"] = "cells"
+    if not maps:
+        raise ValueError(f"size {size} pixels: nothing to build (families dropped: {', '.join(dropped) or 'none'}; "
+                         f"generators left out: {', '.join(missing) or 'none'})")
+    at = "" if scale == TerrainScale() else f", cell_size={scale.cell_size:g}, height={scale.height:g}"
     label = name if not custom else (f"{name}-custom(size={size}, seeds={seeds}, samples={samples}, "
-                                     f"families={len(fams)}, generators={len(gens)})")
+                                     f"families={len(fams) - len(dropped)}, generators={len(gens)}{at})")
     return Suite(label, np.stack(maps).astype(np.float32), np.asarray(family), np.asarray(level, np.int64),
-                 np.asarray(seed, np.int64), np.asarray(value, np.float64), unit, scale, missing)
+                 np.asarray(seed, np.int64), np.asarray(value, np.float64), unit, scale, missing, dropped)
 
 
 def archive_suite(archive, scale: TerrainScale | None = None) -> Suite:
@@ -181,4 +200,4 @@ def archive_suite(archive, scale: TerrainScale | None = None) -> Suite:
         seed[rows] = np.arange(rows.size)
     maps = np.asarray(bank.heightmaps, np.float32)[order] / np.float32(scale.height)
     return Suite(f"archive ({int(bank.size)} elites)", np.clip(maps, 0.0, 1.0), np.full(order.size, "archive"),
-                 level[order], seed[order], dist[order], {"archive": "cells"}, scale, {})
+                 level[order], seed[order], dist[order], {"archive": "cells"}, scale, {}, {})

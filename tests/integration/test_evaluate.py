@@ -1,6 +1,6 @@
-"""``python -m experiments evaluate`` at its smoke size on a CPU: the base policy, a copy of it and a walker with no
-policy (zero weights) on three suite families; the files it writes agree with each other and with the walks, and a
-policy for another observation set is refused before anything is written."""
+"""``python -m experiments evaluate`` at its smoke size (128 pixels) on a CPU: the base policy, a copy of it and a
+walker with no policy (zero weights) on two suite families; the files it writes agree with each other and with the
+walks, and a policy for another observation set is refused before anything is written."""
 
 from __future__ import annotations
 
@@ -72,11 +72,15 @@ def test_levels_and_summary_follow_from_the_fitness(run):
         per = {}
         for r in mine:
             per.setdefault(int(r["level"]), []).append(float(r["fitness"]))
-        passed = [k for k, v in per.items() if np.mean(v) >= 0.9]
-        assert int(lv["highest_level_passed"]) == (max(passed) if passed else -1)
+        highest = -1  # the highest level with every level below it passed too
+        while highest + 1 in per and np.mean(per[highest + 1]) >= 0.9:
+            highest += 1
+        assert int(lv["highest_level_passed"]) == highest
         assert float(lv["mean_fitness"]) == pytest.approx(np.mean([float(r["fitness"]) for r in mine]), abs=1e-4)
     summary = (run / "summary.md").read_text()
     assert summary.count("\n| ") == 4 and "| flat | gaps | mean |" in summary
+    assert "\n| copy | " in summary and "\n| still | " in summary  # the folders, relative to their common parent
+    assert "Dropped" not in summary  # 128 pixels hold a whole trench of every level of gaps
     assert (run / "levels.png").stat().st_size > 1000 and (run / "suite.png").stat().st_size > 1000
     timing = json.loads((run / "timing.json").read_text())
     assert timing["terrains"] == 11 and timing["policies"] == 3 and timing["walk_s_one_policy"] is None
@@ -92,3 +96,14 @@ def test_a_policy_for_another_robot_is_refused_before_anything_is_written(tmp_pa
     with pytest.raises(ValueError, match="not a policy loaded by rl.load_policy"):
         suite.check_policies([lambda obs: obs], (64, 64), suite.load("v1", size=64, families=("flat",),
                                                                      generator_names=()).scale)
+
+
+def test_a_size_that_holds_none_of_the_families_is_one_line(tmp_path, capsys):
+    """``--size 64`` leaves 0.26 m of ground inside the 1 m start strips: no trench of ``gaps`` fits, so a suite of
+    gaps alone is refused, with the reason, before anything walks."""
+    with pytest.raises(SystemExit) as stop:
+        cli("evaluate", "--preset", "smoke", "--size", "64", "--families", "gaps", "--generators", "--out",
+            str(tmp_path / "x"))
+    err = capsys.readouterr().err.strip().splitlines()
+    assert stop.value.code == 2 and len(err) == 1
+    assert "--size 64 pixels holds none of the families asked for: gaps needs 1.20 m" in err[0]
