@@ -284,7 +284,7 @@ class _PlainProgress:
 def _bar(progress, total: int, start: int, desc: str, unit: str):
     if progress is not True:
         return None
-    if not sys.stderr.isatty():
+    if not sys.stderr.isatty() or os.environ.get("JAXTERRAIN_PROGRESS") == "plain":  # --no-progress
         return _PlainProgress(total, start, desc, unit)
     try:
         from tqdm.auto import tqdm
@@ -323,7 +323,7 @@ def run_chunks(chunk_fn: ChunkFn, state: Any, *, total: int, every: int, start: 
         a chunk predicted to end past the time limit is shortened to the steps that fit instead of skipped: the
         limit is then honoured to within one step, not one chunk.
       progress: True for a tqdm bar on stderr (plain lines, at most one per :data:`PLAIN_EVERY_S` seconds, where
-        stderr is not a terminal); a callable receives a dict per chunk (``done``, ``total``,
+        stderr is not a terminal or ``$JAXTERRAIN_PROGRESS`` is ``plain``: a command's ``--no-progress``); a callable receives a dict per chunk (``done``, ``total``,
         ``seconds``, ``steps_per_s`` and the latest value of every metric); False is silent.
       meta: a JSON-serialisable dict stored in every checkpoint (e.g. the run's config).
       wall_s: seconds of wall time the run had taken before this call (a restored checkpoint's ``meta["wall_s"]``,
