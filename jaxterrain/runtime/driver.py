@@ -323,8 +323,9 @@ def run_chunks(chunk_fn: ChunkFn, state: Any, *, total: int, every: int, start: 
         a chunk predicted to end past the time limit is shortened to the steps that fit instead of skipped: the
         limit is then honoured to within one step, not one chunk.
       progress: True for a tqdm bar on stderr (plain lines, at most one per :data:`PLAIN_EVERY_S` seconds, where
-        stderr is not a terminal or ``$JAXTERRAIN_PROGRESS`` is ``plain``: a command's ``--no-progress``); a callable receives a dict per chunk (``done``, ``total``,
-        ``seconds``, ``steps_per_s`` and the latest value of every metric); False is silent.
+        stderr is not a terminal or ``$JAXTERRAIN_PROGRESS`` is ``plain``: a command's ``--no-progress``); a
+        callable receives a dict per chunk (``done``, ``total``, ``seconds``, ``steps_per_s`` and the latest value
+        of every metric); False is silent.
       meta: a JSON-serialisable dict stored in every checkpoint (e.g. the run's config).
       wall_s: seconds of wall time the run had taken before this call (a restored checkpoint's ``meta["wall_s"]``,
         plus any set-up of this call). Every checkpoint's meta gets ``"wall_s"``: that plus the seconds since this
