@@ -457,7 +457,29 @@ def latest_run(command: str, root: Path = Path("runs")) -> Path:
     return runs[-1]
 
 
+PATH_KEYS = ("archive", "archives", "policy", "data", "out", "assets_dir")
+"""Config keys that hold file or folder paths (a path, a list of them or a ``{name: path}`` dict): ``config.json``
+records them relative to its run folder (:func:`write_config`), marked by :data:`PATHS_KEY`."""
+PATHS_KEY = "paths_relative_to_this_folder"
+
+
+def _paths(config: dict, convert: Callable[[str], str]) -> dict:
+    out = dict(config)
+    for key in PATH_KEYS:
+        value = out.get(key)
+        if isinstance(value, (str, Path)):
+            out[key] = convert(str(value))
+        elif isinstance(value, list):
+            out[key] = [convert(str(v)) if isinstance(v, (str, Path)) else v for v in value]
+        elif isinstance(value, dict):
+            out[key] = {k: convert(str(v)) if isinstance(v, (str, Path)) else v for k, v in value.items()}
+    return out
+
+
 def load_config(path: str | Path) -> dict:
+    """A saved ``config.json`` (or the one in folder ``path``) as a dict, its paths as this machine reads them:
+    a config written by :func:`write_config` records them relative to its folder (or ``<jaxterrain>/...``), an older
+    one absolute or relative to where it ran, read as they are."""
     path = Path(path)
     if path.is_dir():
         path = path / CONFIG_NAME
@@ -467,13 +489,22 @@ def load_config(path: str | Path) -> dict:
         raise SystemExit(f"cannot read config {path}: {err}") from err
     if not isinstance(data, dict):
         raise SystemExit(f"config {path} must hold a JSON object")
+    if data.pop(PATHS_KEY, False):
+        from jaxterrain.runtime.provenance import resolve_recorded
+
+        data = _paths(data, lambda v: resolve_recorded(v, path.parent))
     return data
 
 
 def write_config(folder: Path, config: dict) -> Path:
+    """Write ``config`` as ``folder/config.json``, its paths (:data:`PATH_KEYS`) relative to ``folder`` or
+    ``<jaxterrain>/...`` for the package's own files (``jaxterrain.runtime.provenance.portable_path``): no machine's
+    absolute path. :func:`load_config` reads them back."""
     from jaxterrain.runtime.io import atomic_write_text
+    from jaxterrain.runtime.provenance import portable_path
 
-    return atomic_write_text(Path(folder) / CONFIG_NAME, json.dumps(config, indent=2, sort_keys=True) + "\n")
+    saved = {**_paths(config, lambda v: portable_path(v, folder)), PATHS_KEY: True}
+    return atomic_write_text(Path(folder) / CONFIG_NAME, json.dumps(saved, indent=2, sort_keys=True) + "\n")
 
 
 def save_figure(fig, path: str | Path, dpi: int = 120) -> Path:

@@ -19,6 +19,7 @@ from jaxterrain.qd import TerrainBank, cell_distance
 from jaxterrain import curriculum as C
 from jaxterrain.curriculum import gp
 from jaxterrain.curriculum import outputs, runner
+from experiments import common
 
 
 # ---------------------------------------------------------------------------------------------------------------
@@ -833,7 +834,7 @@ def test_learn_writes_every_trials_walker_as_a_loadable_policy(tmp_path, learn_s
     from jaxterrain import rl
 
     _, out = learn_smoke
-    cfg = json.loads((out / "config.json").read_text())
+    cfg = common.load_config(out)  # its paths as this machine reads them
     states = runner.restored(cfg, out)[5]
     base = rl.load_policy()
     seq = [r.split(",") for r in (out / "sequences.csv").read_text().splitlines()[1:]]
@@ -881,7 +882,7 @@ def test_learn_killed_by_its_time_limit_resumes_to_the_uninterrupted_curves(tmp_
     meta = driver.read_meta(parts)
     assert meta["archive_sha256"] == digest != runner.archive_digest(A.load(tiny_archive(3, "3.npz")))
     assert meta["backend"] == "jax"  # auto, resolved on this CPU machine; a resume must run on the same physics
-    cfg = json.loads((parts / "config.json").read_text())
+    cfg = common.load_config(parts)
     runner.check_resumable(parts, cfg, A.load(archive))
     with monkeypatch.context() as m:  # as if checkpointed on a GPU with MuJoCo Warp: auto must not switch to MJX
         m.setattr(driver, "read_meta", lambda folder: {**meta, "backend": "warp"})
