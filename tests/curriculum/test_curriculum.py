@@ -829,7 +829,10 @@ def test_learn_writes_every_trials_walker_as_a_loadable_policy(tmp_path, learn_s
     ``config.json`` keeps the base policy's walker config (its solver) and records the trial's curriculum (epochs,
     env steps, the terrains in the order ``sequences.csv`` lists them). ``--resume RUN --export-policies`` writes the
     same weights from the checkpoint."""
+    import hashlib
+    import os
     import shutil
+    from pathlib import Path
 
     from jaxterrain import rl
 
@@ -852,6 +855,12 @@ def test_learn_writes_every_trials_walker_as_a_loadable_policy(tmp_path, learn_s
         assert c["env_steps"] == c["epochs"] * cfg["steps_per_epoch"] and c["epochs"] > 0
         assert c["terrains"] == [int(r[2]) for r in seq if int(r[0]) == t]
         assert c["hardest"] == pytest.approx(float(np.asarray(states.hardest)[t]))
+        # no machine's absolute path: the archive relative to the run folder, the shipped base policy by package
+        assert c["start_policy"] == "<jaxterrain>/assets/base_policy"
+        assert c["archive"] == os.path.relpath(cfg["archive"], out) and not os.path.isabs(c["archive"])
+        assert c["archive_file_sha256"] == hashlib.sha256(Path(cfg["archive"]).read_bytes()).hexdigest()
+    saved = json.loads((out / "config.json").read_text())
+    assert saved["archive"] == os.path.relpath(cfg["archive"], out) and str(out.parent) not in json.dumps(saved)
     copy = tmp_path / "copy"
     shutil.copytree(out, copy)
     shutil.rmtree(copy / "policies")
