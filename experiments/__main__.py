@@ -1,4 +1,5 @@
-"""``python -m experiments <command>``: every experiment of the paper, and the training jobs behind them.
+"""``python -m experiments <command>`` (installed: ``jaxterrain <command>``): every experiment of the paper, and the
+training jobs behind them.
 
 Each command lives in its own module of this package, which defines ``add_arguments(parser)`` and ``main(args)``;
 this file only maps command names to modules. Command modules import jax and the library inside ``main`` only, so
@@ -105,12 +106,14 @@ def load_plugins(modules: list[str]) -> list[str]:
     return loaded
 
 
-def build_parser() -> tuple[argparse.ArgumentParser, dict]:
-    """The parser of ``python -m experiments`` and ``{name: (module, its subparser)}`` of every command built, each
-    flag's help ending with every preset's value (the docs' command-line page is written from the same parsers)."""
+def build_parser(prog: str = "python -m experiments") -> tuple[argparse.ArgumentParser, dict]:
+    """The parser of ``python -m experiments`` (or ``prog``: ``jaxterrain``, the console script) and ``{name: (module,
+    its subparser)}`` of every command built, each flag's help ending with every preset's value (the docs'
+    command-line page is written from the same parsers)."""
     from experiments.common import show_preset_values
 
-    parser = argparse.ArgumentParser(prog="python -m experiments", description=__doc__.splitlines()[0])
+    parser = argparse.ArgumentParser(prog=prog, description="every experiment of the paper, and the training jobs "
+                                                              "behind them")
     parser.add_argument("--plugin", action="append", default=[], metavar="MODULE",
                         help="import MODULE first: its generators, descriptors and curricula become valid names in "
                              "every command (also after the command; repeatable). Installed packages' "
@@ -132,24 +135,31 @@ def build_parser() -> tuple[argparse.ArgumentParser, dict]:
     return parser, commands
 
 
-def main(argv: list[str] | None = None) -> int:
+def main(argv: list[str] | None = None, prog: str = "python -m experiments") -> int:
     try:
         plugins, argv = split_plugins(list(sys.argv[1:] if argv is None else argv))
         load_plugins(plugins)
     except PluginError as err:
-        print(f"python -m experiments: error: {err}", file=sys.stderr)
+        print(f"{prog}: error: {err}", file=sys.stderr)
         return 2
-    parser, commands = build_parser()
+    parser, commands = build_parser(prog)
     available = {name: module for name, (module, _) in commands.items()}
     args = parser.parse_args(argv)
     args.plugin = plugins
-    from experiments.common import UsageError, check_args
+    from experiments.common import UsageError, apply_progress, check_args
 
+    apply_progress(args)  # --no-progress: plain progress lines
     try:  # bad flag values: one line naming the flag, exit status 2 (as argparse), before any JAX work
         check_args(args.command, args)
         return int(available[args.command].main(args) or 0)
     except UsageError as err:
         parser.exit(2, f"{parser.prog} {args.command}: error: {err}\n")
+
+
+def console() -> None:
+    """The ``jaxterrain`` console script (``[project.scripts]``): ``jaxterrain <command> ...`` is
+    ``python -m experiments <command> ...``."""
+    sys.exit(main(prog="jaxterrain"))
 
 
 if __name__ == "__main__":

@@ -77,14 +77,60 @@ def selector_name(text: str) -> str:
 PRESET_NAMES = ("smoke", "gpu-short", "gpu", "paper")
 """The presets every long command takes, each with one meaning:
 
-- ``smoke``: a CPU, about a minute: the command runs end to end at tiny sizes (a check, not a result);
+- ``smoke``: a CPU, tiny sizes: the command runs end to end (a check, not a result); most of its time is compiling,
+  minutes on 2 CPU cores (``learn`` 6-10, ``evaluate`` 4-6: ``jaxterrain.runtime.estimates.SMOKE_MINUTES``);
 - ``gpu-short``: one GPU, minutes: a tenth of ``gpu``'s budget;
 - ``gpu``: one GPU, the full budget: the paper's protocol at GPU batch sizes;
 - ``paper``: the paper's settings as it states them (where it states none, ``gpu``'s).
 
-A command may add its own (``coverage``'s ``paper-batched``, ``train-traversability``'s ``cpu``)."""
-PRESET_HELP = ("smoke: CPU, about a minute; gpu-short: a tenth of gpu's budget; gpu: the full budget on one GPU; "
-               "paper: the paper's own settings")
+A command may add its own, described by its ``PRESET_NOTES`` (``coverage``'s ``paper-batched``,
+``train-traversability``'s ``cpu``, ``gradient``'s ``default``)."""
+PRESET_HELP = {
+    "smoke": "tiny sizes on a CPU, a check that the command runs end to end, not a result; mostly compiling: {smoke}",
+    "gpu-short": "a tenth of gpu's budget",
+    "gpu": "the full budget on one GPU",
+    "paper": "the paper's own settings",
+}
+"""Each preset's meaning in ``--help`` (``{smoke}``: the command's minutes, :func:`smoke_minutes`)."""
+
+
+def _estimates():
+    """``jaxterrain.runtime.estimates``, read from its file: ``--help`` imports no JAX (the package's ``__init__``
+    does)."""
+    import importlib.util
+
+    if "jaxterrain.runtime.estimates" in sys.modules:
+        return sys.modules["jaxterrain.runtime.estimates"]
+    spec = importlib.util.find_spec("jaxterrain")
+    path = Path(spec.origin).parent / "runtime" / "estimates.py"
+    spec = importlib.util.spec_from_file_location("_jaxterrain_estimates", path)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+def smoke_minutes(command: str) -> str:
+    """How long ``command --preset smoke`` takes on 2 CPU cores, in words (``estimates.SMOKE_MINUTES``, where
+    measured)."""
+    est = _estimates()
+    if command in est.SMOKE_MINUTES:
+        low, high = est.SMOKE_MINUTES[command]
+        return f"about {low:.0f}-{high:.0f} min on {est.CPU_NOTE}"
+    return f"minutes on {est.CPU_NOTE}"
+
+
+def preset_help(command: str, presets: dict[str, dict], default_preset: str,
+                notes: dict[str, str] | None = None) -> str:
+    """``--preset``'s help: every preset of ``presets`` with its meaning (:data:`PRESET_HELP`, then the command's
+    ``notes`` for its own presets), and the default."""
+    if all(p == next(iter(presets.values())) for p in presets.values()):  # gradient: one set of settings
+        return f"every preset gives the same settings: {command} has one set (default {default_preset})"
+    notes = {**{k: v.format(smoke=smoke_minutes(command)) for k, v in PRESET_HELP.items()}, **(notes or {})}
+    order = [n for n in PRESET_NAMES if n in presets] + sorted(n for n in presets if n not in PRESET_NAMES)
+    missing = [n for n in order if n not in notes]
+    if missing:
+        raise ValueError(f"presets {missing} of {command} have no meaning in its PRESET_NOTES")
+    return "; ".join(f"{n}: {notes[n]}" for n in order) + f" (default {default_preset})"
 
 
 def with_preset_names(presets: dict[str, dict], same: dict[str, Any] | None = None) -> dict[str, dict]:
@@ -108,8 +154,9 @@ def show_preset_values(parser: argparse.ArgumentParser, presets: dict[str, dict]
     or ``[smoke: a; gpu-short: b; ...]``), so ``--help`` shows what a flag left out will be."""
     order = [n for n in PRESET_NAMES if n in presets] + sorted(n for n in presets if n not in PRESET_NAMES)
     for action in parser._actions:
-        if action.dest in ("preset", "help") or not any(action.dest in presets[n] for n in order):
-            continue
+        if action.dest in ("preset", "help") or action.help == argparse.SUPPRESS or not any(
+                action.dest in presets[n] for n in order):
+            continue  # a hidden option (a deprecated alias) stays hidden
         shown = {n: _short(presets[n].get(action.dest)) for n in order}
         text = (f"every preset: {next(iter(shown.values()))}" if len(set(shown.values())) == 1
                 else "; ".join(f"{n}: {v}" for n, v in shown.items()))
@@ -118,6 +165,8 @@ def show_preset_values(parser: argparse.ArgumentParser, presets: dict[str, dict]
 
 def _short(value: Any) -> str:
     text = "-" if value is None else (" ".join(map(str, value)) if isinstance(value, (list, tuple)) else str(value))
+    if isinstance(value, (list, tuple)) and not value:
+        text = "none"
     if isinstance(value, str) and "/" in value:  # a path: its file name
         text = Path(value).name
     if isinstance(value, dict):
@@ -137,9 +186,89 @@ def shipped(relative: str) -> str:
     return str(Path(spec.origin).parent / "assets" / relative)
 
 
-FLAG_NAMES = {"n": "--terrains", "samples": "--terrains"}
+FLAG_NAMES = {"n": "--terrains", "samples": "--terrains", "slots": "--rollout-slots", "rollout_backend": "--backend",
+              "lr": "--learning-rate", "ckpt_every": "--checkpoint-every"}
 """Config keys whose flag has another name (the key kept so that older runs' ``config.json`` still read): terrains
-per generator is ``--terrains`` in every command (``--n`` and ``--samples`` stay as aliases)."""
+sampled per generator is ``--terrains`` in every command, the rollout pool's env slots ``--rollout-slots``, the
+walker's physics ``--backend``. The older spellings (``--n``, ``--samples``, ``--slots``, ``--rollout-backend``, ...)
+still parse as hidden deprecated aliases (:func:`add_deprecated_alias`)."""
+
+
+class _Deprecated(argparse.Action):
+    """A hidden old spelling of an option: stores what the new one would, and says once on stderr which to use."""
+
+    def __init__(self, option_strings, dest, new: str = "", const=None, nargs=None, **kwargs):
+        self.new = new
+        super().__init__(option_strings, dest, nargs=nargs, const=const, **kwargs)
+
+    def __call__(self, parser, namespace, values, option_string=None):
+        print(f"{parser.prog}: note: {option_string} is deprecated; use {self.new}", file=sys.stderr)
+        setattr(namespace, self.dest, self.const if self.nargs == 0 else values)
+
+
+def add_deprecated_alias(parser: argparse.ArgumentParser, old: str, new: str, dest: str, const: Any = None,
+                         **kwargs) -> None:
+    """Keep ``old`` working as a hidden alias of option ``new`` (same ``dest``): a value option when ``kwargs`` give
+    its ``type`` / ``nargs`` / ``choices``, else a switch that stores ``const`` (``--freeze-normaliser`` is
+    ``--no-update-normaliser``). Not shown in ``--help`` nor in the docs' command-line page; using it prints one note
+    naming ``new``. Only for spellings that shipped docs or scripts use."""
+    if "type" not in kwargs and "nargs" not in kwargs and "choices" not in kwargs:
+        kwargs["nargs"] = 0
+    parser.add_argument(old, dest=dest, action=_Deprecated, new=new, const=const, default=None,
+                        help=argparse.SUPPRESS, **kwargs)
+
+
+def add_terrains_argument(parser: argparse.ArgumentParser, dest: str, what: str, default: Any = None,
+                          aliases: tuple[str, ...] = ()) -> None:
+    """``--terrains N``: terrains sampled per generator, one flag in every command (``dest``: the config key, ``n`` or
+    ``samples`` in older commands, kept so saved configs read); ``what`` says what the command does with them.
+    ``aliases``: older spellings kept hidden (:func:`add_deprecated_alias`)."""
+    parser.add_argument("--terrains", dest=dest, type=int, default=default, metavar="N",
+                        help=f"terrains sampled per generator, >= 1: {what}")
+    for old in aliases:
+        add_deprecated_alias(parser, old, "--terrains", dest, type=int, metavar="N")
+
+
+def add_slots_argument(parser: argparse.ArgumentParser, dest: str, what: str, type: Callable = int,
+                       aliases: tuple[str, ...] = ()) -> None:
+    """``--rollout-slots``: the env slots of the walker's rollout pool (speed and memory only), one flag in every
+    command that walks many terrains (``dest``: the config key, ``slots`` in ``evaluate`` / ``gradient``)."""
+    parser.add_argument("--rollout-slots", dest=dest, type=type, default=None, metavar="SLOTS",
+                        help=f"env slots of the walker's rollout pool (speed and device memory only; results do not "
+                             f"change): {what}")
+    for old in aliases:
+        add_deprecated_alias(parser, old, "--rollout-slots", dest, type=type, metavar="SLOTS")
+
+
+BACKEND_NAMES = ("auto", "jax", "warp")
+"""``--backend`` choices of every command that walks: ``jaxterrain.walker.layout.BACKEND_CHOICES`` (a literal, so that
+``--help`` imports no JAX; a test keeps the two equal)."""
+
+
+def add_backend_argument(parser: argparse.ArgumentParser, what: str = "walker physics", warp: str = "",
+                         dest: str = "backend") -> None:
+    """``--backend auto|jax|warp``, one flag and one set of choices in every command that walks (``dest``: the config
+    key, ``rollout_backend`` in ``evolve``); ``auto`` is ``jaxterrain.walker.resolve_backend``'s."""
+    parser.add_argument("--backend", dest=dest, choices=BACKEND_NAMES, default=None,
+                        help=f"{what}: auto (warp on a GPU where MuJoCo Warp imports, else jax), jax (MJX) or warp "
+                             f"(MuJoCo Warp{', ' + warp if warp else ''})")
+
+
+def add_progress_argument(parser: argparse.ArgumentParser) -> None:
+    """``--progress`` / ``--no-progress``, on every command that draws a progress bar (``jaxterrain.runtime.driver``):
+    ``--no-progress`` prints plain lines instead, as it does anyway where stderr is not a terminal. It is a display
+    choice, not a setting of the run (not in ``config.json``)."""
+    parser.add_argument("--progress", action=argparse.BooleanOptionalAction, default=True,
+                        help="a progress bar on a terminal; --no-progress: plain progress lines instead (as in a log "
+                             "file)")
+
+
+def apply_progress(args: argparse.Namespace) -> None:
+    """``--no-progress``: tell ``jaxterrain.runtime.driver`` (``JAXTERRAIN_PROGRESS=plain``) to print plain lines."""
+    import os
+
+    if getattr(args, "progress", None) is False:
+        os.environ["JAXTERRAIN_PROGRESS"] = "plain"
 
 
 def flag(key: str) -> str:
@@ -294,15 +423,19 @@ def check_args(command: str, args: argparse.Namespace) -> None:
             raise UsageError(f"{flag(key)} {str(path)!r}: no such file or folder")
 
 
-def add_run_arguments(parser: argparse.ArgumentParser, presets: dict[str, dict], default_preset: str) -> None:
-    """Add ``--preset``, ``--config``, ``--resume``, ``--out``, ``--seed``, ``--time-limit`` and ``--print-config``."""
+def add_run_arguments(parser: argparse.ArgumentParser, presets: dict[str, dict], default_preset: str,
+                      notes: dict[str, str] | None = None) -> None:
+    """Add ``--preset``, ``--config``, ``--resume``, ``--out``, ``--seed``, ``--time-limit`` and ``--print-config``.
+    ``notes``: the meaning of the command's own presets (those beyond :data:`PRESET_NAMES`)."""
+    command = parser.prog.split()[-1]
     parser.add_argument("--preset", choices=sorted(presets), default=None,
-                        help=f"settings preset ({PRESET_HELP}; default {default_preset})")
+                        help=preset_help(command, presets, default_preset, notes).replace("%", "%%"))
     parser.add_argument("--config", type=Path, default=None, help="re-run from a saved config.json")
     parser.add_argument("--resume", nargs="?", const="latest", default=None, metavar="FOLDER",
                         help="continue the run in FOLDER (default: the newest run of this command)")
     parser.add_argument("--out", type=Path, default=None, help="run folder (default runs/<command>-<timestamp>)")
-    parser.add_argument("--seed", type=int, default=None, help="PRNG seed")
+    parser.add_argument("--seed", type=int, default=None,
+                        help="PRNG seed of the run (every random draw derives from it; default 0)")
     parser.add_argument("--time-limit", type=float, default=None, metavar="MIN",
                         help="stop cleanly after about MIN minutes (after a checkpoint); continue with --resume")
     parser.add_argument("--print-config", action="store_true",
@@ -353,7 +486,29 @@ def latest_run(command: str, root: Path = Path("runs")) -> Path:
     return runs[-1]
 
 
+PATH_KEYS = ("archive", "archives", "policy", "data", "out", "assets_dir")
+"""Config keys that hold file or folder paths (a path, a list of them or a ``{name: path}`` dict): ``config.json``
+records them relative to its run folder (:func:`write_config`), marked by :data:`PATHS_KEY`."""
+PATHS_KEY = "paths_relative_to_this_folder"
+
+
+def _paths(config: dict, convert: Callable[[str], str]) -> dict:
+    out = dict(config)
+    for key in PATH_KEYS:
+        value = out.get(key)
+        if isinstance(value, (str, Path)):
+            out[key] = convert(str(value))
+        elif isinstance(value, list):
+            out[key] = [convert(str(v)) if isinstance(v, (str, Path)) else v for v in value]
+        elif isinstance(value, dict):
+            out[key] = {k: convert(str(v)) if isinstance(v, (str, Path)) else v for k, v in value.items()}
+    return out
+
+
 def load_config(path: str | Path) -> dict:
+    """A saved ``config.json`` (or the one in folder ``path``) as a dict, its paths as this machine reads them:
+    a config written by :func:`write_config` records them relative to its folder (or ``<jaxterrain>/...``), an older
+    one absolute or relative to where it ran, read as they are."""
     path = Path(path)
     if path.is_dir():
         path = path / CONFIG_NAME
@@ -363,13 +518,22 @@ def load_config(path: str | Path) -> dict:
         raise SystemExit(f"cannot read config {path}: {err}") from err
     if not isinstance(data, dict):
         raise SystemExit(f"config {path} must hold a JSON object")
+    if data.pop(PATHS_KEY, False):
+        from jaxterrain.runtime.provenance import resolve_recorded
+
+        data = _paths(data, lambda v: resolve_recorded(v, path.parent))
     return data
 
 
 def write_config(folder: Path, config: dict) -> Path:
+    """Write ``config`` as ``folder/config.json``, its paths (:data:`PATH_KEYS`) relative to ``folder`` or
+    ``<jaxterrain>/...`` for the package's own files (``jaxterrain.runtime.provenance.portable_path``): no machine's
+    absolute path. :func:`load_config` reads them back."""
     from jaxterrain.runtime.io import atomic_write_text
+    from jaxterrain.runtime.provenance import portable_path
 
-    return atomic_write_text(Path(folder) / CONFIG_NAME, json.dumps(config, indent=2, sort_keys=True) + "\n")
+    saved = {**_paths(config, lambda v: portable_path(v, folder)), PATHS_KEY: True}
+    return atomic_write_text(Path(folder) / CONFIG_NAME, json.dumps(saved, indent=2, sort_keys=True) + "\n")
 
 
 def save_figure(fig, path: str | Path, dpi: int = 120) -> Path:

@@ -67,16 +67,22 @@ PRESETS: dict[str, dict] = {
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    common.add_run_arguments(parser, PRESETS, "smoke")
+    common.add_run_arguments(parser, PRESETS, "smoke", {"paper-batched": "the paper's 5 000 generations of 20 per "
+                                                                         "treatment, every treatment at once "
+                                                                         "(--batched)"})
     common.add_devices_argument(parser)
-    parser.add_argument("--generators", nargs="+", default=None, help=f"default: {' '.join(GENERATORS)}")
-    parser.add_argument("--generations", type=int, default=None)
-    parser.add_argument("--batch-size", type=int, default=None)
-    parser.add_argument("--size", type=int, default=None)
-    parser.add_argument("--bins", type=int, default=None)
-    parser.add_argument("--fitness", choices=common.FITNESS_NAMES, default=None)
+    parser.add_argument("--generators", nargs="+", default=None,
+                        help=f"generator names (default: {' '.join(GENERATORS)})")
+    parser.add_argument("--generations", type=int, default=None,
+                        help="MAP-Elites generations of each treatment after its initial population")
+    parser.add_argument("--batch-size", type=int, default=None, help="offspring per generation")
+    parser.add_argument("--size", type=int, default=None, help="heightmap side in pixels")
+    parser.add_argument("--bins", type=int, default=None, help="cells per descriptor")
+    parser.add_argument("--fitness", choices=common.FITNESS_NAMES, default=None,
+                        help="what an elite's fitness measures: difficulty (the base policy walks it) or slope (a "
+                             "cheap stand-in, no walking)")
     common.add_protocol_argument(parser)
-    parser.add_argument("--batched", action="store_const", const=True, default=None,
+    parser.add_argument("--batched", action=argparse.BooleanOptionalAction, default=None,
                         help="evolve every treatment at once (one jitted generation, one fitness call on all "
                              "treatments' offspring; jaxterrain.qd.evolve_many); not with --shard")
     parser.add_argument("--shard", type=common.parse_shard, default=None, metavar="I/N",
@@ -138,6 +144,7 @@ def run_batched(cfg: dict, todo, pairs, gens, folder, clock, key, mesh=None) -> 
     treatments = [A.Treatment(g, tuple(pair), jax.random.fold_in(jax.random.fold_in(key, pairs.index(pair)),
                                                                  gens.index(g))) for _, pair, g in todo]
     config = evolve_cmd.evolve_config({**cfg, "descriptors": list(todo[0][1]), "ranges": None})
+    evolve_cmd.announce_compile(cfg, config)
 
     def progress(info):
         cov = info["coverage"]

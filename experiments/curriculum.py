@@ -58,8 +58,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--archives", nargs="+", default=None, metavar="NAME=PATH",
                         help="archives of the map treatments (default: the five generators' archives shipped in "
                              "jaxterrain/assets/archives, G_headings.npz)")
-    parser.add_argument("--trials", type=int, default=None)
-    parser.add_argument("--max-epochs", type=int, default=None)
+    parser.add_argument("--trials", type=int, default=None, help="trials of each treatment, run together (paper: 10)")
+    parser.add_argument("--max-epochs", type=int, default=None,
+                        help="each trial's epoch budget (an epoch: 4 000 env steps; the paper: 30 000)")
     parser.add_argument("--chunks-per-call", type=int, default=None,
                         help="chunks per jitted call / checkpoint, in every treatment (learn's)")
     learn.add_fine_tuning_arguments(parser, ", in every treatment")
@@ -74,9 +75,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--shard", type=common.parse_shard, default=None, metavar="I/N",
                         help="run only the treatments t %% N == I of the fixed order (independent processes, e.g. one "
                              "per GPU, on one run folder); then --resume without --shard writes the tables")
-    parser.add_argument("--backend", choices=["auto", "jax", "warp"], default=None,
-                        help="walker physics of every treatment: auto (default: warp on a GPU where it imports, else "
-                             "jax), jax (MJX) or warp (MuJoCo Warp on tiles)")
+    common.add_backend_argument(parser, "walker physics of every treatment", "on one tile per trial")
+    common.add_progress_argument(parser)
 
 
 def parse_archives(items) -> dict | None:

@@ -20,16 +20,20 @@ from __future__ import annotations
 
 import argparse
 
+from experiments import common
 from experiments.common import UsageError
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--heights", nargs="+", type=float, default=[0.5], help="height scales to try (metres, > 0)")
-    parser.add_argument("--terrains", "--n", dest="n", type=int, default=16, help="random terrains per generator (>= 1)")
-    parser.add_argument("--attempts", type=int, default=20)
-    parser.add_argument("--best", type=int, default=5)
-    parser.add_argument("--generators", nargs="*", default=None, help="default: every generator that loads")
-    parser.add_argument("--seed", type=int, default=0)
+    common.add_terrains_argument(parser, "n", "each walked by the base policy at every height", default=16,
+                                 aliases=("--n",))
+    parser.add_argument("--attempts", type=int, default=20, help="walks per terrain in total (the paper: 20)")
+    parser.add_argument("--best", type=int, default=5,
+                        help="fitness = mean of the best this many walks, <= --attempts (the paper: 5)")
+    parser.add_argument("--generators", nargs="*", default=None,
+                        help="generator names (default: every generator that loads)")
+    parser.add_argument("--seed", type=int, default=0, help="PRNG seed of the terrains and walks")
     parser.add_argument("--out", default=None, help="run folder (default runs/difficulty-spread-<time>)")
     parser.add_argument("--robot", default="humanoid", metavar="NAME",
                         help="walk this robot's shipped base policy (default humanoid)")

@@ -39,7 +39,7 @@ PRESETS: dict[str, dict] = common.with_preset_names({
                   generators=["perlin"], attempts=2, best=1, headings=1, backend="jax", slots=None, chunk=None,
                   repeat=False),
 }, {"gpu-short": "gpu", "paper": ("gpu", {"attempts": 20, "best": 5, "headings": 1})})
-BACKENDS = ("auto", "jax", "warp")  # jaxterrain.walker.layout.BACKEND_CHOICES (literal: --help imports no JAX)
+BACKENDS = common.BACKEND_NAMES  # jaxterrain.walker.layout.BACKEND_CHOICES (literal: --help imports no JAX)
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -53,7 +53,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--archive", default=None, help="walk an archive's elites instead of the suite")
     parser.add_argument("--size", type=int, default=None, help="suite heightmap side in pixels (v1: 256)")
     parser.add_argument("--seeds", type=int, default=None, help="suite terrains per family level (v1: 3)")
-    parser.add_argument("--terrains", "--samples", dest="samples", type=int, default=None, help="suite genomes drawn per generator (v1: 96)")
+    common.add_terrains_argument(parser, "samples", "the suite's generator terrains (v1: 96)", aliases=("--samples",))
     parser.add_argument("--families", nargs="+", default=None, help="suite families to build (default: all of the "
                         "version's; smoke: flat stairs_up gaps)")
     parser.add_argument("--generators", nargs="*", default=None, help="generators to sample (default: the version's "
@@ -65,9 +65,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--best", type=int, default=None, help="best walks averaged per heading")
     parser.add_argument("--headings", type=int, choices=(1, 2, 4), default=None, help="walking headings")
     common.add_protocol_argument(parser)
-    parser.add_argument("--backend", choices=BACKENDS, default=None,
-                        help="walker physics: auto (warp on a GPU where it imports, else jax), jax or warp")
-    parser.add_argument("--slots", type=int, default=None, help="rollout pool slots (default: all walks at once)")
+    common.add_backend_argument(parser)
+    common.add_slots_argument(parser, "slots", "an int (default: all walks at once)", aliases=("--slots",))
     parser.add_argument("--chunk", type=int, default=None, help="terrains per call (bounds device memory)")
 
 
@@ -199,8 +198,11 @@ def main(args) -> int:
           f"{protocol.attempts} walks each (best {protocol.best} per heading, {protocol.headings} headings)", flush=True)
     key = jax.random.fold_in(jax.random.key(int(cfg["seed"])), 3)
     t1 = time.perf_counter()
-    first = suite.evaluate_policies(policies[:1], s.heightmaps, key, protocol, backend, s.scale, cfg["slots"],
-                                    cfg["chunk"])
+    from jaxterrain.runtime.estimates import compiling
+
+    with compiling("suite-walk", f"{s.size} terrains x {protocol.attempts} walks, {backend} physics"):
+        first = suite.evaluate_policies(policies[:1], s.heightmaps, key, protocol, backend, s.scale, cfg["slots"],
+                                        cfg["chunk"])
     first_s = time.perf_counter() - t1  # compile + walk of the base policy
     again, walk_s = None, None
     if cfg["repeat"]:  # the same walks again, compiled: one policy on the whole suite

@@ -61,6 +61,15 @@ def preset_config(name: str):
     return evolve_config(PRESETS[name])
 
 
+def _backend(name: str) -> str:
+    """``--backend auto`` -> the physics ``jaxterrain.walker.resolve_backend`` picks on this machine."""
+    if name != "auto":
+        return str(name)
+    from jaxterrain.walker import resolve_backend
+
+    return resolve_backend("auto")
+
+
 def evolve_config(cfg: dict):
     from jaxterrain.qd import EvolveConfig
 
@@ -74,7 +83,7 @@ def evolve_config(cfg: dict):
         headings=int(cfg.get("headings", 1)), checkpoint_every=int(cfg["checkpoint_every"]), robot_height=cfg.get("robot_height"),
         out_of_range=cfg.get("out_of_range", "clip"), store_heightmaps=bool(cfg.get("store_heightmaps", True)),
         rollout_slots=None if cfg.get("rollout_slots") is None else int(cfg["rollout_slots"]),
-        rollout_backend=str(cfg.get("rollout_backend", "jax")), robot=str(cfg.get("robot") or "humanoid"),
+        rollout_backend=_backend(cfg.get("rollout_backend", "jax")), robot=str(cfg.get("robot") or "humanoid"),
     )
 
 
@@ -84,27 +93,32 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--generator", default=None, help="registered generator name (default perlin)")
     parser.add_argument("--descriptors", nargs=2, default=None, metavar=("D0", "D1"),
                         help="descriptor pair, e.g. roughness tpi")
-    parser.add_argument("--generations", type=int, default=None)
+    parser.add_argument("--generations", type=int, default=None,
+                        help="MAP-Elites generations after the initial population")
     parser.add_argument("--batch-size", type=int, default=None, help="offspring per generation")
-    parser.add_argument("--initial-population", type=int, default=None)
+    parser.add_argument("--initial-population", type=int, default=None, help="random genomes evaluated first")
     parser.add_argument("--bins", type=int, default=None, help="cells per descriptor")
     parser.add_argument("--size", type=int, default=None, help="heightmap side in pixels")
-    parser.add_argument("--checkpoint-every", type=int, default=None)
-    parser.add_argument("--fitness", choices=common.FITNESS_NAMES, default=None)
+    parser.add_argument("--checkpoint-every", type=int, default=None, help="generations between checkpoints")
+    parser.add_argument("--fitness", choices=common.FITNESS_NAMES, default=None,
+                        help="what an elite's fitness measures: difficulty (the base policy walks it) or slope (a "
+                             "cheap stand-in, no walking)")
     parser.add_argument("--attempts", type=int, default=None, help="walks per terrain in total")
     parser.add_argument("--best", type=int, default=None, help="best walks averaged per heading")
     parser.add_argument("--headings", type=int, choices=(1, 2, 4), default=None,
                         help="headings of the walks (1: the paper's +x; 4: +x, +y, -x, -y; mean over headings)")
     common.add_protocol_argument(parser)
-    parser.add_argument("--rollout-slots", type=int, default=None,
-                        help="env slots of the difficulty rollout pool per device (speed only; gpu preset: 16384)")
-    parser.add_argument("--backend", "--rollout-backend", dest="rollout_backend", choices=["jax", "warp"], default=None,
-                        help="walker physics of the difficulty rollouts: jax (MJX, default) or warp (MuJoCo Warp)")
+    common.add_slots_argument(parser, "rollout_slots", "per device (default: all walks of a generation at once)")
+    common.add_backend_argument(parser, "walker physics of the difficulty rollouts", dest="rollout_backend")
+    common.add_deprecated_alias(parser, "--rollout-backend", "--backend", "rollout_backend",
+                                choices=common.BACKEND_NAMES)
     parser.add_argument("--robot", default=None, metavar="NAME",
                         help="whose shipped base policy the walker fitness walks (default humanoid; "
                              "jaxterrain.walker.robots, or a --plugin's); the archive records it")
-    parser.add_argument("--no-heightmaps", dest="store_heightmaps", action="store_const", const=False, default=None,
-                        help="do not store the elites' heightmaps in archive.npz (they can be re-rendered)")
+    parser.add_argument("--store-heightmaps", action=argparse.BooleanOptionalAction, default=None,
+                        help="store the elites' heightmaps in archive.npz (--no-store-heightmaps: leave them out, "
+                             "they can be re-rendered from the genomes)")
+    common.add_deprecated_alias(parser, "--no-heightmaps", "--no-store-heightmaps", "store_heightmaps", const=False)
 
 
 def overrides(args) -> dict:
@@ -113,6 +127,16 @@ def overrides(args) -> dict:
                 size=args.size, checkpoint_every=args.checkpoint_every, fitness=args.fitness,
                 **common.protocol_overrides(args), store_heightmaps=args.store_heightmaps,
                 rollout_slots=args.rollout_slots, rollout_backend=args.rollout_backend, robot=args.robot)
+
+
+def announce_compile(cfg: dict, config) -> None:
+    """Say what the first generations compile and about how long that takes here (``jaxterrain.runtime.estimates``);
+    generation 0 (the initial population) and 1 (the first offspring batch) each compile."""
+    from jaxterrain.runtime.estimates import announce
+
+    walks = cfg.get("fitness") == "difficulty"
+    announce("map-elites" if walks else "map-elites-slope",
+             f"{config.batch_size} offspring" + (f", {config.rollout_backend} physics" if walks else ""))
 
 
 def run_treatment(cfg: dict, generator: str, descriptors, folder: Path, clock: common.Clock, key, label: str = "",
@@ -128,6 +152,7 @@ def run_treatment(cfg: dict, generator: str, descriptors, folder: Path, clock: c
         return A.load(done_path)
     config = evolve_config({**cfg, "descriptors": list(descriptors)})
     fitness = fitness_fn(cfg["fitness"])
+    announce_compile(cfg, config)
     printer = A.progress_printer(label + generator)
 
     def progress(info):

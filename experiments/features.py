@@ -49,14 +49,19 @@ FEATURES = ("tri", "tpi", "roughness")
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     common.add_run_arguments(parser, PRESETS, "smoke")
     parser.add_argument("--generators", nargs="+", default=None, help="generator names (default cppn perlin)")
-    parser.add_argument("--terrains", "--samples", dest="samples", type=int, default=None,
-                        help="random genomes per generator; each also gives mutation_steps mutated descendants")
-    parser.add_argument("--mutation-steps", type=int, default=None)
-    parser.add_argument("--size", type=int, default=None)
-    parser.add_argument("--windows", nargs="+", type=int, default=None)
-    parser.add_argument("--fitness", choices=["difficulty", "slope"], default=None)
-    parser.add_argument("--calibrate", action="store_const", const=True, default=None,
+    common.add_terrains_argument(parser, "samples", "random genomes, each also mutated --mutation-steps times "
+                                            "(1 + mutation-steps terrains each)", aliases=("--samples",))
+    parser.add_argument("--mutation-steps", type=int, default=None,
+                        help="mutated descendants of each random genome, >= 0")
+    parser.add_argument("--size", type=int, default=None, help="heightmap side in pixels")
+    parser.add_argument("--windows", nargs="+", type=int, default=None,
+                        help="window sides (pixels, >= 2) at which TRI / TPI / roughness are computed")
+    parser.add_argument("--fitness", choices=common.FITNESS_NAMES, default=None,
+                        help="what the features are correlated with: difficulty (the base policy walks each "
+                             "terrain) or slope (a cheap stand-in, no walking)")
+    parser.add_argument("--calibrate", action=argparse.BooleanOptionalAction, default=None,
                         help="also measure descriptor ranges (see jaxterrain.qd.DEFAULT_RANGES)")
+    common.add_progress_argument(parser)
 
 
 def overrides(args) -> dict:

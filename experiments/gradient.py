@@ -16,7 +16,7 @@ to the cell's far corner (the curriculum's and Table 2's measure, 1.41 to 70.71 
 The stored fitness is the paper's protocol (20 walks along +x, best 5), as the archive was evolved. With
 ``--protocol headings`` (or ``paper``) every elite is re-rendered (``jaxterrain.qd.from_archive``) and walked
 again under that :class:`jaxterrain.difficulty.Protocol` (fields overridable: ``--attempts --best --headings
---start-spread --rule``), in ONE batched call over all elites on a rollout pool (``--slots``; ``auto`` = 16 384 on
+--start-spread --rule``), in ONE batched call over all elites on a rollout pool (``--rollout-slots``; ``auto`` = 16 384 on
 a GPU, all at once on a CPU), and the tables show the protocols side by side: ``stored``, the protocol, and
 ``heading 0`` (the same rollouts' +x walks alone: with ``HEADINGS``, 20 walks best 5 = the paper's protocol
 re-walked, free of the upward bias that MAP-Elites' selection leaves in stored fitness). ``--sample N`` walks
@@ -143,8 +143,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--headings", type=int, choices=(1, 2, 4), default=None, help="override the headings")
     parser.add_argument("--start-spread", type=float, default=None, help="override the start spread (m)")
     parser.add_argument("--rule", choices=("mean", "min"), default=None, help="override the rule over headings")
-    parser.add_argument("--slots", default=None, help="rollout pool env slots: an int, 'all' or 'auto' (default: "
-                        "16384 on a GPU, all at once on a CPU)")
+    common.add_slots_argument(parser, "slots", "an int, 'all' or 'auto' (16384 on a GPU, all at once on a CPU)",
+                              type=str, aliases=("--slots",))
     parser.add_argument("--chunk", type=int, default=None, help="elites per compiled call (bounds device memory)")
     parser.add_argument("--sample", type=int, default=None, help="walk only N elites per archive, spread over "
                         "distance")
@@ -152,7 +152,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--threshold", type=float, default=None, help="'easy' fitness threshold (default 0.9)")
     parser.add_argument("--distance", choices=DISTANCES, default=None,
                         help="distance measure of the figure and summary (default corner; the CSV has both)")
-    parser.add_argument("--reseat", action="store_true", default=None,
+    parser.add_argument("--reseat", action=argparse.BooleanOptionalAction, default=None,
                         help="with --protocol (no --sample): also write <archive>_reseated.npz, every valid genome "
                              "in its own terrain's cell with the fitness walked here (jaxterrain.qd.reseat)")
 
@@ -182,7 +182,7 @@ def resolve_protocol(cfg: dict):
 
 
 def parse_slots(value) -> int | str | None:
-    """``--slots``: None, ``"all"``, ``"auto"`` or an integer >= 1 (also as text); :class:`~experiments.common.UsageError`
+    """``--rollout-slots``: None, ``"all"``, ``"auto"`` or an integer >= 1 (also as text); :class:`~experiments.common.UsageError`
     otherwise."""
     if value in (None, "all", "auto"):
         return value
@@ -191,7 +191,7 @@ def parse_slots(value) -> int | str | None:
     except (TypeError, ValueError):
         slots = 0
     if isinstance(value, bool) or slots < 1 or (isinstance(value, float) and value != slots):
-        raise common.UsageError(f"--slots must be an integer >= 1, 'all' or 'auto'; got {value!r}")
+        raise common.UsageError(f"--rollout-slots must be an integer >= 1, 'all' or 'auto'; got {value!r}")
     return slots
 
 

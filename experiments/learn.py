@@ -37,7 +37,7 @@ heading (``jaxterrain.curriculum.walker``).
 Fine-tuning: the reward is the base policy's own (brax's humanoid: 1.25 x forward velocity + 5.0 per step for
 staying up - control cost); ``--healthy-reward`` changes the per-step bonus for PPO only (evaluations measure
 distance). The observation normaliser keeps merging the fine-tuning data, as brax's PPO does;
-``--freeze-normaliser`` keeps the base policy's statistics. Why both exist: docs/results/exp2_headings.md.
+``--no-update-normaliser`` keeps the base policy's statistics. Why both exist: docs/results/exp2_headings.md.
 
 Presets: ``paper`` (30 000 epochs, the paper's budget), ``gpu-short`` (3 000 epochs, a tenth), ``smoke`` (CPU,
 about a minute after compiling: 2 trials of 4 one-epoch chunks of 80 env steps on 4 envs, 2 walks per evaluation
@@ -70,7 +70,7 @@ CPPN_ARCHIVE = common.shipped("archives/cppn_headings.npz")
 """The default archive: the CPPN's paper-budget roughness x TPI archive (evolved after the fix of tied insertion),
 reseated under ``difficulty.HEADINGS``; package data (``jaxterrain/assets/archives/``, a copy of
 ``docs/results/exp2_cppn_headings_archive.npz``), so ``learn`` runs from any folder."""
-BACKENDS = ("auto", "jax", "warp")  # jaxterrain.walker.layout.BACKEND_CHOICES (literal: --help imports no JAX)
+BACKENDS = common.BACKEND_NAMES  # jaxterrain.walker.layout.BACKEND_CHOICES (literal: --help imports no JAX)
 RECIPE_NAMES = ("paper", "wide")  # jaxterrain.curriculum.RECIPES (literal, as BACKENDS; a test keeps them equal)
 _PAPER = dict(archive=CPPN_ARCHIVE, curriculum="map", trials=10, descriptors=["roughness", "tpi"], policy=None,
               epochs_per_chunk=40, steps_per_epoch=4000, max_epochs=30000, threshold=0.9, max_fitness=1.0,
@@ -103,7 +103,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     add_selector_arguments(parser)
     parser.add_argument("--trials", type=int, default=None, help="trials run together (paper: 10)")
     parser.add_argument("--threshold", type=float, default=None, help="fraction of the maximum fitness, in (0, 1]")
-    parser.add_argument("--max-epochs", type=int, default=None)
+    parser.add_argument("--max-epochs", type=int, default=None,
+                        help="each trial's epoch budget (an epoch: 4 000 env steps; the paper: 30 000)")
     parser.add_argument("--policy", default=None, help="policy folder to start from (default: the base policy)")
     parser.add_argument("--robot", default=None, metavar="NAME",
                         help="start from this robot's shipped base policy (humanoid, the default, or one a --plugin "
@@ -127,9 +128,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--headings", type=int, choices=(1, 2, 4), default=None,
                         help="evaluation headings (default: the archive's protocol: 1 = the paper's +x)")
     common.add_protocol_argument(parser)
-    parser.add_argument("--backend", choices=BACKENDS, default=None,
-                        help="walker physics: auto (default: warp on a GPU where it imports, else jax), jax (MJX) or "
-                             "warp (MuJoCo Warp on one tile per trial)")
+    common.add_backend_argument(parser, "walker physics", "on one tile per trial")
+    common.add_progress_argument(parser)
 
 
 def add_selector_arguments(parser: argparse.ArgumentParser) -> None:
@@ -190,8 +190,8 @@ def check_selector_flags(args, curricula, option: str = "--curriculum") -> None:
 
 
 def add_fine_tuning_arguments(parser: argparse.ArgumentParser, scope: str = "") -> None:
-    """``--recipe``, ``--freeze-normaliser``, ``--healthy-reward``, ``--learning-rate``, ``--truncation``,
-    ``--max-evals``, ``--overlap`` and ``--compact`` / ``--no-compact`` (config ``recipe`` and the update's shape /
+    """``--recipe``, ``--update-normaliser``, ``--healthy-reward``, ``--learning-rate``, ``--truncation``,
+    ``--max-evals``, ``--overlap`` and ``--compact`` (the switches also as ``--no-...``; config ``recipe`` and the update's shape /
     ``update_normaliser`` / ``healthy_reward`` / ``learning_rate`` / ``truncation`` / ``max_evals`` / ``overlap`` /
     ``compact``, read back by :func:`fine_tuning_overrides`), shared with ``curriculum`` (``scope`` is added to the
     help, e.g. ", in every treatment")."""
@@ -201,9 +201,12 @@ def add_fine_tuning_arguments(parser: argparse.ArgumentParser, scope: str = "") 
                              f"sequential steps, 8x the envs; 1.35x faster on an H200 but lower held-out scores: "
                              f"docs/results/wide_recipe.md); jaxterrain.curriculum.RECIPES (--num-envs overrides its "
                              f"envs)")
-    parser.add_argument("--freeze-normaliser", dest="update_normaliser", action="store_const", const=False,
-                        default=None, help=f"keep the base policy's observation statistics fixed during fine-tuning"
-                                           f"{scope} (default: they keep merging the fine-tuning data, as brax's PPO)")
+    parser.add_argument("--update-normaliser", action=argparse.BooleanOptionalAction, default=None,
+                        help=f"fine-tuning keeps merging its data into the observation normaliser's statistics, as "
+                             f"brax's PPO does{scope}; --no-update-normaliser keeps the base policy's statistics "
+                             f"fixed")
+    common.add_deprecated_alias(parser, "--freeze-normaliser", "--no-update-normaliser", "update_normaliser",
+                                const=False)
     parser.add_argument("--healthy-reward", type=float, default=None,
                         help=f"fine-tuning reward per step for staying up, >= 0{scope} (default: the walker's 5.0, the "
                              f"base policy's; evaluations measure distance and do not use it)")
@@ -218,7 +221,7 @@ def add_fine_tuning_arguments(parser: argparse.ArgumentParser, scope: str = "") 
                         help=f"evaluations (chunks) spent on one terrain before it is left anyway, >= 1{scope} "
                              f"(default: the paper's 100 in every preset; gpu-short keeps it, so one terrain that "
                              f"never reaches the threshold can take all 75 of its chunks)")
-    parser.add_argument("--overlap", action="store_const", const=True, default=None,
+    parser.add_argument("--overlap", action=argparse.BooleanOptionalAction, default=None,
                         help=f"evaluate each chunk's policy while the next chunk trains, in the same physics calls"
                              f"{scope} (the same curriculum; the walker on one tile per trial, on either backend; "
                              f"CurriculumConfig.overlap)")

@@ -22,20 +22,24 @@ from __future__ import annotations
 import argparse
 from typing import Any, NamedTuple
 
+from experiments import common
 from experiments.common import UsageError
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--terrains", "--n", dest="n", type=int, default=32, help="terrains per generator (>= 1)")
+    common.add_terrains_argument(parser, "n", "their descriptors and figures; --walk of them are walked",
+                                 default=32, aliases=("--n",))
     parser.add_argument("--size", type=int, default=256, help="heightmap side in pixels (32..1024)")
-    parser.add_argument("--seed", type=int, default=0)
-    parser.add_argument("--generators", nargs="*", default=None, help="default: every generator that loads")
+    parser.add_argument("--seed", type=int, default=0, help="PRNG seed of the terrains and walks")
+    parser.add_argument("--generators", nargs="*", default=None,
+                        help="generator names (default: every generator that loads)")
     parser.add_argument("--walk", type=int, default=4,
                         help="terrains per generator walked by the base policy (0: none)")
     parser.add_argument("--attempts", type=int, default=8, help="walks per terrain (the paper: 20)")
     parser.add_argument("--best", type=int, default=2, help="fitness = mean of the best this many walks (paper: 5)")
     parser.add_argument("--out", default=None, help="run folder (default runs/quickstart-<time>)")
-    parser.add_argument("--no-report", action="store_true", help="do not write report/ (the HTML page)")
+    parser.add_argument("--report", action=argparse.BooleanOptionalAction, default=True,
+                        help="write report/, the HTML page (--no-report: leave it out)")
     parser.add_argument("--report-frames", type=int, default=60,
                         help="frames per walker video in the report (0: a report without videos)")
 
@@ -284,6 +288,6 @@ def main(args: argparse.Namespace) -> int:
     atomic_write_text(run / "descriptors.csv", descriptors_csv(samples))
     atomic_write_text(run / "summary.md", summary_markdown(samples, skipped, args, walk_note))
     print(f"wrote {run}", flush=True)
-    if not args.no_report:
+    if args.report:
         write_report(run, samples, args.report_frames)
     return 0

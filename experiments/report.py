@@ -19,6 +19,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from experiments import common
 from experiments.common import UsageError
 
 
@@ -27,11 +28,15 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--out", type=Path, default=None,
                         help="report folder (default: RUN_DIR/report for one run, runs/report-<time> for several)")
     parser.add_argument("--title", default="jaxterrain report", help="page title")
-    parser.add_argument("--no-videos", action="store_true", help="leave out the walks (no MJX rollout, no GL)")
-    parser.add_argument("--video-steps", "--steps", dest="steps", type=int, default=1000, help="env steps walked per video (15 ms each)")
+    parser.add_argument("--videos", action=argparse.BooleanOptionalAction, default=True,
+                        help="walker videos (--no-videos: leave out the walks, no MJX rollout, no GL)")
+    parser.add_argument("--video-steps", dest="steps", type=int, default=1000, help="env steps walked per video (15 ms each)")
+    common.add_deprecated_alias(parser, "--steps", "--video-steps", "steps", type=int)
     parser.add_argument("--frames", type=int, default=60, help="frames per video (evenly spaced over the walk)")
-    parser.add_argument("--video-width", "--width", dest="width", type=int, default=320, help="video width in pixels")
-    parser.add_argument("--video-height", "--height", dest="height", type=int, default=240, help="video height in pixels")
+    parser.add_argument("--video-width", dest="width", type=int, default=320, help="video width in pixels")
+    parser.add_argument("--video-height", dest="height", type=int, default=240, help="video height in pixels")
+    common.add_deprecated_alias(parser, "--width", "--video-width", "width", type=int)
+    common.add_deprecated_alias(parser, "--height", "--video-height", "height", type=int)
     parser.add_argument("--thumb", type=int, default=64, help="thumbnail side in pixels")
     parser.add_argument("--policy", type=Path, default=None,
                         help="policy folder (jaxterrain.rl.save_policy); default: the shipped base policy")
@@ -62,7 +67,7 @@ def main(args: argparse.Namespace) -> int:
             policy = load_policy(args.policy)
         except (OSError, ValueError) as err:
             raise UsageError(f"--policy {args.policy}: {str(err).splitlines()[0]}") from None
-    path = write_report(args.runs, out, title=args.title, videos=not args.no_videos, video_steps=args.steps,
+    path = write_report(args.runs, out, title=args.title, videos=args.videos, video_steps=args.steps,
                         video_frames=args.frames, video_size=(args.width, args.height), thumb=args.thumb,
                         seed=args.seed, policy=policy, progress=lambda s: print(s, flush=True))
     print(f"wrote {path} and {path.with_suffix('.md')}")

@@ -70,10 +70,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--robot", default=None, metavar="NAME",
                         help="the body to train: humanoid (default, the paper's), ant (brax's quadruped) or a robot a "
                              "--plugin registered (jaxterrain.walker.robots); recorded with the policy")
-    parser.add_argument("--no-progress", action="store_true", help="one line per chunk instead of a progress bar")
+    common.add_progress_argument(parser)
     parser.add_argument("--eval-attempts", type=int, default=None, help="flat-ground evaluation walks (default 20)")
     parser.add_argument("--eval-best", type=int, default=None, help="of which the best are averaged (default 5)")
-    parser.add_argument("--skip-eval", action="store_true")
+    parser.add_argument("--skip-eval", action="store_true",
+                        help="skip the flat-ground evaluation of the trained walker at the end")
     parser.add_argument("--export-assets", action="store_true",
                         help="write the trained policy to --assets-dir with PROVENANCE.md")
     parser.add_argument("--assets-dir", default=None,
@@ -279,12 +280,15 @@ def train_with_checkpoints(env, terrain, state, start: int, history, args, setti
     meta = {"preset": preset, "train_devices": origin.devices, "train_commit": origin.commit,
             "command": "train-base-policy", "command_line": run.command}
     cfg = settings.ppo_config
+    from jaxterrain.runtime.estimates import announce
+
+    announce("ppo-chunk", f"{cfg.num_envs} envs, {settings.updates_per_chunk} updates")  # its first chunk compiles
     state, done, _ = driver.run_chunks(
         rl.chunk_fn(env, cfg, terrain, mesh=mesh), state, total=settings.num_updates,
         every=settings.updates_per_chunk,
         start=start, history=history, run_dir=run.path, key_metric="episode_return",
         time_limit_s=min(limits) if limits else None,
-        progress=_print_chunk(cfg.steps_per_update) if args.no_progress else True,
+        progress=True if args.progress else _print_chunk(cfg.steps_per_update),
         desc="train-base-policy", unit="update", meta=meta)
     return TrainOutcome(state, done < settings.num_updates)
 

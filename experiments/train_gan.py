@@ -62,17 +62,19 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--size", type=int, default=None, help="heightmap side; must fit the preset's architecture")
     parser.add_argument("--data", default=None,
                         help="folder / file of DEM tiles (.tif .tiff .npy .npz); default: matplotlib DEMs")
-    parser.add_argument("--learning-rate", "--lr", dest="lr", type=float, default=None, help="Adam learning rate of both networks (default 2e-4)")
+    parser.add_argument("--learning-rate", dest="lr", type=float, default=None, help="Adam learning rate of both networks (default 2e-4)")
+    common.add_deprecated_alias(parser, "--lr", "--learning-rate", "lr", type=float)
     parser.add_argument("--r1", type=float, default=None, help="R1 penalty weight on real data, applied lazily "
                         "every 8 steps (0 = off; default: the preset's)")
     parser.add_argument("--sample-every", type=int, default=None, help="steps between sample grids")
-    parser.add_argument("--checkpoint-every", "--ckpt-every", dest="ckpt_every", type=int, default=None, help="steps between checkpoints")
+    parser.add_argument("--checkpoint-every", dest="ckpt_every", type=int, default=None, help="steps between checkpoints")
+    common.add_deprecated_alias(parser, "--ckpt-every", "--checkpoint-every", "ckpt_every", type=int)
     parser.add_argument("--log-every", type=int, default=None, help="steps between log lines")
     parser.add_argument("--quality-samples", type=int, default=None,
                         help="terrains per set in the quality check (0 = skip)")
     parser.add_argument("--quality-only", metavar="WEIGHTS", help="only run the quality check of these weights")
     parser.add_argument("--export-assets", action="store_true", help="copy the result into jaxterrain/assets/gan/")
-    parser.add_argument("--no-progress", action="store_true", help="log lines only, no progress bar")
+    common.add_progress_argument(parser)
 
 
 def overrides(args) -> dict:
@@ -384,7 +386,7 @@ def main(args: argparse.Namespace) -> int:
         return 0
 
     outcome = train(cfg, run_dir, config, data.tiles, resume=args.resume is not None, time_limit=args.time_limit,
-                    progress=not args.no_progress)
+                    progress=args.progress)
     if outcome.done < int(cfg["steps"]):
         print(f"time limit reached at step {outcome.done} of {cfg['steps']}; continue with: "
               f"python -m experiments train-gan --resume {run_dir}", flush=True)

@@ -45,13 +45,15 @@ PRESETS: dict[str, dict] = common.with_preset_names({
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    common.add_run_arguments(parser, PRESETS, "cpu")
+    common.add_run_arguments(parser, PRESETS, "cpu", {"cpu": "a few thousand patches and minutes of training on "
+                                                              "2 CPU cores: the shipped model"})
     parser.add_argument("--generators", nargs="+", default=None, help="generator names (default: all five)")
-    parser.add_argument("--terrains", type=int, default=None, help="terrains walked per generator")
+    common.add_terrains_argument(parser, "terrains", "each walked by the base policy, its patches labelled")
     parser.add_argument("--attempts", type=int, default=None, help="walks per terrain")
     parser.add_argument("--steps", type=int, default=None, help="training steps (minibatches)")
-    parser.add_argument("--no-heldout", dest="heldout", action="store_const", const=False, default=None,
-                        help="skip the leave-one-generator-out evaluation")
+    parser.add_argument("--heldout", action=argparse.BooleanOptionalAction, default=None,
+                        help="also train one model per generator left out and score it on that generator "
+                             "(--no-heldout: skip it)")
     parser.add_argument("--export-assets", action="store_true",
                         help="copy the final model to jaxterrain/assets/traversability/ with a PROVENANCE.md")
 

@@ -22,7 +22,7 @@ terrains predicted easier than the one just trained are removed, the run ends wh
   Adam's state starts fresh (none is shipped with the base policy). ``update_normaliser = True``: the observation
   normaliser keeps merging the fine-tuning data, as brax's PPO does (the base policy's statistics cover 20 M
   observations; a ``gpu-short`` trial adds 12 M). False freezes the base policy's statistics
-  (``learn --freeze-normaliser``). ``truncation = "bootstrap"``: a walk that ends at the goal or the time limit
+  (``learn --no-update-normaliser``). ``truncation = "bootstrap"``: a walk that ends at the goal or the time limit
   trains its last step towards ``r + gamma V(final observation)`` (SB3, Pardo et al. 2018), not the base policy's
   (brax's) ``"mask"`` (``learn --truncation mask``), under which that step's state is never trained yet the step
   before bootstraps from it. On the roughness baseline's second terrain, where the last states before the goal

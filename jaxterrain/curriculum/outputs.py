@@ -188,13 +188,16 @@ def export_policies(folder: Path, cfg: dict, config, ppo, env, start_policy, ban
     + ``config.json``, which :func:`jaxterrain.rl.load_policy` reads and ``python -m experiments evaluate`` walks).
 
     ``config.json`` keeps the starting policy's ``walker_config`` (its contact solver: a walker walks as trained only
-    under it) and adds ``curriculum``: the archive, the selector, the trial, its seed, the epochs and env steps it
+    under it) and adds ``curriculum``: the archive (its path relative to the run folder ``folder``, or
+    ``<jaxterrain>/...`` for a shipped one: ``runtime.provenance.portable_path``, no machine's absolute path; and
+    its file's sha256), the starting policy (the same way), the selector, the trial, its seed, the epochs and env steps it
     trained, its terrain sequence (bank indices, cells, distances and generators in the order trained), the hardest
     terrain it traversed, the chunk of the run; and ``provenance`` (commit, device, date). ``ppo`` is the
     fine-tuning PPOConfig (the networks' shapes); ``env`` the walker env (observation and action sizes). Returns the
     folders, in trial order."""
     hist = histories(states)
     epochs = np.asarray(states.epoch)
+    archive_sha = provenance.file_sha256(cfg["archive"]) if cfg.get("archive") else None
     out = []
     base_meta = dict(getattr(start_policy, "meta", None) or {})
     cell, dist, source = np.asarray(bank.cell), np.asarray(bank.distance), np.asarray(bank.source)
@@ -205,7 +208,8 @@ def export_policies(folder: Path, cfg: dict, config, ppo, env, start_policy, ban
         extra = {
             "walker_config": base_meta.get("walker_config"),
             "curriculum": {
-                "archive": str(cfg.get("archive")), "selector": cfg.get("curriculum"), "trial": t,
+                "archive": provenance.portable_path(str(cfg.get("archive")), folder),
+                "archive_file_sha256": archive_sha, "selector": cfg.get("curriculum"), "trial": t,
                 "seed": int(cfg.get("seed", 0)), "epochs": int(epochs[t]),
                 "env_steps": int(epochs[t]) * int(config.steps_per_epoch),
                 "chunks": int(np.sum(hist["epoch"][t] >= 0)), "hardest": float(np.asarray(states.hardest)[t]),
@@ -213,7 +217,7 @@ def export_policies(folder: Path, cfg: dict, config, ppo, env, start_policy, ban
                 "distances": [round(float(dist[k]), 3) for k in order],
                 "generators": [names[source[k]] if 0 <= source[k] < len(names) else str(int(source[k]))
                                for k in order],
-                "start_policy": str(getattr(start_policy, "path", "") or ""),
+                "start_policy": provenance.portable_path(str(getattr(start_policy, "path", "") or ""), folder),
             },
             "provenance": {"commit": provenance.git_commit(), "device": provenance.device(),
                            "date": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds")},

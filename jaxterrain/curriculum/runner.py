@@ -15,6 +15,7 @@ presets give every key.
 
 from __future__ import annotations
 
+import contextlib
 import functools
 import hashlib
 import json
@@ -34,7 +35,7 @@ from jaxterrain.curriculum.outputs import PARTIAL, export_policies, write_output
 from jaxterrain.curriculum.selectors import get_selector
 from jaxterrain.qd.archive_io import load as load_archive_file
 from jaxterrain.qd.bank import from_archive
-from jaxterrain.runtime import driver, sharding
+from jaxterrain.runtime import driver, estimates, sharding
 from jaxterrain.terrain import TerrainScale
 from jaxterrain.difficulty import policy_robot, robot_base_policy
 from jaxterrain.walker import robots, tiles
@@ -403,27 +404,32 @@ def setup(cfg: dict, config, arch, policy, env, mesh=None):
     bank, ppo, harness, start, keys, init_fn = inputs(cfg, config, arch, policy, env)
     fast = bool(cfg.get("fast_compile", False))
     sig = (config, ppo, env.config, int(cfg["trials"]), tuple(bank.heightmaps.shape), fast, mesh)
-    if sig not in PROGRAMS:
-        PROGRAMS[sig] = (compiled(init_fn, fast, keys, bank, start), make_block(config, harness), {})
-    init, block, blocks = PROGRAMS[sig]  # blocks: trial count -> the block compiled for it
-    states = init(keys, bank, start)
-    if mesh is not None:  # the trials split over the devices; inputs whole on the mesh (whence the init's)
-        block = sharding.map_rows(block, mesh, replicated=(1, 2))
-        bank, states = sharding.replicate((bank, states), mesh)
-        place = functools.partial(sharding.replicate, mesh=mesh)
-    else:
-        place = lambda tree: tree  # noqa: E731
+    fresh = sig not in PROGRAMS  # a treatment of the same shape as an earlier one reuses its programs
+    note = (estimates.compiling("curriculum-block", f"{int(cfg['trials'])} trials, {physics_of(cfg)} physics")
+            if fresh else contextlib.nullcontext())
+    with note:  # what compiles and about how long it takes here, then how long it took
+        if fresh:
+            PROGRAMS[sig] = (compiled(init_fn, fast, keys, bank, start),
+                             make_block(config, harness), {})
+        init, block, blocks = PROGRAMS[sig]  # blocks: trial count -> the block compiled for it
+        states = init(keys, bank, start)
+        if mesh is not None:  # the trials split over the devices; inputs whole on the mesh (whence the init's)
+            block = sharding.map_rows(block, mesh, replicated=(1, 2))
+            bank, states = sharding.replicate((bank, states), mesh)
+            place = functools.partial(sharding.replicate, mesh=mesh)
+        else:
+            place = lambda tree: tree  # noqa: E731
 
-    def program(rows: int):
-        if rows not in blocks:
-            like = jax.tree.map(lambda x: x[:rows], states)
-            blocks[rows] = compiled(block, fast, like, bank, jax.numpy.int32(1))
-        return blocks[rows]
+        def program(rows: int):
+            if rows not in blocks:
+                like = jax.tree.map(lambda x: x[:rows], states)
+                blocks[rows] = compiled(block, fast, like, bank, jax.numpy.int32(1))
+            return blocks[rows]
 
-    def rows_block(s, b, n):
-        return program(int(s.done.shape[0]))(*place((s, b)), jax.numpy.int32(n))
+        def rows_block(s, b, n):
+            return program(int(s.done.shape[0]))(*place((s, b)), jax.numpy.int32(n))
 
-    program(int(states.done.shape[0]))  # the block of every trial now: set-up includes its compile
+        program(int(states.done.shape[0]))  # the block of every trial now: set-up includes its compile
     compact = bool(cfg.get("compact", True))
     return bank, (functools.partial(run_live, rows_block) if compact else rows_block), states
 

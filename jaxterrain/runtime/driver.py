@@ -290,7 +290,7 @@ class _PlainProgress:
 def _bar(progress, total: int, start: int, desc: str, unit: str):
     if progress is not True:
         return None
-    if not sys.stderr.isatty():
+    if not sys.stderr.isatty() or os.environ.get("JAXTERRAIN_PROGRESS") == "plain":  # --no-progress
         return _PlainProgress(total, start, desc, unit)
     try:
         from tqdm.auto import tqdm
@@ -331,8 +331,9 @@ def run_chunks(chunk_fn: ChunkFn, state: Any, *, total: int, every: int, start: 
         honoured to within one step, not one chunk, from the first chunk on. ``chunk_fn``'s results must not
         depend on where the chunks are cut (the curriculum's blocks carry their env states).
       progress: True for a tqdm bar on stderr (plain lines, at most one per :data:`PLAIN_EVERY_S` seconds, where
-        stderr is not a terminal); a callable receives a dict per chunk (``done``, ``total``,
-        ``seconds``, ``steps_per_s`` and the latest value of every metric); False is silent.
+        stderr is not a terminal or ``$JAXTERRAIN_PROGRESS`` is ``plain``: a command's ``--no-progress``); a
+        callable receives a dict per chunk (``done``, ``total``, ``seconds``, ``steps_per_s`` and the latest value
+        of every metric); False is silent.
       meta: a JSON-serialisable dict stored in every checkpoint (e.g. the run's config).
       wall_s: seconds of wall time the run had taken before this call (a restored checkpoint's ``meta["wall_s"]``,
         plus any set-up of this call). Every checkpoint's meta gets ``"wall_s"``: that plus the seconds since this

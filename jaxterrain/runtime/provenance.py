@@ -8,7 +8,12 @@ facts; this module is the one place that finds them.
     provenance.device()                     # "1 x NVIDIA H100 80GB HBM3 (gpu)", "1 x cpu (cpu, 2 CPU cores)"
 
 A copy of the tree without its ``.git`` folder (e.g. on a GPU machine that receives the working tree only) names its
-commit through the environment variable ``JAXTERRAIN_COMMIT``, which wins over git.
+commit through the environment variable ``JAXTERRAIN_COMMIT``, which wins over git; an installed wheel (no checkout)
+names the package's version, ``jaxterrain 0.1.0 (installed package)``.
+
+Paths in the files a run writes carry no machine's layout (:func:`portable_path`): a file of the installed package
+is ``<jaxterrain>/assets/...``, anything else is relative to the run folder; :func:`resolve_recorded` reads both
+forms back, and the absolute paths of older files as they are.
 """
 
 from __future__ import annotations
@@ -17,11 +22,15 @@ import os
 import subprocess
 from pathlib import Path
 
-__all__ = ["COMMIT_ENV", "git_commit", "device"]
+__all__ = ["COMMIT_ENV", "PACKAGE_TOKEN", "git_commit", "package_version", "device", "portable_path",
+           "resolve_recorded", "file_sha256"]
 
 COMMIT_ENV = "JAXTERRAIN_COMMIT"
 DIRTY_NOTE = " (working tree has uncommitted changes)"
 _ROOT = Path(__file__).resolve().parents[2]  # the checkout that holds the package (editable installs)
+_PACKAGE = Path(__file__).resolve().parents[1]  # the jaxterrain package folder
+PACKAGE_TOKEN = "<jaxterrain>"
+"""How a recorded path names the installed package's folder, wherever it is installed."""
 
 
 def _git(*argv: str) -> subprocess.CompletedProcess:
@@ -34,17 +43,20 @@ def git_commit(short: bool = False, mark_dirty: bool = True) -> str:
     ``$JAXTERRAIN_COMMIT`` when set (returned as it is), else ``git rev-parse HEAD`` of the checkout that holds this
     package (not of the current folder), abbreviated with ``short``; with ``mark_dirty``, followed by
     ``" (working tree has uncommitted changes)"`` when ``git status --porcelain`` lists any change. Never raises:
-    ``"unknown (not a git checkout)"`` when git finds no commit, ``"unknown (git not available)"`` when git cannot
-    run.
+    ``"jaxterrain 0.1.0 (installed package, no git checkout)"`` (:func:`package_version`) where the package does not
+    sit in a checkout (a wheel), ``"unknown (not a git checkout; jaxterrain 0.1.0)"`` when git finds no commit,
+    ``"unknown (git not available)"`` when git cannot run.
     """
     given = os.environ.get(COMMIT_ENV, "").strip()
     if given:
         return given
+    if not (_ROOT / ".git").exists():  # an installed wheel, or a tree copied without .git
+        return f"jaxterrain {package_version()} (installed package, no git checkout)"
     try:
         head = _git("rev-parse", *(["--short"] if short else []), "HEAD")
         commit = head.stdout.strip()
         if head.returncode != 0 or not commit:
-            return "unknown (not a git checkout)"
+            return f"unknown (not a git checkout; jaxterrain {package_version()})"
         if mark_dirty and _git("status", "--porcelain").stdout.strip():
             commit += DIRTY_NOTE
         return commit
@@ -61,3 +73,56 @@ def device() -> str:
     kind = getattr(d, "device_kind", d.platform)
     cores = f", {os.cpu_count()} CPU cores" if d.platform == "cpu" else ""
     return f"{jax.device_count()} x {kind} ({d.platform}{cores})"
+
+
+def package_version() -> str:
+    """The installed jaxterrain's version (its distribution's metadata; else ``jaxterrain.__version__``)."""
+    from importlib import metadata
+
+    try:
+        return metadata.version("jaxterrain")
+    except metadata.PackageNotFoundError:
+        from jaxterrain import __version__
+
+        return __version__
+
+
+def portable_path(path: str | os.PathLike, base: str | os.PathLike) -> str:
+    """``path`` as a run's files record it: a file of the installed package as ``<jaxterrain>/...`` (e.g.
+    ``<jaxterrain>/assets/archives/cppn_headings.npz``), anything else relative to ``base`` (the run folder), in
+    ``/`` form; ``""`` stays ``""``. No machine's absolute path is written (where no relative path exists, another
+    drive on Windows, the path as given)."""
+    if str(path) == "":
+        return ""
+    target = Path(os.path.abspath(path))
+    if target == _PACKAGE or _PACKAGE in target.parents:
+        return f"{PACKAGE_TOKEN}/{target.relative_to(_PACKAGE).as_posix()}".rstrip("/.")
+    try:
+        return Path(os.path.relpath(target, os.path.abspath(base))).as_posix()
+    except ValueError:
+        return str(path)
+
+
+def resolve_recorded(path: str, base: str | os.PathLike) -> str:
+    """The inverse of :func:`portable_path`: ``<jaxterrain>/...`` under this machine's package, a relative path
+    against ``base`` (the run folder that recorded it), an absolute path (older files) as it is."""
+    text = str(path)
+    if text == "" or os.path.isabs(text):
+        return text
+    if text == PACKAGE_TOKEN or text.startswith(PACKAGE_TOKEN + "/"):
+        return str(_PACKAGE / text[len(PACKAGE_TOKEN) + 1:])
+    return os.path.normpath(os.path.join(os.path.abspath(base), text))
+
+
+def file_sha256(path: str | os.PathLike) -> str | None:
+    """sha256 (hex) of a file's bytes; None where it cannot be read."""
+    import hashlib
+
+    h = hashlib.sha256()
+    try:
+        with open(path, "rb") as f:
+            for block in iter(lambda: f.read(1 << 20), b""):
+                h.update(block)
+    except OSError:
+        return None
+    return h.hexdigest()

@@ -19,6 +19,7 @@ from jaxterrain.qd import TerrainBank, cell_distance
 from jaxterrain import curriculum as C
 from jaxterrain.curriculum import gp
 from jaxterrain.curriculum import outputs, runner
+from experiments import common
 
 
 # ---------------------------------------------------------------------------------------------------------------
@@ -829,12 +830,15 @@ def test_learn_writes_every_trials_walker_as_a_loadable_policy(tmp_path, learn_s
     ``config.json`` keeps the base policy's walker config (its solver) and records the trial's curriculum (epochs,
     env steps, the terrains in the order ``sequences.csv`` lists them). ``--resume RUN --export-policies`` writes the
     same weights from the checkpoint."""
+    import hashlib
+    import os
     import shutil
+    from pathlib import Path
 
     from jaxterrain import rl
 
     _, out = learn_smoke
-    cfg = json.loads((out / "config.json").read_text())
+    cfg = common.load_config(out)  # its paths as this machine reads them
     states = runner.restored(cfg, out)[5]
     base = rl.load_policy()
     seq = [r.split(",") for r in (out / "sequences.csv").read_text().splitlines()[1:]]
@@ -852,6 +856,12 @@ def test_learn_writes_every_trials_walker_as_a_loadable_policy(tmp_path, learn_s
         assert c["env_steps"] == c["epochs"] * cfg["steps_per_epoch"] and c["epochs"] > 0
         assert c["terrains"] == [int(r[2]) for r in seq if int(r[0]) == t]
         assert c["hardest"] == pytest.approx(float(np.asarray(states.hardest)[t]))
+        # no machine's absolute path: the archive relative to the run folder, the shipped base policy by package
+        assert c["start_policy"] == "<jaxterrain>/assets/base_policy"
+        assert c["archive"] == os.path.relpath(cfg["archive"], out) and not os.path.isabs(c["archive"])
+        assert c["archive_file_sha256"] == hashlib.sha256(Path(cfg["archive"]).read_bytes()).hexdigest()
+    saved = json.loads((out / "config.json").read_text())
+    assert saved["archive"] == os.path.relpath(cfg["archive"], out) and str(out.parent) not in json.dumps(saved)
     copy = tmp_path / "copy"
     shutil.copytree(out, copy)
     shutil.rmtree(copy / "policies")
@@ -882,7 +892,7 @@ def test_learn_killed_by_its_time_limit_resumes_to_the_uninterrupted_curves(tmp_
     meta = driver.read_meta(parts)
     assert meta["archive_sha256"] == digest != runner.archive_digest(A.load(tiny_archive(3, "3.npz")))
     assert meta["backend"] == "jax"  # auto, resolved on this CPU machine; a resume must run on the same physics
-    cfg = json.loads((parts / "config.json").read_text())
+    cfg = common.load_config(parts)
     runner.check_resumable(parts, cfg, A.load(archive))
     with monkeypatch.context() as m:  # as if checkpointed on a GPU with MuJoCo Warp: auto must not switch to MJX
         m.setattr(driver, "read_meta", lambda folder: {**meta, "backend": "warp"})

@@ -51,3 +51,53 @@ def test_the_cli_reference_has_every_commands_help():
     for name in COMMANDS:
         assert f"## {name}\n" in page and f"usage: python -m experiments {name}" in page
     assert "--baseline" in page and "--reps" in page
+
+
+def _cli_page() -> str:
+    spec = importlib.util.spec_from_file_location("cli_hook", ROOT / "docs" / "hooks" / "cli.py")
+    hook = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(hook)
+    return hook, hook.on_page_markdown((ROOT / "docs" / "cli.md").read_text(), None, None, None)
+
+
+def test_the_command_line_page_is_generated_from_the_parsers_and_agrees_with_help():
+    """docs/cli.md as the site builds it: every marker replaced, every command's --help and --preset help in it
+    verbatim, no hidden (deprecated) spelling and no ==SUPPRESS==, and the hand-written stale copies gone."""
+    import argparse
+    import os
+
+    hook, page = _cli_page()
+    config = yaml.safe_load((ROOT / "mkdocs.yml").read_text())
+    assert "docs/hooks/cli.py" in config["hooks"]
+    assert not any(m in page for m in hook.MARKERS)
+    os.environ["COLUMNS"] = "110"
+    from experiments.__main__ import build_parser
+
+    _, commands = build_parser()
+    for name, (_, parser) in commands.items():
+        assert parser.format_help().rstrip() in page, name
+        preset = next((a for a in parser._actions if a.dest == "preset"), None)
+        row = next(line for line in page.splitlines() if line.startswith(f"| `{name}` |"))
+        if preset is not None:
+            assert " ".join(preset.help.split()).replace("|", "\\|") in row, name
+            for choice in preset.choices:
+                assert f"{choice}: " in row or "same settings" in row, (name, choice)
+        section = page.split(f"\n## {name}\n")[1].split("\n## ")[0]
+        for action in parser._actions:
+            if action.help == argparse.SUPPRESS:
+                for option in action.option_strings:
+                    assert not re.search(re.escape(option) + r"(?![-\w])", section), (name, option)
+    for stale in ("==SUPPRESS==", "map\\|roughness", "about a minute", "`evolve` and `coverage` also have"):
+        assert stale not in page, stale
+    assert "| `default` |" not in page.split("<!--")[0]  # gradient's presets: in its own row, not as a preset
+    for preset in ("smoke", "gpu-short", "gpu", "paper"):
+        assert f"| `{preset}` |" in page
+
+
+def test_test_counts_live_in_the_readme_only():
+    """The README's test line is the one place with the suite's count and time; no docs page repeats a copy."""
+    readme = (ROOT / "README.md").read_text()
+    assert re.search(r"\d+ passed, \d+ skipped in \d+ min", readme)
+    for page in (ROOT / "docs").rglob("*.md"):
+        if "results" not in page.parts:
+            assert not re.search(r"\d+ passed, \d+ skipped", page.read_text()), page

@@ -108,7 +108,7 @@ def test_features_smoke(tmp_path):
 
 
 def test_features_time_limit_stops_between_batches_and_resumes_to_the_same_values(tmp_path, capsys):
-    args = ["features", "--preset", "smoke", "--generators", "perlin", "--samples", "12", "--mutation-steps", "1",
+    args = ["features", "--preset", "smoke", "--generators", "perlin", "--terrains", "12", "--mutation-steps", "1",
             "--windows", "5"]
     assert cli(*args, "--out", str(tmp_path / "whole")) == 0
     out = tmp_path / "cut"

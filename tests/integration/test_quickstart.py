@@ -10,7 +10,7 @@ from experiments.__main__ import main
 
 def test_quickstart_writes_figures_and_tables(tmp_path):
     out = tmp_path / "run"
-    assert main(["quickstart", "--n", "4", "--size", "64", "--out", str(out), "--walk", "2", "--attempts", "2",
+    assert main(["quickstart", "--terrains", "4", "--size", "64", "--out", str(out), "--walk", "2", "--attempts", "2",
                  "--best", "1", "--generators", "perlin", "diamond_square", "worley", "--report-frames", "0"]) == 0
     for name in ("terrains.png", "descriptors.png", "difficulty.png", "descriptors.csv", "summary.md", "config.json"):
         assert (out / name).stat().st_size > 0, name

@@ -59,3 +59,33 @@ def test_quickstart_and_learn_run_from_an_empty_folder(installed, tmp_path):
         assert done.returncode == 0, done.stderr[-3000:]
     assert (tmp_path / "l" / "policies" / "trial_0" / "policy.msgpack").is_file()
     assert any((tmp_path / "q").rglob("*.png"))
+
+
+def test_the_wheel_has_the_jaxterrain_console_script_and_names_its_version(installed, tmp_path):
+    """``jaxterrain <command>`` beside ``python -m experiments``; a run from the wheel records the package's version
+    (no git checkout to ask)."""
+    site, env = installed
+    env = {k: v for k, v in env.items() if k != "JAXTERRAIN_COMMIT"}
+    script = site / "bin" / "jaxterrain"
+    assert script.is_file()
+    helped = subprocess.run([str(script), "learn", "--help"], cwd=tmp_path, env=env, capture_output=True, text=True,
+                            timeout=300)
+    assert helped.returncode == 0, helped.stderr[-2000:]
+    assert helped.stdout.startswith("usage: jaxterrain learn") and "--update-normaliser" in helped.stdout
+    probe = run(env, tmp_path, "-c", "from jaxterrain.runtime import provenance; print(provenance.git_commit())")
+    assert probe.stdout.strip() == "jaxterrain 0.1.0 (installed package, no git checkout)", probe.stderr[-2000:]
+
+
+def test_the_console_script_is_declared_and_runs_help(capsys):
+    """Without building a wheel: pyproject's [project.scripts] names experiments.__main__:console, which runs."""
+    import tomllib
+
+    from experiments import __main__ as cli
+
+    scripts = tomllib.loads((ROOT / "pyproject.toml").read_text())["project"]["scripts"]
+    assert scripts == {"jaxterrain": "experiments.__main__:console"}
+    with pytest.MonkeyPatch.context() as m:
+        m.setattr(sys, "argv", ["jaxterrain", "evaluate", "--help"])
+        with pytest.raises(SystemExit) as exc:
+            cli.console()
+    assert exc.value.code == 0 and capsys.readouterr().out.startswith("usage: jaxterrain evaluate")

@@ -32,13 +32,39 @@ def test_git_commit_of_the_package_checkout(monkeypatch, tmp_path):
 
 
 def test_git_commit_outside_a_checkout_and_without_git(monkeypatch, tmp_path):
+    """A package that sits in no checkout (an installed wheel) names its version; a broken checkout and a machine
+    without git say so."""
     monkeypatch.delenv(provenance.COMMIT_ENV, raising=False)
     monkeypatch.setattr(provenance, "_ROOT", tmp_path)
+    version = provenance.package_version()
+    assert re.fullmatch(r"\d+\.\d+\.\d+\S*", version)
+    assert provenance.git_commit() == f"jaxterrain {version} (installed package, no git checkout)"
+    (tmp_path / ".git").mkdir()  # a folder that looks like a checkout but is none
     if shutil.which("git") is not None:
         monkeypatch.setenv("GIT_CEILING_DIRECTORIES", str(tmp_path.parent))
-        assert provenance.git_commit() == "unknown (not a git checkout)"
+        assert provenance.git_commit() == f"unknown (not a git checkout; jaxterrain {version})"
     monkeypatch.setenv("PATH", str(tmp_path / "no-bin"))
     assert provenance.git_commit() == "unknown (git not available)"
+
+
+def test_recorded_paths_carry_no_machines_layout_and_read_back(tmp_path):
+    """What a run's files record: the package's files as <jaxterrain>/..., anything else relative to the run folder;
+    both read back to the same file, and an old file's absolute path reads as it is."""
+    from experiments.common import shipped
+
+    run = tmp_path / "runs" / "learn-1"
+    asset = shipped("archives/cppn_headings.npz")
+    assert provenance.portable_path(asset, run) == "<jaxterrain>/assets/archives/cppn_headings.npz"
+    assert provenance.resolve_recorded("<jaxterrain>/assets/archives/cppn_headings.npz", run) == asset
+    mine = tmp_path / "archives" / "a.npz"
+    assert provenance.portable_path(mine, run) == "../../archives/a.npz"
+    assert provenance.resolve_recorded("../../archives/a.npz", run) == str(mine)
+    assert provenance.resolve_recorded("/root/exp3/combined_archive.npz", run) == "/root/exp3/combined_archive.npz"
+    assert provenance.portable_path("", run) == "" and provenance.resolve_recorded("", run) == ""
+    mine.parent.mkdir(parents=True)
+    mine.write_bytes(b"abc")
+    assert provenance.file_sha256(mine) == "ba7816bf8f01cfea414140de5dae2223b00361a396177a9cb410ff61f20015ad"
+    assert provenance.file_sha256(tmp_path / "missing") is None
 
 
 def test_device_names_count_kind_and_platform():
@@ -48,3 +74,28 @@ def test_device_names_count_kind_and_platform():
     d = jax.devices()[0]
     assert text.startswith(f"{jax.device_count()} x ") and f"({d.platform}" in text
     assert ("CPU cores" in text) == (d.platform == "cpu")
+
+
+def test_a_run_config_records_no_absolute_path_and_reads_back(tmp_path):
+    """``config.json`` written from now on holds its paths relative to the run folder (or <jaxterrain>/...); read
+    back, they name the same files; an older config's absolute paths read as they are."""
+    import json
+
+    from experiments import common
+
+    run = tmp_path / "runs" / "learn-1"
+    run.mkdir(parents=True)
+    asset = common.shipped("archives/cppn_headings.npz")
+    mine = str(tmp_path / "mine" / "a.npz")
+    config = {"archive": asset, "policy": str(tmp_path / "p"), "archives": {"cppn": mine}, "curriculum": "map",
+              "data": None, "out": str(run)}
+    common.write_config(run, config)
+    text = (run / "config.json").read_text()
+    assert str(tmp_path) not in text and "/work/" not in text
+    saved = json.loads(text)
+    assert saved["archive"] == "<jaxterrain>/assets/archives/cppn_headings.npz" and saved["out"] == "."
+    assert saved["archives"] == {"cppn": "../../mine/a.npz"} and saved["policy"] == "../../p"
+    assert common.load_config(run) == config  # the same values as written, on this machine
+    old = {"archive": "/root/exp3/combined_archive.npz", "policy": "runs/x/policies/trial_0"}
+    (run / "config.json").write_text(json.dumps(old))
+    assert common.load_config(run) == old  # an older file: as it is
