@@ -227,7 +227,7 @@ def misfit(name: str, size: int, scale: TerrainScale = TerrainScale()) -> str | 
     """Why family ``name`` does not fit a ``size`` x ``size`` map at ``scale`` (its ``extent`` is more than the map's
     :func:`room`), in one line; None when it fits."""
     fam, have = FAMILIES[name], room(size, scale)
-    if have + 1e-9 >= fam.extent:
+    if fam.extent <= 0 or have + 1e-9 >= fam.extent:  # a family that needs no room (flat) fits any map
         return None
     cell = float(validate_scale(scale).cell_size)
     return (f"needs {fam.extent:.2f} m inside the start strip for {fam.holds}; {size} pixels of {cell:g} m have "
