@@ -8,6 +8,7 @@ import argparse
 import json
 import re
 import warnings
+from pathlib import Path
 
 import jax
 import jax.numpy as jnp
@@ -507,24 +508,25 @@ CPPN = "docs/results/exp1b_gpu_sound_cppn_archive.npz"
 @pytest.fixture(scope="module")
 def tiny_archive(tmp_path_factory):
     """The CPPN archive cut to its first ``k`` filled cells, with stored heightmaps (gentle bumps: no rendering)."""
+    folder = tmp_path_factory.mktemp("arch")
+    return lambda k, name, **config: tiny_archive_file(folder, k, name, **config)
+
+
+def tiny_archive_file(folder, k: int, name: str, **config) -> str:
+    """:func:`tiny_archive`'s file ``folder/name``: the CPPN archive's first ``k`` filled cells, gentle bumps."""
     from jaxterrain import qd as A
 
     arch = A.load(CPPN)
-    folder = tmp_path_factory.mktemp("arch")
-
-    def make(k: int, name: str, **config):
-        filled = np.flatnonzero(arch.filled)
-        keep = np.zeros_like(arch.filled)
-        keep[filled[:k]] = True
-        x = np.linspace(0, 4 * np.pi, 256, dtype=np.float32)
-        bumps = (0.02 * (1 + np.sin(x)[None, :] * np.cos(x)[:, None]) * 65535).astype(np.uint16)
-        maps = np.where(keep[:, None, None], bumps[None], np.uint16(0))
-        tiny = arch._replace(source=np.where(keep, arch.source, -1).astype(np.int32),
-                             fitness=np.where(keep, arch.fitness, -np.inf).astype(np.float32), heightmaps=maps,
-                             config=arch.config._replace(**config))
-        return str(A.save(folder / name, tiny))
-
-    return make
+    filled = np.flatnonzero(arch.filled)
+    keep = np.zeros_like(arch.filled)
+    keep[filled[:k]] = True
+    x = np.linspace(0, 4 * np.pi, 256, dtype=np.float32)
+    bumps = (0.02 * (1 + np.sin(x)[None, :] * np.cos(x)[:, None]) * 65535).astype(np.uint16)
+    maps = np.where(keep[:, None, None], bumps[None], np.uint16(0))
+    tiny = arch._replace(source=np.where(keep, arch.source, -1).astype(np.int32),
+                         fitness=np.where(keep, arch.fitness, -np.inf).astype(np.float32), heightmaps=maps,
+                         config=arch.config._replace(**config))
+    return str(A.save(Path(folder) / name, tiny))
 
 
 def cli(*argv):

@@ -7,6 +7,8 @@ from __future__ import annotations
 import textwrap
 from pathlib import Path
 
+import pytest
+
 from devices import run_on_devices
 
 TESTS = str(Path(__file__).resolve().parents[1] / "curriculum")  # the unit tests whose fixtures the script reuses
@@ -50,3 +52,35 @@ SCRIPT = textwrap.dedent("""
 
 def test_sharded_trials_equal_the_one_device_runner():
     assert run_on_devices(SCRIPT).strip().endswith("ok")
+
+
+LEARN_SCRIPT = textwrap.dedent("""
+    import contextlib, io, json, sys
+    from pathlib import Path
+    sys.path.insert(0, TESTS)
+    import jax
+    from experiments.__main__ import main
+    from test_curriculum import tiny_archive_file
+
+    assert len(jax.devices()) == 2
+    root = Path(ROOT)
+    archive = tiny_archive_file(root, 4, "four.npz")
+    run = lambda *a: main(["learn", "--preset", "smoke", "--archive", archive, "--devices", "2", *a])
+    with contextlib.redirect_stderr(io.StringIO()):
+        assert run("--out", str(root / "whole")) == 0
+        assert run("--out", str(root / "parts"), "--time-limit", "1e-6") == 3  # one chunk: inside the first block
+        assert main(["learn", "--resume", str(root / "parts")]) == 0
+    for name in ("history.csv", "sequences.csv", "milestones.csv"):
+        assert (root / "parts" / name).read_text() == (root / "whole" / name).read_text(), name
+    print("ok")
+""")
+
+
+@pytest.mark.slow
+def test_sharded_learn_stopped_inside_a_block_resumes_to_the_uninterrupted_run(tmp_path):
+    """``learn --devices 2`` (the trials split over 2 forced CPU devices): stopped by ``--time-limit`` after its first
+    chunk, inside the uninterrupted run's first block (the env states of both devices' trials ride in the
+    checkpoint), and resumed, it writes the uninterrupted sharded run's history, sequences and milestones exactly.
+    Minutes of CPU (one more smoke program)."""
+    script = f"TESTS = {TESTS!r}\nROOT = {str(tmp_path)!r}\n" + LEARN_SCRIPT
+    assert run_on_devices(script, devices=2, timeout=1500).strip().endswith("ok")
