@@ -23,6 +23,9 @@ import sys
 import time
 from typing import Iterator, NamedTuple, Optional
 
+__all__ = ["Estimate", "PROGRAMS", "CPU_NOTE", "ESTIMATES", "SMOKE_MINUTES", "platform_of", "first_call_note",
+           "announce", "compiling"]
+
 
 class Estimate(NamedTuple):
     """The first call of a program on one platform: ``low_s`` to ``high_s`` seconds; ``source`` says how it is

@@ -76,15 +76,14 @@ def device() -> str:
 
 
 def package_version() -> str:
-    """The installed jaxterrain's version (its distribution's metadata; else ``jaxterrain.__version__``)."""
+    """The installed jaxterrain's version (its distribution's metadata), or ``"unknown"`` where the package runs
+    from a source tree that was never installed (then the git commit names it)."""
     from importlib import metadata
 
     try:
         return metadata.version("jaxterrain")
     except metadata.PackageNotFoundError:
-        from jaxterrain import __version__
-
-        return __version__
+        return "unknown"
 
 
 def portable_path(path: str | os.PathLike, base: str | os.PathLike) -> str:
