@@ -134,6 +134,18 @@ def test_features_smoke(tmp_path):
     assert (out / "correlations.png").exists() and (out / "correlation_perlin.png").exists()
 
 
+def test_features_takes_extra_descriptors_from_the_command_line(capsys):
+    """``--extra-descriptors`` (e.g. the vertical-face descriptors for their Figure 4 alignment) lands in the config;
+    an unknown name is refused in one line."""
+    capsys.readouterr()
+    with pytest.raises(SystemExit, match="0"):
+        cli("features", "--extra-descriptors", "faces", "max_step", "--print-config")
+    assert json.loads(capsys.readouterr().out)["extra_descriptors"] == ["faces", "max_step"]
+    with pytest.raises(SystemExit):
+        cli("features", "--extra-descriptors", "bogus", "--print-config")
+    assert "unknown descriptor 'bogus'" in capsys.readouterr().err
+
+
 def test_features_time_limit_stops_between_batches_and_resumes_to_the_same_values(tmp_path, capsys):
     args = ["features", "--preset", "smoke", "--generators", "perlin", "--terrains", "12", "--mutation-steps", "1",
             "--windows", "5"]
