@@ -97,7 +97,6 @@ import jax
 import jax.numpy as jnp
 
 from jaxterrain.generators.base import Generator, spec, vector_generator
-from jaxterrain.generators.perlin import _mix32
 from jaxterrain.generators.registry import register
 
 __all__ = ["STEPS_SPEC", "PRIMITIVES", "BASE", "ROOM", "START_STRIP", "NOISE_CELL", "strip_cells", "section_bounds",
@@ -149,6 +148,15 @@ _EPS = 1e-4  # slack for floor() of ratios that are whole numbers in exact arith
 def strip_cells(size: int, cell_size: float = 0.04) -> int:
     """Pixels of the flat strip along each edge: ``round(START_STRIP / cell_size)``, at most ``size // 8``."""
     return int(min(round(START_STRIP / cell_size), size // 8))
+
+
+def _mix32(x: jax.Array) -> jax.Array:
+    """``lowbias32`` integer finaliser (C. Wellons), as in :mod:`~jaxterrain.generators.perlin`; uint32 -> uint32."""
+    x = x ^ (x >> 16)
+    x = x * jnp.uint32(0x7FEB352D)
+    x = x ^ (x >> 15)
+    x = x * jnp.uint32(0x846CA68B)
+    return x ^ (x >> 16)
 
 
 def _uniform(ix: jax.Array, iy: jax.Array, salt: jax.Array) -> jax.Array:
