@@ -190,7 +190,7 @@ def render_steps(genome: jax.Array, size: int = 256, cell_size: float = 0.04, he
 
     seed = jnp.round(gene("seed")).astype(jnp.int32)
     key = jax.random.PRNGKey(seed)
-    salts = jax.random.bits(jax.random.fold_in(key, 1), (4,), jnp.uint32)
+    salts = jax.random.bits(jax.random.fold_in(key, 1), (3,), jnp.uint32)  # box presence, box height, noise
     phases = jax.random.uniform(jax.random.fold_in(key, 2), (3,), jnp.float32)
     # The relief budget (module docstring): noise takes 2 a, the pits / stone gaps and a well their depth, what is
     # left (up) the ridge, the ramp and the boxes.
@@ -217,8 +217,8 @@ def render_steps(genome: jax.Array, size: int = 256, cell_size: float = 0.04, he
         v = u - starts[k]
         return v, (v >= 0.0) & (v < lengths[k])
 
-    # Stairs: a flight up (down) of n risers, a landing, the flight back.
-    # Stairs and ramp rise from the four sides of their section's rectangle (d: metres to its nearest side).
+    # Stairs: flights of n risers up (a well: down) to a landing, rising from the four sides of the section's
+    # rectangle (d: metres to its nearest side); the ramp likewise.
     d_y = jnp.minimum(y, span_y - y)[:, None]  # [H, 1]
     v, inside = local(0)
     n = jnp.where(well, n_well, jnp.minimum(jnp.round(gene("steps")), jnp.floor(up / riser + _EPS)))
