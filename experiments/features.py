@@ -59,6 +59,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--fitness", choices=common.FITNESS_NAMES, default=None,
                         help="what the features are correlated with: difficulty (the base policy walks each "
                              "terrain) or slope (a cheap stand-in, no walking)")
+    parser.add_argument("--extra-descriptors", nargs="+", default=None, metavar="NAME",
+                        help="registered descriptors measured besides TRI / TPI / roughness, at the first of --windows "
+                             "(e.g. faces max_step traversability)")
     parser.add_argument("--calibrate", action=argparse.BooleanOptionalAction, default=None,
                         help="also measure descriptor ranges (see jaxterrain.qd.DEFAULT_RANGES)")
     common.add_progress_argument(parser)
@@ -66,7 +69,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def overrides(args) -> dict:
     return dict(generators=args.generators, samples=args.samples, mutation_steps=args.mutation_steps,
-                size=args.size, windows=args.windows, fitness=args.fitness, calibrate=args.calibrate)
+                size=args.size, windows=args.windows, fitness=args.fitness, extra_descriptors=args.extra_descriptors,
+                calibrate=args.calibrate)
 
 
 def terrain_set(gen, key, samples: int, steps: int):

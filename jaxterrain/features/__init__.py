@@ -1,7 +1,7 @@
 """Terrain features (paper section 3.2) and the traversability check (paper Algorithm 1).
 
 - :mod:`~jaxterrain.features.kernels`: TRI, TPI and roughness maps over windows with a stride, equal to GDAL's
-  ``gdaldem`` at window 3, and their means;
+  ``gdaldem`` at window 3, the vertical-face maps ``faces`` and ``max_step``, and their means;
 - :mod:`~jaxterrain.features.registry`: descriptor names -> functions, :func:`descriptors` (``[B, D]``);
 - :mod:`~jaxterrain.features.algorithm1`: :func:`is_traversable`, the paper's Algorithm 1.
 
@@ -12,11 +12,15 @@ it as the descriptor ``"traversability"``.
 
 from jaxterrain.features.algorithm1 import HUMANOID_HEIGHT, is_traversable, max_window_range
 from jaxterrain.features.kernels import (
+    FACE_THRESHOLD,
     HEIGHT_RANGE,
     check_heights,
+    faces,
+    max_step,
     output_shape,
     reference_maps,
     roughness,
+    step_heights,
     tpi,
     tri,
     window_centre,
@@ -30,12 +34,16 @@ from jaxterrain.features.registry import (
 )
 
 __all__ = [
+    "FACE_THRESHOLD",
     "HEIGHT_RANGE",
     "HUMANOID_HEIGHT",
     "check_heights",
     "tri",
     "tpi",
     "roughness",
+    "step_heights",
+    "faces",
+    "max_step",
     "Descriptor",
     "descriptors",
     "register_descriptor",

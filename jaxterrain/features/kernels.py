@@ -7,6 +7,8 @@ batches ``[B, H, W]`` (a single ``[H, W]`` map is accepted and gives an unbatche
     tri(h, ..., algorithm="riley")    # Riley:  sqrt(sum_{i != centre} (w_i - z)^2)
     tpi(h, window=3, stride=1)        # z - mean_{i != centre} w_i
     roughness(h, window=3, stride=1)  # max(w) - min(w), centre included
+    faces(h, window=3, stride=1)      # share of w's pixels whose largest step to a 4-neighbour > FACE_THRESHOLD
+    max_step(h, window=3, stride=1)   # the largest step to a 4-neighbour of any pixel of w
 
 -> ``[B, H', W']`` float32 with ``H' = (H - window) // stride + 1`` (likewise ``W'``). ``z`` is the window's centre
 pixel, which we define as pixel ``(window // 2, window // 2)`` of the window (row, column from its top-left
@@ -43,6 +45,14 @@ How it is computed (the fast path is exact; only float32 summation order differs
   ``tpi_signed``: a fixed weighted sum of the heightmap (each pixel weighted by how many windows contain it), one
   multiply-add per pixel.
 - Roughness: separable ``lax.reduce_window`` max of z and of -z (rows, then columns).
+- Vertical faces (issue 64): :func:`step_heights` is each pixel's largest absolute height difference to its (up to
+  four) 4-neighbours in the map (neighbours outside the window count; a map's border pixels have fewer), one
+  elementwise pass. ``faces`` is the share of a window's pixels whose step exceeds :data:`FACE_THRESHOLD` (a
+  separable reduce_window sum of the 0 / 1 map over ``k * k``), ``max_step`` the window's largest step (a separable
+  reduce_window max). A riser of ``r`` heightmap units marks the pixels on both sides of it (2 per row it crosses)
+  with step ``r``; a ramp rising ``g`` per pixel marks none (``g`` <= the threshold) and has ``max_step = g``. Their
+  descriptors are the means over the windows, as for the others: ``faces`` is about the density of face pixels
+  (weighted as the windows cover them), ``max_step`` the typical tallest face within one window (~1.2 m at k = 30).
 
 :func:`reference_maps` is a plain NumPy implementation over explicit windows, kept as ground truth for tests and as
 the CPU baseline of the benchmark.
@@ -69,6 +79,10 @@ __all__ = [
     "tpi",
     "roughness",
     "roughness_core",
+    "FACE_THRESHOLD",
+    "step_heights",
+    "faces",
+    "max_step",
     "builtin_descriptors",
     "chunked_builtin_descriptors",
     "reference_maps",
@@ -285,6 +299,32 @@ def roughness_core(h, window, stride):
     return hi - lo
 
 
+FACE_THRESHOLD = 0.05
+"""Heightmap units (0.05 m at the default ``TerrainScale``; a grade of 1.25 at 4 cm pixels): a pixel whose largest
+step to a 4-neighbour exceeds this is part of a vertical face for ``faces``. Above the suite's steepest slope (grade
+0.5: 0.02 per pixel) and the ``steps`` generator's noise (at most 0.036 per pixel); the suite's stairs count from
+level 2 (0.07 m risers) up, and so do the 8 cm risers of issue 64's check."""
+
+
+def _step_core(h):
+    """``[B, H, W]`` -> ``[B, H, W]``: each pixel's largest |height difference| to its 4-neighbours in the map."""
+    dx = jnp.abs(h[:, :, 1:] - h[:, :, :-1])  # [B, H, W-1]: between columns j and j + 1
+    dy = jnp.abs(h[:, 1:, :] - h[:, :-1, :])  # [B, H-1, W]
+    px = ((0, 0), (0, 0), (1, 0)), ((0, 0), (0, 0), (0, 1))
+    py = ((0, 0), (1, 0), (0, 0)), ((0, 0), (0, 1), (0, 0))
+    return jnp.maximum(jnp.maximum(jnp.pad(dx, px[0]), jnp.pad(dx, px[1])),
+                       jnp.maximum(jnp.pad(dy, py[0]), jnp.pad(dy, py[1])))
+
+
+def _faces_core(h, window, stride, threshold: float = FACE_THRESHOLD):
+    face = (_step_core(h) > threshold).astype(jnp.float32)
+    return _box(face, window, stride, 0.0, lax.add) / float(window * window)
+
+
+def _max_step_core(h, window, stride):
+    return _box(_step_core(h), window, stride, -jnp.inf, lax.max)
+
+
 def _check_algorithm(algorithm: str) -> str:
     a = str(algorithm).lower()
     if a not in (_WILSON, _RILEY):
@@ -325,6 +365,33 @@ def roughness(heightmaps, window: int = 3, stride: int = 1) -> jax.Array:
     return _per_pixel(roughness_core, heightmaps, window, stride)
 
 
+def step_heights(heightmaps) -> jax.Array:
+    """Each pixel's largest absolute height difference to its 4-neighbours (up, down, left, right; those in the map).
+
+    ``[B, H, W]`` (or ``[H, W]``) -> the same shape, float32, in the heightmap's units (metres: times
+    ``TerrainScale.height``). A step of ``r`` between columns ``j`` and ``j + 1`` gives ``r`` at both."""
+    h, single = as_batch(heightmaps)
+    out = _step_core(h)
+    return out[0] if single else out
+
+
+def faces(heightmaps, window: int = 3, stride: int = 1, threshold: float = FACE_THRESHOLD) -> jax.Array:
+    """Vertical-face density map: the share of each window's pixels whose :func:`step_heights` exceeds
+    ``threshold`` (heightmap units, default :data:`FACE_THRESHOLD`).
+
+    ``[B, H, W]`` (or ``[H, W]``) -> ``[B, H', W']`` float32 in [0, 1]; window / stride as in :func:`tri`.
+    """
+    return _per_pixel(functools.partial(_faces_core, threshold=float(threshold)), heightmaps, window, stride)
+
+
+def max_step(heightmaps, window: int = 3, stride: int = 1) -> jax.Array:
+    """Largest-step map: the largest :func:`step_heights` over each window's pixels (heightmap units).
+
+    ``[B, H, W]`` (or ``[H, W]``) -> ``[B, H', W']`` float32; window / stride as in :func:`tri`.
+    """
+    return _per_pixel(_max_step_core, heightmaps, window, stride)
+
+
 def _per_pixel(core, heightmaps, window: int, stride: int) -> jax.Array:
     """``core(h [B, H, W], window, stride)`` on checked heightmaps and window / stride; one map in, one map out."""
     h, single = as_batch(heightmaps)
@@ -361,7 +428,7 @@ def _tpi_weights(shape, window: int, stride: int) -> np.ndarray:
     return ((centre * (n + 1) - covered) / (n * count)).astype(np.float32)
 
 
-BUILTIN = ("tri", "tri_riley", "tpi", "tpi_signed", "roughness")
+BUILTIN = ("tri", "tri_riley", "tpi", "tpi_signed", "roughness", "faces", "max_step")
 
 
 def builtin_descriptors(h: jax.Array, names: Sequence[str], window: int, stride: int) -> dict[str, jax.Array]:
@@ -380,6 +447,10 @@ def builtin_descriptors(h: jax.Array, names: Sequence[str], window: int, stride:
             out[name] = jnp.sum(h * w, axis=(1, 2))
         elif name == "roughness":
             out[name] = jnp.mean(roughness_core(h, window, stride), axis=(1, 2))
+        elif name == "faces":
+            out[name] = jnp.mean(_faces_core(h, window, stride), axis=(1, 2))
+        elif name == "max_step":
+            out[name] = jnp.mean(_max_step_core(h, window, stride), axis=(1, 2))
     return out
 
 
@@ -413,8 +484,8 @@ def chunked_builtin_descriptors(h, names, window, stride) -> dict[str, jax.Array
 
 
 def reference_maps(heightmaps, window: int = 3, stride: int = 1) -> dict[str, np.ndarray]:
-    """Plain NumPy maps over explicit windows (float64 inside): ``{"tri", "tri_riley", "tpi", "roughness"}`` ->
-    ``[B, H', W']`` float64 (``[H', W']`` for a single map). Slow ground truth; keep inputs small."""
+    """Plain NumPy maps over explicit windows (float64 inside): ``{"tri", "tri_riley", "tpi", "roughness", "faces",
+    "max_step"}`` -> ``[B, H', W']`` float64 (``[H', W']`` for a single map). Slow ground truth; keep inputs small."""
     h = np.asarray(heightmaps, np.float64)
     single = h.ndim == 2
     if single:
@@ -428,7 +499,17 @@ def reference_maps(heightmaps, window: int = 3, stride: int = 1) -> dict[str, np
     flat = w.reshape(*w.shape[:3], window * window)
     others = np.delete(flat, c * window + c, axis=-1)
     d = others - z[..., None]
+    # Each pixel's largest step to a 4-neighbour, neighbour by neighbour (border pixels have fewer).
+    step = np.zeros_like(h)
+    for dy, dx in ((-1, 0), (1, 0), (0, -1), (0, 1)):
+        for i in range(h.shape[1]):
+            for j in range(h.shape[2]):
+                if 0 <= i + dy < h.shape[1] and 0 <= j + dx < h.shape[2]:
+                    step[:, i, j] = np.maximum(step[:, i, j], np.abs(h[:, i + dy, j + dx] - h[:, i, j]))
+    sw = np.lib.stride_tricks.sliding_window_view(step, (window, window), axis=(1, 2))[:, ::stride, ::stride]
     out = {
+        "faces": (sw > FACE_THRESHOLD).mean(axis=(-2, -1)),
+        "max_step": sw.max(axis=(-2, -1)),
         "tri": np.abs(d).mean(-1),
         "tri_riley": np.sqrt((d * d).sum(-1)),
         "tpi": z - others.mean(-1),

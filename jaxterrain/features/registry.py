@@ -77,7 +77,8 @@ def unregister_descriptor(name: str) -> None:
 
 def descriptor_names() -> tuple[str, ...]:
     """Names accepted by :func:`descriptors`: the built-ins ``tri`` (Wilson), ``tri_riley``, ``tpi`` (mean |TPI|), ``tpi_signed``,
-    ``roughness``, then registered ones in registration order."""
+    ``roughness``, ``faces`` (vertical-face density) and ``max_step`` (largest step per window), then registered ones in
+    registration order."""
     return tuple(_REGISTRY)
 
 

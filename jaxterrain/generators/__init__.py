@@ -2,7 +2,7 @@
 
     >>> from jaxterrain import generators
     >>> generators.names()
-    ('cppn', 'diamond_square', 'gan', 'perlin', 'worley')
+    ('cppn', 'diamond_square', 'gan', 'perlin', 'steps', 'worley')
     >>> gen = generators.get("perlin")           # a Generator (see base.py)
 
 Each module registers a factory ``factory(size=256, **options) -> Generator`` with :func:`register`; ``get`` calls
@@ -27,7 +27,7 @@ from jaxterrain.generators.base import (
 )
 
 # Built-in generators register themselves on import.
-from jaxterrain.generators import cppn, diamond_square, gan, perlin, worley  # noqa: E402,F401
+from jaxterrain.generators import cppn, diamond_square, gan, perlin, steps, worley  # noqa: E402,F401
 from jaxterrain.generators.registry import get, names, register  # noqa: E402
 
 __all__ = [

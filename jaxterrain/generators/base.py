@@ -235,7 +235,9 @@ def check_vector_genomes(genomes: Any, gspec: GenomeSpec, name: str) -> np.ndarr
         if bad.any():
             i = int(np.argmax(bad))
             raise ValueError(f"{name}: gene '{gene}' of genome {i} is {col[i]}; it must be finite in [{lo:g}, {hi:g}]")
-        bad = (col < lo) | (col > hi)
+        # Genomes are float32: a bound such as 0.02 or 0.6 is the nearest float32 there (0.0199999996, 0.6000000238),
+        # which is where sampling and mutation clip to, so that is the bound checked.
+        bad = (col < float(np.float32(lo))) | (col > float(np.float32(hi)))
         if bad.any():
             i = int(np.argmax(bad))
             raise ValueError(f"{name}: gene '{gene}' of genome {i} is {col[i]:g}, outside its range [{lo:g}, {hi:g}]")

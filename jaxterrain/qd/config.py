@@ -29,11 +29,18 @@ FitnessFn = Callable[[jax.Array, PRNGKey, jax.Array], jax.Array]
 # diamond_square, perlin, worley) tri [0.00046, 0.166], roughness [0.0024, 0.750]; with the GAN (all five)
 # tri [0.00015, 0.152], tpi (mean |TPI|) [0.00001, 0.110], roughness [0.0007, 0.630].
 # So nearly every terrain falls inside the grid and the 50 bins are not spent on values no generator reaches.
+# The vertical-face descriptors (2026-11-29, CPU, the same 32 + 32 genomes of each of the six generators, ``steps``
+# included, at window 30 / stride 2, pooled over the 287 of 384 that pass Algorithm 1, as ``features --calibrate``):
+# faces [0, 0.806], max_step [0.00006, 0.261]. The top of faces is Perlin's small-scale noise (up to 0.92); steps
+# alone spans faces [0, 0.16] and max_step [0.006, 0.26], so a steps archive fills max_step's range, a fifth of
+# faces' (pass ``ranges`` to bin faces finer).
 # Re-measure after changing a feature definition or the generators; other windows need ``config.ranges``.
 DEFAULT_RANGES: dict[str, tuple[float, float]] = {
     "tri": (0.0, 0.17),
     "tpi": (0.0, 0.12),
     "roughness": (0.0, 0.76),
+    "faces": (0.0, 0.81),
+    "max_step": (0.0, 0.27),
 }
 
 

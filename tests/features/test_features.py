@@ -257,3 +257,74 @@ def test_large_batches_are_chunked_without_changing_values(monkeypatch):
     chunked = np.asarray(jax.jit(F.descriptors, static_argnums=(1, 2, 3))(h, names, 4, 2))
     assert chunked.shape == (7, 3)
     np.testing.assert_allclose(chunked, whole, atol=1e-6)
+
+
+# ---------------------------------------------------------------------------------------------------------------
+# Vertical faces: step_heights, faces, max_step (issue 64)
+# ---------------------------------------------------------------------------------------------------------------
+
+
+def _step_map(value: float, n: int = 20, column: int = 10) -> np.ndarray:
+    """``n x n``: 0 left of ``column``, ``value`` from it on (a riser between columns column - 1 and column)."""
+    h = np.zeros((n, n), np.float32)
+    h[:, column:] = value
+    return h
+
+
+def test_vertical_faces_of_a_single_step_of_known_height():
+    # A 0.3 step between columns 9 and 10 of a 20 x 20 map: both columns have step 0.3, every other pixel 0.
+    h = _step_map(0.3)
+    s = np.asarray(F.step_heights(h))
+    want = np.zeros((20, 20))
+    want[:, 9:11] = 0.3
+    np.testing.assert_allclose(s, want, atol=1e-7)
+    # Window 4, stride 2: 9 x 9 windows, window (i, j) covers columns 2j .. 2j + 3; column 9 lies in j = 3, 4,
+    # column 10 in j = 4, 5. faces = face pixels / 16: 4 / 16 at j = 3 and 5, 8 / 16 at j = 4; max_step 0.3 there.
+    faces_row = np.array([0, 0, 0, 0.25, 0.5, 0.25, 0, 0, 0])
+    np.testing.assert_allclose(F.faces(h, 4, 2), np.tile(faces_row, (9, 1)), atol=1e-7)
+    np.testing.assert_allclose(F.max_step(h, 4, 2), np.tile([0, 0, 0, 0.3, 0.3, 0.3, 0, 0, 0], (9, 1)), atol=1e-7)
+    # The descriptors are the means over the windows: 1 / 9 and 0.3 * 3 / 9; the same for the step turned by 90
+    # degrees (a face along the rows).
+    d = np.asarray(F.descriptors(np.stack([h, h.T]), names=("faces", "max_step"), window=4, stride=2))
+    np.testing.assert_allclose(d, [[1 / 9, 0.1], [1 / 9, 0.1]], atol=1e-7)
+    # A step under FACE_THRESHOLD (0.05) is no face, and max_step still reads its height.
+    low = np.asarray(F.descriptors(_step_map(0.04), names=("faces", "max_step"), window=4, stride=2))
+    np.testing.assert_allclose(low, [0.0, 0.04 * 3 / 9], atol=1e-7)
+    # just above / below the threshold; a custom threshold
+    assert float(F.faces(_step_map(0.051), 4, 2).max()) == 0.5 and float(F.faces(_step_map(0.049), 4, 2).max()) == 0
+    assert float(F.faces(_step_map(0.3), 4, 2, threshold=0.31).max()) == 0.0
+    # Down or up, the same.
+    np.testing.assert_allclose(F.max_step(0.3 - h, 4, 2), F.max_step(h, 4, 2), atol=1e-7)
+
+
+def test_vertical_faces_of_flat_and_ramp_maps():
+    # Flat at any height: no face, no step.
+    flat = np.full((2, 24, 24), 0.7, np.float32)
+    np.testing.assert_array_equal(F.descriptors(flat, names=("faces", "max_step"), window=6, stride=3), 0.0)
+    # A smooth ramp rising 0.02 per pixel along x (grade 0.5 at 4 cm pixels and 1 m per unit, the suite's steepest
+    # slope): no face anywhere, and the largest step of every window is exactly the rise per pixel.
+    ramp = np.tile(np.arange(24, dtype=np.float32) * 0.02, (24, 1))
+    np.testing.assert_allclose(F.step_heights(ramp), 0.02, atol=1e-6)
+    d = np.asarray(F.descriptors(ramp, names=("faces", "max_step"), window=6, stride=3))
+    np.testing.assert_allclose(d, [0.0, 0.02], atol=1e-6)
+    # A cliff at the end of the same ramp (0.2 extra between columns 19 and 20) shows up in both.
+    cliff = ramp.copy()
+    cliff[:, 20:] += 0.2
+    assert float(F.faces(cliff, 6, 3).max()) > 0 and float(F.max_step(cliff, 6, 3).max()) == pytest.approx(0.22)
+
+
+@pytest.mark.parametrize("window,stride", [(3, 1), (5, 3), (8, 2), (30, 2)])
+def test_vertical_faces_equal_numpy_reference(window, stride):
+    # Random maps (steps of all sizes around the threshold) against the NumPy loops of reference_maps; jitted
+    # descriptors against the means of the reference maps.
+    rng = np.random.default_rng(window + stride)
+    h = (rng.random((2, 33, 37)) * 0.15).astype(np.float32)
+    h[:, :, 20:] += 0.3
+    ref = F.reference_maps(h, window, stride)
+    np.testing.assert_allclose(F.faces(h, window, stride), ref["faces"], atol=1e-6)
+    np.testing.assert_allclose(F.max_step(h, window, stride), ref["max_step"], atol=1e-6)
+    f = jax.jit(F.descriptors, static_argnames=("names", "window", "stride"))
+    got = np.asarray(f(h, names=("faces", "max_step", "tpi"), window=window, stride=stride))
+    np.testing.assert_allclose(got[:, :2], np.stack([ref["faces"].mean((1, 2)), ref["max_step"].mean((1, 2))], -1),
+                               rtol=1e-5, atol=1e-6)
+    assert 0 < got[:, 0].min() and got[:, 0].max() < 1

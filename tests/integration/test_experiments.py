@@ -81,6 +81,33 @@ def test_evolve_smoke_config_and_resume(tmp_path):
     assert cli("evolve", "--resume", str(out)) == 0
 
 
+@pytest.mark.slow  # ~20 s on 2 CPU cores; the smoke evolve above already covers the command in the default suite
+def test_evolve_smoke_steps_generator_binned_by_vertical_faces(tmp_path):
+    """``evolve --generator steps --preset smoke`` with the vertical-face descriptors (issue 64 item 2): an archive of
+    steps terrains whose elites re-render from their genomes, keep the flat edge strips and sit in the cells their
+    faces / max_step put them in."""
+    from jaxterrain import features, generators
+    from jaxterrain import qd as A
+
+    out = tmp_path / "steps"
+    assert cli("evolve", "--preset", "smoke", "--generator", "steps", "--descriptors", "max_step", "faces",
+               "--out", str(out)) == 0
+    arch = A.load(out / "archive.npz")
+    assert arch.generator_names == ("steps",) and arch.config.descriptors == ("max_step", "faces")
+    assert A.coverage(arch) > 0
+    filled = np.flatnonzero(arch.filled)
+    gen = generators.get("steps", size=32)
+    genomes = np.asarray(arch.genomes[0])[filled]
+    gen.validate(genomes)  # mutated genomes within the genome's bounds
+    maps = np.asarray(gen.render(genomes))
+    stored = np.asarray(arch.heightmaps)[filled].astype(np.int64)  # uint16, height * 65535
+    assert np.abs(np.round(maps * 65535).astype(np.int64) - stored).max() <= 1
+    assert (maps[:, :, :4] == 0.5).all() and (maps[:, :, -4:] == 0.5).all()  # strips of 32 // 8 pixels
+    d = np.asarray(features.descriptors(maps, names=("max_step", "faces"), window=8, stride=2))
+    np.testing.assert_allclose(d, np.asarray(arch.descriptors)[filled], rtol=1e-5, atol=1e-6)
+    assert d[:, 0].max() > features.FACE_THRESHOLD  # some elite holds a face
+
+
 def test_evolve_time_limit_stops_at_checkpoints_and_resumes_to_the_same_archive(tmp_path):
     """--time-limit 1e-6 stops after every chunk (exit 3) except the last, which saves the archive; resuming chunk by
     chunk ends with the archive of an uninterrupted run."""
@@ -105,6 +132,18 @@ def test_features_smoke(tmp_path):
     assert r[("difficulty", "difficulty")] == pytest.approx(1.0)
     assert r[("tri_5", "difficulty")] == pytest.approx(r[("difficulty", "tri_5")])
     assert (out / "correlations.png").exists() and (out / "correlation_perlin.png").exists()
+
+
+def test_features_takes_extra_descriptors_from_the_command_line(capsys):
+    """``--extra-descriptors`` (e.g. the vertical-face descriptors for their Figure 4 alignment) lands in the config;
+    an unknown name is refused in one line."""
+    capsys.readouterr()
+    with pytest.raises(SystemExit, match="0"):
+        cli("features", "--extra-descriptors", "faces", "max_step", "--print-config")
+    assert json.loads(capsys.readouterr().out)["extra_descriptors"] == ["faces", "max_step"]
+    with pytest.raises(SystemExit):
+        cli("features", "--extra-descriptors", "bogus", "--print-config")
+    assert "unknown descriptor 'bogus'" in capsys.readouterr().err
 
 
 def test_features_time_limit_stops_between_batches_and_resumes_to_the_same_values(tmp_path, capsys):
