@@ -16,7 +16,7 @@ already normalised (fitness in [0, 1] needs nothing more). Two bootstraps, which
   are resampled separately within each task, as if a run's tasks were independent. Kept for comparison with papers
   that report it; with strongly correlated cells its intervals are several times too narrow.
 
-Pairwise tests on trial scores (:func:`welch_trials`) are adjusted for multiplicity with :func:`holm`; the
+Pairwise tests on trial scores (:func:`welch_trials`: each trial's IQM or mean over the cells) are adjusted for multiplicity with :func:`holm`; the
 association of a per-trial metric with held-out scores across treatments is tested by :func:`stratified_permutation`.
 
     from jaxterrain.runtime import statistics
@@ -331,12 +331,15 @@ def trial_improvement(x, y, reps: int = 2000, seed: int = 0, confidence: float =
     return Interval(probability_of_improvement(xc, yc), *_percentile(boot, confidence))
 
 
-def welch_trials(x, y) -> dict[str, float]:
-    """Welch's t-test of two methods' trial scores, each trial's score its mean over the cells (``x``
-    [trials_x, cells], ``y`` [trials_y, cells]): ``{"t", "p", "n_x", "n_y"}``, two-sided. NaN ``t`` / ``p`` when
-    either has fewer than two trials or both are constant (a comparator with one evaluation has no trial variance
-    to test against)."""
-    a, b = score_matrix(x).mean(axis=1), score_matrix(y).mean(axis=1)
+def welch_trials(x, y, statistic: str = "iqm") -> dict[str, float]:
+    """Welch's t-test of two methods' trial scores: each trial's :func:`iqm` over its cells (``statistic="iqm"``,
+    the pages' aggregate) or its mean (``"mean"``). ``x`` [trials_x, cells], ``y`` [trials_y, cells]. Returns
+    ``{"t", "p", "n_x", "n_y"}``, two-sided; NaN ``t`` / ``p`` when either has fewer than two trials or both are
+    constant (a comparator with one evaluation has no trial variance to test against)."""
+    if statistic not in ("iqm", "mean"):
+        raise ValueError(f"statistic must be 'iqm' or 'mean'; got {statistic!r}")
+    score = (lambda m: stats.trim_mean(m, 0.25, axis=1)) if statistic == "iqm" else (lambda m: m.mean(axis=1))
+    a, b = score(score_matrix(x)), score(score_matrix(y))
     if a.size < 2 or b.size < 2 or (np.ptp(a) == 0 and np.ptp(b) == 0):
         return {"t": float("nan"), "p": float("nan"), "n_x": int(a.size), "n_y": int(b.size)}
     t, p = stats.ttest_ind(a, b, equal_var=False)

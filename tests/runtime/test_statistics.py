@@ -182,6 +182,13 @@ def test_welch_and_holm_on_hand_values():
     assert w["p"] == pytest.approx(stats.ttest_ind([1, 2, 3], [2, 3, 4, 5], equal_var=False).pvalue)
     assert w["t"] < 0 and w["n_x"] == 3 and w["n_y"] == 4
     assert np.isnan(statistics.welch_trials(x, y[:1])["p"])           # one evaluation: nothing to test against
+    # each trial's IQM (default) or mean: a trial with one outlying cell moves its mean, not its IQM
+    z = np.array([[0.1, 0.5, 0.5, 0.5, 0.5, 0.5, 0.5, 0.9]] * 2) + np.array([[0.0], [0.02]])
+    v = z + np.array([[0.0, 0, 0, 0, 0, 0, 0, 0.8], [0.0, 0, 0, 0, 0, 0, 0, 0.8]]) + np.array([[0.01], [0.03]])
+    assert statistics.welch_trials(v, z)["p"] == pytest.approx(
+        stats.ttest_ind([0.51, 0.55], [0.5, 0.52], equal_var=False).pvalue)
+    assert statistics.welch_trials(v, z, "mean")["p"] == pytest.approx(
+        stats.ttest_ind(v.mean(axis=1), z.mean(axis=1), equal_var=False).pvalue)
 
 
 def test_stratified_permutation_with_and_without_association():
