@@ -13,12 +13,30 @@ each trial's hardest archive cell traversed). A RUN is a ``curriculum`` run (its
 runs are its trials; the base policy's runs are its walks in each evaluation (the same policy: their spread is the
 evaluation's noise, Warp's contact solver not being bit-deterministic).
 
-Writes into ``--out`` (default ``RUN/generalisation``): ``intervals.csv`` (each treatment's interquartile mean and
-mean over all cells and per family, with 95 % stratified-bootstrap intervals: ``jaxterrain.runtime.statistics``,
-rliable), ``improvement.csv`` (the probability that a treatment's walker beats the base policy, and each other
-treatment's, on a cell), ``trials.csv`` (each trial's hardest cell traversed and held-out scores),
-``correlation.json`` (rank correlation of the two over trials and over treatments), ``generalisation.md`` (the
-tables) and the figures ``iqm.png``, ``families.png``, ``improvement.png`` and ``hardest_vs_heldout.png``.
+Writes into ``--out`` (default ``RUN/generalisation``): ``intervals.csv`` (each treatment's interquartile mean, mean
+and trial IQM over all cells and per family, with 95 % intervals: ``jaxterrain.runtime.statistics``),
+``improvement.csv`` (the probability that a treatment's walker beats the base policy, and each other treatment's, on
+a cell, with Welch's test on the trials and its Holm adjustment), ``trials.csv`` (each trial's hardest cell
+traversed and held-out scores), ``correlation.json`` (rank correlation of the two over trials and over treatments,
+the pooled one without each treatment in turn, and the permutation test stratified by treatment),
+``generalisation.md`` (the tables) and the figures ``iqm.png``,
+``families.png``, ``improvement.png`` and ``hardest_vs_heldout.png``.
+
+The intervals (``docs/statistics.md``):
+
+- **Primary: over trials.** A trial is one walker evaluated on every cell, so its cells are correlated; the
+  bootstrap resamples whole trials (rows of ``[trials, cells]``, :func:`~jaxterrain.runtime.statistics.trial_estimates`,
+  :func:`~jaxterrain.runtime.statistics.trial_improvement`). ``*_terrains`` columns: the two-level version, each
+  cell's terrains resampled too.
+- ``*_stratified`` columns: rliable's stratified bootstrap (runs resampled within each cell independently), for
+  comparison with papers that report it; several times narrower than the data support here.
+- **The base policy is one policy**: its runs are evaluations of the same weights (one per treatment folder's
+  evaluation; one for a single run), so its interval holds no trial variance (``intervals.csv``'s ``note``); with
+  one evaluation it has zero width. Its pooled IQM is trimmed over ``runs x cells`` values as the treatments' are,
+  but those values do not spread with trials; ``trial_iqm`` (each run's IQM over the cells, averaged) trims every
+  run over the same cells, and is what the per-family comparison with the base policy uses.
+- Pairwise comparisons between treatments: Welch's t-test on the trials' IQMs (``welch_p``) and on their means
+  (``welch_p_mean``), each Holm-adjusted over all pairs; a pair not below 0.05 after adjustment is exploratory.
 """
 
 from __future__ import annotations
@@ -36,7 +54,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "treatment folders; LABEL=FOLDER names a treatment LABEL (a run's: 'LABEL <treatment>')")
     parser.add_argument("--out", type=Path, default=None, help="output folder (default: RUN/generalisation)")
     parser.add_argument("--reps", type=int, default=2000, help="bootstrap resamples per interval")
-    parser.add_argument("--seed", type=int, default=0, help="seed of the bootstrap")
+    parser.add_argument("--seed", type=int, default=0, help="seed of the bootstrap and of the permutation test")
+    parser.add_argument("--permutations", type=int, default=10000,
+                        help="permutations of the test of the paper's metric against held-out scores, stratified "
+                             "by treatment")
 
 
 class LabelledPath(type(Path())):
@@ -121,6 +142,8 @@ def main(args: argparse.Namespace) -> int:
             raise UsageError(f"RUN {run}: no such folder")
     if args.reps < 1:
         raise UsageError(f"--reps must be an integer >= 1; got {args.reps}")
+    if args.permutations < 1:
+        raise UsageError(f"--permutations must be an integer >= 1; got {args.permutations}")
     folders = treatment_folders(args.runs)
     if not folders:
         raise UsageError(f"no treatment with heldout/fitness.csv and summary.json in {', '.join(map(str, args.runs))}")
@@ -136,28 +159,55 @@ def main(args: argparse.Namespace) -> int:
         if not (np.array_equal(t["family"], first["family"]) and np.array_equal(t["level"], first["level"])):
             raise UsageError(f"{t['folder']}: evaluated on other terrains than {first['folder']}")
     cells, _ = suite.cell_scores(first["fitness"], first["family"], first["level"])
-    scores = {t["label"]: suite.cell_scores(t["fitness"], t["family"], t["level"])[1] for t in ts}
-    scores[BASE] = suite.cell_scores(np.concatenate([t["base"] for t in ts]), first["family"], first["level"])[1]
+    terrain = {t["label"]: t["fitness"] for t in ts}                       # [trials, terrains]
+    terrain[BASE] = np.concatenate([t["base"] for t in ts])                # [evaluations, terrains]
+    scores = {n: suite.cell_scores(f, first["family"], first["level"])[1] for n, f in terrain.items()}  # [runs, cells]
+    cell_of = np.array([f"{f}|{lv}" for f, lv in zip(first["family"], first["level"])])  # [terrains]
     names = [t["label"] for t in ts] + [BASE]
     families = list(dict.fromkeys(c[0] for c in cells))
     out = args.out or args.runs[0] / "generalisation"
     out.mkdir(parents=True, exist_ok=True)
 
-    est = {"all": statistics.interval_estimates(scores, args.reps, args.seed)}
-    for fam in families:
-        cols = [i for i, c in enumerate(cells) if c[0] == fam]
-        est[fam] = statistics.interval_estimates({n: s[:, cols] for n, s in scores.items()}, args.reps, args.seed)
+    est, two, strat = {}, {}, {}   # {scope: {name: {"iqm", "mean", ...: Interval}}}: trials, trials + terrains, rliable
+    for scope in ["all", *families]:
+        cols = [i for i, c in enumerate(cells) if scope == "all" or c[0] == scope]
+        tcols = np.flatnonzero((first["family"] == scope) | (scope == "all"))
+        est[scope] = statistics.trial_estimates({n: s[:, cols] for n, s in scores.items()}, args.reps, args.seed)
+        two[scope] = statistics.trial_estimates({n: f[:, tcols] for n, f in terrain.items()}, args.reps, args.seed,
+                                                cells=cell_of[tcols])
+        strat[scope] = statistics.interval_estimates({n: s[:, cols] for n, s in scores.items()}, args.reps,
+                                                     args.seed)
     rows = [(n, scope, scores[n].shape[0], sum(1 for c in cells if scope == "all" or c[0] == scope),
-             *(f"{v:.4f}" for v in (*e[n]["iqm"], *e[n]["mean"]))) for scope, e in est.items() for n in names]
+             *(f"{v:.4f}" for v in (*e[n]["iqm"], *e[n]["mean"], *e[n]["trial_iqm"], *two[scope][n]["iqm"][1:],
+                                    *strat[scope][n]["iqm"][1:], *strat[scope][n]["mean"][1:])),
+             NO_TRIAL_VARIANCE if n == BASE else "")
+            for scope, e in est.items() for n in names]
     atomic_write_csv(out / "intervals.csv", ["treatment", "scope", "runs", "tasks", "iqm", "iqm_low", "iqm_high",
-                                             "mean", "mean_low", "mean_high"], rows)
-    pairs = {f"{a} > {BASE}": (scores[a], scores[BASE]) for a in names[:-1]}
-    pairs.update({f"{a} > {b}": (scores[a], scores[b]) for a in names[:-1] for b in names[:-1] if a != b})
-    pi = statistics.improvement(pairs, args.reps, args.seed)
-    atomic_write_csv(out / "improvement.csv", ["x", "y", "probability", "low", "high"],
-                     [(*k.split(" > "), *(f"{v:.4f}" for v in iv)) for k, iv in pi.items()])
+                                             "mean", "mean_low", "mean_high", "trial_iqm", "trial_iqm_low",
+                                             "trial_iqm_high", "iqm_low_terrains", "iqm_high_terrains",
+                                             "iqm_low_stratified", "iqm_high_stratified", "mean_low_stratified",
+                                             "mean_high_stratified", "note"], rows)
 
-    trial_rows, hard, held = [], [], []
+    keys = [(a, BASE) for a in names[:-1]] + [(a, b) for a in names[:-1] for b in names[:-1] if a != b]
+    pi = {f"{a} > {b}": statistics.trial_improvement(scores[a], scores[b], args.reps, args.seed) for a, b in keys}
+    pi_strat = statistics.improvement({f"{a} > {b}": (scores[a], scores[b]) for a, b in keys}, args.reps, args.seed)
+    pairs = [(a, b) for i, a in enumerate(names[:-1]) for b in names[i + 1:-1]]   # unordered treatment pairs
+    test = {}
+    for stat in ("iqm", "mean"):  # Welch on each trial's IQM (the pages' aggregate) and on its mean
+        welch = [statistics.welch_trials(scores[a], scores[b], stat)["p"] for a, b in pairs]
+        for (a, b), p, h in zip(pairs, welch, statistics.holm(welch)):
+            test.setdefault(f"{a} > {b}", []).extend((p, h))
+            test.setdefault(f"{b} > {a}", []).extend((p, h))
+    atomic_write_csv(out / "improvement.csv", ["x", "y", "probability", "low", "high", "low_stratified",
+                                               "high_stratified", "welch_p", "holm_p", "welch_p_mean",
+                                               "holm_p_mean"],
+                     [(*k.split(" > "), *(f"{v:.4f}" for v in (*iv, *pi_strat[k][1:])),
+                       *(f"{v:.4g}" if k in test else "" for v in test.get(k, (0.0,) * 4)))
+                      for k, iv in pi.items()])
+
+    base_mean = scores[BASE].mean()
+    above = {n: int(np.sum(scores[n].mean(axis=1) > base_mean)) for n in names[:-1]}
+    trial_rows, hard, held, group = [], [], [], []
     for t in ts:
         s = scores[t["label"]]
         for k, trial in enumerate(t["trials"]):
@@ -165,6 +215,7 @@ def main(args: argparse.Namespace) -> int:
                                f"{s[k].mean():.4f}", f"{statistics.iqm(s[k:k + 1]):.4f}"))
             hard.append(t["hardest"][k])
             held.append(s[k].mean())
+            group.append(t["label"])
     atomic_write_csv(out / "trials.csv", ["treatment", "trial", "hardest_cell_distance", "terrain_mean",
                                           "cell_mean", "cell_iqm"], trial_rows)
     corr = {"trials": statistics.rank_correlation(hard, held)} if len(hard) >= 3 else {}
@@ -173,55 +224,117 @@ def main(args: argparse.Namespace) -> int:
                                                          [scores[t["label"]].mean() for t in ts])
     corr["within"] = {t["label"]: statistics.rank_correlation(t["hardest"], scores[t["label"]].mean(axis=1))
                       for t in ts if len(t["trials"]) >= 3}
+    if len(ts) >= 3:  # how much the pooled figure hangs on one treatment: it again without each in turn
+        g = np.array(group)
+        corr["trials_without"] = {t["label"]: statistics.rank_correlation(np.array(hard)[g != t["label"]],
+                                                                          np.array(held)[g != t["label"]])
+                                  for t in ts}
+    corr["within_stratified"] = statistics.stratified_permutation(hard, held, group, args.permutations, args.seed)
     atomic_write_text(out / "correlation.json", json.dumps(corr, indent=2, allow_nan=True) + "\n")
-    helped = {fam: [n for n in names[:-1] if est[fam][n]["iqm"].low > est[fam][BASE]["iqm"].high] for fam in families}
-    atomic_write_text(out / "generalisation.md", markdown(names, {n: s.shape[0] for n, s in scores.items()}, families, est, pi, corr, helped,
-                                                                 len(cells), args))
-    figures(out, names, families, est, pi, ts, scores)
+    base_hi, base_lo = ({f: est[f][BASE]["trial_iqm"].high for f in families},
+                        {f: est[f][BASE]["trial_iqm"].low for f in families})
+    helped = {f: [n for n in names[:-1] if est[f][n]["trial_iqm"].low > base_hi[f]] for f in families}
+    hurt = {f: [n for n in names[:-1] if est[f][n]["trial_iqm"].high < base_lo[f]] for f in families}
+    runs = {n: s.shape[0] for n, s in scores.items()}
+    atomic_write_text(out / "generalisation.md", markdown(names, runs, families, est, two, strat, pi, pi_strat,
+                                                          test, above, corr, helped, hurt, len(cells), args))
+    figures(out, names, families, est, strat, pi, ts, scores)
     best = max(names[:-1], key=lambda n: est["all"][n]["iqm"].point)
-    print(f"{len(ts)} treatments, {len(cells)} cells; highest IQM: {best} "
-          f"{est['all'][best]['iqm'].point:.3f} (base {est['all'][BASE]['iqm'].point:.3f}) -> {out}", flush=True)
+    iv = est["all"][best]["iqm"]
+    print(f"{len(ts)} treatments, {len(cells)} cells; highest IQM: {best} {iv.point:.3f} [{iv.low:.3f}, "
+          f"{iv.high:.3f}] (95 % interval over trials; base {est['all'][BASE]['iqm'].point:.3f}, "
+          f"{runs[BASE]} evaluation{'s' if runs[BASE] > 1 else ''} of one policy) -> {out}", flush=True)
     return 0
+
+
+NO_TRIAL_VARIANCE = "one policy: its runs are evaluations of the same weights, so its interval holds no trial variance"
 
 
 def _iv(iv) -> str:
     return f"{iv.point:.3f} [{iv.low:.3f}, {iv.high:.3f}]"
 
 
-def markdown(names, runs, families, est, pi, corr, helped, cells: int, args) -> str:
-    lines = [f"# Experiment 3: held-out scores ({cells} suite cells; 95 % stratified-bootstrap intervals, "
-             f"{args.reps} resamples, seed {args.seed})", "",
-             "| treatment | runs | IQM | mean | P(beats base policy) |", "|---|---|---|---|---|"]
+def _ci(iv) -> str:
+    return f"[{iv.low:.3f}, {iv.high:.3f}]"
+
+
+def markdown(names, runs, families, est, two, strat, pi, pi_strat, test, above, corr, helped, hurt, cells: int,
+             args) -> str:
+    base = names[-1]
+    nb = runs[base]
+    lines = [f"# Held-out scores ({cells} suite cells; 95 % intervals, {args.reps} resamples, seed {args.seed})", "",
+             "Primary intervals resample whole trials (each walker with all its cells: "
+             "`statistics.trial_estimates`); *terrains* also resamples each cell's terrains (two-level); "
+             "*stratified* is rliable's stratified bootstrap (runs resampled within each cell as if cells were "
+             "independent: too narrow when a trial's cells are correlated; for comparison with papers that use "
+             "it). *Trial IQM*: each trial's IQM over the cells, averaged (every run trimmed over the same "
+             f"{cells} values); compare with the base policy on it.", "",
+             f"**The {base} is one policy**: its {nb} run{'s are evaluations' if nb > 1 else ' is one evaluation'} "
+             "of the same weights, so its interval holds no trial variance (only the evaluation's noise"
+             + ("" if nb > 1 else ": none with one evaluation, an interval of zero width") + ").", "",
+             "| treatment | runs | IQM [over trials] | IQM [terrains too] | IQM [stratified] | mean [over trials] | "
+             "trial IQM [over trials] | P(beats base policy) [over trials] | trials above base mean |",
+             "|---|---|---|---|---|---|---|---|---|"]
     for n in names:
-        p = "-" if n == BASE else _iv(pi[f"{n} > {BASE}"])
-        lines.append(f"| {n} | {runs[n]} | {_iv(est['all'][n]['iqm'])} | {_iv(est['all'][n]['mean'])} | {p} |")
-    lines += ["", "IQM per family (cells of the family as tasks):", "",
+        e = est["all"][n]
+        p = "-" if n == base else _iv(pi[f"{n} > {base}"])
+        k = "-" if n == base else f"{above[n]} of {runs[n]}"
+        lines.append(f"| {n}{' (one policy)' if n == base else ''} | {runs[n]} | {_iv(e['iqm'])} | "
+                     f"{_ci(two['all'][n]['iqm'])} | {_ci(strat['all'][n]['iqm'])} | {_iv(e['mean'])} | "
+                     f"{_iv(e['trial_iqm'])} | {p} | {k} |")
+    lines += ["", "IQM per family (cells of the family as tasks; pooled IQM):", "",
               "| treatment | " + " | ".join(families) + " |", "|---|" + "---|" * len(families)]
     for n in names:
         lines.append(f"| {n} | " + " | ".join(f"{est[f][n]['iqm'].point:.2f}" for f in families) + " |")
     nobody = [f for f, who in helped.items() if not who]
-    lines += ["", "Families where some treatment's IQM interval lies above the base policy's: "
+    lines += ["", "Families where a treatment's trial-IQM interval (over trials) lies above the base policy's: "
               + ("; ".join(f"{f} ({', '.join(who)})" for f, who in helped.items() if who) or "none") + ".",
-              "Families no treatment improves on (intervals overlap the base policy's): "
-              + (", ".join(nobody) or "none") + ".", "",
-              "Probability of improvement between treatments (row beats column on a cell):", "",
-              "| X \\ Y | " + " | ".join(names[:-1]) + " |", "|---|" + "---|" * (len(names) - 1)]
-    for a in names[:-1]:
-        lines.append(f"| {a} | " + " | ".join("-" if a == b else f"{pi[f'{a} > {b}'].point:.2f}"
-                                             for b in names[:-1]) + " |")
+              "Families no treatment improves on (intervals overlap the base policy's, or lie below it): "
+              + (", ".join(nobody) or "none") + ".",
+              "Families where a treatment's trial-IQM interval lies below the base policy's: "
+              + ("; ".join(f"{f} ({', '.join(who)})" for f, who in hurt.items() if who) or "none") + ".", ""]
+    if len(names) > 2:
+        lines += ["Probability of improvement between treatments (row beats column on a cell; point estimates):", "",
+                  "| X \\ Y | " + " | ".join(names[:-1]) + " |", "|---|" + "---|" * (len(names) - 1)]
+        for a in names[:-1]:
+            lines.append(f"| {a} | " + " | ".join("-" if a == b else f"{pi[f'{a} > {b}'].point:.2f}"
+                                                 for b in names[:-1]) + " |")
+        m = len(names[:-1]) * (len(names) - 2) // 2
+        lines += ["", f"Pairwise comparisons ({m} pairs): P(X > Y) with its interval over trials and the "
+                  "stratified one; Welch's t-test on the trials' IQMs (each trial's IQM over the cells) and on their "
+                  f"means, each Holm-adjusted over the {m} pairs. A pair whose Holm-adjusted p is above 0.05 is "
+                  "exploratory: the trials do not separate the two.", "",
+                  "| X | Y | P(X > Y) [over trials] | [stratified] | Welch p (IQM) | Holm | Welch p (mean) | Holm |",
+                  "|---|---|---|---|---|---|---|---|"]
+        for i, a in enumerate(names[:-1]):
+            for b in names[i + 1:-1]:
+                a_, b_ = (a, b) if pi[f"{a} > {b}"].point >= 0.5 else (b, a)
+                k = f"{a_} > {b_}"
+                lines.append(f"| {a_} | {b_} | {_iv(pi[k])} | {_ci(pi_strat[k])} | "
+                             + " | ".join(f"{v:.3g}" for v in test[k]) + " |")
     lines += ["", "Rank correlation of the hardest archive cell traversed (the paper's metric, each on its own "
               "archive) with the held-out cell mean:", ""]
     for scope, c in corr.items():
-        if scope == "within":
+        if scope in ("within", "within_stratified", "trials_without"):
             continue
-        lines.append(f"- over {scope} (n = {c['n']}): Spearman {c['spearman']:.2f} (p = {c['spearman_p']:.3g}), "
-                     f"Kendall {c['kendall']:.2f} (p = {c['kendall_p']:.3g})")
+        lines.append(f"- over {scope} (n = {c['n']}, pooled): Spearman {c['spearman']:.2f} "
+                     f"(p = {c['spearman_p']:.3g}), Kendall {c['kendall']:.2f} (p = {c['kendall_p']:.3g})")
     for label, c in corr.get("within", {}).items():
         lines.append(f"- within {label} (n = {c['n']}): Spearman {c['spearman']:.2f}")
+    if corr.get("trials_without"):
+        lines.append("- over trials without one treatment (pooled; how much the figure hangs on one): "
+                     + "; ".join(f"without {k} {c['spearman']:.2f} (p = {c['spearman_p']:.2g})"
+                                 for k, c in corr["trials_without"].items()))
+    w = corr.get("within_stratified")
+    if w and w["groups"]:
+        lines.append(f"- mean within-treatment Spearman over {w['groups']} treatment{'s' * (w['groups'] != 1)}: "
+                     f"{w['statistic']:.2f}, "
+                     f"p = {w['p']:.3g} (permutation test stratified by treatment, {w['reps']} permutations: the "
+                     "held-out scores shuffled within each treatment)")
     return "\n".join(lines) + "\n"
 
 
-def figures(out: Path, names, families, est, pi, ts, scores) -> None:
+def figures(out: Path, names, families, est, strat, pi, ts, scores) -> None:
     import numpy as np
     from matplotlib.figure import Figure
 
@@ -230,12 +343,13 @@ def figures(out: Path, names, families, est, pi, ts, scores) -> None:
     fig = Figure(figsize=(6.5, 0.45 * len(names) + 1.2))
     ax = fig.subplots()
     for i, n in enumerate(names):
-        iv = est["all"][n]["iqm"]
-        ax.errorbar(iv.point, i, xerr=[[iv.point - iv.low], [iv.high - iv.point]], fmt="o",
-                    color="grey" if n == names[-1] else "C0", capsize=3)
+        for iv, dy, style in ((est["all"][n]["iqm"], 0.0, dict(fmt="o", capsize=3)),
+                              (strat["all"][n]["iqm"], 0.25, dict(fmt="none", capsize=2, lw=0.8))):
+            ax.errorbar(iv.point, i + dy, xerr=[[iv.point - iv.low], [iv.high - iv.point]],
+                        color="grey" if n == names[-1] else ("C0" if dy == 0 else "C1"), **style)
     ax.axvline(est["all"][names[-1]]["iqm"].point, color="grey", lw=0.8, ls="--")
     ax.set_yticks(range(len(names)), names, fontsize=8)
-    ax.set_xlabel("IQM of held-out cell fitness (95 % CI)")
+    ax.set_xlabel("IQM of held-out cell fitness (95 % CI: over trials; thin, above: stratified)")
     ax.set_title("Held-out suite: interquartile mean per treatment", fontsize=9)
     fig.tight_layout()
     save_figure(fig, out / "iqm.png")
@@ -260,7 +374,7 @@ def figures(out: Path, names, families, est, pi, ts, scores) -> None:
         ax.errorbar(iv.point, i, xerr=[[iv.point - iv.low], [iv.high - iv.point]], fmt="o", capsize=3)
     ax.axvline(0.5, color="grey", lw=0.8, ls="--")
     ax.set_yticks(range(len(names) - 1), names[:-1], fontsize=8)
-    ax.set_xlabel("P(a trial's walker beats the base policy on a cell) (95 % CI)")
+    ax.set_xlabel("P(a trial's walker beats the base policy on a cell) (95 % CI over trials)")
     fig.tight_layout()
     save_figure(fig, out / "improvement.png")
 

@@ -65,7 +65,10 @@ def test_generalise_ranks_the_better_walkers_first(tmp_path, capsys):
     trials = list(csv.DictReader((out / "trials.csv").open()))
     assert len(trials) == 8 and trials[0]["treatment"] == "good map" and trials[0]["trial"] == "0"
     md = (out / "generalisation.md").read_text()
-    assert "| good map | 4 |" in md and "Families no treatment improves on (intervals overlap the base policy's): none." in md
+    assert "| good map | 4 |" in md and "Families no treatment improves on (intervals overlap the base policy's, or lie " \
+        "below it): none." in md
+    assert "**The base policy is one policy**: its 2 runs are evaluations of the same weights" in md
+    assert rows[("base policy", "all")]["note"].startswith("one policy") and rows[("good map", "all")]["note"] == ""
     for fig in ("iqm.png", "families.png", "improvement.png", "hardest_vs_heldout.png"):
         assert (out / fig).stat().st_size > 0
     ev = suite.read_fitness(run / "poor-random" / "heldout" / "fitness.csv.gz")
@@ -73,6 +76,57 @@ def test_generalise_ranks_the_better_walkers_first(tmp_path, capsys):
     cells, scores = suite.cell_scores(ev.fitness, ev.family, ev.level)
     assert cells == [("flat", 0), ("gaps", 0), ("gaps", 1), ("gaps", 2), ("gen:perlin", 0), ("gen:perlin", 1)]
     assert scores.shape == (5, 6)
+
+
+def test_generalise_reports_intervals_over_whole_trials_by_default(tmp_path):
+    """Each walker scores the same on every terrain (perfectly correlated cells): the default interval is the
+    bootstrap interval of the trial means, computed here directly; rliable's stratified interval (resampling each
+    cell on its own) is kept beside it and is narrower. The base policy, evaluated once, has no trial variance."""
+    means = np.array([0.52, 0.61, 0.55, 0.70, 0.58])
+    write_treatment(tmp_path / "run" / "t-map", means[:, None], np.linspace(0.2, 0.4, 12), [1, 2, 3, 4, 5])
+    out = tmp_path / "out"
+    assert cli("generalise", str(tmp_path / "run" / "t-map"), "--reps", "500", "--seed", "3", "--out", str(out),
+               "--permutations", "50") == 0
+    rows = {(r["treatment"], r["scope"]): r for r in csv.DictReader((out / "intervals.csv").open())}
+    r = rows[("t map", "all")]
+    rows_drawn = np.random.default_rng(3).integers(0, 5, (500, 5))
+    lo, hi = np.percentile(means[rows_drawn].mean(axis=1), [2.5, 97.5])
+    assert float(r["mean_low"]) == pytest.approx(lo, abs=1e-4) and float(r["mean_high"]) == pytest.approx(hi, abs=1e-4)
+    assert float(r["trial_iqm_low"]) == pytest.approx(lo, abs=1e-4)      # each trial's IQM is its mean here
+    assert float(r["iqm_low_terrains"]) == pytest.approx(float(r["iqm_low"]), abs=1e-3)  # no terrain variance
+    assert float(r["mean_high_stratified"]) - float(r["mean_low_stratified"]) < 0.7 * (hi - lo)
+    b = rows[("base policy", "all")]
+    assert b["runs"] == "1" and b["iqm_low"] == b["iqm_high"] == b["iqm"] and "no trial variance" in b["note"]
+    pi = {(p["x"], p["y"]): p for p in csv.DictReader((out / "improvement.csv").open())}
+    assert float(pi[("t map", "base policy")]["probability"]) == 1.0
+    md = (out / "generalisation.md").read_text()
+    assert "its 1 run is one evaluation of the same weights" in md and "an interval of zero width" in md
+    assert f"| t map | 5 | {means.mean():.3f}" not in md                # the IQM column comes first
+    assert f"[{lo:.3f}, {hi:.3f}]" in md and "5 of 5 |" in md
+
+
+def test_generalise_holm_adjusts_pairwise_comparisons(tmp_path):
+    """Three treatments: three pairs, Welch's test on the trials' means and its Holm adjustment, as computed here."""
+    from scipy import stats
+
+    from jaxterrain.runtime import statistics
+
+    trials = {"a-map": [0.50, 0.52, 0.55, 0.51], "b-map": [0.53, 0.56, 0.54, 0.58], "c-map": [0.70, 0.72, 0.69, 0.74]}
+    for name, m in trials.items():
+        write_treatment(tmp_path / "run" / name, np.array(m)[:, None], 0.3, [1, 2, 3, 4])
+    assert cli("generalise", str(tmp_path / "run"), "--reps", "50", "--permutations", "50") == 0
+    rows = {(r["x"], r["y"]): r for r in csv.DictReader((tmp_path / "run" / "generalisation" / "improvement.csv").open())}
+    pairs = [("a map", "b map"), ("a map", "c map"), ("b map", "c map")]
+    raw = [stats.ttest_ind(trials[a.replace(" ", "-")], trials[b.replace(" ", "-")], equal_var=False).pvalue
+           for a, b in pairs]
+    for (a, b), p, h in zip(pairs, raw, statistics.holm(raw)):
+        for key in ((a, b), (b, a)):
+            for col in ("", "_mean"):  # every cell of a trial equal: its IQM is its mean
+                assert float(rows[key]["welch_p" + col]) == pytest.approx(p, rel=1e-3)
+                assert float(rows[key]["holm_p" + col]) == pytest.approx(h, rel=1e-3)
+    assert rows[("a map", "base policy")]["welch_p"] == ""
+    corr = json.loads((tmp_path / "run" / "generalisation" / "correlation.json").read_text())
+    assert corr["within_stratified"]["groups"] == 3 and corr["within_stratified"]["reps"] == 50
 
 
 def test_generalise_refuses_folders_without_evaluations(tmp_path):
@@ -83,6 +137,8 @@ def test_generalise_refuses_folders_without_evaluations(tmp_path):
         cli("generalise", str(tmp_path / "missing"))
     with pytest.raises(SystemExit):
         cli("generalise", str(tmp_path / "empty"), "--reps", "0")
+    with pytest.raises(SystemExit):
+        cli("generalise", str(tmp_path / "empty"), "--permutations", "0")
 
 
 def test_generalise_refuses_two_treatments_of_one_name_and_takes_treatment_folders(tmp_path, capsys):
