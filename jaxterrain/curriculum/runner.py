@@ -35,7 +35,7 @@ from jaxterrain.curriculum.outputs import PARTIAL, export_policies, write_output
 from jaxterrain.curriculum.selectors import get_selector
 from jaxterrain.qd.archive_io import load as load_archive_file
 from jaxterrain.qd.bank import from_archive
-from jaxterrain.runtime import driver, estimates, sharding
+from jaxterrain.runtime import driver, estimates, sharding, xla
 from jaxterrain.terrain import TerrainScale
 from jaxterrain.difficulty import policy_robot, robot_base_policy
 from jaxterrain.walker import robots, tiles
@@ -249,16 +249,15 @@ were carried (2026-11-29) lack them and stored ``restart`` True: restored, their
 terrains, as they did at every block then."""
 
 
-FAST_COMPILE = {"xla_backend_optimization_level": 0, "xla_llvm_disable_expensive_passes": True,
-                "xla_cpu_use_fusion_emitters": False}
+FAST_COMPILE = xla.FAST_CPU_COMPILE
 
 
 def compiled(fn, fast: bool, *args):
     """``jax.jit(fn)`` compiled for ``args``; with ``fast`` (the CPU smoke preset) at XLA's lowest backend
     optimisation and with its classic elemental emitter instead of the fusion emitters, which compiles the walker's
-    programs several times faster on a CPU."""
+    programs several times faster on a CPU (the options this jax's XLA knows: ``runtime.xla.known_options``)."""
     lowered = jax.jit(fn).lower(*args)
-    return lowered.compile(FAST_COMPILE if fast and jax.default_backend() == "cpu" else None)
+    return lowered.compile(xla.known_options(FAST_COMPILE) if fast and jax.default_backend() == "cpu" else None)
 
 
 _LISTENERS: list = []  # the running treatment's progress function (compiled blocks call _chunk_done, shared by all)

@@ -6,10 +6,11 @@
 - :mod:`~jaxterrain.runtime.io`: atomic file writes;
 - :mod:`~jaxterrain.runtime.provenance`: the code's commit and the device, for every result;
 - :mod:`~jaxterrain.runtime.validation`: the one-line config checks every config class shares;
+- :mod:`~jaxterrain.runtime.xla`: the XLA options the installed jax knows (cheap CPU compiles);
 - :mod:`~jaxterrain.runtime.statistics`: scores of several runs aggregated with rliable (IQM, stratified-bootstrap
   intervals, probability of improvement) and rank correlations.
 """
 
-from jaxterrain.runtime import driver, io, provenance, sharding, statistics, validation
+from jaxterrain.runtime import driver, io, provenance, sharding, statistics, validation, xla
 
-__all__ = ["driver", "io", "provenance", "sharding", "statistics", "validation"]
+__all__ = ["driver", "io", "provenance", "sharding", "statistics", "validation", "xla"]

@@ -24,9 +24,10 @@ from jaxterrain.terrain import TerrainScale
 from jaxterrain.walker import Tile, WalkerConfig, WalkerEnv, warp_available
 from jaxterrain.curriculum import runner
 from jaxterrain.walker import layout
+from jaxterrain.runtime import xla
 
 WARP_OK, WARP_WHY = warp_available()
-FAST_COMPILE = {"xla_backend_optimization_level": 0, "xla_llvm_disable_expensive_passes": True}
+FAST_COMPILE = xla.known_options({"xla_backend_optimization_level": 0, "xla_llvm_disable_expensive_passes": True})
 
 SHAPE = (16, 16)
 EXACT = TerrainScale(cell_size=0.25, height=1.0)  # tile origins multiples of 2 m, 0.25 m cells: exact shifts

@@ -8,7 +8,10 @@ from pathlib import Path
 
 if __name__ == "__main__" and "xla_cpu_use_fusion_emitters" not in os.environ.get("XLA_FLAGS", ""):
     # the test processes' XLA setting (tests/conftest.py): the same compiled program as the test's
-    os.environ["XLA_FLAGS"] = (os.environ.get("XLA_FLAGS", "") + " --xla_cpu_use_fusion_emitters=false").strip()
+    from jaxterrain.runtime import xla
+
+    if xla.flag_known("--xla_cpu_use_fusion_emitters=false"):
+        os.environ["XLA_FLAGS"] = (os.environ.get("XLA_FLAGS", "") + " --xla_cpu_use_fusion_emitters=false").strip()
 
 import jax
 import jax.numpy as jnp

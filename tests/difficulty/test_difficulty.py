@@ -15,6 +15,7 @@ from jaxterrain.terrain import TerrainScale
 from jaxterrain.walker import WalkerConfig
 from jaxterrain import walker
 from jaxterrain.difficulty import evaluation
+from jaxterrain.runtime import xla
 
 SCALE = TerrainScale(cell_size=0.2, height=0.5)
 # 300 steps = 4.5 s: the shipped policy walks ~2.9 m/s, the track is 5.2 m; walkers that fall end earlier
@@ -281,8 +282,8 @@ def test_default_protocol_is_the_existing_computation(flat_pair):
 
 # cheaper XLA CPU compiles for a program only compared with itself (as in test_walker.py): lowest backend
 # optimisation, and the classic elemental emitter instead of the fusion emitters
-FAST_COMPILE = {"xla_backend_optimization_level": 0, "xla_llvm_disable_expensive_passes": True,
-                "xla_cpu_use_fusion_emitters": False}
+FAST_COMPILE = xla.known_options({"xla_backend_optimization_level": 0, "xla_llvm_disable_expensive_passes": True,
+                "xla_cpu_use_fusion_emitters": False})
 
 
 @pytest.mark.slow

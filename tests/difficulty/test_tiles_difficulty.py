@@ -25,6 +25,7 @@ from jaxterrain.terrain import TerrainScale
 from jaxterrain.walker import WalkerConfig, warp_available
 from jaxterrain import walker
 from jaxterrain.walker import layout
+from jaxterrain.runtime import xla
 
 WARP_OK, WARP_WHY = warp_available()
 needs_warp = pytest.mark.skipif(not WARP_OK, reason=WARP_WHY or "warp available")
@@ -37,8 +38,8 @@ ATTEMPTS, BEST, SLOTS = 4, 2, 5  # 12 walks on 5 pool slots: three rounds of ref
 KEY = jax.random.PRNGKey(3)
 # cheaper XLA CPU compiles (measured on the classic loop: 12 s instead of 19 s of CPU); every program compared with
 # another is compiled with the same options
-FAST_COMPILE = {"xla_backend_optimization_level": 0, "xla_llvm_disable_expensive_passes": True,
-                "xla_cpu_use_fusion_emitters": False}
+FAST_COMPILE = xla.known_options({"xla_backend_optimization_level": 0, "xla_llvm_disable_expensive_passes": True,
+                "xla_cpu_use_fusion_emitters": False})
 # Tiled vs classic MJX-JAX: not bit for bit. A tiled walker's world coordinates are shifted by its tile's origin
 # (x = +-1.6 m here), so positions, contact points and the distance's difference x - x_start round differently in
 # float32 (ulp 1.2e-7 m at 1.6 m), and the walk's chaotic dynamics grow that to ~1e-5 over a walk. Measured on

@@ -10,13 +10,14 @@ import pytest
 
 from jaxterrain import rl
 from jaxterrain.walker import TerrainScale, WalkerConfig, WalkerEnv
+from jaxterrain.runtime import xla
 
 from benchmark_loader import load_benchmark
 
 bench = load_benchmark("ppo")
 
-FAST_COMPILE = {"xla_backend_optimization_level": 0, "xla_llvm_disable_expensive_passes": True,
-                "xla_cpu_use_fusion_emitters": False}
+FAST_COMPILE = xla.known_options({"xla_backend_optimization_level": 0, "xla_llvm_disable_expensive_passes": True,
+                "xla_cpu_use_fusion_emitters": False})
 SMALL_ENV = WalkerConfig(terrain_shape=(16, 32), scale=TerrainScale(cell_size=0.2, height=0.5), episode_length=30)
 
 

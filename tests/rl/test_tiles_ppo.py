@@ -26,8 +26,8 @@ from jaxterrain.walker import Tile, WalkerConfig, WalkerEnv
 
 # the exact comparisons below (a tile against its terrain array: two programs) hold with XLA's fusion emitters, which
 # tests/conftest.py turns off suite-wide: pinned on here
-FAST_COMPILE = {"xla_backend_optimization_level": 0, "xla_llvm_disable_expensive_passes": True,
-                "xla_cpu_use_fusion_emitters": True}
+FAST_COMPILE = xla.known_options({"xla_backend_optimization_level": 0, "xla_llvm_disable_expensive_passes": True,
+                "xla_cpu_use_fusion_emitters": True})
 
 
 # ---------------------------------------------------------------------------------------------------------------
@@ -241,6 +241,7 @@ sys.path.insert(0, TESTS)
 import jax, jax.numpy as jnp, numpy as np
 from jaxterrain import rl
 from jaxterrain.runtime import sharding as SH
+from jaxterrain.runtime import xla
 from test_tiles_ppo import CFG, TilePointEnv, _terrains
 
 assert len(jax.devices()) == 4

@@ -9,6 +9,7 @@ import mujoco
 import numpy as np
 import pytest
 
+from jaxterrain.runtime import xla
 from jaxterrain.terrain import TerrainScale
 from jaxterrain.walker import (SOLVER_FAST, SOLVER_SOUND, SOLVER_XML, WalkerConfig, WalkerEnv, build_model,
                                flat_terrain, sample_heights, standing_offset)
@@ -23,8 +24,8 @@ def env():
 
 # cheaper XLA CPU compiles (these tiny runs need no optimised code): lowest backend optimisation and the classic
 # elemental emitter instead of the fusion emitters, every program of this module compiled alike
-FAST_COMPILE = {"xla_backend_optimization_level": 0, "xla_llvm_disable_expensive_passes": True,
-                "xla_cpu_use_fusion_emitters": False}
+FAST_COMPILE = xla.known_options({"xla_backend_optimization_level": 0, "xla_llvm_disable_expensive_passes": True,
+                "xla_cpu_use_fusion_emitters": False})
 
 
 @pytest.fixture(scope="module")

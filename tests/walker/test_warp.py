@@ -14,6 +14,7 @@ import pytest
 
 from jaxterrain.terrain import TerrainScale
 from jaxterrain.walker import TILE_AXES, Tile, TileBank, WalkerConfig, WalkerEnv, sample_heights, warp_available
+from jaxterrain.runtime import xla
 
 WARP_OK, WARP_WHY = warp_available()
 needs_warp = pytest.mark.skipif(not WARP_OK, reason=WARP_WHY or "warp available")
@@ -22,8 +23,8 @@ SHAPE = (16, 16)
 SCALE = TerrainScale(cell_size=0.2, height=1.0)
 STEPS = 100  # env steps (1.5 s): the base policy covers the 2 m track on flat ground in about 80
 # cheap XLA CPU compiles (lowest backend optimisation, the classic elemental emitter instead of the fusion emitters)
-FAST_COMPILE = {"xla_backend_optimization_level": 0, "xla_llvm_disable_expensive_passes": True,
-                "xla_cpu_use_fusion_emitters": False}
+FAST_COMPILE = xla.known_options({"xla_backend_optimization_level": 0, "xla_llvm_disable_expensive_passes": True,
+                "xla_cpu_use_fusion_emitters": False})
 
 
 def _policy():
