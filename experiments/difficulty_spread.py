@@ -88,6 +88,9 @@ def main(args: argparse.Namespace) -> int:
         key, k = jax.random.split(key)
         maps[name] = gen.render(gen.sample(k, args.n))
 
+    from jaxterrain.runtime import estimates
+
+    estimates.announce("walks", f"{args.attempts} walks a terrain; once per terrain count and height")
     results: dict[tuple[float, str], np.ndarray] = {}
     for height in args.heights:
         scale = TerrainScale(cell_size=TerrainScale().cell_size, height=height)

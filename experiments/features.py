@@ -200,6 +200,11 @@ def measure_all(plans: list[Plan], cfg: dict, key, fitness_fn, folder: Path, res
     if restored is not None:
         state, start, history, _ = restored
         print(f"resumed after {start} of {total} batches", flush=True)
+    from jaxterrain.runtime import estimates
+
+    walks = cfg["fitness"] == "difficulty"
+    estimates.announce("walks" if walks else "map-elites-slope",
+                       f"{int(cfg['batch'])} terrains a batch{', ' + str(cfg['attempts']) + ' walks each' if walks else ''}")
     state, done, _ = driver.run_chunks(
         chunk, state, total=total, every=1, start=start, history=history, run_dir=folder, key_metric="difficulty",
         time_limit_s=None if time_limit is None else 60.0 * time_limit, desc="features", unit="batch",

@@ -268,6 +268,9 @@ def walk_archive(elites: dict, protocol, key, slots, chunk, sample) -> dict:
     rows = spread_sample(distance_from_origin(elites["bins"]), sample)
     b = bank.from_archive(elites["archive"])
     maps = np.asarray(b.heightmaps)[rows] / np.float32(1.0 * _scale_height())
+    from jaxterrain.runtime import estimates
+
+    estimates.announce("walks", f"{len(rows)} elites, {protocol.attempts} walks each")
     out = walk(np.clip(maps, 0.0, 1.0), protocol, key, slots, chunk)
     scores = np.asarray(difficulty.heading_scores(out["distances"], protocol))
     out.update(rows=rows, fitness=np.asarray(difficulty.aggregate(out["distances"], protocol)), heading0=scores[:, 0],

@@ -265,6 +265,9 @@ def main(args: argparse.Namespace) -> int:
 
     walk_note = "Not walked (--walk 0)."
     if args.walk > 0:
+        from jaxterrain.runtime import estimates
+
+        estimates.announce("walks", f"{args.walk} terrains of each generator, {args.attempts} walks each")
         try:
             samples, seconds = walk(samples, args.walk, args.attempts, args.best, jax.random.fold_in(key, 1))
         except RuntimeError as err:  # the base policy is not shipped

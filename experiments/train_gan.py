@@ -335,6 +335,9 @@ def train(cfg: dict, run_dir: Path, config, tiles, resume: bool = False, time_li
     _, real_fn = gan_train.jitted_samples(config)
     if not (run_dir / "samples" / "real.png").exists():
         save_grid(run_dir / "samples" / "real.png", real_fn(jax.random.PRNGKey(7), tiles))
+    from jaxterrain.runtime import estimates
+
+    estimates.announce("gan-step", f"batch {cfg['batch_size']}, {cfg['size']} x {cfg['size']}")
     t0 = time.time()
     state, done, history = driver.run_chunks(
         make_chunk(cfg, run_dir, config, tiles, start), state, total=int(cfg["steps"]), every=int(cfg["ckpt_every"]),

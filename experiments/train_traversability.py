@@ -289,6 +289,9 @@ def main(args) -> int:
     clock = common.Clock(args.time_limit)
     t0 = time.time()
     try:
+        from jaxterrain.runtime import estimates
+
+        estimates.announce("walks", f"{cfg['attempts']} walks a terrain")
         data = load_or_collect(folder, list(cfg["generators"]), cfg, jax.random.fold_in(key, 0), clock)
     except common.TimeUp:
         print(f"time limit reached; continue with: python -m experiments train-traversability --resume {folder}",
