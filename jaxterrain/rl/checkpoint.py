@@ -14,6 +14,7 @@ loads the shipped base policy from ``jaxterrain/assets/base_policy/``.
 
 from __future__ import annotations
 
+import functools
 import json
 import os
 from pathlib import Path
@@ -203,10 +204,15 @@ def _read_policy(folder: Path, weights: Path):
     return config, meta, action_size, params, normaliser
 
 
+@functools.lru_cache(maxsize=32)
 def policy_fn(config: PPOConfig, action_size: int) -> Callable[[Any, jax.Array], jax.Array]:
     """``f((params, normaliser), obs [..., O]) -> action [..., A]``: the deterministic policy with its parameters
     as an argument, so new parameters (e.g. during a curriculum) do not re-compile a jitted caller
-    (``jaxterrain.difficulty.evaluate(..., policy=f, policy_params=(state.params, state.normaliser))``)."""
+    (``jaxterrain.difficulty.evaluate(..., policy=f, policy_params=(state.params, state.normaliser))``).
+
+    Cached per ``(config, action_size)`` (at most 32): every walker of one network config gets the SAME function,
+    so a caller's program cache keyed on it (``difficulty``'s) compiles one program for all of them
+    (``suite.evaluate_policies`` compiled one per walker before: 60 s each with MJX on an H200)."""
 
     def f(policy_params, obs):
         params, normaliser = policy_params

@@ -21,6 +21,7 @@ import numpy as np
 import pytest
 
 from jaxterrain import rl
+from jaxterrain.runtime import xla
 from jaxterrain.terrain import TerrainScale
 from jaxterrain.walker import Tile, WalkerConfig, WalkerEnv
 
@@ -241,7 +242,6 @@ sys.path.insert(0, TESTS)
 import jax, jax.numpy as jnp, numpy as np
 from jaxterrain import rl
 from jaxterrain.runtime import sharding as SH
-from jaxterrain.runtime import xla
 from test_tiles_ppo import CFG, TilePointEnv, _terrains
 
 assert len(jax.devices()) == 4

@@ -118,3 +118,21 @@ def test_levels_png_colours_by_the_share_of_levels_and_fits_its_text():
     for tick in bar.get_yticklabels():
         assert not label.overlaps(tick.get_window_extent(r)), tick.get_text()
     assert not ax.title.get_window_extent(r).overlaps(ax.get_window_extent(r))
+
+
+def test_walkers_of_one_network_config_share_one_evaluation_program():
+    """``rl.policy_fn`` is cached per (config, action size), so ``suite.evaluate_policies`` hands ``difficulty`` the
+    same function for every walker of one config and its program cache (keyed on that function) builds one program
+    for all of them (issue 60: one compile per walker before). Nothing is compiled here."""
+    from jaxterrain import difficulty, rl
+    from jaxterrain.difficulty import evaluation
+
+    base = rl.load_policy()
+    a, b = rl.policy_fn(base.config, int(base.action_size)), rl.policy_fn(base.config, int(base.action_size))
+    assert a is b
+    other = rl.policy_fn(base.config._replace(policy_hidden=(8,)), int(base.action_size))
+    assert other is not a  # another network: another function
+    config = difficulty.default_env_config((128, 128), policy=base)
+    first = evaluation._program(config, 2, 1, a, True, None, False)
+    assert evaluation._program(config, 2, 1, b, True, None, False) is first
+    assert evaluation._program(config, 2, 1, other, True, None, False) is not first
