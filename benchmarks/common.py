@@ -35,6 +35,13 @@ def block(x: Any) -> Any:
     return jax.block_until_ready(x)
 
 
+def timed(fn: Callable[[], Any]) -> tuple[Any, float]:
+    """``(fn() blocked until ready, seconds it took)``."""
+    t0 = time.perf_counter()
+    out = jax.block_until_ready(fn())
+    return out, time.perf_counter() - t0
+
+
 def median_time(fn: Callable[[Any], Any], inputs: Sequence[Any], repeats: int = 5, warmup: int = 1) -> float:
     """Median wall time (s) of ``fn(inputs[i])`` over ``repeats`` calls, rotating through ``inputs``.
 

@@ -24,15 +24,9 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 import jax  # noqa: E402
 import numpy as np  # noqa: E402
 
-from common import environment  # noqa: E402
+from common import environment, timed  # noqa: E402
 from jaxterrain import difficulty, rl, suite  # noqa: E402
 from jaxterrain.rl.checkpoint import policy_fn  # noqa: E402
-
-
-def timed(fn):
-    t0 = time.perf_counter()
-    out = jax.block_until_ready(fn())
-    return out, time.perf_counter() - t0
 
 
 def main(argv=None) -> int:

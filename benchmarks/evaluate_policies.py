@@ -17,7 +17,6 @@ from __future__ import annotations
 import argparse
 import json
 import sys
-import time
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
@@ -25,7 +24,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 import jax  # noqa: E402
 import numpy as np  # noqa: E402
 
-from common import environment  # noqa: E402
+from common import environment, timed  # noqa: E402
 from jaxterrain import difficulty, rl, suite  # noqa: E402
 from jaxterrain.suite import evaluation  # noqa: E402
 
@@ -39,12 +38,6 @@ def shipped_walkers(n: int) -> list[Path]:
     if len(folders) < n:
         raise SystemExit(f"--walkers {n}: only {len(folders)} shipped walkers under {WALKERS}")
     return folders[:n]
-
-
-def timed(fn):
-    t0 = time.perf_counter()
-    out = jax.block_until_ready(fn())
-    return out, time.perf_counter() - t0
 
 
 def main(argv=None) -> int:

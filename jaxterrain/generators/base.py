@@ -34,7 +34,7 @@ import numpy as np
 
 __all__ = ["Genome", "PRNGKey", "RENDER_CHUNK", "GenomeSpec", "spec", "Generator", "is_traced", "check_count",
            "check_key", "chunked_render", "mark_checked", "checked", "uniform_genomes", "gaussian_mutation",
-           "check_vector_genomes", "vector_generator"]
+           "check_vector_genomes", "vector_generator", "mix32"]
 
 Genome = Any  # an array [B, G] or a pytree of arrays with leading axis B
 PRNGKey = jax.Array
@@ -303,3 +303,14 @@ def vector_generator(
         return batched(genomes)
 
     return Generator(name, gspec, size, sample, mutate, render, render_one, validate)
+
+
+def mix32(x: jax.Array) -> jax.Array:
+    """``lowbias32`` integer finaliser (C. Wellons): uint32 -> uint32 elementwise, a bijection with good avalanche;
+    the integer hash behind the table-free noise of :mod:`~jaxterrain.generators.perlin` and
+    :mod:`~jaxterrain.generators.steps`."""
+    x = x ^ (x >> 16)
+    x = x * jnp.uint32(0x7FEB352D)
+    x = x ^ (x >> 15)
+    x = x * jnp.uint32(0x846CA68B)
+    return x ^ (x >> 16)

@@ -44,7 +44,7 @@ from __future__ import annotations
 import jax
 import jax.numpy as jnp
 
-from jaxterrain.generators.base import Generator, spec, vector_generator
+from jaxterrain.generators.base import Generator, mix32, spec, vector_generator
 from jaxterrain.generators.registry import register
 
 __all__ = ["MAX_OCTAVES", "PERLIN_SPEC", "perlin_octave", "octave_params", "render_perlin", "perlin"]
@@ -61,15 +61,6 @@ PERLIN_SPEC = spec(
 
 _SQRT2 = 1.4142135623730951
 _HASH_MUL = 0x9E3779B1  # golden-ratio multiplier: the top bits of (k * M) mix all bits of k
-
-
-def _mix32(x: jax.Array) -> jax.Array:
-    """``lowbias32`` integer finaliser (C. Wellons); uint32 -> uint32, a bijection with good avalanche."""
-    x = x ^ (x >> 16)
-    x = x * jnp.uint32(0x7FEB352D)
-    x = x ^ (x >> 15)
-    x = x * jnp.uint32(0x846CA68B)
-    return x ^ (x >> 16)
 
 
 def _grad_dot(h: jax.Array, fx: jax.Array, fy: jax.Array) -> jax.Array:
@@ -90,8 +81,8 @@ def _axis(coords: jax.Array, salt: jax.Array):
     cell = jnp.floor(coords)
     frac = coords - cell
     ci = cell.astype(jnp.int32).astype(jnp.uint32)
-    h0 = _mix32(ci ^ salt)
-    h1 = _mix32((ci + jnp.uint32(1)) ^ salt)
+    h0 = mix32(ci ^ salt)
+    h1 = mix32((ci + jnp.uint32(1)) ^ salt)
     return h0, h1, frac, _fade(frac)
 
 

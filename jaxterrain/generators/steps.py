@@ -96,7 +96,7 @@ import math
 import jax
 import jax.numpy as jnp
 
-from jaxterrain.generators.base import Generator, spec, vector_generator
+from jaxterrain.generators.base import Generator, mix32, spec, vector_generator
 from jaxterrain.generators.registry import register
 
 __all__ = ["STEPS_SPEC", "PRIMITIVES", "BASE", "ROOM", "START_STRIP", "NOISE_CELL", "strip_cells", "section_bounds",
@@ -150,20 +150,11 @@ def strip_cells(size: int, cell_size: float = 0.04) -> int:
     return int(min(round(START_STRIP / cell_size), size // 8))
 
 
-def _mix32(x: jax.Array) -> jax.Array:
-    """``lowbias32`` integer finaliser (C. Wellons), as in :mod:`~jaxterrain.generators.perlin`; uint32 -> uint32."""
-    x = x ^ (x >> 16)
-    x = x * jnp.uint32(0x7FEB352D)
-    x = x ^ (x >> 15)
-    x = x * jnp.uint32(0x846CA68B)
-    return x ^ (x >> 16)
-
-
 def _uniform(ix: jax.Array, iy: jax.Array, salt: jax.Array) -> jax.Array:
     """A uniform number in [0, 1) per integer lattice point ``(ix, iy)`` (int32, broadcast), for a uint32 ``salt``:
     an integer hash (pure arithmetic, no table; fuses with its consumers)."""
-    hx = _mix32(ix.astype(jnp.uint32) ^ salt)
-    h = _mix32(hx ^ (iy.astype(jnp.uint32) * jnp.uint32(0x9E3779B1)))
+    hx = mix32(ix.astype(jnp.uint32) ^ salt)
+    h = mix32(hx ^ (iy.astype(jnp.uint32) * jnp.uint32(0x9E3779B1)))
     return (h >> 8).astype(jnp.float32) * jnp.float32(2.0 ** -24)
 
 
