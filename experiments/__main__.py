@@ -146,9 +146,8 @@ def main(argv: list[str] | None = None, prog: str = "python -m experiments") -> 
     available = {name: module for name, (module, _) in commands.items()}
     args = parser.parse_args(argv)
     args.plugin = plugins
-    from experiments.common import UsageError, apply_progress, check_args
+    from experiments.common import UsageError, check_args
 
-    apply_progress(args)  # --no-progress: plain progress lines
     try:  # bad flag values: one line naming the flag, exit status 2 (as argparse), before any JAX work
         check_args(args.command, args)
         return int(available[args.command].main(args) or 0)

@@ -263,12 +263,10 @@ def add_progress_argument(parser: argparse.ArgumentParser) -> None:
                              "file)")
 
 
-def apply_progress(args: argparse.Namespace) -> None:
-    """``--no-progress``: tell ``jaxterrain.runtime.driver`` (``JAXTERRAIN_PROGRESS=plain``) to print plain lines."""
-    import os
-
-    if getattr(args, "progress", None) is False:
-        os.environ["JAXTERRAIN_PROGRESS"] = "plain"
+def progress_mode(args: argparse.Namespace) -> bool | str:
+    """The ``progress`` argument of ``jaxterrain.runtime.driver.run_chunks`` for ``--progress`` / ``--no-progress``:
+    True (a bar on a terminal, plain lines in a log file) or ``"plain"`` (plain lines always)."""
+    return "plain" if getattr(args, "progress", True) is False else True
 
 
 def flag(key: str) -> str:

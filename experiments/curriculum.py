@@ -319,7 +319,8 @@ def main(args) -> int:
         tcfg = _treatment_cfg(cfg, path, curriculum)
         common.write_config(sub, tcfg)
         left = None if limit is None else max(limit - (time.perf_counter() - start), 1e-3)
-        summary = runner.run_treatment(tcfg, sub, left, desc=f"{name} {curriculum}", mesh=mesh)
+        summary = runner.run_treatment(tcfg, sub, left, desc=f"{name} {curriculum}", mesh=mesh,
+                                       progress=common.progress_mode(args))
         if summary is None:
             print(f"time limit reached; continue with: python -m experiments curriculum --resume {folder}{shard}",
                   flush=True)

@@ -184,7 +184,7 @@ def make_chunk(plans: list[Plan], cfg: dict, key, fitness_fn):
 
 
 def measure_all(plans: list[Plan], cfg: dict, key, fitness_fn, folder: Path, resume: bool,
-                time_limit: float | None) -> dict[str, dict] | None:
+                time_limit: float | None, progress: bool | str = True) -> dict[str, dict] | None:
     """Measure every plan through ``jaxterrain.runtime.driver.run_chunks`` in ``folder`` (``resume``: from its checkpoint;
     ``time_limit`` minutes: stop after the batch in which they pass). Returns ``{generator: {column: [N]
     float64}}`` with ``difficulty``, or None when the time limit stopped the run first."""
@@ -207,7 +207,7 @@ def measure_all(plans: list[Plan], cfg: dict, key, fitness_fn, folder: Path, res
                        f"{int(cfg['batch'])} terrains a batch{', ' + str(cfg['attempts']) + ' walks each' if walks else ''}")
     state, done, _ = driver.run_chunks(
         chunk, state, total=total, every=1, start=start, history=history, run_dir=folder, key_metric="difficulty",
-        time_limit_s=None if time_limit is None else 60.0 * time_limit, desc="features", unit="batch",
+        time_limit_s=None if time_limit is None else 60.0 * time_limit, desc="features", unit="batch", progress=progress,
         meta={"command": "features", "generators": [p.name for p in plans]})
     if done < total:
         return None
@@ -348,7 +348,8 @@ def main(args) -> int:
         print("no generator available", flush=True)
         return 1
     fitness_fn = jax.jit(named_fitness(cfg["fitness"], int(cfg["attempts"]), int(cfg["best"]), int(cfg["size"])))
-    results = measure_all(plans, cfg, key, fitness_fn, folder, args.resume is not None, args.time_limit)
+    results = measure_all(plans, cfg, key, fitness_fn, folder, args.resume is not None, args.time_limit,
+                          common.progress_mode(args))
     if results is None:
         print(f"time limit reached; continue with: python -m experiments features --resume {folder}", flush=True)
         return 3

@@ -292,7 +292,7 @@ def main(args) -> int:
               f"cells -> {folder}", flush=True)
         return 0
     limit = None if args.time_limit is None else 60.0 * args.time_limit
-    summary = runner.run_treatment(cfg, folder, limit, mesh=mesh)
+    summary = runner.run_treatment(cfg, folder, limit, mesh=mesh, progress=common.progress_mode(args))
     if summary is None:
         print(f"time limit reached; continue with: python -m experiments learn --resume {folder}", flush=True)
         return 3

@@ -322,7 +322,7 @@ def make_chunk(cfg: dict, run_dir: Path, config, tiles, start: int):
 
 
 def train(cfg: dict, run_dir: Path, config, tiles, resume: bool = False, time_limit: float | None = None,
-          progress: bool = True) -> TrainOutcome:
+          progress: bool | str = True) -> TrainOutcome:
     """Train (or ``resume``) to ``cfg["steps"]`` through ``jaxterrain.runtime.driver.run_chunks``: a checkpoint
     (``checkpoint.npz``), ``metrics.csv`` and TensorBoard events every ``cfg["ckpt_every"]`` steps; stops early
     after ``time_limit`` minutes (``--time-limit``)."""
@@ -389,7 +389,7 @@ def main(args: argparse.Namespace) -> int:
         return 0
 
     outcome = train(cfg, run_dir, config, data.tiles, resume=args.resume is not None, time_limit=args.time_limit,
-                    progress=args.progress)
+                    progress=common.progress_mode(args))
     if outcome.done < int(cfg["steps"]):
         print(f"time limit reached at step {outcome.done} of {cfg['steps']}; continue with: "
               f"python -m experiments train-gan --resume {run_dir}", flush=True)

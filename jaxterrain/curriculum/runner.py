@@ -434,7 +434,7 @@ def setup(cfg: dict, config, arch, policy, env, mesh=None):
 
 
 def run_treatment(cfg: dict, folder: Path, time_limit_s: float | None = None, desc: str = "",
-                  mesh=None) -> dict | None:
+                  mesh=None, progress: bool | str = True) -> dict | None:
     """Run (or continue) one treatment in ``folder``; its summary dict when finished, None when the time limit
     stopped it (checkpointed; call again to continue). ``time_limit_s`` counts from this call, its set-up and
     compilation included. Raises :class:`BadInput` before compiling anything."""
@@ -474,7 +474,7 @@ def run_treatment(cfg: dict, folder: Path, time_limit_s: float | None = None, de
     try:
         states, done, _ = driver.run_chunks(
             chunk_fn, states, total=config.max_chunks, every=int(cfg["chunks_per_call"]), start=done,
-            history=history, run_dir=folder, key_metric="hardest", desc=desc or cfg["curriculum"],
+            history=history, run_dir=folder, key_metric="hardest", desc=desc or cfg["curriculum"], progress=progress,
             time_limit_s=None if time_limit_s is None else max(time_limit_s - (time.perf_counter() - t0), 1e-3),
             unit="chunk", meta={"config": cfg, "archive_sha256": digest, "backend": physics_of(cfg)},
             wall_s=before + time.perf_counter() - t0, fit_to_limit=True)  # the block's length is traced

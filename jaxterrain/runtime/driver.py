@@ -288,9 +288,9 @@ class _PlainProgress:
 
 
 def _bar(progress, total: int, start: int, desc: str, unit: str):
-    if progress is not True:
+    if progress is not True and progress != "plain":
         return None
-    if not sys.stderr.isatty() or os.environ.get("JAXTERRAIN_PROGRESS") == "plain":  # --no-progress
+    if progress == "plain" or not sys.stderr.isatty():  # a command's --no-progress, or a log file
         return _PlainProgress(total, start, desc, unit)
     try:
         from tqdm.auto import tqdm
@@ -311,7 +311,7 @@ def _extend(history: dict, metrics: dict, n: int) -> None:
 def run_chunks(chunk_fn: ChunkFn, state: Any, *, total: int, every: int, start: int = 0,
                history: Optional[dict] = None, run_dir: str | os.PathLike | None = None,
                key_metric: Optional[str] = None, time_limit_s: Optional[float] = None,
-               progress: bool | Callable[[dict], None] = True, desc: str = "", unit: str = "step",
+               progress: bool | str | Callable[[dict], None] = True, desc: str = "", unit: str = "step",
                meta: Optional[dict] = None, wall_s: float = 0.0, fit_to_limit: bool = False) -> tuple[Any, int, dict]:
     """Run steps ``[start, total)`` as ``chunk_fn(state, a, b)`` calls of at most ``every`` steps.
 
@@ -331,7 +331,7 @@ def run_chunks(chunk_fn: ChunkFn, state: Any, *, total: int, every: int, start: 
         honoured to within one step, not one chunk, from the first chunk on. ``chunk_fn``'s results must not
         depend on where the chunks are cut (the curriculum's blocks carry their env states).
       progress: True for a tqdm bar on stderr (plain lines, at most one per :data:`PLAIN_EVERY_S` seconds, where
-        stderr is not a terminal or ``$JAXTERRAIN_PROGRESS`` is ``plain``: a command's ``--no-progress``); a
+        stderr is not a terminal); ``"plain"`` for those plain lines always (a command's ``--no-progress``); a
         callable receives a dict per chunk (``done``, ``total``, ``seconds``, ``steps_per_s`` and the latest value
         of every metric); False is silent.
       meta: a JSON-serialisable dict stored in every checkpoint (e.g. the run's config).

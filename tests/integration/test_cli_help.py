@@ -148,10 +148,10 @@ def test_every_command_with_a_progress_bar_takes_no_progress(monkeypatch):
     for name in ("learn", "curriculum", "features", "train-gan", "train-base-policy"):
         parser = COMMANDS[name][1]
         assert parser.parse_args([]).progress is True and parser.parse_args(["--no-progress"]).progress is False
-    monkeypatch.delenv("JAXTERRAIN_PROGRESS", raising=False)
-    common.apply_progress(COMMANDS["learn"][1].parse_args(["--no-progress"]))
-    assert os.environ["JAXTERRAIN_PROGRESS"] == "plain"
-    assert isinstance(driver._bar(True, 10, 0, "x", "chunk"), driver._PlainProgress)
+    assert common.progress_mode(COMMANDS["learn"][1].parse_args(["--no-progress"])) == "plain"
+    assert common.progress_mode(COMMANDS["learn"][1].parse_args([])) is True
+    assert isinstance(driver._bar("plain", 10, 0, "x", "chunk"), driver._PlainProgress)  # on a terminal too
+    assert driver._bar(False, 10, 0, "x", "chunk") is None and "JAXTERRAIN_PROGRESS" not in os.environ
 
 
 def test_preset_help_gives_the_measured_smoke_times_and_every_presets_meaning():
