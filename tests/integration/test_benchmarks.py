@@ -140,3 +140,21 @@ def test_curriculum_devices_split_the_trials_without_changing_them(tmp_path):
     assert rows[0]["hardest_mean"] == rows[1]["hardest_mean"] and rows[0]["switches"] == rows[1]["switches"]
     ratio = result["ratios"]["devices_2_vs_1_T2"]
     assert ratio == rows[1]["env_steps_per_s"] / rows[0]["env_steps_per_s"] > 0
+
+
+@pytest.mark.slow
+def test_evaluate_policies_benchmark_walks_shipped_walkers_through_one_program(tmp_path):
+    """``benchmarks/evaluate_policies.py`` at CPU size (6 terrains, the paper's 20 walks): two shipped walkers
+    through the shared program and one through a program of its own; the JSON names them and its totals add up.
+    One MJX compile more than the shared one: minutes of CPU."""
+    import json
+
+    bench = load_benchmark("evaluate_policies")
+    out = tmp_path / "ep.json"
+    assert bench.main(["--walkers", "2", "--peer", "1", "--size", "128", "--seeds", "1", "--samples", "1",
+                       "--families", "flat", "--protocol", "paper", "--out", str(out)]) == 0
+    r = json.loads(out.read_text())
+    assert r["terrains"] == 6 and len(r["walkers"]) == 3 and len(r["shared_s"]) == 2 and len(r["fresh_s"]) == 1
+    assert r["shared_total_s"] == pytest.approx(sum(r["shared_s"]), abs=0.2)
+    assert r["first_call_s"] > r["walk_s"] > 0  # the first walker compiled, the second did not
+    assert all(w.startswith("docs/results/exp3_gpushort/") for w in r["walkers"])
