@@ -236,7 +236,7 @@ def _policy_program(policy: Callable, policy_params: Any) -> tuple[Callable, Any
 
 @functools.lru_cache(maxsize=16)
 def _keyed_program(config: WalkerConfig, attempts: int, headings: int, apply: Callable, with_params: bool,
-                   slots: Optional[int], smooth_first: bool, mesh):
+                   slots: Optional[int], smooth_first: bool, mesh, split: Optional[str] = None):
     """``(terrains_m [B, H, W], keys [B], params) -> distances [B, attempts]`` of :func:`keyed_distances`, the rows
     split over ``mesh`` (``sharding.map_rows``: padded, the padding never walked); cached like :func:`_program`."""
 
@@ -248,15 +248,15 @@ def _keyed_program(config: WalkerConfig, attempts: int, headings: int, apply: Ca
         return keyed_distances(env, apply, terrains_m, keys, protocol, params if with_params else None, slots,
                                needed=mask, priority=priority)[0]
 
-    return sharding.map_rows(rows, mesh, replicated=(2,), mask=True)
+    return sharding.map_rows(rows, mesh, replicated=(2,), mask=True, split=split)
 
 
 def _keyed_rollouts(terrains_m, key, env_config, protocol, apply, params, with_params, chunk, slots, smooth_first,
-                    mesh) -> jax.Array:
+                    mesh, split=None) -> jax.Array:
     """:func:`rollout_distances` over a mesh: per-row keys ``split(key, B)``, ``chunk`` rows per call."""
 
     fn = _keyed_program(env_config, protocol.attempts, protocol.headings, apply, bool(with_params),
-                        None if slots is None else int(slots), bool(smooth_first) and slots is not None, mesh)
+                        None if slots is None else int(slots), bool(smooth_first) and slots is not None, mesh, split)
     b = terrains_m.shape[0]
     keys = sharding.row_keys(key, b)
     params = params if with_params else jnp.zeros((), jnp.float32)
@@ -342,7 +342,7 @@ def rollout_distances(heightmaps, key: jax.Array, attempts: Optional[int] = None
                       scale: Optional[TerrainScale] = None, env_config: Optional[WalkerConfig] = None,
                       policy_params: Any = None, chunk: Optional[int] = None,
                       slots: Optional[int] = None, smooth_first: bool = True,
-                      protocol: Optional[Protocol] = None, mesh=None) -> jax.Array:
+                      protocol: Optional[Protocol] = None, mesh=None, split: Optional[str] = None) -> jax.Array:
     """Normalised distances ``[B, attempts]`` float32 in [0, 1] of the policy on ``heightmaps`` [B, H, W] in [0, 1].
 
     ``attempts`` (default 20) walks along +x, or the walks of ``protocol`` (:class:`Protocol`; its ``attempts``,
@@ -359,7 +359,8 @@ def rollout_distances(heightmaps, key: jax.Array, attempts: Optional[int] = None
     rollouts (invalid physics, NaN action) count 0. ``mesh`` (a ``jax.sharding.Mesh``): the terrains split over its
     devices, each walked with its own key ``split(key, B)[b]`` (:func:`keyed_distances`; ``slots`` per device;
     a batch that does not divide is padded, the padding never walked), so the result does not depend on the number
-    of devices, nor on ``chunk``; without a mesh the batch's one key is split as before.
+    of devices, nor on ``chunk``; without a mesh the batch's one key is split as before. ``split``: how the rows go
+    over the mesh (``sharding.map_rows``; None: ``sharding.default_split``, GPUs dispatch one program per device).
     """
     for name, value in (("chunk", chunk), ("slots", slots)):  # cheap checks before the env is built
         if value is not None and (not isinstance(value, int) or value < 1):
@@ -372,7 +373,7 @@ def rollout_distances(heightmaps, key: jax.Array, attempts: Optional[int] = None
     apply, params, with_params = _policy_program(policy, policy_params)
     if mesh is not None:
         return _keyed_rollouts(terrains_m, key, env_config, protocol, apply, params, with_params, chunk, slots,
-                               smooth_first, mesh)
+                               smooth_first, mesh, split)
     fn = _program(env_config, protocol.attempts, protocol.headings, apply, with_params, slots, smooth_first)
     b = terrains_m.shape[0]
     if chunk is None or chunk >= b:
@@ -393,11 +394,11 @@ def evaluate(heightmaps, key: jax.Array, attempts: Optional[int] = None, best: O
              policy: Optional[Callable] = None, scale: Optional[TerrainScale] = None,
              env_config: Optional[WalkerConfig] = None, policy_params: Any = None, chunk: Optional[int] = None,
              slots: Optional[int] = None, smooth_first: bool = True, protocol: Optional[Protocol] = None,
-             mesh=None) -> jax.Array:
+             mesh=None, split: Optional[str] = None) -> jax.Array:
     """Fitness ``[B]`` float32 in [0, 1] of ``heightmaps`` [B, H, W] (values in [0, 1]) under ``protocol``
     (default: the paper's, ``Protocol(attempts or 20, best or 5)``; with ``protocol`` given, ``attempts`` / ``best``
     must be None or equal to its fields): :func:`aggregate` of :func:`rollout_distances`. Difficulty = 1 - fitness.
-    ``mesh``: the terrains split over its devices with per-row keys (:func:`rollout_distances`).
+    ``mesh`` / ``split``: the terrains split over its devices with per-row keys (:func:`rollout_distances`).
     """
     if protocol is None:
         _check_attempts(attempts)
@@ -405,7 +406,7 @@ def evaluate(heightmaps, key: jax.Array, attempts: Optional[int] = None, best: O
             raise ValueError(f"best must be an int in [1, attempts={attempts or 20}], got {best!r}")
     protocol = protocol_from(protocol, attempts, best)
     d = rollout_distances(heightmaps, key, None, policy, scale, env_config, policy_params, chunk, slots,
-                          smooth_first, protocol, mesh)
+                          smooth_first, protocol, mesh, split)
     return aggregate(d, protocol)
 
 

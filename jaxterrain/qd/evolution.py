@@ -88,7 +88,7 @@ def default_fitness(size: int, config: A.EvolveConfig) -> A.FitnessFn:
 
 
 def problem(generator, descriptors, config: A.EvolveConfig, fitness_fn=None, traversable=None, names=None,
-            mesh=None):
+            mesh=None, split: str | None = None):
     """``(scoring, emitter)`` of one generator under a resolved config.
 
     Args:
@@ -101,6 +101,7 @@ def problem(generator, descriptors, config: A.EvolveConfig, fitness_fn=None, tra
       names: with ``descriptors`` None, the descriptor set to compute (default ``config.descriptors``); the grid
         pair is then ``config.descriptors``' positions in it.
       mesh: None, or a ``jax.sharding.Mesh`` over which the scoring splits its rows.
+      split: how (``sharding.map_rows``; None: ``sharding.default_split``).
     """
     pair = (0, 1)
     if descriptors is None:
@@ -109,7 +110,7 @@ def problem(generator, descriptors, config: A.EvolveConfig, fitness_fn=None, tra
         descriptors = descriptor_fn(names, int(config.window), int(config.stride))
     fitness_fn = default_fitness(generator.size, config) if fitness_fn is None else fitness_fn
     traversable = traversable_fn(config) if traversable is None else traversable
-    scoring = S.make_scoring_fn(generator, descriptors, traversable, fitness_fn, config, pair, mesh)
+    scoring = S.make_scoring_fn(generator, descriptors, traversable, fitness_fn, config, pair, mesh, split)
     emitter = ME.Emitter(generator.sample, generator.mutate, int(config.batch_size), int(config.initial_population))
     return scoring, emitter
 
@@ -134,8 +135,8 @@ def _programs(scoring: S.Scoring, emitter: ME.Emitter, cache: dict | None):
     """Jitted ``init(key, centroids, task)`` and ``chunk(state, key, n) -> (state, metrics [n])``; with a mesh
     their outputs (the repertoire, the metrics) are replicated on its devices."""
     fns = (scoring.render_one, scoring.descriptor_fn, scoring.traversable_fn, scoring.fitness_fn, emitter,
-           scoring.mesh)
-    if _dispatching(scoring.mesh):
+           scoring.mesh, scoring.split)
+    if _dispatching(scoring.mesh, scoring.split):
         return _compiled(cache, ("host",) + fns, lambda: _host_programs(scoring, emitter))
     out = _replicated(scoring.mesh)
 
@@ -159,7 +160,7 @@ def _programs(scoring: S.Scoring, emitter: ME.Emitter, cache: dict | None):
 def evolve(generator, descriptors, config: A.EvolveConfig, key: jax.Array, fitness_fn: A.FitnessFn | None = None,
            checkpoint_dir: str | os.PathLike | None = None, progress: bool | Callable[[dict], None] = True,
            traversable_fn: Callable[[jax.Array], jax.Array] | None = None, generator_options: dict | None = None,
-           compile_cache: dict | None = None, mesh=None) -> A.Archive:
+           compile_cache: dict | None = None, mesh=None, split: str | None = None) -> A.Archive:
     """Run MAP-Elites for one generator and one descriptor pair; returns the final :class:`~jaxterrain.qd.Archive`.
 
     Args:
@@ -190,9 +191,11 @@ def evolve(generator, descriptors, config: A.EvolveConfig, key: jax.Array, fitne
         generation's offspring split over its devices with per-row keys, the repertoire replicated; the same key
         gives the same archive on any number of devices (module docstring). Speed only: a run may resume on
         another device count.
+      split: how the rows go over the mesh (``sharding.map_rows``: ``"shard_map"``, one program over the
+        devices, or ``"dispatch"``, one per device); None: ``sharding.default_split`` (GPUs dispatch).
     """
     generator, descriptors, config = _resolve_one(generator, descriptors, config, generator_options)
-    scoring, emitter = problem(generator, descriptors, config, fitness_fn, traversable_fn, mesh=mesh)
+    scoring, emitter = problem(generator, descriptors, config, fitness_fn, traversable_fn, mesh=mesh, split=split)
     init, chunk = _programs(scoring, emitter, compile_cache)
     meta = {"generator": generator.name, "config": _resume_signature(config), "key": _key_data(key).tolist()}
     run_dir = None if checkpoint_dir is None else Path(checkpoint_dir)
@@ -286,7 +289,8 @@ def evolve_many(treatments: Sequence[Treatment], config: A.EvolveConfig, key: ja
                 fitness_fn: A.FitnessFn | None = None, checkpoint_dir: str | os.PathLike | None = None,
                 progress: bool | Callable[[dict], None] = True,
                 traversable_fn: Callable[[jax.Array], jax.Array] | None = None, generator_options: dict | None = None,
-                ranges: dict | None = None, compile_cache: dict | None = None, mesh=None) -> list[A.Archive]:
+                ranges: dict | None = None, compile_cache: dict | None = None, mesh=None,
+                split: str | None = None) -> list[A.Archive]:
     """Evolve several treatments at once: one jitted generation steps them all (:func:`map_elites.multi_step`).
 
     Treatments of one generator form a batch (``vmap``; their descriptor pairs are indices into one descriptor
@@ -312,6 +316,7 @@ def evolve_many(treatments: Sequence[Treatment], config: A.EvolveConfig, key: ja
       compile_cache: a caller-owned dict to keep compiled programs in.
       mesh: None or a ``jax.sharding.Mesh``: each generation's offspring of all treatments split over its devices
         (:func:`map_elites.multi_step`), the states replicated; the same archives on any number of devices.
+      split: how the rows go over the mesh (as in :func:`evolve`).
 
     Returns:
       one :class:`~jaxterrain.qd.Archive` per treatment, in order.
@@ -320,7 +325,7 @@ def evolve_many(treatments: Sequence[Treatment], config: A.EvolveConfig, key: ja
     config = configs[0]
     fitness = default_fitness(size, config) if fitness_fn is None else fitness_fn
     groups, scorings, emitters, states, keys, history = _init_many(treatments, configs, names, gens, fitness,
-                                                                   traversable_fn, compile_cache, mesh)
+                                                                   traversable_fn, compile_cache, mesh, split)
     history["coverage"] = [float(np.mean([history[f"coverage/{i}"][0] for i in range(len(treatments))]))]
     meta = {"treatments": [[t.generator, list(t.descriptors), _key_data(t.key).tolist()] for t in treatments],
             "config": _resume_signature(config._replace(descriptors=("-", "-"), ranges=((0, 1), (0, 1)))),
@@ -364,7 +369,7 @@ def _resolve_many(treatments, config: A.EvolveConfig, generator_options: dict | 
 def _many_program(scorings, emitters, fitness, mesh, cache: dict | None):
     """The jitted chunk of :func:`evolve_many` (:func:`_many_chunk`), kept in ``cache`` under what determines it."""
     fns = tuple((s.render_one, s.descriptor_fn, s.traversable_fn) for s in scorings)
-    return _compiled(cache, ("many", fns, tuple(emitters), fitness, mesh),
+    return _compiled(cache, ("many", fns, tuple(emitters), fitness, mesh, scorings[0].split),
                      lambda: _many_chunk(tuple(scorings), tuple(emitters), fitness, mesh))
 
 
@@ -390,7 +395,7 @@ def _many_callbacks(chunk, keys, key, groups: dict, config: A.EvolveConfig, coun
     return chunk_fn, on_chunk
 
 
-def _init_many(treatments, configs, names, gens, fitness, traversable, cache, mesh=None):
+def _init_many(treatments, configs, names, gens, fitness, traversable, cache, mesh=None, split=None):
     """Generation 0 of every treatment, grouped by generator: ``(groups {name: [treatment index]}, scorings,
     emitters, stacked states per group, stacked keys per group, history {"<metric>/<index>": [value]})``."""
     groups: dict[str, list[int]] = {}
@@ -400,7 +405,7 @@ def _init_many(treatments, configs, names, gens, fitness, traversable, cache, me
     history: dict[str, list[float]] = {}
     for name, members in groups.items():
         scoring, emitter = problem(gens[name], None, configs[members[0]], fitness, traversable, names=names,
-                                   mesh=mesh)
+                                   mesh=mesh, split=split)
         init, _ = _programs(scoring, emitter, cache)
         group_states = []
         for i in members:
@@ -426,13 +431,13 @@ def _many_archives(states, groups, gens, configs, history) -> list[A.Archive]:
     return out
 
 
-def _dispatching(mesh) -> bool:
+def _dispatching(mesh, split: str | None = None) -> bool:
     """Whether ``mesh`` splits rows by dispatching one program per device (``sharding.default_split``: GPUs), which
     a ``jit``-compiled chunk cannot do: the chunk is then a host loop over generations (:func:`_host_programs`)."""
     if mesh is None:
         return False
 
-    return sharding.default_split(mesh) == "dispatch"
+    return (sharding.default_split(mesh) if split is None else split) == "dispatch"
 
 
 def _host_programs(scoring: S.Scoring, emitter: ME.Emitter):
@@ -469,7 +474,7 @@ def _host_loop(generation: Callable, state, key, n: int):
 
 
 def _many_chunk(scorings, emitters, fitness, mesh=None):
-    if _dispatching(mesh):
+    if _dispatching(mesh, scorings[0].split):
         return _many_host_chunk(scorings, emitters, fitness)
 
     def chunk(states, keys, key, n):

@@ -334,7 +334,7 @@ def _sharded_scores(children, tasks, fitness_key, scorings, fitness_fn, mesh):
             begin += nd.shape[0]
         return out
 
-    scored = SH.split_rows(local, mesh)(groups)
+    scored = SH.split_rows(local, mesh, scorings[0].split)(groups)
     made, parts = [], []
     for (pending, fitness), (t, b) in zip(scored, shapes):
         made.append(jax.tree.map(lambda x, t=t, b=b: x[:t * b].reshape((t, b) + x.shape[1:]), pending))

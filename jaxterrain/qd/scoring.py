@@ -176,6 +176,8 @@ class Scoring(NamedTuple):
       fitness_fn: ``(heightmaps [B, H, W], key, needed [B] bool) -> [B]``.
       task: the default :class:`Task`.
       mesh: None (one device), or a ``jax.sharding.Mesh`` (``sharding.make_mesh``) to split the rows over.
+      split: how the rows go over the mesh (``sharding.map_rows``: ``"shard_map"`` or ``"dispatch"``; None:
+        ``sharding.default_split``).
     """
 
     render_one: Callable
@@ -184,6 +186,7 @@ class Scoring(NamedTuple):
     fitness_fn: Callable
     task: Task
     mesh: Any = None
+    split: Optional[str] = None
 
     def prepare(self, genomes, task: Task | None = None) -> Pending:
         """Render, describe and check a batch (genome leaves ``[B, ...]``); ``task``: one :class:`Task`, or one per
@@ -228,7 +231,7 @@ class Scoring(NamedTuple):
         task = self.task if task is None else task
         if self.mesh is not None:
             n = jax.tree.leaves(genomes)[0].shape[0]
-            pending, fitness = sharding.map_rows(self.prepare_rows, self.mesh, replicated=(2,), mask=True)(
+            pending, fitness = sharding.map_rows(self.prepare_rows, self.mesh, replicated=(2,), mask=True, split=self.split)(
                 genomes, sharding.row_keys(key, n), task)
             return self.complete(pending, fitness, task)
         pending = self.prepare(genomes, task)
@@ -237,7 +240,7 @@ class Scoring(NamedTuple):
 
 
 def make_scoring_fn(generator, descriptor_fn: Callable, traversable_fn: Callable, fitness_fn: Callable,
-                    config, pair=(0, 1), mesh=None) -> Scoring:
+                    config, pair=(0, 1), mesh=None, split: Optional[str] = None) -> Scoring:
     """The scoring function of one generator (see the module docstring).
 
     Args:
@@ -257,4 +260,4 @@ def make_scoring_fn(generator, descriptor_fn: Callable, traversable_fn: Callable
                      ("fitness_fn", fitness_fn)):
         if not callable(fn):
             raise ValueError(f"make_scoring_fn: {name} must be callable; got {type(fn).__name__}")
-    return Scoring(generator.render_one, descriptor_fn, traversable_fn, fitness_fn, task_for(config, pair), mesh)
+    return Scoring(generator.render_one, descriptor_fn, traversable_fn, fitness_fn, task_for(config, pair), mesh, split)

@@ -36,8 +36,9 @@ from jaxterrain.runtime import sharding
 from jaxterrain.walker.layout import terrain_axis
 from jaxterrain.walker.tiles import Tile
 
-__all__ = ["EnvLike", "EpisodeStats", "TrainState", "Transition", "Ride", "raw_key", "make_optimizer",
-           "per_env_mask", "init", "reset_envs", "loss_fn", "update", "run_updates", "ride_updates", "make_train"]
+__all__ = ["EnvLike", "EpisodeStats", "TrainState", "Transition", "Ride", "COLLECT_MODES", "collect_mode", "raw_key",
+           "make_optimizer", "per_env_mask", "init", "reset_envs", "loss_fn", "update", "run_updates",
+           "ride_updates", "make_train"]
 
 
 class EnvLike(Protocol):
@@ -404,7 +405,7 @@ def loss_fn(params, normaliser, batch: Transition, bootstrap_obs, key, *, config
 
 
 def update(state: TrainState, key: jax.Array, terrains: jax.Array, *, env: EnvLike,
-           config: PPOConfig, mesh=None):
+           config: PPOConfig, mesh=None, collect: Optional[str] = None):
     """One PPO iteration: collect ``config.steps_per_update`` transitions, update the normaliser, then
     ``update_epochs`` x ``num_minibatches`` Adam steps on the clipped objective.
 
@@ -416,7 +417,7 @@ def update(state: TrainState, key: jax.Array, terrains: jax.Array, *, env: EnvLi
     that finished one; ``episodes``: episodes finished during this update).
 
     ``mesh`` (a ``jax.sharding.Mesh``, data parallel): the envs (and per-env terrains) are split over its devices,
-    each device steps its own (:func:`_collect_mode`: under ``jax.shard_map`` on CPUs when ``num_envs`` divides
+    each device steps its own (:func:`collect_mode`, ``collect`` None: automatic; under ``jax.shard_map`` on CPUs when ``num_envs`` divides
     over the devices, so that an opaque physics call such as MuJoCo Warp's runs per device; else XLA partitions
     the batched steps); the policy, value net, normaliser and optimiser state are replicated. Every epoch
     draws the same permutation as without a mesh, and each minibatch is split over the devices (padded to a
@@ -426,16 +427,16 @@ def update(state: TrainState, key: jax.Array, terrains: jax.Array, *, env: EnvLi
     the random draws are the ones of the one-device update, so the result equals :func:`update` without a mesh up
     to float rounding (tested on 4 CPU devices and on two processes).
     """
-    return _update(state, key, terrains, env, config, mesh)[0]
+    return _update(state, key, terrains, env, config, mesh, collect=collect)[0]
 
 
 def _update(state: TrainState, key, terrains, env, config: PPOConfig, mesh=None, ride: Optional[Ride] = None,
-            carry=None, per_env=None):
+            carry=None, per_env=None, collect: Optional[str] = None):
     """:func:`update` -> ``((state, metrics), carry)``; with ``ride`` the riders step along (:func:`_collect`)."""
     key = raw_key(key)
     collect_key, sgd_key = jax.random.split(key)
     del key
-    if mesh is not None and _collect_mode(mesh, config, env) == "shard_map":
+    if mesh is not None and collect_mode(mesh, config, env, collect) == "shard_map":
         env_state, episode, data, bootstrap_obs = _collect_split(state, collect_key, terrains, env, config, mesh)
     else:
         if mesh is not None:  # envs that do not divide over the devices: XLA partitions the batched steps
@@ -528,30 +529,30 @@ def _sgd(params, opt_state, normaliser, segments: Transition, boots, key, *, con
         params, opt_state, segments, boots, key)
 
 
-def _collect_mode(mesh, config: PPOConfig, env=None) -> str:
+COLLECT_MODES = ("shard_map", "partition")
+
+
+def collect_mode(mesh, config: PPOConfig, env=None, collect: Optional[str] = None) -> str:
     """How a data-parallel update splits its env steps: ``"shard_map"`` (:func:`_collect_split`, each device its
-    own envs) or ``"partition"`` (sharding constraints; XLA partitions the batched steps). ``$JAXTERRAIN_PPO_COLLECT``
-    when set; else ``"partition"`` when ``num_envs`` does not divide over the devices or on GPUs (JAX 0.11.2's CUDA
-    plugin crashes compiling the walker's step inside ``shard_map``: ``sharding.default_split``), else
-    ``"shard_map"``. MuJoCo Warp's step is one opaque call that XLA cannot partition, so a Warp env on GPUs is a
-    ``ValueError`` unless ``$JAXTERRAIN_PPO_COLLECT=shard_map`` asks for the path that JAX 0.11.2 fails to compile
-    (segfault, measured on 2 H200s, 2026-11-23)."""
-    import os
-
-
-    mode = os.environ.get("JAXTERRAIN_PPO_COLLECT")
-    if mode not in (None, "", "shard_map", "partition"):
-        raise ValueError(f"JAXTERRAIN_PPO_COLLECT must be shard_map or partition, got {mode!r}")
+    own envs) or ``"partition"`` (sharding constraints; XLA partitions the batched steps). ``collect`` (one of
+    :data:`COLLECT_MODES`) when given and ``num_envs`` divides over the devices; else ``"partition"`` when it does
+    not divide or on GPUs (JAX 0.11.2's CUDA plugin crashes compiling the walker's step inside ``shard_map``:
+    ``sharding.default_split``), else ``"shard_map"``. MuJoCo Warp's step is one opaque call that XLA cannot
+    partition, so a Warp env on GPUs is a ``ValueError`` unless ``collect="shard_map"`` asks for the path that JAX
+    0.11.2 fails to compile (segfault, measured on 2 H200s, 2026-11-23). No environment variable changes it (the
+    ``JAXTERRAIN_PPO_COLLECT`` of earlier versions is gone)."""
+    if collect not in (None, *COLLECT_MODES):
+        raise ValueError(f"collect must be one of {COLLECT_MODES} or None (automatic), got {collect!r}")
     if config.num_envs % mesh.devices.size:
         return "partition"
-    if mode:
-        return mode
+    if collect:
+        return collect
     if sharding.default_split(mesh) != "dispatch":
         return "shard_map"
     if getattr(env, "backend", None) == "warp":
         raise ValueError("data-parallel PPO (mesh=) on MuJoCo Warp over several GPUs needs shard_map, which JAX "
-                         "0.11.2's CUDA plugin fails to compile; train on one device, or use backend='jax', or set "
-                         "JAXTERRAIN_PPO_COLLECT=shard_map to try this JAX")
+                         "0.11.2's CUDA plugin fails to compile; train on one device, or use backend='jax', or pass "
+                         "collect='shard_map' to try this JAX")
     return "partition"
 
 
@@ -607,16 +608,17 @@ def _split_envs(state: TrainState, terrains: jax.Array, config: PPOConfig, mesh)
 
 
 def run_updates(state: TrainState, terrains: jax.Array, *, env: EnvLike, config: PPOConfig, num_updates: int,
-                mesh=None):
+                mesh=None, collect: Optional[str] = None):
     """``num_updates`` updates in one ``lax.scan``; each splits its key off ``state.key``. Pure (jit/vmap it).
-    ``mesh``: data parallel over its devices (:func:`update`).
+    ``mesh``: data parallel over its devices; ``collect``: how (:func:`update`, :func:`collect_mode`).
 
     Returns ``(state, metrics)`` with metrics [num_updates] per name.
     """
 
     def body(s, _):
         next_key, update_key = jax.random.split(s.key)
-        return update(s._replace(key=next_key), update_key, terrains, env=env, config=config, mesh=mesh)
+        return update(s._replace(key=next_key), update_key, terrains, env=env, config=config, mesh=mesh,
+                      collect=collect)
 
     return jax.lax.scan(body, state, None, length=num_updates)
 

@@ -159,16 +159,12 @@ SPLITS = ("shard_map", "dispatch")
 
 
 def default_split(mesh: Mesh) -> str:
-    """How :func:`map_rows` splits rows over ``mesh`` unless told: ``$JAXTERRAIN_SPLIT`` when set (one of
-    :data:`SPLITS`), else ``"dispatch"`` for a mesh of this process's GPUs and ``"shard_map"`` otherwise (CPU,
-    several processes). Why GPUs dispatch: JAX 0.11.2's CUDA plugin crashes compiling the walker's physics step
-    inside ``shard_map`` (a segfault in Shardy's ``ManualComputationUnusedInputsPattern``; under GSPMD a failed
-    ``!IsManualLeaf()`` check), measured on 2 H200s on 2026-11-23 (benchmarks/RESULTS.md)."""
-    how = os.environ.get("JAXTERRAIN_SPLIT")
-    if how:
-        if how not in SPLITS:
-            raise ValueError(f"JAXTERRAIN_SPLIT must be one of {SPLITS}, got {how!r}")
-        return how
+    """How :func:`map_rows` splits rows over ``mesh`` unless told (its ``split`` argument, one of :data:`SPLITS`):
+    ``"dispatch"`` for a mesh of this process's GPUs and ``"shard_map"`` otherwise (CPU, several processes). Why
+    GPUs dispatch: JAX 0.11.2's CUDA plugin crashes compiling the walker's physics step inside ``shard_map`` (a
+    segfault in Shardy's ``ManualComputationUnusedInputsPattern``; under GSPMD a failed ``!IsManualLeaf()`` check),
+    measured on 2 H200s on 2026-11-23 (benchmarks/RESULTS.md). A function of the mesh alone: no environment
+    variable changes it (the ``JAXTERRAIN_SPLIT`` of earlier versions is gone; pass ``split=`` instead)."""
     devices = list(mesh.devices.flat)
     local = all(d.process_index == jax.process_index() for d in devices)
     return "dispatch" if local and len(devices) > 1 and devices[0].platform == "gpu" else "shard_map"

@@ -27,7 +27,7 @@ SCRIPT = textwrap.dedent("""
     maps = jnp.asarray(np.concatenate([np.zeros((1, 32, 32)), rng.random((4, 32, 32)) * 0.6]), jnp.float32)
     key = jax.random.key(3)
     got = D.rollout_distances(maps, key, 4, policy=policy, env_config=config, policy_params=params, slots=3,
-                              smooth_first=True, mesh=SH.make_mesh())
+                              smooth_first=True, mesh=SH.make_mesh(), split=SPLIT)
     env, protocol = make_env(config), D.Protocol(4, 1)
     want, steps = jax.jit(lambda t, k, p: D.keyed_distances(env, policy, t, k, protocol, p))(
         maps * 0.5, SH.row_keys(key, 5), params)
@@ -45,7 +45,8 @@ def test_sharded_difficulty_equals_one_device(split):
     dispatched together (the default on GPUs)."""
     flags = ("--xla_force_host_platform_device_count=4 --xla_backend_optimization_level=0 "
              "--xla_llvm_disable_expensive_passes=true")
-    env = dict(os.environ, XLA_FLAGS=flags, JAX_PLATFORMS="cpu", JAXTERRAIN_SPLIT=split)
-    out = subprocess.run([sys.executable, "-c", SCRIPT], env=env, capture_output=True, text=True, timeout=1200)
+    env = dict(os.environ, XLA_FLAGS=flags, JAX_PLATFORMS="cpu")
+    script = SCRIPT.replace("SPLIT", repr(split))  # the library takes the split as an argument
+    out = subprocess.run([sys.executable, "-c", script], env=env, capture_output=True, text=True, timeout=1200)
     assert out.returncode == 0, out.stderr[-3000:]
     assert out.stdout.strip().endswith("ok")

@@ -36,7 +36,7 @@ SCRIPT = textwrap.dedent("""
 
     # the scoring of an uneven batch (7 rows on 4 devices: one padding row) against a hand-made reference
     config = cfg(batch_size=10, initial_population=7, generations=1, checkpoint_every=1)
-    scoring = S.make_scoring_fn(gen, desc2, rejects_b, noisy, config, mesh=mesh4)
+    scoring = S.make_scoring_fn(gen, desc2, rejects_b, noisy, config, mesh=mesh4, split=SPLIT)
     genomes = gen.sample(jax.random.key(5), 7)
     fitness, cells, extras = jax.jit(lambda g, k: scoring(g, k))(genomes, jax.random.key(6))
     assert calls == [1], calls  # the keyed form scores one row at a time (vmap of batch-1 calls)
@@ -51,7 +51,7 @@ SCRIPT = textwrap.dedent("""
 
     # one treatment: init (7 terrains) and a generation of 10 offspring (padded to 12), 4 devices = 1 device
     run = lambda mesh: A.evolve(gen, desc2, config, jax.random.key(0), fitness_fn=noisy, traversable_fn=rejects_b,
-                                progress=False, mesh=mesh)
+                                progress=False, mesh=mesh, split=SPLIT)
     a4, a1 = run(mesh4), run(mesh1)
     assert A.coverage(a4) > 0 and a4.metrics["inserted"][1] > 0
     for name in ("fitness", "descriptors"):
@@ -71,7 +71,7 @@ SCRIPT = textwrap.dedent("""
     E.descriptor_fn = lambda names, window, stride: lambda hm: desc3(hm)[:, [("a", "b", "ab").index(n) for n in names]]
     ranges = {"a": (0.0, 1.0), "b": (0.0, 1.0), "ab": (0.0, 0.5)}
     go = lambda mesh: A.evolve_many(treatments, many, jax.random.key(9), fitness_fn=noisy, traversable_fn=always,
-                                    progress=False, ranges=ranges, mesh=mesh)
+                                    progress=False, ranges=ranges, mesh=mesh, split=SPLIT)
     m4, m1 = go(mesh4), go(mesh1)
     for x, y in zip(m4, m1):
         assert A.coverage(x) > 0
@@ -87,7 +87,7 @@ def test_sharded_map_elites_equals_one_device_and_masks_the_padding(split):
     """``dispatch`` (the GPU default): evolve's chunk is a host loop of jitted parts around the scoring, each device
     scoring its rows in its own program; the archives are the same. ``shard_map`` (one program over the devices) is
     in the slow suite: 38 s of the default suite's time on 2 CPU cores."""
-    assert run_on_devices(SCRIPT, JAXTERRAIN_SPLIT=split).strip().endswith("ok")
+    assert run_on_devices(SCRIPT.replace("SPLIT", repr(split))).strip().endswith("ok")
 
 
 @pytest.mark.parametrize("command", ["evolve", "coverage", "learn", "curriculum", "train-base-policy"])
