@@ -1,6 +1,6 @@
 """MAP-Elites as pure functions over a state pytree (paper section 3.3); callers ``jit`` / ``lax.scan`` / ``vmap``.
 
-    >>> from jaxterrain import map_elites as ME, scoring
+    >>> from jaxterrain.qd import map_elites as ME, scoring
     >>> score = scoring.make_scoring_fn(generator, descriptor_fn, traversable_fn, fitness_fn, config)
     >>> emitter = ME.Emitter(generator.sample, generator.mutate, batch_size=20, initial_population=100)
     >>> state, metrics = jax.jit(lambda k: ME.init(k, score, emitter, centroids))(key)

@@ -1,6 +1,6 @@
 """Scoring of terrain genomes for MAP-Elites, in QDax's contract ``(genomes, key) -> (fitness, descriptors, extras)``.
 
-    >>> from jaxterrain import scoring
+    >>> from jaxterrain.qd import scoring
     >>> score = scoring.make_scoring_fn(generator, descriptor_fn, traversable_fn, fitness_fn, config)
     >>> fitness, cells, extras = score(genomes, key)     # [B], [B, 2], {"raw": [B, 2], "rejected": [], ...}
 

@@ -21,8 +21,8 @@ from jaxterrain.walker.tiles import Tile
 __all__ = ["compiled_chunk", "chunk_fn", "train", "Progress"]
 
 
-def _build_chunk(env, config, num_updates, batched, terrain_seed_axis, mesh=None):
-    fn = functools.partial(run_updates, env=env, config=config, num_updates=num_updates, mesh=mesh)
+def _build_chunk(env, config, num_updates, batched, terrain_seed_axis, mesh=None, collect=None):
+    fn = functools.partial(run_updates, env=env, config=config, num_updates=num_updates, mesh=mesh, collect=collect)
     if batched:
         fn = jax.vmap(fn, in_axes=(0, terrain_seed_axis))
     if mesh is None:
@@ -32,18 +32,20 @@ def _build_chunk(env, config, num_updates, batched, terrain_seed_axis, mesh=None
 
 
 @functools.lru_cache(maxsize=32)
-def _cached_chunk(env, config, num_updates, batched, terrain_seed_axis, mesh=None):
-    return _build_chunk(env, config, num_updates, batched, terrain_seed_axis, mesh)
+def _cached_chunk(env, config, num_updates, batched, terrain_seed_axis, mesh=None, collect=None):
+    return _build_chunk(env, config, num_updates, batched, terrain_seed_axis, mesh, collect)
 
 
-def compiled_chunk(env, config, num_updates: int, batched: bool = False, terrain_seed_axis=None, mesh=None):
+def compiled_chunk(env, config, num_updates: int, batched: bool = False, terrain_seed_axis=None, mesh=None,
+                   collect: Optional[str] = None):
     """The jitted ``(state, terrains) -> (state, metrics)`` running ``num_updates`` updates; cached per
-    (env, config, num_updates, batched, mesh) so repeated :func:`train` calls do not re-compile. With ``mesh``
-    (data parallel, :func:`update`) the returned state is replicated on every device of the mesh."""
+    (env, config, num_updates, batched, mesh, collect) so repeated :func:`train` calls do not re-compile. With
+    ``mesh`` (data parallel, :func:`update`; ``collect``: how, ``rl.ppo.collect_mode``) the returned state is
+    replicated on every device of the mesh."""
     try:
-        return _cached_chunk(env, config, num_updates, batched, terrain_seed_axis, mesh)
+        return _cached_chunk(env, config, num_updates, batched, terrain_seed_axis, mesh, collect)
     except TypeError:  # unhashable env
-        return _build_chunk(env, config, num_updates, batched, terrain_seed_axis, mesh)
+        return _build_chunk(env, config, num_updates, batched, terrain_seed_axis, mesh, collect)
 
 
 def _is_seed_batch(key) -> bool:
@@ -55,14 +57,14 @@ def _is_seed_batch(key) -> bool:
 
 def chunk_fn(env: EnvLike, config: PPOConfig, terrains: jax.Array, batched: bool = False,
              terrain_seed_axis: Optional[int] = None,
-             mesh=None) -> Callable[[TrainState, int, int], tuple[TrainState, dict]]:
+             mesh=None, collect: Optional[str] = None) -> Callable[[TrainState, int, int], tuple[TrainState, dict]]:
     """The ``jaxterrain.runtime.driver.run_chunks`` chunk of PPO: ``(state, start, stop) -> (state, metrics)`` runs
     ``stop - start`` updates (:func:`compiled_chunk`, cached per length) on ``terrains``; metrics are numpy arrays
     [stop - start] (or [S, stop - start] for a batch of seeds, ``batched``). ``mesh``: data parallel
-    (:func:`update`)."""
+    (:func:`update`; ``collect``: how, ``rl.ppo.collect_mode``)."""
 
     def chunk(state: TrainState, start: int, stop: int):
-        fn = compiled_chunk(env, config, stop - start, batched, terrain_seed_axis, mesh)
+        fn = compiled_chunk(env, config, stop - start, batched, terrain_seed_axis, mesh, collect)
         if mesh is not None:  # a state or terrains placed on one device (e.g. a jitted init's) go whole on the mesh
             state, data = sharding.replicate((state, terrains), mesh)
         else:
@@ -76,7 +78,7 @@ def chunk_fn(env: EnvLike, config: PPOConfig, terrains: jax.Array, batched: bool
 def train(key: jax.Array, env: EnvLike, config: PPOConfig, num_updates: int, terrains: jax.Array,
           state: Optional[TrainState] = None, callback: Optional[Callable[[TrainState, dict], Any]] = None,
           updates_per_chunk: int = 10, *, run_dir=None, time_limit_s: Optional[float] = None,
-          progress: Any = False, meta: Optional[dict] = None, mesh=None):
+          progress: Any = False, meta: Optional[dict] = None, mesh=None, collect: Optional[str] = None):
     """Run ``num_updates`` PPO updates in jitted chunks of ``updates_per_chunk`` (a ``lax.scan`` each), through
     ``jaxterrain.runtime.driver.run_chunks``.
 
@@ -96,6 +98,7 @@ def train(key: jax.Array, env: EnvLike, config: PPOConfig, num_updates: int, ter
         and TensorBoard events in ``run_dir`` after every chunk; stop after ``time_limit_s``; a progress bar).
       mesh: a ``jax.sharding.Mesh`` (``sharding.make_mesh()``) to train data parallel over its devices
         (:func:`update`: the envs split, the gradients summed, the policy replicated); not with a batch of seeds.
+      collect: how the envs' steps go over the mesh (``rl.ppo.collect_mode``; None: automatic).
 
     Returns ``(state, metrics)``: the final state and a dict of numpy arrays [n] ([S, n]), n = the updates run
     (``num_updates`` unless the time limit stopped it earlier).
@@ -121,7 +124,7 @@ def train(key: jax.Array, env: EnvLike, config: PPOConfig, num_updates: int, ter
     if mesh is not None:
         state = sharding.replicate(state, mesh)
     history = []
-    run = chunk_fn(env, config, terrains, batched, terrain_seed_axis, mesh)
+    run = chunk_fn(env, config, terrains, batched, terrain_seed_axis, mesh, collect)
 
     def chunk(s, start, stop):
         s, metrics = run(s, start, stop)

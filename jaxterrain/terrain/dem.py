@@ -1,6 +1,6 @@
 """Real terrain: digital elevation models (DEMs) and random training patches cut from them.
 
-    >>> from jaxterrain import dem
+    >>> from jaxterrain.terrain import dem
     >>> tiles = dem.load_tiles()                          # the built-in matplotlib DEMs
     >>> tiles = dem.load_tiles("my_dem_folder/")          # or your own GeoTIFF / .npy / .npz tiles
     >>> patches = dem.random_patches(key, tiles, 64)      # [64, 256, 256] float32, each in [0, 1]
