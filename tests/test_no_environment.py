@@ -10,7 +10,7 @@ from pathlib import Path
 import jax
 import pytest
 
-from jaxterrain.rl import ppo
+from jaxterrain.rl import collect as ppo_collect
 from jaxterrain.rl.config import PPOConfig
 from jaxterrain.runtime import sharding
 
@@ -38,10 +38,10 @@ def test_split_and_collect_are_arguments_not_environment(monkeypatch):
     monkeypatch.setenv("JAXTERRAIN_PPO_COLLECT", "partition")
     assert sharding.default_split(mesh) == "shard_map"  # CPU devices
     config = PPOConfig(num_envs=4)
-    assert ppo.collect_mode(mesh, config) == "shard_map"
-    assert ppo.collect_mode(mesh, config, collect="partition") == "partition"
+    assert ppo_collect.collect_mode(mesh, config) == "shard_map"
+    assert ppo_collect.collect_mode(mesh, config, collect="partition") == "partition"
     with pytest.raises(ValueError, match="collect must be one of"):
-        ppo.collect_mode(mesh, config, collect="bogus")
+        ppo_collect.collect_mode(mesh, config, collect="bogus")
     f = sharding.map_rows(lambda x: x * 2, mesh, split="dispatch")
     assert float(f(jax.numpy.ones((3,)))[2]) == 2.0
     with pytest.raises(ValueError, match="split must be one of"):

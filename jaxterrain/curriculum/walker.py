@@ -162,7 +162,7 @@ def walker_harness(env, ppo: rl.PPOConfig, config: CurriculumConfig) -> Harness:
         ride = rl.Ride(act=jax.vmap(lambda obs: act(params, obs)), terrains=world, record=_record_ride,
                        park=lambda carry, states, start: _park_riders(env, carry, states, start))
         zeros = jnp.zeros((protocol.attempts,), jnp.float32)
-        per_env = rl.ppo.per_env_mask(env, terrain)  # traced once, for both
+        per_env = rl.collect.per_env_mask(env, terrain)  # traced once, for both
         state, riders, (ended, final), _ = rl.ride_updates(keyed(state, key), spread(terrain), riders, ride,
                                                            (zeros > 0, zeros), env=env, config=ppo,
                                                            num_updates=updates, per_env=per_env)
@@ -278,9 +278,9 @@ def finish_walks(env, act, tile: Tile, riders, ended, final, params, attempts: i
     yet ended walk on (every walk steps, as in :func:`tile_distances`) until all have ended or the episode limit.
     Under ``jax.vmap`` over trials ONE loop runs for all trials' walks (a custom batching rule, as
     :func:`tile_distances`'s). So the distances are those of :func:`tile_distances` with the same key.
-    ``per_env``: ``rl.ppo.per_env_mask(env, tile)`` where the caller has it (else traced here)."""
+    ``per_env``: ``rl.collect.per_env_mask(env, tile)`` where the caller has it (else traced here)."""
     if per_env is None:
-        per_env = rl.ppo.per_env_mask(env, Tile(tile.bank, jnp.zeros((), jnp.int32)))
+        per_env = rl.collect.per_env_mask(env, Tile(tile.bank, jnp.zeros((), jnp.int32)))
 
     def one(per_env, x):  # a trial axis of size 1 on the per-env leaves
         return jax.tree.map(lambda p, v: v[None] if p else v, per_env, x)

@@ -23,20 +23,16 @@ from jaxterrain.rl.config import PPOConfig, validate_config
 from jaxterrain.rl.losses import gae, ppo_loss
 from jaxterrain.rl.networks import RunningStats, deterministic_action, init_stats, normalize, update_stats
 from jaxterrain.rl.ppo import (
-    EpisodeStats,
-    Ride,
-    TrainState,
-    Transition,
     init,
     loss_fn,
     make_optimizer,
     make_train,
-    raw_key,
     reset_envs,
     ride_updates,
     run_updates,
     update,
 )
+from jaxterrain.rl.state import EpisodeStats, Ride, TrainState, Transition, raw_key
 from jaxterrain.rl.training import Progress, chunk_fn, compiled_chunk, train
 
 __all__ = [

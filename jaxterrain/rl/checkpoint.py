@@ -1,4 +1,4 @@
-"""Checkpoints of a whole :class:`~jaxterrain.rl.ppo.TrainState` and export / loading of a deterministic policy.
+"""Checkpoints of a whole :class:`~jaxterrain.rl.state.TrainState` and export / loading of a deterministic policy.
 
 Checkpoint (``save_checkpoint``): the one checkpoint format of the project, ``jaxterrain.runtime.driver``'s npz (every leaf
 under its tree path, e.g. ``.params['policy']['params']['mlp']['hidden_0']['kernel']``): params, Adam state,

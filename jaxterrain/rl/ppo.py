@@ -23,7 +23,7 @@ Typical use::
 from __future__ import annotations
 
 import functools
-from typing import Any, NamedTuple, Optional, Protocol
+from typing import Any, Optional
 
 import jax
 import jax.numpy as jnp
@@ -31,102 +31,15 @@ import optax
 
 from jaxterrain.rl import networks as nets
 from jaxterrain.rl.config import PPOConfig, validate_config
+from jaxterrain.rl.collect import (batched_reset, collect_mode, collect_split, collect_steps, join_envs, one_terrain,
+                                   part_envs, per_env_mask, split_envs, zero_episode)
 from jaxterrain.rl.losses import batch_mean, gae, ppo_loss
+from jaxterrain.rl.state import EnvLike, Ride, TrainState, Transition, raw_key
 from jaxterrain.runtime import sharding
 from jaxterrain.walker.layout import terrain_axis
-from jaxterrain.walker.tiles import Tile
 
-__all__ = ["EnvLike", "EpisodeStats", "TrainState", "Transition", "Ride", "COLLECT_MODES", "collect_mode", "raw_key",
-           "make_optimizer", "per_env_mask", "init", "reset_envs", "loss_fn", "update", "run_updates",
-           "ride_updates", "make_train"]
-
-
-class EnvLike(Protocol):
-    observation_size: int
-    action_size: int
-
-    def reset(self, key, terrain): ...
-
-    def step(self, state, action, terrain): ...
-
-
-class EpisodeStats(NamedTuple):
-    """Per-env episode bookkeeping, all [N]: running ``ret``/``length`` of the current episode (unscaled reward),
-    ``last_return``/``last_length`` of the most recent finished one, ``count`` of finished episodes, ``progress``
-    the furthest ``env_state.distance`` (the walker's normalised distance; 0 for an env without one) reached since
-    the envs were last (re)started (:func:`init`, :func:`reset_envs`), over all its episodes."""
-
-    ret: jax.Array
-    length: jax.Array
-    last_return: jax.Array
-    last_length: jax.Array
-    count: jax.Array
-    progress: jax.Array
-
-
-class TrainState(NamedTuple):
-    """Everything PPO carries between updates; a pytree (batch it for several seeds).
-
-    params: ``{"policy": ..., "value": ...}`` flax variables. opt_state: optax state. normaliser:
-    :class:`~jaxterrain.rl.networks.RunningStats`. env_state: the env's state batched over ``num_envs``.
-    episode: :class:`EpisodeStats`. key: [2] uint32, the stream :func:`run_updates` splits per update.
-    update_step: [] int32 updates done. env_steps: [] int32 env steps collected.
-    """
-
-    params: Any
-    opt_state: Any
-    normaliser: nets.RunningStats
-    env_state: Any
-    episode: EpisodeStats
-    key: jax.Array
-    update_step: jax.Array
-    env_steps: jax.Array
-
-
-class Transition(NamedTuple):
-    """One env step of all envs: obs [N, O] (raw), raw_action [N, A], log_prob [N], reward [N] (unscaled),
-    done [N], truncation [N], bootstrap [N] (``gamma * V(final obs)`` in the loss's scaled units where a
-    time-limit end is bootstrapped, ``PPOConfig.truncation == "bootstrap"``; 0 elsewhere)."""
-
-    obs: jax.Array
-    raw_action: jax.Array
-    log_prob: jax.Array
-    reward: jax.Array
-    done: jax.Array
-    truncation: jax.Array
-    bootstrap: jax.Array
-
-
-class Ride(NamedTuple):
-    """Envs that ride along PPO's rollouts (:func:`ride_updates`): ``R`` extra envs stepped in the SAME batched
-    ``env.step`` call as the ``num_envs`` PPO envs, by a fixed policy, never reset, not learned from. Where a physics
-    step costs about the same for a few hundred more envs (a GPU stepping thousands), they walk nearly free: the
-    curriculum evaluates one chunk's policy while the next chunk trains (``CurriculumConfig.overlap``).
-
-    act: ``obs [R, O] -> actions [R, A]``, the riders' policy (a closure over its params).
-    terrains: the riders' terrains, ``[R, H, W]`` / ``[H, W]`` arrays or a ``walker.Tile`` (index [] or [R]) of the
-      SAME bank as the PPO envs' Tile.
-    record: ``(carry, states, start) -> carry`` after every step; ``states`` are all ``num_envs + R`` env states,
-      the riders' are rows ``start ..`` (``start = num_envs``) of their per-env fields (e.g. ``states.done[start:]``).
-    park: optional ``(carry, states, start) -> states`` after ``record``: the env states with riders whose outcome
-      is recorded moved out of the way (e.g. ``WalkerEnv.park``), so that they cost the physics less; it must leave
-      the PPO envs' rows as they are. None: the riders step on as they are.
-    """
-
-    act: Any
-    terrains: Any
-    record: Any
-    park: Any = None
-
-
-# ----------------------------------------------------------------------------------------------------------------
-# Helpers
-# ----------------------------------------------------------------------------------------------------------------
-def raw_key(key: jax.Array) -> jax.Array:
-    """``key`` as raw ``[2]`` uint32 data (``TrainState.key``'s form): a typed key's ``key_data``, a raw one as is."""
-    if jnp.issubdtype(key.dtype, jax.dtypes.prng_key):
-        return jax.random.key_data(key)
-    return key
+__all__ = ["make_optimizer", "init", "reset_envs", "loss_fn", "update", "run_updates", "ride_updates",
+           "make_train"]
 
 
 def make_optimizer(config: PPOConfig) -> optax.GradientTransformation:
@@ -135,95 +48,6 @@ def make_optimizer(config: PPOConfig) -> optax.GradientTransformation:
     if config.max_grad_norm is None:
         return adam
     return optax.chain(optax.clip_by_global_norm(config.max_grad_norm), adam)
-
-
-def _batched_reset(env, key, terrains, num_envs, rows=None):
-    """``num_envs`` reset envs keyed ``split(key, num_envs)``; ``rows = (start, total)``: envs ``start ..
-    start + num_envs`` of a batch of ``total`` (keys ``split(key, total)[start:start + num_envs]``)."""
-    axis = terrain_axis(terrains, num_envs)
-    if rows is None:
-        keys = jax.random.split(key, num_envs)
-    else:
-        keys = jax.lax.dynamic_slice_in_dim(jax.random.split(key, rows[1]), rows[0], num_envs)
-    return jax.vmap(env.reset, in_axes=(0, axis))(keys, terrains)
-
-
-def _truncation(env_state) -> jax.Array:
-    trunc = getattr(env_state, "truncation", None)
-    if trunc is None:
-        info = getattr(env_state, "info", None)
-        if isinstance(info, dict):
-            trunc = info.get("truncation")
-    if trunc is None:
-        return jnp.zeros_like(env_state.done)
-    return jnp.asarray(trunc, jnp.float32)
-
-
-def _select(mask: jax.Array, on_true, on_false):
-    """Per-env ``where`` over two batched pytrees (mask [N])."""
-
-    def sel(a, b):
-        m = jnp.reshape(mask, mask.shape + (1,) * (a.ndim - mask.ndim))
-        return jnp.where(m, a, b)
-
-    return jax.tree_util.tree_map(sel, on_true, on_false)
-
-
-def _select_envs(env, mask: jax.Array, on_true, on_false):
-    """Batched env states: ``env.select(mask, on_true, on_false)`` when the env has it (the walker: MJX-Warp's
-    ``Data`` holds contact buffers shared by all envs, which a per-leaf ``where`` would split), else :func:`_select`
-    (the same values)."""
-    select = getattr(env, "select", None)
-    return _select(mask, on_true, on_false) if select is None else select(mask, on_true, on_false)
-
-
-def _one_terrain(terrains, axis):
-    """One env's terrain argument of ``terrains`` with vmap ``axis`` (None, 0 or a Tile's axes)."""
-    if axis is None:
-        return terrains
-    if axis == 0:
-        return terrains[0]
-    return terrains._replace(index=terrains.index[0])
-
-
-def per_env_mask(env, terrain) -> Any:
-    """A pytree of bools over a batched env state: True for per-env leaves, False for leaves the batch shares
-    (MuJoCo Warp's contact counters and buffers, whose values every step recomputes). Told apart by their shapes at
-    two batch sizes (``jax.eval_shape``: nothing runs); ``terrain`` is one env's terrain argument."""
-
-    def shapes(n):
-        return jax.eval_shape(lambda k, t: _batched_reset(env, k, t, n), jax.random.PRNGKey(0), terrain)
-
-    return jax.tree_util.tree_map(lambda a, b: a.shape[:1] != b.shape[:1], shapes(2), shapes(3))
-
-
-def _join_envs(per_env, a, b):
-    """Batched env states ``a`` [N] and ``b`` [R] as one batch [N + R] (shared leaves: ``a``'s)."""
-    return jax.tree_util.tree_map(lambda p, x, y: jnp.concatenate([x, y]) if p else x, per_env, a, b)
-
-
-def _part_envs(per_env, states, n: int):
-    """:func:`_join_envs` undone: ``(states[:n], states[n:])`` (shared leaves in both)."""
-    head = jax.tree_util.tree_map(lambda p, x: x[:n] if p else x, per_env, states)
-    tail = jax.tree_util.tree_map(lambda p, x: x[n:] if p else x, per_env, states)
-    return head, tail
-
-
-def _join_terrains(terrains, axis, ride_terrains, n: int, r: int):
-    """The terrain argument of ``n`` PPO envs (``terrains`` with vmap ``axis``) and ``r`` riders, as one per-env
-    argument of ``n + r`` envs: arrays ``[n + r, H, W]`` or a Tile with index ``[n + r]`` (the PPO envs' bank)."""
-    if isinstance(terrains, Tile):
-        own = jnp.broadcast_to(jnp.asarray(terrains.index, jnp.int32), (n,))
-        ride = jnp.broadcast_to(jnp.asarray(ride_terrains.index, jnp.int32), (r,))
-        return terrains._replace(index=jnp.concatenate([own, ride]))
-    own = terrains if axis == 0 else jnp.broadcast_to(terrains, (n,) + terrains.shape)
-    ride = ride_terrains if ride_terrains.ndim == 3 else jnp.broadcast_to(ride_terrains, (r,) + ride_terrains.shape)
-    return jnp.concatenate([own, ride])
-
-
-def _zero_episode(num_envs: int) -> EpisodeStats:
-    z = jnp.zeros((num_envs,), jnp.float32)
-    return EpisodeStats(z, z, z, z, z, z)
 
 
 # ----------------------------------------------------------------------------------------------------------------
@@ -253,13 +77,13 @@ def init(key: jax.Array, env: EnvLike, config: PPOConfig, terrains: jax.Array, p
         params = nets.init_params(param_key, config, env.observation_size, env.action_size)
     if normaliser is None:
         normaliser = nets.init_stats(env.observation_size)
-    env_state = _batched_reset(env, env_key, terrains, config.num_envs)
+    env_state = batched_reset(env, env_key, terrains, config.num_envs)
     return TrainState(
         params=params,
         opt_state=make_optimizer(config).init(params),
         normaliser=normaliser,
         env_state=env_state,
-        episode=_zero_episode(config.num_envs),
+        episode=zero_episode(config.num_envs),
         key=run_key,
         update_step=jnp.zeros((), jnp.int32),
         env_steps=jnp.zeros((), jnp.int32),
@@ -270,7 +94,7 @@ def reset_envs(state: TrainState, key: jax.Array, terrains: jax.Array, *, env: E
                config: PPOConfig) -> TrainState:
     """Restart every env on ``terrains`` (as in :func:`init`: arrays or a ``walker.Tile``; e.g. after a curriculum
     switch) and clear running episode counters."""
-    env_state = _batched_reset(env, raw_key(key), terrains, config.num_envs)
+    env_state = batched_reset(env, raw_key(key), terrains, config.num_envs)
     ep = state.episode
     zero = jnp.zeros_like(ep.ret)
     return state._replace(env_state=env_state, episode=ep._replace(ret=zero, length=zero, progress=zero))
@@ -279,91 +103,6 @@ def reset_envs(state: TrainState, key: jax.Array, terrains: jax.Array, *, env: E
 # ----------------------------------------------------------------------------------------------------------------
 # update = collect + GAE + epochs of minibatch SGD
 # ----------------------------------------------------------------------------------------------------------------
-def _collect(state: TrainState, key, terrains, env, config, rows=None, ride: Optional[Ride] = None, carry=None,
-             per_env=None):
-    """``num_unrolls`` x ``unroll_length`` steps of all envs with auto-reset.
-
-    Returns (env_state, episode, data: Transition [K, T, N, ...], bootstrap_obs [K, N, O], carry).
-    Envs that finish reset into a pool of fresh ``env.reset`` states drawn once per update (one reset per env
-    per update instead of one per step). Non-finite observations end the episode (NaN-safety). ``rows = (start,
-    total)``: these N envs are rows ``start .. start + N`` of a batch of ``total`` (one device's share, see
-    :func:`_collect_split`), and every random draw is that slice of the whole batch's draw.
-
-    ``ride`` (a :class:`Ride`): ``state.env_state`` holds ``N + R`` envs, the PPO envs then the ``R`` riders (see
-    :func:`ride_updates`); all are stepped together, the riders by ``ride.act`` and never reset, ``carry`` goes
-    through ``ride.record`` after every step, and ``data`` / the episode statistics are the PPO envs' alone.
-    ``per_env``: :func:`per_env_mask` of the batch if the caller has it (else traced here: two reset traces).
-    """
-    n, dist = config.num_envs, config.action_distribution
-    axis = terrain_axis(terrains, n)
-    pool_key, unroll_key = jax.random.split(key)
-    del key
-    pool = _batched_reset(env, pool_key, terrains, n, rows)
-    if ride is None:  # the PPO envs alone: nothing sliced or widened
-        step_terrains, own, widen = terrains, (lambda x: x), (lambda mask: mask)
-    else:
-        r = state.env_state.obs.shape[0] - n
-        step_terrains = _join_terrains(terrains, axis, ride.terrains, n, r)
-        own = lambda x: x[:n]  # noqa: E731 - the PPO envs' rows
-        widen = lambda mask: jnp.concatenate([mask, jnp.zeros((r,), bool)])  # noqa: E731 - riders never reset
-        if per_env is None:
-            per_env = per_env_mask(env, _one_terrain(terrains, axis))
-        pool = _join_envs(per_env, pool, _part_envs(per_env, state.env_state, n)[1])  # rider rows: never taken
-    v_step = jax.vmap(env.step, in_axes=(0, 0, terrain_axis(step_terrains, pool.obs.shape[0])))
-
-    def env_step(carry, step_key):
-        env_state, ep, ride_carry = carry
-        obs = own(env_state.obs)
-        loc, scale = nets.policy_apply(config, env.action_size, state.params, state.normaliser, obs)
-        if rows is None:
-            raw = nets.sample_raw(step_key, loc, scale)
-        else:  # this device's rows of the whole batch's normal draw
-            noise = jax.random.normal(step_key, (rows[1],) + loc.shape[1:], loc.dtype)
-            raw = loc + scale * jax.lax.dynamic_slice_in_dim(noise, rows[0], n)
-        logp = nets.log_prob(dist, loc, scale, raw)
-        action = nets.postprocess(dist, raw)
-        if ride is not None:
-            action = jnp.concatenate([action, jnp.asarray(ride.act(env_state.obs[n:]), action.dtype)])
-        next_state = v_step(env_state, action, step_terrains)
-        if ride is not None:
-            ride_carry = ride.record(ride_carry, next_state, n)
-            if ride.park is not None:
-                next_state = ride.park(ride_carry, next_state, n)
-        finite = jnp.all(jnp.isfinite(own(next_state.obs)), axis=-1)
-        reward = own(next_state.reward)
-        reward = jnp.where(jnp.isfinite(reward), reward, 0.0).astype(jnp.float32)
-        done = jnp.maximum(own(next_state.done).astype(jnp.float32), 1.0 - finite.astype(jnp.float32))
-        trunc = own(_truncation(next_state)) * finite
-        boot = jnp.zeros_like(reward)
-        if config.truncation == "bootstrap":  # SB3's time-limit bootstrap: a terminal step worth r + gamma V(final)
-            final_value = nets.value_apply(config, state.params, state.normaliser, own(next_state.obs))
-            boot = jnp.where(trunc > 0, config.gamma * final_value, 0.0)
-            trunc = jnp.zeros_like(trunc)
-        ret, length = ep.ret + reward, ep.length + 1.0
-        ended = done > 0
-        distance = getattr(next_state, "distance", None)
-        reached = ep.progress if distance is None else jnp.maximum(
-            ep.progress, jnp.where(finite, jnp.nan_to_num(own(distance).astype(jnp.float32)), 0.0))
-        ep = EpisodeStats(
-            ret=jnp.where(ended, 0.0, ret),
-            length=jnp.where(ended, 0.0, length),
-            last_return=jnp.where(ended, ret, ep.last_return),
-            last_length=jnp.where(ended, length, ep.last_length),
-            count=ep.count + done,
-            progress=reached,
-        )
-        next_state = _select_envs(env, widen(ended), pool, next_state)
-        return (next_state, ep, ride_carry), Transition(obs, raw, logp, reward, done, trunc, boot)
-
-    def unroll(carry, unroll_key):
-        carry, data = jax.lax.scan(env_step, carry, jax.random.split(unroll_key, config.unroll_length))
-        return carry, (data, own(carry[0].obs))
-
-    (env_state, episode, carry), (data, bootstrap_obs) = jax.lax.scan(
-        unroll, (state.env_state, state.episode, carry), jax.random.split(unroll_key, config.num_unrolls))
-    return env_state, episode, data, bootstrap_obs, carry
-
-
 def loss_fn(params, normaliser, batch: Transition, bootstrap_obs, key, *, config: PPOConfig, action_size: int,
             weight=None, rows=None, axis_name=None):
     """PPO loss on a minibatch of segments: ``batch`` fields [b, T, ...], ``bootstrap_obs`` [b, O].
@@ -432,16 +171,16 @@ def update(state: TrainState, key: jax.Array, terrains: jax.Array, *, env: EnvLi
 
 def _update(state: TrainState, key, terrains, env, config: PPOConfig, mesh=None, ride: Optional[Ride] = None,
             carry=None, per_env=None, collect: Optional[str] = None):
-    """:func:`update` -> ``((state, metrics), carry)``; with ``ride`` the riders step along (:func:`_collect`)."""
+    """:func:`update` -> ``((state, metrics), carry)``; with ``ride`` the riders step along (:func:`~jaxterrain.rl.collect.collect_steps`)."""
     key = raw_key(key)
     collect_key, sgd_key = jax.random.split(key)
     del key
     if mesh is not None and collect_mode(mesh, config, env, collect) == "shard_map":
-        env_state, episode, data, bootstrap_obs = _collect_split(state, collect_key, terrains, env, config, mesh)
+        env_state, episode, data, bootstrap_obs = collect_split(state, collect_key, terrains, env, config, mesh)
     else:
         if mesh is not None:  # envs that do not divide over the devices: XLA partitions the batched steps
-            state, terrains = _split_envs(state, terrains, config, mesh)
-        env_state, episode, data, bootstrap_obs, carry = _collect(state, collect_key, terrains, env, config,
+            state, terrains = split_envs(state, terrains, config, mesh)
+        env_state, episode, data, bootstrap_obs, carry = collect_steps(state, collect_key, terrains, env, config,
                                                                   ride=ride, carry=carry, per_env=per_env)
 
     normaliser = state.normaliser
@@ -529,84 +268,6 @@ def _sgd(params, opt_state, normaliser, segments: Transition, boots, key, *, con
         params, opt_state, segments, boots, key)
 
 
-COLLECT_MODES = ("shard_map", "partition")
-
-
-def collect_mode(mesh, config: PPOConfig, env=None, collect: Optional[str] = None) -> str:
-    """How a data-parallel update splits its env steps: ``"shard_map"`` (:func:`_collect_split`, each device its
-    own envs) or ``"partition"`` (sharding constraints; XLA partitions the batched steps). ``collect`` (one of
-    :data:`COLLECT_MODES`) when given and ``num_envs`` divides over the devices; else ``"partition"`` when it does
-    not divide or on GPUs (JAX 0.11.2's CUDA plugin crashes compiling the walker's step inside ``shard_map``:
-    ``sharding.default_split``), else ``"shard_map"``. MuJoCo Warp's step is one opaque call that XLA cannot
-    partition, so a Warp env on GPUs is a ``ValueError`` unless ``collect="shard_map"`` asks for the path that JAX
-    0.11.2 fails to compile (segfault, measured on 2 H200s, 2026-11-23). No environment variable changes it (the
-    ``JAXTERRAIN_PPO_COLLECT`` of earlier versions is gone)."""
-    if collect not in (None, *COLLECT_MODES):
-        raise ValueError(f"collect must be one of {COLLECT_MODES} or None (automatic), got {collect!r}")
-    if config.num_envs % mesh.devices.size:
-        return "partition"
-    if collect:
-        return collect
-    if sharding.default_split(mesh) != "dispatch":
-        return "shard_map"
-    if getattr(env, "backend", None) == "warp":
-        raise ValueError("data-parallel PPO (mesh=) on MuJoCo Warp over several GPUs needs shard_map, which JAX "
-                         "0.11.2's CUDA plugin fails to compile; train on one device, or use backend='jax', or pass "
-                         "collect='shard_map' to try this JAX")
-    return "partition"
-
-
-def _collect_split(state: TrainState, key, terrains, env, config: PPOConfig, mesh):
-    """:func:`_collect` with the envs split over ``mesh``'s devices under ``jax.shard_map``: each device steps its
-    own ``num_envs / devices`` envs (an opaque physics call such as MuJoCo Warp's runs per device, which XLA's
-    partitioner cannot split) with its slice of the one-device random draws, so the data equal :func:`_collect`'s
-    up to float rounding. ``num_envs`` must divide over the devices. Outputs split along their env axis."""
-    from jax.sharding import PartitionSpec as P
-
-
-    d, n = mesh.devices.size, config.num_envs
-    local = n // d
-    axis = terrain_axis(terrains, n)
-    rows_spec = P(sharding.AXIS)
-    whole = jax.tree_util.tree_map(lambda _: P(), state)
-    state_spec = whole._replace(env_state=_env_specs(env, terrains, axis, rows_spec),
-                                episode=jax.tree_util.tree_map(lambda _: rows_spec, state.episode))
-    if axis is None:
-        terrain_spec = jax.tree_util.tree_map(lambda _: P(), terrains)
-    elif axis == 0:
-        terrain_spec = rows_spec
-    else:  # a Tile per env: the bank whole on every device, the indices split
-        terrain_spec = terrains._replace(bank=jax.tree_util.tree_map(lambda _: P(), terrains.bank), index=rows_spec)
-
-    def collect(state, key, terrains):
-        start = jax.lax.axis_index(sharding.AXIS) * local
-        return _collect(state, key, terrains, env, config._replace(num_envs=local), rows=(start, n))[:4]
-
-    out_specs = (state_spec.env_state, rows_spec, P(None, None, sharding.AXIS), P(None, sharding.AXIS))
-    return jax.shard_map(collect, mesh=mesh, in_specs=(state_spec, P(), terrain_spec), out_specs=out_specs,
-                         check_vma=False)(state, key, terrains)
-
-
-def _env_specs(env, terrains, axis, rows_spec):
-    """The ``PartitionSpec`` of every leaf of a batched env state: ``rows_spec`` for per-env leaves, ``P()`` for
-    leaves the batch shares (MuJoCo Warp's contact counters and buffers, whose values each step recomputes). Told
-    apart by their shapes (``jax.eval_shape``, nothing runs) at two batch sizes."""
-    from jax.sharding import PartitionSpec as P
-
-    return jax.tree_util.tree_map(lambda p: rows_spec if p else P(), per_env_mask(env, _one_terrain(terrains, axis)))
-
-
-def _split_envs(state: TrainState, terrains: jax.Array, config: PPOConfig, mesh):
-    """``state``'s envs (and per-env ``terrains``) constrained to be split over ``mesh``'s devices (inside jit)."""
-
-    rows = lambda tree: jax.lax.with_sharding_constraint(tree, sharding.rows(mesh))  # noqa: E731
-    state = state._replace(env_state=rows(state.env_state), episode=rows(state.episode))
-    axis = terrain_axis(terrains, config.num_envs)
-    if axis == 0:
-        return state, rows(terrains)
-    return state, (terrains._replace(index=rows(terrains.index)) if axis is not None else terrains)  # per-env tiles
-
-
 def run_updates(state: TrainState, terrains: jax.Array, *, env: EnvLike, config: PPOConfig, num_updates: int,
                 mesh=None, collect: Optional[str] = None):
     """``num_updates`` updates in one ``lax.scan``; each splits its key off ``state.key``. Pure (jit/vmap it).
@@ -636,8 +297,8 @@ def ride_updates(state: TrainState, terrains: jax.Array, riders: Any, ride: Ride
     """
     n = config.num_envs
     if per_env is None:
-        per_env = per_env_mask(env, _one_terrain(terrains, terrain_axis(terrains, n)))
-    both = state._replace(env_state=_join_envs(per_env, state.env_state, riders))
+        per_env = per_env_mask(env, one_terrain(terrains, terrain_axis(terrains, n)))
+    both = state._replace(env_state=join_envs(per_env, state.env_state, riders))
 
     def body(c, _):
         s, rc = c
@@ -647,7 +308,7 @@ def ride_updates(state: TrainState, terrains: jax.Array, riders: Any, ride: Ride
         return (s, rc), metrics
 
     (state, carry), metrics = jax.lax.scan(body, (both, carry), None, length=num_updates)
-    envs, riders = _part_envs(per_env, state.env_state, n)
+    envs, riders = part_envs(per_env, state.env_state, n)
     return state._replace(env_state=envs), riders, carry, metrics
 
 

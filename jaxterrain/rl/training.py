@@ -14,7 +14,8 @@ import jax.numpy as jnp
 import numpy as np
 
 from jaxterrain.rl.config import PPOConfig, validate_config
-from jaxterrain.rl.ppo import EnvLike, TrainState, init, raw_key, run_updates
+from jaxterrain.rl.ppo import init, run_updates
+from jaxterrain.rl.state import EnvLike, TrainState, raw_key
 from jaxterrain.runtime import driver, sharding
 from jaxterrain.walker.tiles import Tile
 
@@ -40,7 +41,7 @@ def compiled_chunk(env, config, num_updates: int, batched: bool = False, terrain
                    collect: Optional[str] = None):
     """The jitted ``(state, terrains) -> (state, metrics)`` running ``num_updates`` updates; cached per
     (env, config, num_updates, batched, mesh, collect) so repeated :func:`train` calls do not re-compile. With
-    ``mesh`` (data parallel, :func:`update`; ``collect``: how, ``rl.ppo.collect_mode``) the returned state is
+    ``mesh`` (data parallel, :func:`update`; ``collect``: how, ``rl.collect.collect_mode``) the returned state is
     replicated on every device of the mesh."""
     try:
         return _cached_chunk(env, config, num_updates, batched, terrain_seed_axis, mesh, collect)
@@ -61,7 +62,7 @@ def chunk_fn(env: EnvLike, config: PPOConfig, terrains: jax.Array, batched: bool
     """The ``jaxterrain.runtime.driver.run_chunks`` chunk of PPO: ``(state, start, stop) -> (state, metrics)`` runs
     ``stop - start`` updates (:func:`compiled_chunk`, cached per length) on ``terrains``; metrics are numpy arrays
     [stop - start] (or [S, stop - start] for a batch of seeds, ``batched``). ``mesh``: data parallel
-    (:func:`update`; ``collect``: how, ``rl.ppo.collect_mode``)."""
+    (:func:`update`; ``collect``: how, ``rl.collect.collect_mode``)."""
 
     def chunk(state: TrainState, start: int, stop: int):
         fn = compiled_chunk(env, config, stop - start, batched, terrain_seed_axis, mesh, collect)
@@ -98,7 +99,7 @@ def train(key: jax.Array, env: EnvLike, config: PPOConfig, num_updates: int, ter
         and TensorBoard events in ``run_dir`` after every chunk; stop after ``time_limit_s``; a progress bar).
       mesh: a ``jax.sharding.Mesh`` (``sharding.make_mesh()``) to train data parallel over its devices
         (:func:`update`: the envs split, the gradients summed, the policy replicated); not with a batch of seeds.
-      collect: how the envs' steps go over the mesh (``rl.ppo.collect_mode``; None: automatic).
+      collect: how the envs' steps go over the mesh (``rl.collect.collect_mode``; None: automatic).
 
     Returns ``(state, metrics)``: the final state and a dict of numpy arrays [n] ([S, n]), n = the updates run
     (``num_updates`` unless the time limit stopped it earlier).

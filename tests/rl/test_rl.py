@@ -167,11 +167,11 @@ def test_truncation_bootstrap_values_the_final_observation():
     ``bootstrap`` (SB3) it becomes a terminal step whose ``bootstrap`` is ``gamma * V(final obs)``, the obs before
     the auto-reset, valued with the collecting params. PointEnv ends every episode at step 16 by a time limit."""
     from jaxterrain.rl import networks as nets
-    from jaxterrain.rl.ppo import _collect
+    from jaxterrain.rl.collect import collect_steps
 
     cfg = CFG._replace(unroll_length=16, num_unrolls=1)
     state = rl.init(jax.random.PRNGKey(0), ENV, cfg, TERRAIN)
-    data = {t: jax.jit(lambda s, c=cfg._replace(truncation=t): _collect(s, jax.random.PRNGKey(1), TERRAIN, ENV, c)[2])(
+    data = {t: jax.jit(lambda s, c=cfg._replace(truncation=t): collect_steps(s, jax.random.PRNGKey(1), TERRAIN, ENV, c)[2])(
         state) for t in ("mask", "bootstrap")}
     last = data["mask"].done[0, -1]
     assert np.all(np.asarray(last) == 1.0) and np.all(np.asarray(data["mask"].truncation[0, -1]) == 1.0)
