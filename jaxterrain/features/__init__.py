@@ -2,6 +2,7 @@
 
 - :mod:`~jaxterrain.features.kernels`: TRI, TPI and roughness maps over windows with a stride, equal to GDAL's
   ``gdaldem`` at window 3, the vertical-face maps ``faces`` and ``max_step``, and their means;
+- :mod:`~jaxterrain.features.reference`: the same maps by plain NumPy loops (the tests' ground truth);
 - :mod:`~jaxterrain.features.registry`: descriptor names -> functions, :func:`descriptors` (``[B, D]``);
 - :mod:`~jaxterrain.features.algorithm1`: :func:`is_traversable`, the paper's Algorithm 1.
 
@@ -18,13 +19,13 @@ from jaxterrain.features.kernels import (
     faces,
     max_step,
     output_shape,
-    reference_maps,
     roughness,
     step_heights,
     tpi,
     tri,
     window_centre,
 )
+from jaxterrain.features.reference import reference_maps
 from jaxterrain.features.registry import (
     Descriptor,
     descriptor_names,

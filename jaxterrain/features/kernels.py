@@ -54,7 +54,7 @@ How it is computed (the fast path is exact; only float32 summation order differs
   descriptors are the means over the windows, as for the others: ``faces`` is about the density of face pixels
   (weighted as the windows cover them), ``max_step`` the typical tallest face within one window (~1.2 m at k = 30).
 
-:func:`reference_maps` is a plain NumPy implementation over explicit windows, kept as ground truth for tests and as
+:func:`~jaxterrain.features.reference.reference_maps` is a plain NumPy implementation over explicit windows, kept as ground truth for tests and as
 the CPU baseline of the benchmark.
 """
 
@@ -85,7 +85,6 @@ __all__ = [
     "max_step",
     "builtin_descriptors",
     "chunked_builtin_descriptors",
-    "reference_maps",
     "output_shape",
     "window_centre",
 ]
@@ -475,44 +474,3 @@ def chunked_builtin_descriptors(h, names, window, stride) -> dict[str, jax.Array
         return {k: v[0] for k, v in builtin_descriptors(x[None], names, window, stride).items()}
 
     return lax.map(one, h, batch_size=chunk)
-
-
-
-
-# ----------------------------------------------------------------------------------------------------------------
-# NumPy reference (tests, CPU benchmark baseline)
-
-
-def reference_maps(heightmaps, window: int = 3, stride: int = 1) -> dict[str, np.ndarray]:
-    """Plain NumPy maps over explicit windows (float64 inside): ``{"tri", "tri_riley", "tpi", "roughness", "faces",
-    "max_step"}`` -> ``[B, H', W']`` float64 (``[H', W']`` for a single map). Slow ground truth; keep inputs small."""
-    h = np.asarray(heightmaps, np.float64)
-    single = h.ndim == 2
-    if single:
-        h = h[None]
-    if h.ndim != 3:
-        raise ValueError(f"heightmaps must have shape [B, H, W] or [H, W]; got shape {h.shape}")
-    window, stride = check_window(h.shape, window, stride)
-    w = np.lib.stride_tricks.sliding_window_view(h, (window, window), axis=(1, 2))[:, ::stride, ::stride]
-    c = window_centre(window)
-    z = w[..., c, c]
-    flat = w.reshape(*w.shape[:3], window * window)
-    others = np.delete(flat, c * window + c, axis=-1)
-    d = others - z[..., None]
-    # Each pixel's largest step to a 4-neighbour, neighbour by neighbour (border pixels have fewer).
-    step = np.zeros_like(h)
-    for dy, dx in ((-1, 0), (1, 0), (0, -1), (0, 1)):
-        for i in range(h.shape[1]):
-            for j in range(h.shape[2]):
-                if 0 <= i + dy < h.shape[1] and 0 <= j + dx < h.shape[2]:
-                    step[:, i, j] = np.maximum(step[:, i, j], np.abs(h[:, i + dy, j + dx] - h[:, i, j]))
-    sw = np.lib.stride_tricks.sliding_window_view(step, (window, window), axis=(1, 2))[:, ::stride, ::stride]
-    out = {
-        "faces": (sw > FACE_THRESHOLD).mean(axis=(-2, -1)),
-        "max_step": sw.max(axis=(-2, -1)),
-        "tri": np.abs(d).mean(-1),
-        "tri_riley": np.sqrt((d * d).sum(-1)),
-        "tpi": z - others.mean(-1),
-        "roughness": flat.max(-1) - flat.min(-1),
-    }
-    return {k: v[0] for k, v in out.items()} if single else out

@@ -23,94 +23,13 @@ Rendering (``render_one(genome[3]) -> [size, size]`` float32 in [0, 1]):
 * Distances are separable: ``d2[i, j, p] = (i - y_p)^2 + (j - x_p)^2``, so the ``[size, 400]`` row and column terms
   are computed once and the full ``[size, size, 400]`` tensor is never stored.
 
-Selection of the D-th smallest, ``select`` option of the factory. ``DEFAULT_SELECT`` is ``"auto"``: ``"pallas"``
-where the computation is lowered for a CUDA GPU and ``"bracket"`` on any other platform (``lax.platform_dependent``).
-So a CPU map can differ from a GPU map of the same genome by less than ``TOLERANCE``; on one backend the same genome
-always gives the same map, bit for bit.
-
-* ``"pallas"`` (the default on a GPU; exact): the "tiled" method below with its three stages as Pallas kernels
-  (``worley_pallas``), each program one 8 x 8 tile in registers. (1) The coarse grid by the selection kernel over
-  every tile's first N points with the bracket [0, 2 x size]. (2) The candidate lists and (3) the selection, in one
-  kernel (``worley_pallas.FUSED``; two kernels otherwise). The selection runs over the tile's own candidates, whose
-  loops run to that tile's candidate count (mean 16-40, max 83, at 256 x 256), not to a capacity. It first counts
-  ``c_lo = count(d2 < L^2)`` and ``c_hi = count(d2 < U^2)``. Then it bisects the whole tile until no pixel has more
-  than ``TOP_K`` = 4 candidates in its bracket, about 2-4 steps where a 1-candidate bracket took 7-10, since a tile
-  waits for its slowest pixel. A last pass keeps each pixel's 4 smallest ``d2 >= L^2`` in sorted registers; exactly
-  ``c_lo`` values lie below, so ``F_D^2`` is element ``rank - c_lo``. The result is a point's squared distance
-  itself, equal to "sort" bit for bit. This holds on the CPU (Pallas's interpreter), with ties, duplicate points and
-  the overflow fallback; on an H200 the difference was 0 on 16 test maps. On a CPU Pallas only interprets (slower
-  than "bracket"), so "auto" picks "pallas" only on a GPU.
-
-* ``"sort"`` (the exact reference): materialise ``d2`` block by block (``_ROW_BLOCK`` = 16 rows, ``lax.map``)
-  and take element ``D`` of ``jnp.sort(d2)[..., :101]`` (a one-hot sum, no gather). Exact. Memory:
-  ``16 x size x 400`` floats per genome per block (6.5 MB; under ``vmap`` the block is shared by the whole batch, so
-  B = 1024 needs ~6.7 GB).
-* ``"bisect"``: the D-th smallest of non-negative float32 values is the largest float ``t`` with
-  ``count(d2 < t) <= D``; non-negative floats order like their int32 bit patterns, so ``t`` is found exactly by
-  setting its 31 bits greedily from the top, one ``count`` reduction over the 400 points per bit. Exact (same
-  value as "sort" up to the last bit of a squared distance, where XLA may fuse a multiply-add differently).
-* ``"bracket"`` (the default off a GPU): ``F_D`` is 1-Lipschitz in the pixel position, so an exact coarse grid
-  brackets every pixel: (1) "bisect" on every ``_COARSE_STEP`` = 8th pixel (33 x 33 at 256: 1/60 of the pixels, 31
-  counts); (2) per pixel ``L = max_c(F_c - |p - c|)``, ``U = min_c(F_c + |p - c|)`` over the 4 corners of its coarse
-  cell (width <= 2 x 4 sqrt 2 = 11.3 px, ~3 px typical), +-``_MARGIN`` = 2e-3 px for float rounding; (3)
-  ``bracket_iterations(size)`` = 14 bisection steps on the distance (one count each) to a width < ``TOLERANCE``
-  = 1e-3 px; (4) a snap ``min{d2 : d2 >= L^2}`` (one min reduction, as one more loop trip). The snap returns
-  F_D exactly unless another, different point distance lies within the final width below it; then it returns
-  that distance, so
-  ``|error| < TOLERANCE`` px always (measured vs "sort": max 3.5e-4 px at 64 x 64 and 5.0e-4 px at 256 x 256,
-  0.005-0.02 % of pixels differ by > 1e-4 px, the rest to the last bit; on the [0, 1] map the max difference is
-  ~1e-5).
-
-* ``"tiled"``: "bracket" over per-tile candidate lists (``_kth_tiled``). Steps 1-2 as "bracket"; each 8 x 8 tile
-  then keeps only the points that can be the D-th nearest of one of its pixels (at most 96 slots, ``_CAP_GROUPS``;
-  the rest are counted or dropped exactly, see the end of this docstring), and steps 3-4 run over those: 4.2x
-  fewer point-pixel pairs. Same values as "bracket" (bit for bit in the tests). A tile with more than 96
-  candidates (none seen at 256 x 256, max 83) sends its batch through "bracket" once, so the result never
-  depends on the cap ("pallas" redoes it by its kernel over all points instead). About 1.7x "bracket" on the CPU
-  and on a GPU alike, far below "pallas" on a GPU: XLA pays the 96 slots everywhere and materialises the gathered
-  terms (9.3 GB at B = 1024).
-
-Loop structure (all count-based methods): each trip is ONE fused XLA reduction over the points,
-``sum_p((dy2[i, p] + dx2[j, p]) < t[i, j])`` (or an int32 ``min_p`` over the float bit patterns for the snap), whose
-[B, H, W, 400] input is computed inside the fusion and never stored; ``lax.fori_loop`` over trips, the loop shared
-by the batch under ``vmap`` (the trip counts are static). Three XLA behaviours had to be defeated, all visible in the
-optimised HLO (``jax.jit(f).lower(x).compile().as_text()``, and ``memory_analysis().temp_size_in_bytes``):
-(a) while-loop-invariant code motion hoisted the loop-invariant broadcast add ``dy2[:, None, :] + dx2[None, :, :]``
-out of the loop, so the loop carried a materialised ``f32[B, H, W, 400]`` (105 MB per map) and re-read it on every
-trip (memory-bound); ``_tie`` (an optimisation barrier on the loop carry)
-stops it. (b) outside a loop XLA fuses the whole producer of ``dy2`` (PRNG bits -> points -> squares) into the
-[H, W, 400] reduction, or materialises it, so the snap runs as the last trip of the same loop (a ``cond`` on the
-unbatched trip index), where ``dy2`` / ``dx2`` are loop-carried buffers. (c) XLA:CPU's TreeReductionRewriter splits
-any reduced dimension longer than 32 into reduce-window + reduce (materialising the compare, ``s32[B, H, W, 400]``,
-on every trip), and XLA:CPU sends a float min to a YNNPACK custom call on a materialised input; so the points are
-grouped as ``_POINT_GROUPS`` = 16 x 25 (XLA:GPU regroups adjacent reduced dims into one 400-long row reduction) and
-the snap is an int32 min. Result on CPU: the whole computation's temp memory is 1-2 % of one [B, H, W, 400] tensor
-(was 100-200 %). XLA:CPU's code for the 2-d reduction is ~5x slower than for a flat one, which is fastest on CPU
-with ``_POINT_GROUPS = (400,)`` and ``XLA_FLAGS=--xla_disable_hlo_passes=tree_reduction_rewriter``.
-
-Cost model, per map at 256 x 256 (P = 400 points, 65,536 pixels, 26.2 M point-pixel pairs; one "pass" = one
-fused reduction over all pairs, ~4 scalar ops per pair: add, compare, convert, accumulate):
-
-=========  =====================================================  ===============
-method     passes                                                 ops per map
-=========  =====================================================  ===============
-sort       a 400-key sort per pixel (bitonic: ~1e4 compare-swaps)   ~1e9 + memory
-bisect     31                                                     ~3.3e9
-bracket    31 / 60 (coarse) + 14 (bisection) + 1 (snap) = 15.5     ~1.6e9
-=========  =====================================================  ===============
-
-``benchmarks/worley_variants.py`` times the variants on any device (``--stages``: where the time of "pallas" goes);
-every measured figure, with its device, date and commit, is in ``benchmarks/RESULTS.md`` (the Worley sections).
-Ceiling: at ~3e13 simple ops/s (H100 FP32 lanes) "bracket" is ~20,000 maps/s if compute-bound; XLA's generic
-reduction emitter reloads ``dy2`` and ``dx2`` from L1 for every pair, so expect a few thousand. The 100,000 maps/s
-target needed fewer pairs: "pallas", per-tile candidate lists in a hand-written kernel (only points whose distance
-range over the tile meets the tile's bracket; 16-40 of 400 on average) with register-blocked pixels. Exactness of
-such a list: with a tile's bracket ``[Lt, Ut]`` (min of ``L``, max of ``U`` over its pixels), a point farther than
-``Ut`` from the whole tile is never among the first D + 1, and a point nearer than ``Lt`` to all of it is always
-among the first D; so ``F_D`` is the ``(D - inside)``-th smallest over the remaining candidates, exactly. The cap
-can be checked offline once and for all: the genome space is finite (101 integer seeds x N in [2, 400] x D in
-[0, N / 4], about 2.1 M genomes per map size), and the per-tile candidate count needs only the exact coarse grid
-(about 1/60 of a map's work), so every genome can be enumerated offline.
+Selection of the D-th smallest: ``select`` (:data:`SELECT_OPTIONS`); ``"auto"`` (``DEFAULT_SELECT``) is
+``"pallas"`` where lowered for a CUDA GPU (exact: Pallas kernels over per-tile candidate lists,
+:mod:`~jaxterrain.generators.worley_pallas`) and ``"bracket"`` elsewhere (an exact coarse grid brackets every pixel,
+bisection, a snap to a point distance: ``|error| < TOLERANCE`` = 1e-3 px), so a CPU map can differ from a GPU map of
+the same genome by less than that; on one backend a genome always gives the same map, bit for bit. Also ``"sort"``
+(the exact reference), ``"bisect"`` (exact) and ``"tiled"`` ("bracket" over candidate lists). Each method's design,
+the XLA loop behaviours it defeats, the cost model and the exactness of the candidate lists: ``docs/worley.md``.
 """
 
 from __future__ import annotations

@@ -32,10 +32,10 @@ import jax.numpy as jnp
 import numpy as np
 
 from jaxterrain import difficulty, features, generators as _generators
-from jaxterrain.qd import config as A, map_elites as ME, scoring as S
+from jaxterrain.qd import config as A, map_elites as ME, programs as P, scoring as S
 from jaxterrain.qd.archive import render_elites
 from jaxterrain.qd.grid import centroids_for
-from jaxterrain.runtime import driver, sharding
+from jaxterrain.runtime import driver
 
 __all__ = ["CHECKPOINT_NAME", "descriptor_fn", "traversable_fn", "default_fitness", "problem", "evolve", "Treatment",
            "evolve_many", "to_archive", "progress_printer"]
@@ -115,43 +115,6 @@ def problem(generator, descriptors, config: A.EvolveConfig, fitness_fn=None, tra
     return scoring, emitter
 
 
-def _compiled(cache: dict | None, key, build):
-    if cache is None:
-        return build()
-    if key not in cache:
-        cache[key] = build()
-    return cache[key]
-
-
-def _replicated(mesh) -> dict:
-    """``jax.jit`` options that leave every output whole on every device of ``mesh`` (none without a mesh)."""
-    if mesh is None:
-        return {}
-
-    return {"out_shardings": sharding.replicated(mesh)}
-
-
-def _programs(scoring: S.Scoring, emitter: ME.Emitter, cache: dict | None):
-    """Jitted ``init(key, centroids, task)`` and ``chunk(state, key, n) -> (state, metrics [n])``; with a mesh
-    their outputs (the repertoire, the metrics) are replicated on its devices."""
-    fns = (scoring.render_one, scoring.descriptor_fn, scoring.traversable_fn, scoring.fitness_fn, emitter,
-           scoring.mesh, scoring.split)
-    if _dispatching(scoring.mesh, scoring.split):
-        return _compiled(cache, ("host",) + fns, lambda: _host_programs(scoring, emitter))
-    out = _replicated(scoring.mesh)
-
-    def build_init():
-        return jax.jit(lambda key, centroids, task: ME.init(key, scoring, emitter, centroids, task), **out)
-
-    def build_chunk():
-        def chunk(state, key, n):
-            return jax.lax.scan(lambda s, _: ME.step(s, key, scoring, emitter), state, None, length=n)
-
-        return jax.jit(chunk, static_argnums=2, **out)
-
-    return _compiled(cache, ("init",) + fns, build_init), _compiled(cache, ("chunk",) + fns, build_chunk)
-
-
 # ----------------------------------------------------------------------------------------------------------------
 # evolve
 # ----------------------------------------------------------------------------------------------------------------
@@ -196,7 +159,7 @@ def evolve(generator, descriptors, config: A.EvolveConfig, key: jax.Array, fitne
     """
     generator, descriptors, config = _resolve_one(generator, descriptors, config, generator_options)
     scoring, emitter = problem(generator, descriptors, config, fitness_fn, traversable_fn, mesh=mesh, split=split)
-    init, chunk = _programs(scoring, emitter, compile_cache)
+    init, chunk = P.programs(scoring, emitter, compile_cache)
     meta = {"generator": generator.name, "config": _resume_signature(config), "key": _key_data(key).tolist()}
     run_dir = None if checkpoint_dir is None else Path(checkpoint_dir)
     restored = None if run_dir is None else _restore(run_dir, _template(key, scoring, emitter, config), meta,
@@ -337,7 +300,7 @@ def evolve_many(treatments: Sequence[Treatment], config: A.EvolveConfig, key: ja
         states, done, history, _ = restored
     else:
         _save_first(run_dir, states, history, meta)
-    chunk = _many_program(scorings, emitters, fitness, mesh, compile_cache)
+    chunk = P.many_program(scorings, emitters, fitness, mesh, compile_cache)
     chunk_fn, on_chunk = _many_callbacks(chunk, keys, key, groups, config, len(treatments), progress)
     states, done, history = driver.run_chunks(
         chunk_fn, states, total=config.generations, every=config.checkpoint_every, start=done, history=history,
@@ -364,13 +327,6 @@ def _resolve_many(treatments, config: A.EvolveConfig, generator_options: dict | 
         r = None if ranges is None else tuple(tuple(ranges[n]) for n in t.descriptors)
         configs.append(A.resolve_config(config._replace(descriptors=t.descriptors, ranges=r)))
     return treatments, names, gens, sizes.pop(), configs
-
-
-def _many_program(scorings, emitters, fitness, mesh, cache: dict | None):
-    """The jitted chunk of :func:`evolve_many` (:func:`_many_chunk`), kept in ``cache`` under what determines it."""
-    fns = tuple((s.render_one, s.descriptor_fn, s.traversable_fn) for s in scorings)
-    return _compiled(cache, ("many", fns, tuple(emitters), fitness, mesh, scorings[0].split),
-                     lambda: _many_chunk(tuple(scorings), tuple(emitters), fitness, mesh))
 
 
 def _many_callbacks(chunk, keys, key, groups: dict, config: A.EvolveConfig, count: int, progress):
@@ -406,7 +362,7 @@ def _init_many(treatments, configs, names, gens, fitness, traversable, cache, me
     for name, members in groups.items():
         scoring, emitter = problem(gens[name], None, configs[members[0]], fitness, traversable, names=names,
                                    mesh=mesh, split=split)
-        init, _ = _programs(scoring, emitter, cache)
+        init, _ = P.programs(scoring, emitter, cache)
         group_states = []
         for i in members:
             pair = tuple(names.index(n) for n in configs[i].descriptors)
@@ -429,77 +385,6 @@ def _many_archives(states, groups, gens, configs, history) -> list[A.Archive]:
             own = {k.split("/")[0]: v for k, v in history.items() if k.endswith(f"/{i}")}
             out[i] = to_archive(gens[name], repertoire, configs[i], own)
     return out
-
-
-def _dispatching(mesh, split: str | None = None) -> bool:
-    """Whether ``mesh`` splits rows by dispatching one program per device (``sharding.default_split``: GPUs), which
-    a ``jit``-compiled chunk cannot do: the chunk is then a host loop over generations (:func:`_host_programs`)."""
-    if mesh is None:
-        return False
-
-    return (sharding.default_split(mesh) if split is None else split) == "dispatch"
-
-
-def _host_programs(scoring: S.Scoring, emitter: ME.Emitter):
-    """:func:`_programs` on a dispatching mesh: ``init`` and ``chunk`` as host loops of jitted parts (offspring,
-    finish) around the scoring, whose rows go to every device from the host (``sharding.map_rows``)."""
-    make = jax.jit(lambda key, n: emitter.sample(key, n), static_argnums=1)
-    empty = jax.jit(ME.empty_repertoire)
-    children = jax.jit(lambda state, key: ME.offspring(state, key, emitter))
-    finish = jax.jit(ME.finish)
-
-    def init(key, centroids, task):
-        sample_key, _, eval_key = ME.generation_keys(key, 0)
-        genomes = make(sample_key, emitter.initial_population)
-        repertoire = empty(jax.tree.map(lambda x: x[0], genomes), centroids)
-        state = ME.MapElitesState(repertoire, jnp.zeros((), jnp.int32), task)
-        new, m = finish(state, genomes, scoring(genomes, eval_key, task))
-        return state._replace(repertoire=new.repertoire), m
-
-    def generation(state, key):
-        genomes, eval_key = children(state, key)
-        return finish(state, genomes, scoring(genomes, eval_key, state.task))
-
-    return init, functools.partial(_host_loop, generation)
-
-
-def _host_loop(generation: Callable, state, key, n: int):
-    """``n`` calls of ``state, metrics = generation(state, key)`` from the host; the metrics stacked ``[n, ...]``
-    (what a ``lax.scan`` of them returns)."""
-    history = []
-    for _ in range(n):
-        state, m = generation(state, key)
-        history.append(m)
-    return state, jax.tree.map(lambda *xs: jnp.stack(xs), *history)
-
-
-def _many_chunk(scorings, emitters, fitness, mesh=None):
-    if _dispatching(mesh, scorings[0].split):
-        return _many_host_chunk(scorings, emitters, fitness)
-
-    def chunk(states, keys, key, n):
-        def body(st, _):
-            fitness_key = jax.random.fold_in(key, st[0].generation[0])
-            return ME.multi_step(st, keys, fitness_key, scorings, emitters, fitness)
-
-        return jax.lax.scan(body, states, None, length=n)
-
-    return jax.jit(chunk, static_argnums=3, **_replicated(mesh))
-
-
-def _many_host_chunk(scorings, emitters, fitness):
-    """:func:`_many_chunk` on a dispatching mesh: a host loop over generations of the jitted offspring and finish
-    parts of ``map_elites.multi_step`` around its scoring, whose rows go to every device from the host."""
-    children = jax.jit(lambda states, keys: ME.many_offspring(states, keys, emitters))
-    finish = jax.jit(ME.many_finish)
-
-    def generation(states, run):
-        keys, key = run
-        kids = children(states, keys)
-        fitness_key = jax.random.fold_in(key, states[0].generation[0])
-        return finish(states, kids, *ME.many_scores(states, kids, fitness_key, scorings, fitness))
-
-    return lambda states, keys, key, n: _host_loop(generation, states, (keys, key), n)
 
 
 def to_archive(generator, repertoire, config: A.EvolveConfig, history: dict) -> A.Archive:

@@ -186,7 +186,7 @@ class Scoring(NamedTuple):
     fitness_fn: Callable
     task: Task
     mesh: Any = None
-    split: Optional[str] = None
+    split: str | None = None
 
     def prepare(self, genomes, task: Task | None = None) -> Pending:
         """Render, describe and check a batch (genome leaves ``[B, ...]``); ``task``: one :class:`Task`, or one per
@@ -240,7 +240,7 @@ class Scoring(NamedTuple):
 
 
 def make_scoring_fn(generator, descriptor_fn: Callable, traversable_fn: Callable, fitness_fn: Callable,
-                    config, pair=(0, 1), mesh=None, split: Optional[str] = None) -> Scoring:
+                    config, pair=(0, 1), mesh=None, split: str | None = None) -> Scoring:
     """The scoring function of one generator (see the module docstring).
 
     Args:
