@@ -16,13 +16,18 @@
 
 from jaxterrain.suite.evaluation import (THRESHOLD, cell_scores, check_policies, evaluate_policies, highest_level_passed,
                                         level_fitness, passed_levels)
-from jaxterrain.suite.families import FAMILIES, Family, START_STRIP, build_terrain, edge_distance, family_names, misfit, room
-from jaxterrain.suite.heldout import GENERATORS, LEVELS, SEED, Suite, VERSIONS, archive_suite, descriptor_levels, load
+from jaxterrain.suite.families import (FAMILIES, FAMILIES_V2, Family, START_STRIP, TABLES, build_terrain, edge_distance,
+                                      family_names, family_table, misfit, room)
+from jaxterrain.suite.heldout import (GENERATORS, LEVELS, ROBOTS, SEED, Suite, V2_LEVELS, VERSIONS, archive_suite,
+                                     descriptor_levels, load, v2_terrain)
 from jaxterrain.suite.outputs import (Evaluation, level_table, read_fitness, plot_levels, plot_suite, short_names,
                                      write_evaluation)
 
 __all__ = [
     "FAMILIES",
+    "FAMILIES_V2",
+    "TABLES",
+    "family_table",
     "START_STRIP",
     "Family",
     "build_terrain",
@@ -34,6 +39,9 @@ __all__ = [
     "LEVELS",
     "SEED",
     "VERSIONS",
+    "ROBOTS",
+    "V2_LEVELS",
+    "v2_terrain",
     "Suite",
     "descriptor_levels",
     "load",
