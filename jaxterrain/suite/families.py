@@ -57,7 +57,7 @@ import numpy as np
 from jaxterrain.terrain import TerrainScale, validate_scale
 
 __all__ = ["START_STRIP", "Family", "FAMILIES", "FAMILIES_V2", "TABLES", "family_table", "family_names",
-           "build_terrain", "edge_distance", "room", "misfit", "V2_STEPS", "v2_depth"]
+           "build_terrain", "edge_distance", "room", "misfit", "V2_STEPS", "V2_GAP", "v2_width"]
 
 START_STRIP = 1.0
 """Metres of flat ground along every edge (the walker spawns 0.5 m from its edge)."""
@@ -223,10 +223,17 @@ V2_STEPS = 5
 V2_OBSTACLES, V2_OBSTACLE_BASE = 60, 0.5  # rectangles per map; the ground (m) they stand on and sink into
 
 
-def v2_depth(width: float) -> float:
-    """Metres: the depth of a v2 trench or stepping-stone gap of ``width`` metres, ``min(width, DEEP)``: narrow gaps
-    are shallow (a 2 cm gap is a 2 cm groove), wide ones as deep as v1's (0.5 m, the walker cannot climb out)."""
-    return min(float(width), DEEP)
+V2_GAP = 0.1
+"""Metres: the width of a v2 trench or stepping-stone gap beyond its depth (a gap ``depth`` deep is ``V2_GAP + depth``
+wide: :func:`v2_width`)."""
+
+
+def v2_width(depth: float) -> float:
+    """Metres: the width of a v2 trench or stepping-stone gap ``depth`` metres deep, ``V2_GAP + depth``: the
+    family's parameter is the depth, which is continuous, and the width grows with it (a heightmap of 4 cm pixels
+    only holds widths in whole pixels, so a width alone would grade in 4 cm jumps). Level 0 is a shallow groove
+    (1 cm deep, 11 cm wide), 0.5 m deep is v1's widest trench (0.6 m)."""
+    return V2_GAP + float(depth)
 
 
 def _flight(riser, size, scale, rng):
@@ -239,16 +246,16 @@ def _v2_obstacles(height, size, scale, rng):
     return _obstacles(height, size, scale, rng, count=V2_OBSTACLES, base=V2_OBSTACLE_BASE)
 
 
-def _v2_stepping_stones(gap, size, scale, rng, stone: float = STONE):
+def _v2_stepping_stones(depth, size, scale, rng, stone: float = STONE):
     x, y = _axes(size, scale)
-    pitch = stone + gap
+    pitch = stone + v2_width(depth)
     ux, uy = rng.uniform(0.0, 1.0, 2)  # the seed's offset, in pitches: the same at every level
     on = ((x + ux * pitch) % pitch < stone) & ((y + uy * pitch) % pitch < stone)
-    return np.where(on | _strip(size, scale), v2_depth(gap), 0.0)
+    return np.where(on | _strip(size, scale), depth, 0.0)
 
 
-def _v2_gaps(width, size, scale, rng, every: float = TRENCH_EVERY):
-    return np.where(_gaps(width, size, scale, rng, every) == 0.0, DEEP - v2_depth(width), DEEP)
+def _v2_gaps(depth, size, scale, rng, every: float = TRENCH_EVERY):
+    return np.where(_gaps(v2_width(depth), size, scale, rng, every) == 0.0, DEEP - depth, DEEP)
 
 
 FAMILIES_V2: dict[str, Family] = {
@@ -263,10 +270,10 @@ FAMILIES_V2: dict[str, Family] = {
     "boxes": Family(_boxes, "m height", 0.005, 1.0, 10, 2 * BOX, "two 0.4 m boxes"),
     "obstacles": Family(_v2_obstacles, "m height", 0.005, V2_OBSTACLE_BASE, 10, 1.0,
                         "the largest (1.0 m) rectangle"),
-    "stepping_stones": Family(_v2_stepping_stones, "m gap", 0.002, 0.6, 10, STONE + 0.6,
-                              "a 0.6 m stone and a 0.6 m gap"),
-    "gaps": Family(_v2_gaps, "m width", 0.002, 0.6, 10, TRENCH_START + 0.60 + 0.3,
-                   "a 0.60 m trench, 0.3 m in, and 0.3 m of ground beyond it"),
+    "stepping_stones": Family(_v2_stepping_stones, "m depth", 0.002, DEEP, 10, STONE + V2_GAP + DEEP,
+                              "a 0.6 m stone and the deepest gap (0.6 m wide)"),
+    "gaps": Family(_v2_gaps, "m depth", 0.002, DEEP, 10, TRENCH_START + V2_GAP + DEEP + 0.3,
+                   "the deepest trench (0.6 m wide), 0.3 m in, and 0.3 m of ground beyond it"),
     "waves": Family(_waves, "m amplitude", 0.005, 0.5, 10, FADE_IN + WAVELENGTH / 2,
                     "the 1 m fade-in and half a 2 m wave at full amplitude"),
     "rough": Family(_rough, "m amplitude", 0.002, 0.5, 10, 4 * BLOCK, "four 0.12 m blocks"),
@@ -281,8 +288,8 @@ largest value needs.
 | ``stairs_up``, ``stairs_down`` | riser (m) | a flight of ``V2_STEPS`` (5) risers on 0.31 m treads to a plateau ``5 x riser`` high (v1: risers up to a 1 m plateau whatever the riser) |
 | ``boxes`` | height (m) | as v1 |
 | ``obstacles`` | height (m) | 60 rectangles (v1: 40) of 0.3 - 1.0 m, each +- value from ground at 0.5 m (v1: 0.3 m, which capped the pits) |
-| ``stepping_stones`` | gap (m) | 0.6 m stones, gaps ``v2_depth(gap)`` = ``min(gap, 0.5 m)`` deep (v1: 0.5 m at every width) |
-| ``gaps`` | width (m) | trenches every 1.2 m, ``min(width, 0.5 m)`` deep (v1: 0.5 m) |
+| ``stepping_stones`` | depth (m) | 0.6 m stones, gaps that deep and ``v2_width(depth)`` = ``0.1 m + depth`` wide (v1: the gap's width, 0.5 m deep at every width) |
+| ``gaps`` | depth (m) | trenches every 1.2 m, that deep and ``0.1 m + depth`` wide (v1: the width, 0.5 m deep) |
 | ``waves``, ``rough`` | amplitude (m) | as v1 |
 """
 
