@@ -220,7 +220,7 @@ FAMILIES: dict[str, Family] = {
 V2_STEPS = 5
 """Risers in a v2 flight of stairs: the flight is ``V2_STEPS * riser`` high, so it grows with the level."""
 
-V2_OBSTACLES, V2_OBSTACLE_BASE = 60, 0.5  # rectangles per map; the ground (m) they stand on and sink into
+V2_OBSTACLES, V2_OBSTACLE_BASE = 80, 0.5  # rectangles per map; the ground (m) they stand on and sink into
 
 
 V2_GAP = 0.1
@@ -287,7 +287,7 @@ largest value needs.
 | ``slope_up``, ``slope_down`` | grade | as v1 |
 | ``stairs_up``, ``stairs_down`` | riser (m) | a flight of ``V2_STEPS`` (5) risers on 0.31 m treads to a plateau ``5 x riser`` high (v1: risers up to a 1 m plateau whatever the riser) |
 | ``boxes`` | height (m) | as v1 |
-| ``obstacles`` | height (m) | 60 rectangles (v1: 40) of 0.3 - 1.0 m, each +- value from ground at 0.5 m (v1: 0.3 m, which capped the pits) |
+| ``obstacles`` | height (m) | 80 rectangles (v1: 40) of 0.3 - 1.0 m, each +- value from ground at 0.5 m (v1: 0.3 m, which capped the pits) |
 | ``stepping_stones`` | depth (m) | 0.6 m stones, gaps that deep and ``v2_width(depth)`` = ``0.1 m + depth`` wide (v1: the gap's width, 0.5 m deep at every width) |
 | ``gaps`` | depth (m) | trenches every 1.2 m, that deep and ``0.1 m + depth`` wide (v1: the width, 0.5 m deep) |
 | ``waves``, ``rough`` | amplitude (m) | as v1 |

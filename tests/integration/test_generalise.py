@@ -234,6 +234,8 @@ def test_generalise_takes_the_base_policys_k_evaluations_as_k_runs_of_the_compar
     write_base(tmp_path / "short.csv", [0.3])
     lines = (tmp_path / "short.csv").read_text().splitlines()
     (tmp_path / "short.csv").write_text("\n".join(lines[:-1]) + "\n")  # a terrain fewer
-    assert cli("generalise", str(run), "--base", str(tmp_path / "short.csv"), "--reps", "10") == 2
+    with pytest.raises(SystemExit) as stop:
+        cli("generalise", str(run), "--base", str(tmp_path / "short.csv"), "--reps", "10")
     err = capsys.readouterr().err
+    assert stop.value.code == 2
     assert "--base" in err and "other terrains" in err and len(err.strip().splitlines()) == 1

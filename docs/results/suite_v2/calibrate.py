@@ -38,7 +38,7 @@ from pathlib import Path
 import numpy as np
 
 from jaxterrain.suite import calibration
-from jaxterrain.suite.families import FAMILIES_V2
+from jaxterrain.suite.families import FAMILIES_V2, misfit
 from jaxterrain.suite.heldout import ROBOTS, V2_LEVELS, v2_terrain
 
 CANDIDATES: dict[str, dict[str, tuple[str, float, float]]] = {
@@ -284,6 +284,10 @@ def main(argv=None) -> int:
     if args.slots < 0:
         p.error(f"--slots must be >= 0 (0: all walks at once); got {args.slots}")
     args.slots = args.slots or None
+    for f in args.families:
+        why = misfit(f, args.size, version="v2")
+        if why:
+            print(f"calibrate: {f} does not fit {args.size} pixels ({why}); built cut down", file=sys.stderr)
     args.out.mkdir(parents=True, exist_ok=True)
     for robot in args.robots:
         done = args.out / f"timing_{robot}.json"
