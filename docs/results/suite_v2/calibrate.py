@@ -42,21 +42,22 @@ from jaxterrain.suite.families import FAMILIES_V2, misfit
 from jaxterrain.suite.heldout import ROBOTS, V2_LEVELS, v2_terrain
 
 CANDIDATES: dict[str, dict[str, tuple[str, float, float]]] = {
-    # (spacing, lo, hi): linear around where v1's curves (docs/results/exp3_gpushort, ant_gpushort) fell from 0.8
-    # to 0.3; geometric and wide for the families v2 re-parametrised (stairs, gaps, stepping stones, obstacles)
+    # (spacing, lo, hi): around where v1's curves (docs/results/exp3_gpushort, ant_gpushort) fell from 0.8 to 0.3,
+    # about 10 of the 20 values inside that fall (the ant's slope_up fell from 0.99 to 0.11 between grades 0.25 and
+    # 0.30); geometric and wide for the families v2 re-parametrised (stairs, gaps, stepping stones, obstacles)
     "humanoid": {
-        "slope_up": ("lin", 0.04, 0.25), "slope_down": ("lin", 0.05, 0.95),
+        "slope_up": ("lin", 0.06, 0.22), "slope_down": ("geo", 0.06, 1.0),
         "stairs_up": ("geo", 0.005, 0.2), "stairs_down": ("geo", 0.005, 0.2),
-        "boxes": ("lin", 0.01, 0.18), "obstacles": ("geo", 0.01, 0.5),
+        "boxes": ("lin", 0.02, 0.14), "obstacles": ("geo", 0.01, 0.5),
         "stepping_stones": ("geo", 0.003, 0.4), "gaps": ("geo", 0.003, 0.5),
-        "waves": ("lin", 0.01, 0.45), "rough": ("lin", 0.004, 0.095),
+        "waves": ("geo", 0.02, 0.5), "rough": ("lin", 0.008, 0.09),
     },
     "ant": {
-        "slope_up": ("lin", 0.20, 0.34), "slope_down": ("lin", 0.12, 0.95),
+        "slope_up": ("lin", 0.23, 0.32), "slope_down": ("lin", 0.2, 0.6),
         "stairs_up": ("geo", 0.01, 0.2), "stairs_down": ("geo", 0.01, 0.2),
         "boxes": ("geo", 0.08, 1.0), "obstacles": ("geo", 0.05, 0.5),
         "stepping_stones": ("geo", 0.002, 0.3), "gaps": ("geo", 0.002, 0.45),
-        "waves": ("lin", 0.12, 0.5), "rough": ("geo", 0.04, 0.45),
+        "waves": ("lin", 0.12, 0.5), "rough": ("geo", 0.05, 0.35),
     },
 }
 """Each robot's candidate range per family: ``(spacing "lin" | "geo", lo, hi)``."""
