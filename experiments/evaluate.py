@@ -249,7 +249,7 @@ def main(args) -> int:
                                                                    protocol, backend, s.scale, cfg["slots"],
                                                                    cfg["chunk"])])
     if len(policies) > 1:  # the other policies: the same compiled program, their weights as data
-        fitness = np.concatenate([first, suite.evaluate_policies(policies[1:], s.heightmaps, key, protocol, backend,
+        fitness = np.concatenate([fitness, suite.evaluate_policies(policies[1:], s.heightmaps, key, protocol, backend,
                                                                  s.scale, cfg["slots"], cfg["chunk"])])
     suite.write_evaluation(folder, names, s, fitness)
     timing = {"suite": s.name, "terrains": s.size, "policies": len(policies), "base_keys": n_keys, "backend": backend,

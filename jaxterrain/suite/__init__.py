@@ -17,6 +17,7 @@
     suite.passed_levels(fitness[0], s)
 """
 
+from jaxterrain.suite.calibration import check_curve, decreasing_fit, propose_values, select_levels
 from jaxterrain.suite.evaluation import (CVAR_ALPHA, THRESHOLD, cell_scores, check_policies, evaluate_policies,
                                         generator_robustness, highest_level_passed, level_fitness, passed_levels)
 from jaxterrain.suite.families import (FAMILIES, FAMILIES_V2, Family, START_STRIP, TABLES, build_terrain, edge_distance,
@@ -27,6 +28,10 @@ from jaxterrain.suite.outputs import (Evaluation, level_table, read_fitness, plo
                                      write_evaluation)
 
 __all__ = [
+    "check_curve",
+    "decreasing_fit",
+    "propose_values",
+    "select_levels",
     "FAMILIES",
     "FAMILIES_V2",
     "TABLES",

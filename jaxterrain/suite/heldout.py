@@ -17,8 +17,14 @@
   fewer or none. A generator that cannot be built here (the GAN without weights) is left out, and said so in
   ``Suite.missing``.
 
+``v2`` (``load("v2", robot="humanoid" | "ant")``, ``docs/suite.md``) holds the families of
+:data:`~jaxterrain.suite.families.FAMILIES_V2` at the levels calibrated for the robot's base policy
+(:data:`V2_LEVELS`), 5 terrains per level whose random parts depend on the family and seed only
+(:func:`v2_terrain`), and every one of 40 fresh samples of each generator (their worst decile is the robustness
+figure). Its name says the robot: ``"v2:ant"``.
+
 Smaller builds (``size``, ``seeds``, ``samples``, ``families``, ``generator_names``) are for tests on a CPU; their
-terrains are not ``v1``'s and ``Suite.name`` says what was built. A family whose features do not fit the map
+terrains are not the version's and ``Suite.name`` says what was built. A family whose features do not fit the map
 (``families.misfit``: a 64-pixel map at 4 cm has 0.26 m of ground inside its start strips, too little for a trench of
 ``gaps`` or a flight of ``stairs_up``) is dropped, and said so in ``Suite.dropped``; v1's 256 pixels hold every family.
 """

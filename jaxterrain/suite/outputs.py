@@ -136,6 +136,9 @@ def write_evaluation(folder: Path, names: Sequence[str], suite: Suite, fitness: 
     ``{policy: {family: highest level passed}}`` (every level below it passed too; -1: level 0 fails)."""
     folder = Path(folder)
     fitness = np.asarray(fitness, np.float64)
+    if fitness.shape != (len(names), suite.size):
+        raise ValueError(f"fitness must have shape [P, N] = ({len(names)}, {suite.size}) (a row per name, a column per "
+                         f"terrain); got {fitness.shape}")
     rows = [(n, fam, lv, s, f"{v:.4g}", unit, f"{f:.4f}")
             for n, fit in zip(names, fitness) for (fam, lv, s, v, unit), f in zip(suite.rows(), fit)]
     atomic_write_csv(folder / "fitness.csv", ["policy", "family", "level", "seed", "value", "unit", "fitness"], rows)
