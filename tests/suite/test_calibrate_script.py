@@ -76,7 +76,8 @@ def test_the_page_picks_measured_levels_that_pass_and_marks_what_cannot(cal, tmp
     assert calibration.check_curve(means)["ok"]
     assert not levels["rough"]["measured"] and len(levels["rough"]["values"]) == 10
     assert levels["waves"] == {"values": None, "measured": False}
-    md = (tmp_path / "calibration.md").read_text()
+    md = (tmp_path / "calibration_humanoid.md").read_text()
+    assert md.startswith("# Held-out suite v2: calibration for the humanoid")
     assert "| boxes | m | 25 |" in md and "pass (measured grid values)" in md
     assert "**not measured**" in md and "**FAIL**: the grid does not span" in md
     rows = list(csv.DictReader((tmp_path / "curves.csv").open()))
@@ -90,7 +91,7 @@ def test_a_v2_grid_is_checked_level_by_level_and_failures_are_marked(cal, tmp_pa
     fit[6] += 0.12  # 0.12 - 0.072 = 0.048 above level 5
     write_fitness(tmp_path, "ant", {"gaps": (v, fit[:, None].repeat(5, 1))}, grid="v2")
     assert cal.main(["--select", str(tmp_path)]) == 0
-    md = (tmp_path / "calibration.md").read_text()
+    md = (tmp_path / "calibration_ant.md").read_text()
     assert "| gaps | m | 10 | 0.900 | 0.250 | +0.048 (6) | **FAIL**: rise > 0.03 (v2's levels) |" in md
 
 
@@ -118,4 +119,4 @@ def test_the_script_walks_a_base_policy_at_cpu_size_and_resumes_without_walking_
     capsys.readouterr()
     assert cal.main(argv) == 0
     assert "exists; not walked again" in capsys.readouterr().out
-    assert "## humanoid" in (tmp_path / "calibration.md").read_text()
+    assert "| boxes |" in (tmp_path / "calibration_humanoid.md").read_text()

@@ -18,8 +18,8 @@ robot already written is not walked again (a run cut short resumes with the same
 
 Writes into ``--out``: ``fitness_<robot>.csv`` (robot, family, index, value, unit, seed, fitness),
 ``curves.csv`` (robot, family, index, value, unit, terrains, mean, sd, min, max), ``timing_<robot>.json``,
-``curves.png`` (a panel per family, each robot's mean fitness against the value, 0.8 and 0.3 marked), and
-``calibration.md``: for ``--grid v2`` the checks of every family's level curve (level 0 >= 0.8, level 9 <= 0.3, no
+``curves.png`` (a panel per family, each robot's mean fitness against the value, 0.8 and 0.3 marked), and a page
+per robot, ``calibration_<robot>.md``: for ``--grid v2`` the checks of every family's level curve (level 0 >= 0.8, level 9 <= 0.3, no
 rise > 0.03; failures marked); for candidates, the 10 grid values per family that pass (``suite.calibration.
 select_levels``), or, where none do, values interpolated on the curve's monotone fit (to measure with ``--grid v2``).
 ``--select FOLDER`` rewrites the page, figure and ``levels.json`` (the proposed ``V2_LEVELS``) from a folder's CSVs
@@ -137,7 +137,7 @@ def read_fitness(out: Path) -> dict[str, dict[str, list]]:
 
 
 def summarise(out: Path, grid: str) -> None:
-    """``curves.csv``, ``curves.png``, ``levels.json`` and ``calibration.md`` from the folder's fitness files."""
+    """``curves.csv``, ``curves.png``, ``levels.json`` and a ``calibration_<robot>.md`` per robot from the folder's fitness files."""
     from jaxterrain.runtime.io import atomic_write_csv, atomic_write_text
 
     data = read_fitness(out)
@@ -153,10 +153,11 @@ def summarise(out: Path, grid: str) -> None:
     atomic_write_csv(out / "curves.csv", ["robot", "family", "index", "value", "unit", "terrains", "mean", "sd", "min",
                                           "max"], rows)
     timing = {p.stem.split("_", 1)[1]: json.loads(p.read_text()) for p in sorted(out.glob("timing_*.json"))}
-    chosen, lines = {}, []
+    chosen, pages = {}, {}
     for rb, fams in data.items():
         t = timing.get(rb, {})
-        lines += [f"## {rb}", "", f"{t.get('terrains', '?')} terrains ({t.get('grid', grid)} grid), walked on "
+        lines = pages[rb] = []
+        lines += [f"{t.get('terrains', '?')} terrains ({t.get('grid', grid)} grid), walked on "
                   f"{t.get('device', '?')} at commit {t.get('commit', '?')}, {t.get('backend', '?')}, "
                   f"{t.get('walk_s_with_compile', '?')} s with the compile; build {t.get('build_s', '?')} s.", ""]
         lines += ["| family | unit | values walked | level 0 | last level | largest rise (at level) | checks | "
@@ -197,15 +198,17 @@ def summarise(out: Path, grid: str) -> None:
                 lines.append(f"| {f} | {unit} | {vals.size} | {means[0]:.3f} | {means[-1]:.3f} | - | {why} | "
                              f"grid: {curve} |")
         lines.append("")
-    head = ["# Held-out suite v2: calibration per robot", "",
-            "Each robot's shipped base policy on v2's terrains (HEADINGS protocol unless the timing says otherwise); "
-            "a family's level curve passes when level 0 has mean fitness >= 0.8, the last level <= 0.3, and no "
-            "level is above the one before by more than 0.03 (issue 61). Mean over each value's terrains (seeds). "
-            f"Written by `docs/results/suite_v2/calibrate.py` ({grid} grid).", "", "![level curves](curves.png)", ""]
-    atomic_write_text(out / "calibration.md", "\n".join(head + lines))
+    for rb, lines in pages.items():
+        head = [f"# Held-out suite v2: calibration for the {rb}", "",
+                f"The {rb}'s shipped base policy on v2's terrains; a family's level curve passes when level 0 has mean "
+                "fitness >= 0.8, the last level <= 0.3, and no level is above the one before by more than 0.03 "
+                "(issue 61). Mean over each value's terrains (seeds). Written by "
+                f"`docs/results/suite_v2/calibrate.py` ({grid} grid); the figure shows every robot of the run.", "",
+                "![level curves](curves.png)", ""]
+        atomic_write_text(out / f"calibration_{rb}.md", "\n".join(head + lines))
     atomic_write_text(out / "levels.json", json.dumps(chosen, indent=2) + "\n")
     figure(out, data, chosen)
-    print(f"-> {out / 'calibration.md'}", flush=True)
+    print(f"-> {', '.join(str(out / f'calibration_{rb}.md') for rb in pages)}", flush=True)
 
 
 def figure(out: Path, data, chosen) -> None:
