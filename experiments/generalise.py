@@ -303,7 +303,8 @@ def markdown(names, runs, families, est, two, strat, pi, pi_strat, test, above, 
              "it). *Trial IQM*: each trial's IQM over the cells, averaged (every run trimmed over the same "
              f"{cells} values); compare with the base policy on it.", "",
              f"**The {base} is one policy**: its {nb} run{'s are evaluations' if nb > 1 else ' is one evaluation'} "
-             "of the same weights, so its interval holds no trial variance (only the evaluation's noise"
+             + (f"(`{args.base}`, independent keys) " if getattr(args, "base", None) else "")
+             + "of the same weights, so its interval holds no trial variance (only the evaluation's noise"
              + ("" if nb > 1 else ": none with one evaluation, an interval of zero width") + ").", "",
              "| treatment | runs | IQM [over trials] | IQM [terrains too] | IQM [stratified] | mean [over trials] | "
              "trial IQM [over trials] | P(beats base policy) [over trials] | trials above base mean |",

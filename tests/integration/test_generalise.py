@@ -229,7 +229,8 @@ def test_generalise_takes_the_base_policys_k_evaluations_as_k_runs_of_the_compar
     assert 0.30 <= low < 0.34 < high <= 0.38  # the five runs spread: an interval of nonzero width
     pi = {(r["x"], r["y"]): float(r["probability"]) for r in csv.DictReader((out / "improvement.csv").open())}
     assert pi[("good map", "base policy")] == 1.0
-    assert "its 5 runs are evaluations of the same weights" in (out / "generalisation.md").read_text()
+    assert f"its 5 runs are evaluations (`{tmp_path / 'base'}`, independent keys) of the same weights" in \
+        (out / "generalisation.md").read_text()
     capsys.readouterr()
     write_base(tmp_path / "short.csv", [0.3])
     lines = (tmp_path / "short.csv").read_text().splitlines()
