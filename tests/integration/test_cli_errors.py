@@ -92,6 +92,8 @@ CASES = [
     (["export", "missing.npz"], "cannot load missing.npz"),
     (["evaluate", "--suite", "v9"], "--suite must be one of v1, v2; got 'v9'"),
     (["evaluate", "--keys", "0"], "--keys must be an integer >= 1; got 0"),
+    (["evaluate", "--suite", "v2", "--policy", str(ROOT / "jaxterrain" / "assets" / "base_policy_ant")],
+     "--suite v2 holds the levels of robot humanoid (--robot); these policies walk another robot"),
     (["evaluate", "--policy", "missing-policy"], "--policy missing-policy: no policy.msgpack in missing-policy"),
     (["generalise", "missing-run"], "RUN missing-run: no such folder"),
     (["evolve", "--bins", "0"], "--bins must be an integer >= 1; got 0"),
