@@ -231,8 +231,8 @@ wide: :func:`v2_width`)."""
 def v2_width(depth: float) -> float:
     """Metres: the width of a v2 trench or stepping-stone gap ``depth`` metres deep, ``V2_GAP + depth``: the
     family's parameter is the depth, which is continuous, and the width grows with it (a heightmap of 4 cm pixels
-    only holds widths in whole pixels, so a width alone would grade in 4 cm jumps). Level 0 is a shallow groove
-    (1 cm deep, 11 cm wide), 0.5 m deep is v1's widest trench (0.6 m)."""
+    only holds widths in whole pixels, so a width alone would grade in 4 cm jumps): a 1 cm deep gap is an 11 cm
+    groove, a 0.5 m deep one as wide as v1's widest trench (0.6 m)."""
     return V2_GAP + float(depth)
 
 
@@ -329,8 +329,9 @@ def misfit(name: str, size: int, scale: TerrainScale = TerrainScale(), version: 
 def build_terrain(name: str, value: float, size: int = 256, scale: TerrainScale = TerrainScale(),
                   rng: np.random.Generator | None = None, version: str = "v1") -> np.ndarray:
     """One heightmap ``[size, size]`` float32 in [0, 1] of family ``name`` of suite ``version`` (:data:`TABLES`)
-    at parameter ``value`` (metres / scale height, clipped). ValueError naming the parameter for an unknown family, a size below 16 pixels, a ``value``
-    that is not a finite number >= 0 (every family's parameter is a grade, a height or a width) or an ``rng`` that is
+    at parameter ``value`` (metres / scale height, clipped). ValueError naming the parameter for an unknown
+    version or family, a size below 16 pixels, a ``value`` that is not a finite number >= 0 (every family's
+    parameter is a grade, a height, a width or a depth) or an ``rng`` that is
     not a ``numpy.random.Generator``. A map too small for the family (:func:`misfit`) is built all the same, cut
     down: ``suite.load`` drops such families."""
     table = family_table(version)
