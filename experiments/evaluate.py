@@ -11,6 +11,11 @@ family ``archive``, levels = bands of 7.07 cells of distance from cell (0, 0)), 
 ``headings``: 20 walks in each of 4 headings, best 5 per heading). Every policy walks with the same key. A policy for
 another robot or observation set is refused with one line naming its folder, before the run folder is made.
 
+``--suite v2`` holds the levels calibrated for the robot of ``--robot`` (default the humanoid; every ``--policy``
+must walk that robot), 5 terrains per level and 40 fresh samples of each generator, whose worst decile (CVaR at
+10 %) ``robustness.csv`` reports. ``--keys K`` walks the base policy with K independent evaluation keys (rows
+``base``, ``base:key1``, ...), which ``generalise`` reads as K runs of the comparator.
+
 Presets: ``gpu`` (suite v1 at 256 x 256, 3 terrains per level, the HEADINGS protocol; the base policy walks twice
 and the second, compiled call is timed) and ``smoke`` (CPU, a few minutes: three families and Perlin samples built
 at 128 x 128, one terrain per level, 2 walks along +x, best 1; not ``v1``'s terrains). A family whose features do
@@ -34,10 +39,11 @@ from experiments import common
 
 PRESETS: dict[str, dict] = common.with_preset_names({
     "gpu": dict(suite="v1", archive=None, policy=[], robot=None, size=None, seeds=None, samples=None, families=None,
-                generators=None, attempts=80, best=5, headings=4, backend="auto", slots=None, chunk=None, repeat=True),
+                generators=None, attempts=80, best=5, headings=4, backend="auto", slots=None, chunk=None, repeat=True,
+                keys=1),
     "smoke": dict(suite="v1", archive=None, policy=[], robot=None, size=128, seeds=1, samples=4, families=["flat", "stairs_up", "gaps"],
                   generators=["perlin"], attempts=2, best=1, headings=1, backend="jax", slots=None, chunk=None,
-                  repeat=False),
+                  repeat=False, keys=1),
 }, {"gpu-short": "gpu", "paper": ("gpu", {"attempts": 20, "best": 5, "headings": 1})})
 BACKENDS = common.BACKEND_NAMES  # jaxterrain.walker.layout.BACKEND_CHOICES (literal: --help imports no JAX)
 
@@ -46,10 +52,15 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     common.add_run_arguments(parser, PRESETS, "smoke")
     parser.add_argument("--policy", nargs="+", default=None, metavar="DIR",
                         help="policy folders to evaluate beside the base policy (e.g. RUN/policies/trial_0)")
+    parser.add_argument("--keys", type=int, default=None, metavar="K",
+                        help="walk the base policy with K independent evaluation keys (rows base, base:key1, ..., "
+                             "base:key{K-1}; key 0 is the one every --policy walks with): generalise reads them as "
+                             "K runs of the comparator (give K = the treatments' trials)")
     parser.add_argument("--robot", default=None, metavar="NAME",
                         help="the base policy walked beside is this robot's shipped one (default humanoid); each "
                              "--policy walks the robot it was trained on")
-    parser.add_argument("--suite", default=None, help="held-out suite version (default v1)")
+    parser.add_argument("--suite", default=None, help="held-out suite version (default v1; v2: levels calibrated "
+                        "for the robot of --robot)")
     parser.add_argument("--archive", default=None, help="walk an archive's elites instead of the suite")
     parser.add_argument("--size", type=int, default=None, help="suite heightmap side in pixels (v1: 256)")
     parser.add_argument("--seeds", type=int, default=None, help="suite terrains per family level (v1: 3)")
@@ -71,10 +82,21 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def overrides(args) -> dict:
-    return dict(policy=args.policy, robot=args.robot, suite=args.suite, archive=args.archive, size=args.size, seeds=args.seeds,
+    return dict(policy=args.policy, robot=args.robot, keys=args.keys, suite=args.suite, archive=args.archive, size=args.size, seeds=args.seeds,
                 samples=args.samples, families=args.families, generators=args.generators, repeat=args.repeat,
                 backend=args.backend, slots=args.slots, chunk=args.chunk,
                 **common.protocol_overrides(args))
+
+
+def base_names(keys: int) -> list[str]:
+    """The ``fitness.csv`` names of the base policy's ``keys`` evaluations: ``base`` (the key every policy walks
+    with), then ``base:key1`` .. ``base:key{keys-1}`` (``jax.random.fold_in`` of that key by 1 .. keys-1)."""
+    return ["base"] + [f"base:key{k}" for k in range(1, keys)]
+
+
+def is_base(name: str) -> bool:
+    """Whether a ``fitness.csv`` policy name is one of the base policy's evaluations (:func:`base_names`)."""
+    return name == "base" or (name.startswith("base:key") and name[8:].isdigit())
 
 
 def load_policies(paths, robot: str | None = None) -> list:
@@ -109,6 +131,9 @@ def check_terrain_flags(cfg: dict) -> None:
     if unknown:
         raise UsageError(f"--families: unknown {', '.join(map(repr, unknown))}; choose from "
                          f"{', '.join(suite.FAMILIES)}")
+    keys = cfg.get("keys", 1)
+    if not isinstance(keys, int) or isinstance(keys, bool) or keys < 1:
+        raise UsageError(f"--keys must be an integer >= 1; got {keys!r}")
     if cfg["size"] is not None and cfg["size"] < 32:
         raise UsageError(f"--size must be an integer >= 32 pixels; got {cfg['size']}")
     if cfg["archive"] and not Path(cfg["archive"]).is_file():
@@ -158,7 +183,8 @@ def terrains(cfg: dict):
         except (OSError, ValueError) as err:
             raise UsageError(f"--archive {cfg['archive']}: {str(err).splitlines()[0]}") from None
     try:
-        return suite.load(cfg["suite"], size=cfg["size"], seeds=cfg["seeds"], samples=cfg["samples"],
+        robot = None if suite.VERSIONS[cfg["suite"]]["robot"] is None else (cfg.get("robot") or "humanoid")
+        return suite.load(cfg["suite"], robot=robot, size=cfg["size"], seeds=cfg["seeds"], samples=cfg["samples"],
                           families=cfg["families"], generator_names=cfg["generators"])
     except ValueError as err:
         raise UsageError(f"--{str(err)}") from None
@@ -180,13 +206,20 @@ def main(args) -> int:
     cfg0 = common.preset_with_flags(PRESETS, args, overrides(args))
     policies = load_policies(cfg0["policy"], cfg0.get("robot"))  # before the run folder: a bad folder is one line, nothing left behind
     check_terrain_flags(cfg0)
+    if suite.VERSIONS[cfg0["suite"]]["robot"] is not None and not cfg0["archive"]:  # v2: levels per robot
+        robot = cfg0.get("robot") or "humanoid"
+        other = [str(getattr(p, "path", p)) for p in policies[1:] if difficulty.policy_robot(p) != robot]
+        if other:
+            raise common.UsageError(f"--suite {cfg0['suite']} holds the levels of robot {robot} (--robot); these "
+                                    f"policies walk another robot: {', '.join(other)}")
     side = fit_size(args, cfg0, policies)
     try:  # another robot or observation set: refused before anything is built
         suite.check_policies(policies, (side, side), TerrainScale())
     except ValueError as err:
         raise common.UsageError(str(err)) from None
     folder, cfg = common.setup_run("evaluate", args, PRESETS, "smoke", overrides(args))
-    names = ["base"] + [str(p) for p in cfg["policy"]]
+    n_keys = int(cfg.get("keys", 1))
+    names = base_names(n_keys) + [str(p) for p in cfg["policy"]]
     t0 = time.perf_counter()
     s = terrains(cfg)
     build_s = time.perf_counter() - t0
@@ -211,11 +244,15 @@ def main(args) -> int:
                                         cfg["chunk"])
         walk_s = time.perf_counter() - t2
     fitness = first
+    for k in range(1, n_keys):  # the base policy again, with independent keys: runs of the comparator
+        fitness = np.concatenate([fitness, suite.evaluate_policies(policies[:1], s.heightmaps, jax.random.fold_in(key, k),
+                                                                   protocol, backend, s.scale, cfg["slots"],
+                                                                   cfg["chunk"])])
     if len(policies) > 1:  # the other policies: the same compiled program, their weights as data
-        fitness = np.concatenate([first, suite.evaluate_policies(policies[1:], s.heightmaps, key, protocol, backend,
+        fitness = np.concatenate([fitness, suite.evaluate_policies(policies[1:], s.heightmaps, key, protocol, backend,
                                                                  s.scale, cfg["slots"], cfg["chunk"])])
     suite.write_evaluation(folder, names, s, fitness)
-    timing = {"suite": s.name, "terrains": s.size, "policies": len(policies), "backend": backend,
+    timing = {"suite": s.name, "terrains": s.size, "policies": len(policies), "base_keys": n_keys, "backend": backend,
               "walks_per_terrain": protocol.attempts, "build_s": round(build_s, 3),
               "first_call_s": round(first_s, 3), "walk_s_one_policy": None if walk_s is None else round(walk_s, 3),
               "all_policies_s": round(time.perf_counter() - t1, 3),

@@ -30,8 +30,9 @@ The intervals (``docs/statistics.md``):
   cell's terrains resampled too.
 - ``*_stratified`` columns: rliable's stratified bootstrap (runs resampled within each cell independently), for
   comparison with papers that report it; several times narrower than the data support here.
-- **The base policy is one policy**: its runs are evaluations of the same weights (one per treatment folder's
-  evaluation; one for a single run), so its interval holds no trial variance (``intervals.csv``'s ``note``); with
+- **The base policy is one policy**: its runs are evaluations of the same weights (with ``--base FILE``: the K
+  evaluations of ``evaluate --keys K``, one base evaluation shared by every page; without it, the base rows of each
+  treatment folder's evaluation; one for a single run), so its interval holds no trial variance (``intervals.csv``'s ``note``); with
   one evaluation it has zero width. Its pooled IQM is trimmed over ``runs x cells`` values as the treatments' are,
   but those values do not spread with trials; ``trial_iqm`` (each run's IQM over the cells, averaged) trims every
   run over the same cells, and is what the per-family comparison with the base policy uses.
@@ -45,6 +46,8 @@ import argparse
 import json
 from pathlib import Path
 
+from experiments.evaluate import is_base
+
 BASE = "base policy"
 
 
@@ -53,6 +56,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="curriculum (or learn) run folders whose treatments have heldout/fitness.csv, or those "
                              "treatment folders; LABEL=FOLDER names a treatment LABEL (a run's: 'LABEL <treatment>')")
     parser.add_argument("--out", type=Path, default=None, help="output folder (default: RUN/generalisation)")
+    parser.add_argument("--base", type=Path, default=None, metavar="FILE",
+                        help="the base policy's evaluation to compare with (an evaluate run's fitness.csv[.gz], or its "
+                             "folder; `evaluate --keys K` makes K runs of it), on the treatments' terrains: every "
+                             "page then uses the same base evaluation (default: the base rows of each treatment's "
+                             "heldout/fitness.csv, one run each)")
     parser.add_argument("--reps", type=int, default=2000, help="bootstrap resamples per interval")
     parser.add_argument("--seed", type=int, default=0, help="seed of the bootstrap and of the permutation test")
     parser.add_argument("--permutations", type=int, default=10000,
@@ -112,7 +120,7 @@ def load_treatment(folder: Path, label: str | None = None) -> dict:
     except (OSError, ValueError) as err:
         raise UsageError(f"{summary_path}: not readable JSON ({type(err).__name__}: {err})") from None
     trial = lambda name: int(name.rsplit("trial_", 1)[1]) if name.rsplit("trial_", 1)[-1].isdigit() else -1  # noqa: E731
-    walkers = sorted((trial(n), i) for i, n in enumerate(ev.policies) if n != "base" and trial(n) >= 0)
+    walkers = sorted((trial(n), i) for i, n in enumerate(ev.policies) if not is_base(n) and trial(n) >= 0)
     if not walkers:
         raise UsageError(f"{path}: no policies/trial_K walker in it")
     hardest = summary.get("hardest") if isinstance(summary, dict) else None
@@ -126,7 +134,31 @@ def load_treatment(folder: Path, label: str | None = None) -> dict:
     return {"label": label or folder.name.replace("-", " "), "folder": folder, "family": ev.family, "level": ev.level,
             "trials": [t for t, _ in walkers], "fitness": ev.fitness[[i for _, i in walkers]],
             "hardest": [float(hardest[t]) for t, _ in walkers],
-            "base": ev.fitness[[i for i, n in enumerate(ev.policies) if n == "base"]]}
+            "base": ev.fitness[[i for i, n in enumerate(ev.policies) if is_base(n)]]}
+
+
+def load_base(path: Path, family, level) -> "np.ndarray":
+    """The base policy's runs ``[K, terrains]`` from an evaluation's ``fitness.csv`` (``path`` the file or its
+    folder; rows ``base``, ``base:key1``, ...: ``evaluate --keys K``), on the terrains ``family`` / ``level`` [N] of
+    the treatments. UsageError naming the file when it does not read, holds no base rows or other terrains."""
+    import numpy as np
+
+    from experiments.common import UsageError
+    from jaxterrain import suite
+
+    path = Path(path)
+    if path.is_dir():
+        path = next((path / f for f in ("fitness.csv", "fitness.csv.gz") if (path / f).is_file()), path / "fitness.csv")
+    try:
+        ev = suite.read_fitness(path)
+    except (OSError, ValueError) as err:
+        raise UsageError(f"--base: {str(err).splitlines()[0]}") from None
+    rows = [i for i, n in enumerate(ev.policies) if is_base(n)]
+    if not rows:
+        raise UsageError(f"--base {path}: no base policy rows (base, base:key1, ...) in it")
+    if not (np.array_equal(ev.family, family) and np.array_equal(ev.level, level)):
+        raise UsageError(f"--base {path}: evaluated on other terrains than the treatments")
+    return ev.fitness[rows]
 
 
 def main(args: argparse.Namespace) -> int:
@@ -160,7 +192,8 @@ def main(args: argparse.Namespace) -> int:
             raise UsageError(f"{t['folder']}: evaluated on other terrains than {first['folder']}")
     cells, _ = suite.cell_scores(first["fitness"], first["family"], first["level"])
     terrain = {t["label"]: t["fitness"] for t in ts}                       # [trials, terrains]
-    terrain[BASE] = np.concatenate([t["base"] for t in ts])                # [evaluations, terrains]
+    terrain[BASE] = (np.concatenate([t["base"] for t in ts]) if args.base is None   # [evaluations, terrains]
+                     else load_base(args.base, first["family"], first["level"]))
     scores = {n: suite.cell_scores(f, first["family"], first["level"])[1] for n, f in terrain.items()}  # [runs, cells]
     cell_of = np.array([f"{f}|{lv}" for f, lv in zip(first["family"], first["level"])])  # [terrains]
     names = [t["label"] for t in ts] + [BASE]
@@ -270,7 +303,8 @@ def markdown(names, runs, families, est, two, strat, pi, pi_strat, test, above, 
              "it). *Trial IQM*: each trial's IQM over the cells, averaged (every run trimmed over the same "
              f"{cells} values); compare with the base policy on it.", "",
              f"**The {base} is one policy**: its {nb} run{'s are evaluations' if nb > 1 else ' is one evaluation'} "
-             "of the same weights, so its interval holds no trial variance (only the evaluation's noise"
+             + (f"(`{args.base}`, independent keys) " if getattr(args, "base", None) else "")
+             + "of the same weights, so its interval holds no trial variance (only the evaluation's noise"
              + ("" if nb > 1 else ": none with one evaluation, an interval of zero width") + ").", "",
              "| treatment | runs | IQM [over trials] | IQM [terrains too] | IQM [stratified] | mean [over trials] | "
              "trial IQM [over trials] | P(beats base policy) [over trials] | trials above base mean |",

@@ -2,8 +2,11 @@
 
 - :mod:`~jaxterrain.suite.families`: the field's sub-terrains (slopes, stairs, boxes, obstacles, stepping stones,
   gaps, waves, roughness, flat), each at graded levels of one physical parameter;
-- :mod:`~jaxterrain.suite.heldout`: versioned suites (:func:`load`, ``"v1"``): every family at every level and
-  fresh random samples of each generator binned by descriptor distance, deterministic from :data:`SEED`;
+- :mod:`~jaxterrain.suite.heldout`: versioned suites (:func:`load`, ``"v1"``, and ``"v2"`` calibrated per robot:
+  ``load("v2", robot="ant")``): every family at every level and fresh random samples of each generator binned by
+  descriptor distance, deterministic from :data:`SEED`;
+- :mod:`~jaxterrain.suite.calibration`: the checks of a level curve (level 0 >= 0.8, level 9 <= 0.3, rises <= 0.03)
+  and the choice of levels from a measured grid;
 - :mod:`~jaxterrain.suite.evaluation`: :func:`evaluate_policies` (``[P, N]`` fitness) and :func:`passed_levels` (the
   highest level of each family passed with every level below it passed);
 - :mod:`~jaxterrain.suite.outputs`: an evaluation's files (CSV, Markdown, figures).
@@ -14,15 +17,25 @@
     suite.passed_levels(fitness[0], s)
 """
 
-from jaxterrain.suite.evaluation import (THRESHOLD, cell_scores, check_policies, evaluate_policies, highest_level_passed,
-                                        level_fitness, passed_levels)
-from jaxterrain.suite.families import FAMILIES, Family, START_STRIP, build_terrain, edge_distance, family_names, misfit, room
-from jaxterrain.suite.heldout import GENERATORS, LEVELS, SEED, Suite, VERSIONS, archive_suite, descriptor_levels, load
+from jaxterrain.suite.calibration import check_curve, decreasing_fit, propose_values, select_levels
+from jaxterrain.suite.evaluation import (CVAR_ALPHA, THRESHOLD, cell_scores, check_policies, evaluate_policies,
+                                        generator_robustness, highest_level_passed, level_fitness, passed_levels)
+from jaxterrain.suite.families import (FAMILIES, FAMILIES_V2, Family, START_STRIP, TABLES, build_terrain, edge_distance,
+                                      family_names, family_table, misfit, room)
+from jaxterrain.suite.heldout import (GENERATORS, LEVELS, ROBOTS, SEED, Suite, V2_LEVELS, VERSIONS, archive_suite,
+                                     descriptor_levels, load, v2_terrain)
 from jaxterrain.suite.outputs import (Evaluation, level_table, read_fitness, plot_levels, plot_suite, short_names,
                                      write_evaluation)
 
 __all__ = [
+    "check_curve",
+    "decreasing_fit",
+    "propose_values",
+    "select_levels",
     "FAMILIES",
+    "FAMILIES_V2",
+    "TABLES",
+    "family_table",
     "START_STRIP",
     "Family",
     "build_terrain",
@@ -34,6 +47,9 @@ __all__ = [
     "LEVELS",
     "SEED",
     "VERSIONS",
+    "ROBOTS",
+    "V2_LEVELS",
+    "v2_terrain",
     "Suite",
     "descriptor_levels",
     "load",
@@ -46,6 +62,8 @@ __all__ = [
     "plot_suite",
     "short_names",
     "THRESHOLD",
+    "CVAR_ALPHA",
+    "generator_robustness",
     "cell_scores",
     "check_policies",
     "evaluate_policies",

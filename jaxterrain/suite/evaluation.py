@@ -26,15 +26,19 @@ import numpy as np
 from jaxterrain import difficulty
 from jaxterrain.difficulty import HEADINGS, Protocol
 from jaxterrain.rl.checkpoint import policy_fn
+from jaxterrain.runtime.statistics import cvar
 from jaxterrain.suite.heldout import Suite
 from jaxterrain.terrain import TerrainScale
 from jaxterrain.walker.layout import make_env
 
-__all__ = ["THRESHOLD", "cell_scores", "check_policies", "evaluate_policies", "highest_level_passed", "level_fitness",
-           "passed_levels"]
+__all__ = ["THRESHOLD", "CVAR_ALPHA", "cell_scores", "check_policies", "evaluate_policies", "generator_robustness",
+           "highest_level_passed", "level_fitness", "passed_levels"]
 
 THRESHOLD = 0.9
 """A level is passed when the mean fitness of its terrains reaches this (the paper's traversability threshold)."""
+
+CVAR_ALPHA = 0.1
+"""The robustness figure's tail: the mean fitness of the worst 10 % of a generator's samples."""
 
 
 def _name(policy) -> str:
@@ -144,3 +148,19 @@ def cell_scores(fitness, family, level) -> tuple[list, np.ndarray]:
     cells = list(dict.fromkeys(zip(fam.tolist(), lv.tolist())))
     scores = np.stack([f[:, (fam == c[0]) & (lv == c[1])].mean(axis=1) for c in cells], axis=1)
     return cells, scores
+
+
+def generator_robustness(fitness, family, alpha: float = CVAR_ALPHA) -> dict[str, dict[str, float]]:
+    """``{generator: {"samples", "mean", "cvar"}}`` for one policy's ``fitness`` [N] over the terrains whose
+    ``family`` [N] is ``gen:<generator>``: the mean fitness and the CVaR at ``alpha`` (the mean of the worst
+    ``alpha`` fraction: :func:`jaxterrain.runtime.statistics.cvar`) of every sample of that generator; empty for a
+    suite without generator samples. v2 keeps every draw (a random sample of each generator); v1 kept the first 3
+    of each descriptor band, so there the figure is over a band-balanced set, not the generator's distribution."""
+    f, fam = np.asarray(fitness, np.float64), np.asarray(family)
+    if f.shape != fam.shape:
+        raise ValueError(f"fitness and family must both have shape [N]; got {f.shape} and {fam.shape}")
+    out = {}
+    for g in dict.fromkeys(x for x in fam.tolist() if x.startswith("gen:")):
+        x = f[fam == g]
+        out[g[4:]] = {"samples": int(x.size), "mean": float(x.mean()), "cvar": cvar(x, alpha)}
+    return out

@@ -56,7 +56,8 @@ import numpy as np
 
 from jaxterrain.terrain import TerrainScale, validate_scale
 
-__all__ = ["START_STRIP", "Family", "FAMILIES", "family_names", "build_terrain", "edge_distance", "room", "misfit"]
+__all__ = ["START_STRIP", "Family", "FAMILIES", "FAMILIES_V2", "TABLES", "family_table", "family_names",
+           "build_terrain", "edge_distance", "room", "misfit", "V2_STEPS", "V2_GAP", "v2_width"]
 
 START_STRIP = 1.0
 """Metres of flat ground along every edge (the walker spawns 0.5 m from its edge)."""
@@ -212,6 +213,97 @@ FAMILIES: dict[str, Family] = {
 """The held-out families by name, in the order tables list them."""
 
 
+# --- v2: the same kinds of terrain, re-parametrised so that each family's level 0 is easy and its level 9 hard for a
+# robot's base policy (the levels are per robot: heldout.V2_LEVELS), and a terrain's random parts are drawn from
+# its seed alone (heldout.load seeds v2's rng without the level), so the level is the only thing that orders them.
+
+V2_STEPS = 5
+"""Risers in a v2 flight of stairs: the flight is ``V2_STEPS * riser`` high, so it grows with the level."""
+
+V2_OBSTACLES, V2_OBSTACLE_BASE = 80, 0.5  # rectangles per map; the ground (m) they stand on and sink into
+
+
+V2_GAP = 0.1
+"""Metres: the width of a v2 trench or stepping-stone gap beyond its depth (a gap ``depth`` deep is ``V2_GAP + depth``
+wide: :func:`v2_width`)."""
+
+
+def v2_width(depth: float) -> float:
+    """Metres: the width of a v2 trench or stepping-stone gap ``depth`` metres deep, ``V2_GAP + depth``: the
+    family's parameter is the depth, which is continuous, and the width grows with it (a heightmap of 4 cm pixels
+    only holds widths in whole pixels, so a width alone would grade in 4 cm jumps): a 1 cm deep gap is an 11 cm
+    groove, a 0.5 m deep one as wide as v1's widest trench (0.6 m)."""
+    return V2_GAP + float(depth)
+
+
+def _flight(riser, size, scale, rng):
+    inner = _inner(size, scale)
+    steps = np.where(inner > 0, np.floor(inner / TREAD) + 1, 0)
+    return np.minimum(steps, V2_STEPS) * riser
+
+
+def _v2_obstacles(height, size, scale, rng):
+    return _obstacles(height, size, scale, rng, count=V2_OBSTACLES, base=V2_OBSTACLE_BASE)
+
+
+def _v2_stepping_stones(depth, size, scale, rng, stone: float = STONE):
+    x, y = _axes(size, scale)
+    pitch = stone + v2_width(depth)
+    ux, uy = rng.uniform(0.0, 1.0, 2)  # the seed's offset, in pitches: the same at every level
+    on = ((x + ux * pitch) % pitch < stone) & ((y + uy * pitch) % pitch < stone)
+    return np.where(on | _strip(size, scale), depth, 0.0)
+
+
+def _v2_gaps(depth, size, scale, rng, every: float = TRENCH_EVERY):
+    return np.where(_gaps(v2_width(depth), size, scale, rng, every) == 0.0, DEEP - depth, DEEP)
+
+
+FAMILIES_V2: dict[str, Family] = {
+    "flat": Family(_flat, "-", 0.0, 0.0, levels=1),
+    "slope_up": Family(_slope, "grade", 0.02, 1.0, 10, TOP / 0.5, "a 0.50 grade's slope to its 1 m plateau"),
+    "slope_down": Family(_inverted(_slope), "grade", 0.02, 1.0, 10, TOP / 0.5,
+                         "a 0.50 grade's slope down to its 1 m pit"),
+    "stairs_up": Family(_flight, "m riser", 0.005, TOP / V2_STEPS, 10, (V2_STEPS - 1) * TREAD,
+                        f"a flight of {V2_STEPS} risers on 0.31 m treads"),
+    "stairs_down": Family(_inverted(_flight), "m riser", 0.005, TOP / V2_STEPS, 10, (V2_STEPS - 1) * TREAD,
+                          f"a flight of {V2_STEPS} risers on 0.31 m treads"),
+    "boxes": Family(_boxes, "m height", 0.005, 1.0, 10, 2 * BOX, "two 0.4 m boxes"),
+    "obstacles": Family(_v2_obstacles, "m height", 0.005, V2_OBSTACLE_BASE, 10, 1.0,
+                        "the largest (1.0 m) rectangle"),
+    "stepping_stones": Family(_v2_stepping_stones, "m depth", 0.002, DEEP, 10, STONE + V2_GAP + DEEP,
+                              "a 0.6 m stone and the deepest gap (0.6 m wide)"),
+    "gaps": Family(_v2_gaps, "m depth", 0.002, DEEP, 10, TRENCH_START + V2_GAP + DEEP + 0.3,
+                   "the deepest trench (0.6 m wide), 0.3 m in, and 0.3 m of ground beyond it"),
+    "waves": Family(_waves, "m amplitude", 0.005, 0.5, 10, FADE_IN + WAVELENGTH / 2,
+                    "the 1 m fade-in and half a 2 m wave at full amplitude"),
+    "rough": Family(_rough, "m amplitude", 0.002, 0.5, 10, 4 * BLOCK, "four 0.12 m blocks"),
+}
+"""v2's families: the builders and units; ``lo`` / ``hi`` bound the values a v2 level may take (the calibrated
+levels of each robot, ``heldout.V2_LEVELS``, lie inside; ``values()`` is not v2's levels), ``extent`` the room the
+largest value needs.
+
+| family | value | shape (what changed from v1) |
+| --- | --- | --- |
+| ``slope_up``, ``slope_down`` | grade | as v1 |
+| ``stairs_up``, ``stairs_down`` | riser (m) | a flight of ``V2_STEPS`` (5) risers on 0.31 m treads to a plateau ``5 x riser`` high (v1: risers up to a 1 m plateau whatever the riser) |
+| ``boxes`` | height (m) | as v1 |
+| ``obstacles`` | height (m) | 80 rectangles (v1: 40) of 0.3 - 1.0 m, each +- value from ground at 0.5 m (v1: 0.3 m, which capped the pits) |
+| ``stepping_stones`` | depth (m) | 0.6 m stones, gaps that deep and ``v2_width(depth)`` = ``0.1 m + depth`` wide (v1: the gap's width, 0.5 m deep at every width) |
+| ``gaps`` | depth (m) | trenches every 1.2 m, that deep and ``0.1 m + depth`` wide (v1: the width, 0.5 m deep) |
+| ``waves``, ``rough`` | amplitude (m) | as v1 |
+"""
+
+TABLES: dict[str, dict[str, Family]] = {"v1": FAMILIES, "v2": FAMILIES_V2}
+"""The family table of each suite version."""
+
+
+def family_table(version: str = "v1") -> dict[str, Family]:
+    """The family table of suite ``version`` (:data:`TABLES`); ValueError naming it for an unknown one."""
+    if version not in TABLES:
+        raise ValueError(f"version must be one of {', '.join(TABLES)}; got {version!r}")
+    return TABLES[version]
+
+
 def family_names() -> tuple[str, ...]:
     """The family names, in table order."""
     return tuple(FAMILIES)
@@ -223,10 +315,10 @@ def room(size: int, scale: TerrainScale = TerrainScale()) -> float:
     return (size - 1) * float(validate_scale(scale).cell_size) / 2.0 - START_STRIP
 
 
-def misfit(name: str, size: int, scale: TerrainScale = TerrainScale()) -> str | None:
-    """Why family ``name`` does not fit a ``size`` x ``size`` map at ``scale`` (its ``extent`` is more than the map's
-    :func:`room`), in one line; None when it fits."""
-    fam, have = FAMILIES[name], room(size, scale)
+def misfit(name: str, size: int, scale: TerrainScale = TerrainScale(), version: str = "v1") -> str | None:
+    """Why family ``name`` of suite ``version`` does not fit a ``size`` x ``size`` map at ``scale`` (its ``extent``
+    is more than the map's :func:`room`), in one line; None when it fits."""
+    fam, have = family_table(version)[name], room(size, scale)
     if fam.extent <= 0 or have + 1e-9 >= fam.extent:  # a family that needs no room (flat) fits any map
         return None
     cell = float(validate_scale(scale).cell_size)
@@ -235,22 +327,24 @@ def misfit(name: str, size: int, scale: TerrainScale = TerrainScale()) -> str | 
 
 
 def build_terrain(name: str, value: float, size: int = 256, scale: TerrainScale = TerrainScale(),
-                  rng: np.random.Generator | None = None) -> np.ndarray:
-    """One heightmap ``[size, size]`` float32 in [0, 1] of family ``name`` at parameter ``value`` (metres / scale
-    height, clipped). ValueError naming the parameter for an unknown family, a size below 16 pixels, a ``value``
-    that is not a finite number >= 0 (every family's parameter is a grade, a height or a width) or an ``rng`` that is
+                  rng: np.random.Generator | None = None, version: str = "v1") -> np.ndarray:
+    """One heightmap ``[size, size]`` float32 in [0, 1] of family ``name`` of suite ``version`` (:data:`TABLES`)
+    at parameter ``value`` (metres / scale height, clipped). ValueError naming the parameter for an unknown
+    version or family, a size below 16 pixels, a ``value`` that is not a finite number >= 0 (every family's
+    parameter is a grade, a height, a width or a depth) or an ``rng`` that is
     not a ``numpy.random.Generator``. A map too small for the family (:func:`misfit`) is built all the same, cut
     down: ``suite.load`` drops such families."""
-    if not isinstance(name, str) or name not in FAMILIES:
-        raise ValueError(f"family must be one of {', '.join(FAMILIES)}; got {name!r}")
+    table = family_table(version)
+    if not isinstance(name, str) or name not in table:
+        raise ValueError(f"family must be one of {', '.join(table)}; got {name!r}")
     if not isinstance(size, (int, np.integer)) or isinstance(size, bool) or size < 16:
         raise ValueError(f"size must be an integer >= 16 pixels; got {size!r}")
     if isinstance(value, (bool, str, bytes)) or not isinstance(value, (int, float, np.integer, np.floating)) \
             or not (np.isfinite(value) and value >= 0):
-        raise ValueError(f"value must be a finite number >= 0 (the family's {FAMILIES[name].unit}); got {value!r}")
+        raise ValueError(f"value must be a finite number >= 0 (the family's {table[name].unit}); got {value!r}")
     scale = validate_scale(scale)
     if rng is not None and not isinstance(rng, np.random.Generator):
         raise ValueError(f"rng must be a numpy.random.Generator or None; got {type(rng).__name__}")
     rng = np.random.default_rng(0) if rng is None else rng
-    metres = FAMILIES[name].build(float(value), int(size), scale, rng)
+    metres = table[name].build(float(value), int(size), scale, rng)
     return np.clip(metres / float(scale.height), 0.0, 1.0).astype(np.float32)

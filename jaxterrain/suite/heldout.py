@@ -17,8 +17,14 @@
   fewer or none. A generator that cannot be built here (the GAN without weights) is left out, and said so in
   ``Suite.missing``.
 
+``v2`` (``load("v2", robot="humanoid" | "ant")``, ``docs/suite.md``) holds the families of
+:data:`~jaxterrain.suite.families.FAMILIES_V2` at the levels calibrated for the robot's base policy
+(:data:`V2_LEVELS`), 5 terrains per level whose random parts depend on the family and seed only
+(:func:`v2_terrain`), and every one of 40 fresh samples of each generator (their worst decile is the robustness
+figure). Its name says the robot: ``"v2:ant"``.
+
 Smaller builds (``size``, ``seeds``, ``samples``, ``families``, ``generator_names``) are for tests on a CPU; their
-terrains are not ``v1``'s and ``Suite.name`` says what was built. A family whose features do not fit the map
+terrains are not the version's and ``Suite.name`` says what was built. A family whose features do not fit the map
 (``families.misfit``: a 64-pixel map at 4 cm has 0.26 m of ground inside its start strips, too little for a trench of
 ``gaps`` or a flight of ``stairs_up``) is dropped, and said so in ``Suite.dropped``; v1's 256 pixels hold every family.
 """
@@ -34,10 +40,11 @@ from jaxterrain import features, generators
 from jaxterrain.qd.bank import from_archive
 from jaxterrain.qd.config import DEFAULT_RANGES
 from jaxterrain.qd.grid import GRID_BINS, MAX_DISTANCE_50, cell_distance
-from jaxterrain.suite.families import FAMILIES, build_terrain, misfit
+from jaxterrain.suite.families import FAMILIES, FAMILIES_V2, build_terrain, family_table, misfit
 from jaxterrain.terrain import TerrainScale
 
-__all__ = ["SEED", "VERSIONS", "GENERATORS", "LEVELS", "Suite", "load", "descriptor_levels", "archive_suite"]
+__all__ = ["SEED", "VERSIONS", "GENERATORS", "LEVELS", "ROBOTS", "V2_LEVELS", "Suite", "load", "v2_terrain",
+           "descriptor_levels", "archive_suite"]
 
 SEED = 20261128
 """The suite's seed: no evolution or training seed of this project comes near it."""
@@ -47,10 +54,47 @@ LEVELS = 10
 DESCRIPTORS = ("roughness", "tpi")
 
 VERSIONS: dict[str, dict] = {
-    "v1": dict(size=256, seeds=3, samples=96, families=tuple(FAMILIES), generators=GENERATORS),
+    "v1": dict(size=256, seeds=3, samples=96, families=tuple(FAMILIES), generators=GENERATORS, robot=None),
+    "v2": dict(size=256, seeds=5, samples=40, families=tuple(FAMILIES_V2), generators=GENERATORS,
+               robot="humanoid"),
 }
 """Suite versions: the arguments of :func:`load` that define each. A version is never changed once results cite it;
-a new one gets a new name."""
+a new one gets a new name. ``robot``: None for a version with one geometry for every robot (v1); else the default
+of :func:`load`'s ``robot`` (v2's levels are calibrated per robot: :data:`V2_LEVELS`)."""
+
+ROBOTS = ("humanoid", "ant")
+"""The robots v2 is calibrated for (each shipped robot with a base policy)."""
+
+V2_LEVELS: dict[str, dict[str, tuple[float, ...]]] = {
+    # PROVISIONAL (before the GPU calibration, docs/results/suite_v2/): spread from v1's measured curves
+    "humanoid": {
+        "slope_up": (0.02, 0.04, 0.06, 0.08, 0.10, 0.12, 0.14, 0.16, 0.19, 0.22),
+        "slope_down": (0.04, 0.08, 0.12, 0.17, 0.22, 0.28, 0.34, 0.40, 0.47, 0.55),
+        "stairs_up": (0.01, 0.02, 0.03, 0.04, 0.05, 0.06, 0.07, 0.08, 0.10, 0.12),
+        "stairs_down": (0.01, 0.02, 0.03, 0.05, 0.07, 0.09, 0.11, 0.13, 0.16, 0.19),
+        "boxes": (0.01, 0.025, 0.04, 0.055, 0.07, 0.085, 0.10, 0.12, 0.14, 0.17),
+        "obstacles": (0.01, 0.02, 0.035, 0.05, 0.07, 0.09, 0.12, 0.16, 0.21, 0.28),
+        "stepping_stones": (0.005, 0.01, 0.02, 0.03, 0.045, 0.06, 0.08, 0.10, 0.13, 0.17),
+        "gaps": (0.005, 0.01, 0.02, 0.03, 0.045, 0.06, 0.08, 0.11, 0.15, 0.20),
+        "waves": (0.01, 0.025, 0.04, 0.06, 0.08, 0.10, 0.13, 0.16, 0.20, 0.25),
+        "rough": (0.005, 0.01, 0.015, 0.02, 0.025, 0.03, 0.04, 0.05, 0.06, 0.08),
+    },
+    "ant": {
+        "slope_up": (0.10, 0.15, 0.19, 0.22, 0.24, 0.25, 0.26, 0.27, 0.28, 0.30),
+        "slope_down": (0.15, 0.22, 0.28, 0.33, 0.38, 0.43, 0.48, 0.55, 0.65, 0.80),
+        "stairs_up": (0.01, 0.02, 0.03, 0.04, 0.05, 0.055, 0.06, 0.065, 0.07, 0.08),
+        "stairs_down": (0.01, 0.02, 0.04, 0.06, 0.08, 0.10, 0.12, 0.14, 0.16, 0.19),
+        "boxes": (0.05, 0.10, 0.15, 0.20, 0.25, 0.30, 0.35, 0.40, 0.50, 0.60),
+        "obstacles": (0.05, 0.10, 0.14, 0.18, 0.22, 0.26, 0.30, 0.35, 0.40, 0.48),
+        "stepping_stones": (0.004, 0.008, 0.012, 0.016, 0.02, 0.025, 0.03, 0.04, 0.05, 0.06),
+        "gaps": (0.005, 0.01, 0.015, 0.02, 0.03, 0.04, 0.05, 0.06, 0.08, 0.10),
+        "waves": (0.10, 0.15, 0.18, 0.21, 0.24, 0.27, 0.30, 0.34, 0.40, 0.48),
+        "rough": (0.04, 0.06, 0.07, 0.08, 0.09, 0.10, 0.12, 0.14, 0.17, 0.20),
+    },
+}
+"""v2's levels: ``{robot: {family: the family's value at levels 0..9}}``, each robot's base policy from level 0
+(mean fitness >= 0.8) to level 9 (<= 0.3) (``flat`` has one level, 0). Measured calibration:
+``docs/results/suite_v2/``."""
 
 
 class Suite(NamedTuple):
@@ -68,6 +112,7 @@ class Suite(NamedTuple):
       missing: generators left out, with the reason.
       dropped: families left out because their features do not fit the map at this size
         (:func:`~jaxterrain.suite.families.misfit`), with the reason; empty for ``v1``.
+      robot: the robot whose levels a per-robot version (v2) holds; None for v1 and archives.
     """
 
     name: str
@@ -80,6 +125,7 @@ class Suite(NamedTuple):
     scale: TerrainScale
     missing: dict
     dropped: dict = {}  # read-only: a shared default
+    robot: str | None = None
 
     @property
     def size(self) -> int:
@@ -114,18 +160,48 @@ def _check(name, value, lo):
         raise ValueError(f"{name} must be an integer >= {lo}; got {value!r}")
 
 
-def load(name: str = "v1", *, size: int | None = None, seeds: int | None = None, samples: int | None = None,
-         families: Sequence[str] | None = None, generator_names: Sequence[str] | None = None,
-         scale: TerrainScale = TerrainScale()) -> Suite:
+def v2_terrain(name: str, value: float, seed: int, size: int = 256, scale: TerrainScale = TerrainScale()) -> np.ndarray:
+    """v2's terrain ``[size, size]`` float32 of family ``name`` at ``value`` with random parts drawn from ``seed``
+    alone (``numpy.random.default_rng((SEED, 2, family's index in v2, seed))``): the same layout at every value, so
+    the value (the level) is the only thing that orders a seed's terrains. ``load("v2")`` builds its families with
+    it; a calibration builds candidate values with it (the terrain of a candidate value that becomes a level is that
+    level's terrain)."""
+    _check("seed", seed, 0)
+    f_index = list(FAMILIES_V2).index(name) if name in FAMILIES_V2 else -1
+    if f_index < 0:
+        raise ValueError(f"family must be one of {', '.join(FAMILIES_V2)}; got {name!r}")
+    rng = np.random.default_rng((SEED, 2, f_index, int(seed)))
+    return build_terrain(name, value, size, scale, rng, version="v2")
+
+
+def load(name: str = "v1", *, robot: str | None = None, size: int | None = None, seeds: int | None = None,
+         samples: int | None = None, families: Sequence[str] | None = None,
+         generator_names: Sequence[str] | None = None, scale: TerrainScale = TerrainScale()) -> Suite:
     """Build suite ``name`` (:data:`VERSIONS`), deterministic from :data:`SEED`; keyword arguments (``size``,
     ``seeds``, ``samples``, ``families``, ``generator_names``, ``scale``) override the version's settings for a
     smaller build (a test's); one name alone (``families="flat"``) is a list of one. A family too large for the map
     (``families.misfit``) is dropped and named, with the reason, in ``Suite.dropped`` (a kept family's terrains do
-    not change: its random parts are seeded by its place in ``families``, dropped families counted). ValueError naming the parameter for an unknown version or family, a
-    bad size, or a size that holds none of the families asked for (and no generator is asked for)."""
+    not change: its random parts are seeded by its place in ``families``, dropped families counted).
+
+    ``v1``: one geometry for every robot (``robot`` must be None); each terrain's random parts are seeded by its
+    family, level and seed; the generators' samples are the first ``seeds`` of each descriptor band.
+    ``v2``: ``robot``'s levels (:data:`V2_LEVELS`, default ``"humanoid"``), random parts seeded by family and seed
+    only (:func:`v2_terrain`), and every one of the ``samples`` generator draws kept (a fresh random sample of each
+    generator, its level the descriptor band it falls in, ``seed`` its index in the band): their worst decile is
+    the robustness figure (``runtime.statistics.cvar``).
+
+    ValueError naming the parameter for an unknown version, robot or family, a bad size, or a size that holds none of
+    the families asked for (and no generator is asked for)."""
     if name not in VERSIONS:
         raise ValueError(f"suite must be one of {', '.join(VERSIONS)}; got {name!r}")
     spec = VERSIONS[name]
+    table = family_table(name)
+    if spec["robot"] is None and robot is not None:
+        raise ValueError(f"robot: suite {name} has one geometry for every robot; give robot=None (v2 has per-robot "
+                         f"levels); got {robot!r}")
+    robot = spec["robot"] if robot is None else robot
+    if spec["robot"] is not None and robot not in V2_LEVELS:
+        raise ValueError(f"robot must be one of {', '.join(V2_LEVELS)} for suite {name}; got {robot!r}")
     size = spec["size"] if size is None else size
     seeds = spec["seeds"] if seeds is None else seeds
     samples = spec["samples"] if samples is None else samples
@@ -135,28 +211,31 @@ def load(name: str = "v1", *, size: int | None = None, seeds: int | None = None,
     _check("size", size, 32)
     _check("seeds", seeds, 1)
     _check("samples", samples, 1)
-    unknown = [f for f in fams if f not in FAMILIES] + [g for g in gens if g not in generators.names()]
+    unknown = [f for f in fams if f not in table] + [g for g in gens if g not in generators.names()]
     if unknown:
         raise ValueError(f"families / generators: unknown {', '.join(map(repr, unknown))}; families are "
-                         f"{', '.join(FAMILIES)}, generators {', '.join(generators.names())}")
+                         f"{', '.join(table)}, generators {', '.join(generators.names())}")
     custom = (size, seeds, samples, fams, gens, scale) != (spec["size"], spec["seeds"], spec["samples"],
                                                            tuple(spec["families"]), tuple(spec["generators"]),
                                                            TerrainScale())
     maps, family, level, seed, value = [], [], [], [], []
-    dropped = {f: why for f in fams if (why := misfit(f, size, scale)) is not None}
+    dropped = {f: why for f in fams if (why := misfit(f, size, scale, name)) is not None}
     if fams and len(dropped) == len(fams) and not gens:
         raise ValueError(f"size {size} pixels holds none of the families asked for: "
                          + "; ".join(f"{f} {why}" for f, why in dropped.items()))
-    for f_index, f in enumerate(fams):  # the rng keeps each family's place in `fams`, dropped ones counted
+    for f_index, f in enumerate(fams):  # v1's rng keeps each family's place in `fams`, dropped ones counted
         if f in dropped:
             continue
-        fam = FAMILIES[f]
-        for lv, v in enumerate(fam.values()):
+        fam = table[f]
+        values = fam.values() if name == "v1" or fam.levels == 1 else V2_LEVELS[robot][f]
+        for lv, v in enumerate(values):
             for s in range(seeds if fam.levels > 1 else 1):
-                rng = np.random.default_rng((SEED, f_index, lv, s))
-                maps.append(build_terrain(f, v, size, scale, rng))
+                if name == "v1":
+                    maps.append(build_terrain(f, v, size, scale, np.random.default_rng((SEED, f_index, lv, s))))
+                else:
+                    maps.append(v2_terrain(f, v, s, size, scale))
                 family.append(f), level.append(lv), seed.append(s), value.append(float(v))
-    unit = {f: FAMILIES[f].unit for f in fams if f not in dropped}
+    unit = {f: table[f].unit for f in fams if f not in dropped}
     missing = {}
     for g_index, g in enumerate(gens):
         try:
@@ -167,8 +246,8 @@ def load(name: str = "v1", *, size: int | None = None, seeds: int | None = None,
             missing[g] = str(err).splitlines()[0]
             continue
         lv, dist = descriptor_levels(hm)
-        for k in range(LEVELS):  # the first `seeds` samples of each band, in draw order
-            for s, i in enumerate(np.flatnonzero(lv == k)[:seeds]):
+        for k in range(LEVELS):  # v1: the first `seeds` samples of each band, in draw order; v2: every sample
+            for s, i in enumerate(np.flatnonzero(lv == k)[:seeds] if name == "v1" else np.flatnonzero(lv == k)):
                 maps.append(hm[i]), family.append(f"gen:{g}"), level.append(k)
                 seed.append(s), value.append(float(dist[i]))
         unit[f"gen:{g}"] = "cells"
@@ -176,10 +255,11 @@ def load(name: str = "v1", *, size: int | None = None, seeds: int | None = None,
         raise ValueError(f"size {size} pixels: nothing to build (families dropped: {', '.join(dropped) or 'none'}; "
                          f"generators left out: {', '.join(missing) or 'none'})")
     at = "" if scale == TerrainScale() else f", cell_size={scale.cell_size:g}, height={scale.height:g}"
-    label = name if not custom else (f"{name}-custom(size={size}, seeds={seeds}, samples={samples}, "
+    base = name if robot is None else f"{name}:{robot}"
+    label = base if not custom else (f"{base}-custom(size={size}, seeds={seeds}, samples={samples}, "
                                      f"families={len(fams) - len(dropped)}, generators={len(gens)}{at})")
     return Suite(label, np.stack(maps).astype(np.float32), np.asarray(family), np.asarray(level, np.int64),
-                 np.asarray(seed, np.int64), np.asarray(value, np.float64), unit, scale, missing, dropped)
+                 np.asarray(seed, np.int64), np.asarray(value, np.float64), unit, scale, missing, dropped, robot)
 
 
 def archive_suite(archive, scale: TerrainScale | None = None) -> Suite:

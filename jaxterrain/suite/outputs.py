@@ -1,5 +1,7 @@
 """An evaluation's files: ``fitness.csv`` (one row per policy and terrain), ``levels.csv`` (the highest level of each
-family a policy passes with every level below it passed, and its mean fitness per level), ``summary.md``,
+family a policy passes with every level below it passed, and its mean fitness per level), ``robustness.csv`` (each
+generator's samples: mean fitness and CVaR at 10 %, the worst decile; written when the suite has generator samples),
+``summary.md``,
 ``levels.png`` (policies x families, coloured by the share of the family's levels passed) and ``suite.png`` (what the
 families look like), all written atomically; and :func:`read_fitness`, which reads ``fitness.csv`` (or a gzipped
 ``fitness.csv.gz``) back.
@@ -23,7 +25,7 @@ import numpy as np
 from matplotlib.figure import Figure
 
 from jaxterrain.runtime.io import atomic_write_csv, atomic_write_text, save_figure
-from jaxterrain.suite.evaluation import THRESHOLD, level_fitness, passed_levels
+from jaxterrain.suite.evaluation import CVAR_ALPHA, THRESHOLD, generator_robustness, level_fitness, passed_levels
 from jaxterrain.suite.heldout import Suite
 
 __all__ = ["Evaluation", "read_fitness", "write_evaluation", "level_table", "plot_levels", "plot_suite", "short_names"]
@@ -134,6 +136,9 @@ def write_evaluation(folder: Path, names: Sequence[str], suite: Suite, fitness: 
     ``{policy: {family: highest level passed}}`` (every level below it passed too; -1: level 0 fails)."""
     folder = Path(folder)
     fitness = np.asarray(fitness, np.float64)
+    if fitness.shape != (len(names), suite.size):
+        raise ValueError(f"fitness must have shape [P, N] = ({len(names)}, {suite.size}) (a row per name, a column per "
+                         f"terrain); got {fitness.shape}")
     rows = [(n, fam, lv, s, f"{v:.4g}", unit, f"{f:.4f}")
             for n, fit in zip(names, fitness) for (fam, lv, s, v, unit), f in zip(suite.rows(), fit)]
     atomic_write_csv(folder / "fitness.csv", ["policy", "family", "level", "seed", "value", "unit", "fitness"], rows)
@@ -160,6 +165,19 @@ def write_evaluation(folder: Path, names: Sequence[str], suite: Suite, fitness: 
     if suite.dropped:
         text += (f"\nDropped at {side} x {side} pixels, not walked (the family's features do not fit the map):\n\n"
                  + "".join(f"- {f}: {why}\n" for f, why in suite.dropped.items()))
+    robust = {n: generator_robustness(f, suite.family) for n, f in zip(names, fitness)}
+    gens = list(dict.fromkeys(g for r in robust.values() for g in r))
+    if gens:
+        atomic_write_csv(folder / "robustness.csv", ["policy", "generator", "samples", "mean", "cvar10"],
+                         [(n, g, r[g]["samples"], f"{r[g]['mean']:.4f}", f"{r[g]['cvar']:.4f}")
+                          for n, r in robust.items() for g in r])
+        text += (f"\nGenerator samples: mean fitness / CVaR at {CVAR_ALPHA:g} (the mean of the worst "
+                 f"{CVAR_ALPHA:.0%} of each generator's samples in this suite; samples: "
+                 + ", ".join(f"{g} {robust[names[0]][g]['samples']}" for g in gens) + ")\n\n"
+                 + "| policy | " + " | ".join(gens) + " |\n|---|" + "---|" * len(gens) + "\n"
+                 + "".join(f"| {label} | " + " | ".join(f"{robust[n][g]['mean']:.3f} / {robust[n][g]['cvar']:.3f}"
+                                                      for g in gens) + " |\n"
+                           for n, label in zip(names, labels)))
     if suite.missing:
         text += "\nLeft out: " + "; ".join(f"{g} ({why})" for g, why in suite.missing.items()) + "\n"
     atomic_write_text(folder / "summary.md", text)

@@ -42,7 +42,7 @@ def run(tmp_path_factory, policies):
     copy, still, _ = policies
     out = tmp_path_factory.mktemp("evaluate") / "run"
     assert cli("evaluate", "--preset", "smoke", "--families", "flat", "gaps", "--generators", "--policy", str(copy),
-               str(still), "--out", str(out)) == 0
+               str(still), "--keys", "2", "--out", str(out)) == 0
     return out
 
 
@@ -52,14 +52,16 @@ def read(path):
 
 
 def test_every_policy_walks_every_terrain_with_the_same_key(run, policies):
+    """... and ``--keys 2`` walks the base policy a second time with another key (``base:key1``)."""
     rows = read(run / "fitness.csv")
-    names = ["base", str(policies[0]), str(policies[1])]
-    assert [r["policy"] for r in rows[:: len(rows) // 3]] == names
-    fit = np.array([float(r["fitness"]) for r in rows]).reshape(3, -1)
+    names = ["base", "base:key1", str(policies[0]), str(policies[1])]
+    assert [r["policy"] for r in rows[:: len(rows) // 4]] == names
+    fit = np.array([float(r["fitness"]) for r in rows]).reshape(4, -1)
     assert fit.shape[1] == 1 + 10  # flat, then gaps at levels 0-9, one terrain each
-    np.testing.assert_array_equal(fit[0], fit[1])  # the same weights, the same key: the same walks
+    np.testing.assert_array_equal(fit[0], fit[2])  # the same weights, the same key: the same walks
+    assert not np.array_equal(fit[0], fit[1])  # the same weights, another key: other walks
     flat = [i for i, r in enumerate(rows[: fit.shape[1]]) if r["family"] == "flat"]
-    assert fit[0, flat] == pytest.approx(1.0) and fit[2, flat][0] < 0.5  # the walker without a policy falls
+    assert fit[0, flat] == pytest.approx(1.0) and fit[3, flat][0] < 0.5  # the walker without a policy falls
     assert [r["unit"] for r in rows[1:11]] == ["m width"] * 10
     np.testing.assert_allclose([float(r["value"]) for r in rows[1:11]], suite.FAMILIES["gaps"].values(), rtol=1e-3)
 
@@ -78,12 +80,13 @@ def test_levels_and_summary_follow_from_the_fitness(run):
         assert int(lv["highest_level_passed"]) == highest
         assert float(lv["mean_fitness"]) == pytest.approx(np.mean([float(r["fitness"]) for r in mine]), abs=1e-4)
     summary = (run / "summary.md").read_text()
-    assert summary.count("\n| ") == 4 and "| flat | gaps | mean |" in summary
+    assert summary.count("\n| ") == 5 and "| flat | gaps | mean |" in summary
     assert "\n| copy | " in summary and "\n| still | " in summary  # the folders, relative to their common parent
     assert "Dropped" not in summary  # 128 pixels hold a whole trench of every level of gaps
     assert (run / "levels.png").stat().st_size > 1000 and (run / "suite.png").stat().st_size > 1000
     timing = json.loads((run / "timing.json").read_text())
     assert timing["terrains"] == 11 and timing["policies"] == 3 and timing["walk_s_one_policy"] is None
+    assert timing["base_keys"] == 2
 
 
 def test_a_policy_for_another_robot_is_refused_before_anything_is_written(tmp_path, policies, capsys):

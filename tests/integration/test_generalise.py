@@ -197,3 +197,46 @@ def test_generalise_names_the_damaged_file_and_row_in_one_line(tmp_path, capsys,
     assert err.startswith("python -m experiments generalise: error: ") and message in err, err
     assert str(folder) in err
     assert not (tmp_path / "run" / "generalisation").exists()
+
+
+def write_base(path, runs):
+    """An ``evaluate --keys K`` fitness.csv of the base policy alone: rows ``base``, ``base:key1``, ... with the
+    scores of ``runs`` [K] (one number each, on every terrain)."""
+    terrains = [(f, lv, s) for f, levels in FAMILIES for lv in range(levels) for s in range(2)]
+    lines = ["policy,family,level,seed,value,unit,fitness"]
+    for k, v in enumerate(runs):
+        lines += [f"{'base' if k == 0 else f'base:key{k}'},{f},{lv},{s},{lv},cm,{v:.4f}" for f, lv, s in terrains]
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text("\n".join(lines) + "\n")
+
+
+def test_generalise_takes_the_base_policys_k_evaluations_as_k_runs_of_the_comparator(tmp_path, capsys):
+    """``--base FILE`` (``evaluate --keys K``): the base policy's runs are those K evaluations, on every page the
+    same; the treatments' own base rows (here 0.9, which would beat every walker) are not used, and base:keyK rows
+    in a treatment's file are never read as walkers."""
+    run = tmp_path / "exp3"
+    write_treatment(run / "good-map", np.linspace(0.7, 0.75, 4)[:, None], 0.9, [30, 31, 32, 33])
+    text = (run / "good-map" / "heldout" / "fitness.csv").read_text().splitlines()
+    extra = [line.replace("base,", "base:key1,", 1) for line in text[1:] if line.startswith("base,")]
+    (run / "good-map" / "heldout" / "fitness.csv").write_text("\n".join(text + extra) + "\n")
+    write_base(tmp_path / "base" / "fitness.csv", [0.30, 0.32, 0.34, 0.36, 0.38])
+    assert cli("generalise", str(run), "--base", str(tmp_path / "base"), "--reps", "40") == 0
+    out = run / "generalisation"
+    rows = {(r["treatment"], r["scope"]): r for r in csv.DictReader((out / "intervals.csv").open())}
+    assert rows[("base policy", "all")]["runs"] == "5" and rows[("good map", "all")]["runs"] == "4"
+    assert float(rows[("base policy", "all")]["mean"]) == pytest.approx(0.34)
+    low, high = float(rows[("base policy", "all")]["mean_low"]), float(rows[("base policy", "all")]["mean_high"])
+    assert 0.30 <= low < 0.34 < high <= 0.38  # the five runs spread: an interval of nonzero width
+    pi = {(r["x"], r["y"]): float(r["probability"]) for r in csv.DictReader((out / "improvement.csv").open())}
+    assert pi[("good map", "base policy")] == 1.0
+    assert f"its 5 runs are evaluations (`{tmp_path / 'base'}`, independent keys) of the same weights" in \
+        (out / "generalisation.md").read_text()
+    capsys.readouterr()
+    write_base(tmp_path / "short.csv", [0.3])
+    lines = (tmp_path / "short.csv").read_text().splitlines()
+    (tmp_path / "short.csv").write_text("\n".join(lines[:-1]) + "\n")  # a terrain fewer
+    with pytest.raises(SystemExit) as stop:
+        cli("generalise", str(run), "--base", str(tmp_path / "short.csv"), "--reps", "10")
+    err = capsys.readouterr().err
+    assert stop.value.code == 2
+    assert "--base" in err and "other terrains" in err and len(err.strip().splitlines()) == 1

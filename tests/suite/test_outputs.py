@@ -88,6 +88,12 @@ def test_the_summary_says_the_rule_the_labels_and_what_was_dropped(tmp_path):
     assert "Dropped at 64 x 64 pixels, not walked" in text and "- gaps: needs 1.20 m" in text
     assert "Left out: gan (no weights)" in text
     assert (tmp_path / "levels.png").stat().st_size > 1000
+    robust = list(csv.DictReader((tmp_path / "robustness.csv").open()))  # 3 perlin samples: the worst 0.3 of one
+    assert [(r["policy"], r["generator"], r["samples"]) for r in robust] == [(n, "perlin", "3") for n in names]
+    assert [float(r["cvar10"]) for r in robust] == [0.2, 0.9, 0.2] and float(robust[0]["mean"]) == pytest.approx(0.7)
+    assert "| base | 0.700 / 0.200 |" in text and "CVaR at 0.1" in text
+    with pytest.raises(ValueError, match=r"fitness must have shape \[P, N\] = \(3, 14\)"):
+        suite.write_evaluation(tmp_path / "bad", names, s, fitness[:2])
     plain = hand_made()
     suite.write_evaluation(tmp_path / "plain", ["base"], plain, fitness[:1])
     assert "Dropped" not in (tmp_path / "plain" / "summary.md").read_text()
