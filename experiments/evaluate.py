@@ -33,9 +33,9 @@ import sys
 from experiments import common
 
 PRESETS: dict[str, dict] = common.with_preset_names({
-    "gpu": dict(suite="v1", archive=None, policy=[], robot=None, size=None, seeds=None, samples=None, families=None,
+    "gpu": dict(suite="v1", archive=None, policy=[], robot=None, observation=None, size=None, seeds=None, samples=None, families=None,
                 generators=None, attempts=80, best=5, headings=4, backend="auto", slots=None, chunk=None, repeat=True),
-    "smoke": dict(suite="v1", archive=None, policy=[], robot=None, size=128, seeds=1, samples=4, families=["flat", "stairs_up", "gaps"],
+    "smoke": dict(suite="v1", archive=None, policy=[], robot=None, observation=None, size=128, seeds=1, samples=4, families=["flat", "stairs_up", "gaps"],
                   generators=["perlin"], attempts=2, best=1, headings=1, backend="jax", slots=None, chunk=None,
                   repeat=False),
 }, {"gpu-short": "gpu", "paper": ("gpu", {"attempts": 20, "best": 5, "headings": 1})})
@@ -49,6 +49,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--robot", default=None, metavar="NAME",
                         help="the base policy walked beside is this robot's shipped one (default humanoid); each "
                              "--policy walks the robot it was trained on")
+    parser.add_argument("--observation", choices=("blind", "perceptive"), default=None,
+                        help="the base policy walked beside: the robot's blind one (default, the paper's) or its "
+                             "perceptive twin; each --policy walks with the observation set it records")
     parser.add_argument("--suite", default=None, help="held-out suite version (default v1)")
     parser.add_argument("--archive", default=None, help="walk an archive's elites instead of the suite")
     parser.add_argument("--size", type=int, default=None, help="suite heightmap side in pixels (v1: 256)")
@@ -71,22 +74,23 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def overrides(args) -> dict:
-    return dict(policy=args.policy, robot=args.robot, suite=args.suite, archive=args.archive, size=args.size, seeds=args.seeds,
+    return dict(policy=args.policy, robot=args.robot, observation=args.observation, suite=args.suite, archive=args.archive, size=args.size, seeds=args.seeds,
                 samples=args.samples, families=args.families, generators=args.generators, repeat=args.repeat,
                 backend=args.backend, slots=args.slots, chunk=args.chunk,
                 **common.protocol_overrides(args))
 
 
-def load_policies(paths, robot: str | None = None) -> list:
-    """The base policy of ``robot`` (default the humanoid's) and every folder of ``paths``, loaded; UsageError naming
-    a folder that does not load, an unknown robot or one without a shipped base policy."""
+def load_policies(paths, robot: str | None = None, observation: str | None = None) -> list:
+    """The base policy of ``robot`` (default the humanoid's; ``observation``: its blind, default, or perceptive one)
+    and every folder of ``paths``, loaded; UsageError naming a folder that does not load, an unknown robot or one
+    without a shipped base policy."""
     from experiments.common import UsageError
     from jaxterrain import difficulty, rl
 
     try:
-        out = [difficulty.robot_base_policy("humanoid" if robot is None else robot)]
+        out = [difficulty.robot_base_policy("humanoid" if robot is None else robot, observation or "blind")]
     except ValueError as err:
-        raise UsageError(f"--robot: {err}") from None
+        raise UsageError(f"--{'observation' if observation else 'robot'}: {err}") from None
     for p in paths or []:
         try:
             out.append(rl.load_policy(p))
@@ -178,7 +182,7 @@ def main(args) -> int:
     from jaxterrain.walker import resolve_backend
 
     cfg0 = common.preset_with_flags(PRESETS, args, overrides(args))
-    policies = load_policies(cfg0["policy"], cfg0.get("robot"))  # before the run folder: a bad folder is one line, nothing left behind
+    policies = load_policies(cfg0["policy"], cfg0.get("robot"), cfg0.get("observation"))  # before the run folder: a bad folder is one line, nothing left behind
     check_terrain_flags(cfg0)
     side = fit_size(args, cfg0, policies)
     try:  # another robot or observation set: refused before anything is built

@@ -92,7 +92,7 @@ def check_policy(policy, env) -> None:
     obs, act = getattr(policy, "observation_size", None), getattr(policy, "action_size", None)
     if obs != env.observation_size or act != env.action_size:
         raise ValueError(f"{where}: policy for observations {obs} / actions {act}, but the walker has "
-                         f"{env.observation_size} / {env.action_size} (height_scan={env.config.height_scan})")
+                         f"{env.observation_size} / {env.action_size} (observation {env.config.observation})")
 
     like = jax.eval_shape(lambda k: nets.init_params(k, policy.config, obs, act), jax.random.key(0))
     shapes = lambda t: jax.tree.map(lambda x: tuple(x.shape), t)  # noqa: E731

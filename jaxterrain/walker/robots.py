@@ -27,7 +27,7 @@ from typing import Callable, NamedTuple, Optional
 __all__ = ["RobotSpec", "HUMANOID", "ANT", "ROBOT_FIELDS", "register_robot", "get", "names", "brax_asset"]
 
 ROBOT_FIELDS = ("start_margin", "goal_margin", "side_margin", "healthy_z_range", "forward_reward_weight", "healthy_reward", "ctrl_cost_weight", "joint_noise",
-                "qvel_noise", "warp_contacts", "warp_njmax")
+                "qvel_noise", "warp_contacts", "warp_njmax", "scan_x", "scan_y", "scan_points")
 """The :class:`~jaxterrain.walker.WalkerConfig` fields whose default (None) is the robot's (``RobotSpec.defaults``)."""
 
 
@@ -74,7 +74,9 @@ HUMANOID = RobotSpec(
     defaults=(("start_margin", 0.5), ("goal_margin", 0.5), ("side_margin", 0.3), ("healthy_z_range", (1.0, 2.0)), ("forward_reward_weight", 1.25), ("healthy_reward", 5.0),
               ("ctrl_cost_weight", 0.1), ("joint_noise", 0.1), ("qvel_noise", 0.1),
               # 2 feet x up to 4 hfield contacts; 8 contacts x 4 rows + 17 joint limits = 49 rows at most
-              ("warp_contacts", 8), ("warp_njmax", 64)),
+              ("warp_contacts", 8), ("warp_njmax", 64),
+              # height scan (observation="perceptive"): 1.6 m x 0.8 m, 0.4 m behind to 1.2 m ahead, 0.1 m apart
+              ("scan_x", (-0.4, 1.2)), ("scan_y", (-0.4, 0.4)), ("scan_points", (17, 9))),
     description="brax's humanoid (17 hinge joints, 2 sphere feet): the paper's walker")
 
 ANT = RobotSpec(
@@ -88,7 +90,9 @@ ANT = RobotSpec(
     defaults=(("start_margin", 1.0), ("goal_margin", 1.3), ("side_margin", 1.3), ("healthy_z_range", (0.2, 1.0)), ("forward_reward_weight", 1.0), ("healthy_reward", 1.0),
               ("ctrl_cost_weight", 0.5), ("joint_noise", 0.1), ("qvel_noise", 0.1),
               # 4 feet x up to 4 hfield contacts; 16 contacts x 4 rows + 8 joint limits = 72 rows at most
-              ("warp_contacts", 16), ("warp_njmax", 96)),
+              ("warp_contacts", 16), ("warp_njmax", 96),
+              # height scan: 2.4 m x 1.6 m, 0.15 / 0.16 m apart: the feet reach 1.2 m from the torso; 0.8 m behind it
+              ("scan_x", (-0.8, 1.6)), ("scan_y", (-0.8, 0.8)), ("scan_points", (17, 11))),
     description="brax's ant (8 hinge joints, 4 sphere feet): a quadruped; brax's Ant reward weights")
 
 _REGISTRY: dict[str, RobotSpec] = {HUMANOID.name: HUMANOID, ANT.name: ANT}
