@@ -2,7 +2,7 @@
 
 The twin observes the blind observation plus the robot's height scan (``WalkerConfig(observation="perceptive")``);
 its networks' first layers get zero weights for the scan and its normaliser the scan's mean and standard deviation
-measured on flat ground (``--envs`` walks of ``--steps`` env steps of the blind policy; the std floored at
+measured on flat ground (``--walks`` walks of ``--walk-steps`` env steps of the blind policy; the std floored at
 ``--std-floor`` metres), so it walks exactly like the blind policy until training (``learn --policy FOLDER``) moves
 those weights. Then both walk flat ground (``--eval-attempts`` walks, best ``--eval-best``, on a ``--eval-size``
 square), and the figures go to ``eval.json`` and ``PROVENANCE.md`` beside the policy.
@@ -30,8 +30,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "_perceptive/) instead of --out")
     parser.add_argument("--scan-noise", type=float, default=0.0, metavar="M",
                         help="std of Gaussian noise on each scanned height (metres) recorded with the policy")
-    parser.add_argument("--envs", type=int, default=16, help="flat-ground walks that measure the scan's statistics")
-    parser.add_argument("--steps", type=int, default=200, help="env steps of each of those walks")
+    parser.add_argument("--walks", type=int, default=16, help="flat-ground walks that measure the scan's statistics")
+    parser.add_argument("--walk-steps", type=int, default=200, help="env steps of each of those walks")
     parser.add_argument("--std-floor", type=float, default=0.1, metavar="M",
                         help="the smallest standard deviation (metres) the normaliser gets for a scanned height")
     parser.add_argument("--eval-size", type=int, default=64, help="side (pixels, 4 cm) of the flat evaluation square")
@@ -48,7 +48,7 @@ def check_args(args) -> None:
         raise UsageError("give --out FOLDER or --export-assets")
     if args.out is not None and args.export_assets:
         raise UsageError("--out and --export-assets name two destinations; give one")
-    for name in ("envs", "steps", "eval_attempts", "eval_best"):
+    for name in ("walks", "walk_steps", "eval_attempts", "eval_best"):
         v = getattr(args, name)
         if v < 1:
             raise UsageError(f"--{name.replace('_', '-')} must be an integer >= 1, got {v}")
@@ -123,13 +123,13 @@ def main(args) -> int:
     blind_cfg = difficulty.default_env_config(shape, TerrainScale(), blind)
     seeing_cfg = with_observation(blind_cfg, "perceptive")._replace(scan_noise=float(args.scan_noise))
     env = make_env(seeing_cfg)
-    twin = perceptive_twin(blind, env, key=jax.random.PRNGKey(args.seed), envs=args.envs, steps=args.steps,
+    twin = perceptive_twin(blind, env, key=jax.random.PRNGKey(args.seed), envs=args.walks, steps=args.walk_steps,
                            std_floor=args.std_floor)
     walker_config = dict(trained, robot=robot, **{k: list(v) if isinstance(v, tuple) else v
                                                   for k, v in observation_fields(seeing_cfg).items()},
                          scan_noise=float(args.scan_noise))
     walker_config.pop("height_scan", None)
-    surgery = {"from": str(args.source or rl.base_policy_dir(robot)), "envs": args.envs, "steps": args.steps,
+    surgery = {"from": str(args.source or rl.base_policy_dir(robot)), "walks": args.walks, "steps": args.walk_steps,
                "samples": twin.samples, "std_floor": args.std_floor, "seed": args.seed,
                "scan_mean": [round(float(v), 5) for v in twin.scan_mean],
                "scan_std": [round(float(v), 5) for v in twin.scan_std]}
@@ -156,7 +156,7 @@ def main(args) -> int:
           "(`jaxterrain.rl.perception.perceptive_twin`): it observes "
           f"{observation_label(observation_fields(seeing_cfg))}, appended to the blind observation. The first "
           "dense layer of the policy and value networks has zero weights for the scan, and the normaliser has the "
-          f"scan's mean and std measured on flat ground ({args.envs} walks x {args.steps} env steps of the blind "
+          f"scan's mean and std measured on flat ground ({args.walks} walks x {args.walk_steps} env steps of the blind "
           f"policy, {twin.samples} scans; std floored at {args.std_floor:g} m), so it walks exactly like the blind "
           "policy (same actions to float rounding) until training moves those weights.", "",
           f"- command: `python -m experiments perceptive-policy {' '.join(_argv())}`",

@@ -24,11 +24,14 @@ import importlib.util
 from pathlib import Path
 from typing import Callable, NamedTuple, Optional
 
-__all__ = ["RobotSpec", "HUMANOID", "ANT", "ROBOT_FIELDS", "register_robot", "get", "names", "brax_asset"]
+__all__ = ["RobotSpec", "HUMANOID", "ANT", "ROBOT_FIELDS", "SCAN_DEFAULTS", "register_robot", "get", "names", "brax_asset"]
 
 ROBOT_FIELDS = ("start_margin", "goal_margin", "side_margin", "healthy_z_range", "forward_reward_weight", "healthy_reward", "ctrl_cost_weight", "joint_noise",
                 "qvel_noise", "warp_contacts", "warp_njmax", "scan_x", "scan_y", "scan_points")
 """The :class:`~jaxterrain.walker.WalkerConfig` fields whose default (None) is the robot's (``RobotSpec.defaults``)."""
+SCAN_DEFAULTS = (("scan_x", (-0.4, 1.2)), ("scan_y", (-0.4, 0.4)), ("scan_points", (17, 9)))
+"""The height scan's grid for a spec whose ``defaults`` leave it out (specs written before observation sets): the
+humanoid's, 1.6 m x 0.8 m from 0.4 m behind the torso to 1.2 m ahead, 0.1 m apart."""
 
 
 class RobotSpec(NamedTuple):
@@ -51,8 +54,9 @@ class RobotSpec(NamedTuple):
     description: str = ""
 
     def default(self, field: str):
-        """The robot's default of a :data:`ROBOT_FIELDS` field."""
-        return dict(self.defaults)[field]
+        """The robot's default of a :data:`ROBOT_FIELDS` field (the scan grid's: :data:`SCAN_DEFAULTS` where the
+        spec leaves it out)."""
+        return {**dict(SCAN_DEFAULTS), **dict(self.defaults)}[field]
 
 
 def brax_asset(filename: str) -> Callable[[], str]:
@@ -107,7 +111,7 @@ def register_robot(spec: RobotSpec) -> None:
         raise ValueError(f"RobotSpec.name must be an identifier, got {spec.name!r}")
     if spec.name in _REGISTRY and _REGISTRY[spec.name] != spec:
         raise ValueError(f"a robot named {spec.name!r} is already registered")
-    missing = [f for f in ROBOT_FIELDS if f not in dict(spec.defaults)]
+    missing = [f for f in ROBOT_FIELDS if f not in dict(spec.defaults) and f not in dict(SCAN_DEFAULTS)]
     if missing:
         raise ValueError(f"RobotSpec {spec.name!r}: defaults lacks {', '.join(missing)}")
     if not spec.foot_geoms:
