@@ -22,6 +22,7 @@ COMMANDS = {
     "quickstart": ("experiments.quickstart", "small end-to-end run on CPU: terrains, descriptors, figures"),
     "train-gan": ("experiments.train_gan", "train the DCGAN terrain generator on real DEM tiles"),
     "train-base-policy": ("experiments.train_base_policy", "train the flat-ground base walker with PPO"),
+    "perceptive-policy": ("experiments.perceptive_policy", "the perceptive twin of a blind policy (network surgery)"),
     "features": ("experiments.features", "Experiment 1a: correlations of features with difficulty"),
     "evolve": ("experiments.evolve", "MAP-Elites archive for one generator and descriptor pair"),
     "difficulty-spread": ("experiments.difficulty_spread", "fitness spread of random terrains per generator and height scale"),

@@ -49,7 +49,7 @@ _INT_MIN = {
 }
 _FLOAT_POSITIVE = ("plr_temperature", "time_limit", "time_budget", "env_steps", "lr", "learning_rate", "heights", "robot_height",
                    "band_width")
-_FLOAT_NONNEGATIVE = ("r1", "healthy_reward")
+_FLOAT_NONNEGATIVE = ("r1", "healthy_reward", "scan_noise")
 _FLOAT_UNIT = ("threshold", "levels_promote")  # in (0, 1]
 _FLOAT_FRACTION = ("levels_demote", "plr_replay_prob", "plr_staleness", "plr_min_fill")  # in [0, 1]
 _AT_MOST = (("best", "attempts"), ("eval_best", "eval_attempts"), ("window", "size"),

@@ -38,10 +38,11 @@ import sys
 from experiments import common
 
 PRESETS: dict[str, dict] = common.with_preset_names({
-    "gpu": dict(suite="v1", archive=None, policy=[], robot=None, size=None, seeds=None, samples=None, families=None,
-                generators=None, attempts=80, best=5, headings=4, backend="auto", slots=None, chunk=None, repeat=True,
-                keys=1),
-    "smoke": dict(suite="v1", archive=None, policy=[], robot=None, size=128, seeds=1, samples=4, families=["flat", "stairs_up", "gaps"],
+    "gpu": dict(suite="v1", archive=None, policy=[], robot=None, observation=None, size=None, seeds=None, samples=None,
+                families=None, generators=None, attempts=80, best=5, headings=4, backend="auto", slots=None, chunk=None,
+                repeat=True, keys=1),
+    "smoke": dict(suite="v1", archive=None, policy=[], robot=None, observation=None, size=128, seeds=1, samples=4,
+                  families=["flat", "stairs_up", "gaps"],
                   generators=["perlin"], attempts=2, best=1, headings=1, backend="jax", slots=None, chunk=None,
                   repeat=False, keys=1),
 }, {"gpu-short": "gpu", "paper": ("gpu", {"attempts": 20, "best": 5, "headings": 1})})
@@ -59,6 +60,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--robot", default=None, metavar="NAME",
                         help="the base policy walked beside is this robot's shipped one (default humanoid); each "
                              "--policy walks the robot it was trained on")
+    parser.add_argument("--observation", choices=("blind", "perceptive"), default=None,
+                        help="the base policy walked beside: the robot's blind one (default, the paper's) or its "
+                             "perceptive twin; each --policy walks with the observation set it records")
     parser.add_argument("--suite", default=None, help="held-out suite version (default v1; v2: levels calibrated "
                         "for the robot of --robot)")
     parser.add_argument("--archive", default=None, help="walk an archive's elites instead of the suite")
@@ -82,7 +86,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def overrides(args) -> dict:
-    return dict(policy=args.policy, robot=args.robot, keys=args.keys, suite=args.suite, archive=args.archive, size=args.size, seeds=args.seeds,
+    return dict(policy=args.policy, robot=args.robot, observation=args.observation, keys=args.keys, suite=args.suite,
+                archive=args.archive, size=args.size, seeds=args.seeds,
                 samples=args.samples, families=args.families, generators=args.generators, repeat=args.repeat,
                 backend=args.backend, slots=args.slots, chunk=args.chunk,
                 **common.protocol_overrides(args))
@@ -99,16 +104,17 @@ def is_base(name: str) -> bool:
     return name == "base" or (name.startswith("base:key") and name[8:].isdigit())
 
 
-def load_policies(paths, robot: str | None = None) -> list:
-    """The base policy of ``robot`` (default the humanoid's) and every folder of ``paths``, loaded; UsageError naming
-    a folder that does not load, an unknown robot or one without a shipped base policy."""
+def load_policies(paths, robot: str | None = None, observation: str | None = None) -> list:
+    """The base policy of ``robot`` (default the humanoid's; ``observation``: its blind, default, or perceptive one)
+    and every folder of ``paths``, loaded; UsageError naming a folder that does not load, an unknown robot or one
+    without a shipped base policy."""
     from experiments.common import UsageError
     from jaxterrain import difficulty, rl
 
     try:
-        out = [difficulty.robot_base_policy("humanoid" if robot is None else robot)]
+        out = [difficulty.robot_base_policy("humanoid" if robot is None else robot, observation or "blind")]
     except ValueError as err:
-        raise UsageError(f"--robot: {err}") from None
+        raise UsageError(f"--{'observation' if observation else 'robot'}: {err}") from None
     for p in paths or []:
         try:
             out.append(rl.load_policy(p))
@@ -204,7 +210,7 @@ def main(args) -> int:
     from jaxterrain.walker import resolve_backend
 
     cfg0 = common.preset_with_flags(PRESETS, args, overrides(args))
-    policies = load_policies(cfg0["policy"], cfg0.get("robot"))  # before the run folder: a bad folder is one line, nothing left behind
+    policies = load_policies(cfg0["policy"], cfg0.get("robot"), cfg0.get("observation"))  # before the run folder: a bad folder is one line, nothing left behind
     check_terrain_flags(cfg0)
     if suite.VERSIONS[cfg0["suite"]]["robot"] is not None and not cfg0["archive"]:  # v2: levels per robot
         robot = cfg0.get("robot") or "humanoid"

@@ -44,7 +44,8 @@ from experiments import common
 _PAPER = dict(generator="perlin", descriptors=["roughness", "tpi"], generations=5000, batch_size=20,
               initial_population=100, bins=50, size=256, window=30, stride=2, attempts=20, best=5, headings=1,
               checkpoint_every=250, fitness="difficulty", robot_height=None, out_of_range="clip", ranges=None,
-              store_heightmaps=True, rollout_slots=None, rollout_backend="jax", robot="humanoid")
+              store_heightmaps=True, rollout_slots=None, rollout_backend="jax", robot="humanoid",
+              observation="blind")
 PRESETS: dict[str, dict] = {
     "paper": _PAPER,
     "gpu": {**_PAPER, "generations": 25, "batch_size": 4000, "checkpoint_every": 1, "rollout_slots": 16384},
@@ -84,6 +85,7 @@ def evolve_config(cfg: dict):
         out_of_range=cfg.get("out_of_range", "clip"), store_heightmaps=bool(cfg.get("store_heightmaps", True)),
         rollout_slots=None if cfg.get("rollout_slots") is None else int(cfg["rollout_slots"]),
         rollout_backend=_backend(cfg.get("rollout_backend", "jax")), robot=str(cfg.get("robot") or "humanoid"),
+        observation=str(cfg.get("observation") or "blind"),
     )
 
 
@@ -115,6 +117,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--robot", default=None, metavar="NAME",
                         help="whose shipped base policy the walker fitness walks (default humanoid; "
                              "jaxterrain.walker.robots, or a --plugin's); the archive records it")
+    parser.add_argument("--observation", choices=("blind", "perceptive"), default=None,
+                        help="which of the robot's shipped base policies the walker fitness walks: blind (default, "
+                             "the paper's) or perceptive (with a height scan); the archive records it")
     parser.add_argument("--store-heightmaps", action=argparse.BooleanOptionalAction, default=None,
                         help="store the elites' heightmaps in archive.npz (--no-store-heightmaps: leave them out, "
                              "they can be re-rendered from the genomes)")
@@ -126,7 +131,8 @@ def overrides(args) -> dict:
                 batch_size=args.batch_size, initial_population=args.initial_population, bins=args.bins,
                 size=args.size, checkpoint_every=args.checkpoint_every, fitness=args.fitness,
                 **common.protocol_overrides(args), store_heightmaps=args.store_heightmaps,
-                rollout_slots=args.rollout_slots, rollout_backend=args.rollout_backend, robot=args.robot)
+                rollout_slots=args.rollout_slots, rollout_backend=args.rollout_backend, robot=args.robot,
+                observation=args.observation)
 
 
 def announce_compile(cfg: dict, config) -> None:
@@ -173,6 +179,9 @@ def check_robot_walks(args, cfg: dict) -> None:
     if args.robot is not None and cfg.get("fitness") != "difficulty":
         raise common.UsageError(f"--robot {args.robot}: only the walker fitness walks a robot (--fitness difficulty); "
                                 f"this run's fitness is {cfg.get('fitness')!r}, which walks none")
+    if args.observation is not None and cfg.get("fitness") != "difficulty":
+        raise common.UsageError(f"--observation {args.observation}: only the walker fitness walks a policy "
+                                f"(--fitness difficulty); this run's fitness is {cfg.get('fitness')!r}")
 
 
 def fitness_fn(name: str):
@@ -220,16 +229,19 @@ def main(args) -> int:
 
     mesh = common.device_mesh(args.devices)
     fitness = args.fitness or PRESETS.get(args.preset or "smoke", {}).get("fitness")
-    if args.robot is not None:  # before the run folder: one line (its base policy only where the fitness walks)
-        from jaxterrain import difficulty
+    if args.robot is not None or args.observation is not None:  # before the run folder: one line (its base policy
+        from jaxterrain import difficulty  # only where the fitness walks)
         from jaxterrain.walker import robots
 
         try:
-            robots.get(args.robot)
-            if fitness == "difficulty":
-                difficulty.robot_base_policy(args.robot)
+            robots.get(args.robot or "humanoid")
         except ValueError as err:
             raise common.UsageError(f"--robot: {err}") from None
+        try:
+            if fitness == "difficulty":
+                difficulty.robot_base_policy(args.robot or "humanoid", args.observation or "blind")
+        except ValueError as err:
+            raise common.UsageError(f"--{'observation' if args.observation else 'robot'}: {err}") from None
     if fitness == "difficulty":  # the walker fitness needs terrains the robot has a track on (its margins)
         from jaxterrain.walker import WalkerConfig, min_terrain_side
 

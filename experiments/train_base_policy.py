@@ -42,9 +42,9 @@ from experiments import common
 # chunk would compile once more, ~25 s).
 PRESETS: dict[str, dict[str, Any]] = common.with_preset_names({
     "smoke": dict(env_steps=4 * 40, time_budget=None, updates_per_chunk=2, num_envs=None, solver=None,
-                  eval_attempts=20, eval_best=5, robot="humanoid"),
+                  eval_attempts=20, eval_best=5, robot="humanoid", observation="blind", scan_noise=0.0),
     "gpu": dict(env_steps=410 * 122_880, time_budget=None, updates_per_chunk=10, num_envs=None, solver=None,
-                eval_attempts=20, eval_best=5, robot="humanoid"),
+                eval_attempts=20, eval_best=5, robot="humanoid", observation="blind", scan_noise=0.0),
 }, {"gpu-short": ("gpu", {"env_steps": 41 * 122_880}), "paper": "gpu"})
 # time_budget (seconds, the whole process) is the config key of runs made before --time-limit replaced --time-budget
 # (2026-11-28); no preset sets it: --time-limit MIN bounds a process now, on every preset.
@@ -70,6 +70,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--robot", default=None, metavar="NAME",
                         help="the body to train: humanoid (default, the paper's), ant (brax's quadruped) or a robot a "
                              "--plugin registered (jaxterrain.walker.robots); recorded with the policy")
+    parser.add_argument("--observation", choices=("blind", "perceptive"), default=None,
+                        help="what the walker observes: blind (the paper's: torso height, orientation, joints) or "
+                             "perceptive (plus a height scan around and ahead of the torso, the robot's default "
+                             "grid); recorded with the policy, and every command walks it with the same set")
+    parser.add_argument("--scan-noise", type=float, default=None, metavar="M",
+                        help="perceptive: std of Gaussian noise on each scanned height, in metres")
     common.add_progress_argument(parser)
     parser.add_argument("--eval-attempts", type=int, default=None, help="flat-ground evaluation walks (default 20)")
     parser.add_argument("--eval-best", type=int, default=None, help="of which the best are averaged (default 5)")
@@ -85,7 +91,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 def overrides(args: argparse.Namespace) -> dict:
     """The settings given on the command line (None: not given)."""
     return {name: getattr(args, name) for name in ("env_steps", "time_budget", "updates_per_chunk", "num_envs",
-                                                    "solver", "eval_attempts", "eval_best", "robot")}
+                                                    "solver", "eval_attempts", "eval_best", "robot",
+                                                    "observation", "scan_noise")}
 
 
 def configs():
@@ -162,7 +169,9 @@ def resolve_settings(cfg: dict) -> RunSettings:
     from jaxterrain.walker import resolve_config
 
     env_cfg, ppo_cfg = configs()[cfg.get("preset") or "smoke"]
-    env_cfg = resolve_config(env_cfg._replace(robot=cfg.get("robot") or "humanoid"))  # runs before --robot: humanoid
+    env_cfg = resolve_config(env_cfg._replace(robot=cfg.get("robot") or "humanoid",  # runs before --robot: humanoid
+                                              observation=cfg.get("observation") or "blind",  # before sets: blind
+                                              scan_noise=float(cfg.get("scan_noise") or 0.0)))
     if cfg.get("solver") is not None:
         env_cfg = env_cfg._replace(solver=_solver(cfg["solver"]))
     if cfg.get("num_envs") is not None:
@@ -199,13 +208,26 @@ def write_run_info(folder: Path, settings: RunSettings, resumed: bool) -> RunFol
         if isinstance(old.get("walker_config"), dict):  # run.json written before robot specs: the humanoid
             old["walker_config"].setdefault("robot", "humanoid")
         for k in ("walker_config", "ppo_config"):
-            if old.get(k) != info[k]:
+            if _comparable(old.get(k)) != _comparable(info[k]):
                 raise SystemExit(f"--resume: {k} differs from the run's {RUN_INFO} (the library's defaults changed "
                                  "since the run started?); resume it with the code that started it")
         info["command_line"] = old.get("command_line", command)  # the command that started the run
         info["resumed_with"] = list(old.get("resumed_with", [])) + [command]
     atomic_write_text(path, json.dumps(info, indent=2) + "\n")
     return RunFolder(folder, command, info)
+
+
+def _comparable(walker_config):
+    """A run.json config as resume compares it: a walker config's observation fields as
+    ``walker.observation_fields`` reads them (run.json written before observation sets said ``height_scan`` and a
+    scan grid that no blind walker uses)."""
+    if not isinstance(walker_config, dict) or "terrain_shape" not in walker_config:
+        return walker_config
+    from jaxterrain.walker import observation_fields
+
+    rest = {k: v for k, v in walker_config.items()
+            if k not in ("height_scan", "observation", "scan_x", "scan_y", "scan_points", "scan_noise")}
+    return rest, observation_fields(walker_config), float(walker_config.get("scan_noise") or 0.0)
 
 
 def _device_name() -> str:
@@ -418,6 +440,8 @@ def main(args: argparse.Namespace) -> int:
 
     if args.solver is not None:
         _solver(args.solver)  # a bad --solver stops before the run folder is made
+    if args.scan_noise and args.observation != "perceptive":
+        raise common.UsageError("--scan-noise needs --observation perceptive (a blind walker scans nothing)")
     if args.robot is not None:
         from jaxterrain.walker import robots
 

@@ -86,13 +86,15 @@ def walker_env(policy, shape: tuple[int, int], scale: TerrainScale, episode_leng
 
 
 def check_policy(policy, env) -> None:
-    """``ValueError`` naming the policy's file when it does not fit the walker: observation / action sizes, or
-    parameters that are not those of its own PPOConfig's networks. Uses shapes only (nothing is compiled)."""
+    """``ValueError`` naming the policy's file when it does not fit the walker: another observation set
+    (:func:`jaxterrain.difficulty.check_observation`), observation / action sizes, or parameters that are not those
+    of its own PPOConfig's networks. Uses shapes only (nothing is compiled)."""
     where = str(getattr(policy, "path", None) or "the policy")
+    difficulty.check_observation(policy, env.config)
     obs, act = getattr(policy, "observation_size", None), getattr(policy, "action_size", None)
     if obs != env.observation_size or act != env.action_size:
         raise ValueError(f"{where}: policy for observations {obs} / actions {act}, but the walker has "
-                         f"{env.observation_size} / {env.action_size} (height_scan={env.config.height_scan})")
+                         f"{env.observation_size} / {env.action_size} (observation {env.config.observation})")
 
     like = jax.eval_shape(lambda k: nets.init_params(k, policy.config, obs, act), jax.random.key(0))
     shapes = lambda t: jax.tree.map(lambda x: tuple(x.shape), t)  # noqa: E731

@@ -12,17 +12,21 @@ The rollout loops themselves are the walker's (:mod:`jaxterrain.walker.rollout`)
 """
 
 from jaxterrain.difficulty.evaluation import (
+    check_observation,
     default_env_config,
     default_policy,
     evaluate,
     fitness_fn,
     keyed_distances,
+    policy_observation,
     policy_robot,
+    policy_scan_noise,
     robot_base_policy,
     policy_solver,
     protocol_distances,
     rollout_distances,
     validate_heightmaps,
+    with_policy_observation,
 )
 from jaxterrain.difficulty.fitness import FITNESSES, PROTOCOLS, difficulty_fitness, named_fitness, slope_fitness
 from jaxterrain.difficulty.protocol import (
@@ -58,6 +62,10 @@ __all__ = [
     "default_policy",
     "default_env_config",
     "policy_robot",
+    "policy_observation",
+    "policy_scan_noise",
+    "with_policy_observation",
+    "check_observation",
     "robot_base_policy",
     "policy_solver",
     "FITNESSES",

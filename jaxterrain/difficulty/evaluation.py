@@ -65,14 +65,16 @@ from jaxterrain.difficulty.protocol import (  # the protocol and its pure aggreg
 from jaxterrain.walker.layout import is_tiled, make_env
 from jaxterrain.walker.rollout import batched_distances, job_queue, pooled_distances, smoothness_priority
 from jaxterrain.terrain import TerrainScale, validate_scale
-from jaxterrain.walker import BACKENDS, SolverOptions, WalkerConfig, WalkerEnv
+from jaxterrain.walker import (BACKENDS, OBSERVATIONS, SolverOptions, WalkerConfig, WalkerEnv, observation_fields,
+                               observation_label)
 from jaxterrain.runtime import sharding
 from jaxterrain.rl import base_policy_dir, load_policy
 from jaxterrain.walker.robots import get as get_robot
 
 __all__ = ["evaluate", "rollout_distances", "fitness_fn", "protocol_distances", "keyed_distances",
            "validate_heightmaps", "default_policy", "default_env_config", "policy_solver",
-           "policy_robot", "robot_base_policy"]
+           "policy_robot", "robot_base_policy", "policy_observation", "policy_scan_noise", "with_policy_observation",
+           "check_observation"]
 
 
 # ----------------------------------------------------------------------------------------------------------------
@@ -283,10 +285,44 @@ def policy_robot(policy: Callable) -> str:
     return ((getattr(policy, "meta", None) or {}).get("walker_config") or {}).get("robot") or "humanoid"
 
 
+def policy_observation(policy: Callable) -> dict:
+    """What a policy observes (:func:`jaxterrain.walker.observation_fields` of its recorded ``walker_config``):
+    ``{"observation": "blind"}`` for policies that record none (every policy before observation sets was blind),
+    else the set and, when perceptive, its scan grid. ``ValueError`` when the record names an unknown set."""
+    return observation_fields(dict((getattr(policy, "meta", None) or {}).get("walker_config") or {}))
+
+
+def policy_scan_noise(policy: Callable) -> float:
+    """The scan noise (m) a policy was trained with (``walker_config.scan_noise``; 0 when it records none)."""
+    return float(((getattr(policy, "meta", None) or {}).get("walker_config") or {}).get("scan_noise") or 0.0)
+
+
+def with_policy_observation(config: WalkerConfig, policy: Callable) -> WalkerConfig:
+    """``config`` observing what ``policy`` observes (:func:`policy_observation`; its scan grid and scan noise):
+    how every env built to walk a policy gets its observation set."""
+    fields = policy_observation(policy)
+    config = config._replace(**fields)
+    return config._replace(scan_noise=policy_scan_noise(policy)) if fields["observation"] == "perceptive" else config
+
+
+def check_observation(policy: Callable, env_config: WalkerConfig) -> None:
+    """``ValueError``, one line naming both, when ``env_config`` observes another set (or scan grid) than
+    ``policy`` records (:func:`policy_observation`); policies without a record (a bare callable) are not checked
+    here (their observation size is)."""
+    if getattr(policy, "meta", None) is None:
+        return
+    want, have = policy_observation(policy), observation_fields(env_config)
+    if want != have:
+        where = getattr(policy, "path", None)
+        raise ValueError(f"observation mismatch: the policy{f' {where}' if where else ''} observes "
+                         f"{observation_label(want)}, the env {observation_label(have)}")
+
+
 def default_env_config(shape: tuple[int, int], scale: Optional[TerrainScale] = None, policy: Optional[Callable] = None,
                        backend: str = "jax") -> WalkerConfig:
     """``WalkerConfig(terrain_shape=shape, scale=scale)`` with the policy's own robot and solver options when it
-    records them (``scale`` None: ``TerrainScale()``; ``policy`` None: the shipped base policy).
+    records them, and its observation set (:func:`with_policy_observation`) (``scale`` None: ``TerrainScale()``;
+    ``policy`` None: the shipped base policy).
 
     ``backend``: ``"jax"`` (MJX-JAX, the classic layout: one heightfield per env) or ``"warp"`` (MuJoCo Warp, on
     tiles: ``tiles=1``, which the rollout loops size to each call, :mod:`jaxterrain.walker.rollout`). Pass the result as
@@ -299,6 +335,7 @@ def default_env_config(shape: tuple[int, int], scale: Optional[TerrainScale] = N
     config = WalkerConfig(terrain_shape=tuple(shape), scale=TerrainScale() if scale is None else scale,
                           robot=policy_robot(policy))
     config = config if solver is None else config._replace(solver=solver)
+    config = with_policy_observation(config, policy)
     return config if backend == "jax" else config._replace(backend=backend, tiles=1)
 
 
@@ -323,11 +360,12 @@ def _resolve(heightmaps, protocol: Protocol, policy, scale, env_config):
     env_config = protocol_env_config(env_config, protocol)
     if is_tiled(env_config) and not env_config.tiles:  # WalkerConfig(backend="warp"): tiles, sized per call
         env_config = env_config._replace(tiles=1)
+    check_observation(policy, env_config)
     obs_size = getattr(policy, "observation_size", None)
     env = make_env(env_config)
     if obs_size is not None and int(obs_size) != env.observation_size:
         raise ValueError(f"policy expects observations of size {obs_size}, the env gives {env.observation_size} "
-                         f"(height_scan={env_config.height_scan})")
+                         f"(observation {env_config.observation})")
     terrains_m = h * jnp.float32(env_config.scale.height)
     return terrains_m, env_config, policy
 
@@ -412,7 +450,7 @@ def evaluate(heightmaps, key: jax.Array, attempts: Optional[int] = None, best: O
 
 def fitness_fn(size: int, protocol: Protocol = PAPER, scale: Optional[TerrainScale] = None,
                slots: Optional[int] = None, smooth_first: bool = True, backend: str = "jax",
-               robot: str = "humanoid") -> Callable:
+               robot: str = "humanoid", observation: str = "blind") -> Callable:
     """Terrain fitness as a pure function, for use inside jit / scan (e.g. ``qd.evolve(fitness_fn=...)``):
     ``fitness(heightmaps [B, size, size] in [0, 1], key, needed=None) -> [B]`` float32 in [0, 1].
 
@@ -429,7 +467,8 @@ def fitness_fn(size: int, protocol: Protocol = PAPER, scale: Optional[TerrainSca
     -> [B]`` (:func:`keyed_distances`: terrain ``b`` walks from ``keys[b]``, one pool of ``slots`` per call), which
     the sharded MAP-Elites scoring calls on each device's rows (``scoring.keyed_fitness``).
 
-    ``robot``: whose shipped base policy walks (:func:`robot_base_policy`; the humanoid's by default).
+    ``robot``: whose shipped base policy walks (:func:`robot_base_policy`; the humanoid's by default);
+    ``observation``: its blind (default, the paper's) or perceptive twin, in an env of its observation set.
     """
     if not isinstance(size, int) or size < 4:
         raise ValueError(f"size must be an int >= 4 (heightmap side in pixels), got {size!r}")
@@ -439,32 +478,39 @@ def fitness_fn(size: int, protocol: Protocol = PAPER, scale: Optional[TerrainSca
         raise ValueError(f"backend must be one of {BACKENDS}, got {backend!r}")
     protocol = protocol_from(protocol, None, None)
     scale = validate_scale(TerrainScale() if scale is None else scale)
-    robot_base_policy(robot)  # an unknown robot, or one without a shipped base policy: ValueError here
-    return _fitness_fn_cached(size, protocol, scale, slots, bool(smooth_first) and slots is not None, backend, robot)
+    robot_base_policy(robot, observation)  # unknown, or without a shipped base policy: ValueError here
+    return _fitness_fn_cached(size, protocol, scale, slots, bool(smooth_first) and slots is not None, backend, robot,
+                              observation)
 
 
-def robot_base_policy(robot: str = "humanoid") -> Callable:
-    """The shipped base policy of ``robot``: :func:`default_policy` for the humanoid, else
-    ``rl.base_policy_dir(robot)`` (loaded once). ``ValueError`` naming the robot when it is unknown or has none."""
+def robot_base_policy(robot: str = "humanoid", observation: str = "blind") -> Callable:
+    """The shipped base policy of ``robot``: :func:`default_policy` for the blind humanoid, else
+    ``rl.base_policy_dir(robot, observation)`` (loaded once). ``ValueError`` naming the robot / observation set when
+    it is unknown or has none shipped."""
     get_robot(robot)
-    if robot == "humanoid":
+    if observation not in OBSERVATIONS:
+        raise ValueError(f"observation must be one of {', '.join(OBSERVATIONS)}, got {observation!r}")
+    if robot == "humanoid" and observation == "blind":
         return default_policy()
-    return _robot_policy(robot)
+    return _robot_policy(robot, observation)
 
 
 @functools.lru_cache(maxsize=None)
-def _robot_policy(robot: str) -> Callable:
-    folder = base_policy_dir(robot)
+def _robot_policy(robot: str, observation: str = "blind") -> Callable:
+    folder = base_policy_dir(robot, observation)
     if not (folder / "policy.msgpack").is_file():
-        raise ValueError(f"robot {robot!r}: no base policy is shipped for it ({folder}); train one with `python -m "
-                         f"experiments train-base-policy --robot {robot} --preset gpu --export-assets`")
+        how = (f"python -m experiments perceptive-policy --robot {robot} --export-assets"
+               if observation == "perceptive" else
+               f"python -m experiments train-base-policy --robot {robot} --preset gpu --export-assets")
+        raise ValueError(f"robot {robot!r}: no {observation} base policy is shipped for it ({folder}); make one with "
+                         f"`{how}`")
     return load_policy(folder)
 
 
 @functools.lru_cache(maxsize=16)
 def _fitness_fn_cached(size: int, protocol: Protocol, scale: TerrainScale, slots, smooth_first: bool,
-                       backend: str = "jax", robot: str = "humanoid") -> Callable:
-    policy = robot_base_policy(robot)
+                       backend: str = "jax", robot: str = "humanoid", observation: str = "blind") -> Callable:
+    policy = robot_base_policy(robot, observation)
     env = make_env(protocol_env_config(default_env_config((size, size), scale, policy, backend), protocol))
 
     def walk(distances_fn, heightmaps, keys, needed):

@@ -81,6 +81,8 @@ class EvolveConfig(NamedTuple):
 
       robot: the walker whose shipped base policy the fitness walks (``jaxterrain.walker.robots``; its policy in
         ``rl.base_policy_dir(robot)``). The archive records it: an archive's fitness is one robot's difficulty.
+      observation: which of the robot's shipped base policies walks: ``"blind"`` (the paper's) or
+        ``"perceptive"`` (its twin with a height scan, ``rl.base_policy_dir(robot, "perceptive")``); recorded too.
 
     The run settings (and ``generations``) stay here so that config files and archive headers keep one shape; they
     are the host driver's, not the algorithm's.
@@ -106,6 +108,7 @@ class EvolveConfig(NamedTuple):
     rollout_backend: str = "jax"
     headings: int = 1
     robot: str = "humanoid"
+    observation: str = "blind"
 
 
 class Archive(NamedTuple):
@@ -176,6 +179,8 @@ def resolve_config(config: EvolveConfig) -> EvolveConfig:
         raise ValueError(f"EvolveConfig.rollout_backend must be 'jax' or 'warp'; got {config.rollout_backend!r}")
     if config.robot not in robot_names():
         raise ValueError(f"EvolveConfig.robot must be one of {', '.join(robot_names())}; got {config.robot!r}")
+    if config.observation not in ("blind", "perceptive"):
+        raise ValueError(f"EvolveConfig.observation must be 'blind' or 'perceptive'; got {config.observation!r}")
     if config.robot_height is not None and not (
             isinstance(config.robot_height, numbers.Real) and not isinstance(config.robot_height, bool)
             and math.isfinite(config.robot_height) and config.robot_height > 0):

@@ -81,10 +81,10 @@ def _traversable_fn(robot_height, window, scale) -> Callable:
 
 def default_fitness(size: int, config: A.EvolveConfig) -> A.FitnessFn:
     """The walker fitness of a config: :func:`jaxterrain.difficulty.difficulty_fitness` at the config's attempts,
-    best, headings, scale, slots, backend and robot."""
+    best, headings, scale, slots, backend, robot and observation set."""
     return difficulty.difficulty_fitness(int(size), config.attempts, config.best, config.scale, config.rollout_slots,
                                          backend=config.rollout_backend, headings=config.headings,
-                                         robot=config.robot)
+                                         robot=config.robot, observation=config.observation)
 
 
 def problem(generator, descriptors, config: A.EvolveConfig, fitness_fn=None, traversable=None, names=None,

@@ -6,7 +6,8 @@ humanoid recipe). Public API::
 
     PPOConfig, TrainState, init, update, run_updates, ride_updates, Ride, make_train, train, chunk_fn, reset_envs,
     raw_key, Progress,
-    gae, ppo_loss, save_checkpoint, load_checkpoint, save_policy, load_policy
+    gae, ppo_loss, save_checkpoint, load_checkpoint, save_policy, load_policy,
+    widen_inputs, scan_statistics, perceptive_twin   (a blind policy's perceptive twin: jaxterrain.rl.perception)
 """
 
 from jaxterrain.rl.checkpoint import (
@@ -21,6 +22,7 @@ from jaxterrain.rl.checkpoint import (
 )
 from jaxterrain.rl.config import PPOConfig, validate_config
 from jaxterrain.rl.losses import gae, ppo_loss
+from jaxterrain.rl.perception import PerceptiveTwin, perceptive_twin, scan_statistics, widen_inputs
 from jaxterrain.rl.networks import RunningStats, deterministic_action, init_stats, normalize, update_stats
 from jaxterrain.rl.ppo import (
     init,
@@ -41,5 +43,5 @@ __all__ = [
     "load_checkpoint", "load_policy", "loss_fn", "make_optimizer", "make_train", "normalize", "policy_fn", "ppo_loss",
     "raw_key", "reset_envs", "Ride", "ride_updates", "run_updates", "save_checkpoint", "save_policy", "train", "update",
     "update_stats",
-    "validate_config",
+    "validate_config", "PerceptiveTwin", "perceptive_twin", "scan_statistics", "widen_inputs",
 ]

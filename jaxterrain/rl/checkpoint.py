@@ -38,10 +38,15 @@ POLICY_FORMAT = "jaxterrain.rl.policy/1"
 BASE_POLICY_DIR = Path(__file__).resolve().parent.parent / "assets" / "base_policy"
 
 
-def base_policy_dir(robot: str = "humanoid") -> Path:
+def base_policy_dir(robot: str = "humanoid", observation: str = "blind") -> Path:
     """Where a robot's shipped base policy lives: :data:`BASE_POLICY_DIR` for the humanoid, ``assets/base_policy_<robot>/``
-    for another (``train-base-policy --robot NAME --export-assets`` writes it there; it may not exist)."""
-    return BASE_POLICY_DIR if robot == "humanoid" else BASE_POLICY_DIR.parent / f"base_policy_{robot}"
+    for another (``train-base-policy --robot NAME --export-assets`` writes it there; it may not exist).
+    ``observation="perceptive"``: its perceptive twin, ``assets/base_policy_perceptive/`` (the humanoid's) or
+    ``assets/base_policy_<robot>_perceptive/`` (``python -m experiments perceptive-policy`` writes it)."""
+    if observation not in ("blind", "perceptive"):
+        raise ValueError(f"observation must be one of blind, perceptive, got {observation!r}")
+    name = "base_policy" if robot == "humanoid" else f"base_policy_{robot}"
+    return BASE_POLICY_DIR.parent / (name if observation == "blind" else f"{name}_perceptive")
 # leaves added to TrainState since checkpoints were first written (read as the template's value when absent)
 LEGACY_DEFAULTS = (".episode.progress",)
 

@@ -22,8 +22,9 @@ Per-env terrains as tiles of one heightfield (needed by the MuJoCo Warp backend,
 
 from jaxterrain.walker import robots
 from jaxterrain.walker.robots import RobotSpec, register_robot
-from jaxterrain.walker.env import (BACKENDS, WalkerConfig, WalkerEnv, WalkerState, flat_terrain, min_terrain_side,
-                                   resolve_config, sample_heights)
+from jaxterrain.walker.env import (BACKENDS, OBSERVATIONS, SCAN_FIELDS, WalkerConfig, WalkerEnv, WalkerState,
+                                   flat_terrain, min_terrain_side, observation_fields, observation_label,
+                                   resolve_config, sample_heights, with_observation)
 from jaxterrain.walker.model import (
     NAMED_SOLVERS,
     SOLVER_FAST,
@@ -62,6 +63,11 @@ __all__ = [
     "job_queue",
     "smoothness_priority",
     "BACKENDS",
+    "OBSERVATIONS",
+    "SCAN_FIELDS",
+    "observation_fields",
+    "observation_label",
+    "with_observation",
     "TILE_AXES",
     "Tile",
     "TileBank",

@@ -91,10 +91,17 @@ from jaxterrain.walker.model import (
 from jaxterrain.walker.robots import ROBOT_FIELDS, get as get_robot
 from jaxterrain.walker.tiles import Tile, TileBank
 
-__all__ = ["BACKENDS", "PARK_HEIGHT", "WalkerConfig", "WalkerState", "resolve_config", "min_terrain_side",
+__all__ = ["BACKENDS", "OBSERVATIONS", "SCAN_FIELDS", "PARK_HEIGHT", "WalkerConfig", "with_observation",
+           "observation_fields", "observation_label", "WalkerState", "resolve_config", "min_terrain_side",
            "sample_heights", "WalkerEnv", "flat_terrain"]
 
 BACKENDS = ("jax", "warp")
+OBSERVATIONS = ("blind", "perceptive")
+"""The observation sets: ``blind`` (torso height, orientation, joint angles and velocities: the paper's) and
+``perceptive`` (the same, then a height scan: terrain heights minus torso z on a grid in the heading frame)."""
+SCAN_FIELDS = ("observation", "scan_x", "scan_y", "scan_points")
+"""The :class:`WalkerConfig` fields that define what a policy observes: a policy walks only an env with the same
+values (:func:`observation_fields`); ``scan_noise`` changes the values, not their meaning, and may differ."""
 PARK_HEIGHT = 100.0  # m above the terrain's top where WalkerEnv.park puts walkers whose outcome is recorded
 # MuJoCo Warp overflow bits (mujoco_warp OverflowType) that mean dropped contacts or constraints: the step is invalid.
 _WARP_DROPPED = (1 << 0) | (1 << 1) | (1 << 2) | (1 << 3)  # NEFC, NJMAX_NNZ, BROADPHASE, NARROWPHASE
@@ -127,11 +134,12 @@ class WalkerConfig(NamedTuple):
     forward_reward_weight: Optional[float] = None  # humanoid: 1.25
     healthy_reward: Optional[float] = None  # humanoid: 5.0
     ctrl_cost_weight: Optional[float] = None  # humanoid: 0.1
-    # optional height scan (off for the paper's protocol)
-    height_scan: bool = False
-    scan_x: tuple[float, float] = (0.0, 1.4)  # ahead of the torso, heading frame
-    scan_y: tuple[float, float] = (-0.4, 0.4)  # lateral, heading frame
-    scan_points: tuple[int, int] = (8, 5)  # (along x, along y)
+    # the observation set (OBSERVATIONS): "blind" (the paper's) or "perceptive" (+ a height scan on the grid below)
+    observation: str = "blind"
+    scan_x: Optional[tuple[float, float]] = None  # m along the heading, torso at 0 (humanoid: -0.4, 1.2)
+    scan_y: Optional[tuple[float, float]] = None  # m to the left of the heading (humanoid: -0.4, 0.4)
+    scan_points: Optional[tuple[int, int]] = None  # grid points (along x, along y) (humanoid: 17, 9: 0.1 m apart)
+    scan_noise: float = 0.0  # m: std of Gaussian noise on every scanned height (0: exact heights)
     # physics backend and terrain layout (see the module docstring)
     backend: str = "jax"  # "jax" (MJX-JAX) | "warp" (MJX-Warp, needs tiles >= 1 and warp-lang + mujoco-warp)
     tiles: int = 0  # 0: terrain = one [H, W] array per env; T >= 1: terrain = a Tile of a bank of T tiles
@@ -176,6 +184,53 @@ def resolve_config(config: WalkerConfig) -> WalkerConfig:
     config = config._replace(**{f: robot.default(f) for f in ROBOT_FIELDS if getattr(config, f) is None})
     _check_config(config)
     return config
+
+
+def with_observation(config: WalkerConfig, observation: str) -> WalkerConfig:
+    """``config`` with the observation set ``observation`` (one of :data:`OBSERVATIONS`); the scan grid stays as
+    set (None: the robot's default, :func:`resolve_config`). ``ValueError`` naming ``observation`` otherwise."""
+    if not isinstance(observation, str) or observation not in OBSERVATIONS:
+        raise ValueError(f"observation must be one of {', '.join(OBSERVATIONS)}, got {observation!r}")
+    return config._replace(observation=observation)
+
+
+def observation_fields(config) -> dict:
+    """What a walker observes, as ``{field: value}`` of :data:`SCAN_FIELDS`, from a
+    :class:`WalkerConfig` or a policy's recorded ``walker_config`` (a JSON dict). Blind sets carry no scan fields
+    (the grid means nothing to them); perceptive ones the resolved grid as tuples. A dict without ``observation``
+    (every policy saved before observation sets) is blind unless it says ``height_scan: true`` (the field's old
+    name). Compare two with ``==``: a policy walks only an env of the same fields (the noise may differ)."""
+    if isinstance(config, WalkerConfig):
+        c = resolve_config(config)
+        get = lambda f: getattr(c, f)  # noqa: E731
+        robot_name = c.robot
+    elif isinstance(config, dict):
+        robot_name = config.get("robot") or "humanoid"
+        get = config.get
+    else:
+        raise ValueError(f"config must be a walker.WalkerConfig or a walker_config dict; got {type(config).__name__}")
+    observation = get("observation")
+    if isinstance(config, dict) and observation is None:
+        observation = "perceptive" if get("height_scan") else "blind"
+    if observation not in OBSERVATIONS:
+        raise ValueError(f"walker_config.observation must be one of {', '.join(OBSERVATIONS)}, got {observation!r}")
+    if observation == "blind":
+        return {"observation": "blind"}
+    robot = get_robot(robot_name)
+    out = {"observation": observation}
+    for f in ("scan_x", "scan_y", "scan_points"):
+        v = get(f)
+        out[f] = tuple(robot.default(f) if v is None else v)
+    return out
+
+
+def observation_label(fields: dict) -> str:
+    """One line for :func:`observation_fields`' dict: ``blind`` or ``perceptive (17 x 9 heights, x -0.4..1.2 m,
+    y -0.4..0.4 m)``."""
+    if fields.get("observation") != "perceptive":
+        return str(fields.get("observation"))
+    (x0, x1), (y0, y1), (nx, ny) = fields["scan_x"], fields["scan_y"], fields["scan_points"]
+    return f"perceptive ({nx} x {ny} heights, x {x0:g}..{x1:g} m, y {y0:g}..{y1:g} m)"
 
 
 def min_terrain_side(config: WalkerConfig = WalkerConfig()) -> int:
@@ -243,14 +298,16 @@ def _check_config(c: WalkerConfig) -> None:
     for name in ("joint_noise", "qvel_noise"):
         _real(name, getattr(c, name), 0.0)
     _real("start_spread (metres)", c.start_spread, 0.0)
-    if not isinstance(c.height_scan, (bool, np.bool_)):
-        raise ValueError(f"height_scan must be True or False, got {c.height_scan!r}")
+    if not isinstance(c.observation, str) or c.observation not in OBSERVATIONS:
+        raise ValueError(f"observation must be one of {', '.join(OBSERVATIONS)}, got {c.observation!r}")
     for name in ("scan_x", "scan_y"):
-        for v in _pair(name, getattr(c, name)):
-            _real(name, v)
+        lo, hi = _pair(name, getattr(c, name))
+        if not _real(name, lo) <= _real(name, hi):
+            raise ValueError(f"{name} must be (low, high) metres with low <= high, got {getattr(c, name)}")
     points = _pair("scan_points", c.scan_points)
     if not all(isinstance(p, (int, np.integer)) and not isinstance(p, bool) for p in points) or min(points) < 1:
         raise ValueError(f"scan_points must be >= 1 each, got {c.scan_points}")
+    _real("scan_noise (metres)", c.scan_noise, 0.0)
     if c.backend not in BACKENDS:
         raise ValueError(f"backend must be one of {BACKENDS}, got {c.backend!r}")
     _int("tiles", c.tiles, 0)
@@ -286,6 +343,16 @@ def sample_heights(terrain: jax.Array, x: jax.Array, y: jax.Array, radius_x: flo
     return (1 - fv) * top + fv * bot
 
 
+def _state_key(data) -> jax.Array:
+    """A PRNG key that is a hash of the physics state (``qpos``, ``qvel``, ``time``): the scan noise's."""
+    bits = jax.lax.bitcast_convert_type(jnp.concatenate([data.qpos, data.qvel, jnp.reshape(data.time, (1,))])
+                                        .astype(jnp.float32), jnp.uint32)
+    mult = (jnp.arange(bits.shape[0], dtype=jnp.uint32) * jnp.uint32(2654435761)) | jnp.uint32(1)
+    h = jnp.sum(bits * mult, dtype=jnp.uint32) ^ jnp.sum((bits >> 16) * (mult + jnp.uint32(0x9E3779B9)),
+                                                         dtype=jnp.uint32)
+    return jax.random.fold_in(jax.random.PRNGKey(0x5CA7), h)
+
+
 def _yaw(quat: jax.Array) -> jax.Array:
     w, x, y, z = quat[0], quat[1], quat[2], quat[3]
     return jnp.arctan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z))
@@ -300,7 +367,8 @@ class WalkerEnv:
     ``observation_size``, ``action_size`` (the robot's actuators: humanoid 17, ant 8; actions in [-1, 1]), ``robot``
     (its :class:`~jaxterrain.walker.robots.RobotSpec`).
     Observation: [torso height above terrain (1), torso quaternion (4), J joint angles, 6 + J qvel] (humanoid: J = 17)
-    (+ ``scan_points[0] * scan_points[1]`` terrain heights minus torso z when ``config.height_scan``).
+    (+ ``scan_points[0] * scan_points[1]`` terrain heights minus torso z, x-major, for
+    ``config.observation == "perceptive"``: :meth:`WalkerEnv._obs`).
     """
 
     def __init__(self, config: WalkerConfig = WalkerConfig()):
@@ -362,7 +430,7 @@ class WalkerEnv:
         self._foot_radius = np.asarray(m.geom_size[self._feet, 0], np.float32)
         self.action_size = int(m.nu)
         self.observation_size = 1 + 4 + (m.nq - 7) + m.nv
-        if config.height_scan:
+        if config.observation == "perceptive":
             self.observation_size += int(config.scan_points[0] * config.scan_points[1])
         # spawn patch: 0.5 m x 0.5 m around the start point
         px, py = np.meshgrid(np.linspace(-0.25, 0.25, 5), np.linspace(-0.25, 0.25, 5))
@@ -602,17 +670,29 @@ class WalkerEnv:
 
     # ----------------------------------------------------------------------------------------------------------
     def _obs(self, data: mjx.Data, terrain) -> jax.Array:
+        """The observation ``[O]`` of physics state ``data`` on ``terrain`` (one code path for MJX-JAX and MuJoCo
+        Warp, classic and tiled: heights come from :meth:`_surface`, tile-local).
+
+        Perceptive: the scan grid (``scan_x`` x ``scan_y``, ``scan_points``; x-major, x along the heading) is rotated
+        by the torso's yaw (the heading frame: roll and pitch are ignored, so the grid stays level) about the torso's
+        ground point; each entry is the terrain height there minus the torso's z, plus, when ``scan_noise > 0``,
+        Gaussian noise of that std. The noise key is a hash of the physics state (``qpos``, ``qvel``, time): the
+        observation stays a pure function of the state (same state, same observation; no key in the state), and
+        differs between envs and steps."""
         heights, (ox, oy) = self._surface(terrain)
         qpos, qvel = data.qpos, data.qvel
         x, y = qpos[0] - ox, qpos[1] - oy
         z = qpos[2] - heights(x, y)
         parts = [z[None], qpos[3:], qvel]
-        if self.config.height_scan:
+        if self.config.observation == "perceptive":
             yaw = _yaw(qpos[3:7])
             cy, sy = jnp.cos(yaw), jnp.sin(yaw)
             px = x + cy * self._scan[0] - sy * self._scan[1]
             py = y + sy * self._scan[0] + cy * self._scan[1]
-            parts.append(heights(px, py) - qpos[2])
+            scan = heights(px, py) - qpos[2]
+            if self.config.scan_noise > 0:
+                scan = scan + self.config.scan_noise * jax.random.normal(_state_key(data), scan.shape, scan.dtype)
+            parts.append(scan)
         obs = jnp.concatenate(parts).astype(jnp.float32)
         return jnp.clip(jnp.nan_to_num(obs, nan=0.0, posinf=1e4, neginf=-1e4), -1e4, 1e4)
 

@@ -24,11 +24,14 @@ import importlib.util
 from pathlib import Path
 from typing import Callable, NamedTuple, Optional
 
-__all__ = ["RobotSpec", "HUMANOID", "ANT", "ROBOT_FIELDS", "register_robot", "get", "names", "brax_asset"]
+__all__ = ["RobotSpec", "HUMANOID", "ANT", "ROBOT_FIELDS", "SCAN_DEFAULTS", "register_robot", "get", "names", "brax_asset"]
 
 ROBOT_FIELDS = ("start_margin", "goal_margin", "side_margin", "healthy_z_range", "forward_reward_weight", "healthy_reward", "ctrl_cost_weight", "joint_noise",
-                "qvel_noise", "warp_contacts", "warp_njmax")
+                "qvel_noise", "warp_contacts", "warp_njmax", "scan_x", "scan_y", "scan_points")
 """The :class:`~jaxterrain.walker.WalkerConfig` fields whose default (None) is the robot's (``RobotSpec.defaults``)."""
+SCAN_DEFAULTS = (("scan_x", (-0.4, 1.2)), ("scan_y", (-0.4, 0.4)), ("scan_points", (17, 9)))
+"""The height scan's grid for a spec whose ``defaults`` leave it out (specs written before observation sets): the
+humanoid's, 1.6 m x 0.8 m from 0.4 m behind the torso to 1.2 m ahead, 0.1 m apart."""
 
 
 class RobotSpec(NamedTuple):
@@ -51,8 +54,9 @@ class RobotSpec(NamedTuple):
     description: str = ""
 
     def default(self, field: str):
-        """The robot's default of a :data:`ROBOT_FIELDS` field."""
-        return dict(self.defaults)[field]
+        """The robot's default of a :data:`ROBOT_FIELDS` field (the scan grid's: :data:`SCAN_DEFAULTS` where the
+        spec leaves it out)."""
+        return {**dict(SCAN_DEFAULTS), **dict(self.defaults)}[field]
 
 
 def brax_asset(filename: str) -> Callable[[], str]:
@@ -74,7 +78,9 @@ HUMANOID = RobotSpec(
     defaults=(("start_margin", 0.5), ("goal_margin", 0.5), ("side_margin", 0.3), ("healthy_z_range", (1.0, 2.0)), ("forward_reward_weight", 1.25), ("healthy_reward", 5.0),
               ("ctrl_cost_weight", 0.1), ("joint_noise", 0.1), ("qvel_noise", 0.1),
               # 2 feet x up to 4 hfield contacts; 8 contacts x 4 rows + 17 joint limits = 49 rows at most
-              ("warp_contacts", 8), ("warp_njmax", 64)),
+              ("warp_contacts", 8), ("warp_njmax", 64),
+              # height scan (observation="perceptive"): 1.6 m x 0.8 m, 0.4 m behind to 1.2 m ahead, 0.1 m apart
+              ("scan_x", (-0.4, 1.2)), ("scan_y", (-0.4, 0.4)), ("scan_points", (17, 9))),
     description="brax's humanoid (17 hinge joints, 2 sphere feet): the paper's walker")
 
 ANT = RobotSpec(
@@ -88,7 +94,9 @@ ANT = RobotSpec(
     defaults=(("start_margin", 1.0), ("goal_margin", 1.3), ("side_margin", 1.3), ("healthy_z_range", (0.2, 1.0)), ("forward_reward_weight", 1.0), ("healthy_reward", 1.0),
               ("ctrl_cost_weight", 0.5), ("joint_noise", 0.1), ("qvel_noise", 0.1),
               # 4 feet x up to 4 hfield contacts; 16 contacts x 4 rows + 8 joint limits = 72 rows at most
-              ("warp_contacts", 16), ("warp_njmax", 96)),
+              ("warp_contacts", 16), ("warp_njmax", 96),
+              # height scan: 2.4 m x 1.6 m, 0.15 / 0.16 m apart: the feet reach 1.2 m from the torso; 0.8 m behind it
+              ("scan_x", (-0.8, 1.6)), ("scan_y", (-0.8, 0.8)), ("scan_points", (17, 11))),
     description="brax's ant (8 hinge joints, 4 sphere feet): a quadruped; brax's Ant reward weights")
 
 _REGISTRY: dict[str, RobotSpec] = {HUMANOID.name: HUMANOID, ANT.name: ANT}
@@ -103,7 +111,7 @@ def register_robot(spec: RobotSpec) -> None:
         raise ValueError(f"RobotSpec.name must be an identifier, got {spec.name!r}")
     if spec.name in _REGISTRY and _REGISTRY[spec.name] != spec:
         raise ValueError(f"a robot named {spec.name!r} is already registered")
-    missing = [f for f in ROBOT_FIELDS if f not in dict(spec.defaults)]
+    missing = [f for f in ROBOT_FIELDS if f not in dict(spec.defaults) and f not in dict(SCAN_DEFAULTS)]
     if missing:
         raise ValueError(f"RobotSpec {spec.name!r}: defaults lacks {', '.join(missing)}")
     if not spec.foot_geoms:

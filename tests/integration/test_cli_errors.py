@@ -170,6 +170,16 @@ CASES = [
     (["evolve", "--robot", "ant"], "--robot ant: only the walker fitness walks a robot (--fitness difficulty); this "
                                    "run's fitness is 'slope', which walks none"),
     (["evolve", "--robot", "humanoid", "--fitness", "slope"], "--robot humanoid: only the walker fitness walks a robot"),
+    # issue 64: observation sets
+    (["evolve", "--observation", "perceptive"], "--observation perceptive: only the walker fitness walks a policy"),
+    (["train-base-policy", "--scan-noise", "0.1"], "--scan-noise needs --observation perceptive"),
+    (["train-base-policy", "--observation", "perceptive", "--scan-noise", "-1"], "--scan-noise must be a finite "
+                                                                                "number >= 0"),
+    (["perceptive-policy"], "give --out FOLDER or --export-assets"),
+    (["perceptive-policy", "--out", "x", "--std-floor", "0"], "--std-floor must be a finite number > 0"),
+    (["perceptive-policy", "--out", "x", "--robot", "dog"], "--robot: robot must be one of humanoid, ant, got 'dog'"),
+    (["perceptive-policy", "--out", "x", "--from", str(ROOT / "jaxterrain" / "assets" / "base_policy_perceptive")],
+     "the policy is already perceptive"),
 ]
 
 

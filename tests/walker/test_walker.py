@@ -225,20 +225,73 @@ def test_config_validation():
 
 
 def test_height_scan_observation(settled):
-    """Optional height scan: terrain heights on a grid ahead of the torso (heading frame), minus torso z."""
+    """Perceptive: terrain heights on a grid around and ahead of the torso (heading frame), minus torso z, after the
+    blind observation, which is unchanged."""
     terrains, _, state = settled
-    env_scan = WalkerEnv(CFG._replace(height_scan=True))
-    nx, ny = CFG.scan_points
+    env_scan = WalkerEnv(CFG._replace(observation="perceptive"))
+    nx, ny = env_scan.config.scan_points
+    assert (nx, ny) == (17, 9) and env_scan.config.scan_x == (-0.4, 1.2)  # the humanoid's default grid
     assert env_scan.observation_size == 45 + nx * ny
     data = jax.tree.map(lambda a: a[2], state.data)  # the step terrain: 0.10 m up to x = -1.7 m, 0.45 m from -1.5 m
     obs = np.asarray(jax.jit(env_scan._obs)(data, terrains[2]))  # one compile, not one per operation
     assert obs.shape == (env_scan.observation_size,)
     z = float(data.qpos[2])
-    scan = obs[45:].reshape(nx, ny)  # [along x, along y]; x from 0 to 1.4 m ahead of x ~ -2.6 m
+    scan = obs[45:].reshape(nx, ny)  # [along x, along y]; x from 0.4 m behind to 1.2 m ahead of x ~ -2.6 m
     np.testing.assert_allclose(scan[0], 0.10 - z, atol=1e-3)
     np.testing.assert_allclose(scan[-1], 0.45 - z, atol=1e-3)
     assert np.all(np.diff(scan[:, ny // 2]) >= -1e-6)  # the step rises ahead
     np.testing.assert_allclose(obs[:45], np.asarray(state.obs[2]), atol=1e-6)
+
+
+def test_height_scan_turns_with_the_heading_noise_is_a_pure_function_of_the_state_and_tiles_agree(settled):
+    """The grid turns with the torso's yaw (a walker facing +y sees the step to its right); scan noise has the
+    std asked for, is the same for the same state and differs between states, and leaves the blind part alone; a
+    tiled env's perceptive observation on tile i is the classic one on that terrain (the warp backend shares this
+    ``_obs``)."""
+    terrains, _, state = settled
+    env_scan = WalkerEnv(CFG._replace(observation="perceptive"))
+    nx, ny = env_scan.config.scan_points
+    data = jax.tree.map(lambda a: a[2], state.data)
+    obs_fn = jax.jit(env_scan._obs)
+    turned = data.replace(qpos=data.qpos.at[3:7].set(jnp.array([np.cos(np.pi / 4), 0, 0, np.sin(np.pi / 4)])))
+    scan = np.asarray(obs_fn(turned, terrains[2]))[45:].reshape(nx, ny)  # x ahead = world +y: constant in x
+    z = float(data.qpos[2])
+    np.testing.assert_allclose(scan, np.broadcast_to(scan[:1], scan.shape), atol=1e-5)
+    np.testing.assert_allclose(scan[0, 0], 0.10 - z, atol=1e-3)  # scan y = -0.4 (right of +y) is world x + 0.4: low
+
+    noisy_env = WalkerEnv(CFG._replace(observation="perceptive", scan_noise=0.05))
+    noisy = jax.jit(jax.vmap(noisy_env._obs, in_axes=(0, 0)))
+    clean = np.asarray(jax.vmap(obs_fn)(state.data, terrains))
+    a, b = np.asarray(noisy(state.data, terrains)), np.asarray(noisy(state.data, terrains))
+    np.testing.assert_array_equal(a, b)  # a pure function of the state
+    np.testing.assert_allclose(a[:, :45], clean[:, :45], atol=0)
+    err = a[:, 45:] - clean[:, 45:]
+    assert 0.035 < err.std() < 0.065 and abs(err.mean()) < 0.015  # 3 x 153 draws of N(0, 0.05)
+    assert not np.allclose(err[0], err[1])  # another state, other noise
+
+    tiled = WalkerEnv(CFG._replace(observation="perceptive", tiles=3))
+    bank = tiled.make_bank(terrains)
+    for i in (0, 2):
+        x0, y0 = tiled.tile_origin(i)
+        d = jax.tree.map(lambda v: v[i], state.data)
+        moved = d.replace(qpos=d.qpos.at[0].add(x0).at[1].add(y0))
+        np.testing.assert_allclose(np.asarray(jax.jit(tiled._obs)(moved, bank.at(i))), clean[i], atol=2e-5)
+
+
+def test_observation_fields_and_old_records():
+    """What a walker observes, from a config or a policy's recorded walker_config: blind carries no grid, a record
+    without the field is blind (or perceptive where it said height_scan: true), the robot's grid fills in."""
+    from jaxterrain.walker import observation_fields, observation_label, with_observation
+
+    assert observation_fields(CFG) == {"observation": "blind"}
+    seeing = observation_fields(with_observation(CFG, "perceptive"))
+    assert seeing == {"observation": "perceptive", "scan_x": (-0.4, 1.2), "scan_y": (-0.4, 0.4), "scan_points": (17, 9)}
+    assert observation_fields({"height_scan": False, "scan_x": [0.0, 1.4]}) == {"observation": "blind"}
+    assert observation_fields({"observation": "perceptive", "scan_points": [17, 9]}) == seeing
+    assert observation_fields({"height_scan": True, "robot": "ant"})["scan_points"] == (17, 11)
+    assert observation_label(seeing) == "perceptive (17 x 9 heights, x -0.4..1.2 m, y -0.4..0.4 m)"
+    with pytest.raises(ValueError, match="^observation must be one of blind, perceptive"):
+        with_observation(CFG, "sighted")
 
 
 def test_start_spread(fns):

@@ -1,0 +1,74 @@
+"""Perceptive walkers: the twin of a blind policy computes the blind policy's actions exactly (no physics here: the
+networks alone), an env of another observation set is refused in one line naming both, and the shipped perceptive
+base policies record their set and walk in the env that follows them."""
+
+from __future__ import annotations
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+from jaxterrain import difficulty, rl
+from jaxterrain.rl import networks as nets
+from jaxterrain.walker import TerrainScale, WalkerConfig
+
+
+def test_widened_networks_give_the_blind_actions_and_values_whatever_the_scan():
+    base = rl.load_policy()
+    extra = 153
+    mean = np.linspace(-1.5, -1.0, extra).astype(np.float32)
+    params, stats = rl.widen_inputs(base.params, base.normaliser, extra, mean, np.full(extra, 0.01, np.float32))
+    obs = jax.random.normal(jax.random.PRNGKey(0), (64, base.observation_size)) * 2.0
+    scan = jax.random.uniform(jax.random.PRNGKey(1), (64, extra), minval=-3.0, maxval=1.0)  # any terrain at all
+    wide = jnp.concatenate([obs, scan], axis=1)
+    a_blind = nets.deterministic_action(base.config, base.action_size, base.params, base.normaliser, obs)
+    a_wide = nets.deterministic_action(base.config, base.action_size, params, stats, wide)
+    np.testing.assert_allclose(np.asarray(a_wide), np.asarray(a_blind), atol=1e-6)
+    v_blind = nets.value_net(base.config).apply(base.params["value"], nets.normalize(base.normaliser, obs))
+    v_wide = nets.value_net(base.config).apply(params["value"], nets.normalize(stats, wide))
+    np.testing.assert_allclose(np.asarray(v_wide), np.asarray(v_blind), rtol=1e-5, atol=1e-4)
+    assert float(stats.count) == float(base.normaliser.count)
+    np.testing.assert_allclose(np.asarray(nets.stats_std(stats))[-extra:], 0.1, rtol=1e-4)
+    np.testing.assert_allclose(np.asarray(stats.mean)[-extra:], mean)
+    with pytest.raises(ValueError, match="^mean and var must have shape"):
+        rl.widen_inputs(base.params, base.normaliser, extra, mean[:3], mean[:3])
+    with pytest.raises(ValueError, match="var finite and > 0"):
+        rl.widen_inputs(base.params, base.normaliser, 2, [0.0, 0.0], [1.0, 0.0])
+
+
+@pytest.mark.parametrize("robot", ["humanoid", "ant"])
+def test_the_shipped_perceptive_base_policy_is_its_blind_twin(robot):
+    blind = difficulty.robot_base_policy(robot)
+    seeing = difficulty.robot_base_policy(robot, "perceptive")
+    fields = difficulty.policy_observation(seeing)
+    assert fields["observation"] == "perceptive" and difficulty.policy_observation(blind) == {"observation": "blind"}
+    cfg = difficulty.default_env_config((96, 96), TerrainScale(), seeing)
+    assert cfg.observation == "perceptive" and cfg.robot == robot and cfg.solver == difficulty.policy_solver(blind)
+    n = seeing.observation_size - blind.observation_size
+    assert n == fields["scan_points"][0] * fields["scan_points"][1]
+    obs = jax.random.normal(jax.random.PRNGKey(2), (32, seeing.observation_size))
+    np.testing.assert_allclose(np.asarray(seeing(obs)), np.asarray(blind(obs[:, :blind.observation_size])),
+                               atol=1e-6)
+    surgery = seeing.meta["surgery"]
+    assert surgery["samples"] > 1000 and min(surgery["scan_std"]) >= surgery["std_floor"] - 1e-6
+
+
+def test_an_env_of_another_observation_set_is_refused_in_one_line():
+    blind = rl.load_policy()
+    seeing_cfg = difficulty.default_env_config((48, 48), TerrainScale(), blind)._replace(observation="perceptive")
+    with pytest.raises(ValueError) as err:
+        difficulty.evaluate(jnp.zeros((1, 48, 48)), jax.random.PRNGKey(0), attempts=1, best=1, policy=blind,
+                            env_config=seeing_cfg)
+    msg = str(err.value)
+    assert "\n" not in msg and msg.startswith("observation mismatch: the policy")
+    assert "observes blind, the env perceptive (17 x 9 heights, x -0.4..1.2 m, y -0.4..0.4 m)" in msg
+    seeing = difficulty.robot_base_policy("humanoid", "perceptive")
+    other_grid = seeing_cfg._replace(scan_points=(9, 5))
+    with pytest.raises(ValueError, match=r"observes perceptive \(17 x 9 .*the env perceptive \(9 x 5"):
+        difficulty.check_observation(seeing, other_grid)
+    difficulty.check_observation(seeing, seeing_cfg._replace(scan_noise=0.05))  # noise is not the set
+    difficulty.check_observation(lambda obs: obs, seeing_cfg)  # a bare callable records nothing: sizes decide
+    with pytest.raises(ValueError, match="^observation must be one of blind, perceptive"):
+        difficulty.fitness_fn(48, observation="sighted")
+    assert isinstance(WalkerConfig().observation, str)
