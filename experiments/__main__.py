@@ -35,6 +35,7 @@ COMMANDS = {
     "generalise": ("experiments.generalise", "Experiment 3: treatments' walkers on the held-out suite, rliable intervals"),
     "report": ("experiments.report", "one self-contained HTML page (and Markdown) of run folders, with walker videos"),
     "export": ("experiments.export", "terrains of an archive as OBJ / STL meshes, PNG, .npy or MJCF"),
+    "export-policy": ("experiments.export_policy", "a walker as one ONNX file: normaliser and network, with its metadata"),
 }
 
 

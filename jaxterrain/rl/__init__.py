@@ -8,6 +8,7 @@ humanoid recipe). Public API::
     raw_key, Progress,
     gae, ppo_loss, save_checkpoint, load_checkpoint, save_policy, load_policy,
     widen_inputs, scan_statistics, perceptive_twin   (a blind policy's perceptive twin: jaxterrain.rl.perception)
+    export_onnx, onnx_metadata, read_onnx_metadata   (jaxterrain.rl.onnx; needs the extra jaxterrain[onnx])
 """
 
 from jaxterrain.rl.checkpoint import (
@@ -23,6 +24,7 @@ from jaxterrain.rl.checkpoint import (
 from jaxterrain.rl.config import PPOConfig, validate_config
 from jaxterrain.rl.losses import gae, ppo_loss
 from jaxterrain.rl.perception import PerceptiveTwin, perceptive_twin, scan_statistics, widen_inputs
+from jaxterrain.rl.onnx import export_onnx, onnx_metadata, read_onnx_metadata
 from jaxterrain.rl.networks import RunningStats, deterministic_action, init_stats, normalize, update_stats
 from jaxterrain.rl.ppo import (
     init,
@@ -39,9 +41,10 @@ from jaxterrain.rl.training import Progress, chunk_fn, compiled_chunk, train
 
 __all__ = [
     "BASE_POLICY_DIR", "base_policy_dir", "EpisodeStats", "PPOConfig", "Progress", "RunningStats", "TrainState", "Transition",
-    "checkpoint_metadata", "chunk_fn", "compiled_chunk", "deterministic_action", "gae", "init", "init_stats",
+    "checkpoint_metadata", "chunk_fn", "compiled_chunk", "deterministic_action", "export_onnx", "gae", "init",
+    "init_stats",
     "load_checkpoint", "load_policy", "loss_fn", "make_optimizer", "make_train", "normalize", "policy_fn", "ppo_loss",
-    "raw_key", "reset_envs", "Ride", "ride_updates", "run_updates", "save_checkpoint", "save_policy", "train", "update",
+    "onnx_metadata", "raw_key", "read_onnx_metadata", "reset_envs", "Ride", "ride_updates", "run_updates", "save_checkpoint", "save_policy", "train", "update",
     "update_stats",
     "validate_config", "PerceptiveTwin", "perceptive_twin", "scan_statistics", "widen_inputs",
 ]
