@@ -29,6 +29,7 @@ import numpy as np
 from jaxterrain import qd as A
 from jaxterrain.report import archives as AV
 from jaxterrain.report import collect
+from jaxterrain.report.compare import VIDEO_COLUMNS
 from jaxterrain.report import render as R
 from jaxterrain.report.heatmap import SCRIPT, CMAP, archive_html  # noqa: F401
 
@@ -282,7 +283,8 @@ def _run_section(h: list[str], md: list[str], r: int, run, views: dict, walks_at
                  f"{html_table(rows)}</details>")
         md += ["### Configuration (config.json)", "", md_table(rows)]
     _tables(h, md, run)
-    _figures(h, md, run, assets, prefix)
+    shown = _evaluation_videos(h, md, run, assets, prefix)
+    _figures(h, md, run, assets, prefix, skip=shown)
     if run.archives:
         h.append("<h3>Archives</h3>")
         md += ["### Archives", ""]
@@ -321,12 +323,53 @@ def _tables(h: list[str], md: list[str], run) -> None:
             md.append(f"cannot read {rel}: {err}\n")
 
 
-def _figures(h: list[str], md: list[str], run, assets: _Assets, prefix: str) -> None:
-    """Every figure of the run, embedded in the page and copied for the Markdown twin."""
-    if run.figures:
+def _evaluation_videos(h: list[str], md: list[str], run, assets: _Assets, prefix: str) -> set:
+    """The videos of an evaluation (``evaluate --videos``: a ``videos.csv`` beside ``<walker>/<family>_L<level>.gif``,
+    :func:`jaxterrain.report.compare.write_videos`), each with its terrain and both policies' fitness; returns the
+    GIFs shown, which the figures then leave out."""
+    shown: set = set()
+    for table in run.tables:
+        if table.name != "videos.csv":
+            continue
+        try:
+            with open(table, newline="") as fh:
+                reader = csv.DictReader(fh)
+                rows = list(reader) if set(VIDEO_COLUMNS) <= set(reader.fieldnames or []) else []
+        except (OSError, csv.Error, UnicodeDecodeError):
+            continue
+        rows = [r for r in rows if (table.parent / r["file"]).is_file()]
+        if not rows:
+            continue
+        rel = run.rel(table.parent)
+        h.append(f"<h3>Videos ({escape(rel)})</h3><p>Each walker beside the base policy on one terrain: one walk "
+                 "along +x from the same start, recorded from the physics the evaluation used and replayed by "
+                 "MuJoCo's renderer; the fitness is the level's mean under the evaluation's protocol.</p>"
+                 "<div class=videos>")
+        md += [f"### Videos ({rel})", "", "Each walker beside the base policy on one terrain: one walk along +x from "
+               "the same start; the fitness is the level's mean under the evaluation's protocol.", ""]
+        for r in rows:
+            gif = table.parent / r["file"]
+            shown.add(gif)
+            unit = "" if r["unit"] in ("", "-") else f" ({r['value']} {r['unit']})"
+            cap = (f"{r['walker']} on {r['family']} level {r['level']}{unit}: level fitness {r['walker_level_fitness']}"
+                   f" vs the base policy's {r['base_level_fitness']}; this walk: {r['walker_walk']}"
+                   + (f" / {r['base_walk']}" if r["walker"] != "base" else ""))
+            data = gif.read_bytes()
+            h.append(f'<figure style="max-width:none"><img alt="{escape(r["file"])}" '
+                     f'src="{data_uri(data, "image/gif")}"><figcaption>{escape(cap)}</figcaption></figure>')
+            asset = assets.add(f"{prefix}_video_{r['file']}", data)
+            md += [f"![{r['file']}]({asset})", "", f"*{cap}*", ""]
+        h.append("</div>")
+    return shown
+
+
+def _figures(h: list[str], md: list[str], run, assets: _Assets, prefix: str, skip: set = frozenset()) -> None:
+    """Every figure of the run (but those in ``skip``), embedded in the page and copied for the Markdown twin."""
+    figures = [p for p in run.figures if p not in skip]
+    if figures:
         h.append("<h3>Figures</h3>")
         md += ["### Figures", ""]
-    for path in run.figures:
+    for path in figures:
         rel = run.rel(path)
         data = path.read_bytes()
         h.append(f'<figure><img alt="{escape(rel)}" src="{data_uri(data, MIME[path.suffix.lower()])}">'
