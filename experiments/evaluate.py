@@ -35,11 +35,12 @@ from experiments import common
 PRESETS: dict[str, dict] = common.with_preset_names({
     "gpu": dict(suite="v1", archive=None, policy=[], robot=None, size=None, seeds=None, samples=None, families=None,
                 generators=None, attempts=80, best=5, headings=4, backend="auto", slots=None, chunk=None, repeat=True,
-                videos=False, video_terrains=None, video_frames=75, video_width=320, video_height=240),
+                videos=False, video_terrains=None, video_frames=75, video_width=320, video_height=240,
+                video_starts=8),
     "smoke": dict(suite="v1", archive=None, policy=[], robot=None, size=128, seeds=1, samples=4, families=["flat", "stairs_up", "gaps"],
                   generators=["perlin"], attempts=2, best=1, headings=1, backend="jax", slots=None, chunk=None,
                   repeat=False, videos=False, video_terrains=None, video_frames=75, video_width=320,
-                  video_height=240),
+                  video_height=240, video_starts=8),
 }, {"gpu-short": "gpu", "paper": ("gpu", {"attempts": 20, "best": 5, "headings": 1})})
 BACKENDS = common.BACKEND_NAMES  # jaxterrain.walker.layout.BACKEND_CHOICES (literal: --help imports no JAX)
 
@@ -81,6 +82,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "default: per family the hardest level the walker passes and the first it fails")
     parser.add_argument("--video-frames", type=int, default=None,
                         help="frames per video, evenly spaced over the longer walk (played at 15 per second)")
+    parser.add_argument("--video-starts", type=int, default=None,
+                        help="reset poses each policy walks every video terrain from; the video shows the one the "
+                             "walker went farthest from, the base policy from the same one")
     parser.add_argument("--video-width", type=int, default=None, help="pixels of each panel's width")
     parser.add_argument("--video-height", type=int, default=None, help="pixels of each panel's height")
     parser.add_argument("--gl", choices=("osmesa", "egl", "glfw"), default=None,
@@ -93,7 +97,8 @@ def overrides(args) -> dict:
                 samples=args.samples, families=args.families, generators=args.generators, repeat=args.repeat,
                 backend=args.backend, slots=args.slots, chunk=args.chunk, videos=args.videos,
                 video_terrains=args.video_terrains, video_frames=args.video_frames, video_width=args.video_width,
-                video_height=args.video_height, **common.protocol_overrides(args))
+                video_height=args.video_height, video_starts=args.video_starts,
+                **common.protocol_overrides(args))
 
 
 def load_policies(paths, robot: str | None = None) -> list:
@@ -149,7 +154,7 @@ def check_video_flags(cfg: dict) -> list | None:
     from jaxterrain import suite
     from jaxterrain.report import compare
 
-    for key, low in (("video_frames", 1), ("video_width", 16), ("video_height", 16)):
+    for key, low in (("video_frames", 1), ("video_width", 16), ("video_height", 16), ("video_starts", 1)):
         v = cfg[key]
         if not isinstance(v, int) or isinstance(v, bool) or v < low or v > 4096:
             raise UsageError(f"--{key.replace('_', '-')} must be an integer in [{low}, 4096]; got {v!r}")
@@ -282,7 +287,8 @@ def main(args) -> int:
         made = compare.write_videos(folder / "videos", names, policies, s, fitness,
                                     jax.random.fold_in(jax.random.key(int(cfg["seed"])), 5),
                                     picks=check_video_flags(cfg), frames=int(cfg["video_frames"]),
-                                    width=int(cfg["video_width"]), height=int(cfg["video_height"]), backend=backend,
+                                    width=int(cfg["video_width"]), height=int(cfg["video_height"]),
+                                    starts=int(cfg["video_starts"]), backend=backend,
                                     progress=lambda line: print(f"evaluate: {line}", file=sys.stderr, flush=True))
         videos_s = round(time.perf_counter() - t3, 3)
         if isinstance(made, str):

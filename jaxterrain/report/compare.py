@@ -8,6 +8,7 @@ side, in step.
     rows = [compare.terrain_index(s.family, s.level, s.seed, fam, lv) for fam, lv in picks]
     walks = compare.record_pairs([walker, base], s.heightmaps[rows], jax.random.key(0), rows)
     gif = compare.pair_gif([walks[0][0], walks[1][0]], ["trial_0", "base"])          # bytes of an animated GIF
+    compare.write_videos("run/videos", names, policies, s, fitness, key)   # what `evaluate --videos` writes
 
 :func:`record_pairs` walks every policy on every terrain with :func:`jaxterrain.report.render.record_walks` (MJX,
 the env :func:`jaxterrain.difficulty.evaluate` walks, each policy with its own solver options, one walk along +x
@@ -16,6 +17,7 @@ same start pose, so what differs between the panels is the policy. :func:`pair_f
 :func:`jaxterrain.report.render.render_walk` at the same env steps (a walk that ended early holds its last state)
 and puts them side by side under a label bar (the policy, how its walk went, the time); :func:`pair_gif` encodes
 that as a GIF (Pillow). GIF only: no MP4 writer (imageio / ffmpeg / PyAV) is a dependency of the package.
+:func:`write_videos` does all of it for an evaluation (``python -m experiments evaluate --videos``).
 """
 
 from __future__ import annotations
@@ -170,9 +172,17 @@ def pair_frames(walks: Sequence[R.Walk], labels: Sequence[str], width: int = 320
 
 def pair_gif(walks: Sequence[R.Walk], labels: Sequence[str], width: int = 320, height: int = 240,
              frames: int = 75, fps: float = 15.0) -> bytes:
-    """An animated GIF of :func:`pair_frames` at ``fps`` (default 15: 75 frames play in 5 s; the time shown on
-    each frame is the walk's)."""
-    return R.gif_bytes(pair_frames(walks, labels, width, height, frames), fps=fps)
+    """An animated GIF of :func:`pair_frames` at ``fps``: at most ``frames`` frames (default 75 at 15 fps: a 15-s
+    walk plays in 5 s), and no more than one per ``1 / fps`` seconds of the longer walk (a short walk plays in real
+    time). The time shown on each frame is the walk's."""
+    return R.gif_bytes(pair_frames(walks, labels, width, height, pair_frame_count(walks, frames, fps)), fps=fps)
+
+
+def pair_frame_count(walks: Sequence[R.Walk], frames: int = 75, fps: float = 15.0) -> int:
+    """Frames :func:`pair_gif` draws: ``min(frames, 1 + ceil(seconds of the longer walk x fps))``."""
+    seconds = max(w.length for w in walks) * walks[0].dt
+    n = min(int(frames), 1 + int(np.ceil(seconds * float(fps) - 1e-9)))
+    return len(R.frame_indices(max(w.length for w in walks), max(n, 1)))
 
 
 def _slug(text: str) -> str:
@@ -180,36 +190,43 @@ def _slug(text: str) -> str:
 
 
 VIDEO_COLUMNS = ["walker", "policy", "family", "level", "seed", "value", "unit", "file", "walker_level_fitness",
-                 "base_level_fitness", "walker_walk", "base_walk", "frames", "fps"]
+                 "base_level_fitness", "walker_walk", "base_walk", "start", "starts", "walker_distances",
+                 "base_distances", "frames", "fps"]
 """The columns of ``videos.csv`` (:func:`write_videos`)."""
 
 
 def write_videos(folder, names: Sequence[str], policies: Sequence, s, fitness, key,
                  picks: Optional[Sequence[tuple[str, int]]] = None, frames: int = 75, width: int = 320,
-                 height: int = 240, fps: float = 15.0, steps: int = 1000, backend: str = "jax",
-                 progress: Callable[[str], None] = lambda line: None):
+                 height: int = 240, fps: float = 15.0, starts: int = 8, steps: int = 1000, backend: str = "jax",
+                 labels: Optional[Sequence[str]] = None, progress: Callable[[str], None] = lambda line: None):
     """Videos of an evaluation: each walker (``policies[1:]``) beside the base policy (``policies[0]``; alone when
     there is no walker) on each of its terrains, written atomically to ``folder/<walker>/<family>_L<level>.gif``
     with ``folder/videos.csv`` (:data:`VIDEO_COLUMNS`: the level's mean fitness of both from ``fitness`` and how
     each video's walks went).
 
     ``names`` [P] / ``policies`` [P] / ``fitness`` [P, N]: the evaluation's (``names[0]`` the base policy's);
-    ``s``: its :class:`jaxterrain.suite.Suite`; ``picks``: ``[(family, level)]`` for every walker (None: per walker
+    ``s``: its :class:`jaxterrain.suite.Suite`; ``labels`` [P]: the policies' names on the videos and their folders
+    (default :func:`jaxterrain.suite.short_names` of ``names``); ``picks``: ``[(family, level)]`` for every walker (None: per walker
     :func:`default_picks` of its fitness); each pick is its level's lowest seed (a pick the suite lacks is said
-    through ``progress`` and skipped). Every policy walks every picked terrain once (:func:`record_pairs`, one
-    compile per walker config; the terrain's reset key ``fold_in(key, its row in the suite)``) for up to ``steps``
-    env steps on ``backend``'s physics, then :func:`pair_gif` draws them.
+    through ``progress`` and skipped). Every policy walks every picked terrain from ``starts`` reset poses
+    (:func:`record_pairs`, one compile per walker config; start ``k`` of the terrain in row ``r`` of the suite has
+    the key ``fold_in(key, r * starts + k)`` for every policy) for up to ``steps`` env steps on ``backend``'s
+    physics; the video shows the start from which the walker went farthest (the first of equals), the base policy
+    from that same start beside it (as the fitness takes the best walks of each heading: the protocol's best 5 of
+    20), drawn by :func:`pair_gif`. ``videos.csv`` gives the start shown and every start's distance for both.
 
     Returns the ``videos.csv`` rows, or a string saying why nothing was made (no OpenGL backend for MuJoCo's
     renderer: :func:`jaxterrain.report.render.gl_status`); never raises for a GL failure.
     """
     folder = Path(folder)
+    if not isinstance(starts, int) or starts < 1:
+        raise ValueError(f"starts must be an integer >= 1; got {starts!r}")
     ok, why = R.gl_status()
     if not ok:
         return why
     fitness = np.asarray(fitness, np.float64)
     walkers = list(range(1, len(policies))) or [0]
-    labels = short_names(names)
+    labels = short_names(names) if labels is None else list(labels)
     wanted: dict[int, list[tuple[str, int, int]]] = {}
     for w in walkers:
         mine = list(picks) if picks is not None else default_picks(fitness[w], s.family, s.level)
@@ -226,25 +243,29 @@ def write_videos(folder, names: Sequence[str], policies: Sequence, s, fitness, k
         return []
     t0 = time.perf_counter()
     walking = sorted(set(walkers) | {0})
-    got = record_pairs([policies[p] for p in walking], s.heightmaps[rows], key, rows, steps=steps, scale=s.scale,
-                       backend=backend)
-    walks = {p: dict(zip(rows, got[i])) for i, p in enumerate(walking)}
-    progress(f"recorded {len(walking)} policies x {len(rows)} terrains in {time.perf_counter() - t0:.0f} s "
-             f"(compile included)")
+    ids = [r * starts + k for r in rows for k in range(starts)]
+    got = record_pairs([policies[p] for p in walking], s.heightmaps[np.repeat(rows, starts)], key, ids, steps=steps,
+                       scale=s.scale, backend=backend)
+    walks = {p: {r: got[i][j * starts:(j + 1) * starts] for j, r in enumerate(rows)} for i, p in enumerate(walking)}
+    progress(f"recorded {len(walking)} policies x {len(rows)} terrains x {starts} starts in "
+             f"{time.perf_counter() - t0:.0f} s (compile included)")
     per_level = {p: level_fitness(fitness[p], s) for p in walking}
     out = []
     for w in walkers:
         for fam, lv, row in wanted[w]:
             t1 = time.perf_counter()
-            pair = [walks[w][row]] + ([walks[0][row]] if w != 0 else [])
+            k = int(np.argmax([x.distance for x in walks[w][row]]))
+            pair = [walks[w][row][k]] + ([walks[0][row][k]] if w != 0 else [])
             tags = [labels[w]] + (["base policy"] if w != 0 else [])
             gif = pair_gif(pair, tags, width=width, height=height, frames=frames, fps=fps)
             rel = f"{_slug(labels[w])}/{_slug(fam)}_L{lv}.gif"
             atomic_write_bytes(folder / rel, gif)
-            n = len(R.frame_indices(max(p.length for p in pair), frames))
+            n = pair_frame_count(pair, frames, fps)
             out.append([labels[w], names[w], fam, lv, int(s.seed[row]), f"{float(s.value[row]):.4g}",
                         s.unit.get(fam, "-"), rel, f"{per_level[w][fam][lv]:.4f}", f"{per_level[0][fam][lv]:.4f}",
-                        outcome(walks[w][row]), outcome(walks[0][row]), n, f"{fps:g}"])
+                        outcome(pair[0]), outcome(walks[0][row][k]), k, starts,
+                        " ".join(f"{x.distance:.3f}" for x in walks[w][row]),
+                        " ".join(f"{x.distance:.3f}" for x in walks[0][row]), n, f"{fps:g}"])
             progress(f"video {rel}: {n} frames, {len(gif) / 1024:.0f} KiB in {time.perf_counter() - t1:.0f} s")
     atomic_write_csv(folder / "videos.csv", VIDEO_COLUMNS, out)
     return out

@@ -342,18 +342,21 @@ def _evaluation_videos(h: list[str], md: list[str], run, assets: _Assets, prefix
             continue
         rel = run.rel(table.parent)
         h.append(f"<h3>Videos ({escape(rel)})</h3><p>Each walker beside the base policy on one terrain: one walk "
-                 "along +x from the same start, recorded from the physics the evaluation used and replayed by "
-                 "MuJoCo's renderer; the fitness is the level's mean under the evaluation's protocol.</p>"
+                 "along +x from the same start (of several tried, the one the walker went farthest from), recorded "
+                 "from the physics the evaluation used and replayed by MuJoCo's renderer; the fitness is the "
+                 "level's mean under the evaluation's protocol.</p>"
                  "<div class=videos>")
         md += [f"### Videos ({rel})", "", "Each walker beside the base policy on one terrain: one walk along +x from "
-               "the same start; the fitness is the level's mean under the evaluation's protocol.", ""]
+               "the same start (of several tried, the one the walker went farthest from); the fitness is the "
+               "level's mean under the evaluation's protocol.", ""]
         for r in rows:
             gif = table.parent / r["file"]
             shown.add(gif)
             unit = "" if r["unit"] in ("", "-") else f" ({r['value']} {r['unit']})"
             cap = (f"{r['walker']} on {r['family']} level {r['level']}{unit}: level fitness {r['walker_level_fitness']}"
                    f" vs the base policy's {r['base_level_fitness']}; this walk: {r['walker_walk']}"
-                   + (f" / {r['base_walk']}" if r["walker"] != "base" else ""))
+                   + (f" / {r['base_walk']}" if r["walker"] != "base" else "")
+                   + f" (start {r['start']} of {r['starts']}: the walker's farthest)")
             data = gif.read_bytes()
             h.append(f'<figure style="max-width:none"><img alt="{escape(r["file"])}" '
                      f'src="{data_uri(data, "image/gif")}"><figcaption>{escape(cap)}</figcaption></figure>')

@@ -111,7 +111,8 @@ def test_the_report_shows_an_evaluations_videos_with_their_fitness(tmp_path):
     frames[0].save(buf, format="GIF", save_all=True, append_images=frames[1:], duration=100)
     (run / "videos" / "trial_0" / "slope_up_L5.gif").write_bytes(buf.getvalue())
     row = ["trial_0", "/r/trial_0", "slope_up", "5", "0", "0.3", "grade", "trial_0/slope_up_L5.gif", "0.9560",
-           "0.1760", "reached the far edge at 9.8 s", "0.18 of the track, fell at 2.0 s", "75", "15"]
+           "0.1760", "reached the far edge at 9.8 s", "0.18 of the track, fell at 2.0 s", "3", "8",
+           "0.5 0.4 0.6 1.0 0.9 0.2 0.3 0.7", "0.1 0.1 0.2 0.2 0.1 0.1 0.1 0.2", "75", "15"]
     with open(run / "videos" / "videos.csv", "w", newline="") as fh:
         csv.writer(fh).writerows([compare.VIDEO_COLUMNS, row])
     page = write_report([run], tmp_path / "rep", videos=False, progress=lambda s: None).read_text()
