@@ -23,6 +23,11 @@ mean fitness >= 0.9, -1 for none, and the mean fitness per level), ``summary.md`
 labelled by their folders relative to a common parent, and the families dropped at this size), ``levels.png`` (the
 same, coloured by the share of each family's levels passed),
 ``suite.png`` (a terrain of every family at its easiest, middle and hardest level) and ``timing.json``.
+
+``--videos`` (off by default) adds ``videos/<walker>/<family>_L<level>.gif``: each walker beside the base policy on
+the terrains of ``--video-terrains`` (default: per family the hardest level the walker passes and the first it
+fails), and ``videos/videos.csv`` (``jaxterrain.report.compare.write_videos``). GIF only (no MP4 writer is a
+dependency). Without an OpenGL backend for MuJoCo's renderer one line says why and the evaluation is still written.
 """
 
 from __future__ import annotations

@@ -37,7 +37,7 @@ from jaxterrain.suite.outputs import short_names
 from jaxterrain.terrain import TerrainScale
 
 __all__ = ["default_picks", "parse_picks", "terrain_index", "record_pairs", "pair_frames", "pair_gif", "outcome",
-           "write_videos", "VIDEO_COLUMNS", "PANEL_GAP", "LABEL_HEIGHT"]
+           "pair_frame_count", "write_videos", "VIDEO_COLUMNS", "PANEL_GAP", "LABEL_HEIGHT"]
 
 PANEL_GAP = 4
 """Pixels of white between two panels."""

@@ -8,7 +8,9 @@ For every run folder (:func:`jaxterrain.report.collect.scan`): its ``config.json
 tables, Markdown rendered), every figure, each archive as a fitness heatmap whose cells show their terrain's
 thumbnail, fitness and descriptors on hover (click pins a cell; a switch shows all thumbnails in the grid), and
 videos of the policy walking the easiest, the median and the hardest terrain of the archive
-(:mod:`jaxterrain.report.render`), then small text files verbatim and the remaining files by name and size.
+(:mod:`jaxterrain.report.render`), an evaluation's videos of walkers beside the base policy (``videos/videos.csv``
+and its GIFs, :func:`jaxterrain.report.compare.write_videos`) with their terrain and fitness, then small text files
+verbatim and the remaining files by name and size.
 Nothing on the page refers to a network address.
 
 This module builds the page section by section; :mod:`jaxterrain.report.markdown` renders the tables and Markdown,

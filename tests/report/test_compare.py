@@ -84,8 +84,10 @@ def test_a_pair_gif_has_two_labelled_panels_in_step():
     assert not np.array_equal(right[0], right[2])
     assert frames[:, : compare.LABEL_HEIGHT].min() < 100  # the labels are drawn
     gif = compare.pair_gif([long, short], ["walker", "base policy"], width=w, height=h, frames=5)
+    assert compare.pair_frame_count([long, short], 5, fps=15) == 3  # 0.12 s of walk: real time at 15 fps
+    assert compare.pair_frame_count([long, short], 5, fps=50) == 5
     with Image.open(io.BytesIO(gif)) as im:
-        assert im.format == "GIF" and im.n_frames == 5 and im.size == (2 * w + compare.PANEL_GAP,
+        assert im.format == "GIF" and im.n_frames == 3 and im.size == (2 * w + compare.PANEL_GAP,
                                                                        compare.LABEL_HEIGHT + h)
     assert compare.outcome(short) == "0.50 of the track, fell at 0.1 s"
     assert compare.outcome(long) == "0.50 of the track in 0.1 s"
