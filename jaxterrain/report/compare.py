@@ -138,6 +138,15 @@ def _font(size: int):
         return ImageFont.load_default()
 
 
+def _fit(draw, text: str, font, room: float) -> str:
+    """``text``, cut at the end with an ellipsis so that it is at most ``room`` pixels wide."""
+    if draw.textlength(text, font=font) <= room:
+        return text
+    while text and draw.textlength(text + "...", font=font) > room:
+        text = text[:-1]
+    return text + "..."
+
+
 def pair_frames(walks: Sequence[R.Walk], labels: Sequence[str], width: int = 320, height: int = 240,
                 frames: int = 75) -> np.ndarray:
     """``[F, LABEL_HEIGHT + height, P * width + (P - 1) * PANEL_GAP, 3]`` uint8: the ``P`` walks (one terrain,
@@ -160,7 +169,7 @@ def pair_frames(walks: Sequence[R.Walk], labels: Sequence[str], width: int = 320
         draw = ImageDraw.Draw(bar)
         for p, (walk, label) in enumerate(zip(walks, labels)):
             x = p * (width + PANEL_GAP) + 4
-            draw.text((x, 2), str(label), fill=(0, 0, 0), font=font)
+            draw.text((x, 2), _fit(draw, str(label), font, width - 68), fill=(0, 0, 0), font=font)
             draw.text((x, 18), outcome(walk), fill=(70, 70, 70), font=small)
             draw.text((x + width - 56, 2), f"t {step * dt:4.1f} s", fill=(0, 0, 0), font=small)
         canvas[f, :LABEL_HEIGHT] = np.asarray(bar)
