@@ -78,15 +78,16 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--chunk", type=int, default=None, help="terrains per call (bounds device memory)")
     parser.add_argument("--videos", action=argparse.BooleanOptionalAction, default=None,
                         help="after the evaluation, GIFs of each --policy walker beside the base policy (the base "
-                             "policy alone without --policy) on chosen terrains, one walk along +x from the same "
-                             "start, into videos/<walker>/<family>_L<level>.gif with videos/videos.csv; GIF only "
+                             "policy alone without --policy) on chosen terrains, one walk along +x each from the same "
+                             "start (of --video-starts), into videos/<walker>/<family>_L<level>.gif with videos/videos.csv; GIF only "
                              "(Pillow: no MP4 writer is a dependency); needs an OpenGL backend for MuJoCo's renderer "
                              "(without one: a line saying why, the evaluation is still written)")
     parser.add_argument("--video-terrains", default=None, metavar="FAMILY:LEVEL,...",
                         help="terrains of the videos, e.g. slope_up:5,gen:perlin:3 (each level's seed-0 terrain); "
                              "default: per family the hardest level the walker passes and the first it fails")
     parser.add_argument("--video-frames", type=int, default=None,
-                        help="frames per video, evenly spaced over the longer walk (played at 15 per second)")
+                        help="most frames per video, evenly spaced over the longer walk, played at 15 a second "
+                             "(a walk shorter than frames / 15 s gets fewer and plays in real time)")
     parser.add_argument("--video-starts", type=int, default=None,
                         help="reset poses each policy walks every video terrain from; the video shows the one the "
                              "walker went farthest from, the base policy from the same one")
