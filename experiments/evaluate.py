@@ -28,6 +28,11 @@ mean fitness >= 0.9, -1 for none, and the mean fitness per level), ``summary.md`
 labelled by their folders relative to a common parent, and the families dropped at this size), ``levels.png`` (the
 same, coloured by the share of each family's levels passed),
 ``suite.png`` (a terrain of every family at its easiest, middle and hardest level) and ``timing.json``.
+
+``--videos`` (off by default) adds ``videos/<walker>/<family>_L<level>.gif``: each walker beside the base policy on
+the terrains of ``--video-terrains`` (default: per family the hardest level the walker passes and the first it
+fails), and ``videos/videos.csv`` (``jaxterrain.report.compare.write_videos``). GIF only (no MP4 writer is a
+dependency). Without an OpenGL backend for MuJoCo's renderer one line says why and the evaluation is still written.
 """
 
 from __future__ import annotations
@@ -40,11 +45,13 @@ from experiments import common
 PRESETS: dict[str, dict] = common.with_preset_names({
     "gpu": dict(suite="v1", archive=None, policy=[], robot=None, observation=None, size=None, seeds=None, samples=None,
                 families=None, generators=None, attempts=80, best=5, headings=4, backend="auto", slots=None, chunk=None,
-                repeat=True, keys=1),
+                repeat=True, keys=1, videos=False, video_terrains=None, video_frames=75, video_width=320,
+                video_height=240, video_starts=8),
     "smoke": dict(suite="v1", archive=None, policy=[], robot=None, observation=None, size=128, seeds=1, samples=4,
                   families=["flat", "stairs_up", "gaps"],
                   generators=["perlin"], attempts=2, best=1, headings=1, backend="jax", slots=None, chunk=None,
-                  repeat=False, keys=1),
+                  repeat=False, keys=1, videos=False, video_terrains=None, video_frames=75, video_width=320,
+                  video_height=240, video_starts=8),
 }, {"gpu-short": "gpu", "paper": ("gpu", {"attempts": 20, "best": 5, "headings": 1})})
 BACKENDS = common.BACKEND_NAMES  # jaxterrain.walker.layout.BACKEND_CHOICES (literal: --help imports no JAX)
 
@@ -83,13 +90,35 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     common.add_backend_argument(parser)
     common.add_slots_argument(parser, "slots", "an int (default: all walks at once)", aliases=("--slots",))
     parser.add_argument("--chunk", type=int, default=None, help="terrains per call (bounds device memory)")
+    parser.add_argument("--videos", action=argparse.BooleanOptionalAction, default=None,
+                        help="after the evaluation, GIFs of each --policy walker beside the base policy (the base "
+                             "policy alone without --policy) on chosen terrains, one walk along +x each from the same "
+                             "start (of --video-starts), into videos/<walker>/<family>_L<level>.gif with videos/videos.csv; GIF only "
+                             "(Pillow: no MP4 writer is a dependency); needs an OpenGL backend for MuJoCo's renderer "
+                             "(without one: a line saying why, the evaluation is still written)")
+    parser.add_argument("--video-terrains", default=None, metavar="FAMILY:LEVEL,...",
+                        help="terrains of the videos, e.g. slope_up:5,gen:perlin:3 (each level's seed-0 terrain); "
+                             "default: per family the hardest level the walker passes and the first it fails")
+    parser.add_argument("--video-frames", type=int, default=None,
+                        help="most frames per video, evenly spaced over the longer walk, played at 15 a second "
+                             "(a walk shorter than frames / 15 s gets fewer and plays in real time)")
+    parser.add_argument("--video-starts", type=int, default=None,
+                        help="reset poses each policy walks every video terrain from; the video shows the one the "
+                             "walker went farthest from, the base policy from the same one")
+    parser.add_argument("--video-width", type=int, default=None, help="pixels of each panel's width")
+    parser.add_argument("--video-height", type=int, default=None, help="pixels of each panel's height")
+    parser.add_argument("--gl", choices=("osmesa", "egl", "glfw"), default=None,
+                        help="MuJoCo OpenGL backend of the videos (default: $MUJOCO_GL, else egl with an NVIDIA "
+                             "GPU, else osmesa)")
 
 
 def overrides(args) -> dict:
     return dict(policy=args.policy, robot=args.robot, observation=args.observation, keys=args.keys, suite=args.suite,
                 archive=args.archive, size=args.size, seeds=args.seeds,
                 samples=args.samples, families=args.families, generators=args.generators, repeat=args.repeat,
-                backend=args.backend, slots=args.slots, chunk=args.chunk,
+                backend=args.backend, slots=args.slots, chunk=args.chunk, videos=args.videos,
+                video_terrains=args.video_terrains, video_frames=args.video_frames, video_width=args.video_width,
+                video_height=args.video_height, video_starts=args.video_starts,
                 **common.protocol_overrides(args))
 
 
@@ -151,6 +180,41 @@ def check_terrain_flags(cfg: dict) -> None:
             qd.load(cfg["archive"])
         except (OSError, ValueError) as err:
             raise UsageError(f"--archive {cfg['archive']}: {str(err).splitlines()[0]}") from None
+
+
+def check_video_flags(cfg: dict) -> list | None:
+    """The ``(family, level)`` pairs of ``--video-terrains`` (None: the default picks); UsageError naming the flag
+    for a malformed list, a family this evaluation does not walk, a level the family lacks, ``--video-terrains``
+    without ``--videos`` or a frame count / panel size out of range."""
+    from experiments.common import UsageError
+    from jaxterrain import suite
+    from jaxterrain.report import compare
+
+    for key, low in (("video_frames", 1), ("video_width", 16), ("video_height", 16), ("video_starts", 1)):
+        v = cfg[key]
+        if not isinstance(v, int) or isinstance(v, bool) or v < low or v > 4096:
+            raise UsageError(f"--{key.replace('_', '-')} must be an integer in [{low}, 4096]; got {v!r}")
+    if cfg["video_terrains"] is None:
+        return None
+    if not cfg["videos"]:
+        raise UsageError("--video-terrains chooses the terrains of --videos, which is off: give --videos too")
+    try:
+        picks = compare.parse_picks(cfg["video_terrains"])
+    except ValueError as err:
+        raise UsageError(f"--video-{err}") from None
+    if cfg["archive"]:
+        levels = {"archive": suite.LEVELS}
+    else:
+        fams = cfg["families"] or suite.VERSIONS[cfg["suite"]]["families"]
+        gens = suite.VERSIONS[cfg["suite"]]["generators"] if cfg["generators"] is None else cfg["generators"]
+        levels = {**{f: suite.FAMILIES[f].levels for f in fams}, **{f"gen:{g}": suite.LEVELS for g in gens}}
+    for fam, lv in picks:
+        if fam not in levels:
+            raise UsageError(f"--video-terrains: family {fam!r} is not walked here; choose from "
+                             f"{', '.join(levels)}")
+        if lv >= levels[fam]:
+            raise UsageError(f"--video-terrains: {fam} has levels 0 to {levels[fam] - 1}; got {lv}")
+    return picks
 
 
 def fit_size(args, cfg0: dict, policies) -> int:
@@ -218,6 +282,11 @@ def main(args) -> int:
         if other:
             raise common.UsageError(f"--suite {cfg0['suite']} holds the levels of robot {robot} (--robot); these "
                                     f"policies walk another robot: {', '.join(other)}")
+    check_video_flags(cfg0)
+    if cfg0["videos"]:  # before anything imports mujoco
+        from jaxterrain.report import render
+
+        render.setup_gl(args.gl)
     side = fit_size(args, cfg0, policies)
     try:  # another robot or observation set: refused before anything is built
         suite.check_policies(policies, (side, side), TerrainScale())
@@ -258,12 +327,29 @@ def main(args) -> int:
         fitness = np.concatenate([fitness, suite.evaluate_policies(policies[1:], s.heightmaps, key, protocol, backend,
                                                                  s.scale, cfg["slots"], cfg["chunk"])])
     suite.write_evaluation(folder, names, s, fitness)
+    videos_s = None
+    if cfg["videos"]:
+        from jaxterrain.report import compare
+
+        t3 = time.perf_counter()
+        own = [0] + list(range(n_keys, len(names)))  # one row per policy: the base policy's first key, then the walkers
+        made = compare.write_videos(folder / "videos", [names[i] for i in own], policies, s, fitness[own],
+                                    jax.random.fold_in(jax.random.key(int(cfg["seed"])), 5),
+                                    picks=check_video_flags(cfg), frames=int(cfg["video_frames"]),
+                                    width=int(cfg["video_width"]), height=int(cfg["video_height"]),
+                                    starts=int(cfg["video_starts"]), backend=backend,
+                                    progress=lambda line: print(f"evaluate: {line}", file=sys.stderr, flush=True))
+        videos_s = round(time.perf_counter() - t3, 3)
+        if isinstance(made, str):
+            print(f"evaluate: videos skipped: {made}", file=sys.stderr, flush=True)
+        else:
+            print(f"{len(made)} videos in {videos_s:.0f} s -> {folder / 'videos'}", flush=True)
     timing = {"suite": s.name, "terrains": s.size, "policies": len(policies), "base_keys": n_keys, "backend": backend,
               "walks_per_terrain": protocol.attempts, "build_s": round(build_s, 3),
               "first_call_s": round(first_s, 3), "walk_s_one_policy": None if walk_s is None else round(walk_s, 3),
               "all_policies_s": round(time.perf_counter() - t1, 3),
               "repeat_equal": None if again is None else bool((first == again).all()),
-              "device": provenance.device()}
+              "videos_s": videos_s, "device": provenance.device()}
     atomic_write_text(folder / "timing.json", json.dumps(timing, indent=2) + "\n")
     said = "" if walk_s is None else f", {walk_s:.1f} s compiled"
     print(f"one policy on {s.size} terrains: {first_s:.1f} s the first call{said} -> {folder}", flush=True)

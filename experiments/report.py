@@ -5,7 +5,8 @@ The page (``report.html``) is self-contained (images base64-embedded, inline CSS
 heatmap whose cells show their terrain's thumbnail on hover or click, and GIFs of the base policy (or ``--policy``)
 walking the easiest, the median and the hardest terrain of each archive, rendered by MuJoCo's offscreen renderer
 (``MUJOCO_GL``: osmesa on a CPU machine, from the Debian package ``libosmesa6``; egl on a GPU one). Without a
-working OpenGL backend the page says that the renders were skipped and why. ``report.md`` holds the same with its
+working OpenGL backend the page says that the renders were skipped and why. A run of ``evaluate --videos`` shows
+its videos (each walker beside the base policy) in a Videos section, with the terrain and both fitness values. ``report.md`` holds the same with its
 images in ``report_files/``.
 
 Example::

@@ -8,7 +8,9 @@ For every run folder (:func:`jaxterrain.report.collect.scan`): its ``config.json
 tables, Markdown rendered), every figure, each archive as a fitness heatmap whose cells show their terrain's
 thumbnail, fitness and descriptors on hover (click pins a cell; a switch shows all thumbnails in the grid), and
 videos of the policy walking the easiest, the median and the hardest terrain of the archive
-(:mod:`jaxterrain.report.render`), then small text files verbatim and the remaining files by name and size.
+(:mod:`jaxterrain.report.render`), an evaluation's videos of walkers beside the base policy (``videos/videos.csv``
+and its GIFs, :func:`jaxterrain.report.compare.write_videos`) with their terrain and fitness, then small text files
+verbatim and the remaining files by name and size.
 Nothing on the page refers to a network address.
 
 This module builds the page section by section; :mod:`jaxterrain.report.markdown` renders the tables and Markdown,
@@ -29,6 +31,7 @@ import numpy as np
 from jaxterrain import qd as A
 from jaxterrain.report import archives as AV
 from jaxterrain.report import collect
+from jaxterrain.report.compare import VIDEO_COLUMNS
 from jaxterrain.report import render as R
 from jaxterrain.report.heatmap import SCRIPT, CMAP, archive_html  # noqa: F401
 
@@ -282,7 +285,8 @@ def _run_section(h: list[str], md: list[str], r: int, run, views: dict, walks_at
                  f"{html_table(rows)}</details>")
         md += ["### Configuration (config.json)", "", md_table(rows)]
     _tables(h, md, run)
-    _figures(h, md, run, assets, prefix)
+    shown = _evaluation_videos(h, md, run, assets, prefix)
+    _figures(h, md, run, assets, prefix, skip=shown)
     if run.archives:
         h.append("<h3>Archives</h3>")
         md += ["### Archives", ""]
@@ -321,12 +325,56 @@ def _tables(h: list[str], md: list[str], run) -> None:
             md.append(f"cannot read {rel}: {err}\n")
 
 
-def _figures(h: list[str], md: list[str], run, assets: _Assets, prefix: str) -> None:
-    """Every figure of the run, embedded in the page and copied for the Markdown twin."""
-    if run.figures:
+def _evaluation_videos(h: list[str], md: list[str], run, assets: _Assets, prefix: str) -> set:
+    """The videos of an evaluation (``evaluate --videos``: a ``videos.csv`` beside ``<walker>/<family>_L<level>.gif``,
+    :func:`jaxterrain.report.compare.write_videos`), each with its terrain and both policies' fitness; returns the
+    GIFs shown, which the figures then leave out."""
+    shown: set = set()
+    for table in run.tables:
+        if table.name != "videos.csv":
+            continue
+        try:
+            with open(table, newline="") as fh:
+                reader = csv.DictReader(fh)
+                rows = list(reader) if set(VIDEO_COLUMNS) <= set(reader.fieldnames or []) else []
+        except (OSError, csv.Error, UnicodeDecodeError):
+            continue
+        rows = [r for r in rows if (table.parent / r["file"]).is_file()]
+        if not rows:
+            continue
+        rel = run.rel(table.parent)
+        h.append(f"<h3>Videos ({escape(rel)})</h3><p>Each walker beside the base policy on one terrain: one walk "
+                 "along +x from the same start (of several tried, the one the walker went farthest from), recorded "
+                 "from the physics the evaluation used and replayed by MuJoCo's renderer; the fitness is the "
+                 "level's mean under the evaluation's protocol.</p>"
+                 "<div class=videos>")
+        md += [f"### Videos ({rel})", "", "Each walker beside the base policy on one terrain: one walk along +x from "
+               "the same start (of several tried, the one the walker went farthest from); the fitness is the "
+               "level's mean under the evaluation's protocol.", ""]
+        for r in rows:
+            gif = table.parent / r["file"]
+            shown.add(gif)
+            unit = "" if r["unit"] in ("", "-") else f" ({r['value']} {r['unit']})"
+            cap = (f"{r['walker']} on {r['family']} level {r['level']}{unit}: level fitness {r['walker_level_fitness']}"
+                   f" vs the base policy's {r['base_level_fitness']}; this walk: {r['walker_walk']}"
+                   + (f" / {r['base_walk']}" if r["walker"] != "base" else "")
+                   + f" (start {r['start']} of {r['starts']}: the walker's farthest)")
+            data = gif.read_bytes()
+            h.append(f'<figure style="max-width:none"><img alt="{escape(r["file"])}" '
+                     f'src="{data_uri(data, "image/gif")}"><figcaption>{escape(cap)}</figcaption></figure>')
+            asset = assets.add(f"{prefix}_video_{r['file']}", data)
+            md += [f"![{r['file']}]({asset})", "", f"*{cap}*", ""]
+        h.append("</div>")
+    return shown
+
+
+def _figures(h: list[str], md: list[str], run, assets: _Assets, prefix: str, skip: set = frozenset()) -> None:
+    """Every figure of the run (but those in ``skip``), embedded in the page and copied for the Markdown twin."""
+    figures = [p for p in run.figures if p not in skip]
+    if figures:
         h.append("<h3>Figures</h3>")
         md += ["### Figures", ""]
-    for path in run.figures:
+    for path in figures:
         rel = run.rel(path)
         data = path.read_bytes()
         h.append(f'<figure><img alt="{escape(rel)}" src="{data_uri(data, MIME[path.suffix.lower()])}">'

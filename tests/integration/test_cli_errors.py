@@ -154,6 +154,15 @@ CASES = [
     (["curriculum", "--archives", "cppn=RANDOM.npz"], "--archives cppn=RANDOM.npz: 'RANDOM.npz': not an .npz archive"),
     (["evaluate", "--archive", "RANDOM.npz"], "--archive RANDOM.npz: 'RANDOM.npz': not an .npz archive file"),
     (["evaluate", "--robot", ""], "--robot: robot must be one of humanoid, ant, got ''"),
+    # issue 62 item 4: the videos' flags
+    (["evaluate", "--video-terrains", "flat:0"], "--video-terrains chooses the terrains of --videos, which is off"),
+    (["evaluate", "--videos", "--video-terrains", "slope_up"], "--video-terrains must be FAMILY:LEVEL"),
+    (["evaluate", "--videos", "--video-terrains", "slope_up:5"], "--video-terrains: family 'slope_up' is not walked "
+                                                                  "here; choose from flat, stairs_up, gaps, gen:perlin"),
+    (["evaluate", "--videos", "--video-terrains", "gaps:10"], "--video-terrains: gaps has levels 0 to 9; got 10"),
+    (["evaluate", "--videos", "--video-terrains", "flat:1"], "--video-terrains: flat has levels 0 to 0; got 1"),
+    (["evaluate", "--videos", "--video-frames", "0"], "--video-frames must be an integer in [1, 4096]; got 0"),
+    (["evaluate", "--videos", "--video-width", "8"], "--video-width must be an integer in [16, 4096]; got 8"),
     (["learn", "--robot", ""], "--robot: robot must be one of humanoid, ant, got ''"),
     (["learn", "--robot", "dog"], "--robot: robot must be one of humanoid, ant, got 'dog'"),  # before the run folder now
     (["learn", "--curriculum", "badmod:factory"], "--curriculum 'badmod:factory': cannot import it (RuntimeError: boom)"),

@@ -110,3 +110,40 @@ def test_a_size_that_holds_none_of_the_families_is_one_line(tmp_path, capsys):
     err = capsys.readouterr().err.strip().splitlines()
     assert stop.value.code == 2 and len(err) == 1
     assert "--size 64 pixels holds none of the families asked for: gaps needs 1.20 m" in err[0]
+
+
+@pytest.mark.slow
+def test_videos_show_each_walker_beside_the_base_policy(tmp_path, policies, capsys, monkeypatch):
+    """``evaluate --videos`` on flat ground (smoke size): without an OpenGL backend one line says why and the
+    evaluation is written all the same; with one, the walker without a policy (it fails flat ground: its first
+    failed level) walks beside the base policy in one GIF of two panels, listed in ``videos.csv`` with the
+    evaluation's level fitness of both (a few minutes on 2 CPU cores: two compiles)."""
+    import io
+
+    from PIL import Image
+
+    from jaxterrain.report import compare, render
+
+    _, still, _ = policies
+    argv = ["evaluate", "--preset", "smoke", "--families", "flat", "--generators", "--policy", str(still), "--videos",
+            "--video-frames", "3", "--video-width", "64", "--video-height", "48", "--video-starts", "2"]
+    with monkeypatch.context() as m:
+        m.setattr(render, "gl_status", lambda: (False, "no OpenGL backend (test)"))
+        assert cli(*argv, "--out", str(tmp_path / "nogl")) == 0
+    err = capsys.readouterr().err
+    assert "evaluate: videos skipped: no OpenGL backend (test)" in err
+    assert (tmp_path / "nogl" / "fitness.csv").is_file() and not (tmp_path / "nogl" / "videos").exists()
+    ok, why = render.gl_status()
+    if not ok:
+        pytest.skip(why)
+    out = tmp_path / "run"
+    assert cli(*argv, "--out", str(out)) == 0
+    (row,) = read(out / "videos" / "videos.csv")
+    assert (row["walker"], row["family"], row["level"], row["file"]) == ("still", "flat", "0", "still/flat_L0.gif")
+    levels = {r["policy"]: r for r in read(out / "levels.csv")}
+    assert float(row["base_level_fitness"]) == pytest.approx(float(levels["base"]["per_level_fitness"]), abs=1e-3)
+    assert float(row["walker_level_fitness"]) < 0.5 and row["starts"] == "2"
+    assert "fell" in row["walker_walk"]  # no policy: it falls
+    with Image.open(io.BytesIO((out / "videos" / row["file"]).read_bytes())) as im:
+        assert im.size == (2 * 64 + compare.PANEL_GAP, compare.LABEL_HEIGHT + 48) and 2 <= im.n_frames <= 3
+    assert json.loads((out / "timing.json").read_text())["videos_s"] > 0
