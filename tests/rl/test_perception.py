@@ -24,7 +24,8 @@ def test_widened_networks_give_the_blind_actions_and_values_whatever_the_scan():
     wide = jnp.concatenate([obs, scan], axis=1)
     a_blind = nets.deterministic_action(base.config, base.action_size, base.params, base.normaliser, obs)
     a_wide = nets.deterministic_action(base.config, base.action_size, params, stats, wide)
-    np.testing.assert_allclose(np.asarray(a_wide), np.asarray(a_blind), atol=1e-6)
+    # equal up to float rounding: the wider first layer sums its products in another order (3e-6 seen on 2 CPU cores)
+    np.testing.assert_allclose(np.asarray(a_wide), np.asarray(a_blind), atol=1e-5)
     v_blind = nets.value_net(base.config).apply(base.params["value"], nets.normalize(base.normaliser, obs))
     v_wide = nets.value_net(base.config).apply(params["value"], nets.normalize(stats, wide))
     np.testing.assert_allclose(np.asarray(v_wide), np.asarray(v_blind), rtol=1e-5, atol=1e-4)
@@ -49,7 +50,7 @@ def test_the_shipped_perceptive_base_policy_is_its_blind_twin(robot):
     assert n == fields["scan_points"][0] * fields["scan_points"][1]
     obs = jax.random.normal(jax.random.PRNGKey(2), (32, seeing.observation_size))
     np.testing.assert_allclose(np.asarray(seeing(obs)), np.asarray(blind(obs[:, :blind.observation_size])),
-                               atol=1e-6)
+                               atol=1e-5)
     surgery = seeing.meta["surgery"]
     assert surgery["samples"] > 1000 and min(surgery["scan_std"]) >= surgery["std_floor"] - 1e-6
 
