@@ -82,7 +82,7 @@ _PAPER = dict(archive=CPPN_ARCHIVE, curriculum="map", trials=10, descriptors=["r
               truncation="bootstrap", overlap=False, compact=True, policy_every=None, terrains_per_chunk=8, levels=10,
               levels_init=None, levels_promote=None, levels_demote=0.5, plr_capacity=None, plr_replay_prob=0.8,
               plr_staleness=0.3, plr_temperature=0.3, plr_min_fill=0.5, accel_generator=None, accel_edits=1,
-              robot=None, recipe="paper")
+              robot=None, recipe="paper", observation=None)
 PRESETS: dict[str, dict] = common.with_preset_names({
     "paper": _PAPER,
     "gpu-short": {**_PAPER, "max_epochs": 3000},
@@ -190,11 +190,15 @@ def check_selector_flags(args, curricula, option: str = "--curriculum") -> None:
 
 
 def add_fine_tuning_arguments(parser: argparse.ArgumentParser, scope: str = "") -> None:
-    """``--recipe``, ``--update-normaliser``, ``--healthy-reward``, ``--learning-rate``, ``--truncation``,
+    """``--observation``, ``--recipe``, ``--update-normaliser``, ``--healthy-reward``, ``--learning-rate``, ``--truncation``,
     ``--max-evals``, ``--overlap`` and ``--compact`` (the switches also as ``--no-...``; config ``recipe`` and the update's shape /
     ``update_normaliser`` / ``healthy_reward`` / ``learning_rate`` / ``truncation`` / ``max_evals`` / ``overlap`` /
     ``compact``, read back by :func:`fine_tuning_overrides`), shared with ``curriculum`` (``scope`` is added to the
     help, e.g. ", in every treatment")."""
+    parser.add_argument("--observation", choices=("blind", "perceptive"), default=None,
+                        help=f"start from the robot's blind base policy (the default, the paper's) or its perceptive "
+                             f"twin{scope}; the walker observes what the start policy records (a --policy of another "
+                             f"set is refused)")
     parser.add_argument("--recipe", choices=RECIPE_NAMES, default=None,
                         help=f"how fine-tuning PPO collects each 40 000-step update{scope}: paper (500 envs per trial "
                              f"x 8 x 10 steps; every preset but smoke) or wide (4 000 envs x 10 steps: 8x fewer "
@@ -239,7 +243,8 @@ def fine_tuning_overrides(args) -> dict:
         from jaxterrain.curriculum.config import recipe
 
         shape = {"recipe": args.recipe, **recipe(args.recipe)}
-    return dict(healthy_reward=args.healthy_reward, update_normaliser=args.update_normaliser,
+    return dict(observation=args.observation, healthy_reward=args.healthy_reward,
+                update_normaliser=args.update_normaliser,
                 learning_rate=args.learning_rate, truncation=args.truncation, max_evals=args.max_evals,
                 overlap=args.overlap, compact=args.compact, **shape)
 

@@ -34,7 +34,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--walk-steps", type=int, default=200, help="env steps of each of those walks")
     parser.add_argument("--std-floor", type=float, default=0.1, metavar="M",
                         help="the smallest standard deviation (metres) the normaliser gets for a scanned height")
-    parser.add_argument("--eval-size", type=int, default=64, help="side (pixels, 4 cm) of the flat evaluation square")
+    parser.add_argument("--eval-size", type=int, default=None,
+                        help="side (pixels, 4 cm) of the flat evaluation square (default: the smallest multiple of 32 "
+                             "that holds the robot's track, at least 64: humanoid 64, ant 96)")
     parser.add_argument("--eval-attempts", type=int, default=20, help="flat-ground evaluation walks per policy")
     parser.add_argument("--eval-best", type=int, default=5, help="of which the best are averaged")
     parser.add_argument("--seed", type=int, default=0, help="seed of the statistics walks and the evaluation")
@@ -48,6 +50,8 @@ def check_args(args) -> None:
         raise UsageError("give --out FOLDER or --export-assets")
     if args.out is not None and args.export_assets:
         raise UsageError("--out and --export-assets name two destinations; give one")
+    if args.eval_size is not None and args.eval_size < 4:
+        raise UsageError(f"--eval-size must be an integer >= 4 pixels, got {args.eval_size}")
     for name in ("walks", "walk_steps", "eval_attempts", "eval_best"):
         v = getattr(args, name)
         if v < 1:
@@ -110,12 +114,18 @@ def main(args) -> int:
     from jaxterrain.runtime.io import atomic_write_text
     from jaxterrain.runtime.provenance import git_commit
     from jaxterrain.terrain import TerrainScale
-    from jaxterrain.walker import make_env, observation_fields, observation_label, with_observation
+    from jaxterrain.walker import (WalkerConfig, make_env, min_terrain_side, observation_fields, observation_label,
+                                   with_observation)
 
     check_args(args)
     blind = load_blind(args)
     robot = difficulty.policy_robot(blind)
     out = rl.base_policy_dir(robot, "perceptive") if args.export_assets else Path(args.out)
+    side = args.eval_size or max(64, -(-min_terrain_side(WalkerConfig(robot=robot)) // 32) * 32)
+    if side < min_terrain_side(WalkerConfig(robot=robot)):
+        raise UsageError(f"--eval-size must be >= {min_terrain_side(WalkerConfig(robot=robot))} pixels for the "
+                         f"{robot} (its track), got {side}")
+    args.eval_size = side
     t0 = time.perf_counter()
     # the statistics: the blind policy's own training env (its recorded walker config), perceptive
     trained = dict((blind.meta or {}).get("walker_config") or {})
@@ -129,7 +139,7 @@ def main(args) -> int:
                                                   for k, v in observation_fields(seeing_cfg).items()},
                          scan_noise=float(args.scan_noise))
     walker_config.pop("height_scan", None)
-    surgery = {"from": str(args.source or rl.base_policy_dir(robot)), "walks": args.walks, "steps": args.walk_steps,
+    surgery = {"from": _shown(args.source or rl.base_policy_dir(robot)), "walks": args.walks, "steps": args.walk_steps,
                "samples": twin.samples, "std_floor": args.std_floor, "seed": args.seed,
                "scan_mean": [round(float(v), 5) for v in twin.scan_mean],
                "scan_std": [round(float(v), 5) for v in twin.scan_std]}
@@ -137,7 +147,7 @@ def main(args) -> int:
                    extra={"walker_config": walker_config, "surgery": surgery},
                    actor_only=bool((blind.meta or {}).get("actor_only")))
     seeing = rl.load_policy(out)
-    size = (args.eval_size, args.eval_size)
+    size = (side, side)
     flat = {}
     for name, p in (("blind", blind), ("perceptive", seeing)):
         flat[name] = flat_eval(p, difficulty.default_env_config(size, TerrainScale(), p), args.eval_attempts,
@@ -173,6 +183,15 @@ def main(args) -> int:
           f"perceptive {f(flat['perceptive'])}, blind {f(flat['blind'])} (|difference| {diff:.3g}); "
           f"{result['seconds']:.0f} s", flush=True)
     return 0 if np.isfinite(diff) else 1
+
+
+def _shown(folder) -> str:
+    """``folder`` relative to the repository when inside it (shipped assets name their source portably)."""
+    path = Path(folder).resolve()
+    try:
+        return str(path.relative_to(Path(__file__).resolve().parents[1]))
+    except ValueError:
+        return str(folder)
 
 
 def _argv() -> list[str]:

@@ -37,7 +37,7 @@ from jaxterrain.qd.archive_io import load as load_archive_file
 from jaxterrain.qd.bank import from_archive
 from jaxterrain.runtime import driver, estimates, sharding, xla
 from jaxterrain.terrain import TerrainScale
-from jaxterrain.difficulty import policy_robot, robot_base_policy
+from jaxterrain.difficulty import policy_observation, policy_robot, robot_base_policy
 from jaxterrain.walker import robots, tiles
 from jaxterrain.walker.layout import resolve_backend
 
@@ -188,21 +188,28 @@ def walker_layout(cfg: dict) -> dict:
 
 def start_policy(cfg: dict):
     """The policy a learn config starts from: ``--policy``, else the shipped base policy of ``--robot`` (default the
-    humanoid's). :class:`BadInput` for an unknown robot, a robot without a shipped base policy, a policy that does
-    not load, or a ``--policy`` of another robot than ``--robot``."""
-    robot, path = cfg.get("robot") or "humanoid", cfg.get("policy")
+    humanoid's; ``--observation perceptive``: its perceptive twin). :class:`BadInput` for an unknown robot, a robot
+    without a shipped base policy, a policy that does not load, or a ``--policy`` of another robot than ``--robot``
+    or of another observation set than ``--observation``."""
+    robot, path, observation = cfg.get("robot") or "humanoid", cfg.get("policy"), cfg.get("observation") or "blind"
     try:
         robots.get(robot)
-        if path is None and robot != "humanoid":
-            return robot_base_policy(robot)
     except ValueError as err:
         raise BadInput(f"--robot: {err}") from None
+    if path is None and (robot != "humanoid" or observation != "blind"):
+        try:
+            return robot_base_policy(robot, observation)
+        except ValueError as err:
+            raise BadInput(f"--{'observation' if observation != 'blind' else 'robot'}: {err}") from None
     try:
         policy = W.load_policy(path)
     except ValueError as err:
         raise BadInput(f"--policy: {err}") from None
     if cfg.get("robot") is not None and policy_robot(policy) != robot:
         raise BadInput(f"--policy {path}: it walks the {policy_robot(policy)}, not --robot {robot}")
+    seen = policy_observation(policy)["observation"]
+    if cfg.get("observation") is not None and seen != observation:
+        raise BadInput(f"--policy {path}: it observes {seen}, not --observation {observation}")
     return policy
 
 

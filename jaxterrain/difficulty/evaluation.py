@@ -502,8 +502,8 @@ def _robot_policy(robot: str, observation: str = "blind") -> Callable:
         how = (f"python -m experiments perceptive-policy --robot {robot} --export-assets"
                if observation == "perceptive" else
                f"python -m experiments train-base-policy --robot {robot} --preset gpu --export-assets")
-        raise ValueError(f"robot {robot!r}: no {observation} base policy is shipped for it ({folder}); make one with "
-                         f"`{how}`")
+        which = "perceptive base policy" if observation == "perceptive" else "base policy"
+        raise ValueError(f"robot {robot!r}: no {which} is shipped for it ({folder}); make one with `{how}`")
     return load_policy(folder)
 
 

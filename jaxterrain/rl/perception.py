@@ -7,7 +7,7 @@
 The perceptive observation is the blind one with the scan appended (``jaxterrain.walker.WalkerEnv``: its first
 ``O_blind`` entries are the blind observation, unchanged). :func:`widen_inputs` gives the first dense layer of every
 network (policy and value) zero weights for the new inputs and the observation normaliser the scan's mean and
-variance, so the widened networks compute exactly what the blind ones computed (the scan enters as ``(scan - mean) /
+variance, so the widened networks compute what the blind ones computed, up to float rounding (the scan enters as ``(scan - mean) /
 std`` times zero) and the twin walks like its blind policy until training moves those weights. The normaliser's
 count is kept, so its running statistics go on as before; the scan's variance is floored (``std_floor``, metres)
 because on flat ground it is only the torso's bob, and a step of the curriculum's terrain would otherwise be tens
@@ -115,7 +115,8 @@ def perceptive_twin(policy, env, terrain=None, key: jax.Array | None = None, env
     """The perceptive twin of the blind ``policy`` for the perceptive ``env`` (a ``WalkerEnv`` with
     ``observation="perceptive"``, same robot): :func:`scan_statistics` on ``terrain`` (default flat ground at 0 m)
     with ``key`` (default ``PRNGKey(0)``), the standard deviations floored at ``std_floor`` metres, then
-    :func:`widen_inputs`. Its deterministic actions equal the blind policy's on the same physics state."""
+    :func:`widen_inputs`. Its deterministic actions equal the blind policy's on the same physics state, up to float
+    rounding."""
     if not (isinstance(std_floor, (int, float)) and np.isfinite(std_floor) and std_floor > 0):
         raise ValueError(f"std_floor must be a finite number > 0 (metres), got {std_floor!r}")
     terrain = env.flat_terrain() if terrain is None else terrain
