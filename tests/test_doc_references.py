@@ -12,6 +12,7 @@ ROOT = Path(__file__).resolve().parents[1]
 NOT_MODULES = {
     "jaxterrain.plugins": "the entry-point group of plugins (pyproject), not a module",
     "jaxterrain.rl.policy": "the format tag of a policy's config.json (rl.checkpoint.POLICY_FORMAT)",
+    "jaxterrain.onnx": "the format tag of an exported policy's metadata (rl.onnx.ONNX_FORMAT)",
 }
 NAME = re.compile(r"\bjaxterrain(?:\.[A-Za-z_]\w*)+")
 IMPORT = re.compile(r"^\s*>>> ((?:from jaxterrain[\w.]* import [\w ,]+)|(?:import jaxterrain[\w. ,]*))", re.M)

@@ -95,6 +95,8 @@ def walker_config_of(meta: dict) -> WalkerConfig:
     """The :class:`WalkerConfig` recorded in a policy's ``config.json`` (``meta["walker_config"]``; absent: the
     defaults, the humanoid), robot defaults resolved. ``ValueError`` naming a field that is not a WalkerConfig's."""
     recorded = dict(meta.get("walker_config") or {})
+    if "height_scan" in recorded:  # the observation set's old name (policies saved before observation sets)
+        recorded.setdefault("observation", "perceptive" if recorded.pop("height_scan") else "blind")
     unknown = sorted(set(recorded) - set(WalkerConfig._fields))
     if unknown:
         raise ValueError(f"walker_config: unknown field(s) {', '.join(unknown)} (WalkerConfig has "
@@ -133,7 +135,7 @@ def observation_layout(config: WalkerConfig, model: Optional[mujoco.MjModel] = N
          "free joint's angular velocity, qvel[3:6] (MuJoCo: torso's local frame)"),
         ("joint_vel", [f"joint_vel:{n}" for n in joints], "rad/s", "hinge joint velocities, qvel[6:]"),
     ]
-    if config.height_scan:
+    if config.observation == "perceptive":
         nx, ny = config.scan_points
         xs, ys = np.linspace(*config.scan_x, nx), np.linspace(*config.scan_y, ny)
         blocks.append(("height_scan", [f"scan:{x:.3f},{y:.3f}" for x in xs for y in ys], "m",
@@ -201,8 +203,8 @@ def onnx_metadata(policy, verification: Optional[dict] = None, base: str | os.Pa
     obs, act = observation_layout(config, model), action_layout(config, model)
     if obs["size"] != policy.observation_size or act["size"] != policy.action_size:
         raise ValueError(f"{policy.path}: the policy takes {policy.observation_size} observations and gives "
-                         f"{policy.action_size} actions, its walker ({config.robot}, height_scan="
-                         f"{config.height_scan}) has {obs['size']} and {act['size']}")
+                         f"{policy.action_size} actions, its walker ({config.robot}, observation="
+                         f"{config.observation}) has {obs['size']} and {act['size']}")
     normalised = bool(policy.config.normalize_observations)
     mean, std = _normaliser(policy)
     obs.update({"dtype": "float32", "normalised_in_graph": normalised, "clip": [-OBS_CLIP, OBS_CLIP],
@@ -211,7 +213,7 @@ def onnx_metadata(policy, verification: Optional[dict] = None, base: str | os.Pa
                 "mean": [float(v) for v in mean] if normalised else None,
                 "std": [float(v) for v in std] if normalised else None})
     scan = ({"scan_x": list(config.scan_x), "scan_y": list(config.scan_y), "scan_points": list(config.scan_points)}
-            if config.height_scan else None)
+            if config.observation == "perceptive" else None)
     walker = config._asdict()
     walker["scale"], walker["solver"] = config.scale._asdict(), config.solver._asdict()
     path = getattr(policy, "path", None)

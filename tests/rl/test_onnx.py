@@ -164,7 +164,9 @@ def synthetic_policy(folder, activation, distribution, normalise, height_scan):
     stats = nets.RunningStats(np.float32(32), (1 + rng.standard_normal(env_obs)).astype(np.float32),
                               (32 * rng.uniform(0.5, 4, env_obs)).astype(np.float32))
     return rl.save_policy(folder, params, stats, config, env_obs, 17, actor_only=True,
-                          extra={"walker_config": {"height_scan": height_scan}})
+                          extra={"walker_config": {"observation": "perceptive", "scan_x": [0.0, 1.4],
+                                                            "scan_y": [-0.4, 0.4], "scan_points": [8, 5]}
+                                 if height_scan else {"height_scan": False}})  # blind: the old record still reads
 
 
 @pytest.mark.parametrize("activation,distribution,normalise,height_scan", [
