@@ -53,21 +53,26 @@ _ONE_THREAD = "--xla_cpu_multi_thread_eigen=false intra_op_parallelism_threads=1
 
 def worker_env() -> dict:
     """The environment variables a pool worker starts with: JAX on the CPU alone, one thread (appended to this
-    process's ``XLA_FLAGS``, whose other flags the workers keep)."""
+    process's ``XLA_FLAGS``, whose other flags the workers keep), no GPU visible (MuJoCo Warp, where installed,
+    then takes no device memory in them either)."""
     flags = os.environ.get("XLA_FLAGS", "")
     flags = flags if _ONE_THREAD in flags else f"{flags} {_ONE_THREAD}".strip()
-    return {"JAX_PLATFORMS": "cpu", "XLA_FLAGS": flags, "OMP_NUM_THREADS": "1"}
+    return {"JAX_PLATFORMS": "cpu", "XLA_FLAGS": flags, "OMP_NUM_THREADS": "1", "CUDA_VISIBLE_DEVICES": ""}
 
 
 class MujocoWalks(NamedTuple):
     """``distances`` [B, attempts] float32 (heading-major, 0 where failed), ``steps`` [B, attempts] int32 env
     steps walked, ``failed`` [B, attempts] bool, ``seconds`` the processes' time spent on them in all (each job
-    timed where it ran: ``steps.sum() / seconds`` is the C engine's env steps per second per core)."""
+    timed where it ran), and of them the steps and seconds of the jobs that ran compiled (not the first job of
+    a process for its walker config and network, which compiles the jitted pieces): ``compiled_steps /
+    compiled_seconds`` is the C engine's env steps per second per core."""
 
     distances: np.ndarray
     steps: np.ndarray
     failed: np.ndarray
     seconds: float
+    compiled_steps: int = 0
+    compiled_seconds: float = 0.0
 
 
 def mujoco_env_config(shape, scale: Optional[TerrainScale], policy: Callable, protocol: Protocol,
@@ -98,6 +103,9 @@ def _payload(policy: Callable):
     return ("callable", policy)
 
 
+_RAN: set = set()  # (config, network, walks) of the jobs this process has run: their programs are compiled
+
+
 @functools.lru_cache(maxsize=8)
 def _engine(config: WalkerConfig) -> CEngine:
     return CEngine(WalkerEnv(config))
@@ -120,11 +128,15 @@ def _actor(payload) -> Callable:
     return lambda obs: np.asarray(fn(jax.device_put(obs, cpu)))
 
 
-def _job(args) -> tuple[np.ndarray, np.ndarray, np.ndarray, float]:
+def _job(args) -> tuple:
     """One turned map's walks: ``(config, payload, terrain_m [H, W], key_data [per, ...])`` -> ``(distance, steps,
-    failed)`` [per] each and the seconds they took here."""
+    failed)`` [per] each, the seconds they took here and whether they ran compiled (not this process's first job
+    of their kind)."""
     t0 = time.perf_counter()
     config, payload, terrain, key_data = args
+    program = (config, payload[1:3] if payload[0] == "weights" else id(payload[1]), key_data.shape[0])
+    compiled = program in _RAN
+    _RAN.add(program)
     engine = _engine(config)
     act = _actor(payload)
     keys = jax.random.wrap_key_data(jax.device_put(key_data, cpu_device()))
@@ -133,7 +145,7 @@ def _job(args) -> tuple[np.ndarray, np.ndarray, np.ndarray, float]:
     with jax.default_device(cpu_device()):
         start = engine.starts(keys, terrains)
     walks = engine.walk(act, terrain[None], start, terrain_of=np.zeros(per, np.int64))
-    return walks.distance, walks.steps, walks.failed, time.perf_counter() - t0
+    return walks.distance, walks.steps, walks.failed, time.perf_counter() - t0, compiled
 
 
 @contextlib.contextmanager
@@ -164,7 +176,9 @@ class Pending(NamedTuple):
     def get(self) -> MujocoWalks:
         out = [r.get() if hasattr(r, "get") else r for r in self.results]
         d, n, f = (np.stack([o[k] for o in out]).reshape(self.shape) for k in range(3))
-        return MujocoWalks(d.astype(np.float32), n.astype(np.int32), f.astype(bool), float(sum(o[3] for o in out)))
+        warm = [o for o in out if o[4]]
+        return MujocoWalks(d.astype(np.float32), n.astype(np.int32), f.astype(bool), float(sum(o[3] for o in out)),
+                           int(sum(o[1].sum() for o in warm)), float(sum(o[3] for o in warm)))
 
 
 def _jobs(heightmaps, key, policy, protocol, scale, env_config) -> tuple[list, tuple]:

@@ -107,3 +107,19 @@ def test_a_size_that_holds_none_of_the_families_is_one_line(tmp_path, capsys):
     err = capsys.readouterr().err.strip().splitlines()
     assert stop.value.code == 2 and len(err) == 1
     assert "--size 64 pixels holds none of the families asked for: gaps needs 1.20 m" in err[0]
+
+
+def test_engine_mujoco_walks_the_suite_with_mujoco_c_beside_mjx(tmp_path, run):
+    """``--engine mujoco``: the same outputs, walked by MuJoCo's C engine from the same starts (sim2sim); the base
+    policy crosses the flat map under both engines (MJX: the ``run`` fixture, same seed and size)."""
+    out = tmp_path / "c"
+    assert cli("evaluate", "--preset", "smoke", "--engine", "mujoco", "--families", "flat", "--generators",
+               "--workers", "1", "--out", str(out)) == 0
+    for name in ("config.json", "fitness.csv", "levels.csv", "summary.md", "timing.json"):
+        assert (out / name).is_file(), name
+    timing = json.loads((out / "timing.json").read_text())
+    assert timing["engine"] == "mujoco" and timing["workers"] == 1
+    c = [r for r in read(out / "fitness.csv") if r["policy"] == "base"]
+    mjx = [r for r in read(run / "fitness.csv") if r["policy"] == "base" and r["family"] == "flat"]
+    assert len(c) == len(mjx) == 1
+    assert abs(float(c[0]["fitness"]) - float(mjx[0]["fitness"])) <= 0.05
