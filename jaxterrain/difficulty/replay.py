@@ -18,7 +18,8 @@ The physics is :class:`jaxterrain.walker.mujoco_c.CEngine`'s. ``workers > 1`` ru
 that many processes (``spawn``; each runs JAX on the CPU alone, one thread, whatever the parent's platform), each
 job one turned map's ``per_heading`` walks in lockstep. The policy reaches them as its weights (a policy loaded by
 ``rl.load_policy``) or pickled (any other callable ``obs [..., O] -> action [..., A]``: a JAX function, an ONNX
-session wrapper); ``workers=1`` walks in this process. The result does not depend on ``workers``.
+session wrapper; jit-compiled in each job, since each job unpickles its own copy); ``workers=1`` walks in this
+process. The result does not depend on ``workers``.
 """
 
 from __future__ import annotations
