@@ -22,6 +22,12 @@ at 128 x 128, one terrain per level, 2 walks along +x, best 1; not ``v1``'s terr
 not fit the map at ``--size`` (a 64-pixel map has 0.26 m of ground inside its 1 m start strips: no trench of ``gaps``,
 one step of ``stairs_up``) is dropped, said on stderr and in ``summary.md`` (``jaxterrain.suite.misfit``).
 
+``--engine mujoco`` walks the same walkers on the same terrains with MuJoCo's C engine on the CPU cores
+(``--workers`` processes, default every core) instead of MJX: the same starts (MJX's reset, the same key), policy,
+observation, termination and protocol, another simulator (sim2sim; ``jaxterrain.difficulty.replay``,
+``docs/results/sim2sim.md``). It takes no ``--backend`` other than jax, no ``--rollout-slots`` / ``--chunk``, and
+refuses a suite whose walks could take more than 24 hours on its workers (at 1 000 env steps per second per core).
+
 Writes into the run folder: ``config.json``, ``fitness.csv`` (policy, family, level, seed, value, unit, fitness),
 ``levels.csv`` (policy, family, the highest level passed with every level below it passed too, a level passing at
 mean fitness >= 0.9, -1 for none, and the mean fitness per level), ``summary.md`` (policies x families, policies
@@ -46,14 +52,17 @@ PRESETS: dict[str, dict] = common.with_preset_names({
     "gpu": dict(suite="v1", archive=None, policy=[], robot=None, observation=None, size=None, seeds=None, samples=None,
                 families=None, generators=None, attempts=80, best=5, headings=4, backend="auto", slots=None, chunk=None,
                 repeat=True, keys=1, videos=False, video_terrains=None, video_frames=75, video_width=320,
-                video_height=240, video_starts=8),
+                video_height=240, video_starts=8, engine="mjx", workers=None),
     "smoke": dict(suite="v1", archive=None, policy=[], robot=None, observation=None, size=128, seeds=1, samples=4,
                   families=["flat", "stairs_up", "gaps"],
                   generators=["perlin"], attempts=2, best=1, headings=1, backend="jax", slots=None, chunk=None,
                   repeat=False, keys=1, videos=False, video_terrains=None, video_frames=75, video_width=320,
-                  video_height=240, video_starts=8),
+                  video_height=240, video_starts=8, engine="mjx", workers=None),
 }, {"gpu-short": "gpu", "paper": ("gpu", {"attempts": 20, "best": 5, "headings": 1})})
 BACKENDS = common.BACKEND_NAMES  # jaxterrain.walker.layout.BACKEND_CHOICES (literal: --help imports no JAX)
+ENGINES = ("mjx", "mujoco")  # jaxterrain.difficulty.replay.ENGINES (literal: --help imports no JAX)
+MUJOCO_STEPS_PER_CORE_S = 1000  # MuJoCo C humanoid env steps / s / core, measured (docs/results/sim2sim.md)
+MUJOCO_MAX_HOURS = 24.0  # --engine mujoco refuses suites whose longest possible walk would take longer
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -88,6 +97,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--headings", type=int, choices=(1, 2, 4), default=None, help="walking headings")
     common.add_protocol_argument(parser)
     common.add_backend_argument(parser)
+    parser.add_argument("--engine", choices=ENGINES, default=None,
+                        help="physics engine: mjx (default; MJX on the accelerator, --backend picks jax or warp) or "
+                             "mujoco (MuJoCo's C engine on the CPU cores, the same starts and protocol: sim2sim)")
+    parser.add_argument("--workers", type=int, default=None,
+                        help="--engine mujoco: CPU processes walking (default: every core)")
     common.add_slots_argument(parser, "slots", "an int (default: all walks at once)", aliases=("--slots",))
     parser.add_argument("--chunk", type=int, default=None, help="terrains per call (bounds device memory)")
     parser.add_argument("--videos", action=argparse.BooleanOptionalAction, default=None,
@@ -118,7 +132,7 @@ def overrides(args) -> dict:
                 samples=args.samples, families=args.families, generators=args.generators, repeat=args.repeat,
                 backend=args.backend, slots=args.slots, chunk=args.chunk, videos=args.videos,
                 video_terrains=args.video_terrains, video_frames=args.video_frames, video_width=args.video_width,
-                video_height=args.video_height, video_starts=args.video_starts,
+                video_height=args.video_height, video_starts=args.video_starts, engine=args.engine, workers=args.workers,
                 **common.protocol_overrides(args))
 
 
@@ -242,6 +256,46 @@ def fit_size(args, cfg0: dict, policies) -> int:
     return args.size
 
 
+def mujoco_workers(cfg: dict) -> int:
+    """The CPU processes of ``--engine mujoco``: ``--workers``, else every core."""
+    import os
+
+    return int(cfg.get("workers") or os.cpu_count() or 1)
+
+
+def check_engine(args, cfg: dict) -> None:
+    """UsageError for flags that do not apply to the engine: ``--engine mujoco`` with an MJX ``--backend`` other than
+    jax, ``--rollout-slots`` or ``--chunk`` (MJX's batching), a ``--workers`` below 1; ``--workers`` with MJX."""
+    from experiments.common import UsageError
+
+    if cfg.get("engine") == "mujoco":
+        if args.backend not in (None, "jax"):
+            raise UsageError(f"--backend {args.backend} is an MJX backend; --engine mujoco steps MuJoCo's C engine on "
+                             "the CPU (drop --backend)")
+        for flag, key in (("--rollout-slots", "slots"), ("--chunk", "chunk")):
+            if cfg.get(key) is not None:
+                raise UsageError(f"{flag} batches MJX's walks; --engine mujoco walks on CPU processes (--workers)")
+        if cfg.get("workers") is not None and cfg["workers"] < 1:
+            raise UsageError(f"--workers must be an integer >= 1; got {cfg['workers']}")
+    elif args.workers is not None:
+        raise UsageError("--workers sets the CPU processes of --engine mujoco; MJX walks on the accelerator")
+
+
+def check_mujoco_cost(cfg: dict, terrains_n: int, policies_n: int) -> None:
+    """UsageError when ``--engine mujoco``'s walks could take longer than :data:`MUJOCO_MAX_HOURS` on its workers,
+    at :data:`MUJOCO_STEPS_PER_CORE_S` env steps per second per core with every walk lasting the episode."""
+    from experiments.common import UsageError
+    from jaxterrain.walker import WalkerConfig
+
+    steps = policies_n * terrains_n * int(cfg["attempts"]) * WalkerConfig().episode_length
+    hours = steps / (MUJOCO_STEPS_PER_CORE_S * mujoco_workers(cfg)) / 3600
+    if hours > MUJOCO_MAX_HOURS:
+        raise UsageError(f"--engine mujoco: {policies_n} policies x {terrains_n} terrains x {cfg['attempts']} walks "
+                         f"could take up to {hours:.0f} h on {mujoco_workers(cfg)} CPU processes (more than "
+                         f"{MUJOCO_MAX_HOURS:.0f} h): walk fewer terrains (--seeds, --samples, --families) or walks "
+                         "(--attempts)")
+
+
 def terrains(cfg: dict):
     """The suite of the config, or the archive's elites as a one-family suite."""
     from experiments.common import UsageError
@@ -274,6 +328,7 @@ def main(args) -> int:
     from jaxterrain.walker import resolve_backend
 
     cfg0 = common.preset_with_flags(PRESETS, args, overrides(args))
+    check_engine(args, cfg0)
     policies = load_policies(cfg0["policy"], cfg0.get("robot"), cfg0.get("observation"))  # before the run folder: a bad folder is one line, nothing left behind
     check_terrain_flags(cfg0)
     if suite.VERSIONS[cfg0["suite"]]["robot"] is not None and not cfg0["archive"]:  # v2: levels per robot
@@ -292,17 +347,26 @@ def main(args) -> int:
         suite.check_policies(policies, (side, side), TerrainScale())
     except ValueError as err:
         raise common.UsageError(str(err)) from None
+    t0 = time.perf_counter()
+    s = None
+    if cfg0["engine"] == "mujoco":  # the CPU engine's cost is checked on the terrains, before the run folder
+        s = terrains(cfg0)
+        check_mujoco_cost(cfg0, s.size, len(policies))
     folder, cfg = common.setup_run("evaluate", args, PRESETS, "smoke", overrides(args))
     n_keys = int(cfg.get("keys", 1))
     names = base_names(n_keys) + [str(p) for p in cfg["policy"]]
-    t0 = time.perf_counter()
-    s = terrains(cfg)
+    terrain_keys = ("suite", "archive", "size", "seeds", "samples", "families", "generators")
+    if s is None or any(cfg[k] != cfg0[k] for k in terrain_keys):
+        s = terrains(cfg)
     build_s = time.perf_counter() - t0
     protocol = difficulty.Protocol(int(cfg["attempts"]), int(cfg["best"]), int(cfg["headings"]))
-    backend = resolve_backend(cfg["backend"])
+    engine = cfg.get("engine") or "mjx"
+    backend = resolve_backend(cfg["backend"]) if engine == "mjx" else "jax"
+    walk = dict(engine=engine, workers=mujoco_workers(cfg))
     for fam, why in s.dropped.items():
         print(f"evaluate: family {fam} dropped at --size {cfg['size']}: {why}", file=sys.stderr)
-    print(f"{s.name}: {s.size} terrains, {len(s.families())} families; {len(policies)} policies on {backend}, "
+    on = backend if engine == "mjx" else f"MuJoCo C ({walk['workers']} CPU processes)"
+    print(f"{s.name}: {s.size} terrains, {len(s.families())} families; {len(policies)} policies on {on}, "
           f"{protocol.attempts} walks each (best {protocol.best} per heading, {protocol.headings} headings)", flush=True)
     key = jax.random.fold_in(jax.random.key(int(cfg["seed"])), 3)
     t1 = time.perf_counter()
@@ -310,22 +374,22 @@ def main(args) -> int:
 
     with compiling("suite-walk", f"{s.size} terrains x {protocol.attempts} walks, {backend} physics"):
         first = suite.evaluate_policies(policies[:1], s.heightmaps, key, protocol, backend, s.scale, cfg["slots"],
-                                        cfg["chunk"])
+                                        cfg["chunk"], **walk)
     first_s = time.perf_counter() - t1  # compile + walk of the base policy
     again, walk_s = None, None
     if cfg["repeat"]:  # the same walks again, compiled: one policy on the whole suite
         t2 = time.perf_counter()
         again = suite.evaluate_policies(policies[:1], s.heightmaps, key, protocol, backend, s.scale, cfg["slots"],
-                                        cfg["chunk"])
+                                        cfg["chunk"], **walk)
         walk_s = time.perf_counter() - t2
     fitness = first
     for k in range(1, n_keys):  # the base policy again, with independent keys: runs of the comparator
         fitness = np.concatenate([fitness, suite.evaluate_policies(policies[:1], s.heightmaps, jax.random.fold_in(key, k),
                                                                    protocol, backend, s.scale, cfg["slots"],
-                                                                   cfg["chunk"])])
+                                                                   cfg["chunk"], **walk)])
     if len(policies) > 1:  # the other policies: the same compiled program, their weights as data
         fitness = np.concatenate([fitness, suite.evaluate_policies(policies[1:], s.heightmaps, key, protocol, backend,
-                                                                 s.scale, cfg["slots"], cfg["chunk"])])
+                                                                 s.scale, cfg["slots"], cfg["chunk"], **walk)])
     suite.write_evaluation(folder, names, s, fitness)
     videos_s = None
     if cfg["videos"]:
@@ -345,6 +409,7 @@ def main(args) -> int:
         else:
             print(f"{len(made)} videos in {videos_s:.0f} s -> {folder / 'videos'}", flush=True)
     timing = {"suite": s.name, "terrains": s.size, "policies": len(policies), "base_keys": n_keys, "backend": backend,
+              "engine": engine, "workers": walk["workers"] if engine == "mujoco" else None,
               "walks_per_terrain": protocol.attempts, "build_s": round(build_s, 3),
               "first_call_s": round(first_s, 3), "walk_s_one_policy": None if walk_s is None else round(walk_s, 3),
               "all_policies_s": round(time.perf_counter() - t1, 3),

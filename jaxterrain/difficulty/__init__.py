@@ -5,6 +5,8 @@ distances walked; difficulty = 1 - fitness.
   :data:`PAPER`, :data:`HEADINGS`, and the pure functions from distances to fitness;
 - :mod:`~jaxterrain.difficulty.evaluation`: :func:`evaluate` (host, cached compiled programs), :func:`fitness_fn`
   (pure, for MAP-Elites), the base policy and its env;
+- :mod:`~jaxterrain.difficulty.replay`: the same protocol walked by MuJoCo's C engine on the CPU cores (sim2sim:
+  :func:`~jaxterrain.difficulty.replay.mujoco_evaluate`);
 - :mod:`~jaxterrain.difficulty.fitness`: the one table of named fitness functions (``--fitness``) and of protocol
   names (``--protocol``).
 
@@ -41,8 +43,13 @@ from jaxterrain.difficulty.protocol import (
     protocol_env_config,
     rotate_headings,
 )
+from jaxterrain.difficulty import replay  # noqa: E402  (after evaluation, which it imports)
+from jaxterrain.difficulty.replay import ENGINES, mujoco_evaluate
 
 __all__ = [
+    "replay",
+    "ENGINES",
+    "mujoco_evaluate",
     "Protocol",
     "PAPER",
     "HEADINGS",

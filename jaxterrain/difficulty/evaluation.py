@@ -380,8 +380,11 @@ def rollout_distances(heightmaps, key: jax.Array, attempts: Optional[int] = None
                       scale: Optional[TerrainScale] = None, env_config: Optional[WalkerConfig] = None,
                       policy_params: Any = None, chunk: Optional[int] = None,
                       slots: Optional[int] = None, smooth_first: bool = True,
-                      protocol: Optional[Protocol] = None, mesh=None, split: Optional[str] = None) -> jax.Array:
-    """Normalised distances ``[B, attempts]`` float32 in [0, 1] of the policy on ``heightmaps`` [B, H, W] in [0, 1].
+                      protocol: Optional[Protocol] = None, mesh=None, split: Optional[str] = None,
+                      with_steps: bool = False) -> jax.Array:
+    """Normalised distances ``[B, attempts]`` float32 in [0, 1] of the policy on ``heightmaps`` [B, H, W] in [0, 1]
+    (with ``with_steps``: ``(distances, steps [B, attempts] int32)``, the env steps each walk lasted; not with
+    ``mesh``).
 
     ``attempts`` (default 20) walks along +x, or the walks of ``protocol`` (:class:`Protocol`; its ``attempts``,
     heading-major: attempt ``a`` on heading ``a // protocol.per_heading``; ``attempts`` must then be None or equal).
@@ -407,6 +410,8 @@ def rollout_distances(heightmaps, key: jax.Array, attempts: Optional[int] = None
         _check_attempts(attempts)
         protocol = Protocol(20 if attempts is None else attempts, 1)
     protocol = protocol_from(protocol, attempts, None)
+    if with_steps and mesh is not None:
+        raise ValueError("with_steps=True is not available with a mesh (the sharded walks return distances only)")
     terrains_m, env_config, policy = _resolve(heightmaps, protocol, policy, scale, env_config)
     apply, params, with_params = _policy_program(policy, policy_params)
     if mesh is not None:
@@ -415,7 +420,8 @@ def rollout_distances(heightmaps, key: jax.Array, attempts: Optional[int] = None
     fn = _program(env_config, protocol.attempts, protocol.headings, apply, with_params, slots, smooth_first)
     b = terrains_m.shape[0]
     if chunk is None or chunk >= b:
-        return fn(terrains_m, key, params)[0]
+        out = fn(terrains_m, key, params)
+        return out if with_steps else out[0]
     keys = jax.random.split(key, -(-b // chunk))
     del key
     outs = []
@@ -424,8 +430,9 @@ def rollout_distances(heightmaps, key: jax.Array, attempts: Optional[int] = None
         n = part.shape[0]
         if n < chunk:  # pad to the compiled shape
             part = jnp.concatenate([part, jnp.repeat(part[-1:], chunk - n, axis=0)])
-        outs.append(fn(part, k, params)[0][:n])
-    return jnp.concatenate(outs)
+        outs.append(tuple(o[:n] for o in fn(part, k, params)))
+    d, steps = (jnp.concatenate([o[j] for o in outs]) for j in range(2))
+    return (d, steps) if with_steps else d
 
 
 def evaluate(heightmaps, key: jax.Array, attempts: Optional[int] = None, best: Optional[int] = None,

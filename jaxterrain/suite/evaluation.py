@@ -24,7 +24,7 @@ import jax
 import numpy as np
 
 from jaxterrain import difficulty
-from jaxterrain.difficulty import HEADINGS, Protocol
+from jaxterrain.difficulty import HEADINGS, Protocol, replay
 from jaxterrain.rl.checkpoint import policy_fn
 from jaxterrain.runtime.statistics import cvar
 from jaxterrain.suite.heldout import Suite
@@ -66,19 +66,36 @@ def check_policies(policies: Sequence[Callable], shape: tuple[int, int], scale: 
 
 def evaluate_policies(policies: Sequence[Callable], heightmaps, key: jax.Array, protocol: Protocol = HEADINGS,
                       backend: str = "jax", scale: TerrainScale | None = None, slots: int | None = None,
-                      chunk: int | None = None) -> np.ndarray:
+                      chunk: int | None = None, engine: str = "mjx", workers: int = 1) -> np.ndarray:
     """Fitness ``[P, N]`` float32 in [0, 1] of ``P`` policies on ``heightmaps`` [N, H, W] in [0, 1].
 
     ``protocol``: the walks (default :data:`HEADINGS`: 20 in each of 4 headings, best 5 per heading, mean over
     headings); ``backend``: ``"jax"`` (MJX) or ``"warp"`` (MuJoCo Warp on tiles); ``slots`` / ``chunk``: a rollout
     pool and terrains per call (:func:`jaxterrain.difficulty.evaluate`), to bound device memory on large suites.
-    Every policy walks with ``key``. ValueError for no policy at all."""
+    ``engine``: ``"mjx"`` (default) or ``"mujoco"``: MuJoCo's C engine on ``workers`` CPU processes
+    (:mod:`jaxterrain.difficulty.replay`: the same starts and protocol; ``backend`` must then be ``"jax"`` and
+    ``slots`` / ``chunk`` None). Every policy walks with ``key``. ValueError for no policy at all."""
     if isinstance(policies, (str, bytes)) or len(policies) == 0:
         raise ValueError(f"policies: give at least one policy (a sequence of rl.load_policy policies); got "
                          f"{policies!r}")
+    if engine not in replay.ENGINES:
+        raise ValueError(f"engine must be one of {replay.ENGINES}, got {engine!r}")
+    if engine == "mujoco" and (backend != "jax" or slots is not None or chunk is not None):
+        raise ValueError(f"engine 'mujoco' steps MuJoCo C on the CPU: backend must be 'jax' and slots / chunk None "
+                         f"(got backend={backend!r}, slots={slots!r}, chunk={chunk!r})")
     h = difficulty.validate_heightmaps(heightmaps)
     scale = TerrainScale() if scale is None else scale
     configs = check_policies(policies, tuple(h.shape[1:]), scale, backend)
+    if engine == "mujoco":
+        if isinstance(workers, bool) or not isinstance(workers, int) or workers < 1:
+            raise ValueError(f"workers must be an int >= 1, got {workers!r}")
+        pool = replay.make_pool(workers) if workers > 1 else None
+        try:
+            return np.stack([replay.mujoco_evaluate(h, key, p, protocol, env_config=cfg, pool=pool)
+                             for p, cfg in zip(policies, configs)]).astype(np.float32)
+        finally:
+            if pool is not None:
+                pool.terminate()
     out = []
     for p, cfg in zip(policies, configs):
         apply = policy_fn(p.config, int(p.action_size))  # weights as data: one program per walker config

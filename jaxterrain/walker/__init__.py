@@ -3,7 +3,8 @@
 
 Modules: :mod:`.robots` (robot specs and their registry), :mod:`.model` (the MJCF and solver options), :mod:`.env` (reset / step / park), :mod:`.tiles` (terrains as
 tiles of one heightfield), :mod:`.layout` (classic vs tiles, env sizing, the backend ``auto`` resolves to: the one
-home of the layout) and :mod:`.rollout` (batched walks and the rollout pool).
+home of the layout), :mod:`.rollout` (batched walks and the rollout pool) and :mod:`.mujoco_c` (MuJoCo's C engine
+stepping the same walks on the CPU: sim2sim).
 
     from jaxterrain.walker import WalkerEnv, WalkerConfig, flat_terrain
     env = WalkerEnv(WalkerConfig())
@@ -44,6 +45,8 @@ from jaxterrain.walker.tiles import TILE_AXES, Tile, TileBank, warp_available
 from jaxterrain.walker import layout, rollout  # noqa: E402  (after env / tiles, which they import)
 from jaxterrain.walker.layout import BACKEND_CHOICES, env_for, is_tiled, make_env, resolve_backend, sized_env, terrain_batch
 from jaxterrain.walker.rollout import batched_distances, job_queue, smoothness_priority
+from jaxterrain.walker import mujoco_c  # noqa: E402  (after env, which it imports)
+from jaxterrain.walker.mujoco_c import CEngine
 
 __all__ = [
     "robots",
@@ -52,6 +55,8 @@ __all__ = [
     "resolve_config", "min_terrain_side",
     "layout",
     "rollout",
+    "mujoco_c",
+    "CEngine",
     "BACKEND_CHOICES",
     "env_for",
     "is_tiled",

@@ -343,9 +343,11 @@ def sample_heights(terrain: jax.Array, x: jax.Array, y: jax.Array, radius_x: flo
     return (1 - fv) * top + fv * bot
 
 
-def _state_key(data) -> jax.Array:
+def _state_key(qpos, qvel, time) -> jax.Array:
     """A PRNG key that is a hash of the physics state (``qpos``, ``qvel``, ``time``): the scan noise's."""
-    bits = jax.lax.bitcast_convert_type(jnp.concatenate([data.qpos, data.qvel, jnp.reshape(data.time, (1,))])
+    time = jnp.asarray(time, jnp.float32)
+    bits = jax.lax.bitcast_convert_type(jnp.concatenate([qpos.astype(jnp.float32), qvel.astype(jnp.float32),
+                                                         jnp.reshape(time, (1,))])
                                         .astype(jnp.float32), jnp.uint32)
     mult = (jnp.arange(bits.shape[0], dtype=jnp.uint32) * jnp.uint32(2654435761)) | jnp.uint32(1)
     h = jnp.sum(bits * mult, dtype=jnp.uint32) ^ jnp.sum((bits >> 16) * (mult + jnp.uint32(0x9E3779B9)),
@@ -625,11 +627,8 @@ class WalkerEnv:
         """Advance ``n_frames`` physics steps with ``action`` [A] in [-1, 1] (clipped) on ``terrain`` (the one
         given to reset: an ``[H, W]`` array in metres, or a :class:`Tile` of a tiled env)."""
         c = self.config
-        m, heights, (ox, oy) = self._terrain(terrain)
-        action = jnp.asarray(action, jnp.float32)
-        action_ok = jnp.all(jnp.isfinite(action))
-        a = jnp.clip(jnp.nan_to_num(action, nan=0.0, posinf=1.0, neginf=-1.0), -1.0, 1.0)
-        ctrl = self._ctrl_lo + (a + 1.0) * (self._ctrl_hi - self._ctrl_lo) * 0.5
+        m = self.model(terrain)
+        ctrl, action_ok = self.controls(action)
         d0 = state.data
         d = d0.replace(ctrl=ctrl)
         warp = self._data0 is not None
@@ -643,23 +642,12 @@ class WalkerEnv:
         invalid = ~(physics_ok & action_ok)
         d = d.where(invalid, d0)  # mjx.Data.where keeps MJX-Warp's shared contact buffers shared
 
-        x, y, z = d.qpos[0] - ox, d.qpos[1] - oy, d.qpos[2]  # tile-local
-        x_velocity = jnp.where(invalid, 0.0, (d.qpos[0] - d0.qpos[0]) / self.dt)
-        torso_height = z - heights(x, y)
-        lo, hi = c.healthy_z_range
-        healthy = (torso_height > lo) & (torso_height < hi)
-        in_bounds = (jnp.abs(y) < self.radius_y - c.side_margin) & (x > -self.radius_x + 0.5 * c.start_margin)
-        fell = ~healthy | ~in_bounds | invalid
-        reached = x >= self.x_goal
         steps = state.steps + 1
-        timeout = steps >= c.episode_length
-        done = fell | reached | timeout
-        truncation = done & ~fell
-
+        done, truncation, distance, x_velocity, torso_height = self.outcome(d0.qpos, d.qpos, steps, state.x_start,
+                                                                             invalid, terrain)
         forward_reward = c.forward_reward_weight * x_velocity
         ctrl_cost = c.ctrl_cost_weight * jnp.sum(jnp.square(ctrl))
         reward = jnp.where(invalid, 0.0, forward_reward + c.healthy_reward - ctrl_cost)
-        distance = jnp.clip((d.qpos[0] - state.x_start) / self.track_length, 0.0, 1.0)
         f32 = lambda v: jnp.asarray(v, jnp.float32)  # noqa: E731
         metrics = {"forward_reward": f32(jnp.where(invalid, 0.0, forward_reward)), "reward_alive": f32(
             jnp.where(invalid, 0.0, c.healthy_reward)), "reward_quadctrl": f32(-ctrl_cost),
@@ -668,19 +656,51 @@ class WalkerEnv:
                            truncation=f32(truncation), failed=f32(invalid), steps=steps, x_start=state.x_start,
                            distance=f32(distance), metrics=metrics)
 
-    # ----------------------------------------------------------------------------------------------------------
-    def _obs(self, data: mjx.Data, terrain) -> jax.Array:
-        """The observation ``[O]`` of physics state ``data`` on ``terrain`` (one code path for MJX-JAX and MuJoCo
-        Warp, classic and tiled: heights come from :meth:`_surface`, tile-local).
+    # ---- the pieces of a step that do not touch the physics (shared with the MuJoCo C engine, walker.mujoco_c) --
+    def controls(self, action: jax.Array) -> tuple[jax.Array, jax.Array]:
+        """``action`` [A] in [-1, 1] -> ``(ctrl [A] float32, action_ok [] bool)``: the actuator controls (NaN -> 0,
+        +-inf -> +-1, clipped to [-1, 1], then mapped linearly onto the actuators' ctrlrange) and whether every
+        component was finite."""
+        action = jnp.asarray(action, jnp.float32)
+        action_ok = jnp.all(jnp.isfinite(action))
+        a = jnp.clip(jnp.nan_to_num(action, nan=0.0, posinf=1.0, neginf=-1.0), -1.0, 1.0)
+        return self._ctrl_lo + (a + 1.0) * (self._ctrl_hi - self._ctrl_lo) * 0.5, action_ok
+
+    def outcome(self, qpos_before: jax.Array, qpos: jax.Array, steps: jax.Array, x_start: jax.Array,
+                invalid: jax.Array, terrain) -> tuple[jax.Array, ...]:
+        """How an env step ended, from the physics state alone: ``(done, truncation, distance, x_velocity,
+        torso_height)`` ([] each; done / truncation bool) for the step from ``qpos_before`` [nq] to ``qpos`` [nq]
+        (world coordinates; ``qpos`` is ``qpos_before`` again where ``invalid``, the physics having been rejected),
+        ``steps`` env steps since reset counting this one, ``x_start`` the torso's x at reset, on ``terrain`` (as
+        :meth:`step`'s). The termination rules are the module docstring's."""
+        c = self.config
+        heights, (ox, oy) = self._surface(terrain)
+        x, y, z = qpos[0] - ox, qpos[1] - oy, qpos[2]  # tile-local
+        x_velocity = jnp.where(invalid, 0.0, (qpos[0] - qpos_before[0]) / self.dt)
+        torso_height = z - heights(x, y)
+        lo, hi = c.healthy_z_range
+        healthy = (torso_height > lo) & (torso_height < hi)
+        in_bounds = (jnp.abs(y) < self.radius_y - c.side_margin) & (x > -self.radius_x + 0.5 * c.start_margin)
+        fell = ~healthy | ~in_bounds | invalid
+        reached = x >= self.x_goal
+        timeout = steps >= c.episode_length
+        done = fell | reached | timeout
+        truncation = done & ~fell
+        distance = jnp.clip((qpos[0] - x_start) / self.track_length, 0.0, 1.0)
+        return done, truncation, distance, x_velocity, torso_height
+
+    def observe(self, qpos: jax.Array, qvel: jax.Array, terrain, time=0.0) -> jax.Array:
+        """The observation ``[observation_size]`` float32 of the physics state ``qpos`` [nq], ``qvel`` [nv] (world
+        coordinates) at ``time`` (s) on ``terrain`` (as :meth:`step`'s); finite, clipped to +-1e4. One code path for
+        MJX-JAX, MuJoCo Warp and the MuJoCo C engine, classic and tiled (heights from :meth:`_surface`, tile-local).
 
         Perceptive: the scan grid (``scan_x`` x ``scan_y``, ``scan_points``; x-major, x along the heading) is rotated
         by the torso's yaw (the heading frame: roll and pitch are ignored, so the grid stays level) about the torso's
         ground point; each entry is the terrain height there minus the torso's z, plus, when ``scan_noise > 0``,
-        Gaussian noise of that std. The noise key is a hash of the physics state (``qpos``, ``qvel``, time): the
+        Gaussian noise of that std. The noise key is a hash of the physics state (``qpos``, ``qvel``, ``time``): the
         observation stays a pure function of the state (same state, same observation; no key in the state), and
         differs between envs and steps."""
         heights, (ox, oy) = self._surface(terrain)
-        qpos, qvel = data.qpos, data.qvel
         x, y = qpos[0] - ox, qpos[1] - oy
         z = qpos[2] - heights(x, y)
         parts = [z[None], qpos[3:], qvel]
@@ -691,10 +711,14 @@ class WalkerEnv:
             py = y + sy * self._scan[0] + cy * self._scan[1]
             scan = heights(px, py) - qpos[2]
             if self.config.scan_noise > 0:
-                scan = scan + self.config.scan_noise * jax.random.normal(_state_key(data), scan.shape, scan.dtype)
+                scan = scan + self.config.scan_noise * jax.random.normal(_state_key(qpos, qvel, time), scan.shape,
+                                                                         scan.dtype)
             parts.append(scan)
         obs = jnp.concatenate(parts).astype(jnp.float32)
         return jnp.clip(jnp.nan_to_num(obs, nan=0.0, posinf=1e4, neginf=-1e4), -1e4, 1e4)
+
+    def _obs(self, data: mjx.Data, terrain) -> jax.Array:
+        return self.observe(data.qpos, data.qvel, terrain, data.time)
 
 
 def flat_terrain(config: WalkerConfig = WalkerConfig(), height: float = 0.0) -> jax.Array:

@@ -147,3 +147,19 @@ def test_videos_show_each_walker_beside_the_base_policy(tmp_path, policies, caps
     with Image.open(io.BytesIO((out / "videos" / row["file"]).read_bytes())) as im:
         assert im.size == (2 * 64 + compare.PANEL_GAP, compare.LABEL_HEIGHT + 48) and 2 <= im.n_frames <= 3
     assert json.loads((out / "timing.json").read_text())["videos_s"] > 0
+
+
+def test_engine_mujoco_walks_the_suite_with_mujoco_c_beside_mjx(tmp_path, run):
+    """``--engine mujoco``: the same outputs, walked by MuJoCo's C engine from the same starts (sim2sim); the base
+    policy crosses the flat map under both engines (MJX: the ``run`` fixture, same seed and size)."""
+    out = tmp_path / "c"
+    assert cli("evaluate", "--preset", "smoke", "--engine", "mujoco", "--families", "flat", "--generators",
+               "--workers", "1", "--out", str(out)) == 0
+    for name in ("config.json", "fitness.csv", "levels.csv", "summary.md", "timing.json"):
+        assert (out / name).is_file(), name
+    timing = json.loads((out / "timing.json").read_text())
+    assert timing["engine"] == "mujoco" and timing["workers"] == 1
+    c = [r for r in read(out / "fitness.csv") if r["policy"] == "base"]
+    mjx = [r for r in read(run / "fitness.csv") if r["policy"] == "base" and r["family"] == "flat"]
+    assert len(c) == len(mjx) == 1
+    assert abs(float(c[0]["fitness"]) - float(mjx[0]["fitness"])) <= 0.05
