@@ -32,7 +32,7 @@ from jaxterrain.curriculum import walker as W
 from jaxterrain.curriculum.config import RECIPES, CurriculumConfig, FINE_TUNED, validate_config
 from jaxterrain.curriculum.core import CHECKPOINT_COMPAT, init_trials, live_rows, run_live, run_trials
 from jaxterrain.curriculum.outputs import PARTIAL, export_policies, write_outputs
-from jaxterrain.curriculum.selectors import get_selector
+from jaxterrain.curriculum.selectors import flat_name, get_selector, selector_fields
 from jaxterrain.qd.archive_io import load as load_archive_file
 from jaxterrain.qd.bank import from_archive
 from jaxterrain.runtime import driver, estimates, sharding, xla
@@ -63,12 +63,16 @@ def curriculum_config(cfg: dict):
     side by side, with ``curriculum`` as the selector; ``CurriculumConfig.from_json_dict`` reads that layout."""
     if cfg.get("recipe") is not None and cfg["recipe"] not in RECIPES:
         raise BadInput(f"--recipe must be one of {', '.join(RECIPES)}, got {cfg['recipe']!r}")
-    fields = {k: v for k, v in cfg.items() if k in FINE_TUNED or (k in CurriculumConfig._fields and k != "ppo")}
+    own = selector_fields()  # the selectors' params, flat (CurriculumConfig.from_json_dict takes the run's)
+    fields = {k: v for k, v in cfg.items()
+              if k in FINE_TUNED or k in own or (k in CurriculumConfig._fields and k not in ("ppo", "params"))}
     fields.setdefault("truncation", LEGACY_TRUNCATION)
     try:
         return validate_config(CurriculumConfig.from_json_dict({**fields, "selector": cfg["curriculum"]}))
     except (ValueError, TypeError) as err:  # a field is its flag's name: --levels-init (CurriculumConfig.levels_init)
         err = re.sub(r"CurriculumConfig\.ppo\b", "--recipe / --num-envs (the update's shape)", str(err))
+        err = re.sub(r"CurriculumConfig\.params\.([a-z_]+)\b",  # a selector's own: its flat key (plr_capacity)
+                     lambda m: "CurriculumConfig." + flat_name(cfg["curriculum"], m.group(1)), err)
         raise BadInput(re.sub(r"CurriculumConfig\.selector\b", "--curriculum", re.sub(
             r"CurriculumConfig\.(?!selector\b)([a-z_]+)\b", lambda m: f"--{m.group(1).replace('_', '-')}",
             err))) from None
@@ -158,7 +162,7 @@ def selector_slots(cfg: dict) -> int:
     chunk. :class:`BadInput` for an unknown curriculum."""
     fields = {k: cfg[k] for k in ("terrains_per_chunk", "levels") if cfg.get(k) is not None}
     try:
-        return int(get_selector(CurriculumConfig(selector=cfg["curriculum"], **fields)).slots)
+        return int(get_selector(CurriculumConfig.from_json_dict({"selector": cfg["curriculum"], **fields})).slots)
     except (ValueError, TypeError) as err:
         raise BadInput(f"--curriculum: {err}") from None
 

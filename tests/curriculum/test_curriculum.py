@@ -20,6 +20,7 @@ from jaxterrain.qd import TerrainBank, cell_distance
 from jaxterrain import curriculum as C
 from jaxterrain.curriculum import gp
 from jaxterrain.curriculum import outputs, runner
+from jaxterrain.curriculum.selectors import selector_params as S_params
 from experiments import common
 
 
@@ -193,7 +194,7 @@ def reference_map_run(bank, config, gain, chunks):
     avail = np.ones(prior.size, bool)
     pick = lambda score: min(np.flatnonzero(avail & np.isclose(score, np.max(score[avail]), atol=1e-6)),  # noqa
                              key=lambda i: (hard[i], i))
-    cur, skill, evals, hardest, obs_i, obs_y, out = pick(prior + config.kappa), 0.0, 0, 0.0, [], [], []
+    cur, skill, evals, hardest, obs_i, obs_y, out = pick(prior + S_params(config).kappa), 0.0, 0, 0.0, [], [], []
     for _ in range(chunks):
         skill += gain
         fit = float(np.clip(1.0 - diff[cur] + skill, 0, 1))
@@ -206,12 +207,12 @@ def reference_map_run(bank, config, gain, chunks):
         obs_i.append(cur)
         obs_y.append(fit)
         mean, var = numpy_posterior(pts[obs_i], np.array(obs_y), prior[obs_i], pts, prior)
-        tie = np.abs(mean - mean[cur]) <= config.removal_margin
-        avail &= ~((mean > mean[cur] + config.removal_margin) | (tie & (hard <= hard[cur])))
+        tie = np.abs(mean - mean[cur]) <= S_params(config).removal_margin
+        avail &= ~((mean > mean[cur] + S_params(config).removal_margin) | (tie & (hard <= hard[cur])))
         avail[cur], evals = False, 0
         if not avail.any():
             return out, True
-        cur = pick(mean + config.kappa * np.sqrt(np.maximum(var, 0)))
+        cur = pick(mean + S_params(config).kappa * np.sqrt(np.maximum(var, 0)))
     return out, False
 
 
