@@ -285,7 +285,7 @@ def test_recipes_shape_the_update_and_num_envs_overrides_theirs(capsys):
     500 x 10 x 8; ``wide``: 4 000 x 10 x 1, the same 40 000 env steps per update), in ``learn`` and ``curriculum``;
     ``--num-envs`` still wins; the curriculum built from it trains with that PPO shape."""
     from experiments import learn
-    from jaxterrain.curriculum import FINE_TUNING, RECIPES, recipe, runner
+    from jaxterrain.curriculum import FINE_TUNING, RECIPES, recipe, run_config, runner
 
     assert learn.RECIPE_NAMES == tuple(RECIPES)
     assert RECIPES["paper"] == {k: getattr(FINE_TUNING, k) for k in RECIPES["paper"]}
@@ -307,7 +307,8 @@ def test_recipes_shape_the_update_and_num_envs_overrides_theirs(capsys):
     mine = printed("learn", "--preset", "gpu-short", "--recipe", "wide", "--num-envs", "2000")
     assert (mine["num_envs"], mine["num_unrolls"]) == (2000, 1)
     cfg = printed("learn", "--preset", "gpu-short", "--recipe", "wide")
-    ppo = runner.curriculum_config({**cfg, "attempts": 20, "best": 5, "headings": 4}).ppo  # the archive's protocol
+    run = run_config.from_flat({**cfg, "attempts": 20, "best": 5, "headings": 4})  # the archive's protocol
+    ppo = runner.curriculum_config(run).ppo
     assert (ppo.num_envs, ppo.unroll_length, ppo.num_unrolls) == (4000, 10, 1)
 
 
