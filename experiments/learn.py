@@ -272,6 +272,17 @@ def overrides(args) -> dict:
     return out
 
 
+def report(summary: dict | None, folder) -> int:
+    """``--report``'s line (``runner.report_treatment``'s summary; None: no checkpoint yet, exit 2)."""
+    if summary is None:
+        print(f"learn: {folder} has no checkpoint yet: nothing to report", file=sys.stderr)
+        return 2
+    state = f"partial, {summary['chunks_done']} chunks" if summary.get("partial") else "finished"
+    print(f"report ({state}): hardest traversed {summary['hardest_mean']:.2f} +- {summary['hardest_se']:.2f} "
+          f"cells -> {folder}", flush=True)
+    return 0
+
+
 def main(args) -> int:
     from jaxterrain.curriculum import runner
 
@@ -283,35 +294,21 @@ def main(args) -> int:
     folder, cfg = common.setup_run("learn", args, PRESETS, "smoke", overrides(args),
                                    check=lambda c: (check_selector_flags(args, [c["curriculum"]]), run_of(c)))
     run = run_of(cfg)
-    try:  # cheap: files and values, before the run folder fills up or anything compiles
-        readonly = args.report or args.export_policies
-        arch = runner.validate(runner.report_run(run) if readonly else run)[2]
-        runner.check_resumable(folder, run, arch, physics=not readonly)
+    try:  # the library validates the run once, before anything compiles (runner.validate)
+        if args.export_policies:
+            paths = runner.export_treatment(run, folder)
+            print(f"wrote {len(paths)} policies -> {folder / 'policies'}", flush=True)
+            return 0
+        if args.report:
+            return report(runner.report_treatment(run, folder), folder)
+        limit = None if args.time_limit is None else 60.0 * args.time_limit
+        summary = runner.run_treatment(run, folder, limit, mesh=mesh, progress=common.progress_mode(args))
     except runner.BadInput as err:
         print(f"learn: {flags_in(str(err), run.curriculum.selector)}", file=sys.stderr)
         if args.resume is None and {p.name for p in folder.iterdir()} <= {common.CONFIG_NAME,
                                                                           common.PROVENANCE_NAME}:
-            shutil.rmtree(folder)
+            shutil.rmtree(folder)  # nothing of a run in it yet
         return 2
-    if args.export_policies:
-        try:
-            paths = runner.export_treatment(run, folder)
-        except runner.BadInput as err:
-            print(f"learn: {flags_in(str(err), run.curriculum.selector)}", file=sys.stderr)
-            return 2
-        print(f"wrote {len(paths)} policies -> {folder / 'policies'}", flush=True)
-        return 0
-    if args.report:
-        summary = runner.report_treatment(run, folder)
-        if summary is None:
-            print(f"learn: {folder} has no checkpoint yet: nothing to report", file=sys.stderr)
-            return 2
-        state = f"partial, {summary['chunks_done']} chunks" if summary.get("partial") else "finished"
-        print(f"report ({state}): hardest traversed {summary['hardest_mean']:.2f} +- {summary['hardest_se']:.2f} "
-              f"cells -> {folder}", flush=True)
-        return 0
-    limit = None if args.time_limit is None else 60.0 * args.time_limit
-    summary = runner.run_treatment(run, folder, limit, mesh=mesh, progress=common.progress_mode(args))
     if summary is None:
         print(f"time limit reached; continue with: python -m experiments learn --resume {folder}", flush=True)
         return 3

@@ -63,15 +63,18 @@ terrains predicted easier than the one just trained are removed, the run ends wh
 Ties in the choice of the next terrain (equal scores) go to the terrain nearest the origin, then the lowest index.
 The first terrain of the map curriculum is the argmax of the prior (no observation yet: the UCB is the prior + kappa).
 
-Baselines share everything but the ``selector``: ``"roughness"`` (standard CL, the paper's Figure 7b: the terrains
-sorted by descriptor 0 (roughness) ascending, every ``roughness_stride``-th one, in order, each finished by the same
-threshold / 100-evaluation rule) and ``"random"`` (uniformly random among the available terrains, each removed after
-it is finished, no GP). The field's curricula spread a trial's envs over several terrains at once: ``"dr"`` (domain
-randomisation, ``terrains_per_chunk`` terrains a chunk), ``"levels"`` (legged_gym's terrain levels: ``levels``,
-``levels_init``, ``levels_promote``, ``levels_demote``), ``"plr"`` (prioritised level replay, ``plr_*``) and
-``"accel"`` (PLR over a generator's genomes whose replayed levels are edited by its ``mutate``: ``accel_generator``,
-``accel_edits`` and the ``plr_*`` buffer settings); their rules and where they differ from the field's are in
-:mod:`.selectors`. Any other name is a registered selector (``selectors.register_selector``) or ``module:object``.
+Baselines share everything but the ``selector`` and its ``params`` (each selector's own NamedTuple, defined and
+checked in its module of :mod:`.selectors`; None = its defaults): ``"roughness"`` (standard CL, the paper's Figure
+7b: the terrains sorted by descriptor 0 (roughness) ascending, every ``RoughnessParams.stride``-th one, in order,
+each finished by the same threshold / 100-evaluation rule) and ``"random"`` (uniformly random among the available
+terrains, each removed after it is finished, no GP). The field's curricula spread a trial's envs over several
+terrains at once: ``"dr"`` (domain randomisation, ``DRParams.terrains_per_chunk`` terrains a chunk), ``"levels"``
+(legged_gym's terrain levels: ``LevelsParams``), ``"plr"`` (prioritised level replay: ``PLRParams``) and
+``"accel"`` (PLR over a generator's genomes whose replayed levels are edited by its ``mutate``: ``AccelParams``);
+their rules and where they differ from the field's are in their modules. The map curriculum's GP and removal rule
+above are ``MapParams`` (``kappa``, ``rho``, ``sigma_f``, ``noise``, ``gp_evaluation``, ``removal_margin``,
+``removal_ties``, ``max_observations``). Any other name is a registered selector (``selectors.register_selector``)
+or ``module:object``.
 """
 
 from __future__ import annotations
