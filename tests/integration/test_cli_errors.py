@@ -325,3 +325,18 @@ def test_evaluate_raises_a_presets_size_to_one_the_robot_fits(capsys):
         evaluate.fit_size(args, cfg0, [difficulty.robot_base_policy(robot)])
         assert cfg0["size"] == size and args.size == (size if robot == "ant" else None), robot
     assert "--size 96 (the smoke preset's 64 pixels are too small for robot ant)" in capsys.readouterr().err
+
+
+def test_a_library_field_is_printed_as_its_flag():
+    """``learn`` and ``curriculum`` print the library's ``LearnConfig.<field>`` as the flag that sets it, through one
+    table (``run_config.FLAT_FIELDS`` and each selector's ``SelectorSpec.flat``, then ``common.flag``)."""
+    from experiments import common, learn
+    from jaxterrain.curriculum import run_config, selectors
+
+    for key in run_config.FLAT_FIELDS:
+        assert learn.flags_in(f"LearnConfig.{run_config.field_of(key)} must be", "map") == f"{common.flag(key)} must be"
+    for name in ("map", "roughness", "dr", "levels", "plr", "accel"):
+        for key, field in selectors.selector_spec(name).flat.items():
+            text = learn.flags_in(f"LearnConfig.curriculum.params.{field} must be", name)
+            assert text == f"{common.flag(key)} must be", (name, key)
+    assert learn.flags_in("LearnConfig.archive a.npz: 1 filled cell(s)", "map") == "--archive a.npz: 1 filled cell(s)"
