@@ -59,8 +59,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 import common  # noqa: E402
-from experiments import learn  # noqa: E402
-from jaxterrain.curriculum import runner  # noqa: E402
+from jaxterrain.curriculum import presets, run_config, runner  # noqa: E402
 from jaxterrain import rl  # noqa: E402
 from jaxterrain.rl.config import TRUNCATIONS  # noqa: E402
 from jaxterrain.curriculum import walker as W  # noqa: E402
@@ -75,7 +74,7 @@ def timed(fn, *args):
 
 def learn_cfg(args, trials: int, overlap: bool = False, truncation: str | None = None,
               curriculum: str | None = None) -> dict:
-    cfg = {**learn.PRESETS[args.preset], "seed": 0, "trials": trials, "overlap": overlap}
+    cfg = {**presets.FLAT_PRESETS[args.preset], "seed": 0, "trials": trials, "overlap": overlap}
     if curriculum is not None:
         cfg["curriculum"] = curriculum
     if truncation is not None:
@@ -142,10 +141,10 @@ def measure_block(args, trials: int, overlap: bool = False, truncation: str | No
     """The learn command's block at ``trials``: compile seconds, seconds per chunk, env steps/s; ``devices``: the
     trials split over that many devices (a mesh, as ``learn --devices N``; None: the one-device runner)."""
     cfg = learn_cfg(args, trials, overlap, truncation, curriculum)
-    config, arch, policy, env = runner.validate(cfg)
+    run, config, arch, policy, env = runner.validate(run_config.from_flat(cfg))
     mesh = None if devices is None else sharding.setup(devices)
     t0 = time.perf_counter()
-    bank, block, states = runner.setup(cfg, config, arch, policy, env, mesh)
+    bank, block, states = runner.setup(run, config, arch, policy, env, mesh)
     jax.block_until_ready(states)
     compile_s = time.perf_counter() - t0
     start = None  # --start's restored states, for the parts
@@ -173,7 +172,7 @@ def measure_block(args, trials: int, overlap: bool = False, truncation: str | No
            "chunk_reached": int(np.max(np.asarray(states.chunk))), "switches": int(np.sum(switched)),
            "loop_steps": steps, "s_per_step": t / steps, "hardest_mean": float(np.mean(np.asarray(states.hardest))),
            **{f"{k}_timed": v for k, v in kinds.items()}}  # plr / accel: mean replay (edit) chunks per trial timed
-    if args.parts and runner.selector_slots(cfg) == 1:  # the parts of a one-terrain curriculum
+    if args.parts and runner.selector_slots(run) == 1:  # the parts of a one-terrain curriculum
         row.update(measure_parts(cfg, config, bank, policy, env, trials, start))
     return row
 
@@ -223,8 +222,8 @@ def measure_ppo(args, truncation: str | None = None) -> dict:
     """Bare PPO on one fixed terrain with the curriculum's PPO config, one chunk's updates per call (on a tiled
     walker, all its envs on one tile holding that terrain)."""
     cfg = learn_cfg(args, 1, truncation=truncation)
-    config, arch, policy, env = runner.validate(cfg)
-    bank, _, _ = runner.setup(cfg, config, arch, policy, env)
+    run, config, arch, policy, env = runner.validate(run_config.from_flat(cfg))
+    bank, _, _ = runner.setup(run, config, arch, policy, env)
     ppo = config.ppo_config(policy.config)
     terrain = bank.heightmaps[0]
     if env.tiles:  # a tiled walker (e.g. Warp's): that terrain on tile 0, every env on it
@@ -248,8 +247,8 @@ def measure_ppo(args, truncation: str | None = None) -> dict:
 
 def main() -> None:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    p.add_argument("--archive", default=None, help=f"default: the learn command's ({learn.CPPN_ARCHIVE})")
-    p.add_argument("--preset", default="gpu-short", choices=sorted(learn.PRESETS), help="the learn preset (smoke: CPU)")
+    p.add_argument("--archive", default=None, help=f"default: the learn command's ({presets.CPPN_ARCHIVE})")
+    p.add_argument("--preset", default="gpu-short", choices=sorted(presets.FLAT_PRESETS), help="the learn preset (smoke: CPU)")
     p.add_argument("--trials", default="1,10", help="comma list of trial counts")
     p.add_argument("--chunks", type=int, default=2, help="chunks per timed block call")
     p.add_argument("--repeats", type=int, default=2, help="bare PPO: timed calls")
@@ -283,7 +282,7 @@ def main() -> None:
     if any(n is not None and not 1 <= n <= jax.device_count() for n in device_counts):
         p.error(f"--devices: counts from 1 to the {jax.device_count()} devices here; got {args.devices!r}")
     modes = [{"off": False, "on": True}[m] for m in args.overlap.split(",")]
-    truncations = (args.truncation or learn.PRESETS[args.preset]["truncation"]).split(",")
+    truncations = (args.truncation or presets.FLAT_PRESETS[args.preset]["truncation"]).split(",")
     if not set(truncations) <= set(TRUNCATIONS):
         p.error(f"--truncation: a comma list of {', '.join(TRUNCATIONS)}; got {args.truncation!r}")
 
@@ -294,7 +293,7 @@ def main() -> None:
         for truncation in truncations:
             rows.append(measure_ppo(args, truncation))
             print(rows[-1], flush=True)
-    curricula = args.curricula.split(",") if args.curricula else [learn.PRESETS[args.preset]["curriculum"]]
+    curricula = args.curricula.split(",") if args.curricula else [presets.FLAT_PRESETS[args.preset]["curriculum"]]
     for trials in [int(t) for t in args.trials.split(",")]:
         for overlap in modes:
             for truncation in truncations:
@@ -329,7 +328,7 @@ def main() -> None:
                         if (r["part"], r["trials"], r["truncation"]) == (part, trials, t)] for t in TRUNCATIONS}
             if mode["mask"] and mode["bootstrap"]:
                 ratios[f"bootstrap_cost_{name}_T{trials}"] = float(np.mean(mode["bootstrap"]) / np.mean(mode["mask"]))
-    paper_chunks = learn.PRESETS["paper"]["max_epochs"] // learn.PRESETS["paper"]["epochs_per_chunk"]
+    paper_chunks = presets.FLAT_PRESETS["paper"]["max_epochs"] // presets.FLAT_PRESETS["paper"]["epochs_per_chunk"]
     ppo = next((r for r in rows if r["part"] == "bare PPO (one terrain)" and r["truncation"] == first), None)
     if 1 in blocks:
         ratios["paper_trial_minutes_T1"] = blocks[1]["s_per_chunk"] * paper_chunks / 60

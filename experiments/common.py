@@ -94,19 +94,24 @@ PRESET_HELP = {
 """Each preset's meaning in ``--help`` (``{smoke}``: the command's minutes, :func:`smoke_minutes`)."""
 
 
-def _estimates():
-    """``jaxterrain.runtime.estimates``, read from its file: ``--help`` imports no JAX (the package's ``__init__``
-    does)."""
+def library_file(name: str):
+    """The library module ``name`` (``"runtime.estimates"``, ``"curriculum.presets"``: one that imports only the
+    standard library), read from its file: ``--help`` imports no JAX (the package's ``__init__`` does)."""
     import importlib.util
 
-    if "jaxterrain.runtime.estimates" in sys.modules:
-        return sys.modules["jaxterrain.runtime.estimates"]
+    if f"jaxterrain.{name}" in sys.modules:
+        return sys.modules[f"jaxterrain.{name}"]
     spec = importlib.util.find_spec("jaxterrain")
-    path = Path(spec.origin).parent / "runtime" / "estimates.py"
-    spec = importlib.util.spec_from_file_location("_jaxterrain_estimates", path)
+    path = Path(spec.origin).parent.joinpath(*name.split(".")).with_suffix(".py")
+    spec = importlib.util.spec_from_file_location(f"_jaxterrain_{name.replace('.', '_')}", path)
     module = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(module)
     return module
+
+
+def _estimates():
+    """``jaxterrain.runtime.estimates`` (:func:`library_file`)."""
+    return library_file("runtime.estimates")
 
 
 def smoke_minutes(command: str) -> str:

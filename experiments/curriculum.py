@@ -101,7 +101,7 @@ def check_config(args, cfg: dict) -> None:
         try:
             runner.load_archive(path, cfg["descriptors"])
         except runner.BadInput as err:
-            text = str(err).removeprefix(f"--archive {path}: ")
+            text = str(err).removeprefix(f"LearnConfig.archive {path}: ")
             raise common.UsageError(f"--archives {name}={path}: {text}") from None
     learn.check_selector_flags(args, ["map", *baselines(cfg)], "--baseline")
 
@@ -138,8 +138,14 @@ def baselines(cfg: dict) -> list[str]:
 
 
 def _treatment_cfg(cfg: dict, path: str, curriculum: str) -> dict:
+    """A treatment's flat config (its ``config.json``): the run's, on one archive with one curriculum."""
     keep = {k: v for k, v in cfg.items() if k not in ("archives", "baseline", "command", "preset")}
     return {**keep, "archive": path, "curriculum": curriculum, "command": "learn"}
+
+
+def treatment_run(cfg: dict, path: str, curriculum: str):
+    """A treatment's typed run (``jaxterrain.curriculum.run_config.LearnConfig``)."""
+    return learn.run_of(_treatment_cfg(cfg, path, curriculum))
 
 
 def shown(label: str, summary: dict) -> str:
@@ -263,7 +269,7 @@ def report(folder: Path, cfg: dict, plan) -> int:
     rows, done = [], []
     for name, path, curriculum in plan:
         sub = folder / f"{name}-{curriculum}"
-        summary = runner.report_treatment(_treatment_cfg(cfg, path, curriculum), sub) if sub.is_dir() else None
+        summary = runner.report_treatment(treatment_run(cfg, path, curriculum), sub) if sub.is_dir() else None
         if summary is None:
             print(f"{name} {curriculum}: no checkpoint yet", flush=True)
             continue
@@ -293,15 +299,16 @@ def main(args) -> int:
     folder, cfg = common.setup_run("curriculum", args, PRESETS, "smoke", over, check=lambda c: check_config(args, c))
     start = time.perf_counter()
     limit = None if args.time_limit is None else 60.0 * args.time_limit
+    curriculum = "map"  # the curriculum whose flags an error names (its own, once the plan is read)
     try:
         plan = treatments(cfg, folder)
         for name, path, curriculum in plan:  # every treatment's input, before anything is compiled
-            tcfg = _treatment_cfg(cfg, path, curriculum)
-            runner.check_resumable(folder / f"{name}-{curriculum}", tcfg,
-                                  runner.validate(runner.report_cfg(tcfg) if args.report else tcfg)[1],
+            run = treatment_run(cfg, path, curriculum)
+            runner.check_resumable(folder / f"{name}-{curriculum}", run,
+                                  runner.validate(runner.report_run(run) if args.report else run)[2],
                                   physics=not args.report)
     except runner.BadInput as err:
-        print(f"curriculum: {err}", file=sys.stderr)
+        print(f"curriculum: {learn.flags_in(str(err), curriculum)}", file=sys.stderr)
         if args.resume is None and {p.name for p in folder.iterdir()} <= {common.CONFIG_NAME, common.PROVENANCE_NAME,
                                                                           "combined_archive.npz"}:
             shutil.rmtree(folder)  # nothing of a run in it yet (as learn)
@@ -319,7 +326,7 @@ def main(args) -> int:
         tcfg = _treatment_cfg(cfg, path, curriculum)
         common.write_config(sub, tcfg)
         left = None if limit is None else max(limit - (time.perf_counter() - start), 1e-3)
-        summary = runner.run_treatment(tcfg, sub, left, desc=f"{name} {curriculum}", mesh=mesh,
+        summary = runner.run_treatment(learn.run_of(tcfg), sub, left, desc=f"{name} {curriculum}", mesh=mesh,
                                        progress=common.progress_mode(args))
         if summary is None:
             print(f"time limit reached; continue with: python -m experiments curriculum --resume {folder}{shard}",

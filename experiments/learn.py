@@ -39,7 +39,8 @@ staying up - control cost); ``--healthy-reward`` changes the per-step bonus for 
 distance). The observation normaliser keeps merging the fine-tuning data, as brax's PPO does;
 ``--no-update-normaliser`` keeps the base policy's statistics. Why both exist: docs/results/exp2_headings.md.
 
-Presets: ``paper`` (30 000 epochs, the paper's budget), ``gpu-short`` (3 000 epochs, a tenth), ``smoke`` (CPU,
+Presets (``jaxterrain.curriculum.presets``; typed, ``jaxterrain.curriculum.run_config.PRESETS``): ``paper`` (30 000
+epochs, the paper's budget), ``gpu-short`` (3 000 epochs, a tenth), ``smoke`` (CPU,
 about a minute after compiling: 2 trials of 4 one-epoch chunks of 80 env steps on 4 envs, 2 walks per evaluation
 along +x whatever the archive's protocol, 100-step episodes; the archive's terrains are used as they are). The
 default archive is the CPPN's shipped paper-budget archive, reseated under ``difficulty.HEADINGS`` (``CPPN_ARCHIVE``).
@@ -55,7 +56,8 @@ Writes into the run folder: ``config.json``, ``checkpoint.npz`` + ``tb/`` (the d
 ``summary.json``, and every trial's walker in ``policies/trial_K/`` (``rl.load_policy`` reads it; ``python -m
 experiments evaluate --policy RUN/policies/trial_0`` walks it on the held-out suite; ``--policy-every N`` adds
 snapshots ``policies/chunk_CCCCC/trial_K/``; ``--resume RUN --export-policies`` writes them from the last checkpoint
-of a run made before). This module is the command line only: the runner is :mod:`jaxterrain.curriculum.runner`.
+of a run made before). This module is the command line only: the run is a ``jaxterrain.curriculum.run_config.LearnConfig`` (its
+``config.json`` the flat form, ``--print-config`` its printout), run by :mod:`jaxterrain.curriculum.runner`.
 """
 
 from __future__ import annotations
@@ -66,31 +68,47 @@ import sys
 
 from experiments import common
 
-CPPN_ARCHIVE = common.shipped("archives/cppn_headings.npz")
-"""The default archive: the CPPN's paper-budget roughness x TPI archive (evolved after the fix of tied insertion),
-reseated under ``difficulty.HEADINGS``; package data (``jaxterrain/assets/archives/``, a copy of
-``docs/results/exp2_cppn_headings_archive.npz``), so ``learn`` runs from any folder."""
+_PRESETS = common.library_file("curriculum.presets")  # jaxterrain.curriculum.presets, read without JAX
+CPPN_ARCHIVE = _PRESETS.CPPN_ARCHIVE
+"""The default archive (``jaxterrain.curriculum.presets.CPPN_ARCHIVE``): the CPPN's shipped paper-budget archive."""
 BACKENDS = common.BACKEND_NAMES  # jaxterrain.walker.layout.BACKEND_CHOICES (literal: --help imports no JAX)
 RECIPE_NAMES = ("paper", "wide")  # jaxterrain.curriculum.RECIPES (literal, as BACKENDS; a test keeps them equal)
-_PAPER = dict(archive=CPPN_ARCHIVE, curriculum="map", trials=10, descriptors=["roughness", "tpi"], policy=None,
-              epochs_per_chunk=40, steps_per_epoch=4000, max_epochs=30000, threshold=0.9, max_fitness=1.0,
-              max_evals=100, attempts=None, best=None, headings=None, kappa=0.05, rho=0.4, sigma_f=1.0, noise=0.001,
-              gp_evaluation="final", removal_margin=0.05, removal_ties="nearer", credit="threshold",
-              distance_origin="origin", roughness_stride=5, max_observations=None, num_envs=500, unroll_length=10,
-              num_unrolls=8, num_minibatches=8, update_epochs=8, learning_rate=3e-4, episode_length=1000,
-              chunks_per_call=25, fast_compile=False, backend="auto", healthy_reward=None, update_normaliser=True,
-              truncation="bootstrap", overlap=False, compact=True, policy_every=None, terrains_per_chunk=8, levels=10,
-              levels_init=None, levels_promote=None, levels_demote=0.5, plr_capacity=None, plr_replay_prob=0.8,
-              plr_staleness=0.3, plr_temperature=0.3, plr_min_fill=0.5, accel_generator=None, accel_edits=1,
-              robot=None, recipe="paper", observation=None)
-PRESETS: dict[str, dict] = common.with_preset_names({
-    "paper": _PAPER,
-    "gpu-short": {**_PAPER, "max_epochs": 3000},
-    "smoke": {**_PAPER, "trials": 2, "epochs_per_chunk": 1, "steps_per_epoch": 80, "max_epochs": 4, "max_evals": 2,
-              "attempts": 2, "best": 1, "headings": 1, "num_envs": 4, "num_unrolls": 2, "num_minibatches": 2,
-              "update_epochs": 1, "episode_length": 100, "chunks_per_call": 2, "fast_compile": True,
-              "compact": False, "recipe": None},  # its own tiny update (4 envs x 10 x 2), no recipe's
-}, {"gpu": "paper"})
+PRESETS: dict[str, dict] = common.with_preset_names({n: dict(p) for n, p in _PRESETS.FLAT_PRESETS.items()})
+"""The presets in their flat (``config.json``) form, defined in the library: ``jaxterrain.curriculum.presets``
+(typed: ``jaxterrain.curriculum.run_config.PRESETS``)."""
+
+
+def flags_in(text: str, selector: str) -> str:
+    """A library message with its fields (``LearnConfig.<path>``: ``jaxterrain.curriculum.run_config``) named as
+    this command's flags: ``LearnConfig.curriculum.threshold`` -> ``--threshold``, ``LearnConfig.walker.backend``
+    -> ``--backend``, a selector's ``LearnConfig.curriculum.params.capacity`` -> ``--plr-capacity`` (its flat key,
+    ``selectors.SelectorSpec.flat``). The field -> flag naming is ``run_config.FLAT_FIELDS`` and ``common.flag``."""
+    import re
+
+    from jaxterrain.curriculum import run_config, selectors
+
+    inverse = {path: key for key, path in run_config.FLAT_FIELDS.items()}
+
+    def one(m) -> str:
+        path = m.group(1)
+        if path == "curriculum.ppo":
+            return "--recipe / --num-envs (the update's shape)"
+        if path.startswith("curriculum.params."):
+            return common.flag(selectors.flat_name(selector, path.rsplit(".", 1)[1]))
+        return common.flag(inverse.get(path, path.rsplit(".", 1)[-1]))
+
+    return re.sub(r"\bLearnConfig\.([a-z_]+(?:\.[a-z_]+)*)", one, text)
+
+
+def run_of(cfg: dict):
+    """The typed run (``run_config.from_flat``) of a flat config; :class:`~experiments.common.UsageError` naming
+    the keys it does not know."""
+    from jaxterrain.curriculum import run_config
+
+    try:
+        return run_config.from_flat(cfg)
+    except (ValueError, TypeError) as err:
+        raise common.UsageError(str(err)) from None
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -259,6 +277,17 @@ def overrides(args) -> dict:
     return out
 
 
+def report(summary: dict | None, folder) -> int:
+    """``--report``'s line (``runner.report_treatment``'s summary; None: no checkpoint yet, exit 2)."""
+    if summary is None:
+        print(f"learn: {folder} has no checkpoint yet: nothing to report", file=sys.stderr)
+        return 2
+    state = f"partial, {summary['chunks_done']} chunks" if summary.get("partial") else "finished"
+    print(f"report ({state}): hardest traversed {summary['hardest_mean']:.2f} +- {summary['hardest_se']:.2f} "
+          f"cells -> {folder}", flush=True)
+    return 0
+
+
 def main(args) -> int:
     from jaxterrain.curriculum import runner
 
@@ -268,36 +297,23 @@ def main(args) -> int:
         raise common.UsageError("--export-policies needs --resume RUN (the run whose walkers to write)")
     mesh = common.device_mesh(args.devices)
     folder, cfg = common.setup_run("learn", args, PRESETS, "smoke", overrides(args),
-                                   check=lambda c: check_selector_flags(args, [c["curriculum"]]))
-    try:  # cheap: files and values, before the run folder fills up or anything compiles
-        readonly = args.report or args.export_policies
-        arch = runner.validate(runner.report_cfg(cfg) if readonly else cfg)[1]
-        runner.check_resumable(folder, cfg, arch, physics=not readonly)
+                                   check=lambda c: (check_selector_flags(args, [c["curriculum"]]), run_of(c)))
+    run = run_of(cfg)
+    try:  # the library validates the run once, before anything compiles (runner.validate)
+        if args.export_policies:
+            paths = runner.export_treatment(run, folder)
+            print(f"wrote {len(paths)} policies -> {folder / 'policies'}", flush=True)
+            return 0
+        if args.report:
+            return report(runner.report_treatment(run, folder), folder)
+        limit = None if args.time_limit is None else 60.0 * args.time_limit
+        summary = runner.run_treatment(run, folder, limit, mesh=mesh, progress=common.progress_mode(args))
     except runner.BadInput as err:
-        print(f"learn: {err}", file=sys.stderr)
+        print(f"learn: {flags_in(str(err), run.curriculum.selector)}", file=sys.stderr)
         if args.resume is None and {p.name for p in folder.iterdir()} <= {common.CONFIG_NAME,
                                                                           common.PROVENANCE_NAME}:
-            shutil.rmtree(folder)
+            shutil.rmtree(folder)  # nothing of a run in it yet
         return 2
-    if args.export_policies:
-        try:
-            paths = runner.export_treatment(cfg, folder)
-        except runner.BadInput as err:
-            print(f"learn: {err}", file=sys.stderr)
-            return 2
-        print(f"wrote {len(paths)} policies -> {folder / 'policies'}", flush=True)
-        return 0
-    if args.report:
-        summary = runner.report_treatment(cfg, folder)
-        if summary is None:
-            print(f"learn: {folder} has no checkpoint yet: nothing to report", file=sys.stderr)
-            return 2
-        state = f"partial, {summary['chunks_done']} chunks" if summary.get("partial") else "finished"
-        print(f"report ({state}): hardest traversed {summary['hardest_mean']:.2f} +- {summary['hardest_se']:.2f} "
-              f"cells -> {folder}", flush=True)
-        return 0
-    limit = None if args.time_limit is None else 60.0 * args.time_limit
-    summary = runner.run_treatment(cfg, folder, limit, mesh=mesh, progress=common.progress_mode(args))
     if summary is None:
         print(f"time limit reached; continue with: python -m experiments learn --resume {folder}", flush=True)
         return 3

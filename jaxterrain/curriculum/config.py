@@ -63,44 +63,39 @@ terrains predicted easier than the one just trained are removed, the run ends wh
 Ties in the choice of the next terrain (equal scores) go to the terrain nearest the origin, then the lowest index.
 The first terrain of the map curriculum is the argmax of the prior (no observation yet: the UCB is the prior + kappa).
 
-Baselines share everything but the ``selector``: ``"roughness"`` (standard CL, the paper's Figure 7b: the terrains
-sorted by descriptor 0 (roughness) ascending, every ``roughness_stride``-th one, in order, each finished by the same
-threshold / 100-evaluation rule) and ``"random"`` (uniformly random among the available terrains, each removed after
-it is finished, no GP). The field's curricula spread a trial's envs over several terrains at once: ``"dr"`` (domain
-randomisation, ``terrains_per_chunk`` terrains a chunk), ``"levels"`` (legged_gym's terrain levels: ``levels``,
-``levels_init``, ``levels_promote``, ``levels_demote``), ``"plr"`` (prioritised level replay, ``plr_*``) and
-``"accel"`` (PLR over a generator's genomes whose replayed levels are edited by its ``mutate``: ``accel_generator``,
-``accel_edits`` and the ``plr_*`` buffer settings); their rules and where they differ from the field's are in
-:mod:`.selectors`. Any other name is a registered selector (``selectors.register_selector``) or ``module:object``.
+Baselines share everything but the ``selector`` and its ``params`` (each selector's own NamedTuple, defined and
+checked in its module of :mod:`.selectors`; None = its defaults): ``"roughness"`` (standard CL, the paper's Figure
+7b: the terrains sorted by descriptor 0 (roughness) ascending, every ``RoughnessParams.stride``-th one, in order,
+each finished by the same threshold / 100-evaluation rule) and ``"random"`` (uniformly random among the available
+terrains, each removed after it is finished, no GP). The field's curricula spread a trial's envs over several
+terrains at once: ``"dr"`` (domain randomisation, ``DRParams.terrains_per_chunk`` terrains a chunk), ``"levels"``
+(legged_gym's terrain levels: ``LevelsParams``), ``"plr"`` (prioritised level replay: ``PLRParams``) and
+``"accel"`` (PLR over a generator's genomes whose replayed levels are edited by its ``mutate``: ``AccelParams``);
+their rules and where they differ from the field's are in their modules. The map curriculum's GP and removal rule
+above are ``MapParams`` (``kappa``, ``rho``, ``sigma_f``, ``noise``, ``gp_evaluation``, ``removal_margin``,
+``removal_ties``, ``max_observations``). Any other name is a registered selector (``selectors.register_selector``)
+or ``module:object``.
 """
 
 from __future__ import annotations
 
-import math
-import numbers
-from typing import NamedTuple, Optional
+from typing import Any, NamedTuple, Optional
 
-from jaxterrain.curriculum.selectors import accel_generator, resolve_factory
+from jaxterrain.curriculum.selectors.base import float_in
+from jaxterrain.curriculum.selectors.protocol import params_from_flat, selector_fields, selector_spec, validate_selector
 from jaxterrain.difficulty import Protocol
 from jaxterrain.rl.config import PPOConfig, validate_config as validate_ppo_config
 from jaxterrain.runtime.validation import int_at_least, known_fields, one_of, walks
 
 __all__ = ["CurriculumConfig", "validate_config", "SELECTORS", "SELECTOR_FIELDS", "FINE_TUNED", "FINE_TUNING",
-           "RECIPES", "recipe"]
+           "RECIPES", "recipe", "CREDITS", "DISTANCE_ORIGINS"]
 
 SELECTORS = ("map", "roughness", "random", "dr", "levels", "plr", "accel")  # built in; selectors.selector_names() adds registered ones
-SELECTOR_FIELDS: dict[str, tuple[str, ...]] = {
-    "terrains_per_chunk": ("dr", "plr", "accel"),
-    **dict.fromkeys(("levels", "levels_init", "levels_promote", "levels_demote"), ("levels",)),
-    **dict.fromkeys(("plr_capacity", "plr_replay_prob", "plr_staleness", "plr_temperature", "plr_min_fill"),
-                    ("plr", "accel")),
-    **dict.fromkeys(("accel_generator", "accel_edits"), ("accel",)),
-}
-"""The :class:`CurriculumConfig` fields that only some built-in selectors read, and which: any other built-in
-selector ignores them (``experiments learn`` refuses such a flag given with another ``--curriculum``; a registered
-or ``module:object`` selector may read any field)."""
-GP_EVALUATIONS = ("final", "best")
-REMOVAL_TIES = ("nearer", "keep", "remove")
+SELECTOR_FIELDS: dict[str, tuple[str, ...]] = selector_fields(SELECTORS)
+"""The flat config keys (``learn``'s ``config.json`` and flags) of the built-in selectors' params, and which selectors
+read each (``plr_capacity``: ``plr``, ``accel``): any other built-in selector ignores them (``experiments learn``
+refuses such a flag given with another ``--curriculum``; a registered or ``module:object`` selector has its own).
+Each selector's module owns its params (:mod:`.selectors`)."""
 CREDITS = ("threshold", "finished")
 DISTANCE_ORIGINS = ("origin", "top_right")
 # The PPOConfig fields that fine-tuning sets (how much is collected per update, how it is trained on); every other
@@ -159,17 +154,8 @@ class CurriculumConfig(NamedTuple):
         per heading (1: the paper's +x; 2 or 4: the map also turned, ``difficulty.HEADINGS`` is 80, 5, 4), the mean
         over headings of each heading's best ``best``. Use the protocol the archive's fitness (the GP's prior) was
         measured under: ``experiments learn`` takes it from the archive unless told otherwise.
-      kappa: UCB exploration weight (IT&E: 0.05).
-      rho, sigma_f, noise: GP length scale, signal variance, observation noise (IT&E: 0.4, 1, 0.001).
-      gp_evaluation: ``final`` or ``best`` evaluation of a finished terrain enters the GP.
-      removal_margin: fitness margin of the removal rule (>= 0).
-      removal_ties: ``nearer``, ``keep`` or ``remove``: terrains predicted within the margin of the one just
-        trained.
       credit: ``threshold`` or ``finished``: which terrains count for the hardest-terrain record.
       distance_origin: ``origin`` or ``top_right``: how a cell's hardness (distance) is measured.
-      roughness_stride: the roughness baseline trains every ``roughness_stride``-th terrain (paper: 5).
-      max_observations: GP observation slots ``M``; None = ``min(N terrains, max chunks)``, which can never fill up
-        (one observation per finished terrain, each terrain finished at most once).
       ppo: a :class:`jaxterrain.rl.PPOConfig` whose :data:`FINE_TUNED` fields (``num_envs, unroll_length,
         num_unrolls, num_minibatches, update_epochs, learning_rate, update_normaliser, truncation``) are the
         fine-tuning PPO's (the base policy's recipe otherwise, :meth:`ppo_config`); its other fields must keep
@@ -181,28 +167,12 @@ class CurriculumConfig(NamedTuple):
         keys, policies, evaluations and choices, given the same env states) in
         fewer physics calls: see :func:`jaxterrain.curriculum.core.step`. Needs a harness with ``train_evaluate``
         (the walker's on tiles). One-terrain selectors only (``map``, ``roughness``, ``random``).
-      terrains_per_chunk: ``dr``'s, ``plr``'s and ``accel``'s terrains per chunk (the envs dealt round-robin over them), >= 1.
-      levels: ``levels``' difficulty levels (bands of the bank by hardness; legged_gym: 10), >= 1.
-      levels_init: envs start at random levels ``0 .. levels_init``, in [0, levels - 1]; None = ``levels // 2``
-        (legged_gym: 5 of 10).
-      levels_promote: an env moves up a level when its furthest normalised distance in the chunk is at least this;
-        None = ``threshold x max_fitness``.
-      levels_demote: ... and down when it is below this (legged_gym: half the course), in [0, 1].
-      plr_capacity, plr_replay_prob, plr_staleness, plr_temperature, plr_min_fill: ``plr``'s level buffer (JaxUED's
-        ``maze_plr.py`` defaults 4000, 0.8, 0.3, 0.3, 0.5): entries (at most the bank's terrains), the chance a chunk
-        replays, the staleness coefficient, the rank temperature (> 0), the buffer's fill before any replay.
-        ``accel`` uses the same settings for its buffer of genomes (there the capacity is not bounded by the bank).
-        ``plr_capacity=None`` (the default) sizes the buffer to the run (:func:`plr_buffer_capacity`): it reaches
-        ``plr_min_fill`` within the run's first tenth of chunks. JaxUED's 4 000 fills in its first 0.2 % of updates
-        (32 new mazes an update, 30 000 updates); a chunk here brings only ``terrains_per_chunk`` new levels, so 4 000
-        would fill to half only after 250 chunks at 8 a chunk, never within a ``gpu-short`` run of 75 (measured:
-        Experiment 3b's first ``accel`` run never replayed). An explicit capacity that cannot reach ``plr_min_fill``
-        within the run is refused.
-      accel_generator: ``accel``'s levels are genomes of this generator (its ``sample`` makes new levels, its
-        ``mutate`` edits them); None = unset (``experiments learn`` sets the archive's generator). Must be set for
-        ``accel``.
-      accel_edits: ``mutate`` applications per edit of a replayed level, >= 1 (JaxUED's maze: 5 tile edits; one of
-        our mutations already moves about a third of a vector genome's genes, or grows a CPPN's network).
+      params: the selector's own parameters, a NamedTuple its module defines (:mod:`.selectors`:
+        ``MapParams`` for ``map`` (the GP's kappa, rho, sigma_f, noise, gp_evaluation, the removal rule's margin and
+        ties, max_observations), ``RoughnessParams``, ``DRParams``, ``LevelsParams``, ``PLRParams``,
+        ``AccelParams``; ``random`` has none), or None (the default): that selector's defaults
+        (:func:`.selectors.selector_params`). :meth:`from_json_dict` also reads them flat, under their
+        ``config.json`` keys (``kappa``, ``plr_capacity``, ``levels_init``, ...: ``selectors.SelectorSpec.flat``).
     """
 
     selector: str = "map"
@@ -215,31 +185,11 @@ class CurriculumConfig(NamedTuple):
     attempts: int = 20
     best: int = 5
     headings: int = 1
-    kappa: float = 0.05
-    rho: float = 0.4
-    sigma_f: float = 1.0
-    noise: float = 0.001
-    gp_evaluation: str = "final"
-    removal_margin: float = 0.05
-    removal_ties: str = "nearer"
     credit: str = "threshold"
     distance_origin: str = "origin"
-    roughness_stride: int = 5
-    max_observations: Optional[int] = None
     ppo: PPOConfig = FINE_TUNING
     overlap: bool = False
-    terrains_per_chunk: int = 8
-    levels: int = 10
-    levels_init: Optional[int] = None
-    levels_promote: Optional[float] = None
-    levels_demote: float = 0.5
-    plr_capacity: Optional[int] = None
-    plr_replay_prob: float = 0.8
-    plr_staleness: float = 0.3
-    plr_temperature: float = 0.3
-    plr_min_fill: float = 0.5
-    accel_generator: Optional[str] = None
-    accel_edits: int = 1
+    params: Any = None
 
     @property
     def max_chunks(self) -> int:
@@ -261,10 +211,11 @@ class CurriculumConfig(NamedTuple):
         """PPO updates per chunk."""
         return self.steps_per_chunk // self.steps_per_update
 
-    def observation_slots(self, num_terrains: int) -> int:
-        """``M``, the GP's padded observation count for a bank of ``num_terrains``."""
-        if self.max_observations is not None:
-            return int(self.max_observations)
+    def observation_slots(self, num_terrains: int, max_observations: Optional[int] = None) -> int:
+        """``M``, the GP's padded observation count for a bank of ``num_terrains``: ``max_observations`` (``map``'s
+        ``MapParams.max_observations``), or with None ``min(N, max_chunks)``."""
+        if max_observations is not None:
+            return int(max_observations)
         return max(1, min(int(num_terrains), self.max_chunks))
 
     @property
@@ -280,14 +231,19 @@ class CurriculumConfig(NamedTuple):
 
     def to_json_dict(self) -> dict:
         """A JSON-serialisable dict: the fields, with ``ppo`` as ``{name: value}`` of its :data:`FINE_TUNED` fields
-        (the only ones it may set)."""
-        return {**self._asdict(), "ppo": {name: getattr(self.ppo, name) for name in FINE_TUNED}}
+        (the only ones it may set) and ``params`` as ``{field: value}`` (or None)."""
+        params = None if self.params is None else dict(self.params._asdict())
+        return {**self._asdict(), "ppo": {name: getattr(self.ppo, name) for name in FINE_TUNED}, "params": params}
 
     @classmethod
     def from_json_dict(cls, d: dict) -> "CurriculumConfig":
         """Inverse of :meth:`to_json_dict`; also reads the flat layout (the :data:`FINE_TUNED` fields beside the
         others, as ``experiments learn``'s ``config.json`` and configs written before ``ppo`` existed hold them).
-        Missing fields take their defaults; unknown keys, or ``d`` not a dict, raise ``ValueError``."""
+        The selector's params are read nested (``"params": {field: value}``) or flat, under their ``config.json``
+        keys (``plr_capacity``, ...; the layout of every config before the selectors owned their params): the keys
+        of the run's selector go into its params, those of the other built-in selectors are dropped (a flat config
+        holds every selector's). Missing fields take their defaults; unknown keys, or ``d`` not a dict, raise
+        ``ValueError``."""
         if not isinstance(d, dict):
             raise ValueError(f"CurriculumConfig.from_json_dict: needs a dict of fields (as to_json_dict writes); got "
                              f"{type(d).__name__}")
@@ -295,74 +251,37 @@ class CurriculumConfig(NamedTuple):
         ppo = {name: d.pop(name) for name in FINE_TUNED if name in d}
         nested = d.pop("ppo", None) or {}
         known_fields("CurriculumConfig.ppo", FINE_TUNED, nested)
+        selector = d.get("selector", cls._field_defaults["selector"])
+        flat = {key: d.pop(key) for key in list(d) if key in selector_fields()}
+        params = d.pop("params", None)
         known_fields("CurriculumConfig", cls._fields, d)
-        return cls(**d, ppo=FINE_TUNING._replace(**{**ppo, **nested}))
+        if isinstance(params, dict):
+            kind = selector_spec(selector).params
+            if kind is None:
+                raise ValueError(f"CurriculumConfig.params: selector {selector!r} takes none, got {params!r}")
+            known_fields("CurriculumConfig.params", kind._fields, params)
+            params = kind(**params)
+        elif params is None:
+            params = params_from_flat(selector, flat)
+        return cls(**d, ppo=FINE_TUNING._replace(**{**ppo, **nested}), params=params)
 
 
-def _float_in(config, name: str, lo: float, hi: Optional[float], lo_open: bool, hi_open: bool = False) -> None:
-    v = getattr(config, name)
-    if isinstance(v, bool) or not isinstance(v, numbers.Real):  # not a string that float() would read
-        raise ValueError(f"CurriculumConfig.{name} must be a number, got {v!r}")
-    f = float(v)
-    ok = math.isfinite(f) and (f > lo if lo_open else f >= lo) and (hi is None or (f < hi if hi_open else f <= hi))
-    if not ok:
-        left, right = "(" if lo_open else "[", ")" if (hi is None or hi_open) else "]"
-        raise ValueError(f"CurriculumConfig.{name} must be in {left}{lo}, {'inf' if hi is None else hi}{right}, "
-                         f"got {v!r}")
-
-
-def _int_at_least(config, name: str, lo: int) -> None:
-    int_at_least("CurriculumConfig", config, name, lo)
-
-
-def _choice(config, name: str, options: tuple) -> None:
-    one_of("CurriculumConfig", config, name, options)
+def _float_in(config, name: str, lo: float, hi: Optional[float], lo_open: bool) -> None:
+    float_in("CurriculumConfig", config, name, lo, hi, lo_open)
 
 
 def validate_config(config: CurriculumConfig) -> CurriculumConfig:
-    """Raise ``ValueError`` naming the first bad field and its allowed range; return ``config`` unchanged."""
-    resolve_factory(config.selector)
-    for name in ("epochs_per_chunk", "steps_per_epoch", "max_epochs", "max_evals", "attempts", "best",
-                 "roughness_stride", "terrains_per_chunk", "levels", "accel_edits"):
-        _int_at_least(config, name, 1)
-    if config.plr_capacity is not None:
-        _int_at_least(config, "plr_capacity", 1)
+    """Raise ``ValueError`` naming the first bad field and its allowed range (``CurriculumConfig.<field>``, or
+    ``CurriculumConfig.params.<field>`` for the selector's own, checked by its module); return ``config``
+    unchanged."""
+    for name in ("epochs_per_chunk", "steps_per_epoch", "max_epochs", "max_evals", "attempts", "best"):
+        int_at_least("CurriculumConfig", config, name, 1)
     walks("CurriculumConfig", config)
     _float_in(config, "threshold", 0.0, 1.0, lo_open=True)
     _float_in(config, "max_fitness", 0.0, None, lo_open=True)
-    _float_in(config, "kappa", 0.0, None, lo_open=False)
-    _float_in(config, "rho", 0.0, None, lo_open=True)
-    _float_in(config, "sigma_f", 0.0, None, lo_open=True)
-    _float_in(config, "noise", 0.0, None, lo_open=True)
-    _float_in(config, "removal_margin", 0.0, None, lo_open=False)
-    _choice(config, "gp_evaluation", GP_EVALUATIONS)
-    _choice(config, "removal_ties", REMOVAL_TIES)
-    _choice(config, "credit", CREDITS)
-    _choice(config, "distance_origin", DISTANCE_ORIGINS)
-    if config.max_observations is not None:
-        _int_at_least(config, "max_observations", 1)
-    if config.levels_init is not None:
-        _int_at_least(config, "levels_init", 0)
-    if config.levels_init is not None and config.levels_init > config.levels - 1:
-        raise ValueError(f"CurriculumConfig.levels_init must be in [0, levels - 1 = {config.levels - 1}], got "
-                         f"{config.levels_init!r}")
-    if config.levels_promote is not None:
-        _float_in(config, "levels_promote", 0.0, 1.0, lo_open=True)
-    _float_in(config, "levels_demote", 0.0, 1.0, lo_open=False)
-    for name in ("plr_replay_prob", "plr_staleness", "plr_min_fill"):
-        _float_in(config, name, 0.0, 1.0, lo_open=False)
-    _float_in(config, "plr_temperature", 0.0, None, lo_open=True)
-    if config.selector in ("plr", "accel") and config.plr_capacity is not None:
-        fill = math.ceil(config.plr_capacity * config.plr_min_fill)
-        seen = config.terrains_per_chunk * config.max_chunks
-        if fill > seen:
-            raise ValueError(
-                f"CurriculumConfig.plr_capacity must be at most {int(seen / max(config.plr_min_fill, 1e-9))} (or None: "
-                f"sized to the run) for {config.selector}: {config.plr_capacity} fills to plr_min_fill="
-                f"{config.plr_min_fill} ({fill} levels) only after more than the run's {config.max_chunks} chunks of "
-                f"{config.terrains_per_chunk} new levels ({seen}), so it would never replay")
-    if config.selector == "accel" or config.accel_generator is not None:
-        accel_generator(config)
+    one_of("CurriculumConfig", config, "credit", CREDITS)
+    one_of("CurriculumConfig", config, "distance_origin", DISTANCE_ORIGINS)
+    validate_selector(config)
     if config.overlap and config.selector not in ("map", "roughness", "random"):  # one terrain a trial
         raise ValueError(f"CurriculumConfig.overlap needs a one-terrain selector (map, roughness, random), got "
                          f"selector={config.selector!r}")

@@ -109,7 +109,7 @@ def plot_curves(ax, curves: dict, title: str = "") -> None:
     ax.legend(fontsize=7)
 
 
-def write_outputs(folder: Path, cfg: dict, config, bank, states, seconds: float | None,
+def write_outputs(folder: Path, run, config, bank, states, seconds: float | None,
                   chunks_done: int | None = None, names: tuple = ()) -> dict:
     """history.csv, sequences.csv, milestones.csv/.md, curve.png and summary.json; returns the summary. With
     ``chunks_done`` (an unfinished run's last checkpoint, :func:`report_treatment`) the summary goes to
@@ -120,7 +120,8 @@ def write_outputs(folder: Path, cfg: dict, config, bank, states, seconds: float 
     interval ``hardest_iqm`` ([point, low, high]). ``seconds``: the wall
     time of every command that ran the treatment, summed over resumes (each from its set-up and compilation on; the
     interpreter's start-up and imports are not in it), None where unknown. ``names``: the archive's generator names
-    (``sequences.csv``'s ``generator`` column, the summary's ``generators``: :func:`generator_counts`)."""
+    (``sequences.csv``'s ``generator`` column, the summary's ``generators``: :func:`generator_counts`). ``run``: the
+    treatment's :class:`~jaxterrain.curriculum.run_config.LearnConfig` (its archive and selector name it)."""
     hist = histories(states)
     cell, bins, dist = np.asarray(bank.cell), np.asarray(bank.bins), np.asarray(bank.distance)
     rows = []
@@ -134,7 +135,7 @@ def write_outputs(folder: Path, cfg: dict, config, bank, states, seconds: float 
                                   "distance", "evaluation", "hardest"], rows)
     sequences = sequence_rows(hist, bank, config, names)
     atomic_write_csv(folder / "sequences.csv", list(SEQUENCE_COLUMNS), sequences)
-    label = f"{Path(cfg['archive']).stem} {cfg['curriculum']}"
+    label = f"{Path(run.archive).stem} {run.curriculum.selector}"
     pct = [f"{round(100 * m)}%" for m in MILESTONES]
     csv_row, cells = milestone_rows(label, hist)
     atomic_write_csv(folder / "milestones.csv", ["treatment"] + [f"epochs_{p}" for p in pct] + [f"trials_{p}" for p in pct],
@@ -182,7 +183,7 @@ def trial_policy(states, trial: int) -> tuple:
     return pick(states.policy.params), pick(states.policy.normaliser)
 
 
-def export_policies(folder: Path, cfg: dict, config, ppo, env, start_policy, bank, states,
+def export_policies(folder: Path, run, config, ppo, env, start_policy, bank, states,
                     subdir: str | None = None, names: tuple = ()) -> list[Path]:
     """Write every trial's walker as ``folder/policies[/subdir]/trial_K/`` (``rl.save_policy``: ``policy.msgpack``
     + ``config.json``, which :func:`jaxterrain.rl.load_policy` reads and ``python -m experiments evaluate`` walks).
@@ -192,12 +193,12 @@ def export_policies(folder: Path, cfg: dict, config, ppo, env, start_policy, ban
     ``<jaxterrain>/...`` for a shipped one: ``runtime.provenance.portable_path``, no machine's absolute path; and
     its file's sha256), the starting policy (the same way), the selector, the trial, its seed, the epochs and env steps it
     trained, its terrain sequence (bank indices, cells, distances and generators in the order trained), the hardest
-    terrain it traversed, the chunk of the run; and ``provenance`` (commit, device, date). ``ppo`` is the
-    fine-tuning PPOConfig (the networks' shapes); ``env`` the walker env (observation and action sizes). Returns the
+    terrain it traversed, the chunk of the run; and ``provenance`` (commit, device, date). ``run`` is the treatment's
+    ``LearnConfig``, ``ppo`` the fine-tuning PPOConfig (the networks' shapes); ``env`` the walker env (observation and action sizes). Returns the
     folders, in trial order."""
     hist = histories(states)
     epochs = np.asarray(states.epoch)
-    archive_sha = provenance.file_sha256(cfg["archive"]) if cfg.get("archive") else None
+    archive_sha = provenance.file_sha256(run.archive) if run.archive else None
     out = []
     base_meta = dict(getattr(start_policy, "meta", None) or {})
     cell, dist, source = np.asarray(bank.cell), np.asarray(bank.distance), np.asarray(bank.source)
@@ -208,9 +209,9 @@ def export_policies(folder: Path, cfg: dict, config, ppo, env, start_policy, ban
         extra = {
             "walker_config": base_meta.get("walker_config"),
             "curriculum": {
-                "archive": provenance.portable_path(str(cfg.get("archive")), folder),
-                "archive_file_sha256": archive_sha, "selector": cfg.get("curriculum"), "trial": t,
-                "seed": int(cfg.get("seed", 0)), "epochs": int(epochs[t]),
+                "archive": provenance.portable_path(str(run.archive), folder),
+                "archive_file_sha256": archive_sha, "selector": run.curriculum.selector, "trial": t,
+                "seed": int(run.seed), "epochs": int(epochs[t]),
                 "env_steps": int(epochs[t]) * int(config.steps_per_epoch),
                 "chunks": int(np.sum(hist["epoch"][t] >= 0)), "hardest": float(np.asarray(states.hardest)[t]),
                 "terrains": order, "cells": [int(cell[k]) for k in order],

@@ -19,7 +19,13 @@ from jaxterrain.runtime import driver
 from jaxterrain.qd import TerrainBank, cell_distance
 from jaxterrain import curriculum as C
 from jaxterrain.curriculum import gp
-from jaxterrain.curriculum import outputs, runner
+from jaxterrain.curriculum import outputs, run_config, runner
+from jaxterrain.curriculum.selectors import selector_params as S_params
+
+
+def validated(cfg: dict):
+    """``(CurriculumConfig, archive, policy, env)`` of a flat (``config.json``) run config."""
+    return runner.validate(run_config.from_flat(cfg))[1:]
 from experiments import common
 
 
@@ -193,7 +199,7 @@ def reference_map_run(bank, config, gain, chunks):
     avail = np.ones(prior.size, bool)
     pick = lambda score: min(np.flatnonzero(avail & np.isclose(score, np.max(score[avail]), atol=1e-6)),  # noqa
                              key=lambda i: (hard[i], i))
-    cur, skill, evals, hardest, obs_i, obs_y, out = pick(prior + config.kappa), 0.0, 0, 0.0, [], [], []
+    cur, skill, evals, hardest, obs_i, obs_y, out = pick(prior + S_params(config).kappa), 0.0, 0, 0.0, [], [], []
     for _ in range(chunks):
         skill += gain
         fit = float(np.clip(1.0 - diff[cur] + skill, 0, 1))
@@ -206,12 +212,12 @@ def reference_map_run(bank, config, gain, chunks):
         obs_i.append(cur)
         obs_y.append(fit)
         mean, var = numpy_posterior(pts[obs_i], np.array(obs_y), prior[obs_i], pts, prior)
-        tie = np.abs(mean - mean[cur]) <= config.removal_margin
-        avail &= ~((mean > mean[cur] + config.removal_margin) | (tie & (hard <= hard[cur])))
+        tie = np.abs(mean - mean[cur]) <= S_params(config).removal_margin
+        avail &= ~((mean > mean[cur] + S_params(config).removal_margin) | (tie & (hard <= hard[cur])))
         avail[cur], evals = False, 0
         if not avail.any():
             return out, True
-        cur = pick(mean + config.kappa * np.sqrt(np.maximum(var, 0)))
+        cur = pick(mean + S_params(config).kappa * np.sqrt(np.maximum(var, 0)))
     return out, False
 
 
@@ -591,19 +597,19 @@ def test_learn_fine_tuning_knobs_reach_the_walker_and_ppo(tiny_archive):
     from jaxterrain import rl
 
     cfg = {**learn.PRESETS["smoke"], "archive": tiny_archive(4, "four.npz")}
-    config, _, _, env = runner.validate(cfg)
+    config, _, _, env = validated(cfg)
     assert env.config.healthy_reward == 5.0 and config.ppo.update_normaliser
-    config, _, _, env = runner.validate({**cfg, "healthy_reward": 0.5, "update_normaliser": False, "max_evals": 7,
+    config, _, _, env = validated({**cfg, "healthy_reward": 0.5, "update_normaliser": False, "max_evals": 7,
                                         "learning_rate": 3e-5, "truncation": "mask"})
     assert env.config.healthy_reward == 0.5 and not config.ppo.update_normaliser and config.max_evals == 7
     assert not config.ppo_config(rl.PPOConfig()).update_normaliser
     assert config.ppo_config(rl.PPOConfig()).learning_rate == 3e-5
     assert config.ppo_config(rl.PPOConfig()).truncation == "mask"
-    assert runner.validate(cfg)[0].ppo_config(rl.PPOConfig()).truncation == "bootstrap"  # every preset's
+    assert validated(cfg)[0].ppo_config(rl.PPOConfig()).truncation == "bootstrap"  # every preset's
     legacy = {k: v for k, v in cfg.items() if k != "truncation"}  # a config.json saved before the key existed
-    assert runner.validate(legacy)[0].ppo_config(rl.PPOConfig()).truncation == "mask"
+    assert validated(legacy)[0].ppo_config(rl.PPOConfig()).truncation == "mask"
     with pytest.raises(runner.BadInput, match="truncation"):
-        runner.validate({**cfg, "truncation": "drop"})
+        validated({**cfg, "truncation": "drop"})
     parser = argparse.ArgumentParser()
     learn.add_fine_tuning_arguments(parser)
     assert learn.fine_tuning_overrides(parser.parse_args(["--learning-rate", "1e-4"]))["learning_rate"] == 1e-4
@@ -632,9 +638,9 @@ def test_learn_time_limit_counts_set_up_and_compilation(tmp_path, tiny_archive, 
 
     monkeypatch.setattr(runner, "setup", slow_setup)
     monkeypatch.setattr(driver, "run_chunks", loop)
-    assert runner.run_treatment(cfg, tmp_path / "run", time_limit_s=10.0) is None
+    assert runner.run_treatment(run_config.from_flat(cfg), tmp_path / "run", time_limit_s=10.0) is None
     assert 9.0 < seen["limit"] <= 9.5
-    assert runner.run_treatment(cfg, tmp_path / "run", time_limit_s=0.1) is None
+    assert runner.run_treatment(run_config.from_flat(cfg), tmp_path / "run", time_limit_s=0.1) is None
     assert 0 < seen["limit"] <= 1e-3  # spent in set-up: one chunk, then stop
 
 
@@ -841,7 +847,7 @@ def test_learn_writes_every_trials_walker_as_a_loadable_policy(tmp_path, learn_s
 
     _, out = learn_smoke
     cfg = common.load_config(out)  # its paths as this machine reads them
-    states = runner.restored(cfg, out)[5]
+    states = runner.restored(run_config.from_flat(cfg), out)[6]
     base = rl.load_policy()
     seq = [r.split(",") for r in (out / "sequences.csv").read_text().splitlines()[1:]]
     for t in range(2):
@@ -895,12 +901,12 @@ def test_learn_killed_by_its_time_limit_resumes_to_the_uninterrupted_curves(tmp_
     assert meta["archive_sha256"] == digest != runner.archive_digest(A.load(tiny_archive(3, "3.npz")))
     assert meta["backend"] == "jax"  # auto, resolved on this CPU machine; a resume must run on the same physics
     cfg = common.load_config(parts)
-    runner.check_resumable(parts, cfg, A.load(archive))
+    runner.check_resumable(parts, run_config.from_flat(cfg), A.load(archive))
     with monkeypatch.context() as m:  # as if checkpointed on a GPU with MuJoCo Warp: auto must not switch to MJX
         m.setattr(driver, "read_meta", lambda folder: {**meta, "backend": "warp"})
-        with pytest.raises(runner.BadInput, match=r"--backend auto: it runs the walker on jax here, but .* on warp"):
-            runner.check_resumable(parts, cfg | {"backend": "auto"}, A.load(archive))
-        runner.check_resumable(parts, cfg, A.load(archive), physics=False)  # a report reads it on any machine
+        with pytest.raises(runner.BadInput, match=r"LearnConfig.walker.backend auto: it runs the walker on jax here, but .* on warp"):
+            runner.check_resumable(parts, run_config.from_flat(cfg | {"backend": "auto"}), A.load(archive))
+        runner.check_resumable(parts, run_config.from_flat(cfg), A.load(archive), physics=False)  # a report reads it on any machine
     shutil.copy(tiny_archive(3, "three.npz"), archive)  # another archive under the run's path
     for extra in ((), ("--report",)):
         capsys.readouterr()
@@ -952,17 +958,17 @@ def test_the_default_archives_are_the_five_shipped_headings_archives():
     assert exp.DEFAULT_ARCHIVES["cppn"] == learn.CPPN_ARCHIVE
     for name, path in exp.DEFAULT_ARCHIVES.items():
         arch = runner.load_archive(path, ["roughness", "tpi"])
-        cfg = runner.with_protocol(learn.PRESETS["gpu-short"], arch)
-        assert (cfg["attempts"], cfg["best"], cfg["headings"]) == (80, 5, 4), name
+        cfg = runner.resolve(run_config.PRESETS["gpu-short"], arch).curriculum
+        assert (cfg.attempts, cfg.best, cfg.headings) == (80, 5, 4), name
         assert int(arch.filled.sum()) >= 100 and arch.config.generations == 25, name  # the paper's budget
-    config, *_ = runner.validate(dict(learn.PRESETS["smoke"]))
+    config, *_ = validated(dict(learn.PRESETS["smoke"]))
     assert (config.attempts, config.best, config.headings) == (2, 1, 1)
 
 
 @pytest.mark.slow
 def test_a_warp_checkpoint_is_reported_through_the_mjx_layout(tmp_path, monkeypatch):
     """A `learn --backend warp` run's checkpoint (one block of the smoke preset on MuJoCo Warp's CPU device) is read
-    by `--report` into the MJX-JAX layout's states (`runner.report_cfg`): every leaf has the shape it had on Warp, so
+    by `--report` into the MJX-JAX layout's states (`runner.report_run`): every leaf has the shape it had on Warp, so
     a GPU run reports on a machine without Warp; resuming it there is refused (the checkpoint records warp)."""
     from jaxterrain.walker import warp_available
 

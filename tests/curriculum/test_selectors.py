@@ -267,7 +267,7 @@ def test_a_users_selector_runs_by_module_and_name_without_editing_the_library(mo
     states = C.make_runner(config, harness)(C.init_trials(jax.random.split(jax.random.key(0), 2), bank, START,
                                                           config=config, harness=harness), bank, 5)
     assert np.all(np.asarray(states.history.terrain)[:, :3] == 11) and np.all(np.asarray(states.chunk) == 3)
-    monkeypatch.setattr(S, "_REGISTRY", dict(S._REGISTRY))  # registered for this test only
+    monkeypatch.setattr(S.protocol, "_REGISTRY", dict(S.protocol._REGISTRY))  # registered for this test only
     S.register_selector("hardest_first", hardest_first)
     assert "hardest_first" in S.selector_names()
     again = C.validate_config(config._replace(selector="hardest_first"))
@@ -276,36 +276,55 @@ def test_a_users_selector_runs_by_module_and_name_without_editing_the_library(mo
 
 @pytest.mark.parametrize("fields, message", [
     (dict(selector="nope"), "selector must be one of map, roughness, random, dr, levels, plr"),
-    (dict(selector="plr", plr_temperature=0.0), r"plr_temperature must be in \(0.0, inf\)"),
-    (dict(selector="plr", plr_replay_prob=1.5), r"plr_replay_prob must be in \[0.0, 1.0\]"),
+    (dict(selector="plr", params=S.PLRParams(temperature=0.0)), r"params.temperature must be in \(0.0, inf\)"),
+    (dict(selector="plr", params=S.PLRParams(replay_prob=1.5)), r"params.replay_prob must be in \[0.0, 1.0\]"),
     (dict(selector="no_such_module:thing"), "cannot import it"),
-    (dict(selector="levels", levels=3, levels_init=3), r"levels_init must be in \[0, levels - 1 = 2\]"),
-    (dict(selector="levels", levels_promote=1.5), r"levels_promote must be in \(0.0, 1.0\]"),
-    (dict(selector="levels", levels_demote=-0.1), r"levels_demote must be in \[0.0, 1.0\]"),
-    (dict(selector="dr", terrains_per_chunk=0), "terrains_per_chunk must be an integer >= 1"),
+    (dict(selector="levels", params=S.LevelsParams(levels=3, init=3)), r"params.init must be in \[0, levels - 1 = 2\]"),
+    (dict(selector="levels", params=S.LevelsParams(promote=1.5)), r"params.promote must be in \(0.0, 1.0\]"),
+    (dict(selector="levels", params=S.LevelsParams(demote=-0.1)), r"params.demote must be in \[0.0, 1.0\]"),
+    (dict(selector="dr", params=S.DRParams(terrains_per_chunk=0)), "params.terrains_per_chunk must be an integer >= 1"),
     (dict(selector="dr", overlap=True), "overlap needs a one-terrain selector"),
-    (dict(selector="accel"), "accel_generator must be one of cppn, .*got None"),
-    (dict(selector="accel", accel_generator="nope"), "accel_generator must be one of .*got 'nope'"),
-    (dict(selector="accel", accel_generator="perlin", accel_edits=0), "accel_edits must be an integer >= 1"),
-    (dict(selector="plr", plr_capacity=0), "plr_capacity must be an integer >= 1"),
+    (dict(selector="accel"), "params.generator must be one of cppn, .*got None"),
+    (dict(selector="accel", params=S.AccelParams(generator="nope")), "params.generator must be one of .*got 'nope'"),
+    (dict(selector="accel", params=S.AccelParams(generator="perlin", edits=0)), "params.edits must be an integer >= 1"),
+    (dict(selector="plr", params=S.PLRParams(capacity=0)), "params.capacity must be an integer >= 1"),
     # JaxUED's 4 000 at gpu-short (75 chunks of 8 new levels): half full after 250 chunks, so it would never replay
-    (dict(selector="plr", max_epochs=3000, plr_capacity=4000), r"plr_capacity must be at most 1200 .*never replay"),
+    (dict(selector="plr", max_epochs=3000, params=S.PLRParams(capacity=4000)),
+     r"params.capacity must be at most 1200 .*never replay"),
+    (dict(selector="map", params=S.MapParams(kappa=-1.0)), r"params.kappa must be in \[0.0, inf\)"),
+    (dict(selector="roughness", params=S.RoughnessParams(stride=0)), "params.stride must be an integer >= 1"),
+    (dict(selector="plr", params=S.LevelsParams()), "params must be a PLRParams for selector 'plr'"),
 ])
 def test_selector_settings_are_refused_with_the_field_and_its_range(fields, message):
     with pytest.raises(ValueError, match=message):
         C.validate_config(C.CurriculumConfig(**fields))
 
 
+def test_each_selector_owns_its_params_and_reads_the_flat_layout_of_old_configs():
+    """``CurriculumConfig.params`` is the selector's own NamedTuple (None: its defaults); a flat config (every
+    ``config.json`` before the selectors owned their params) gives the run's selector its keys and drops the others'."""
+    assert S.selector_params(C.CurriculumConfig(selector="levels")) == S.LevelsParams()
+    assert S.selector_params(C.CurriculumConfig(selector="random")) is None
+    flat = C.CurriculumConfig.from_json_dict({"selector": "accel", "plr_capacity": 64, "accel_generator": "perlin",
+                                             "levels": 3, "kappa": 9.0, "roughness_stride": 2})
+    assert flat.params == S.AccelParams(capacity=64, generator="perlin")
+    assert C.CurriculumConfig.from_json_dict(flat.to_json_dict()) == flat  # the nested layout reads back
+    assert C.CurriculumConfig.from_json_dict({"selector": "map", "kappa": 0.1}).params == S.MapParams(kappa=0.1)
+    assert S.flat_name("accel", "capacity") == "plr_capacity" and S.flat_name("levels", "init") == "levels_init"
+    assert {"kappa", "levels_init", "plr_capacity", "accel_edits"} <= set(C.config.SELECTOR_FIELDS)
+    assert not set(C.config.SELECTOR_FIELDS) & set(C.CurriculumConfig._fields)  # no selector field is the config's
+
+
 def test_the_default_level_buffer_fills_to_min_fill_in_the_first_tenth_of_the_run():
     """plr_capacity=None: K x ceil(chunks / 10) new levels fill it to plr_min_fill (gpu-short 128, the paper 1 200)."""
     gpu_short = C.CurriculumConfig(selector="plr", max_epochs=3000)  # 75 chunks of 40 epochs, 8 terrains a chunk
-    assert gpu_short.max_chunks == 75 and S.plr_buffer_capacity(gpu_short) == 128
-    assert S.plr_buffer_capacity(gpu_short._replace(max_epochs=30000)) == 1200
-    assert S.plr_buffer_capacity(gpu_short._replace(plr_min_fill=0.25)) == 256
-    assert S.plr_buffer_capacity(gpu_short._replace(max_epochs=40)) == 16  # one chunk: at least one chunk's levels
-    assert S.plr_buffer_capacity(gpu_short._replace(plr_capacity=300)) == 300
-    C.validate_config(gpu_short._replace(plr_capacity=1200))  # fills to half with the run's last new levels
-    C.validate_config(gpu_short._replace(selector="dr", plr_capacity=4000))  # not a buffer selector: not checked
+    p = S.PLRParams()
+    assert gpu_short.max_chunks == 75 and S.plr_buffer_capacity(p, gpu_short.max_chunks) == 128
+    assert S.plr_buffer_capacity(p, 750) == 1200
+    assert S.plr_buffer_capacity(p._replace(min_fill=0.25), 75) == 256
+    assert S.plr_buffer_capacity(p, 1) == 16  # one chunk: at least one chunk's levels
+    assert S.plr_buffer_capacity(p._replace(capacity=300), 75) == 300
+    C.validate_config(gpu_short._replace(params=p._replace(capacity=1200)))  # fills to half with the last new levels
 
 
 def test_a_checkpoint_of_the_state_before_the_protocol_restores_into_the_selector_state(tmp_path):

@@ -22,9 +22,14 @@ from jaxterrain.qd import TerrainBank, cell_distance
 from jaxterrain.curriculum import walker as W
 from jaxterrain.terrain import TerrainScale
 from jaxterrain.walker import Tile, WalkerConfig, WalkerEnv, warp_available
-from jaxterrain.curriculum import runner
+from jaxterrain.curriculum import run_config, runner
 from jaxterrain.walker import layout
 from jaxterrain.runtime import xla
+
+
+def validated(cfg: dict):
+    """``(CurriculumConfig, archive, policy, env)`` of a flat (``config.json``) run config."""
+    return runner.validate(run_config.from_flat(cfg))[1:]
 
 WARP_OK, WARP_WHY = warp_available()
 FAST_COMPILE = xla.known_options({"xla_backend_optimization_level": 0, "xla_llvm_disable_expensive_passes": True})
@@ -290,19 +295,19 @@ def test_learn_backend_builds_the_walker_and_refuses_a_missing_warp(tmp_path, ti
     from experiments import learn
 
     cfg = {**learn.PRESETS["smoke"], "archive": tiny_archive, "seed": 0}
-    assert runner.validate(cfg)[3].config.tiles == 0 and learn.PRESETS["smoke"]["backend"] == "auto"
+    assert validated(cfg)[3].config.tiles == 0 and learn.PRESETS["smoke"]["backend"] == "auto"
     assert layout.resolve_backend("auto") == "jax"  # on a CPU; "warp" on a GPU where MuJoCo Warp imports
     monkeypatch.setattr(jax, "default_backend", lambda: "gpu")
     assert layout.resolve_backend("auto") == ("warp" if WARP_OK else "jax") and layout.resolve_backend("jax") == "jax"
     monkeypatch.undo()
     old = {k: v for k, v in cfg.items() if k != "backend"}
-    assert runner.validate(old)[3].config == runner.validate(cfg)[3].config
-    config, _, _, env = runner.validate({**cfg, "overlap": True, "trials": 3})  # MJX on tiles for the riding walks
+    assert validated(old)[3].config == validated(cfg)[3].config
+    config, _, _, env = validated({**cfg, "overlap": True, "trials": 3})  # MJX on tiles for the riding walks
     assert config.overlap and (env.config.backend, env.tiles) == ("jax", 3)
     if WARP_OK:
-        env = runner.validate({**cfg, "backend": "warp", "trials": 3})[3]
+        env = validated({**cfg, "backend": "warp", "trials": 3})[3]
         assert (env.config.backend, env.tiles, env.config.warp_worlds) == ("warp", 3, 3 * 4)  # 4 envs > 2 walks
-        env = runner.validate({**cfg, "backend": "warp", "trials": 3, "overlap": True})[3]
+        env = validated({**cfg, "backend": "warp", "trials": 3, "overlap": True})[3]
         assert env.config.warp_worlds == 3 * (4 + 2)  # the walks step with the PPO envs
     import jaxterrain.walker as walker_pkg
 
@@ -367,12 +372,13 @@ def test_learn_takes_the_evaluation_protocol_from_the_archive(tmp_path, tiny_arc
         attempts=80, best=5, headings=4))))
     paper = {**learn.PRESETS["paper"], "archive": tiny_archive, "seed": 0}
     assert learn.PRESETS["paper"]["headings"] is None and learn.PRESETS["gpu-short"]["attempts"] is None
-    assert runner.validate(paper)[0].protocol == (20, 5, 1, 0.0, "mean")  # an archive saved before headings existed
-    assert runner.validate({**paper, "archive": four})[0].protocol == (80, 5, 4, 0.0, "mean")
-    assert runner.validate({**paper, "archive": four, "headings": 1, "attempts": 20})[0].protocol[:3] == (20, 5, 1)
+    assert validated(paper)[0].protocol == (20, 5, 1, 0.0, "mean")  # an archive saved before headings existed
+    assert validated({**paper, "archive": four})[0].protocol == (80, 5, 4, 0.0, "mean")
+    assert validated({**paper, "archive": four, "headings": 1, "attempts": 20})[0].protocol[:3] == (20, 5, 1)
     with pytest.raises(runner.BadInput, match="attempts must be a multiple of headings"):
-        runner.validate({**paper, "archive": four, "attempts": 30})
-    assert runner.walker_layout({**paper, "backend": "jax"}) == {}
+        validated({**paper, "archive": four, "attempts": 30})
+    assert runner.walker_layout(run_config.from_flat({**paper, "backend": "jax"})) == {}
     if WARP_OK:
-        layout = runner.walker_layout({**paper, "backend": "warp", "headings": 4, "attempts": 80, "trials": 3})
+        layout = runner.walker_layout(run_config.from_flat({**paper, "backend": "warp", "headings": 4, "attempts": 80,
+                                                            "trials": 3}))
         assert layout == {"backend": "warp", "tiles": 12, "worlds": 3 * 500}

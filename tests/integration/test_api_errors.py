@@ -143,6 +143,12 @@ def _curriculum(**fields):
     return validate_config(CurriculumConfig(**fields))
 
 
+def _levels(**fields):
+    from jaxterrain.curriculum.selectors import LevelsParams
+
+    return LevelsParams(**fields)
+
+
 def _npy_text(tmp_path):
     from jaxterrain import terrain
 
@@ -157,7 +163,8 @@ def _npy_text(tmp_path):
      r"TerrainScale.cell_size must be a finite number of metres > 0 \(a scalar\); got an array of shape \(2,\)"),
     (lambda tmp: TerrainScale(cell_size=[0.04]), r"TerrainScale.cell_size must be a finite number of metres > 0"),
     (lambda tmp: _curriculum(threshold="0.9"), r"CurriculumConfig.threshold must be a number, got '0.9'"),
-    (lambda tmp: _curriculum(levels_demote=True), r"CurriculumConfig.levels_demote must be a number, got True"),
+    (lambda tmp: _curriculum(selector="levels", params=_levels(demote=True)),
+     r"CurriculumConfig.params.demote must be a number, got True"),
     (lambda tmp: __import__("jaxterrain.curriculum").curriculum.CurriculumConfig.from_json_dict([1, 2]),
      r"CurriculumConfig.from_json_dict: needs a dict of fields .*; got list"),
     (lambda tmp: _no_policies(), r"policies: give at least one policy"),

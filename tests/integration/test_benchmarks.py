@@ -64,8 +64,8 @@ def test_curriculum_parts_from_restored_states():
     args = argparse.Namespace(preset="smoke", archive=None, backend=None, num_envs=None, num_unrolls=None, recipe=None,
                               robot=None, headings=None)
     cfg = curriculum.learn_cfg(args, 2)
-    config, arch, policy, env = curriculum.runner.validate(cfg)
-    bank, block, states = curriculum.runner.setup(cfg, config, arch, policy, env)
+    run, config, arch, policy, env = curriculum.runner.validate(curriculum.run_config.from_flat(cfg))
+    bank, block, states = curriculum.runner.setup(run, config, arch, policy, env)
     keys = ("eval_fitness_mean", "train_seq_steps")
     default = curriculum.measure_parts(cfg, config, bank, policy, env, 2)
     first = states._replace(terrain=jnp.arange(2, dtype=states.terrain.dtype) % bank.heightmaps.shape[0])

@@ -229,7 +229,11 @@ def test_a_curriculum_flag_is_refused_with_another_curriculum_and_taken_with_its
     from experiments.common import flag
     from jaxterrain.curriculum.config import SELECTOR_FIELDS, SELECTORS
 
-    assert sorted(SELECTOR_FIELDS) == sorted(SELECTOR_VALUES)
+    from experiments import learn
+
+    assert set(SELECTOR_VALUES) <= set(SELECTOR_FIELDS)  # the flags of the selectors' params (map's have none)
+    assert sorted(learn.selector_overrides(__import__("argparse").Namespace(**dict.fromkeys(SELECTOR_VALUES)))) == \
+        sorted(SELECTOR_VALUES)
     monkeypatch.chdir(tmp_path)
     owners = SELECTOR_FIELDS[field]
     other = next(c for c in SELECTORS if c not in owners)
@@ -309,7 +313,7 @@ def test_recipes_shape_the_update_and_num_envs_overrides_theirs(capsys):
     500 x 10 x 8; ``wide``: 4 000 x 10 x 1, the same 40 000 env steps per update), in ``learn`` and ``curriculum``;
     ``--num-envs`` still wins; the curriculum built from it trains with that PPO shape."""
     from experiments import learn
-    from jaxterrain.curriculum import FINE_TUNING, RECIPES, recipe, runner
+    from jaxterrain.curriculum import FINE_TUNING, RECIPES, recipe, run_config, runner
 
     assert learn.RECIPE_NAMES == tuple(RECIPES)
     assert RECIPES["paper"] == {k: getattr(FINE_TUNING, k) for k in RECIPES["paper"]}
@@ -331,7 +335,8 @@ def test_recipes_shape_the_update_and_num_envs_overrides_theirs(capsys):
     mine = printed("learn", "--preset", "gpu-short", "--recipe", "wide", "--num-envs", "2000")
     assert (mine["num_envs"], mine["num_unrolls"]) == (2000, 1)
     cfg = printed("learn", "--preset", "gpu-short", "--recipe", "wide")
-    ppo = runner.curriculum_config({**cfg, "attempts": 20, "best": 5, "headings": 4}).ppo  # the archive's protocol
+    run = run_config.from_flat({**cfg, "attempts": 20, "best": 5, "headings": 4})  # the archive's protocol
+    ppo = runner.curriculum_config(run).ppo
     assert (ppo.num_envs, ppo.unroll_length, ppo.num_unrolls) == (4000, 10, 1)
 
 
@@ -348,3 +353,18 @@ def test_evaluate_raises_a_presets_size_to_one_the_robot_fits(capsys):
         evaluate.fit_size(args, cfg0, [difficulty.robot_base_policy(robot)])
         assert cfg0["size"] == size and args.size == (size if robot == "ant" else None), robot
     assert "--size 96 (the smoke preset's 64 pixels are too small for robot ant)" in capsys.readouterr().err
+
+
+def test_a_library_field_is_printed_as_its_flag():
+    """``learn`` and ``curriculum`` print the library's ``LearnConfig.<field>`` as the flag that sets it, through one
+    table (``run_config.FLAT_FIELDS`` and each selector's ``SelectorSpec.flat``, then ``common.flag``)."""
+    from experiments import common, learn
+    from jaxterrain.curriculum import run_config, selectors
+
+    for key in run_config.FLAT_FIELDS:
+        assert learn.flags_in(f"LearnConfig.{run_config.field_of(key)} must be", "map") == f"{common.flag(key)} must be"
+    for name in ("map", "roughness", "dr", "levels", "plr", "accel"):
+        for key, field in selectors.selector_spec(name).flat.items():
+            text = learn.flags_in(f"LearnConfig.curriculum.params.{field} must be", name)
+            assert text == f"{common.flag(key)} must be", (name, key)
+    assert learn.flags_in("LearnConfig.archive a.npz: 1 filled cell(s)", "map") == "--archive a.npz: 1 filled cell(s)"

@@ -74,7 +74,7 @@ def plugin(tmp_path, monkeypatch):
     from jaxterrain.walker import robots
 
     monkeypatch.setattr(registry, "_FACTORIES", dict(registry._FACTORIES))
-    monkeypatch.setattr(selectors, "_REGISTRY", dict(selectors._REGISTRY))
+    monkeypatch.setattr(selectors.protocol, "_REGISTRY", dict(selectors.protocol._REGISTRY))
     monkeypatch.setattr(robots, "_REGISTRY", dict(robots._REGISTRY))
     (tmp_path / "jt_test_plugin.py").write_text(PLUGIN)
     monkeypatch.syspath_prepend(str(tmp_path))

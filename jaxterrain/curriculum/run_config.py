@@ -1,0 +1,188 @@
+"""One curriculum run (``learn``, and each treatment of ``curriculum``) as one frozen, typed config, nested where the
+concepts nest, with its presets and its serialised form.
+
+    from jaxterrain.curriculum import run_config as R, runner
+    config = R.PRESETS["smoke"]._replace(trials=1)
+    config = config._replace(curriculum=config.curriculum._replace(selector="plr", params=PLRParams(capacity=8)))
+    summary = runner.run_treatment(config, "runs/mine")        # validates once, then runs (None: time limit)
+    flat = R.to_flat(config)                                   # config.json; R.from_flat(flat) == config
+
+The shape (each field consumed where ``docs/CONTRIBUTING.md`` says)::
+
+    LearnConfig
+      archive, descriptors          the archive and the descriptors it must have (runner.load_archive)
+      trials, seed                  trials run together (vmap) and the root key (runner.inputs)
+      recipe                        the name of the fine-tuning recipe its PPO shape came from (recorded; RECIPES)
+      preset                        the preset it was made from (recorded)
+      curriculum: CurriculumConfig  selector + params (selectors.*Params), threshold, budget in epochs, ppo
+                                    (FINE_TUNED fields), overlap, credit, ... (curriculum.core, .walker, .outputs)
+      protocol: ProtocolOverride    attempts / best / headings; None = the archive's (runner.resolve)
+      walker: WalkerSettings        backend, episode_length, healthy_reward, robot, policy, observation (runner: the env)
+      budget: Budget                chunks_per_call, compact, fast_compile, policy_every (runner.setup, run_treatment)
+
+The run's protocol is ``protocol`` where given, else the archive's: :func:`jaxterrain.curriculum.runner.resolve`
+writes it into ``curriculum.attempts`` / ``best`` / ``headings`` before the run (:func:`from_flat` writes the given
+ones there too; the others hold ``CurriculumConfig``'s defaults until resolved).
+
+The serialised form is the flat dict of ``config.json`` (:func:`to_flat`; every key a command-line flag's name, so
+the one field -> flag table is :data:`FLAT_FIELDS` with ``--`` + dashes); :func:`from_flat` reads it, and every
+``config.json`` written before (a key it lacks takes the value that version ran with: ``truncation`` ``mask``,
+``backend`` ``jax``, ``overlap`` / ``fast_compile`` off, ``compact`` on; the keys of other selectors' params are
+dropped). The presets' flat forms live in :mod:`.presets` (no JAX: ``--help`` reads them).
+"""
+
+from __future__ import annotations
+
+from typing import NamedTuple, Optional
+
+from jaxterrain.curriculum.config import FINE_TUNED, SELECTORS, CurriculumConfig
+from jaxterrain.curriculum.presets import CPPN_ARCHIVE, FLAT_PRESETS
+from jaxterrain.curriculum.selectors.protocol import selector_fields, selector_spec
+
+__all__ = ["LearnConfig", "ProtocolOverride", "WalkerSettings", "Budget", "PRESETS", "CPPN_ARCHIVE", "from_flat",
+           "to_flat", "FLAT_FIELDS", "field_of", "LEGACY", "RENAMED"]
+
+
+class ProtocolOverride(NamedTuple):
+    """The evaluation protocol of a run, field by field; None = the archive's (``EvolveConfig.attempts`` / ``best``
+    / ``headings``, under which the GP's prior was measured)."""
+
+    attempts: Optional[int] = None
+    best: Optional[int] = None
+    headings: Optional[int] = None
+
+
+class WalkerSettings(NamedTuple):
+    """The walker the run trains: ``backend`` (``auto`` / ``jax`` / ``warp``), ``episode_length`` (steps),
+    ``healthy_reward`` (PPO's per-step bonus; None = the walker's 5.0), ``robot`` (None = the humanoid, or the
+    ``policy``'s), ``policy`` (a policy folder to start from; None = the robot's shipped base policy),
+    ``observation`` (``blind`` / ``perceptive``: the start policy's observation set; None = the ``policy``'s, or
+    the blind base policy)."""
+
+    backend: str = "auto"
+    episode_length: int = 1000
+    healthy_reward: Optional[float] = None
+    robot: Optional[str] = None
+    policy: Optional[str] = None
+    observation: Optional[str] = None
+
+
+class Budget(NamedTuple):
+    """How the run is cut and computed (none changes its result): ``chunks_per_call`` chunks per jitted block and
+    checkpoint, ``compact`` (compute only the running trials), ``fast_compile`` (XLA's quick CPU options),
+    ``policy_every`` (walker snapshots every N chunks; None: only the final ones)."""
+
+    chunks_per_call: int = 25
+    compact: bool = True
+    fast_compile: bool = False
+    policy_every: Optional[int] = None
+
+
+class LearnConfig(NamedTuple):
+    """One curriculum run (the module docstring shows the shape). Hashable and frozen; ``_replace`` to change."""
+
+    archive: str = CPPN_ARCHIVE
+    descriptors: tuple = ("roughness", "tpi")
+    trials: int = 10
+    seed: int = 0
+    recipe: Optional[str] = "paper"
+    preset: Optional[str] = None
+    curriculum: CurriculumConfig = CurriculumConfig()
+    protocol: ProtocolOverride = ProtocolOverride()
+    walker: WalkerSettings = WalkerSettings()
+    budget: Budget = Budget()
+
+
+_TOP = ("archive", "descriptors", "trials", "seed", "recipe", "preset")
+_CURRICULUM = ("epochs_per_chunk", "steps_per_epoch", "max_epochs", "threshold", "max_fitness", "max_evals",
+               "credit", "distance_origin", "overlap")
+LEGACY = {"truncation": "mask", "backend": "jax", "overlap": False, "fast_compile": False, "compact": True,
+          "seed": 0}
+"""The value a ``config.json`` key had in the runs made before it was written (what :func:`from_flat` fills in)."""
+
+RENAMED = {"dr_terrains": "terrains_per_chunk"}
+"""Flat keys of older versions under their current names (``dr_terrains``: before ``plr`` shared the field)."""
+
+FLAT_FIELDS: dict[str, str] = {
+    **{k: k for k in _TOP if k != "preset"}, "curriculum": "curriculum.selector",
+    **{k: f"curriculum.{k}" for k in _CURRICULUM}, **{k: f"curriculum.ppo.{k}" for k in FINE_TUNED},
+    **{k: f"protocol.{k}" for k in ProtocolOverride._fields}, **{k: f"walker.{k}" for k in WalkerSettings._fields},
+    **{k: f"budget.{k}" for k in Budget._fields},
+}
+"""``{flat key: typed field}`` of every ``config.json`` key but the selectors' params (``kappa``:
+``curriculum.params.kappa``, by :func:`field_of`): the one table between the serialised form (whose keys are the
+command line's flag names, ``--`` + dashes) and the typed fields."""
+
+
+def field_of(key: str, selector: str = "map") -> str:
+    """The typed field (dotted path) of flat key ``key`` in a run of ``selector``."""
+    if key in FLAT_FIELDS:
+        return FLAT_FIELDS[key]
+    spec = selector_spec(selector) if isinstance(selector, str) else None
+    if spec is not None and key in spec.flat:
+        return f"curriculum.params.{spec.flat[key]}"
+    return key
+
+
+def from_flat(flat: dict) -> LearnConfig:
+    """The :class:`LearnConfig` of a flat config (``config.json``, a preset's :mod:`.presets` form, or a command
+    line's settings); keys a config of an older version lacks take :data:`LEGACY`'s values, the defaults otherwise.
+    ``ValueError`` naming unknown keys. ``command`` (the command that wrote it) is not part of the run."""
+    d = {k: v for k, v in flat.items() if k != "command"}
+    for old, new in RENAMED.items():
+        if old in d:
+            value = d.pop(old)
+            d.setdefault(new, value)
+    own = selector_fields()
+    unknown = set(d) - set(FLAT_FIELDS) - set(own) - {"preset"}
+    if unknown:
+        raise ValueError(f"LearnConfig: unknown config keys {sorted(unknown)}")
+    get = lambda key, default=None: d[key] if key in d else LEGACY.get(key, default)  # noqa: E731
+    selector = d.get("curriculum", "map")
+    curriculum = {"selector": selector, **{k: d[k] for k in _CURRICULUM if k in d},
+                  **{k: d[k] for k in ProtocolOverride._fields if d.get(k) is not None},
+                  **{k: d[k] for k in FINE_TUNED if k in d}, **{k: v for k, v in d.items() if k in own}}
+    curriculum.setdefault("truncation", LEGACY["truncation"])
+    curriculum.setdefault("overlap", LEGACY["overlap"])
+    base = LearnConfig()
+    return LearnConfig(
+        archive=d.get("archive", base.archive), descriptors=tuple(d.get("descriptors", base.descriptors)),
+        trials=d.get("trials", base.trials), seed=get("seed"), recipe=d.get("recipe"), preset=d.get("preset"),
+        curriculum=CurriculumConfig.from_json_dict(curriculum),
+        protocol=ProtocolOverride(**{k: d.get(k) for k in ProtocolOverride._fields}),
+        walker=WalkerSettings(**{k: get(k, getattr(base.walker, k)) for k in WalkerSettings._fields}),
+        budget=Budget(**{k: get(k, getattr(base.budget, k)) for k in Budget._fields}))
+
+
+def _params_flat(config: LearnConfig) -> dict:
+    """Every built-in selector's params under their flat keys: the run's own, the others' defaults (a flat config
+    holds every key, as the presets do)."""
+    out = {}
+    for name in SELECTORS + ((config.curriculum.selector,) if config.curriculum.selector not in SELECTORS else ()):
+        spec = selector_spec(name) if ":" not in name else None
+        if spec is None or spec.params is None:
+            continue
+        own = name == config.curriculum.selector and config.curriculum.params is not None
+        params = config.curriculum.params if own else spec.params()
+        for key, field in spec.flat.items():
+            if own or key not in out:
+                out[key] = getattr(params, field)
+    return out
+
+
+def to_flat(config: LearnConfig, command: Optional[str] = None) -> dict:
+    """The serialised form of ``config``: ``config.json``'s flat dict (:func:`from_flat` reads it back), with
+    ``command`` added when given."""
+    c = config.curriculum
+    out = {k: getattr(config, k) for k in _TOP if not (k == "preset" and config.preset is None)}
+    out["descriptors"] = list(config.descriptors)
+    out.update(curriculum=c.selector, **{k: getattr(c, k) for k in _CURRICULUM},
+               **{k: getattr(c.ppo, k) for k in FINE_TUNED}, **config.protocol._asdict(), **config.walker._asdict(),
+               **config.budget._asdict(), **_params_flat(config))
+    if command is not None:
+        out["command"] = command
+    return out
+
+
+PRESETS: dict[str, LearnConfig] = {name: from_flat({**flat, "preset": name}) for name, flat in FLAT_PRESETS.items()}
+"""The typed presets (``smoke``, ``gpu-short``, ``gpu``, ``paper``: :mod:`.presets`), ``preset`` set to the name."""
