@@ -88,9 +88,12 @@ SEEDS, VALUES = 5, 20
 
 
 def grid_values(spec: tuple[str, float, float], n: int) -> np.ndarray:
-    """[n] increasing values of a candidate range ``(spacing, lo, hi)``: evenly spaced, or in ``log`` for "geo"."""
+    """[n] increasing values of a candidate range ``(spacing, lo, hi)``: evenly spaced, or in ``log`` for "geo",
+    each rounded to 4 significant digits (so that the CSVs, which write 6, hold the exact value a level is built
+    from)."""
     kind, lo, hi = spec
-    return np.geomspace(lo, hi, n) if kind == "geo" else np.linspace(lo, hi, n)
+    v = np.geomspace(lo, hi, n) if kind == "geo" else np.linspace(lo, hi, n)
+    return np.array([float(f"{x:.4g}") for x in v])
 
 
 def plan(robot: str, grid: str, values: int, families) -> dict[str, np.ndarray]:
@@ -199,7 +202,7 @@ def summarise(out: Path, grid: str) -> None:
                 note = "measured grid values"
             if idx is not None:
                 c = calibration.check_curve(means[idx])
-                chosen[rb][f] = {"values": [round(float(x), 4) for x in vals[idx]], "measured": True}
+                chosen[rb][f] = {"values": [float(x) for x in vals[idx]], "measured": True}
                 marks = "pass" if c["ok"] else "**FAIL**: " + ", ".join(
                     k for k, ok in (("level 0 < 0.8", c["ok_level0"]), ("last > 0.3", c["ok_last"]),
                                     ("rise > 0.03", c["ok_rises"])) if not ok)
