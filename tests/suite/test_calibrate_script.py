@@ -78,6 +78,9 @@ def test_the_page_picks_measured_levels_that_pass_and_marks_what_cannot(cal, tmp
     assert calibration.check_curve(means)["ok"]
     assert not levels["rough"]["measured"] and len(levels["rough"]["values"]) == 10
     assert levels["waves"] == {"values": None, "measured": False}
+    literal = (tmp_path / "V2_LEVELS.txt").read_text()
+    assert literal.startswith('    "humanoid": {\n        "boxes": (') and "# waves: no values" in literal
+    assert "NOT MEASURED" in literal and max(map(len, literal.splitlines())) <= 120
     md = (tmp_path / "calibration_humanoid.md").read_text()
     assert md.startswith("# Held-out suite v2: calibration for the humanoid")
     assert "| boxes | m | 25 |" in md and "pass (measured grid values)" in md

@@ -22,8 +22,8 @@ Writes into ``--out``: ``fitness_<robot>.csv`` (robot, family, index, value, uni
 per robot, ``calibration_<robot>.md``: for ``--grid v2`` the checks of every family's level curve (level 0 >= 0.8, level 9 <= 0.3, no
 rise > 0.03; failures marked); for candidates, the 10 grid values per family that pass (``suite.calibration.
 select_levels``), or, where none do, values interpolated on the curve's monotone fit (to measure with ``--grid v2``).
-``--select FOLDER`` rewrites the page, figure and ``levels.json`` (the proposed ``V2_LEVELS``) from a folder's CSVs
-on the CPU. At the GPU's size: 10 families x 20 values x 5 seeds + flat = 1001 terrains a robot.
+``--select FOLDER`` rewrites the page, figure, ``levels.json`` and ``V2_LEVELS.txt`` (the proposed levels, as the body
+of ``heldout.V2_LEVELS`` to paste) from a folder's CSVs on the CPU. At the GPU's size: 10 families x 20 values x 5 seeds + flat = 1001 terrains a robot.
 """
 
 from __future__ import annotations
@@ -232,8 +232,28 @@ def summarise(out: Path, grid: str) -> None:
                 "![level curves](curves.png)", ""]
         atomic_write_text(out / f"calibration_{rb}.md", "\n".join(head + lines))
     atomic_write_text(out / "levels.json", json.dumps(chosen, indent=2) + "\n")
+    atomic_write_text(out / "V2_LEVELS.txt", levels_literal(chosen))
     figure(out, data, chosen)
     print(f"-> {', '.join(str(out / f'calibration_{rb}.md') for rb in pages)}", flush=True)
+
+
+def levels_literal(chosen: dict) -> str:
+    """``chosen`` (``levels.json``) as the body of ``heldout.V2_LEVELS`` to paste (families with no values left out,
+    unmeasured ones marked), wrapped at 120 columns."""
+    import textwrap
+
+    lines = []
+    for rb, fams in chosen.items():
+        lines.append(f'    "{rb}": {{')
+        for f, e in fams.items():
+            if not e["values"]:
+                lines.append(f"        # {f}: no values (widen its range)")
+                continue
+            text = f'"{f}": (' + ", ".join(repr(v) for v in e["values"]) + "),"
+            text += "" if e["measured"] else "  # NOT MEASURED: interpolated"
+            lines += textwrap.wrap(text, 118, initial_indent=" " * 8, subsequent_indent=" " * 12)
+        lines.append("    },")
+    return "\n".join(lines) + "\n"
 
 
 def figure(out: Path, data, chosen) -> None:
