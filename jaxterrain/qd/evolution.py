@@ -108,6 +108,12 @@ def problem(generator, descriptors, config: A.EvolveConfig, fitness_fn=None, tra
         names = tuple(config.descriptors) if names is None else tuple(names)
         pair = tuple(names.index(n) for n in config.descriptors)
         descriptors = descriptor_fn(names, int(config.window), int(config.stride))
+    if _generators.is_mixture(generator):
+        need = generator.spec.fresh * len(generator.spec.names)
+        if config.batch_size <= need:
+            raise ValueError(f"EvolveConfig.batch_size must be > {need} for {generator.name} (its fresh samples: "
+                             f"{generator.spec.fresh} of each of {len(generator.spec.names)} generators); got "
+                             f"{config.batch_size}")
     fitness_fn = default_fitness(generator.size, config) if fitness_fn is None else fitness_fn
     traversable = traversable_fn(config) if traversable is None else traversable
     scoring = S.make_scoring_fn(generator, descriptors, traversable, fitness_fn, config, pair, mesh, split)
@@ -388,15 +394,27 @@ def _many_archives(states, groups, gens, configs, history) -> list[A.Archive]:
 
 
 def to_archive(generator, repertoire, config: A.EvolveConfig, history: dict) -> A.Archive:
-    """Host :class:`~jaxterrain.qd.Archive` of one repertoire (elites rendered when ``store_heightmaps``)."""
+    """Host :class:`~jaxterrain.qd.Archive` of one repertoire (elites rendered when ``store_heightmaps``). A
+    mixture's repertoire (``generators.mixture``) becomes an archive of its component generators: ``source`` is each
+    elite's generator and ``genomes[k]`` generator ``k``'s slot, zero where another generator or nobody holds the
+    cell (the form of ``qd.combine``'s archives, so every reader of archives takes it)."""
     fitness = np.asarray(repertoire.fitnesses, np.float32).reshape(-1)
     filled = fitness > -np.inf
     genomes = jax.tree.map(np.asarray, repertoire.genotypes)
     maps = render_elites(generator, genomes, filled) if config.store_heightmaps else None
+    if _generators.is_mixture(generator):
+        ids = np.asarray(genomes.generator, np.int32)
+        source = np.where(filled, ids, -1).astype(np.int32)
+        names = tuple(generator.spec.names)
+        kept = tuple(jax.tree.map(lambda x, k=k: np.where(_rows(source == k, x), x, np.zeros_like(x)), slot)
+                     for k, slot in enumerate(genomes.slots))
+    else:
+        source = np.where(filled, 0, -1).astype(np.int32)
+        names, kept = (generator.name,), (genomes,)
     return A.Archive(
-        genomes=(genomes,),
-        generator_names=(generator.name,),
-        source=np.where(filled, 0, -1).astype(np.int32),
+        genomes=kept,
+        generator_names=names,
+        source=source,
         fitness=fitness,
         descriptors=np.asarray(repertoire.extra_scores["raw"], np.float32),
         centroids=np.asarray(repertoire.centroids, np.float32),
@@ -404,6 +422,11 @@ def to_archive(generator, repertoire, config: A.EvolveConfig, history: dict) -> 
         config=config,
         metrics={k: np.asarray(v, np.float32) for k, v in history.items()},
     )
+
+
+def _rows(mask: np.ndarray, x: np.ndarray) -> np.ndarray:
+    """``mask`` [cells] shaped to broadcast over ``x`` [cells, ...]."""
+    return mask.reshape(mask.shape + (1,) * (x.ndim - 1))
 
 
 def _template(key, scoring: S.Scoring, emitter: ME.Emitter, config: A.EvolveConfig) -> ME.MapElitesState:
