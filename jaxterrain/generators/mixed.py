@@ -47,7 +47,8 @@ import numpy as np
 from jaxterrain.generators import registry
 from jaxterrain.generators.base import Generator, check_count
 
-__all__ = ["MixedGenome", "MixtureSpec", "DEFAULT_RENDER_CHUNK", "mixture", "is_mixture", "render_grouped"]
+__all__ = ["MixedGenome", "MixtureSpec", "DEFAULT_RENDER_CHUNK", "mixture", "is_mixture", "render_grouped",
+           "check_batch", "archive_slots"]
 
 DEFAULT_RENDER_CHUNK = 64
 """Rows per rendered chunk of a mixture's batched render (each chunk one generator)."""
@@ -86,6 +87,28 @@ class MixtureSpec(NamedTuple):
 def is_mixture(generator) -> bool:
     """True for a generator made by :func:`mixture`."""
     return isinstance(getattr(generator, "spec", None), MixtureSpec)
+
+
+def check_batch(generator, batch_size: int, what: str = "batch_size") -> None:
+    """``ValueError`` naming ``what`` unless a mixture's batches of ``batch_size`` leave room for mutated offspring
+    beside its fresh samples (``batch_size > fresh * K``)."""
+    need = generator.spec.fresh * len(generator.spec.names)
+    if batch_size <= need:
+        raise ValueError(f"{what} must be > {need} for {generator.name} (its fresh samples: {generator.spec.fresh} "
+                         f"of each of {len(generator.spec.names)} generators); got {batch_size}")
+
+
+def archive_slots(genomes: MixedGenome, filled: np.ndarray) -> tuple[np.ndarray, tuple]:
+    """Host form of a repertoire's mixed genomes (leaves ``[cells, ...]``): ``(source [cells] int32, slots)``, the
+    generator of each filled cell (-1 where empty) and each generator's slot with zeros where it does not hold the
+    cell (the form of ``qd.combine``'s archives)."""
+    source = np.where(np.asarray(filled), np.asarray(genomes.generator, np.int32), -1).astype(np.int32)
+
+    def keep(x, k):
+        x = np.asarray(x)
+        return np.where((source == k).reshape(source.shape + (1,) * (x.ndim - 1)), x, np.zeros_like(x))
+
+    return source, tuple(jax.tree.map(lambda x, k=k: keep(x, k), slot) for k, slot in enumerate(genomes.slots))
 
 
 def render_grouped(gens: Sequence[Generator], genomes: MixedGenome, chunk: int = DEFAULT_RENDER_CHUNK) -> jax.Array:

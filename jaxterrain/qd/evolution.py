@@ -32,6 +32,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from jaxterrain import difficulty, features, generators as _generators
+from jaxterrain.generators import mixed as _mixed
 from jaxterrain.qd import config as A, map_elites as ME, programs as P, scoring as S
 from jaxterrain.qd.archive import render_elites
 from jaxterrain.qd.grid import centroids_for
@@ -109,11 +110,7 @@ def problem(generator, descriptors, config: A.EvolveConfig, fitness_fn=None, tra
         pair = tuple(names.index(n) for n in config.descriptors)
         descriptors = descriptor_fn(names, int(config.window), int(config.stride))
     if _generators.is_mixture(generator):
-        need = generator.spec.fresh * len(generator.spec.names)
-        if config.batch_size <= need:
-            raise ValueError(f"EvolveConfig.batch_size must be > {need} for {generator.name} (its fresh samples: "
-                             f"{generator.spec.fresh} of each of {len(generator.spec.names)} generators); got "
-                             f"{config.batch_size}")
+        _mixed.check_batch(generator, config.batch_size, "EvolveConfig.batch_size")
     fitness_fn = default_fitness(generator.size, config) if fitness_fn is None else fitness_fn
     traversable = traversable_fn(config) if traversable is None else traversable
     scoring = S.make_scoring_fn(generator, descriptors, traversable, fitness_fn, config, pair, mesh, split)
@@ -403,11 +400,8 @@ def to_archive(generator, repertoire, config: A.EvolveConfig, history: dict) -> 
     genomes = jax.tree.map(np.asarray, repertoire.genotypes)
     maps = render_elites(generator, genomes, filled) if config.store_heightmaps else None
     if _generators.is_mixture(generator):
-        ids = np.asarray(genomes.generator, np.int32)
-        source = np.where(filled, ids, -1).astype(np.int32)
         names = tuple(generator.spec.names)
-        kept = tuple(jax.tree.map(lambda x, k=k: np.where(_rows(source == k, x), x, np.zeros_like(x)), slot)
-                     for k, slot in enumerate(genomes.slots))
+        source, kept = _mixed.archive_slots(genomes, filled)
     else:
         source = np.where(filled, 0, -1).astype(np.int32)
         names, kept = (generator.name,), (genomes,)
@@ -422,11 +416,6 @@ def to_archive(generator, repertoire, config: A.EvolveConfig, history: dict) -> 
         config=config,
         metrics={k: np.asarray(v, np.float32) for k, v in history.items()},
     )
-
-
-def _rows(mask: np.ndarray, x: np.ndarray) -> np.ndarray:
-    """``mask`` [cells] shaped to broadcast over ``x`` [cells, ...]."""
-    return mask.reshape(mask.shape + (1,) * (x.ndim - 1))
 
 
 def _template(key, scoring: S.Scoring, emitter: ME.Emitter, config: A.EvolveConfig) -> ME.MapElitesState:
