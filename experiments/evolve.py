@@ -217,6 +217,14 @@ def check_mixed(args, cfg: dict) -> None:
     names = list(cfg.get("mix") or MIX_DEFAULT)
     if len(names) < 2 or len(set(names)) != len(names):
         raise common.UsageError(f"--mix: two or more distinct generator names; got {' '.join(names)}")
+    from jaxterrain import generators
+
+    for name in names:  # the default six are not checked by common.check_values: e.g. diamond-square's sizes
+        try:
+            generators.get(name, size=int(cfg["size"]))
+        except (ValueError, OSError) as err:
+            raise common.UsageError(f"--size {cfg['size']} does not suit generator {name!r} of --generator mixed: "
+                                    f"{str(err).splitlines()[0]}") from None
     need = int(cfg.get("fresh", 1)) * len(names)
     if int(cfg["batch_size"]) <= need:
         raise common.UsageError(f"--batch-size must be > {need} with --generator mixed (--fresh {cfg.get('fresh', 1)} "

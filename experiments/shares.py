@@ -131,19 +131,18 @@ def markdown(archives: dict, rows: list[dict], names: list[str]) -> str:
         n = int(arch.filled.sum())
         lines.append(f"| {label} | {A.coverage(arch):.2f}% | {n} | "
                      + " | ".join(f"{100 * c / max(n, 1):.1f}%" for c in total) + " |")
-    lines += ["", "Per band of distance from cell (0, 0) (`qd.cell_distance`): coverage of the band, then each "
-              "generator's share of its filled cells.", ""]
-    labels = list(archives)
-    head = ["band", "cells"] + [f"{lab} coverage" for lab in labels] + [f"{lab}: {n}" for lab in labels for n in names]
-    lines += ["| " + " | ".join(head) + " |", "|" + " --- |" * len(head)]
-    bands = sorted({(r["band_lo"], r["band_hi"], r["cells"]) for r in rows})
-    for lo, hi, cells in bands:
-        cov = [next(r["coverage_percent"] for r in rows if r["archive"] == lab and r["band_lo"] == lo)
-               for lab in labels]
-        share = [next(r for r in rows if r["archive"] == lab and r["band_lo"] == lo and r["generator"] == n)
-                 for lab in labels for n in names]
-        lines.append(f"| [{lo:g}, {hi:g}) | {cells} | " + " | ".join(f"{c:.1f}%" for c in cov) + " | "
-                     + " | ".join("-" if r["filled"] == 0 else f"{100 * r['share']:.0f}%" for r in share) + " |")
+    lines += ["", "Per band of distance from cell (0, 0) (`qd.cell_distance`, in cells): the band's coverage, then each "
+              "generator's share of its filled cells.", "",
+              "| band | archive | cells | filled | coverage | " + " | ".join(names) + " |",
+              "| --- | --- | --- | --- | --- |" + " --- |" * len(names)]
+    for lo, hi in sorted({(r["band_lo"], r["band_hi"]) for r in rows}):
+        for lab in archives:
+            mine = {r["generator"]: r for r in rows if r["archive"] == lab and r["band_lo"] == lo}
+            first = next(iter(mine.values()))
+            lines.append(f"| [{lo:g}, {hi:g}) | {lab} | {first['cells']} | {first['filled']} | "
+                         f"{first['coverage_percent']:.1f}% | "
+                         + " | ".join("-" if first["filled"] == 0 else f"{100 * mine[n]['share']:.0f}%" for n in names)
+                         + " |")
     return "\n".join(lines) + "\n"
 
 
@@ -157,7 +156,7 @@ def plot(path: Path, archives: dict, rows: list[dict], names: list[str], title: 
     import numpy as np
 
     labels = list(archives)
-    fig, axes = plt.subplots(2, len(labels), figsize=(4.2 * len(labels), 5.2), squeeze=False, sharex=True,
+    fig, axes = plt.subplots(2, len(labels), figsize=(4.2 * len(labels), 5.2), squeeze=False, sharex=True, sharey="row",
                              layout="constrained")
     colors = plt.get_cmap("tab10")
     for j, lab in enumerate(labels):

@@ -55,6 +55,7 @@ def test_evolve_mixed_smoke_writes_the_archive_and_its_shares(tmp_path):
     (["evolve", "--mix", "perlin", "worley"], "--mix: only with --generator mixed"),
     (["evolve", "--generator", "mixed", "--batch-size", "6"], "--batch-size must be > 6 with --generator mixed"),
     (["evolve", "--generator", "mixed", "--fresh", "-1"], "--fresh must be an integer >= 0"),
+    (["evolve", "--generator", "mixed", "--size", "48"], "--size 48 does not suit generator 'diamond_square'"),
     (["shares", "--mixed", "NOPE.npz"], "--mixed NOPE.npz: no archive there"),
     (["shares"], "--mixed or --separate"),
 ])
