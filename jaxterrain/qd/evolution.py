@@ -130,7 +130,9 @@ def evolve(generator, descriptors, config: A.EvolveConfig, key: jax.Array, fitne
     """Run MAP-Elites for one generator and one descriptor pair; returns the final :class:`~jaxterrain.qd.Archive`.
 
     Args:
-      generator: a ``Generator`` (see generators/base.py) or a registered generator name.
+      generator: a ``Generator`` (see generators/base.py) or a registered generator name; a
+        ``generators.mixture`` of several evolves ONE archive whose elites record their generator (each generator's
+        offspring compete for the same cells; ``config.batch_size`` must exceed its fresh samples).
       descriptors: None (use ``config.descriptors``), a pair of descriptor names (replaces ``config.descriptors``),
         or a callable ``heightmaps [B, H, W] -> [B, 2]`` (e.g. a learned descriptor; ``config.descriptors`` then only
         names it and ``config.ranges`` must be given unless the names have defaults).

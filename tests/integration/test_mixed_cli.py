@@ -83,3 +83,16 @@ def test_shares_refuses_archives_of_other_grids(tmp_path, monkeypatch, capsys):
             str(ROOT / "docs/results/exp2_perlin_headings_archive.npz"))
     assert exit_.value.code == 2 and "must share one grid" in capsys.readouterr().err
     assert not (tmp_path / "runs").exists()
+
+
+@pytest.mark.slow  # ~50 s of CPU (six generators compile); the two-generator run above covers the command by default
+def test_evolve_mixed_smoke_of_all_six_generators(tmp_path):
+    from jaxterrain import qd as A
+
+    out = tmp_path / "six"
+    assert cli("evolve", "--preset", "smoke", "--generator", "mixed", "--generations", "2", "--batch-size", "12",
+               "--initial-population", "24", "--out", str(out)) == 0
+    arch = A.load(out / "archive.npz")
+    assert arch.generator_names == ("perlin", "worley", "diamond_square", "cppn", "gan", "steps")
+    assert arch.filled.any() and arch.source[arch.filled].max() < 6
+    assert A.check_cells(arch, generator_options={"size": 32}).all()  # each elite re-derives its cell by its generator
