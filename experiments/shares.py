@@ -131,6 +131,11 @@ def markdown(archives: dict, rows: list[dict], names: list[str]) -> str:
         n = int(arch.filled.sum())
         lines.append(f"| {label} | {A.coverage(arch):.2f}% | {n} | "
                      + " | ".join(f"{100 * c / max(n, 1):.1f}%" for c in total) + " |")
+    if {"mixed", "combined"} <= set(archives):
+        o = overlap(archives["mixed"], archives["combined"])
+        lines += ["", f"Cells filled in both: {o['both']}, held by the same generator in both: {o['same']} "
+                  f"({100 * o['same'] / max(o['both'], 1):.0f}%); filled only in the mixed archive: {o['only_a']}, "
+                  f"only in the combined one: {o['only_b']}."]
     lines += ["", "Per band of distance from cell (0, 0) (`qd.cell_distance`, in cells): the band's coverage, then each "
               "generator's share of its filled cells.", "",
               "| band | archive | cells | filled | coverage | " + " | ".join(names) + " |",
@@ -144,6 +149,18 @@ def markdown(archives: dict, rows: list[dict], names: list[str]) -> str:
                          + " | ".join("-" if first["filled"] == 0 else f"{100 * mine[n]['share']:.0f}%" for n in names)
                          + " |")
     return "\n".join(lines) + "\n"
+
+
+def overlap(a, b) -> dict:
+    """Cells of two archives of one grid: ``{"both", "same", "only_a", "only_b"}``: filled in both, of those held by
+    the same generator (by name) in both, filled only in ``a``, only in ``b``."""
+    import numpy as np
+
+    both = a.filled & b.filled
+    name_a = np.array(a.generator_names + ("",), dtype=object)[np.where(a.filled, a.source, -1)]
+    name_b = np.array(b.generator_names + ("",), dtype=object)[np.where(b.filled, b.source, -1)]
+    return {"both": int(both.sum()), "same": int((both & (name_a == name_b)).sum()),
+            "only_a": int((a.filled & ~b.filled).sum()), "only_b": int((b.filled & ~a.filled).sum())}
 
 
 def plot(path: Path, archives: dict, rows: list[dict], names: list[str], title: str = "") -> None:

@@ -45,6 +45,8 @@ def test_evolve_mixed_smoke_writes_the_archive_and_its_shares(tmp_path):
     assert cli("shares", "--mixed", str(out), "--separate", str(out / "archive.npz"), "--out", str(shares)) == 0
     text = (shares / "shares.md").read_text()
     assert "| mixed |" in text and "| combined |" in text
+    n = int(arch.filled.sum())  # the combined archive of the mixed one alone is the mixed one, cell by cell
+    assert f"Cells filled in both: {n}, held by the same generator in both: {n} (100%)" in text
     assert cli("evolve", "--resume", str(out)) == 0  # done: the saved archive is reused
 
 
