@@ -226,10 +226,12 @@ def _build(gens: tuple, fresh: int, render_chunk: int) -> Generator:
             if rows.size:
                 g.validate(jax.tree.map(lambda x: np.asarray(x)[rows], genomes.slots[i]))
 
+    compiled = jax.jit(render_batch)
+
     def render(genomes):
         if not any(isinstance(x, jax.core.Tracer) for x in jax.tree.leaves(genomes)):
             validate(genomes)
-        return jax.jit(render_batch)(genomes)
+        return compiled(genomes)
 
     spec = MixtureSpec(names, gens, fresh, render_chunk, render_batch)
     return Generator(f"mixed({','.join(names)};fresh={fresh})", spec, gens[0].size, sample, mutate, render,
