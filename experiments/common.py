@@ -45,7 +45,7 @@ _INT_MIN = {
                      "chunk", "sample", "seeds", "walk_batch", "horizon", "trials", "epochs_per_chunk",
                      "steps_per_epoch", "max_epochs", "terrains_per_chunk", "levels", "plr_capacity", "accel_edits"), 1),
     **dict.fromkeys(("window", "windows"), 2),
-    **dict.fromkeys(("mutation_steps", "walk", "quality_samples", "levels_init"), 0),
+    **dict.fromkeys(("mutation_steps", "walk", "quality_samples", "levels_init", "fresh"), 0),
 }
 _FLOAT_POSITIVE = ("plr_temperature", "time_limit", "time_budget", "env_steps", "lr", "learning_rate", "heights", "robot_height",
                    "band_width")
@@ -327,9 +327,11 @@ def check_values(values: dict, where=flag) -> None:
                                      f"{', '.join(features.descriptor_names())}")
         elif key == "fitness" and (not isinstance(value, str) or value not in FITNESS_NAMES):
             raise UsageError(f"{where(key)}: unknown fitness {value!r}; choose from {', '.join(FITNESS_NAMES)}")
-        elif key in ("generator", "generators") and items:
+        elif key in ("generator", "generators", "mix") and items:
             from jaxterrain import generators
 
+            if key == "generator" and value == "mixed":  # evolve --generator mixed: its --mix names are checked
+                continue
             for v in items:
                 if v not in generators.names():
                     names = ", ".join(generators.names())
