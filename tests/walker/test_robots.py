@@ -129,7 +129,7 @@ def test_train_base_policy_trains_the_ant_and_its_policy_walks_the_ant(tmp_path)
     meta = json.loads((out / "policy" / "config.json").read_text())
     assert meta["walker_config"]["robot"] == "ant" and (meta["observation_size"], meta["action_size"]) == (27, 8)
     policy = rl.load_policy(out / "policy")
-    assert difficulty.evaluation.default_env_config((32, 64), policy=policy).robot == "ant"
+    assert difficulty.default_env_config((32, 64), policy=policy).robot == "ant"
     assert 0.0 <= json.loads((out / "eval.json").read_text())["best_mean"] <= 1.0
     # learn starts from a policy of the robot it names, else refuses in one line; an archive of the humanoid's
     # fitness does not serve the ant
