@@ -269,3 +269,30 @@ def test_train_traversability_smoke_preset_stops_and_resumes(tmp_path):
     model = trav.load(tmp_path / "t" / "model")
     assert model.config.channels == (4, 4, 4, 4) and len(model.meta["heldout"]) == 2
 
+
+
+# ---- generators: train-gan (the loop: jaxterrain.generators.gan_train.train_gan, tests/generators/test_gan.py)
+def test_train_gan_stops_at_its_time_limit_and_resumes_from_the_folder(tmp_path, monkeypatch):
+    """``train-gan --time-limit``: exit 3 after the first checkpoint; ``--resume FOLDER`` alone takes the run's
+    settings from its config.json (only --steps changes) and ends with final/; a resume into another folder is
+    refused."""
+    from experiments import common, train_gan
+
+    # a tiny architecture so the test compiles fast; the command itself is unchanged
+    monkeypatch.setitem(train_gan.PRESETS, "smoke", dict(
+        train_gan.PRESETS["smoke"], channels=(16, 8, 4), disc_channels=(8, 16)))
+    parser = argparse.ArgumentParser()
+    train_gan.add_arguments(parser)
+    out = tmp_path / "c"
+    argv = ["--preset", "smoke", "--size", "32", "--batch-size", "2", "--steps", "2", "--out", str(out),
+            "--checkpoint-every", "1", "--sample-every", "1", "--log-every", "1", "--quality-samples", "0",
+            "--no-progress"]
+    assert train_gan.main(parser.parse_args(argv + ["--time-limit", "0.00001"])) == 3  # as evolve
+    assert (out / "checkpoint.npz").exists() and not (out / "final").exists()
+    with pytest.raises(ValueError, match="different runs"):
+        common.resume_folder("train-gan", str(out), str(tmp_path / "d"))
+    assert train_gan.main(parser.parse_args(["--resume", str(out), "--steps", "3", "--no-progress"])) == 0
+    saved = json.loads((out / "config.json").read_text())
+    assert saved["command"] == "train-gan" and saved["batch_size"] == 2 and saved["steps"] == 3
+    assert (out / "final" / "generator.msgpack").is_file()
+    assert [json.loads(line)["step"] for line in (out / "log.jsonl").read_text().splitlines()] == [1, 2, 3]
