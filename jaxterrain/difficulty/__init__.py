@@ -27,6 +27,7 @@ from jaxterrain.difficulty.evaluation import (
     policy_solver,
     protocol_distances,
     rollout_distances,
+    timed_distances,
     validate_heightmaps,
     with_policy_observation,
 )
@@ -62,6 +63,7 @@ __all__ = [
     "protocol_env_config",
     "evaluate",
     "rollout_distances",
+    "timed_distances",
     "fitness_fn",
     "protocol_distances",
     "keyed_distances",

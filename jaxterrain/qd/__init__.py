@@ -7,14 +7,15 @@
 - :mod:`~jaxterrain.qd.evolution`: the host drivers :func:`evolve` / :func:`evolve_many` (checkpoints, resume);
 - :mod:`~jaxterrain.qd.archive`: host queries (coverage, QD score, re-derive / reseat elites, :func:`combine`);
 - :mod:`~jaxterrain.qd.archive_io`: the archive file (:func:`save` / :func:`load`);
-- :mod:`~jaxterrain.qd.bank`: an archive's elites on the device (:class:`TerrainBank`), the curriculum's input.
+- :mod:`~jaxterrain.qd.bank`: an archive's elites on the device (:class:`TerrainBank`), the curriculum's input;
+- :mod:`~jaxterrain.qd.gradient`: does fitness fall with the distance from cell (0, 0)? (:func:`gradient.gradient`).
 
     >>> from jaxterrain import qd
     >>> arch = qd.evolve("perlin", None, qd.EvolveConfig(generations=50), key)
     >>> qd.coverage(arch), qd.save("perlin.npz", arch)
 """
 
-from jaxterrain.qd import grid, map_elites, scoring
+from jaxterrain.qd import gradient, grid, map_elites, scoring
 from jaxterrain.qd.archive import (
     check_cells,
     combine,
@@ -82,6 +83,7 @@ __all__ = [
     "coverage",
     "elite",
     "fitness_grid",
+    "gradient",
     "grid",
     "heightmaps",
     "qd_score",
