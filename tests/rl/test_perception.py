@@ -83,14 +83,20 @@ def test_every_command_that_walks_a_policy_takes_the_observation_set():
     from jaxterrain import qd
     from jaxterrain.curriculum import runner
 
+    from jaxterrain.curriculum import run_config
+    from jaxterrain.curriculum.presets import FLAT_PRESETS
+
+    def run(**walker):  # the smoke preset's run with these walker settings
+        return run_config.from_flat({**FLAT_PRESETS["smoke"], **walker})
+
     seeing_dir = rl.base_policy_dir("humanoid", "perceptive")
-    assert runner.start_policy({"observation": "perceptive"}).path == seeing_dir
-    assert runner.start_policy({"observation": "perceptive", "robot": "ant"}).path == rl.base_policy_dir("ant",
-                                                                                                        "perceptive")
-    assert runner.start_policy({"policy": str(seeing_dir)}).observation_size == 198  # a --policy brings its own set
-    with pytest.raises(runner.BadInput, match="^--policy .*base_policy: it observes blind, not --observation "
-                                              "perceptive$"):
-        runner.start_policy({"observation": "perceptive", "policy": str(rl.base_policy_dir())})
+    assert runner.start_policy(run(observation="perceptive")).path == seeing_dir
+    assert runner.start_policy(run(observation="perceptive", robot="ant")).path == rl.base_policy_dir("ant",
+                                                                                                   "perceptive")
+    assert runner.start_policy(run(policy=str(seeing_dir))).observation_size == 198  # a policy brings its own set
+    with pytest.raises(runner.BadInput, match="^LearnConfig.walker.policy .*base_policy: it observes blind, not "
+                                              "LearnConfig.walker.observation perceptive$"):
+        runner.start_policy(run(observation="perceptive", policy=str(rl.base_policy_dir())))
     assert qd.config.config_from_dict(qd.config.config_to_dict(qd.EvolveConfig(observation="perceptive"))
                                       ).observation == "perceptive"
     with pytest.raises(ValueError, match="EvolveConfig.observation must be 'blind' or 'perceptive'"):
