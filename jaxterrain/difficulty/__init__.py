@@ -19,6 +19,7 @@ from jaxterrain.difficulty.evaluation import (
     keyed_distances,
     protocol_distances,
     rollout_distances,
+    timed_distances,
     validate_heightmaps,
 )
 from jaxterrain.difficulty.policies import (
@@ -64,6 +65,7 @@ __all__ = [
     "protocol_env_config",
     "evaluate",
     "rollout_distances",
+    "timed_distances",
     "fitness_fn",
     "protocol_distances",
     "keyed_distances",
