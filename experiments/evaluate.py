@@ -35,6 +35,10 @@ labelled by their folders relative to a common parent, and the families dropped 
 same, coloured by the share of each family's levels passed),
 ``suite.png`` (a terrain of every family at its easiest, middle and hardest level) and ``timing.json``.
 
+``--randomise SPEC`` walks every policy under randomised physics (``jaxterrain.walker.parse_randomisation``; every
+policy meets the same draws; MJX only, without ``--videos``); by default the nominal physics, whatever a policy was
+trained under.
+
 ``--videos`` (off by default) adds ``videos/<walker>/<family>_L<level>.gif``: each walker beside the base policy on
 the terrains of ``--video-terrains`` (default: per family the hardest level the walker passes and the first it
 fails), and ``videos/videos.csv`` (``jaxterrain.report.compare.write_videos``). GIF only (no MP4 writer is a

@@ -20,6 +20,10 @@ Presets:
   best-5 / all-20 flat distance 1.00 / 0.98. Under ``--solver fast`` (brax's Newton 1 / 4) an H200 did ~315 k env
   steps/s, 50 M in 218 s, but that policy walks only under the fast solver (``jaxterrain.walker.SOLVER_SOUND``).
 
+``--randomise SPEC`` trains under physics randomisation (``jaxterrain.walker.parse_randomisation``: friction, masses,
+motors, observation noise, action delay, pushes, or ``legged-gym``); the policy records it in its ``walker_config``,
+and ``eval.json`` walks the nominal physics.
+
 Writes into ``--out RUN_DIR``: ``config.json`` (the settings, as in every command: ``--config RUN/config.json``
 re-runs them), ``run.json`` (the command lines that started and resumed it, the updates, the walker and PPO
 configs), ``checkpoint.npz``, ``metrics.csv``, ``tb/``, ``policy/`` (``policy.msgpack`` + ``config.json``, loadable with

@@ -54,6 +54,9 @@ Physical choices (all in :class:`WalkerConfig`):
   torso's x velocity over the env step and ctrl = 0.4 * action (the XML's ctrlrange).
 - Normalised distance ``clip((x - x_start) / (x_goal - x_start), 0, 1)`` of the torso's x, in ``state.distance``.
 - One env step = ``n_frames`` (5) physics steps of ``timestep`` (0.003 s): dt = 0.015 s, as in brax.
+- Physics randomisation (``randomisation``, :mod:`jaxterrain.walker.randomisation`; off by default): friction,
+  masses, torso mass, motor strength, observation noise, action delay and pushes, drawn per env at reset (from the
+  reset key's stream ``fold_in(key, 2)``) into ``state.random``; off, nothing is drawn and ``state.random`` is None.
 - Solver: :data:`~jaxterrain.walker.model.SOLVER_SOUND` (Newton, iterations 4, ls_iterations 16, no Euler damping)
   by default: a walk under it is the same as under the XML's converged ``SOLVER_XML`` (8 / 50 / damping on).
   ``SOLVER_FAST`` (1 / 4, brax's MJX setting) is 2.2x faster but lets a policy exploit the unconverged contacts.
