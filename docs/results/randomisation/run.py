@@ -224,18 +224,25 @@ def summary(args) -> int:
                 r[name]["mean"] = float(np.mean([float(x["fitness"]) for x in rows]))
         result["arms"][arm] = r
     s2s = out / "sim2sim" / "summary.json"
-    if s2s.is_file():
+    if s2s.is_file():  # measure.py's groups are "humanoid ARM"; "mujoco-mjx" holds |C - MJX| per group|family
         result["sim2sim"] = json.loads(s2s.read_text())
+        pairs = result["sim2sim"].get("pairs", {}).get("mujoco-mjx", {})
+        for arm, r in result["arms"].items():
+            gap = pairs.get(f"humanoid {arm}|all")
+            if gap is not None:
+                r["sim2sim_gap"] = gap["mean_abs"]
     md = ["# Physics randomisation: held-out cost and sim2sim gap", "",
           f"Written {time.strftime('%Y-%m-%d %H:%M')} from {out}.", "",
-          "| arm | flat best-5 / all-20 | suite mean (nominal) | suite mean (legged-gym physics) | env steps/s |",
-          "|---|---|---|---|---|"]
+          "| arm | flat best-5 / all-20 | suite mean (nominal) | suite mean (legged-gym physics) | sim2sim gap "
+          "(mean \\|C - MJX\\|) | env steps/s |",
+          "|---|---|---|---|---|---|"]
     for arm, r in result["arms"].items():
         flat = f"{r['flat_best']:.3f} / {r['flat_all']:.3f}" if "flat_best" in r else "-"
         nom = f"{r['suite']['mean']:.3f}" if "suite" in r else "-"
         ran = f"{r['suite_randomised']['mean']:.3f}" if "suite_randomised" in r else "-"
         rate = f"{r['env_steps_per_s']:,.0f}" if "env_steps_per_s" in r else "-"
-        md.append(f"| {arm} | {flat} | {nom} | {ran} | {rate} |")
+        gap = f"{r['sim2sim_gap']:.3f}" if "sim2sim_gap" in r else "-"
+        md.append(f"| {arm} | {flat} | {nom} | {ran} | {gap} | {rate} |")
     if s2s.is_file():
         md += ["", "Sim2sim (MuJoCo C vs MJX-JAX): `sim2sim/summary.md`."]
     atomic_write_text(out / "summary.json", json.dumps(result, indent=2) + "\n")
