@@ -2,7 +2,7 @@
 
     PYTHONPATH=. python docs/results/randomisation/run.py train legged-gym --out runs/dr     # ~8 min, one H200
     PYTHONPATH=. python docs/results/randomisation/run.py train full --out runs/dr           # ~8 min
-    PYTHONPATH=. python docs/results/randomisation/run.py evaluate --out runs/dr             # ~5 min
+    PYTHONPATH=. python docs/results/randomisation/run.py evaluate --out runs/dr             # ~5 min (MJX-JAX)
     PYTHONPATH=. python docs/results/randomisation/run.py sim2sim --out runs/dr              # ~5 min (+ its CPU cores)
     PYTHONPATH=. python docs/results/randomisation/run.py summary --out runs/dr              # seconds
     PYTHONPATH=. python docs/results/randomisation/run.py all --out /tmp/dr --tiny           # the CPU check, ~15 min
@@ -132,7 +132,7 @@ def evaluate(args) -> int:
         if (out / name / "fitness.csv").is_file():
             print(f"{name}: done", flush=True)
             continue
-        argv = ["evaluate", "--preset", "smoke" if args.tiny else "gpu", "--backend", "jax", "--out",
+        argv = ["evaluate", "--preset", "smoke" if args.tiny else "gpu", "--backend", "jax", "--no-repeat", "--out",
                 str(out / name), *extra] + (["--policy", *pols] if pols else [])
         rc = rc or _cli(argv)
     return rc
