@@ -259,6 +259,24 @@ def add_backend_argument(parser: argparse.ArgumentParser, what: str = "walker ph
                              f"(MuJoCo Warp{', ' + warp if warp else ''})")
 
 
+RANDOMISATION_PRESET_NAMES = ("legged-gym",)
+"""``--randomise`` preset names: ``jaxterrain.walker.RANDOMISATION_PRESETS`` (a literal, so that ``--help`` imports no
+JAX; a test keeps the two equal)."""
+
+
+def add_randomise_argument(parser: argparse.ArgumentParser, what: str) -> None:
+    """``--randomise SPEC``: physics randomisation of ``what`` (``jaxterrain.walker.parse_randomisation``: a preset or
+    ``KEY=VALUE`` items; off by default). The config key ``randomise`` holds the spec as given."""
+    parser.add_argument("--randomise", default=None, metavar="SPEC",
+                        help=f"physics randomisation of {what} (default off): a preset "
+                             f"({', '.join(RANDOMISATION_PRESET_NAMES)}) and/or comma-separated KEY=VALUE items, "
+                             f"friction=LOW:HIGH (scale of the friction coefficient, 1.0 here), mass=LOW:HIGH (scale of "
+                             f"each body's mass), added-mass=LOW:HIGH (kg on the torso), motor=LOW:HIGH (scale of the "
+                             f"motors' force), obs-noise=STD, delay=STEPS or LOW:HIGH (env steps), push=EVERY:VELOCITY "
+                             f"(env steps, m/s), drawn per env at reset; e.g. friction=0.5:1.25,push=200:0.5 or "
+                             f"legged-gym,obs-noise=0.01 (jaxterrain.walker.randomisation)")
+
+
 def add_progress_argument(parser: argparse.ArgumentParser) -> None:
     """``--progress`` / ``--no-progress``, on every command that draws a progress bar (``jaxterrain.runtime.driver``):
     ``--no-progress`` prints plain lines instead, as it does anyway where stderr is not a terminal. It is a display
@@ -346,6 +364,13 @@ def check_values(values: dict, where=flag) -> None:
                         text = str(err).splitlines()[0].removeprefix(f"{v}: ")
                         raise UsageError(f"{where('size')} {size} does not suit generator {v!r} ({where(key)}): {text}") \
                             from None
+        elif key == "randomise":
+            from jaxterrain.walker import parse_randomisation
+
+            try:
+                parse_randomisation(value)
+            except ValueError as err:
+                raise UsageError(f"{where(key)}: {err}") from None
         elif key == "robot":
             from jaxterrain.walker import robots
 

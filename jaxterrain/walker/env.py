@@ -54,6 +54,9 @@ Physical choices (all in :class:`WalkerConfig`):
   torso's x velocity over the env step and ctrl = 0.4 * action (the XML's ctrlrange).
 - Normalised distance ``clip((x - x_start) / (x_goal - x_start), 0, 1)`` of the torso's x, in ``state.distance``.
 - One env step = ``n_frames`` (5) physics steps of ``timestep`` (0.003 s): dt = 0.015 s, as in brax.
+- Physics randomisation (``randomisation``, :mod:`jaxterrain.walker.randomisation`; off by default): friction,
+  masses, torso mass, motor strength, observation noise, action delay and pushes, drawn per env at reset (from the
+  reset key's stream ``fold_in(key, 2)``) into ``state.random``; off, nothing is drawn and ``state.random`` is None.
 - Solver: :data:`~jaxterrain.walker.model.SOLVER_SOUND` (Newton, iterations 4, ls_iterations 16, no Euler damping)
   by default: a walk under it is the same as under the XML's converged ``SOLVER_XML`` (8 / 50 / damping on).
   ``SOLVER_FAST`` (1 / 4, brax's MJX setting) is 2.2x faster but lets a policy exploit the unconverged contacts.
@@ -79,6 +82,7 @@ with contextlib.redirect_stdout(io.StringIO()) if importlib.util.find_spec("warp
     from mujoco import mjx
 
 from jaxterrain.terrain import hfield_size, validate_scale
+from jaxterrain.walker import randomisation as _rnd
 from jaxterrain.walker import tiles as _tiles
 from jaxterrain.walker.model import (
     SOLVER_SOUND,
@@ -88,6 +92,7 @@ from jaxterrain.walker.model import (
     check_terrain_shape,
     metres_to_hfield,
 )
+from jaxterrain.walker.randomisation import Randomisation, check_randomisation, is_active
 from jaxterrain.walker.robots import ROBOT_FIELDS, get as get_robot
 from jaxterrain.walker.tiles import Tile, TileBank
 
@@ -148,6 +153,8 @@ class WalkerConfig(NamedTuple):
     warp_njmax: Optional[int] = None  # warp: constraint rows per env (humanoid: 64; 8 contacts x 4 + 17 limits = 49)
     # the body (jaxterrain.walker.robots): every field above that is None takes this robot's default
     robot: str = "humanoid"
+    # physics randomisation (jaxterrain.walker.randomisation; default: off, the paper's walker)
+    randomisation: Randomisation = Randomisation()
 
 
 class WalkerState(NamedTuple):
@@ -157,7 +164,9 @@ class WalkerState(NamedTuple):
     episode ended this step; truncation = 1 when it ended at the goal or the time limit; failed = 1 for invalid
     physics or a non-finite action). steps: [] int32 env steps since reset. x_start: [] float32 torso x at reset.
     distance: [] float32 normalised distance in [0, 1]. metrics: dict of [] float32 (forward_reward,
-    reward_alive, reward_quadctrl, x_velocity, torso_height, distance).
+    reward_alive, reward_quadctrl, x_velocity, torso_height, distance). random: this env's physics randomisation
+    (:class:`~jaxterrain.walker.randomisation.Draws`, drawn at reset), or None when ``config.randomisation`` is off
+    (then the state has the leaves it always had: checkpoints of unrandomised runs read the same).
     """
 
     data: Any
@@ -170,6 +179,7 @@ class WalkerState(NamedTuple):
     x_start: jax.Array
     distance: jax.Array
     metrics: dict
+    random: Any = None
 
 
 def resolve_config(config: WalkerConfig) -> WalkerConfig:
@@ -183,7 +193,7 @@ def resolve_config(config: WalkerConfig) -> WalkerConfig:
     robot = get_robot(config.robot)
     config = config._replace(**{f: robot.default(f) for f in ROBOT_FIELDS if getattr(config, f) is None})
     _check_config(config)
-    return config
+    return config._replace(randomisation=check_randomisation(config.randomisation))
 
 
 def with_observation(config: WalkerConfig, observation: str) -> WalkerConfig:
@@ -316,6 +326,7 @@ def _check_config(c: WalkerConfig) -> None:
                          "per-env terrains come from a bank of tiles (WalkerConfig(tiles=T), env.make_bank)")
     for name in ("warp_worlds", "warp_contacts", "warp_njmax"):
         _int(name, getattr(c, name), 1)
+    check_randomisation(c.randomisation)
     h, w = check_terrain_shape(c.terrain_shape)
     rows, cols = _tiles.grid(max(c.tiles, 1))
     if c.tiles and rows * h * cols * w >= 2 ** 31:
@@ -430,6 +441,12 @@ class WalkerEnv:
             raise ValueError(f"robot {self.robot.name!r}: every joint after the free root must be a hinge")
         self._feet = np.array([mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_GEOM, n) for n in self.robot.foot_geoms])
         self._foot_radius = np.asarray(m.geom_size[self._feet, 0], np.float32)
+        self._random = is_active(config.randomisation)  # off: no draws, no state leaves, the shared model
+        self._torso, self._torso_mass = int(torso), float(m.body_mass[torso])
+        added = config.randomisation.added_mass
+        if added is not None and self._torso_mass + added[0] <= 0:
+            raise ValueError(f"randomisation.added_mass must be (low, high) kg with low > -{self._torso_mass:.3g} (the "
+                             f"{self.robot.name}'s torso mass), got {added}")
         self.action_size = int(m.nu)
         self.observation_size = 1 + 4 + (m.nq - 7) + m.nv
         if config.observation == "perceptive":
@@ -595,6 +612,7 @@ class WalkerEnv:
         ``config.start_spread > 0``)."""
         c = self.config
         key_q, key_v = jax.random.split(key)
+        key_r = key
         patch_y = self._patch[1]
         if c.start_spread > 0:  # a stream of its own: the joint noise stays that of the same key without a spread
             y0 = jax.random.uniform(jax.random.fold_in(key, 1), (), minval=-c.start_spread, maxval=c.start_spread)
@@ -619,9 +637,15 @@ class WalkerEnv:
         zero = jnp.zeros((), jnp.float32)
         metrics = {"forward_reward": zero, "reward_alive": zero, "reward_quadctrl": zero, "x_velocity": zero,
                    "torso_height": qpos[2] - heights(qpos[0] - ox, qpos[1] - oy), "distance": zero}
-        return WalkerState(data=data, obs=self._obs(data, terrain), reward=zero, done=zero,
-                           truncation=zero, failed=zero, steps=jnp.zeros((), jnp.int32),
-                           x_start=jnp.asarray(qpos[0], jnp.float32), distance=zero, metrics=metrics)
+        steps, obs, random = jnp.zeros((), jnp.int32), self._obs(data, terrain), None
+        if self._random:  # a stream of its own (fold_in 2): the start pose of a key is that without randomisation
+            r = c.randomisation
+            random = _rnd.draw(jax.random.fold_in(key_r, 2), r, self.mj_model.nbody, self._torso, self._torso_mass,
+                               self.action_size)
+            obs = _rnd.noisy_obs(obs, random, steps, r)
+        return WalkerState(data=data, obs=obs, reward=zero, done=zero,
+                           truncation=zero, failed=zero, steps=steps,
+                           x_start=jnp.asarray(qpos[0], jnp.float32), distance=zero, metrics=metrics, random=random)
 
     def step(self, state: WalkerState, action: jax.Array, terrain) -> WalkerState:
         """Advance ``n_frames`` physics steps with ``action`` [A] in [-1, 1] (clipped) on ``terrain`` (the one
@@ -629,6 +653,11 @@ class WalkerEnv:
         c = self.config
         m = self.model(terrain)
         ctrl, action_ok = self.controls(action)
+        random = state.random
+        if self._random:  # the action of `delay` steps ago; this env's friction, masses and motors
+            given, random = _rnd.delayed_action(random, jnp.nan_to_num(jnp.asarray(action, jnp.float32)))
+            ctrl = self.controls(given)[0]
+            m = _rnd.randomised_model(m, random, c.randomisation)
         d0 = state.data
         d = d0.replace(ctrl=ctrl)
         warp = self._data0 is not None
@@ -641,8 +670,10 @@ class WalkerEnv:
             physics_ok = physics_ok & jnp.all((d._impl.overflow & _WARP_DROPPED) == 0)
         invalid = ~(physics_ok & action_ok)
         d = d.where(invalid, d0)  # mjx.Data.where keeps MJX-Warp's shared contact buffers shared
-
         steps = state.steps + 1
+        if self._random and c.randomisation.push_every:  # a kick after this step's physics
+            d = d.replace(qvel=_rnd.push(d.qvel, random, steps, c.randomisation))
+
         done, truncation, distance, x_velocity, torso_height = self.outcome(d0.qpos, d.qpos, steps, state.x_start,
                                                                              invalid, terrain)
         forward_reward = c.forward_reward_weight * x_velocity
@@ -652,9 +683,12 @@ class WalkerEnv:
         metrics = {"forward_reward": f32(jnp.where(invalid, 0.0, forward_reward)), "reward_alive": f32(
             jnp.where(invalid, 0.0, c.healthy_reward)), "reward_quadctrl": f32(-ctrl_cost),
                    "x_velocity": f32(x_velocity), "torso_height": f32(torso_height), "distance": f32(distance)}
-        return WalkerState(data=d, obs=self._obs(d, terrain), reward=f32(reward), done=f32(done),
+        obs = self._obs(d, terrain)
+        if self._random:
+            obs = _rnd.noisy_obs(obs, random, steps, c.randomisation)
+        return WalkerState(data=d, obs=obs, reward=f32(reward), done=f32(done),
                            truncation=f32(truncation), failed=f32(invalid), steps=steps, x_start=state.x_start,
-                           distance=f32(distance), metrics=metrics)
+                           distance=f32(distance), metrics=metrics, random=random)
 
     # ---- the pieces of a step that do not touch the physics (shared with the MuJoCo C engine, walker.mujoco_c) --
     def controls(self, action: jax.Array) -> tuple[jax.Array, jax.Array]:
