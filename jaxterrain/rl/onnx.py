@@ -58,7 +58,7 @@ from jaxterrain.rl.checkpoint import load_policy
 from jaxterrain.runtime import provenance
 from jaxterrain.runtime.io import atomic_write_bytes
 from jaxterrain.terrain import TerrainScale
-from jaxterrain.walker.env import WalkerConfig, resolve_config
+from jaxterrain.walker.config import WalkerConfig, resolve_config
 from jaxterrain.walker.model import SolverOptions, build_model
 from jaxterrain.walker.randomisation import randomisation_from_json, randomisation_json
 from jaxterrain.walker.robots import get as get_robot

@@ -23,9 +23,11 @@ Per-env terrains as tiles of one heightfield (needed by the MuJoCo Warp backend,
 
 from jaxterrain.walker import robots
 from jaxterrain.walker.robots import RobotSpec, register_robot
-from jaxterrain.walker.env import (BACKENDS, OBSERVATIONS, SCAN_FIELDS, WalkerConfig, WalkerEnv, WalkerState,
-                                   flat_terrain, min_terrain_side, observation_fields, observation_label,
-                                   resolve_config, sample_heights, with_observation)
+from jaxterrain.walker.config import (BACKENDS, OBSERVATIONS, SCAN_FIELDS, WalkerConfig, flat_terrain,
+                                      min_terrain_side, observation_fields, observation_label, resolve_config,
+                                      with_observation)
+from jaxterrain.walker.env import WalkerEnv, WalkerState
+from jaxterrain.walker.surface import sample_heights
 from jaxterrain.walker.model import (
     NAMED_SOLVERS,
     SOLVER_FAST,

@@ -142,15 +142,3 @@ def test_levels_picked_from_a_measured_grid_pass_and_spread_evenly():
     fit = calibration.decreasing_fit(means[::5])
     assert np.all(np.diff(fit) <= 0)
     assert calibration.propose_values(values[:5], means[:5]) is None  # never falls to 0.22: widen the range
-
-
-def test_evaluate_builds_v2_with_the_levels_of_its_robot_and_v1_without_one():
-    from experiments.evaluate import terrains
-
-    cfg = dict(archive=None, suite="v2", robot="ant", size=128, seeds=1, samples=1, families=["boxes"],
-               generators=[])
-    s = terrains(cfg)
-    assert s.robot == "ant" and s.value.tolist() == list(suite.V2_LEVELS["ant"]["boxes"])
-    assert terrains({**cfg, "robot": None}).robot == "humanoid"
-    v1 = terrains({**cfg, "suite": "v1"})  # one geometry: the robot does not choose it
-    assert v1.robot is None and np.allclose(v1.value, suite.FAMILIES["boxes"].values())
