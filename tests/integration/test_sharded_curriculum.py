@@ -15,7 +15,7 @@ TESTS = str(Path(__file__).resolve().parents[1] / "curriculum")  # the unit test
 
 SCRIPT = textwrap.dedent("""
     import sys
-    sys.path.insert(0, TESTS)
+    import os; sys.path[:0] = [TESTS, os.path.dirname(TESTS)]  # the unit tests and the helpers beside them
     import jax, numpy as np
     from jaxterrain import curriculum as C
     from jaxterrain.runtime import sharding as SH
@@ -57,7 +57,7 @@ def test_sharded_trials_equal_the_one_device_runner():
 LEARN_SCRIPT = textwrap.dedent("""
     import contextlib, io, json, sys
     from pathlib import Path
-    sys.path.insert(0, TESTS)
+    import os; sys.path[:0] = [TESTS, os.path.dirname(TESTS)]  # the unit tests and the helpers beside them
     import jax
     from experiments.__main__ import main
     from test_curriculum import tiny_archive_file
