@@ -33,7 +33,7 @@ from jaxterrain.suite.outputs import (Evaluation, level_table, read_fitness, plo
 
 __all__ = [
     "EXTENSIONS", "ORDERS", "TERRAIN_SIDE", "TerrainFolder", "difficulty_order", "fit_terrain", "folder_bank",
-    "folder_suite", "load_folder", "name_order", "read_terrain", "folder",
+    "folder_suite", "load_folder", "name_order", "read_terrain",
     "check_curve",
     "decreasing_fit",
     "propose_values",
