@@ -359,5 +359,6 @@ def main(args) -> int:
         return 3
     of = (f"rank (of {summary['bank_terrains'] - 1}, the hardest of the terrains)" if run.terrains else
           "cells (of 70.71)")
-    print(f"done: hardest traversed {summary['hardest_mean']:.2f} +- {summary['hardest_se']:.2f} {of} after {summary['epochs_max']} epochs -> {folder}; walkers in {folder / 'policies'}", flush=True)
+    print(f"done: hardest traversed {summary['hardest_mean']:.2f} +- {summary['hardest_se']:.2f} {of} after "
+          f"{summary['epochs_max']} epochs -> {folder}; walkers in {folder / 'policies'}", flush=True)
     return 0

@@ -191,8 +191,9 @@ def export_policies(folder: Path, run, config, ppo, env, start_policy, bank, sta
     ``config.json`` keeps the starting policy's ``walker_config`` (its contact solver: a walker walks as trained only
     under it) and adds ``curriculum``: the archive (its path relative to the run folder ``folder``, or
     ``<jaxterrain>/...`` for a shipped one: ``runtime.provenance.portable_path``, no machine's absolute path; and
-    its file's sha256; None, and ``terrains`` the folder, for a run on a folder of heightmaps), the starting policy (the same way), the selector, the trial, its seed, the epochs and env steps it
-    trained, its terrain sequence (bank indices, cells, distances and generators in the order trained), the hardest
+    its file's sha256; None, and ``terrain_folder`` the folder, for a run on a folder of heightmaps), the starting
+    policy (the same way), the selector, the trial, its seed, the epochs and env steps it trained, its terrain
+    sequence (bank indices, cells, distances and generators in the order trained), the hardest
     terrain it traversed, the chunk of the run; and ``provenance`` (commit, device, date). ``run`` is the treatment's
     ``LearnConfig``, ``ppo`` the fine-tuning PPOConfig (the networks' shapes); ``env`` the walker env (observation and action sizes). Returns the
     folders, in trial order."""
@@ -211,7 +212,7 @@ def export_policies(folder: Path, run, config, ppo, env, start_policy, bank, sta
             "walker_config": base_meta.get("walker_config"),
             "curriculum": {
                 "archive": None if terrains else provenance.portable_path(str(run.archive), folder),
-                **({"terrains": provenance.portable_path(str(terrains), folder)} if terrains else {}),
+                **({"terrain_folder": provenance.portable_path(str(terrains), folder)} if terrains else {}),
                 "archive_file_sha256": archive_sha, "selector": run.curriculum.selector, "trial": t,
                 "seed": int(run.seed), "epochs": int(epochs[t]),
                 "env_steps": int(epochs[t]) * int(config.steps_per_epoch),

@@ -160,8 +160,8 @@ def check_terrains(run: LearnConfig) -> Optional[OwnTerrains]:
         raise BadInput(f"LearnConfig.terrain_order must be one of {', '.join(ORDERS)}, got {run.terrain_order!r}")
     selector = run.curriculum.selector
     if selector in GRID_SELECTORS:
-        raise BadInput(f"LearnConfig.curriculum.selector {selector} needs an archive (its descriptor grid or generator);"
-                       f" on LearnConfig.terrains use dr, plr, levels or random")
+        raise BadInput(f"LearnConfig.curriculum.selector {selector} needs an archive (its descriptor grid or "
+                       f"generator); on LearnConfig.terrains use dr, plr, levels or random")
     return load_terrains(run)
 
 

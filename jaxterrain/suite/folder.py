@@ -2,7 +2,7 @@
 curriculum bank) and ``evaluate --terrains DIR`` (a suite with one family per file).
 
     from jaxterrain import suite
-    folder = suite.load_folder("my_tiles/")               # TerrainFolder: names, heightmaps [N, 256, 256] metres, digest
+    folder = suite.load_folder("my_tiles/")               # TerrainFolder: names, heightmaps [N, 256, 256] m
     folder = suite.load_folder("my_pngs/", height=0.5)    # images: grey 0..1 -> 0..0.5 m
     s = suite.folder_suite(folder)                        # a Suite: family = file name, one level each
     bank = suite.folder_bank(folder, suite.name_order(folder))   # a qd.TerrainBank; hardness = rank in the order
