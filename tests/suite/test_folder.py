@@ -1,28 +1,14 @@
 """Your own terrains (``jaxterrain.suite.folder``): a folder of PNG / GeoTIFF / .npy / .npz heightmaps read into the
 walker's terrains, and the one-line refusals of bad folders. No physics: every test here is numpy."""
 
-from pathlib import Path
-
 import numpy as np
 import pytest
-import tifffile
 from PIL import Image
+from terrain_tiles import write_tiles
 
 from jaxterrain import suite
 from jaxterrain.suite import folder as F
 from jaxterrain.terrain import TerrainScale
-
-
-def write_tiles(folder: Path) -> Path:
-    """Four small heightmaps of every kind, none square: a .npy ramp in metres (0.3 m), an 8-bit PNG, a 16-bit PNG
-    and a GeoTIFF in metres with 20 m of relief (a DEM: it needs a terrain height)."""
-    folder.mkdir(parents=True, exist_ok=True)
-    y, x = np.mgrid[0:40, 0:50].astype(np.float32)
-    np.save(folder / "a_ramp.npy", 0.3 * x / 49.0)
-    Image.fromarray((255 * (x / 49.0)).astype(np.uint8)).save(folder / "b_grey8.png")
-    Image.fromarray((65535 * (y / 39.0)).astype(np.uint16)).save(folder / "c_grey16.png")
-    tifffile.imwrite(folder / "d_dem.tif", (100.0 + 20.0 * np.sin(x / 8.0) * np.cos(y / 8.0)).astype(np.float32))
-    return folder
 
 
 def test_a_folder_reads_each_file_as_one_square_terrain_in_metres_with_flat_start_strips(tmp_path):
