@@ -327,7 +327,7 @@ def folder_suite(cfg: dict):
         side = cfg.get("size") or suite.TERRAIN_SIDE  # --size, else the curriculum's 256 cells
         return suite.folder_suite(suite.load_folder(cfg["terrain_folder"], cfg.get("terrain_height"), side))
     except ValueError as err:
-        msg = str(err)
+        msg = str(err).replace("give a terrain height M", "give --terrain-height M")
         if msg.startswith("terrain height"):
             raise UsageError(f"--terrain-height{msg[len('terrain height'):]}") from None
         raise UsageError(f"--{msg}" if msg.startswith("terrains ") else f"--terrains: {msg}") from None

@@ -127,9 +127,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     common.add_devices_argument(parser)  # the trials are split over the devices (curriculum.make_runner)
     parser.add_argument("--archive", default=None, help="archive .npz (default: the shipped CPPN archive, jaxterrain/assets/archives/cppn_headings.npz)")
     parser.add_argument("--terrains", default=None, metavar="DIR",
-                        help="train on your own terrains instead of an archive: a folder of .png (8/16-bit grey), "
-                             ".tif/.tiff (GeoTIFF, metres), .npy/.npz (metres) heightmaps, one terrain each, cropped "
-                             "to a centred square, resized to 256 x 256 cells of 4 cm, flat 1 m start strips "
+                        help="DIR, a folder of your own heightmaps, trained on instead of an archive: .png "
+                             "(8/16-bit grey), .tif/.tiff (GeoTIFF, metres), .npy/.npz (metres), one terrain each, "
+                             "cropped to a centred square, resized to 256 x 256 cells of 4 cm, flat 1 m start strips "
                              "(jaxterrain.suite.folder); curricula dr (the default with it), plr, levels, random")
     parser.add_argument("--terrain-height", type=float, default=None, metavar="M",
                         help="--terrains: metres of an image's full grey (default 1.0), and the relief every metre "

@@ -136,7 +136,7 @@ def load_terrains(run: LearnConfig) -> OwnTerrains:
     try:
         folder = load_folder(run.terrains, run.terrain_height)
     except ValueError as err:
-        msg = str(err)
+        msg = str(err).replace("give a terrain height M", "give LearnConfig.terrain_height M")
         if msg.startswith("terrain height"):
             raise BadInput(f"LearnConfig.terrain_height{msg[len('terrain height'):]}") from None
         if msg.startswith("terrains "):
