@@ -176,7 +176,7 @@ def measure_terrains(run: LearnConfig, own: OwnTerrains, policy) -> np.ndarray:
     maps = np.clip(own.heightmaps / np.float32(TerrainScale().height), 0.0, 1.0)
     apply = policy_fn(policy.config, int(policy.action_size))
     protocol = difficulty.Protocol(int(c.attempts), int(c.best), int(c.headings))
-    with estimates.compiling("terrain-order", f"{own.folder.size} terrains x {protocol.attempts} walks"):
+    with estimates.compiling("walks", f"{own.folder.size} terrains x {protocol.attempts} walks, the terrain order"):
         fit = difficulty.evaluate(jnp.asarray(maps), jax.random.fold_in(jax.random.key(int(run.seed)), 7),
                                   policy=apply, policy_params=(policy.params, policy.normaliser), env_config=cfg,
                                   protocol=protocol)

@@ -124,3 +124,20 @@ def test_evaluate_walks_a_folder_of_heightmaps(tmp_path):
                                                   ("a_ramp.npy", "b_grey8.png", "c_grey16.png", "d_dem.tif")]
     assert all(0 <= float(r[6]) <= 1 for r in rows)
     assert "| base |" in (out / "summary.md").read_text() and (out / "suite.png").stat().st_size > 0
+
+
+@pytest.mark.slow
+def test_learn_levels_by_the_base_policys_difficulty_measures_the_order_once(tmp_path):
+    """``--terrain-order difficulty``: the start policy walks every terrain before the run (its fitness and rank in
+    terrains.csv); the levels' bands and the hardest traversed read that rank."""
+    from jaxterrain import suite
+
+    tiles = write_tiles(tmp_path / "tiles")
+    out = tmp_path / "levels"
+    assert cli("learn", "--preset", "smoke", "--terrains", str(tiles), "--terrain-height", "0.2", "--curriculum",
+               "levels", "--levels", "2", "--terrain-order", "difficulty", "--out", str(out)) == 0
+    rows = [r.split(",") for r in (out / "terrains.csv").read_text().splitlines()[1:]]
+    fitness = [float(r[3]) for r in rows]
+    assert all(0 <= f <= 1 for f in fitness)
+    assert [int(r[4]) for r in rows] == suite.difficulty_order(fitness).astype(int).tolist()
+    assert json.loads((out / "config.json").read_text())["terrain_order"] == "difficulty"
