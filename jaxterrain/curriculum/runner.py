@@ -543,7 +543,8 @@ def run_treatment(run: LearnConfig, folder: Path, time_limit_s: float | None = N
                             names=arch.generator_names)
         return s, chunk_metrics(s, a, b)
 
-    _LISTENERS[:] = [ChunkProgress(desc or config.selector, config.max_chunks, done)] + (
+    unit = "rank" if isinstance(arch, OwnTerrains) else "cells"  # a folder's hardness is its terrains' rank
+    _LISTENERS[:] = [ChunkProgress(desc or config.selector, config.max_chunks, done, unit=unit)] + (
         [metrics_csv] if metrics_csv is not None else [])
     try:
         states, done, _ = driver.run_chunks(
