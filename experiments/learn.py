@@ -303,16 +303,16 @@ def overrides(args) -> dict:
 
 
 def check_terrain_flags(args, cfg: dict) -> None:
-    """``--terrains DIR`` read and checked before the run folder is made (``runner.check_terrains``: the folder and
-    its files, the height, the order, a curriculum that needs no archive), and not given with ``--archive``;
-    :class:`~experiments.common.UsageError` naming the flag."""
-    from jaxterrain.curriculum import runner
+    """``--terrains DIR`` read and checked before the run folder is made (``own_terrains.check_terrains``: the
+    folder and its files, the height, the order, a curriculum that needs no archive), and not given with
+    ``--archive``; :class:`~experiments.common.UsageError` naming the flag."""
+    from jaxterrain.curriculum import own_terrains
 
     if args.terrains is not None and args.archive is not None:
         raise common.UsageError("--terrains DIR trains on a folder of heightmaps instead of --archive: give one")
     try:
-        runner.check_terrains(run_of(cfg))
-    except runner.BadInput as err:
+        own_terrains.check_terrains(run_of(cfg))
+    except ValueError as err:
         raise common.UsageError(flags_in(str(err), cfg.get("curriculum") or "map")) from None
 
 

@@ -12,7 +12,7 @@ The shape (each field consumed where ``docs/CONTRIBUTING.md`` says)::
     LearnConfig
       archive, descriptors          the archive and the descriptors it must have (runner.load_archive)
       terrains, terrain_height,     or a folder of your own heightmaps instead of the archive, the metres of an
-      terrain_order                 image's full grey, and how its terrains rank by hardness (runner.load_terrains)
+      terrain_order                 image's full grey, and how its terrains rank by hardness (own_terrains)
       trials, seed                  trials run together (vmap) and the root key (runner.inputs)
       recipe                        the name of the fine-tuning recipe its PPO shape came from (recorded; RECIPES)
       preset                        the preset it was made from (recorded)
