@@ -27,6 +27,8 @@ COMMANDS = {
     "evolve": ("experiments.evolve", "MAP-Elites archive for one generator and descriptor pair"),
     "difficulty-spread": ("experiments.difficulty_spread", "fitness spread of random terrains per generator and height scale"),
     "coverage": ("experiments.coverage", "Experiment 1b: archives of all generators, coverage table and figures"),
+    "shares": ("experiments.shares", "who holds an archive's cells: each generator's share per distance band, a mixed "
+                                     "archive beside the combined archive of separate runs"),
     "gradient": ("experiments.gradient", "difficulty gradient of archives: fitness against distance from cell (0, 0)"),
     "learn": ("experiments.learn", "Experiment 2, one treatment: PPO from the base policy on a curriculum over an archive"),
     "curriculum": ("experiments.curriculum", "Experiment 2: every treatment, Figure 7 and Table 2"),

@@ -45,7 +45,7 @@ _INT_MIN = {
                      "chunk", "sample", "seeds", "walk_batch", "horizon", "trials", "epochs_per_chunk",
                      "steps_per_epoch", "max_epochs", "terrains_per_chunk", "levels", "plr_capacity", "accel_edits"), 1),
     **dict.fromkeys(("window", "windows"), 2),
-    **dict.fromkeys(("mutation_steps", "walk", "quality_samples", "levels_init"), 0),
+    **dict.fromkeys(("mutation_steps", "walk", "quality_samples", "levels_init", "fresh"), 0),
 }
 _FLOAT_POSITIVE = ("plr_temperature", "time_limit", "time_budget", "env_steps", "lr", "learning_rate", "heights", "robot_height",
                    "band_width")
@@ -275,6 +275,24 @@ def add_backend_argument(parser: argparse.ArgumentParser, what: str = "walker ph
                              f"(MuJoCo Warp{', ' + warp if warp else ''})")
 
 
+RANDOMISATION_PRESET_NAMES = ("legged-gym",)
+"""``--randomise`` preset names: ``jaxterrain.walker.RANDOMISATION_PRESETS`` (a literal, so that ``--help`` imports no
+JAX; a test keeps the two equal)."""
+
+
+def add_randomise_argument(parser: argparse.ArgumentParser, what: str) -> None:
+    """``--randomise SPEC``: physics randomisation of ``what`` (``jaxterrain.walker.parse_randomisation``: a preset or
+    ``KEY=VALUE`` items; off by default). The config key ``randomise`` holds the spec as given."""
+    parser.add_argument("--randomise", default=None, metavar="SPEC",
+                        help=f"physics randomisation of {what} (default off): a preset "
+                             f"({', '.join(RANDOMISATION_PRESET_NAMES)}) and/or comma-separated KEY=VALUE items, "
+                             f"friction=LOW:HIGH (scale of the friction coefficient, 1.0 here), mass=LOW:HIGH (scale of "
+                             f"each body's mass), added-mass=LOW:HIGH (kg on the torso), motor=LOW:HIGH (scale of the "
+                             f"motors' force), obs-noise=STD, delay=STEPS or LOW:HIGH (env steps), push=EVERY:VELOCITY "
+                             f"(env steps, m/s), drawn per env at reset; e.g. friction=0.5:1.25,push=200:0.5 or "
+                             f"legged-gym,obs-noise=0.01 (jaxterrain.walker.randomisation)")
+
+
 def add_progress_argument(parser: argparse.ArgumentParser) -> None:
     """``--progress`` / ``--no-progress``, on every command that draws a progress bar (``jaxterrain.runtime.driver``):
     ``--no-progress`` prints plain lines instead, as it does anyway where stderr is not a terminal. It is a display
@@ -343,9 +361,11 @@ def check_values(values: dict, where=flag) -> None:
                                      f"{', '.join(features.descriptor_names())}")
         elif key == "fitness" and (not isinstance(value, str) or value not in FITNESS_NAMES):
             raise UsageError(f"{where(key)}: unknown fitness {value!r}; choose from {', '.join(FITNESS_NAMES)}")
-        elif key in ("generator", "generators") and items:
+        elif key in ("generator", "generators", "mix") and items:
             from jaxterrain import generators
 
+            if key == "generator" and value == "mixed":  # evolve --generator mixed: its --mix names are checked
+                continue
             for v in items:
                 if v not in generators.names():
                     names = ", ".join(generators.names())
@@ -360,6 +380,13 @@ def check_values(values: dict, where=flag) -> None:
                         text = str(err).splitlines()[0].removeprefix(f"{v}: ")
                         raise UsageError(f"{where('size')} {size} does not suit generator {v!r} ({where(key)}): {text}") \
                             from None
+        elif key == "randomise":
+            from jaxterrain.walker import parse_randomisation
+
+            try:
+                parse_randomisation(value)
+            except ValueError as err:
+                raise UsageError(f"{where(key)}: {err}") from None
         elif key == "robot":
             from jaxterrain.walker import robots
 

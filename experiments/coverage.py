@@ -47,7 +47,8 @@ PAPER_NAMES = {"cppn": "CPPN", "gan": "GAN", "perlin": "Perlin Noise", "worley":
 
 
 def _preset(base: str, **kw) -> dict:
-    cfg = {k: v for k, v in evolve_cmd.PRESETS[base].items() if k not in ("generator", "descriptors", "ranges")}
+    cfg = {k: v for k, v in evolve_cmd.PRESETS[base].items()
+           if k not in ("generator", "descriptors", "ranges", "mix", "fresh")}  # mix / fresh: evolve's mixed runs
     cfg.update(generators=list(GENERATORS), pairs=[list(p) for p in PAIRS], ranges=None)
     cfg.update(kw)
     return cfg

@@ -39,6 +39,10 @@ labelled by their folders relative to a common parent, and the families dropped 
 same, coloured by the share of each family's levels passed),
 ``suite.png`` (a terrain of every family at its easiest, middle and hardest level) and ``timing.json``.
 
+``--randomise SPEC`` walks every policy under randomised physics (``jaxterrain.walker.parse_randomisation``; every
+policy meets the same draws; MJX only, without ``--videos``); by default the nominal physics, whatever a policy was
+trained under.
+
 ``--videos`` (off by default) adds ``videos/<walker>/<family>_L<level>.gif``: each walker beside the base policy on
 the terrains of ``--video-terrains`` (default: per family the hardest level the walker passes and the first it
 fails), and ``videos/videos.csv`` (``jaxterrain.report.compare.write_videos``). GIF only (no MP4 writer is a
@@ -57,13 +61,13 @@ PRESETS: dict[str, dict] = common.with_preset_names({
                 policy=[], robot=None, observation=None, size=None, seeds=None, samples=None,
                 families=None, generators=None, attempts=80, best=5, headings=4, backend="auto", slots=None, chunk=None,
                 repeat=True, keys=1, videos=False, video_terrains=None, video_frames=75, video_width=320,
-                video_height=240, video_starts=8, engine="mjx", workers=None),
+                video_height=240, video_starts=8, engine="mjx", workers=None, randomise=None),
     "smoke": dict(suite="v1", archive=None, terrain_folder=None, terrain_height=None,
                   policy=[], robot=None, observation=None, size=128, seeds=1, samples=4,
                   families=["flat", "stairs_up", "gaps"],
                   generators=["perlin"], attempts=2, best=1, headings=1, backend="jax", slots=None, chunk=None,
                   repeat=False, keys=1, videos=False, video_terrains=None, video_frames=75, video_width=320,
-                  video_height=240, video_starts=8, engine="mjx", workers=None),
+                  video_height=240, video_starts=8, engine="mjx", workers=None, randomise=None),
 }, {"gpu-short": "gpu", "paper": ("gpu", {"attempts": 20, "best": 5, "headings": 1})})
 BACKENDS = common.BACKEND_NAMES  # jaxterrain.walker.layout.BACKEND_CHOICES (literal: --help imports no JAX)
 ENGINES = ("mjx", "mujoco")  # jaxterrain.difficulty.replay.ENGINES (literal: --help imports no JAX)
@@ -114,6 +118,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--workers", type=int, default=None,
                         help="--engine mujoco: CPU processes walking (default: every core)")
     common.add_slots_argument(parser, "slots", "an int (default: all walks at once)", aliases=("--slots",))
+    common.add_randomise_argument(parser, "every walk (a randomised protocol: every policy, the base policy "
+                                          "included, meets the same draws; default: the nominal physics; MJX only)")
     parser.add_argument("--chunk", type=int, default=None, help="terrains per call (bounds device memory)")
     parser.add_argument("--videos", action=argparse.BooleanOptionalAction, default=None,
                         help="after the evaluation, GIFs of each --policy walker beside the base policy (the base "
@@ -146,6 +152,7 @@ def overrides(args) -> dict:
                 backend=args.backend, slots=args.slots, chunk=args.chunk, videos=args.videos,
                 video_terrains=args.video_terrains, video_frames=args.video_frames, video_width=args.video_width,
                 video_height=args.video_height, video_starts=args.video_starts, engine=args.engine, workers=args.workers,
+                randomise=args.randomise,
                 **common.protocol_overrides(args))
 
 
@@ -286,7 +293,8 @@ def mujoco_workers(cfg: dict) -> int:
 
 def check_engine(args, cfg: dict) -> None:
     """UsageError for flags that do not apply to the engine: ``--engine mujoco`` with an MJX ``--backend`` other than
-    jax, ``--rollout-slots`` or ``--chunk`` (MJX's batching), a ``--workers`` below 1; ``--workers`` with MJX."""
+    jax, ``--rollout-slots`` or ``--chunk`` (MJX's batching), a ``--workers`` below 1 or ``--randomise``; ``--workers``
+    with MJX."""
     from experiments.common import UsageError
 
     if cfg.get("engine") == "mujoco":
@@ -298,6 +306,8 @@ def check_engine(args, cfg: dict) -> None:
                 raise UsageError(f"{flag} batches MJX's walks; --engine mujoco walks on CPU processes (--workers)")
         if cfg.get("workers") is not None and cfg["workers"] < 1:
             raise UsageError(f"--workers must be an integer >= 1; got {cfg['workers']}")
+        if cfg.get("randomise") is not None:
+            raise UsageError("--randomise randomises MJX's walks; --engine mujoco walks the nominal physics")
     elif args.workers is not None:
         raise UsageError("--workers sets the CPU processes of --engine mujoco; MJX walks on the accelerator")
 
@@ -364,7 +374,7 @@ def main(args) -> int:
     from jaxterrain.runtime import provenance
     from jaxterrain.runtime.io import atomic_write_text
     from jaxterrain.terrain import TerrainScale
-    from jaxterrain.walker import resolve_backend
+    from jaxterrain.walker import parse_randomisation, randomisation_label, resolve_backend
 
     cfg0 = common.preset_with_flags(PRESETS, args, overrides(args))
     check_engine(args, cfg0)
@@ -378,6 +388,9 @@ def main(args) -> int:
             raise common.UsageError(f"--suite {cfg0['suite']} holds the levels of robot {robot} (--robot); these "
                                     f"policies walk another robot: {', '.join(other)}")
     check_video_flags(cfg0)
+    if cfg0["videos"] and cfg0.get("randomise") is not None:
+        raise common.UsageError("--videos draws the walks under the nominal physics; evaluate --randomise without "
+                                "--videos (and the videos in a run without it)")
     if cfg0["videos"]:  # before anything imports mujoco
         from jaxterrain.report import render
 
@@ -404,11 +417,15 @@ def main(args) -> int:
     engine = cfg.get("engine") or "mjx"
     backend = resolve_backend(cfg["backend"]) if engine == "mjx" else "jax"
     walk = dict(engine=engine, workers=mujoco_workers(cfg))
+    randomised = parse_randomisation(cfg.get("randomise"))
+    if cfg.get("randomise") is not None:
+        walk["randomisation"] = randomised
     for fam, why in s.dropped.items():
         print(f"evaluate: family {fam} dropped at --size {cfg['size']}: {why}", file=sys.stderr)
     on = backend if engine == "mjx" else f"MuJoCo C ({walk['workers']} CPU processes)"
     print(f"{s.name}: {s.size} terrains, {len(s.families())} families; {len(policies)} policies on {on}, "
-          f"{protocol.attempts} walks each (best {protocol.best} per heading, {protocol.headings} headings)", flush=True)
+          f"{protocol.attempts} walks each (best {protocol.best} per heading, {protocol.headings} headings)"
+          + (f", randomised physics: {randomisation_label(randomised)}" if "randomisation" in walk else ""), flush=True)
     key = jax.random.fold_in(jax.random.key(int(cfg["seed"])), 3)
     t1 = time.perf_counter()
     from jaxterrain.runtime.estimates import compiling

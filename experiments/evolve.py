@@ -17,9 +17,18 @@ Presets (``--preset``):
   ``python -m experiments coverage --preset gpu-short`` gives all of Table 1 within a session's GPU time.
 * ``smoke``: a tiny CPU run (32 x 32 terrains, 10 x 10 cells, cheap slope fitness), seconds.
 
+``--generator mixed`` evolves ONE archive whose offspring of several generators (``--mix``, default all six)
+compete for the same cells (``jaxterrain.generators.mixture``): parents are drawn uniformly over the filled cells and
+mutated by their own generator, ``--fresh`` random genomes of each generator join every generation, all offspring
+are scored by one fitness call, and each elite records its generator (``archive.npz`` is an ordinary archive of
+several generators, like ``qd.combine``'s). ``initial_population`` is the run's total, in equal blocks per
+generator. The run also writes ``shares.csv`` / ``shares.md`` / ``shares.png``: each generator's share of the cells
+per distance band (``python -m experiments shares`` compares it with the combined archive of separate runs).
+
 Writes into the run folder: ``config.json``, ``checkpoint/checkpoint.npz`` (every ``checkpoint_every`` generations),
 ``archive.npz`` (``jaxterrain.qd.save`` format), ``metrics.csv`` (one row per generation) and ``archive.png``.
-Re-run with ``--config <run>/config.json``; continue a killed or time-limited run with ``--resume <run>``.
+Re-run with ``--config <run>/config.json``; continue a killed or time-limited run with ``--resume <run>``. A mixed
+run writes ``shares.*`` too (above).
 
 ``--devices N`` (default: every visible device) splits each generation's offspring over N devices (render,
 descriptors, Algorithm 1, walks; the repertoire replicated; ``jaxterrain.qd.evolution``): the same seed gives the same
@@ -45,12 +54,15 @@ _PAPER = dict(generator="perlin", descriptors=["roughness", "tpi"], generations=
               initial_population=100, bins=50, size=256, window=30, stride=2, attempts=20, best=5, headings=1,
               checkpoint_every=250, fitness="difficulty", robot_height=None, out_of_range="clip", ranges=None,
               store_heightmaps=True, rollout_slots=None, rollout_backend="jax", robot="humanoid",
-              observation="blind")
+              observation="blind", mix=None, fresh=1)
+MIX_DEFAULT = ("perlin", "worley", "diamond_square", "cppn", "gan", "steps")
+"""``--generator mixed``'s generators by default: the six built-in ones (``jaxterrain.generators.BUILTIN``)."""
 PRESETS: dict[str, dict] = {
     "paper": _PAPER,
-    "gpu": {**_PAPER, "generations": 25, "batch_size": 4000, "checkpoint_every": 1, "rollout_slots": 16384},
+    "gpu": {**_PAPER, "generations": 25, "batch_size": 4000, "checkpoint_every": 1, "rollout_slots": 16384,
+            "fresh": 64},
     "gpu-short": {**_PAPER, "generations": 5, "batch_size": 2000, "checkpoint_every": 1, "store_heightmaps": False,
-                  "rollout_slots": 8192},
+                  "rollout_slots": 8192, "fresh": 32},
     "smoke": {**_PAPER, "generations": 4, "batch_size": 8, "initial_population": 16, "bins": 10, "size": 32,
               "window": 8, "attempts": 2, "best": 1, "checkpoint_every": 2, "fitness": "slope",
               "ranges": [[0.0, 0.5], [-0.02, 0.02]]},
@@ -92,7 +104,16 @@ def evolve_config(cfg: dict):
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     common.add_run_arguments(parser, PRESETS, "smoke")
     common.add_devices_argument(parser)
-    parser.add_argument("--generator", default=None, help="registered generator name (default perlin)")
+    parser.add_argument("--generator", default=None,
+                        help="registered generator name (default perlin), or mixed: one archive whose offspring of "
+                             "every --mix generator compete for the cells, each elite recording its generator")
+    parser.add_argument("--mix", nargs="+", default=None, metavar="NAME",
+                        help=f"with --generator mixed: the generators of the mixture (default: all six, "
+                             f"{' '.join(MIX_DEFAULT)})")
+    parser.add_argument("--fresh", type=int, default=None,
+                        help="with --generator mixed: fresh random genomes of EACH generator among every "
+                             "generation's offspring, so that a generator holding no cell keeps competing (presets: "
+                             "1, gpu-short 32, gpu 64)")
     parser.add_argument("--descriptors", nargs=2, default=None, metavar=("D0", "D1"),
                         help="descriptor pair, e.g. roughness tpi")
     parser.add_argument("--generations", type=int, default=None,
@@ -132,7 +153,7 @@ def overrides(args) -> dict:
                 size=args.size, checkpoint_every=args.checkpoint_every, fitness=args.fitness,
                 **common.protocol_overrides(args), store_heightmaps=args.store_heightmaps,
                 rollout_slots=args.rollout_slots, rollout_backend=args.rollout_backend, robot=args.robot,
-                observation=args.observation)
+                observation=args.observation, mix=args.mix, fresh=args.fresh)
 
 
 def announce_compile(cfg: dict, config) -> None:
@@ -160,6 +181,8 @@ def run_treatment(cfg: dict, generator: str, descriptors, folder: Path, clock: c
     fitness = fitness_fn(cfg["fitness"])
     announce_compile(cfg, config)
     printer = A.progress_printer(label + generator)
+    if generator == "mixed":
+        generator = mixture_of(cfg)
 
     def progress(info):
         printer(info)
@@ -171,6 +194,41 @@ def run_treatment(cfg: dict, generator: str, descriptors, folder: Path, clock: c
     A.save(done_path, arch)
     write_metrics_csv(folder / "metrics.csv", arch.metrics)
     return arch
+
+
+def mixture_of(cfg: dict):
+    """The ``jaxterrain.generators.mixture`` of a ``--generator mixed`` config (its ``mix``, ``fresh`` and ``size``)."""
+    from jaxterrain import generators
+
+    return generators.mixture(tuple(cfg.get("mix") or MIX_DEFAULT), fresh=int(cfg.get("fresh", 1)),
+                              size=int(cfg["size"]))
+
+
+def check_mixed(args, cfg: dict) -> None:
+    """``--mix`` / ``--fresh`` only with ``--generator mixed``; a mixture of two or more distinct generators whose
+    fresh samples leave room for mutated offspring (``batch_size > fresh x generators``);
+    :class:`~experiments.common.UsageError`."""
+    if cfg.get("generator") != "mixed":
+        for flag, value in (("--mix", args.mix), ("--fresh", args.fresh)):
+            if value is not None:
+                raise common.UsageError(f"{flag}: only with --generator mixed (this run's generator is "
+                                        f"{cfg.get('generator')!r})")
+        return
+    names = list(cfg.get("mix") or MIX_DEFAULT)
+    if len(names) < 2 or len(set(names)) != len(names):
+        raise common.UsageError(f"--mix: two or more distinct generator names; got {' '.join(names)}")
+    from jaxterrain import generators
+
+    for name in names:  # the default six are not checked by common.check_values: e.g. diamond-square's sizes
+        try:
+            generators.get(name, size=int(cfg["size"]))
+        except (ValueError, OSError) as err:
+            raise common.UsageError(f"--size {cfg['size']} does not suit generator {name!r} of --generator mixed: "
+                                    f"{str(err).splitlines()[0]}") from None
+    need = int(cfg.get("fresh", 1)) * len(names)
+    if int(cfg["batch_size"]) <= need:
+        raise common.UsageError(f"--batch-size must be > {need} with --generator mixed (--fresh {cfg.get('fresh', 1)} "
+                                f"of each of {len(names)} generators); got {cfg['batch_size']}")
 
 
 def check_robot_walks(args, cfg: dict) -> None:
@@ -251,8 +309,11 @@ def main(args) -> int:
         if cfg0.get("size") is not None and int(cfg0["size"]) < need:
             raise common.UsageError(f"--size must be >= {need} pixels for the walker fitness of robot {robot} (its "
                                     f"episode margins at 4 cm a pixel); got {cfg0['size']}")
-    folder, cfg = common.setup_run("evolve", args, PRESETS, "smoke", overrides(args),
-                                   check=lambda c: check_robot_walks(args, c))
+    def check(c):
+        check_robot_walks(args, c)
+        check_mixed(args, c)
+
+    folder, cfg = common.setup_run("evolve", args, PRESETS, "smoke", overrides(args), check=check)
     clock = common.Clock(args.time_limit)
     try:
         arch = run_treatment(cfg, cfg["generator"], cfg["descriptors"], folder, clock, jax.random.key(cfg["seed"]),
@@ -264,6 +325,12 @@ def main(args) -> int:
     fig.colorbar(plot_archive(ax, arch), ax=ax, label="fitness")
     fig.tight_layout()
     common.save_figure(fig, folder / "archive.png", dpi=120)
+    if cfg["generator"] == "mixed":
+        from experiments import shares
+
+        mix = mixture_of(cfg).spec
+        shares.write_all(folder, {"mixed": arch}, 10.0, f"{len(mix.names)} generators, fresh {mix.fresh}, preset "
+                                                        f"{cfg.get('preset')}")
     print(f"done: coverage {A.coverage(arch):.2f}%  qd {A.qd_score(arch):.2f}  "
           f"rejected by Algorithm 1: {int(arch.metrics['rejected'].sum())}  -> {folder}", flush=True)
     return 0

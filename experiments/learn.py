@@ -252,6 +252,7 @@ def add_fine_tuning_arguments(parser: argparse.ArgumentParser, scope: str = "") 
                              f"fixed")
     common.add_deprecated_alias(parser, "--freeze-normaliser", "--no-update-normaliser", "update_normaliser",
                                 const=False)
+    common.add_randomise_argument(parser, f"fine-tuning's walker{scope} (its curriculum's evaluations too)")
     parser.add_argument("--healthy-reward", type=float, default=None,
                         help=f"fine-tuning reward per step for staying up, >= 0{scope} (default: the walker's 5.0, the "
                              f"base policy's; evaluations measure distance and do not use it)")
@@ -284,7 +285,7 @@ def fine_tuning_overrides(args) -> dict:
         from jaxterrain.curriculum.config import recipe
 
         shape = {"recipe": args.recipe, **recipe(args.recipe)}
-    return dict(observation=args.observation, healthy_reward=args.healthy_reward,
+    return dict(observation=args.observation, healthy_reward=args.healthy_reward, randomise=args.randomise,
                 update_normaliser=args.update_normaliser,
                 learning_rate=args.learning_rate, truncation=args.truncation, max_evals=args.max_evals,
                 overlap=args.overlap, compact=args.compact, **shape)

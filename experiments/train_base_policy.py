@@ -20,6 +20,10 @@ Presets:
   best-5 / all-20 flat distance 1.00 / 0.98. Under ``--solver fast`` (brax's Newton 1 / 4) an H200 did ~315 k env
   steps/s, 50 M in 218 s, but that policy walks only under the fast solver (``jaxterrain.walker.SOLVER_SOUND``).
 
+``--randomise SPEC`` trains under physics randomisation (``jaxterrain.walker.parse_randomisation``: friction, masses,
+motors, observation noise, action delay, pushes, or ``legged-gym``); the policy records it in its ``walker_config``,
+and ``eval.json`` walks the nominal physics.
+
 Writes into ``--out RUN_DIR``: ``config.json`` (the settings, as in every command: ``--config RUN/config.json``
 re-runs them), ``run.json`` (the command lines that started and resumed it, the updates, the walker and PPO
 configs), ``checkpoint.npz``, ``metrics.csv``, ``tb/``, ``policy/`` (``policy.msgpack`` + ``config.json``, loadable with
@@ -42,9 +46,9 @@ from experiments import common
 # chunk would compile once more, ~25 s).
 PRESETS: dict[str, dict[str, Any]] = common.with_preset_names({
     "smoke": dict(env_steps=4 * 40, time_budget=None, updates_per_chunk=2, num_envs=None, solver=None,
-                  eval_attempts=20, eval_best=5, robot="humanoid", observation="blind", scan_noise=0.0),
+                  eval_attempts=20, eval_best=5, robot="humanoid", observation="blind", scan_noise=0.0, randomise=None),
     "gpu": dict(env_steps=410 * 122_880, time_budget=None, updates_per_chunk=10, num_envs=None, solver=None,
-                eval_attempts=20, eval_best=5, robot="humanoid", observation="blind", scan_noise=0.0),
+                eval_attempts=20, eval_best=5, robot="humanoid", observation="blind", scan_noise=0.0, randomise=None),
 }, {"gpu-short": ("gpu", {"env_steps": 41 * 122_880}), "paper": "gpu"})
 # time_budget (seconds, the whole process) is the config key of runs made before --time-limit replaced --time-budget
 # (2026-11-28); no preset sets it: --time-limit MIN bounds a process now, on every preset.
@@ -76,6 +80,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "grid); recorded with the policy, and every command walks it with the same set")
     parser.add_argument("--scan-noise", type=float, default=None, metavar="M",
                         help="perceptive: std of Gaussian noise on each scanned height, in metres")
+    common.add_randomise_argument(parser, "the training walker (recorded with the policy; the flat-ground "
+                                          "evaluation walks the nominal physics)")
     common.add_progress_argument(parser)
     parser.add_argument("--eval-attempts", type=int, default=None, help="flat-ground evaluation walks (default 20)")
     parser.add_argument("--eval-best", type=int, default=None, help="of which the best are averaged (default 5)")
@@ -92,7 +98,7 @@ def overrides(args: argparse.Namespace) -> dict:
     """The settings given on the command line (None: not given)."""
     return {name: getattr(args, name) for name in ("env_steps", "time_budget", "updates_per_chunk", "num_envs",
                                                     "solver", "eval_attempts", "eval_best", "robot",
-                                                    "observation", "scan_noise")}
+                                                    "observation", "scan_noise", "randomise")}
 
 
 def configs():
@@ -109,8 +115,15 @@ def configs():
 
 
 def _to_jsonable(x):
+    from jaxterrain.walker import Randomisation, randomisation_json
+
     if hasattr(x, "_asdict"):
-        return {k: _to_jsonable(v) for k, v in x._asdict().items()}
+        fields = x._asdict()
+        if isinstance(fields.get("randomisation"), Randomisation):  # a WalkerConfig's: recorded only when on
+            randomised = randomisation_json(fields.pop("randomisation"))
+            if randomised is not None:
+                fields["randomisation"] = randomised
+        return {k: _to_jsonable(v) for k, v in fields.items()}
     if isinstance(x, (list, tuple)):
         return [_to_jsonable(v) for v in x]
     return x
@@ -166,12 +179,13 @@ def resolve_settings(cfg: dict) -> RunSettings:
 
     from jaxterrain import rl
 
-    from jaxterrain.walker import resolve_config
+    from jaxterrain.walker import parse_randomisation, resolve_config
 
     env_cfg, ppo_cfg = configs()[cfg.get("preset") or "smoke"]
     env_cfg = resolve_config(env_cfg._replace(robot=cfg.get("robot") or "humanoid",  # runs before --robot: humanoid
                                               observation=cfg.get("observation") or "blind",  # before sets: blind
-                                              scan_noise=float(cfg.get("scan_noise") or 0.0)))
+                                              scan_noise=float(cfg.get("scan_noise") or 0.0),
+                                              randomisation=parse_randomisation(cfg.get("randomise"))))
     if cfg.get("solver") is not None:
         env_cfg = env_cfg._replace(solver=_solver(cfg["solver"]))
     if cfg.get("num_envs") is not None:
@@ -338,8 +352,9 @@ def resume_command(command: str, run: Path) -> str:
 
 def evaluate_policy(policy_dir: Path, env_cfg, seed: int, attempts: int, best: int, steps_done: int) -> dict:
     """``eval.json``'s content: the flat-ground normalised distances of the deterministic policy in ``policy_dir``
-    under the env config ``env_cfg`` (``jaxterrain.difficulty.rollout_distances``), the mean of the ``best``
-    largest (``difficulty.best_of``) and of all, and the bar verdict."""
+    under the env config ``env_cfg`` (``jaxterrain.difficulty.rollout_distances``) with its physics randomisation
+    off (the bar is the nominal walker's), the mean of the ``best`` largest (``difficulty.best_of``) and of all, and
+    the bar verdict."""
     import time
 
     import jax
@@ -347,7 +362,9 @@ def evaluate_policy(policy_dir: Path, env_cfg, seed: int, attempts: int, best: i
     import numpy as np
 
     from jaxterrain import difficulty, rl
+    from jaxterrain.walker import Randomisation
 
+    env_cfg = env_cfg._replace(randomisation=Randomisation())
     policy = rl.load_policy(policy_dir)
     t_eval = time.perf_counter()
     dist = difficulty.rollout_distances(jnp.zeros((1,) + tuple(env_cfg.terrain_shape), jnp.float32),

@@ -84,34 +84,6 @@ def overrides(args) -> dict:
 
 
 # ----------------------------------------------------------------------------------------------------------------
-# Samples and quality
-# ----------------------------------------------------------------------------------------------------------------
-
-
-def save_grid(path: Path, maps, cols: int = 4) -> Path:
-    """Save ``[N, H, W]`` maps in [0, 1] as one PNG grid (matplotlib 'terrain' colours, 2 px gaps)."""
-    import io
-
-    import numpy as np
-    from matplotlib import colormaps
-    from PIL import Image
-
-    from jaxterrain.runtime.io import atomic_write_bytes
-
-    maps = np.clip(np.asarray(maps, np.float32), 0.0, 1.0)
-    n, h, w = maps.shape
-    rows = -(-n // cols)
-    grid = np.ones((rows * (h + 2) + 2, cols * (w + 2) + 2, 3), np.uint8) * 255
-    rgb = (colormaps["terrain"](maps)[..., :3] * 255).astype(np.uint8)
-    for i in range(n):
-        r, c = divmod(i, cols)
-        grid[2 + r * (h + 2): 2 + r * (h + 2) + h, 2 + c * (w + 2): 2 + c * (w + 2) + w] = rgb[i]
-    buf = io.BytesIO()
-    Image.fromarray(grid).save(buf, format="PNG")
-    return atomic_write_bytes(path, buf.getvalue())
-
-
-# ----------------------------------------------------------------------------------------------------------------
 # Provenance and export
 # ----------------------------------------------------------------------------------------------------------------
 
@@ -187,14 +159,14 @@ class TrainingData(NamedTuple):
     description: str
 
 
-class TrainOutcome(NamedTuple):
-    """The result of :func:`train`: the state, the steps done (< ``--steps`` after a time-limit stop), the wall
-    time of the loop (s) and the last step's metrics."""
+def gan_run(cfg: dict):
+    """The library's ``GanRun`` of the run's settings ``cfg``."""
+    from jaxterrain.generators.gan_train import GanRun
 
-    state: Any  # jaxterrain.generators.gan_train.GanTrainState
-    done: int
-    wall: float
-    last_metrics: dict[str, float] | None
+    return GanRun(make_config(cfg), steps=int(cfg["steps"]), batch_size=int(cfg["batch_size"]), lr=float(cfg["lr"]),
+                  r1=float(cfg["r1"]), seed=int(cfg["seed"]), sample_every=int(cfg["sample_every"]),
+                  ckpt_every=int(cfg["ckpt_every"]), log_every=int(cfg["log_every"]),
+                  quality_samples=int(cfg["quality_samples"]))
 
 
 def make_config(cfg: dict):
@@ -258,126 +230,12 @@ def run_quality_only(weights: str, cfg: dict, run_dir: Path, tiles) -> None:
     print(json.dumps(report["mean_w1"]), "gan_closer_than_perlin:", report["gan_closer_than_perlin"])
 
 
-def init_or_resume(cfg: dict, run_dir: Path, config, resume: bool) -> tuple[Any, int, dict | None]:
-    """``(state, steps done, metric history)``: a fresh ``GanTrainState`` from the run's seed and 0 steps, or with
-    ``resume`` the run's ``checkpoint.npz`` (``jaxterrain.runtime.driver`` format; none yet: a fresh state)."""
-    import jax
-
-    from jaxterrain.runtime import driver
-    from jaxterrain.generators import gan_train
-
-    state = gan_train.init_state(jax.random.PRNGKey(int(cfg["seed"])), config, float(cfg["lr"]))
-    if not resume:
-        return state, 0, None
-    restored = driver.restore(run_dir, like=state)
-    if restored is None:
-        print(f"--resume: no checkpoint in {run_dir}; starting from scratch", flush=True)
-        return state, 0, None
-    state, done, history, _ = restored
-    print(f"resumed from {run_dir / driver.CHECKPOINT_NAME} at step {done}", flush=True)
-    return state, done, history
-
-
-def _log_metrics(say, log_path: Path, step: int, total: int, start: int, t0: float, metrics) -> dict[str, float]:
-    """Print and append to ``log.jsonl`` one log line for ``step``; raise on non-finite losses. The host metrics."""
-    import numpy as np
-
-    m = {k: float(v) for k, v in metrics.items()}
-    rate = (step - start) / max(time.time() - t0, 1e-9)
-    line = f"step {step}/{total}  " + "  ".join(f"{k} {v:.4f}" for k, v in m.items()) + f"  {rate:.1f} steps/s"
-    say(line)
-    with open(log_path, "a") as f:
-        f.write(json.dumps({"step": step, "time": time.time() - t0, **m}) + "\n")
-    if not all(np.isfinite(list(m.values()))):
-        raise FloatingPointError(f"train-gan: non-finite losses at step {step}: {m}")
-    return m
-
-
-def make_chunk(cfg: dict, run_dir: Path, config, tiles, start: int):
-    """The ``jaxterrain.runtime.driver`` chunk ``(state, a, b) -> (state, metrics [b - a])``: steps ``a + 1 .. b`` of the
-    jitted train step, with log lines and sample grids at their intervals (``start``: where this process began)."""
-    import jax
-    import jax.numpy as jnp
-
-    from jaxterrain.generators import gan_train
-
-    step_fn = gan_train.jitted_step(config, int(cfg["batch_size"]), float(cfg["lr"]), float(cfg["r1"]),
-                                    jax.default_backend() != "cpu")
-    steps, log_every, sample_every = int(cfg["steps"]), int(cfg["log_every"]), int(cfg["sample_every"])
-    sample_fn, _ = gan_train.jitted_samples(config)
-    t0 = time.time()
-
-    def chunk(state, a: int, b: int):
-        done = []
-        for step in range(a + 1, b + 1):
-            state, metrics = step_fn(state, tiles)
-            done.append(metrics)
-            if step % log_every == 0 or step == steps:
-                _log_metrics(common.say, run_dir / "log.jsonl", step, steps, start, t0, metrics)
-            if step % sample_every == 0 or step == steps:
-                save_grid(run_dir / "samples" / f"step_{step:08d}.png", sample_fn(state.g_params, state.g_stats))
-        return state, {k: jnp.stack([m[k] for m in done]) for k in done[0]}
-
-    return chunk
-
-
-def train(cfg: dict, run_dir: Path, config, tiles, resume: bool = False, time_limit: float | None = None,
-          progress: bool | str = True) -> TrainOutcome:
-    """Train (or ``resume``) to ``cfg["steps"]`` through ``jaxterrain.runtime.driver.run_chunks``: a checkpoint
-    (``checkpoint.npz``), ``metrics.csv`` and TensorBoard events every ``cfg["ckpt_every"]`` steps; stops early
-    after ``time_limit`` minutes (``--time-limit``)."""
-    import jax
-
-    from jaxterrain.runtime import driver
-    from jaxterrain.generators import gan_train
-
-    state, start, history = init_or_resume(cfg, run_dir, config, resume)
-    _, real_fn = gan_train.jitted_samples(config)
-    if not (run_dir / "samples" / "real.png").exists():
-        save_grid(run_dir / "samples" / "real.png", real_fn(jax.random.PRNGKey(7), tiles))
-    from jaxterrain.runtime import estimates
-
-    estimates.announce("gan-step", f"batch {cfg['batch_size']}, {cfg['size']} x {cfg['size']}")
-    t0 = time.time()
-    state, done, history = driver.run_chunks(
-        make_chunk(cfg, run_dir, config, tiles, start), state, total=int(cfg["steps"]), every=int(cfg["ckpt_every"]),
-        start=start, history=history, run_dir=run_dir, key_metric="g_loss",
-        time_limit_s=time_limit * 60.0 if time_limit else None, progress=progress,
-        desc="train-gan", meta={"command": "train-gan", "config": config.to_json()})
-    wall = time.time() - t0
-    if start < done:
-        common.say(f"trained {done - start} steps in {wall:.1f} s")
-    last = {k: v[-1] for k, v in history.items() if v} or None
-    return TrainOutcome(state, done, wall, last)
-
-
-def run_quality(cfg: dict, run_dir: Path, config, variables, tiles) -> dict | None:
-    """The :func:`quality_check` of the trained generator, written to ``quality.json`` (None if skipped)."""
-    import jax
-
-    from jaxterrain.generators import gan_train
-
-    from jaxterrain.runtime.io import atomic_write_text
-
-    if int(cfg["quality_samples"]) <= 0:
-        return None
-    try:
-        quality = gan_train.quality_check(jax.random.PRNGKey(int(cfg["seed"]) + 1), config, variables, tiles,
-                                          int(cfg["quality_samples"]))
-    except ImportError as err:
-        print(f"quality check skipped: {err}", flush=True)
-        return None
-    atomic_write_text(run_dir / "quality.json", json.dumps(quality, indent=2) + "\n")
-    print(f"quality (mean W1 to training patches, lower = closer): {json.dumps(quality['mean_w1'])}  "
-          f"gan_closer_than_perlin: {quality['gan_closer_than_perlin']}", flush=True)
-    return quality
-
-
 def main(args: argparse.Namespace) -> int:
-    """Resolve the settings and the run folder, load the data, train (or resume), save ``final/``, check quality,
-    optionally export."""
+    """Resolve the settings and the run folder, load the data, train (or resume) with
+    ``jaxterrain.generators.gan_train.train_gan``, optionally export."""
     from jaxterrain.runtime import provenance
-    from jaxterrain.generators.gan import ASSET_DIR, save_generator
+    from jaxterrain.generators.gan import ASSET_DIR
+    from jaxterrain.generators.gan_train import train_gan
 
     run_dir, cfg = common.setup_resumable_run("train-gan", args, PRESETS, "smoke", overrides(args), EXTENDABLE,
                                               check=check_config)
@@ -387,19 +245,16 @@ def main(args: argparse.Namespace) -> int:
     if args.quality_only:
         run_quality_only(args.quality_only, cfg, run_dir, data.tiles)
         return 0
-
-    outcome = train(cfg, run_dir, config, data.tiles, resume=args.resume is not None, time_limit=args.time_limit,
-                    progress=common.progress_mode(args))
-    if outcome.done < int(cfg["steps"]):
-        print(f"time limit reached at step {outcome.done} of {cfg['steps']}; continue with: "
+    result = train_gan(gan_run(cfg), data.tiles, run_dir, resume=args.resume is not None,
+                       time_limit_s=args.time_limit * 60.0 if args.time_limit else None,
+                       progress=common.progress_mode(args), say=common.say)
+    if result.done < int(cfg["steps"]):
+        print(f"time limit reached at step {result.done} of {cfg['steps']}; continue with: "
               f"python -m experiments train-gan --resume {run_dir}", flush=True)
         return 3  # as evolve: stopped by the time limit, resumable
-    variables = {"params": outcome.state.g_params, "batch_stats": outcome.state.g_stats}
-    save_generator(run_dir / "final", config, variables)
-    quality = run_quality(cfg, run_dir, config, variables, data.tiles)
     if args.export_assets:
-        text = provenance_text(cfg, config, data.description, int(outcome.state.step), outcome.wall, quality,
-                               outcome.last_metrics)
+        text = provenance_text(cfg, config, data.description, int(result.state.step), result.wall, result.quality,
+                               result.last_metrics)
         out = export_assets(run_dir, ASSET_DIR, text)
         print(f"exported the generator to {out}", flush=True)
     print(f"done: {run_dir / 'final'}", flush=True)

@@ -193,3 +193,19 @@ def test_top_level_names_every_stage_in_flow_order():
 
     stages = [s for s in FLOW if "." not in s]
     assert [n for n in jaxterrain.__all__ if n in stages] == stages
+
+
+def test_only_integration_tests_import_the_command_line():
+    """The library's tests import the library only: ``experiments`` (the command line) is imported, at any level,
+    by tests under tests/integration/ alone; a command's work that a test needs belongs in a library driver."""
+    tests = ROOT / "tests"
+    bad = []
+    for p in sorted(tests.rglob("*.py")):
+        if p.is_relative_to(tests / "integration"):
+            continue
+        for node in ast.walk(ast.parse(p.read_text())):
+            names = ([a.name for a in node.names] if isinstance(node, ast.Import)
+                     else [node.module or ""] if isinstance(node, ast.ImportFrom) and node.level == 0 else [])
+            bad += [f"{p.relative_to(ROOT)}:{node.lineno}: imports {n}" for n in names
+                    if n.split(".")[0] == "experiments"]
+    assert not bad, "\n".join(bad)

@@ -26,6 +26,7 @@ from jaxterrain.qd.grid import MAX_DISTANCE_50
 from jaxterrain.rl.checkpoint import save_policy
 from jaxterrain.runtime import provenance, statistics
 from jaxterrain.runtime.io import atomic_write_csv, atomic_write_text, save_figure
+from jaxterrain.walker import randomisation_json
 
 __all__ = ["BOOTSTRAP_REPS", "PARTIAL", "POLICIES", "SEQUENCE_COLUMNS", "histories", "sequence_rows", "generator_counts",
            "milestone_rows", "summary_curve", "plot_curves", "write_outputs", "trial_policy", "export_policies"]
@@ -189,7 +190,7 @@ def export_policies(folder: Path, run, config, ppo, env, start_policy, bank, sta
     + ``config.json``, which :func:`jaxterrain.rl.load_policy` reads and ``python -m experiments evaluate`` walks).
 
     ``config.json`` keeps the starting policy's ``walker_config`` (its contact solver: a walker walks as trained only
-    under it) and adds ``curriculum``: the archive (its path relative to the run folder ``folder``, or
+    under it; with ``randomisation`` set to the walker's when fine-tuning randomised the physics) and adds ``curriculum``: the archive (its path relative to the run folder ``folder``, or
     ``<jaxterrain>/...`` for a shipped one: ``runtime.provenance.portable_path``, no machine's absolute path; and
     its file's sha256; None, and ``terrain_folder`` the folder, for a run on a folder of heightmaps), the starting
     policy (the same way), the selector, the trial, its seed, the epochs and env steps it trained, its terrain
@@ -203,13 +204,17 @@ def export_policies(folder: Path, run, config, ppo, env, start_policy, bank, sta
     archive_sha = provenance.file_sha256(run.archive) if run.archive and not terrains else None
     out = []
     base_meta = dict(getattr(start_policy, "meta", None) or {})
+    walker_config = base_meta.get("walker_config")
+    randomised = randomisation_json(env.config.randomisation)  # the physics randomisation fine-tuning trained under
+    if randomised is not None:
+        walker_config = {**(walker_config or {}), "randomisation": randomised}
     cell, dist, source = np.asarray(bank.cell), np.asarray(bank.distance), np.asarray(bank.source)
     for t in range(hist["epoch"].shape[0]):
         runs = terrain_runs(hist["terrain"][t], hist["evaluation"][t], hist["epoch"][t])
         order = [int(r["terrain"]) for r in runs]
         params, normaliser = trial_policy(states, t)
         extra = {
-            "walker_config": base_meta.get("walker_config"),
+            "walker_config": walker_config,
             "curriculum": {
                 "archive": None if terrains else provenance.portable_path(str(run.archive), folder),
                 **({"terrain_folder": provenance.portable_path(str(terrains), folder)} if terrains else {}),

@@ -19,7 +19,8 @@ The shape (each field consumed where ``docs/CONTRIBUTING.md`` says)::
       curriculum: CurriculumConfig  selector + params (selectors.*Params), threshold, budget in epochs, ppo
                                     (FINE_TUNED fields), overlap, credit, ... (curriculum.core, .walker, .outputs)
       protocol: ProtocolOverride    attempts / best / headings; None = the archive's (runner.resolve)
-      walker: WalkerSettings        backend, episode_length, healthy_reward, robot, policy, observation (runner: the env)
+      walker: WalkerSettings        backend, episode_length, healthy_reward, robot, policy, observation, randomise
+                                    (runner: the env)
       budget: Budget                chunks_per_call, compact, fast_compile, policy_every (runner.setup, run_treatment)
 
 The run's protocol is ``protocol`` where given, else the archive's: :func:`jaxterrain.curriculum.runner.resolve`
@@ -59,7 +60,8 @@ class WalkerSettings(NamedTuple):
     ``healthy_reward`` (PPO's per-step bonus; None = the walker's 5.0), ``robot`` (None = the humanoid, or the
     ``policy``'s), ``policy`` (a policy folder to start from; None = the robot's shipped base policy),
     ``observation`` (``blind`` / ``perceptive``: the start policy's observation set; None = the ``policy``'s, or
-    the blind base policy)."""
+    the blind base policy), ``randomise`` (a ``--randomise`` spec of physics randomisation,
+    ``jaxterrain.walker.parse_randomisation``; None = off)."""
 
     backend: str = "auto"
     episode_length: int = 1000
@@ -67,6 +69,7 @@ class WalkerSettings(NamedTuple):
     robot: Optional[str] = None
     policy: Optional[str] = None
     observation: Optional[str] = None
+    randomise: Optional[str] = None
 
 
 class Budget(NamedTuple):

@@ -248,7 +248,7 @@ def make_env(run: LearnConfig, arch, policy):
     treatment's env is built. :class:`BadInput` when the policy does not fit it."""
     shape = (256, 256) if arch.heightmaps is None else tuple(arch.heightmaps.shape[1:])
     env = W.walker_env(policy, shape, TerrainScale(), run.walker.episode_length, **walker_layout(run),
-                       healthy_reward=run.walker.healthy_reward)
+                       healthy_reward=run.walker.healthy_reward, randomisation=run.walker.randomise)
     try:
         W.check_policy(policy, env)
     except ValueError as err:

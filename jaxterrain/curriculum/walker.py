@@ -44,7 +44,7 @@ from jaxterrain.curriculum.config import CurriculumConfig
 from jaxterrain.curriculum.core import Harness
 from jaxterrain.rl import networks as nets
 from jaxterrain.terrain import TerrainScale
-from jaxterrain.walker import TILE_AXES, Tile, TileBank
+from jaxterrain.walker import TILE_AXES, Tile, TileBank, parse_randomisation
 from jaxterrain.walker.layout import make_env
 
 __all__ = ["walker_env_config", "walker_env", "check_policy", "walker_harness", "tile_layout", "select_policy",
@@ -53,7 +53,7 @@ __all__ = ["walker_env_config", "walker_env", "check_policy", "walker_harness", 
 
 def walker_env_config(policy, shape: tuple[int, int], scale: TerrainScale, episode_length: Optional[int] = None,
                       backend: str = "jax", tiles: int = 0, worlds: Optional[int] = None,
-                      healthy_reward: Optional[float] = None):
+                      healthy_reward: Optional[float] = None, randomisation=None):
     """The :class:`~jaxterrain.walker.WalkerConfig` of the curriculum: the bank's terrain shape and scale, the
     contact solver the policy was trained with, and (optionally) a shorter ``episode_length``.
 
@@ -63,8 +63,11 @@ def walker_env_config(policy, shape: tuple[int, int], scale: TerrainScale, episo
     ``backend``: "jax" (MJX) or "warp" (MuJoCo Warp, needs ``tiles >= 1``). ``tiles``: 0 for the classic layout (a
     ``[H, W]`` terrain per trial), else the trials run together (one tile each). ``worlds``: MuJoCo Warp's contact
     buffers, for at least this many envs stepped together (trials x max(PPO envs, evaluation walks)); None keeps
-    the walker's default."""
+    the walker's default. ``randomisation``: physics randomisation of the fine-tuning walker (a
+    :class:`~jaxterrain.walker.Randomisation` or a ``--randomise`` spec; None: off)."""
     config = difficulty.default_env_config(tuple(shape), scale, policy)
+    if randomisation is not None:
+        config = config._replace(randomisation=parse_randomisation(randomisation))
     if episode_length is not None:
         config = config._replace(episode_length=int(episode_length))
     if backend != "jax" or tiles:
@@ -78,11 +81,11 @@ def walker_env_config(policy, shape: tuple[int, int], scale: TerrainScale, episo
 
 def walker_env(policy, shape: tuple[int, int], scale: TerrainScale, episode_length: Optional[int] = None,
                backend: str = "jax", tiles: int = 0, worlds: Optional[int] = None,
-               healthy_reward: Optional[float] = None):
+               healthy_reward: Optional[float] = None, randomisation=None):
     """The cached :class:`~jaxterrain.walker.WalkerEnv` of :func:`walker_env_config` (builds the MuJoCo model;
     compiles nothing)."""
     return make_env(walker_env_config(policy, shape, scale, episode_length, backend, tiles, worlds,
-                                                 healthy_reward))
+                                                 healthy_reward, randomisation))
 
 
 def check_policy(policy, env) -> None:

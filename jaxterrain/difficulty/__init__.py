@@ -14,20 +14,23 @@ The rollout loops themselves are the walker's (:mod:`jaxterrain.walker.rollout`)
 """
 
 from jaxterrain.difficulty.evaluation import (
-    check_observation,
-    default_env_config,
-    default_policy,
     evaluate,
     fitness_fn,
     keyed_distances,
+    protocol_distances,
+    rollout_distances,
+    timed_distances,
+    validate_heightmaps,
+)
+from jaxterrain.difficulty.policies import (
+    check_observation,
+    default_env_config,
+    default_policy,
     policy_observation,
     policy_robot,
     policy_scan_noise,
-    robot_base_policy,
     policy_solver,
-    protocol_distances,
-    rollout_distances,
-    validate_heightmaps,
+    robot_base_policy,
     with_policy_observation,
 )
 from jaxterrain.difficulty.fitness import FITNESSES, PROTOCOLS, difficulty_fitness, named_fitness, slope_fitness
@@ -62,6 +65,7 @@ __all__ = [
     "protocol_env_config",
     "evaluate",
     "rollout_distances",
+    "timed_distances",
     "fitness_fn",
     "protocol_distances",
     "keyed_distances",

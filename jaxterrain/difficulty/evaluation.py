@@ -13,7 +13,7 @@ rollout has ended (fall, far edge or ``env_config.episode_length``). A rollout's
 ``policy(policy_params, obs)`` - then new parameters do not re-compile (the curriculum's PPO can pass its own).
 Without ``policy`` the shipped base policy (``jaxterrain.rl.load_policy()``) is used. Without ``env_config`` the env
 is ``WalkerConfig(terrain_shape, scale)`` with the contact-solver options that the policy records it was trained with
-(:func:`default_env_config`).
+(:func:`~jaxterrain.difficulty.policies.default_env_config`).
 
 :func:`evaluate` and :func:`rollout_distances` are host-level entry points: they validate on the host and call a
 cached jit-compiled function. Inside your own jit (e.g. a QDax scoring function) use the pure
@@ -65,16 +65,12 @@ from jaxterrain.difficulty.protocol import (  # the protocol and its pure aggreg
 from jaxterrain.walker.layout import is_tiled, make_env
 from jaxterrain.walker.rollout import batched_distances, job_queue, pooled_distances, smoothness_priority
 from jaxterrain.terrain import TerrainScale, validate_scale
-from jaxterrain.walker import (BACKENDS, OBSERVATIONS, SolverOptions, WalkerConfig, WalkerEnv, observation_fields,
-                               observation_label)
+from jaxterrain.walker import BACKENDS, WalkerConfig, WalkerEnv
+from jaxterrain.difficulty.policies import check_observation, default_env_config, default_policy, robot_base_policy
 from jaxterrain.runtime import sharding
-from jaxterrain.rl import base_policy_dir, load_policy
-from jaxterrain.walker.robots import get as get_robot
 
-__all__ = ["evaluate", "rollout_distances", "fitness_fn", "protocol_distances", "keyed_distances",
-           "validate_heightmaps", "default_policy", "default_env_config", "policy_solver",
-           "policy_robot", "robot_base_policy", "policy_observation", "policy_scan_noise", "with_policy_observation",
-           "check_observation"]
+__all__ = ["evaluate", "rollout_distances", "timed_distances", "fitness_fn", "protocol_distances", "keyed_distances",
+           "validate_heightmaps"]
 
 
 # ----------------------------------------------------------------------------------------------------------------
@@ -158,16 +154,6 @@ def validate_heightmaps(heightmaps, name: str = "heightmaps") -> jax.Array:
     if lo < 0.0 or hi > 1.0:
         raise ValueError(f"{name} values must lie in [0, 1] (heightmap units), got min {lo:.4g}, max {hi:.4g}")
     return h
-
-
-@functools.lru_cache(maxsize=1)
-def default_policy() -> Callable:
-    """The shipped base policy (``jaxterrain.rl.load_policy()``), loaded once."""
-    try:
-        return load_policy()
-    except FileNotFoundError as err:
-        raise RuntimeError(f"policy=None needs the shipped base policy, which is missing ({err}); "
-                           "pass policy= explicitly") from err
 
 
 def _compiled(config: WalkerConfig, attempts: int, policy: Callable, with_params: bool, slots: Optional[int] = None,
@@ -269,74 +255,6 @@ def _keyed_rollouts(terrains_m, key, env_config, protocol, apply, params, with_p
         part = sharding.pad_rows((terrains_m[i:i + n], keys[i:i + n]), step)  # one compiled shape
         outs.append(fn(part[0], part[1], params)[:n])
     return jnp.concatenate(outs)
-
-
-def policy_solver(policy: Callable) -> Optional[SolverOptions]:
-    """The solver options a policy was trained with, when it records them (``policy.meta["walker_config"]
-    ["solver"]``, as :func:`jaxterrain.rl.load_policy` policies do), else None. A policy walks as trained only
-    under the same contact solver (benchmarks/RESULTS.md), so the default env of :func:`evaluate` uses them."""
-    solver = ((getattr(policy, "meta", None) or {}).get("walker_config") or {}).get("solver")
-    return None if solver is None else SolverOptions(**solver)
-
-
-def policy_robot(policy: Callable) -> str:
-    """The robot a policy was trained on (``policy.meta["walker_config"]["robot"]``); ``"humanoid"`` for policies
-    that do not record one (every policy made before robot specs walked the humanoid)."""
-    return ((getattr(policy, "meta", None) or {}).get("walker_config") or {}).get("robot") or "humanoid"
-
-
-def policy_observation(policy: Callable) -> dict:
-    """What a policy observes (:func:`jaxterrain.walker.observation_fields` of its recorded ``walker_config``):
-    ``{"observation": "blind"}`` for policies that record none (every policy before observation sets was blind),
-    else the set and, when perceptive, its scan grid. ``ValueError`` when the record names an unknown set."""
-    return observation_fields(dict((getattr(policy, "meta", None) or {}).get("walker_config") or {}))
-
-
-def policy_scan_noise(policy: Callable) -> float:
-    """The scan noise (m) a policy was trained with (``walker_config.scan_noise``; 0 when it records none)."""
-    return float(((getattr(policy, "meta", None) or {}).get("walker_config") or {}).get("scan_noise") or 0.0)
-
-
-def with_policy_observation(config: WalkerConfig, policy: Callable) -> WalkerConfig:
-    """``config`` observing what ``policy`` observes (:func:`policy_observation`; its scan grid and scan noise):
-    how every env built to walk a policy gets its observation set."""
-    fields = policy_observation(policy)
-    config = config._replace(**fields)
-    return config._replace(scan_noise=policy_scan_noise(policy)) if fields["observation"] == "perceptive" else config
-
-
-def check_observation(policy: Callable, env_config: WalkerConfig) -> None:
-    """``ValueError``, one line naming both, when ``env_config`` observes another set (or scan grid) than
-    ``policy`` records (:func:`policy_observation`); policies without a record (a bare callable) are not checked
-    here (their observation size is)."""
-    if getattr(policy, "meta", None) is None:
-        return
-    want, have = policy_observation(policy), observation_fields(env_config)
-    if want != have:
-        where = getattr(policy, "path", None)
-        raise ValueError(f"observation mismatch: the policy{f' {where}' if where else ''} observes "
-                         f"{observation_label(want)}, the env {observation_label(have)}")
-
-
-def default_env_config(shape: tuple[int, int], scale: Optional[TerrainScale] = None, policy: Optional[Callable] = None,
-                       backend: str = "jax") -> WalkerConfig:
-    """``WalkerConfig(terrain_shape=shape, scale=scale)`` with the policy's own robot and solver options when it
-    records them, and its observation set (:func:`with_policy_observation`) (``scale`` None: ``TerrainScale()``;
-    ``policy`` None: the shipped base policy).
-
-    ``backend``: ``"jax"`` (MJX-JAX, the classic layout: one heightfield per env) or ``"warp"`` (MuJoCo Warp, on
-    tiles: ``tiles=1``, which the rollout loops size to each call, :mod:`jaxterrain.walker.rollout`). Pass the result as
-    ``env_config`` to :func:`evaluate` / :func:`rollout_distances`; ``fitness_fn(..., backend=)`` takes the name.
-    For MJX-JAX on tiles set ``tiles=1`` yourself (``config._replace(tiles=1)``)."""
-    if backend not in BACKENDS:
-        raise ValueError(f"backend must be one of {BACKENDS}, got {backend!r}")
-    policy = default_policy() if policy is None else policy
-    solver = policy_solver(policy)
-    config = WalkerConfig(terrain_shape=tuple(shape), scale=TerrainScale() if scale is None else scale,
-                          robot=policy_robot(policy))
-    config = config if solver is None else config._replace(solver=solver)
-    config = with_policy_observation(config, policy)
-    return config if backend == "jax" else config._replace(backend=backend, tiles=1)
 
 
 def _resolve(heightmaps, protocol: Protocol, policy, scale, env_config):
@@ -490,30 +408,6 @@ def fitness_fn(size: int, protocol: Protocol = PAPER, scale: Optional[TerrainSca
                               observation)
 
 
-def robot_base_policy(robot: str = "humanoid", observation: str = "blind") -> Callable:
-    """The shipped base policy of ``robot``: :func:`default_policy` for the blind humanoid, else
-    ``rl.base_policy_dir(robot, observation)`` (loaded once). ``ValueError`` naming the robot / observation set when
-    it is unknown or has none shipped."""
-    get_robot(robot)
-    if observation not in OBSERVATIONS:
-        raise ValueError(f"observation must be one of {', '.join(OBSERVATIONS)}, got {observation!r}")
-    if robot == "humanoid" and observation == "blind":
-        return default_policy()
-    return _robot_policy(robot, observation)
-
-
-@functools.lru_cache(maxsize=None)
-def _robot_policy(robot: str, observation: str = "blind") -> Callable:
-    folder = base_policy_dir(robot, observation)
-    if not (folder / "policy.msgpack").is_file():
-        how = (f"python -m experiments perceptive-policy --robot {robot} --export-assets"
-               if observation == "perceptive" else
-               f"python -m experiments train-base-policy --robot {robot} --preset gpu --export-assets")
-        which = "perceptive base policy" if observation == "perceptive" else "base policy"
-        raise ValueError(f"robot {robot!r}: no {which} is shipped for it ({folder}); make one with `{how}`")
-    return load_policy(folder)
-
-
 @functools.lru_cache(maxsize=16)
 def _fitness_fn_cached(size: int, protocol: Protocol, scale: TerrainScale, slots, smooth_first: bool,
                        backend: str = "jax", robot: str = "humanoid", observation: str = "blind") -> Callable:
@@ -535,3 +429,33 @@ def _fitness_fn_cached(size: int, protocol: Protocol, scale: TerrainScale, slots
 
     fitness.keyed = keyed
     return fitness
+
+
+def timed_distances(heightmaps, protocol: Protocol, key: jax.Array, slots: Optional[int] = None,
+                    chunk: Optional[int] = None) -> dict:
+    """:func:`rollout_distances` of ``heightmaps`` [N, H, W] in [0, 1] under ``protocol`` with the shipped base
+    policy, compiled ahead of time so that compiling and walking are timed apart (the same program; ``chunk``
+    terrains per call, the last call padded). Returns ``{"distances", "lengths"}`` [N, attempts] (heading-major),
+    ``"compile_s"`` and ``"walk_s"``."""
+    import time
+
+    terrains_m, env_config, policy = _resolve(heightmaps, protocol, None, None, None)
+    apply, params, with_params = _policy_program(policy, None)
+    fn = _program(env_config, protocol.attempts, protocol.headings, apply, with_params, slots, True)
+    n = terrains_m.shape[0]
+    size = n if chunk is None else min(int(chunk), n)
+    parts = -(-n // size)
+    keys = [key] if parts == 1 else list(jax.random.split(key, parts))
+    pad = lambda t: jnp.concatenate([t, jnp.repeat(t[-1:], size - t.shape[0], axis=0)])  # noqa: E731
+    t0 = time.perf_counter()
+    compiled = fn.lower(terrains_m[:size], keys[0], params).compile()
+    t1 = time.perf_counter()
+    dist, length = [], []
+    for i, k in enumerate(keys):
+        part = terrains_m[i * size:(i + 1) * size]
+        d, s = compiled(pad(part) if part.shape[0] < size else part, k, params)
+        dist.append(np.asarray(d)[:part.shape[0]])
+        length.append(np.asarray(s)[:part.shape[0]])
+    t2 = time.perf_counter()
+    return {"distances": np.concatenate(dist), "lengths": np.concatenate(length), "compile_s": t1 - t0,
+            "walk_s": t2 - t1}

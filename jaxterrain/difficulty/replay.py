@@ -35,7 +35,8 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from jaxterrain.difficulty.evaluation import default_env_config, default_policy, validate_heightmaps
+from jaxterrain.difficulty.evaluation import validate_heightmaps
+from jaxterrain.difficulty.policies import default_env_config, default_policy
 from jaxterrain.difficulty.protocol import Protocol, aggregate, protocol_env_config, protocol_from, rotate_headings
 from jaxterrain.rl.checkpoint import policy_fn
 from jaxterrain.terrain import TerrainScale, validate_scale

@@ -5,18 +5,25 @@ quality check. ``python -m experiments train-gan`` is the command around these f
     step = jitted_step(config, batch_size=64, lr=2e-4, r1=1.0)     # (state, tiles) -> (state, metrics)
     state, metrics = step(state, tiles)                            # tiles: jaxterrain.terrain.dem.DemTiles
     report = quality_check(key, config, variables, tiles)          # W1 of TRI / TPI / roughness to real patches
+    result = train_gan(GanRun(config, steps=20), tiles, "runs/gan")  # the whole run, files and all: GanResult
 
 Training: the non-saturating GAN loss, Adam(lr, b1=0.5, b2=0.999) for both networks, one discriminator and one
 generator update per step, batches of random DEM patches cut, augmented and normalised on the device inside the
 step (``jaxterrain.terrain.dem.random_patches``), latents from N(0, 1) truncated to [-3, 3] (the genome range), and an
 optional R1 penalty on real data applied lazily every :data:`R1_EVERY` steps (StyleGAN2). The state is a plain
-pytree: checkpoint it with ``jaxterrain.runtime.driver`` (``python -m experiments train-gan`` runs its loop there).
+pytree: :func:`train_gan` runs the loop through ``jaxterrain.runtime.driver`` (checkpoints, ``metrics.csv``, a time
+limit, resume), writes the sample grids, ``log.jsonl``, ``final/`` and ``quality.json`` into its folder, and returns
+a :class:`GanResult`; ``python -m experiments train-gan`` is flags and files around it.
 """
 
 from __future__ import annotations
 
 import functools
-from typing import Any, Callable, NamedTuple
+import io
+import json
+import time
+from pathlib import Path
+from typing import Any, Callable, NamedTuple, Optional
 
 import jax
 import jax.numpy as jnp
@@ -24,11 +31,15 @@ import numpy as np
 import optax
 
 from jaxterrain import features, generators
-from jaxterrain.generators.gan import GanConfig, count_params, init_variables, make_modules, sample_latents
+from jaxterrain.generators.gan import (GanConfig, count_params, init_variables, make_modules, sample_latents,
+                                       save_generator)
+from jaxterrain.runtime import driver, estimates
+from jaxterrain.runtime.io import atomic_write_bytes, atomic_write_text
 from jaxterrain.terrain import dem
 
 __all__ = ["R1_EVERY", "GanTrainState", "gan_optimizer", "init_state", "make_train_step", "jitted_step",
-           "jitted_samples", "wasserstein1", "quality_check", "generator_params"]
+           "jitted_samples", "wasserstein1", "quality_check", "generator_params", "GanRun", "GanResult", "train_gan",
+           "save_grid"]
 
 R1_EVERY = 8  # lazy R1 regularisation interval
 
@@ -229,3 +240,153 @@ def quality_check(key: jax.Array, config: GanConfig, variables: dict, tiles, n: 
         report["gan_closer_than_perlin"] = None
         report["perlin_error"] = perlin_error
     return report
+
+
+# ----------------------------------------------------------------------------------------------------------------
+# The run: a driver that owns the loop and its files
+# ----------------------------------------------------------------------------------------------------------------
+class GanRun(NamedTuple):
+    """The settings of one training run (``train-gan``'s presets fill them).
+
+    config: the architecture. steps: total steps (a resumed run continues to it). batch_size: patches per step.
+    lr: Adam's learning rate. r1: the R1 weight (0: off). seed: the run's key. sample_every / ckpt_every /
+    log_every: steps between sample grids, checkpoints and log lines. quality_samples: terrains per set in the final
+    :func:`quality_check` (0: skip)."""
+
+    config: GanConfig
+    steps: int
+    batch_size: int = 8
+    lr: float = 2e-4
+    r1: float = 0.0
+    seed: int = 0
+    sample_every: int = 10
+    ckpt_every: int = 10
+    log_every: int = 5
+    quality_samples: int = 0
+
+
+class GanResult(NamedTuple):
+    """What :func:`train_gan` returns. state: the :class:`GanTrainState` reached. done: steps done (< ``steps``
+    after a time-limit stop: resumable). wall: seconds of the loop. history: metric name -> one float per step of the
+    run (resumed runs included). last_metrics: the last step's (None: no step). variables: the generator's flax
+    variables (``final/``), None unless finished. quality: the :func:`quality_check` report (None: skipped or not
+    finished)."""
+
+    state: GanTrainState
+    done: int
+    wall: float
+    history: dict
+    last_metrics: Optional[dict]
+    variables: Optional[dict]
+    quality: Optional[dict]
+
+
+def save_grid(path, maps, cols: int = 4) -> Path:
+    """Save ``[N, H, W]`` maps in [0, 1] as one PNG grid (matplotlib 'terrain' colours, 2 px gaps), atomically."""
+    from matplotlib import colormaps
+    from PIL import Image
+
+    maps = np.clip(np.asarray(maps, np.float32), 0.0, 1.0)
+    n, h, w = maps.shape
+    rows = -(-n // cols)
+    grid = np.ones((rows * (h + 2) + 2, cols * (w + 2) + 2, 3), np.uint8) * 255
+    rgb = (colormaps["terrain"](maps)[..., :3] * 255).astype(np.uint8)
+    for i in range(n):
+        r, c = divmod(i, cols)
+        grid[2 + r * (h + 2): 2 + r * (h + 2) + h, 2 + c * (w + 2): 2 + c * (w + 2) + w] = rgb[i]
+    buf = io.BytesIO()
+    Image.fromarray(grid).save(buf, format="PNG")
+    return atomic_write_bytes(path, buf.getvalue())
+
+
+def _log_metrics(say, log_path: Path, step: int, total: int, start: int, t0: float, metrics) -> None:
+    """Say and append to ``log.jsonl`` one log line for ``step``; raise on non-finite losses."""
+    m = {k: float(v) for k, v in metrics.items()}
+    rate = (step - start) / max(time.time() - t0, 1e-9)
+    say(f"step {step}/{total}  " + "  ".join(f"{k} {v:.4f}" for k, v in m.items()) + f"  {rate:.1f} steps/s")
+    with open(log_path, "a") as f:
+        f.write(json.dumps({"step": step, "time": time.time() - t0, **m}) + "\n")
+    if not all(np.isfinite(list(m.values()))):
+        raise FloatingPointError(f"train-gan: non-finite losses at step {step}: {m}")
+
+
+def _chunk(run: GanRun, folder: Path, tiles, start: int, say):
+    """The ``runtime.driver`` chunk ``(state, a, b) -> (state, metrics [b - a])``: steps ``a + 1 .. b`` of the jitted
+    step, with log lines and sample grids at their intervals (``start``: where this call began)."""
+    step_fn = jitted_step(run.config, int(run.batch_size), float(run.lr), float(run.r1),
+                          jax.default_backend() != "cpu")
+    sample_fn, _ = jitted_samples(run.config)
+    t0 = time.time()
+
+    def chunk(state, a: int, b: int):
+        done = []
+        for step in range(a + 1, b + 1):
+            state, metrics = step_fn(state, tiles)
+            done.append(metrics)
+            if step % run.log_every == 0 or step == run.steps:
+                _log_metrics(say, folder / "log.jsonl", step, run.steps, start, t0, metrics)
+            if step % run.sample_every == 0 or step == run.steps:
+                save_grid(folder / "samples" / f"step_{step:08d}.png", sample_fn(state.g_params, state.g_stats))
+        return state, {k: jnp.stack([m[k] for m in done]) for k in done[0]}
+
+    return chunk
+
+
+def _start(run: GanRun, folder: Path, resume: bool, say) -> tuple[GanTrainState, int, Optional[dict]]:
+    """``(state, steps done, history)``: fresh from the run's seed, or with ``resume`` the folder's checkpoint."""
+    state = init_state(jax.random.PRNGKey(int(run.seed)), run.config, float(run.lr))
+    restored = driver.restore(folder, like=state) if resume else None
+    if restored is None:
+        if resume:
+            say(f"--resume: no checkpoint in {folder}; starting from scratch")
+        return state, 0, None
+    state, done, history, _ = restored
+    say(f"resumed from {folder / driver.CHECKPOINT_NAME} at step {done}")
+    return state, done, history
+
+
+def train_gan(run: GanRun, tiles: dem.DemTiles, folder, *, resume: bool = False,
+              time_limit_s: Optional[float] = None, progress: bool | str = True, say: Callable[[str], None] = print,
+              meta: Optional[dict] = None) -> GanResult:
+    """Train the GAN of ``run`` on ``tiles`` (``dem.stack_tiles``) into ``folder``, or with ``resume`` continue the
+    folder's run, to ``run.steps`` through ``jaxterrain.runtime.driver.run_chunks``: ``checkpoint.npz``,
+    ``metrics.csv`` and TensorBoard events every ``ckpt_every`` steps, ``log.jsonl`` lines, sample grids
+    (``samples/real.png``, ``samples/step_*.png``); stops after ``time_limit_s`` seconds at a checkpoint. Finished,
+    it writes ``final/`` (``gan.save_generator``) and ``quality.json``. ``say`` prints a line (the command's goes
+    above its progress bar); ``meta`` joins the checkpoint's meta. Same seed, same bytes."""
+    folder = Path(folder)
+    state, start, history = _start(run, folder, resume, say)
+    _, real_fn = jitted_samples(run.config)
+    if not (folder / "samples" / "real.png").exists():
+        save_grid(folder / "samples" / "real.png", real_fn(jax.random.PRNGKey(7), tiles))
+    estimates.announce("gan-step", f"batch {run.batch_size}, {run.config.size} x {run.config.size}")
+    t0 = time.time()
+    state, done, history = driver.run_chunks(
+        _chunk(run, folder, tiles, start, say), state, total=int(run.steps), every=int(run.ckpt_every), start=start,
+        history=history, run_dir=folder, key_metric="g_loss", time_limit_s=time_limit_s, progress=progress,
+        desc="train-gan", meta={"command": "train-gan", **(meta or {}), "config": run.config.to_json()})
+    wall = time.time() - t0
+    if start < done:
+        say(f"trained {done - start} steps in {wall:.1f} s")
+    last = {k: v[-1] for k, v in history.items() if v} or None
+    if done < run.steps:
+        return GanResult(state, done, wall, history, last, None, None)
+    variables = {"params": state.g_params, "batch_stats": state.g_stats}
+    save_generator(folder / "final", run.config, variables)
+    return GanResult(state, done, wall, history, last, variables, _quality(run, folder, variables, tiles, say))
+
+
+def _quality(run: GanRun, folder: Path, variables: dict, tiles, say) -> Optional[dict]:
+    """The :func:`quality_check` of the trained generator, written to ``quality.json`` (None: skipped)."""
+    if int(run.quality_samples) <= 0:
+        return None
+    try:
+        quality = quality_check(jax.random.PRNGKey(int(run.seed) + 1), run.config, variables, tiles,
+                                int(run.quality_samples))
+    except ImportError as err:
+        say(f"quality check skipped: {err}")
+        return None
+    atomic_write_text(folder / "quality.json", json.dumps(quality, indent=2) + "\n")
+    say(f"quality (mean W1 to training patches, lower = closer): {json.dumps(quality['mean_w1'])}  "
+        f"gan_closer_than_perlin: {quality['gan_closer_than_perlin']}")
+    return quality

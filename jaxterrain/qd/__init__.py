@@ -5,22 +5,25 @@
 - :mod:`~jaxterrain.qd.scoring`: render, descriptors, Algorithm 1 and fitness of a batch (QDax's scoring contract);
 - :mod:`~jaxterrain.qd.map_elites`: the pure state, ``init`` / ``step``, one winner per cell, several at once;
 - :mod:`~jaxterrain.qd.evolution`: the host drivers :func:`evolve` / :func:`evolve_many` (checkpoints, resume);
-- :mod:`~jaxterrain.qd.archive`: host queries (coverage, QD score, re-derive / reseat elites, :func:`combine`);
+- :mod:`~jaxterrain.qd.archive`: host queries (coverage, QD score, re-derive / reseat elites, :func:`combine`,
+  :func:`generator_shares` per distance band);
 - :mod:`~jaxterrain.qd.archive_io`: the archive file (:func:`save` / :func:`load`);
-- :mod:`~jaxterrain.qd.bank`: an archive's elites on the device (:class:`TerrainBank`), the curriculum's input.
+- :mod:`~jaxterrain.qd.bank`: an archive's elites on the device (:class:`TerrainBank`), the curriculum's input;
+- :mod:`~jaxterrain.qd.gradient`: does fitness fall with the distance from cell (0, 0)? (:func:`gradient.gradient`).
 
     >>> from jaxterrain import qd
     >>> arch = qd.evolve("perlin", None, qd.EvolveConfig(generations=50), key)
     >>> qd.coverage(arch), qd.save("perlin.npz", arch)
 """
 
-from jaxterrain.qd import grid, map_elites, scoring
+from jaxterrain.qd import gradient, grid, map_elites, scoring
 from jaxterrain.qd.archive import (
     check_cells,
     combine,
     coverage,
     elite,
     fitness_grid,
+    generator_shares,
     heightmaps,
     qd_score,
     rederive_cells,
@@ -82,6 +85,8 @@ __all__ = [
     "coverage",
     "elite",
     "fitness_grid",
+    "generator_shares",
+    "gradient",
     "grid",
     "heightmaps",
     "qd_score",

@@ -76,9 +76,10 @@ from qdax.core.containers.mapelites_repertoire import get_cells_indices
 
 from jaxterrain import features, generators
 from jaxterrain.qd.config import Archive, EvolveConfig, resolve_config
+from jaxterrain.qd.grid import cell_bins, cell_distance
 
 __all__ = ["render_elites", "rederive_cells", "check_cells", "refused", "reseat", "heightmaps", "coverage", "qd_score",
-           "elite", "fitness_grid", "combine"]
+           "elite", "fitness_grid", "combine", "generator_shares"]
 
 # ----------------------------------------------------------------------------------------------------------------
 # Elites: render, re-derive their cells, query
@@ -86,7 +87,16 @@ __all__ = ["render_elites", "rederive_cells", "check_cells", "refused", "reseat"
 
 
 def render_elites(generator, genomes, filled: np.ndarray, batch: int = 64) -> np.ndarray:
-    """Heightmaps ``[cells, H, W]`` uint16 (height * 65535) of the filled cells (zeros elsewhere)."""
+    """Heightmaps ``[cells, H, W]`` uint16 (height * 65535) of the filled cells (zeros elsewhere). With a mixture
+    (``generators.mixture``; ``genomes`` a ``MixedGenome``, leaves ``[cells, ...]``) each elite is rendered by its
+    own generator, ``genomes.generator[cell]``."""
+    if generators.is_mixture(generator):
+        out = None
+        ids = np.asarray(genomes.generator)
+        for k, gen in enumerate(generator.spec.generators):
+            part = render_elites(gen, genomes.slots[k], np.asarray(filled) & (ids == k), batch)
+            out = part if out is None else out + part  # disjoint cells: zeros elsewhere
+        return out
     cells = filled.shape[0]
     size = generator.size
     out = np.zeros((cells, size, size), np.uint16)
@@ -352,3 +362,51 @@ def combine(archives: Sequence[Archive]) -> Archive:
 def _bcast(mask, x):
     return mask.reshape(mask.shape + (1,) * (np.ndim(x) - 1))
 
+
+
+# ----------------------------------------------------------------------------------------------------------------
+# Who holds the cells: each generator's share per distance band
+# ----------------------------------------------------------------------------------------------------------------
+
+
+def generator_shares(archive: Archive, width: float = 10.0, names: Sequence[str] | None = None) -> dict:
+    """Each generator's share of an archive's filled cells per band of distance from cell (0, 0).
+
+    A cell's distance is :func:`jaxterrain.qd.cell_distance` of its bins (to the cell's far corner, 70.71 for the
+    last cell of a 50 x 50 grid); band ``b`` holds ``b * width <= distance < (b + 1) * width``, as in
+    ``docs/results/gradient.md``; the last band ends past the grid's largest distance.
+
+    Args:
+      archive: any archive (one run's, a mixed run's, ``combine``'s).
+      width: band width in cells (> 0).
+      names: the generators to count, in this order (default ``archive.generator_names``); a name the archive
+        lacks counts zero cells.
+
+    Returns:
+      ``{"names": tuple, "lo", "hi": [bands] float band edges, "cells": [bands] int cells of the grid in the band,
+      "filled": [bands] int filled cells, "count": [bands, G] int cells held by each generator, "share": [bands, G]
+      float fraction of the band's FILLED cells held by each generator (NaN for a band with none), "coverage":
+      [bands] float percent of the band's cells filled, "total": [G] int cells held by each generator}``.
+    """
+    if not (isinstance(width, (int, float, np.floating)) and not isinstance(width, bool) and np.isfinite(width)
+            and width > 0):
+        raise ValueError(f"generator_shares: width must be a finite number > 0 (cells); got {width!r}")
+    names = tuple(archive.generator_names) if names is None else tuple(names)
+    bins = archive.config.bins
+    n_cells = archive.fitness.shape[0]
+    distance = cell_distance(cell_bins(np.arange(n_cells), bins)).astype(np.float64)
+    band = np.floor(distance / width).astype(np.int64)
+    n_bands = int(band.max()) + 1
+    filled = archive.source >= 0
+    own = {n: i for i, n in enumerate(archive.generator_names)}
+    count = np.zeros((n_bands, len(names)), np.int64)
+    for j, name in enumerate(names):
+        if name in own:
+            count[:, j] = np.bincount(band[filled & (archive.source == own[name])], minlength=n_bands)
+    cells = np.bincount(band, minlength=n_bands)
+    n_filled = np.bincount(band[filled], minlength=n_bands)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        share = np.where(n_filled[:, None] > 0, count / np.maximum(n_filled, 1)[:, None], np.nan)
+    lo = np.arange(n_bands, dtype=np.float64) * width
+    return {"names": names, "lo": lo, "hi": lo + width, "cells": cells, "filled": n_filled, "count": count,
+            "share": share, "coverage": 100.0 * n_filled / np.maximum(cells, 1), "total": count.sum(axis=0)}

@@ -32,6 +32,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from jaxterrain import difficulty, features, generators as _generators
+from jaxterrain.generators import mixed as _mixed
 from jaxterrain.qd import config as A, map_elites as ME, programs as P, scoring as S
 from jaxterrain.qd.archive import render_elites
 from jaxterrain.qd.grid import centroids_for
@@ -108,6 +109,8 @@ def problem(generator, descriptors, config: A.EvolveConfig, fitness_fn=None, tra
         names = tuple(config.descriptors) if names is None else tuple(names)
         pair = tuple(names.index(n) for n in config.descriptors)
         descriptors = descriptor_fn(names, int(config.window), int(config.stride))
+    if _generators.is_mixture(generator):
+        _mixed.check_batch(generator, config.batch_size, "EvolveConfig.batch_size")
     fitness_fn = default_fitness(generator.size, config) if fitness_fn is None else fitness_fn
     traversable = traversable_fn(config) if traversable is None else traversable
     scoring = S.make_scoring_fn(generator, descriptors, traversable, fitness_fn, config, pair, mesh, split)
@@ -127,7 +130,9 @@ def evolve(generator, descriptors, config: A.EvolveConfig, key: jax.Array, fitne
     """Run MAP-Elites for one generator and one descriptor pair; returns the final :class:`~jaxterrain.qd.Archive`.
 
     Args:
-      generator: a ``Generator`` (see generators/base.py) or a registered generator name.
+      generator: a ``Generator`` (see generators/base.py) or a registered generator name; a
+        ``generators.mixture`` of several evolves ONE archive whose elites record their generator (each generator's
+        offspring compete for the same cells; ``config.batch_size`` must exceed its fresh samples).
       descriptors: None (use ``config.descriptors``), a pair of descriptor names (replaces ``config.descriptors``),
         or a callable ``heightmaps [B, H, W] -> [B, 2]`` (e.g. a learned descriptor; ``config.descriptors`` then only
         names it and ``config.ranges`` must be given unless the names have defaults).
@@ -388,15 +393,24 @@ def _many_archives(states, groups, gens, configs, history) -> list[A.Archive]:
 
 
 def to_archive(generator, repertoire, config: A.EvolveConfig, history: dict) -> A.Archive:
-    """Host :class:`~jaxterrain.qd.Archive` of one repertoire (elites rendered when ``store_heightmaps``)."""
+    """Host :class:`~jaxterrain.qd.Archive` of one repertoire (elites rendered when ``store_heightmaps``). A
+    mixture's repertoire (``generators.mixture``) becomes an archive of its component generators: ``source`` is each
+    elite's generator and ``genomes[k]`` generator ``k``'s slot, zero where another generator or nobody holds the
+    cell (the form of ``qd.combine``'s archives, so every reader of archives takes it)."""
     fitness = np.asarray(repertoire.fitnesses, np.float32).reshape(-1)
     filled = fitness > -np.inf
     genomes = jax.tree.map(np.asarray, repertoire.genotypes)
     maps = render_elites(generator, genomes, filled) if config.store_heightmaps else None
+    if _generators.is_mixture(generator):
+        names = tuple(generator.spec.names)
+        source, kept = _mixed.archive_slots(genomes, filled)
+    else:
+        source = np.where(filled, 0, -1).astype(np.int32)
+        names, kept = (generator.name,), (genomes,)
     return A.Archive(
-        genomes=(genomes,),
-        generator_names=(generator.name,),
-        source=np.where(filled, 0, -1).astype(np.int32),
+        genomes=kept,
+        generator_names=names,
+        source=source,
         fitness=fitness,
         descriptors=np.asarray(repertoire.extra_scores["raw"], np.float32),
         centroids=np.asarray(repertoire.centroids, np.float32),

@@ -46,6 +46,7 @@ from typing import Any, Callable, NamedTuple
 import jax
 import jax.numpy as jnp
 
+from jaxterrain.generators.mixed import is_mixture
 from jaxterrain.runtime import sharding
 
 __all__ = ["RENDER_CHUNK", "Task", "Pending", "Scoring", "make_scoring_fn", "ignore_needed", "render_batch",
@@ -178,6 +179,8 @@ class Scoring(NamedTuple):
       mesh: None (one device), or a ``jax.sharding.Mesh`` (``sharding.make_mesh``) to split the rows over.
       split: how the rows go over the mesh (``sharding.map_rows``: ``"shard_map"`` or ``"dispatch"``; None:
         ``sharding.default_split``).
+      batch_render: None (render with :func:`render_batch` of ``render_one``), or ``genomes [B, ...] -> [B, H, W]``
+        (a mixture of generators: each row once by its own generator, ``generators.mixture``).
     """
 
     render_one: Callable
@@ -187,12 +190,14 @@ class Scoring(NamedTuple):
     task: Task
     mesh: Any = None
     split: str | None = None
+    batch_render: Callable | None = None
 
     def prepare(self, genomes, task: Task | None = None) -> Pending:
         """Render, describe and check a batch (genome leaves ``[B, ...]``); ``task``: one :class:`Task`, or one per
         row (leaves with a leading ``[B]``)."""
         task = self.task if task is None else task
-        heightmaps = render_batch(self.render_one, genomes)
+        heightmaps = (render_batch(self.render_one, genomes) if self.batch_render is None
+                      else self.batch_render(genomes))
         every = jnp.asarray(self.descriptor_fn(heightmaps), jnp.float32)
         raw = jnp.take_along_axis(every, jnp.broadcast_to(task.pair, every.shape[:-1] + (2,)), axis=-1)
         traversable = jnp.asarray(self.traversable_fn(heightmaps), bool)
@@ -244,7 +249,8 @@ def make_scoring_fn(generator, descriptor_fn: Callable, traversable_fn: Callable
     """The scoring function of one generator (see the module docstring).
 
     Args:
-      generator: a ``Generator`` (its ``render_one``: genome -> ``[H, W]`` in [0, 1]).
+      generator: a ``Generator`` (its ``render_one``: genome -> ``[H, W]`` in [0, 1]; a ``generators.mixture``
+        renders its batches with its grouped render).
       descriptor_fn: ``heightmaps [B, H, W] -> [B, D]`` descriptors (``D >= 2``).
       traversable_fn: ``heightmaps [B, H, W] -> [B] bool`` (Algorithm 1, built with the run's ``TerrainScale``).
       fitness_fn: ``(heightmaps [B, H, W], key, needed [B] bool) -> [B]`` (built with the same scale); see
@@ -260,4 +266,6 @@ def make_scoring_fn(generator, descriptor_fn: Callable, traversable_fn: Callable
                      ("fitness_fn", fitness_fn)):
         if not callable(fn):
             raise ValueError(f"make_scoring_fn: {name} must be callable; got {type(fn).__name__}")
-    return Scoring(generator.render_one, descriptor_fn, traversable_fn, fitness_fn, task_for(config, pair), mesh, split)
+    batch_render = generator.spec.render_batch if is_mixture(generator) else None
+    return Scoring(generator.render_one, descriptor_fn, traversable_fn, fitness_fn, task_for(config, pair), mesh, split,
+                   batch_render)

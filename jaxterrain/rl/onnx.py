@@ -58,8 +58,9 @@ from jaxterrain.rl.checkpoint import load_policy
 from jaxterrain.runtime import provenance
 from jaxterrain.runtime.io import atomic_write_bytes
 from jaxterrain.terrain import TerrainScale
-from jaxterrain.walker.env import WalkerConfig, resolve_config
+from jaxterrain.walker.config import WalkerConfig, resolve_config
 from jaxterrain.walker.model import SolverOptions, build_model
+from jaxterrain.walker.randomisation import randomisation_from_json, randomisation_json
 from jaxterrain.walker.robots import get as get_robot
 
 __all__ = ["ONNX_FORMAT", "OPSET", "VERIFY_TOLERANCE", "MISSING_EXTRA", "INPUT_NAME", "OUTPUT_NAME", "onnx_modules",
@@ -107,6 +108,8 @@ def walker_config_of(meta: dict) -> WalkerConfig:
             value = TerrainScale(**value)
         elif key == "solver":
             value = SolverOptions(**value)
+        elif key == "randomisation":
+            value = randomisation_from_json(value)
         elif isinstance(value, list):
             value = tuple(value)
         kwargs[key] = value
@@ -216,6 +219,9 @@ def onnx_metadata(policy, verification: Optional[dict] = None, base: str | os.Pa
             if config.observation == "perceptive" else None)
     walker = config._asdict()
     walker["scale"], walker["solver"] = config.scale._asdict(), config.solver._asdict()
+    randomised = randomisation_json(walker.pop("randomisation"))  # recorded only when on, as in config.json
+    if randomised is not None:
+        walker["randomisation"] = randomised
     path = getattr(policy, "path", None)
     source = {k: v for k, v in meta.items() if k != "ppo_config"}
     onnx = onnx_modules()

@@ -48,30 +48,40 @@ def check_curve(means, level0: float = LEVEL0, last: float = LAST, rise: float =
 
 
 def select_levels(values, means, levels: int = 10, level0: float = LEVEL0, last: float = LAST,
-                  rise: float = RISE) -> np.ndarray | None:
+                  rise: float = RISE, margin: float = 0.05) -> np.ndarray | None:
     """Indices [levels] into a measured candidate grid (``values`` [G] increasing, ``means`` [G] the base policy's
     mean fitness at each) whose curve passes :func:`check_curve`, spread as evenly as the grid allows: of all
-    passing choices, the one whose largest drop between neighbouring levels is smallest (ties: the lowest indices).
-    None when no choice passes (too few grid values between ``level0`` and ``last``, or the curve rises there)."""
+    passing choices, the one with the smallest sum of squared steps between neighbouring levels (equal steps
+    minimise it, so levels bunched at 1.0 or at the floor are avoided; ties: the lowest indices). Ends with
+    ``margin`` to spare (level 0 >= ``level0 + margin``, the last level <= ``last - margin``) are preferred where
+    the grid has them, so that a new measurement of the same terrains still passes. None when no choice passes
+    (too few grid values between ``level0`` and ``last``, or the curve rises there)."""
     v, m = np.asarray(values, np.float64), _curve(means)
     if v.shape != m.shape or np.any(np.diff(v) <= 0):
         raise ValueError(f"values must be increasing and as long as means ({m.size}); got {v.tolist()}")
     if not isinstance(levels, (int, np.integer)) or levels < 2:
         raise ValueError(f"levels must be an integer >= 2; got {levels!r}")
+    for top, bottom in ((level0 + margin, last - margin), (level0, last)):
+        idx = _even_levels(m, levels, top, bottom, rise)
+        if idx is not None:
+            return idx
+    return None
+
+
+def _even_levels(m: np.ndarray, levels: int, top: float, bottom: float, rise: float) -> np.ndarray | None:
     g = m.size
-    inf = np.inf
-    cost = np.full((levels, g), inf)  # cost[k, i]: the smallest largest-drop of levels 0..k ending at value i
+    cost = np.full((levels, g), np.inf)  # cost[k, i]: the smallest sum of squared steps of levels 0..k ending at i
     prev = np.full((levels, g), -1)
-    cost[0, m >= level0] = -inf
+    cost[0, m >= top] = 0.0
     for k in range(1, levels):
         for i in range(k, g):
             for j in range(k - 1, i):
-                if cost[k - 1, j] == inf or m[i] - m[j] > rise + 1e-12:
+                if not np.isfinite(cost[k - 1, j]) or m[i] - m[j] > rise + 1e-12:
                     continue
-                c = max(cost[k - 1, j], m[j] - m[i])
-                if c < cost[k, i]:
+                c = cost[k - 1, j] + (m[j] - m[i]) ** 2
+                if c < cost[k, i] - 1e-15:
                     cost[k, i], prev[k, i] = c, j
-    ends = [i for i in range(g) if m[i] <= last and cost[levels - 1, i] < inf]
+    ends = [i for i in range(g) if m[i] <= bottom and np.isfinite(cost[levels - 1, i])]
     if not ends:
         return None
     i = min(ends, key=lambda e: (cost[levels - 1, e], e))

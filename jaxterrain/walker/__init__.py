@@ -1,7 +1,7 @@
 """The walker: a robot (default brax's humanoid; ``WalkerConfig(robot="ant")`` brax's quadruped, or any
 :class:`RobotSpec` you register) in MuJoCo MJX on a heightfield passed as data (see :mod:`jaxterrain.walker.env`).
 
-Modules: :mod:`.robots` (robot specs and their registry), :mod:`.model` (the MJCF and solver options), :mod:`.env` (reset / step / park), :mod:`.tiles` (terrains as
+Modules: :mod:`.robots` (robot specs and their registry), :mod:`.model` (the MJCF and solver options), :mod:`.env` (reset / step / park), :mod:`.randomisation` (physics randomisation: friction, masses, motors, noise, delay, pushes), :mod:`.tiles` (terrains as
 tiles of one heightfield), :mod:`.layout` (classic vs tiles, env sizing, the backend ``auto`` resolves to: the one
 home of the layout), :mod:`.rollout` (batched walks and the rollout pool) and :mod:`.mujoco_c` (MuJoCo's C engine
 stepping the same walks on the CPU: sim2sim).
@@ -23,9 +23,11 @@ Per-env terrains as tiles of one heightfield (needed by the MuJoCo Warp backend,
 
 from jaxterrain.walker import robots
 from jaxterrain.walker.robots import RobotSpec, register_robot
-from jaxterrain.walker.env import (BACKENDS, OBSERVATIONS, SCAN_FIELDS, WalkerConfig, WalkerEnv, WalkerState,
-                                   flat_terrain, min_terrain_side, observation_fields, observation_label,
-                                   resolve_config, sample_heights, with_observation)
+from jaxterrain.walker.config import (BACKENDS, OBSERVATIONS, SCAN_FIELDS, WalkerConfig, flat_terrain,
+                                      min_terrain_side, observation_fields, observation_label, resolve_config,
+                                      with_observation)
+from jaxterrain.walker.env import WalkerEnv, WalkerState
+from jaxterrain.walker.surface import sample_heights
 from jaxterrain.walker.model import (
     NAMED_SOLVERS,
     SOLVER_FAST,
@@ -42,6 +44,9 @@ from jaxterrain.walker.model import (
     standing_offset,
 )
 from jaxterrain.walker.tiles import TILE_AXES, Tile, TileBank, warp_available
+from jaxterrain.walker import randomisation
+from jaxterrain.walker.randomisation import (PRESETS as RANDOMISATION_PRESETS, Randomisation, parse_randomisation,
+                                             randomisation_from_json, randomisation_json, randomisation_label)
 from jaxterrain.walker import layout, rollout  # noqa: E402  (after env / tiles, which they import)
 from jaxterrain.walker.layout import BACKEND_CHOICES, env_for, is_tiled, make_env, resolve_backend, sized_env, terrain_batch
 from jaxterrain.walker.rollout import batched_distances, job_queue, smoothness_priority
@@ -77,6 +82,13 @@ __all__ = [
     "Tile",
     "TileBank",
     "warp_available",
+    "randomisation",
+    "RANDOMISATION_PRESETS",
+    "Randomisation",
+    "parse_randomisation",
+    "randomisation_from_json",
+    "randomisation_json",
+    "randomisation_label",
     "WalkerConfig",
     "WalkerEnv",
     "WalkerState",

@@ -34,34 +34,13 @@ Backends and tiled terrains (``WalkerConfig.backend``, ``WalkerConfig.tiles``):
   over ``state.data``. A step whose contacts or constraints overflowed those buffers is invalid (``failed = 1``).
   ``jax.vmap`` of ``reset`` / ``step`` (nested too) works unchanged; MJX-Warp batches the physics itself.
 
-Physical choices (all in :class:`WalkerConfig`):
-
-- Scale: ``terrain_shape`` samples at ``scale`` (default 256 x 256 at 0.04 m = a 10.2 m square, heights up to
-  1.0 m). Heights outside ``[0, scale.height]`` metres are clipped, for the physics and for the samples alike.
-- Spawn: torso at ``x_start = -radius_x + start_margin``, ``y = 0`` (or, with ``start_spread > 0`` m, ``y``
-  uniform in ``[-start_spread, start_spread]``, drawn from the reset key; the default 0 draws nothing), facing +x,
-  joints at the XML pose plus uniform noise of ``joint_noise`` rad (clipped into the joint ranges) and joint
-  velocities with noise ``qvel_noise`` rad/s; the body is lowered so that its lowest foot sphere sits
-  ``spawn_clearance`` above the highest terrain sample in a 0.5 m x 0.5 m patch under the start point (forward
-  kinematics per reset).
-- Termination (``done = 1``): a fall (torso height above the terrain under it outside ``healthy_z_range``, or the
-  torso leaving the sides / the back of the heightfield), reaching ``x_goal = radius_x - goal_margin``, the time
-  limit ``episode_length`` env steps, or invalid physics (non-finite state or ``|qvel| > max_qvel``) or a
-  non-finite action. Invalid steps keep the previous (finite) physics state, give reward 0 and set
-  ``failed = 1``; obs and reward are always finite. ``truncation = 1`` marks ends that are not failures
-  (goal or time limit): bootstrap the value there.
-- Reward (brax humanoid): ``forward_reward_weight * vx + healthy_reward - ctrl_cost_weight * |ctrl|^2`` with vx the
-  torso's x velocity over the env step and ctrl = 0.4 * action (the XML's ctrlrange).
-- Normalised distance ``clip((x - x_start) / (x_goal - x_start), 0, 1)`` of the torso's x, in ``state.distance``.
-- One env step = ``n_frames`` (5) physics steps of ``timestep`` (0.003 s): dt = 0.015 s, as in brax.
-- Solver: :data:`~jaxterrain.walker.model.SOLVER_SOUND` (Newton, iterations 4, ls_iterations 16, no Euler damping)
-  by default: a walk under it is the same as under the XML's converged ``SOLVER_XML`` (8 / 50 / damping on).
-  ``SOLVER_FAST`` (1 / 4, brax's MJX setting) is 2.2x faster but lets a policy exploit the unconverged contacts.
+See :mod:`jaxterrain.walker.config` for the physical choices (scale, spawn, termination, reward, distance,
+time step, randomisation, solver): every one is a :class:`~jaxterrain.walker.config.WalkerConfig` field.
 """
 
 from __future__ import annotations
 
-from typing import Any, NamedTuple, Optional
+from typing import Any, NamedTuple
 
 import contextlib
 import importlib.util
@@ -78,76 +57,23 @@ import numpy as np
 with contextlib.redirect_stdout(io.StringIO()) if importlib.util.find_spec("warp") is None else contextlib.nullcontext():
     from mujoco import mjx
 
-from jaxterrain.terrain import hfield_size, validate_scale
+from jaxterrain.terrain import hfield_size
+from jaxterrain.walker import randomisation as _rnd
 from jaxterrain.walker import tiles as _tiles
-from jaxterrain.walker.model import (
-    SOLVER_SOUND,
-    SolverOptions,
-    TerrainScale,
-    build_model,
-    check_terrain_shape,
-    metres_to_hfield,
-)
-from jaxterrain.walker.robots import ROBOT_FIELDS, get as get_robot
+from jaxterrain.walker.model import build_model, metres_to_hfield
+from jaxterrain.walker.randomisation import is_active
+from jaxterrain.walker.robots import get as get_robot
 from jaxterrain.walker.tiles import Tile, TileBank
+from jaxterrain.walker.config import (BACKENDS, OBSERVATIONS, SCAN_FIELDS, WalkerConfig, check_config, flat_terrain,
+                                     min_terrain_side, observation_fields, observation_label, resolve_config,
+                                     with_observation)
+from jaxterrain.walker.surface import sample_heights, state_key, yaw
 
-__all__ = ["BACKENDS", "OBSERVATIONS", "SCAN_FIELDS", "PARK_HEIGHT", "WalkerConfig", "with_observation",
-           "observation_fields", "observation_label", "WalkerState", "resolve_config", "min_terrain_side",
-           "sample_heights", "WalkerEnv", "flat_terrain"]
+__all__ = ["PARK_HEIGHT", "WalkerState", "WalkerEnv"]
 
-BACKENDS = ("jax", "warp")
-OBSERVATIONS = ("blind", "perceptive")
-"""The observation sets: ``blind`` (torso height, orientation, joint angles and velocities: the paper's) and
-``perceptive`` (the same, then a height scan: terrain heights minus torso z on a grid in the heading frame)."""
-SCAN_FIELDS = ("observation", "scan_x", "scan_y", "scan_points")
-"""The :class:`WalkerConfig` fields that define what a policy observes: a policy walks only an env with the same
-values (:func:`observation_fields`); ``scan_noise`` changes the values, not their meaning, and may differ."""
 PARK_HEIGHT = 100.0  # m above the terrain's top where WalkerEnv.park puts walkers whose outcome is recorded
 # MuJoCo Warp overflow bits (mujoco_warp OverflowType) that mean dropped contacts or constraints: the step is invalid.
 _WARP_DROPPED = (1 << 0) | (1 << 1) | (1 << 2) | (1 << 3)  # NEFC, NJMAX_NNZ, BROADPHASE, NARROWPHASE
-
-
-class WalkerConfig(NamedTuple):
-    """Static configuration of :class:`WalkerEnv` (hashable; lengths in metres, times in env steps). ``robot`` names
-    a :class:`~jaxterrain.walker.robots.RobotSpec`; the fields of :data:`~jaxterrain.walker.robots.ROBOT_FIELDS`
-    left None take its defaults (:func:`resolve_config`; ``WalkerEnv.config`` holds the resolved values)."""
-
-    terrain_shape: tuple[int, int] = (256, 256)  # (nrow = y samples, ncol = x samples)
-    scale: TerrainScale = TerrainScale()
-    solver: SolverOptions = SOLVER_SOUND
-    timestep: float = 0.003  # physics step, s
-    n_frames: int = 5  # physics steps per env step
-    episode_length: int = 1000  # env steps (15 s)
-    # track
-    start_margin: Optional[float] = None  # x_start = -radius_x + start_margin (humanoid: 0.5; the ant's legs: 1.0)
-    goal_margin: Optional[float] = None  # x_goal = radius_x - goal_margin (humanoid: 0.5; the ant's reach: 1.3)
-    side_margin: Optional[float] = None  # fall when |y| > radius_y - side_margin (humanoid: 0.3; the ant: 1.3)
-    start_spread: float = 0.0  # start y uniform in [-start_spread, start_spread] m (0: y = 0, no key drawn)
-    spawn_clearance: float = 0.01  # lowest foot this far above the highest terrain under the start
-    # termination
-    healthy_z_range: Optional[tuple[float, float]] = None  # torso z minus terrain height under it (humanoid: 1, 2)
-    max_qvel: float = 500.0  # |qvel| beyond this = exploding physics
-    # reset noise (uniform, +-)
-    joint_noise: Optional[float] = None  # rad on the hinge joints (humanoid: 0.1)
-    qvel_noise: Optional[float] = None  # rad/s on the hinge joint velocities (humanoid: 0.1)
-    # reward
-    forward_reward_weight: Optional[float] = None  # humanoid: 1.25
-    healthy_reward: Optional[float] = None  # humanoid: 5.0
-    ctrl_cost_weight: Optional[float] = None  # humanoid: 0.1
-    # the observation set (OBSERVATIONS): "blind" (the paper's) or "perceptive" (+ a height scan on the grid below)
-    observation: str = "blind"
-    scan_x: Optional[tuple[float, float]] = None  # m along the heading, torso at 0 (humanoid: -0.4, 1.2)
-    scan_y: Optional[tuple[float, float]] = None  # m to the left of the heading (humanoid: -0.4, 0.4)
-    scan_points: Optional[tuple[int, int]] = None  # grid points (along x, along y) (humanoid: 17, 9: 0.1 m apart)
-    scan_noise: float = 0.0  # m: std of Gaussian noise on every scanned height (0: exact heights)
-    # physics backend and terrain layout (see the module docstring)
-    backend: str = "jax"  # "jax" (MJX-JAX) | "warp" (MJX-Warp, needs tiles >= 1 and warp-lang + mujoco-warp)
-    tiles: int = 0  # 0: terrain = one [H, W] array per env; T >= 1: terrain = a Tile of a bank of T tiles
-    warp_worlds: int = 8192  # warp: contacts are allocated for this many envs stepped together (all vmap axes)
-    warp_contacts: Optional[int] = None  # warp: contacts per env (humanoid: 8, 2 feet x up to 4 hfield contacts)
-    warp_njmax: Optional[int] = None  # warp: constraint rows per env (humanoid: 64; 8 contacts x 4 + 17 limits = 49)
-    # the body (jaxterrain.walker.robots): every field above that is None takes this robot's default
-    robot: str = "humanoid"
 
 
 class WalkerState(NamedTuple):
@@ -157,7 +83,9 @@ class WalkerState(NamedTuple):
     episode ended this step; truncation = 1 when it ended at the goal or the time limit; failed = 1 for invalid
     physics or a non-finite action). steps: [] int32 env steps since reset. x_start: [] float32 torso x at reset.
     distance: [] float32 normalised distance in [0, 1]. metrics: dict of [] float32 (forward_reward,
-    reward_alive, reward_quadctrl, x_velocity, torso_height, distance).
+    reward_alive, reward_quadctrl, x_velocity, torso_height, distance). random: this env's physics randomisation
+    (:class:`~jaxterrain.walker.randomisation.Draws`, drawn at reset), or None when ``config.randomisation`` is off
+    (then the state has the leaves it always had: checkpoints of unrandomised runs read the same).
     """
 
     data: Any
@@ -170,194 +98,7 @@ class WalkerState(NamedTuple):
     x_start: jax.Array
     distance: jax.Array
     metrics: dict
-
-
-def resolve_config(config: WalkerConfig) -> WalkerConfig:
-    """``config`` with every :data:`~jaxterrain.walker.robots.ROBOT_FIELDS` field that is None set to its robot's
-    default, after checking every field on the host (no model is built): ``ValueError`` naming the field and what
-    it allows (an unknown robot, a terrain smaller than 4 x 4, a non-positive step count, a NaN length, ...). The
-    checks that need the robot's model (the track length, ``start_spread`` against the map's width) are
-    :class:`WalkerEnv`'s."""
-    if not isinstance(config, WalkerConfig):
-        raise ValueError(f"config must be a walker.WalkerConfig; got {type(config).__name__}")
-    robot = get_robot(config.robot)
-    config = config._replace(**{f: robot.default(f) for f in ROBOT_FIELDS if getattr(config, f) is None})
-    _check_config(config)
-    return config
-
-
-def with_observation(config: WalkerConfig, observation: str) -> WalkerConfig:
-    """``config`` with the observation set ``observation`` (one of :data:`OBSERVATIONS`); the scan grid stays as
-    set (None: the robot's default, :func:`resolve_config`). ``ValueError`` naming ``observation`` otherwise."""
-    if not isinstance(observation, str) or observation not in OBSERVATIONS:
-        raise ValueError(f"observation must be one of {', '.join(OBSERVATIONS)}, got {observation!r}")
-    return config._replace(observation=observation)
-
-
-def observation_fields(config) -> dict:
-    """What a walker observes, as ``{field: value}`` of :data:`SCAN_FIELDS`, from a
-    :class:`WalkerConfig` or a policy's recorded ``walker_config`` (a JSON dict). Blind sets carry no scan fields
-    (the grid means nothing to them); perceptive ones the resolved grid as tuples. A dict without ``observation``
-    (every policy saved before observation sets) is blind unless it says ``height_scan: true`` (the field's old
-    name). Compare two with ``==``: a policy walks only an env of the same fields (the noise may differ)."""
-    if isinstance(config, WalkerConfig):
-        c = resolve_config(config)
-        get = lambda f: getattr(c, f)  # noqa: E731
-        robot_name = c.robot
-    elif isinstance(config, dict):
-        robot_name = config.get("robot") or "humanoid"
-        get = config.get
-    else:
-        raise ValueError(f"config must be a walker.WalkerConfig or a walker_config dict; got {type(config).__name__}")
-    observation = get("observation")
-    if isinstance(config, dict) and observation is None:
-        observation = "perceptive" if get("height_scan") else "blind"
-    if observation not in OBSERVATIONS:
-        raise ValueError(f"walker_config.observation must be one of {', '.join(OBSERVATIONS)}, got {observation!r}")
-    if observation == "blind":
-        return {"observation": "blind"}
-    robot = get_robot(robot_name)
-    out = {"observation": observation}
-    for f in ("scan_x", "scan_y", "scan_points"):
-        v = get(f)
-        out[f] = tuple(robot.default(f) if v is None else v)
-    return out
-
-
-def observation_label(fields: dict) -> str:
-    """One line for :func:`observation_fields`' dict: ``blind`` or ``perceptive (17 x 9 heights, x -0.4..1.2 m,
-    y -0.4..0.4 m)``."""
-    if fields.get("observation") != "perceptive":
-        return str(fields.get("observation"))
-    (x0, x1), (y0, y1), (nx, ny) = fields["scan_x"], fields["scan_y"], fields["scan_points"]
-    return f"perceptive ({nx} x {ny} heights, x {x0:g}..{x1:g} m, y {y0:g}..{y1:g} m)"
-
-
-def min_terrain_side(config: WalkerConfig = WalkerConfig()) -> int:
-    """The fewest samples per side of a square terrain that :class:`WalkerEnv` takes for ``config``'s robot at
-    ``config.scale`` (its ``terrain_shape`` is ignored): a track longer than 0.5 m between ``start_margin`` and
-    ``goal_margin``, and more than 0.2 m inside the two ``side_margin`` s (plus ``start_spread`` and 0.5 m when a
-    spread is set). The humanoid at 4 cm: 39; the ant (1.0 / 1.3 / 1.3 m margins): 77."""
-    c = resolve_config(config._replace(terrain_shape=(4, 4)))
-    for n in range(4, 1 << 16):
-        radius_x, radius_y = hfield_size((n, n), c.scale)[:2]
-        track, width = 2 * radius_x - c.start_margin - c.goal_margin, radius_y - c.side_margin
-        if track > 0.5 and width > 0.2 and (c.start_spread == 0 or c.start_spread <= width - 0.5):
-            return n
-    raise ValueError(f"no terrain up to {1 << 16} samples a side fits the margins of {c}")
-
-
-def _real(name: str, value, lo: float | None = None, lo_open: bool = False) -> float:
-    """``value`` as a finite float (>= ``lo``, or > it when ``lo_open``), or ``ValueError`` naming ``name``."""
-    bound = "" if lo is None else f" {'>' if lo_open else '>='} {lo:g}"
-    try:
-        if isinstance(value, (bool, str, bytes)):
-            raise TypeError
-        v = float(value)
-    except (TypeError, ValueError):
-        raise ValueError(f"{name} must be a finite number{bound}, got {value!r}") from None
-    if not np.isfinite(v) or (lo is not None and (v <= lo if lo_open else v < lo)):
-        raise ValueError(f"{name} must be a finite number{bound}, got {value!r}")
-    return v
-
-
-def _int(name: str, value, lo: int) -> int:
-    if not isinstance(value, (int, np.integer)) or isinstance(value, (bool, np.bool_)) or value < lo:
-        raise ValueError(f"{name} must be an integer >= {lo}, got {value!r}")
-    return int(value)
-
-
-def _pair(name: str, value) -> tuple:
-    try:
-        if isinstance(value, (str, bytes)) or len(value) != 2:
-            raise TypeError
-    except TypeError:
-        raise ValueError(f"{name} must be a pair (low, high), got {value!r}") from None
-    return tuple(value)
-
-
-def _check_config(c: WalkerConfig) -> None:
-    check_terrain_shape(c.terrain_shape)
-    try:
-        validate_scale(c.scale)
-    except ValueError as err:
-        raise ValueError(f"scale.cell_size and scale.height must be > 0: {err}") from None
-    if not isinstance(c.solver, SolverOptions):
-        raise ValueError(f"solver must be a walker.SolverOptions (see walker.parse_solver), got {c.solver!r}")
-    _real("timestep", c.timestep, 0.0, lo_open=True)
-    _int("n_frames", c.n_frames, 1)
-    _int("episode_length", c.episode_length, 1)
-    for name in ("start_margin", "goal_margin", "side_margin", "spawn_clearance"):
-        _real(name, getattr(c, name), 0.0)
-    _real("max_qvel", c.max_qvel, 0.0, lo_open=True)
-    for name in ("forward_reward_weight", "healthy_reward", "ctrl_cost_weight"):
-        _real(name, getattr(c, name))
-    lo, hi = _pair("healthy_z_range", c.healthy_z_range)
-    if not _real("healthy_z_range", lo) < _real("healthy_z_range", hi):
-        raise ValueError(f"healthy_z_range must be (low, high) with low < high, got {c.healthy_z_range}")
-    for name in ("joint_noise", "qvel_noise"):
-        _real(name, getattr(c, name), 0.0)
-    _real("start_spread (metres)", c.start_spread, 0.0)
-    if not isinstance(c.observation, str) or c.observation not in OBSERVATIONS:
-        raise ValueError(f"observation must be one of {', '.join(OBSERVATIONS)}, got {c.observation!r}")
-    for name in ("scan_x", "scan_y"):
-        lo, hi = _pair(name, getattr(c, name))
-        if not _real(name, lo) <= _real(name, hi):
-            raise ValueError(f"{name} must be (low, high) metres with low <= high, got {getattr(c, name)}")
-    points = _pair("scan_points", c.scan_points)
-    if not all(isinstance(p, (int, np.integer)) and not isinstance(p, bool) for p in points) or min(points) < 1:
-        raise ValueError(f"scan_points must be >= 1 each, got {c.scan_points}")
-    _real("scan_noise (metres)", c.scan_noise, 0.0)
-    if c.backend not in BACKENDS:
-        raise ValueError(f"backend must be one of {BACKENDS}, got {c.backend!r}")
-    _int("tiles", c.tiles, 0)
-    if c.backend == "warp" and c.tiles < 1:
-        raise ValueError("backend='warp' needs tiles >= 1: MuJoCo Warp shares one heightfield across all envs, so "
-                         "per-env terrains come from a bank of tiles (WalkerConfig(tiles=T), env.make_bank)")
-    for name in ("warp_worlds", "warp_contacts", "warp_njmax"):
-        _int(name, getattr(c, name), 1)
-    h, w = check_terrain_shape(c.terrain_shape)
-    rows, cols = _tiles.grid(max(c.tiles, 1))
-    if c.tiles and rows * h * cols * w >= 2 ** 31:
-        raise ValueError(f"{c.tiles} tiles of {h} x {w} exceed MuJoCo's int32 heightfield size")
-
-
-def sample_heights(terrain: jax.Array, x: jax.Array, y: jax.Array, radius_x: float, radius_y: float,
-                   max_height: float) -> jax.Array:
-    """Bilinear terrain height (metres) at world points ``x, y`` (same shape) on a ``[H, W]`` terrain.
-
-    Uses MuJoCo's hfield grid (column j at x = -radius_x + j * 2 radius_x / (W - 1), row i likewise in y);
-    points outside are clamped to the border. Sample values are clipped to [0, max_height] like the physics.
-    """
-    if len(jnp.shape(terrain)) != 2:
-        raise ValueError(f"terrain must have shape [H, W]; got shape {tuple(jnp.shape(terrain))}")
-    h, w = terrain.shape
-    u = jnp.clip((x + radius_x) / (2.0 * radius_x) * (w - 1), 0.0, w - 1.0)
-    v = jnp.clip((y + radius_y) / (2.0 * radius_y) * (h - 1), 0.0, h - 1.0)
-    j0 = jnp.clip(jnp.floor(u).astype(jnp.int32), 0, w - 2)
-    i0 = jnp.clip(jnp.floor(v).astype(jnp.int32), 0, h - 2)
-    fu, fv = u - j0, v - i0
-    t = lambda i, j: jnp.clip(terrain[i, j], 0.0, max_height)  # noqa: E731
-    top = (1 - fu) * t(i0, j0) + fu * t(i0, j0 + 1)
-    bot = (1 - fu) * t(i0 + 1, j0) + fu * t(i0 + 1, j0 + 1)
-    return (1 - fv) * top + fv * bot
-
-
-def _state_key(qpos, qvel, time) -> jax.Array:
-    """A PRNG key that is a hash of the physics state (``qpos``, ``qvel``, ``time``): the scan noise's."""
-    time = jnp.asarray(time, jnp.float32)
-    bits = jax.lax.bitcast_convert_type(jnp.concatenate([qpos.astype(jnp.float32), qvel.astype(jnp.float32),
-                                                         jnp.reshape(time, (1,))])
-                                        .astype(jnp.float32), jnp.uint32)
-    mult = (jnp.arange(bits.shape[0], dtype=jnp.uint32) * jnp.uint32(2654435761)) | jnp.uint32(1)
-    h = jnp.sum(bits * mult, dtype=jnp.uint32) ^ jnp.sum((bits >> 16) * (mult + jnp.uint32(0x9E3779B9)),
-                                                         dtype=jnp.uint32)
-    return jax.random.fold_in(jax.random.PRNGKey(0x5CA7), h)
-
-
-def _yaw(quat: jax.Array) -> jax.Array:
-    w, x, y, z = quat[0], quat[1], quat[2], quat[3]
-    return jnp.arctan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z))
+    random: Any = None
 
 
 class WalkerEnv:
@@ -375,7 +116,7 @@ class WalkerEnv:
 
     def __init__(self, config: WalkerConfig = WalkerConfig()):
         config = resolve_config(config)
-        _check_config(config)
+        check_config(config)
         self.config = config
         self.robot = get_robot(config.robot)
         h, w = config.terrain_shape
@@ -430,6 +171,12 @@ class WalkerEnv:
             raise ValueError(f"robot {self.robot.name!r}: every joint after the free root must be a hinge")
         self._feet = np.array([mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_GEOM, n) for n in self.robot.foot_geoms])
         self._foot_radius = np.asarray(m.geom_size[self._feet, 0], np.float32)
+        self._random = is_active(config.randomisation)  # off: no draws, no state leaves, the shared model
+        self._torso, self._torso_mass = int(torso), float(m.body_mass[torso])
+        added = config.randomisation.added_mass
+        if added is not None and self._torso_mass + added[0] <= 0:
+            raise ValueError(f"randomisation.added_mass must be (low, high) kg with low > -{self._torso_mass:.3g} (the "
+                             f"{self.robot.name}'s torso mass), got {added}")
         self.action_size = int(m.nu)
         self.observation_size = 1 + 4 + (m.nq - 7) + m.nv
         if config.observation == "perceptive":
@@ -595,6 +342,7 @@ class WalkerEnv:
         ``config.start_spread > 0``)."""
         c = self.config
         key_q, key_v = jax.random.split(key)
+        key_r = key
         patch_y = self._patch[1]
         if c.start_spread > 0:  # a stream of its own: the joint noise stays that of the same key without a spread
             y0 = jax.random.uniform(jax.random.fold_in(key, 1), (), minval=-c.start_spread, maxval=c.start_spread)
@@ -619,9 +367,15 @@ class WalkerEnv:
         zero = jnp.zeros((), jnp.float32)
         metrics = {"forward_reward": zero, "reward_alive": zero, "reward_quadctrl": zero, "x_velocity": zero,
                    "torso_height": qpos[2] - heights(qpos[0] - ox, qpos[1] - oy), "distance": zero}
-        return WalkerState(data=data, obs=self._obs(data, terrain), reward=zero, done=zero,
-                           truncation=zero, failed=zero, steps=jnp.zeros((), jnp.int32),
-                           x_start=jnp.asarray(qpos[0], jnp.float32), distance=zero, metrics=metrics)
+        steps, obs, random = jnp.zeros((), jnp.int32), self._obs(data, terrain), None
+        if self._random:  # a stream of its own (fold_in 2): the start pose of a key is that without randomisation
+            r = c.randomisation
+            random = _rnd.draw(jax.random.fold_in(key_r, 2), r, self.mj_model.nbody, self._torso, self._torso_mass,
+                               self.action_size)
+            obs = _rnd.noisy_obs(obs, random, steps, r)
+        return WalkerState(data=data, obs=obs, reward=zero, done=zero,
+                           truncation=zero, failed=zero, steps=steps,
+                           x_start=jnp.asarray(qpos[0], jnp.float32), distance=zero, metrics=metrics, random=random)
 
     def step(self, state: WalkerState, action: jax.Array, terrain) -> WalkerState:
         """Advance ``n_frames`` physics steps with ``action`` [A] in [-1, 1] (clipped) on ``terrain`` (the one
@@ -629,6 +383,11 @@ class WalkerEnv:
         c = self.config
         m = self.model(terrain)
         ctrl, action_ok = self.controls(action)
+        random = state.random
+        if self._random:  # the action of `delay` steps ago; this env's friction, masses and motors
+            given, random = _rnd.delayed_action(random, jnp.nan_to_num(jnp.asarray(action, jnp.float32)))
+            ctrl = self.controls(given)[0]
+            m = _rnd.randomised_model(m, random, c.randomisation)
         d0 = state.data
         d = d0.replace(ctrl=ctrl)
         warp = self._data0 is not None
@@ -641,8 +400,10 @@ class WalkerEnv:
             physics_ok = physics_ok & jnp.all((d._impl.overflow & _WARP_DROPPED) == 0)
         invalid = ~(physics_ok & action_ok)
         d = d.where(invalid, d0)  # mjx.Data.where keeps MJX-Warp's shared contact buffers shared
-
         steps = state.steps + 1
+        if self._random and c.randomisation.push_every:  # a kick after this step's physics
+            d = d.replace(qvel=_rnd.push(d.qvel, random, steps, c.randomisation))
+
         done, truncation, distance, x_velocity, torso_height = self.outcome(d0.qpos, d.qpos, steps, state.x_start,
                                                                              invalid, terrain)
         forward_reward = c.forward_reward_weight * x_velocity
@@ -652,9 +413,12 @@ class WalkerEnv:
         metrics = {"forward_reward": f32(jnp.where(invalid, 0.0, forward_reward)), "reward_alive": f32(
             jnp.where(invalid, 0.0, c.healthy_reward)), "reward_quadctrl": f32(-ctrl_cost),
                    "x_velocity": f32(x_velocity), "torso_height": f32(torso_height), "distance": f32(distance)}
-        return WalkerState(data=d, obs=self._obs(d, terrain), reward=f32(reward), done=f32(done),
+        obs = self._obs(d, terrain)
+        if self._random:
+            obs = _rnd.noisy_obs(obs, random, steps, c.randomisation)
+        return WalkerState(data=d, obs=obs, reward=f32(reward), done=f32(done),
                            truncation=f32(truncation), failed=f32(invalid), steps=steps, x_start=state.x_start,
-                           distance=f32(distance), metrics=metrics)
+                           distance=f32(distance), metrics=metrics, random=random)
 
     # ---- the pieces of a step that do not touch the physics (shared with the MuJoCo C engine, walker.mujoco_c) --
     def controls(self, action: jax.Array) -> tuple[jax.Array, jax.Array]:
@@ -705,13 +469,13 @@ class WalkerEnv:
         z = qpos[2] - heights(x, y)
         parts = [z[None], qpos[3:], qvel]
         if self.config.observation == "perceptive":
-            yaw = _yaw(qpos[3:7])
-            cy, sy = jnp.cos(yaw), jnp.sin(yaw)
+            heading = yaw(qpos[3:7])
+            cy, sy = jnp.cos(heading), jnp.sin(heading)
             px = x + cy * self._scan[0] - sy * self._scan[1]
             py = y + sy * self._scan[0] + cy * self._scan[1]
             scan = heights(px, py) - qpos[2]
             if self.config.scan_noise > 0:
-                scan = scan + self.config.scan_noise * jax.random.normal(_state_key(qpos, qvel, time), scan.shape,
+                scan = scan + self.config.scan_noise * jax.random.normal(state_key(qpos, qvel, time), scan.shape,
                                                                          scan.dtype)
             parts.append(scan)
         obs = jnp.concatenate(parts).astype(jnp.float32)
@@ -719,13 +483,3 @@ class WalkerEnv:
 
     def _obs(self, data: mjx.Data, terrain) -> jax.Array:
         return self.observe(data.qpos, data.qvel, terrain, data.time)
-
-
-def flat_terrain(config: WalkerConfig = WalkerConfig(), height: float = 0.0) -> jax.Array:
-    """A flat ``config.terrain_shape`` float32 terrain at ``height`` metres (a finite number)."""
-    if not isinstance(config, WalkerConfig):
-        raise ValueError(f"config must be a walker.WalkerConfig; got {type(config).__name__}")
-    check_terrain_shape(config.terrain_shape)
-    if not isinstance(height, jax.core.Tracer):
-        _real("height", height)
-    return jnp.full(tuple(config.terrain_shape), height, jnp.float32)

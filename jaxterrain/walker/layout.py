@@ -18,7 +18,8 @@ import jax
 import jax.numpy as jnp
 
 from jaxterrain.walker import tiles
-from jaxterrain.walker.env import WalkerConfig, WalkerEnv
+from jaxterrain.walker.config import WalkerConfig
+from jaxterrain.walker.env import WalkerEnv
 from jaxterrain.walker.tiles import TILE_AXES, Tile
 
 __all__ = ["BACKEND_CHOICES", "make_env", "is_tiled", "env_for", "sized_env", "world", "terrain_batch",

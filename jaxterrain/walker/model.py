@@ -10,7 +10,7 @@ The XML is read at runtime from the robot's spec (the shipped ones: the installe
   the world origin, so the surface height at a sample is ``hfield_data * elevation_z`` metres;
 - only the foot spheres collide with the terrain (brax's humanoid and ant already give every other geom
   ``contype = conaffinity = 0``; we check it), so there are no cylinder/ellipsoid-hfield pairs (MJX has none);
-- solver options come from the :class:`~jaxterrain.walker.env.WalkerConfig` (see ``SOLVER_SOUND``, the
+- solver options come from the :class:`~jaxterrain.walker.config.WalkerConfig` (see ``SOLVER_SOUND``, the
   default, ``SOLVER_FAST`` and ``SOLVER_XML``).
 
 MuJoCo's heightfield layout (checked against ``mujoco/mjx/_src/mesh.py`` and by tests): ``hfield_data`` is

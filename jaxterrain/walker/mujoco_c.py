@@ -41,6 +41,7 @@ import numpy as np
 
 from jaxterrain.walker.env import WalkerEnv
 from jaxterrain.walker.model import HFIELD_NAME, metres_to_hfield
+from jaxterrain.walker.randomisation import is_active
 
 __all__ = ["Starts", "Walks", "CEngine", "cpu_device"]
 
@@ -81,6 +82,9 @@ class CEngine:
         if env.tiles:
             raise ValueError(f"the MuJoCo C engine walks one terrain per model: build the env with tiles=0 "
                              f"(got config.tiles={env.tiles})")
+        if is_active(env.config.randomisation):
+            raise ValueError("the MuJoCo C engine walks the nominal physics: build the env without "
+                             "config.randomisation (walker.Randomisation())")
         self.env = env
         self.config = env.config
         self._hfield = mujoco.mj_name2id(env.mj_model, mujoco.mjtObj.mjOBJ_HFIELD, HFIELD_NAME)

@@ -115,7 +115,7 @@ def unpack(data: jax.Array, tiles: int, tile_shape: tuple[int, int]) -> jax.Arra
 def sample_tile_heights(data: jax.Array, row, col, x: jax.Array, y: jax.Array, tile_shape: tuple[int, int],
                         radius_x: float, radius_y: float, elevation_z: float) -> jax.Array:
     """Bilinear height in metres at tile-local points ``x, y`` on the tile at grid ``(row, col)`` of the heightfield
-    ``data`` (values in [0, 1]); the same grid and clamping as :func:`jaxterrain.walker.env.sample_heights` on that
+    ``data`` (values in [0, 1]); the same grid and clamping as :func:`jaxterrain.walker.surface.sample_heights` on that
     tile alone (points outside are clamped to the tile's border)."""
     h, w = tile_shape
     u = jnp.clip((x + radius_x) / (2.0 * radius_x) * (w - 1), 0.0, w - 1.0)

@@ -260,7 +260,7 @@ def test_overlapped_walker_harness_makes_the_plain_choices(backend):
 
 
 # ---------------------------------------------------------------------------------------------------------------
-# experiments learn --backend
+# The walker of a learn run (the command: tests/integration/test_learn_command.py)
 # ---------------------------------------------------------------------------------------------------------------
 CPPN = "docs/results/exp1b_gpu_sound_cppn_archive.npz"
 
@@ -280,60 +280,6 @@ def tiny_archive(tmp_path_factory):
     tiny = arch._replace(source=np.where(keep, arch.source, -1).astype(np.int32),
                          fitness=np.where(keep, arch.fitness, -np.inf).astype(np.float32), heightmaps=maps)
     return str(A.save(tmp_path_factory.mktemp("arch") / "four.npz", tiny))
-
-
-def cli(*argv):
-    from experiments.__main__ import main
-
-    return main(list(argv))
-
-
-def test_learn_backend_builds_the_walker_and_refuses_a_missing_warp(tmp_path, tiny_archive, monkeypatch, capsys):
-    """--backend jax (also a config saved without the key): the classic walker, with --overlap one tile per trial;
-    warp: one tile per trial and contact buffers for trials x max(num_envs, attempts) envs (num_envs + attempts with
-    --overlap); warp where it does not import: one line, exit 2, nothing left behind."""
-    from experiments import learn
-
-    cfg = {**learn.PRESETS["smoke"], "archive": tiny_archive, "seed": 0}
-    assert validated(cfg)[3].config.tiles == 0 and learn.PRESETS["smoke"]["backend"] == "auto"
-    assert layout.resolve_backend("auto") == "jax"  # on a CPU; "warp" on a GPU where MuJoCo Warp imports
-    monkeypatch.setattr(jax, "default_backend", lambda: "gpu")
-    assert layout.resolve_backend("auto") == ("warp" if WARP_OK else "jax") and layout.resolve_backend("jax") == "jax"
-    monkeypatch.undo()
-    old = {k: v for k, v in cfg.items() if k != "backend"}
-    assert validated(old)[3].config == validated(cfg)[3].config
-    config, _, _, env = validated({**cfg, "overlap": True, "trials": 3})  # MJX on tiles for the riding walks
-    assert config.overlap and (env.config.backend, env.tiles) == ("jax", 3)
-    if WARP_OK:
-        env = validated({**cfg, "backend": "warp", "trials": 3})[3]
-        assert (env.config.backend, env.tiles, env.config.warp_worlds) == ("warp", 3, 3 * 4)  # 4 envs > 2 walks
-        env = validated({**cfg, "backend": "warp", "trials": 3, "overlap": True})[3]
-        assert env.config.warp_worlds == 3 * (4 + 2)  # the walks step with the PPO envs
-    import jaxterrain.walker as walker_pkg
-
-    monkeypatch.setattr(walker_pkg.tiles, "warp_available", lambda: (False, "no warp here"))
-    out = tmp_path / "run"
-    assert cli("learn", "--preset", "smoke", "--archive", tiny_archive, "--backend", "warp", "--out", str(out)) == 2
-    err = capsys.readouterr().err.strip().splitlines()
-    assert len(err) == 1 and "--backend warp: no warp here" in err[0] and not out.exists()
-
-
-@pytest.mark.slow
-@pytest.mark.skipif(not WARP_OK, reason=WARP_WHY or "warp available")
-def test_learn_smoke_on_warp_end_to_end(tmp_path, tiny_archive):
-    """learn --preset smoke --backend warp: 2 trials of 4 chunks on tiles, the policy walked, config.json keeps
-    the backend and --resume reports the finished run."""
-    import json
-
-    out = tmp_path / "learn"
-    assert cli("learn", "--preset", "smoke", "--archive", tiny_archive, "--backend", "warp", "--out", str(out)) == 0
-    assert json.loads((out / "config.json").read_text())["backend"] == "warp"
-    summary = json.loads((out / "summary.json").read_text())
-    assert summary["trials"] == 2 and summary["epochs_max"] <= 4
-    evals = np.array([float(r.split(",")[9]) for r in (out / "history.csv").read_text().splitlines()[1:]])
-    assert np.all((evals >= 0) & (evals <= 1)) and evals.max() > 0
-    assert cli("learn", "--resume", str(out)) == 0
-    assert json.loads((out / "config.json").read_text())["backend"] == "warp"
 
 
 def test_tile_layout_with_headings_puts_each_turned_terrain_on_its_own_tile():
@@ -364,14 +310,14 @@ def test_learn_takes_the_evaluation_protocol_from_the_archive(tmp_path, tiny_arc
     """``attempts`` / ``best`` / ``headings`` left None (the paper and gpu-short presets) come from the archive's
     config, so the GP's prior and its observations share a protocol; given ones win; Warp gets a tile per trial and
     heading. A protocol that does not divide is one line naming the field."""
-    from experiments import learn
     from jaxterrain import qd as A
+    from jaxterrain.curriculum.presets import FLAT_PRESETS
 
     arch = A.load(tiny_archive)
     four = str(A.save(tmp_path / "four_headings.npz", arch._replace(config=arch.config._replace(
         attempts=80, best=5, headings=4))))
-    paper = {**learn.PRESETS["paper"], "archive": tiny_archive, "seed": 0}
-    assert learn.PRESETS["paper"]["headings"] is None and learn.PRESETS["gpu-short"]["attempts"] is None
+    paper = {**FLAT_PRESETS["paper"], "archive": tiny_archive, "seed": 0}
+    assert FLAT_PRESETS["paper"]["headings"] is None and FLAT_PRESETS["gpu-short"]["attempts"] is None
     assert validated(paper)[0].protocol == (20, 5, 1, 0.0, "mean")  # an archive saved before headings existed
     assert validated({**paper, "archive": four})[0].protocol == (80, 5, 4, 0.0, "mean")
     assert validated({**paper, "archive": four, "headings": 1, "attempts": 20})[0].protocol[:3] == (20, 5, 1)

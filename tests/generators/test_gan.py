@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import argparse
 import json
 
 import jax
@@ -176,42 +175,39 @@ def test_matplotlib_dem_patches():
 
 
 # ---------------------------------------------------------------------------------------------------------------
-# Training command
+# Training run (gan_train.train_gan; the train-gan command: tests/integration/test_stage_commands.py)
 # ---------------------------------------------------------------------------------------------------------------
+def tiny_run(steps: int):
+    """A tiny architecture and batch, so the test compiles fast; a checkpoint, a log line and a grid every step."""
+    from jaxterrain.generators import gan_train
+
+    return gan_train.GanRun(G.GanConfig(size=32, channels=(16, 8, 4), disc_channels=(8, 16)), steps=steps,
+                            batch_size=2, sample_every=1, ckpt_every=1, log_every=1, quality_samples=0)
 
 
-def _args(out, steps, resume=False, extra=()):
-    from experiments import train_gan
-
-    parser = argparse.ArgumentParser()
-    train_gan.add_arguments(parser)
-    argv = ["--preset", "smoke", "--size", "32", "--batch-size", "2", "--steps", str(steps), "--out", str(out),
-            "--ckpt-every", "1", "--sample-every", "1", "--log-every", "1", "--quality-samples", "0",
-            "--no-progress", *extra]
-    return parser.parse_args(argv + (["--resume"] if resume else []))
+@pytest.fixture(scope="module")
+def sample_tiles():
+    """matplotlib's sample DEMs, stacked for the device (train-gan's default data)."""
+    return dem.stack_tiles([z for _, z in dem.load_dems(None, min(dem.DEFAULT_SCALES))])
 
 
-def test_train_checkpoint_resume_bit_equal(tmp_path, monkeypatch):
-    from experiments import train_gan
+def test_train_checkpoint_resume_bit_equal(tmp_path, sample_tiles):
+    """``train_gan`` stopped after 1 step and resumed (to 2, then 3 steps) ends with the generator bytes, the
+    discriminator, optimiser states, step, key and metric history of an uninterrupted 3-step run."""
     from jaxterrain.runtime import driver
     from jaxterrain.generators import gan_train
 
-    # a tiny architecture so the test compiles fast; the command itself is unchanged
-    monkeypatch.setitem(train_gan.PRESETS, "smoke", dict(
-        train_gan.PRESETS["smoke"], channels=(16, 8, 4), disc_channels=(8, 16)))
-    cfg = G.GanConfig(size=32, channels=(16, 8, 4), disc_channels=(8, 16))
-    like = gan_train.init_state(jax.random.PRNGKey(0), cfg)
-    assert train_gan.main(_args(tmp_path / "a", 3)) == 0
-    assert train_gan.main(_args(tmp_path / "b", 1)) == 0
-    assert driver.restore(tmp_path / "b", like)[1] == 1
-    # --resume FOLDER (the evolve convention) continues run b; the flag with --out means the same
-    parser = argparse.ArgumentParser()
-    train_gan.add_arguments(parser)
-    assert train_gan.main(_args(tmp_path / "b", 2, resume=True)) == 0
-    # --resume FOLDER alone takes the run's settings from its config.json (only --steps changes here)
-    assert train_gan.main(parser.parse_args(["--resume", str(tmp_path / "b"), "--steps", "3", "--no-progress"])) == 0
-    saved = json.loads((tmp_path / "b" / "config.json").read_text())
-    assert saved["command"] == "train-gan" and saved["batch_size"] == 2 and saved["steps"] == 3
+    run = tiny_run(3)
+    like = gan_train.init_state(jax.random.PRNGKey(0), run.config)
+    whole = gan_train.train_gan(run, sample_tiles, tmp_path / "a", progress=False)
+    assert whole.done == 3 and whole.variables is not None and whole.quality is None
+    assert len(whole.history["d_loss"]) == 3 and whole.last_metrics["d_loss"] == whole.history["d_loss"][-1]
+    part = gan_train.train_gan(run._replace(steps=1), sample_tiles, tmp_path / "b", progress=False)
+    assert part.done == 1 and driver.restore(tmp_path / "b", like)[1] == 1
+    assert gan_train.train_gan(run._replace(steps=2), sample_tiles, tmp_path / "b", resume=True,
+                               progress=False).done == 2
+    resumed = gan_train.train_gan(run, sample_tiles, tmp_path / "b", resume=True, progress=False)
+    assert resumed.history == whole.history
     a = (tmp_path / "a" / "final" / "generator.msgpack").read_bytes()
     b = (tmp_path / "b" / "final" / "generator.msgpack").read_bytes()
     assert a == b  # bit-equal generator after resume
@@ -221,7 +217,7 @@ def test_train_checkpoint_resume_bit_equal(tmp_path, monkeypatch):
     for x, y in zip(leaves_a, leaves_b):  # bit-equal discriminator, optimiser states, step and key
         assert np.asarray(x).dtype == np.asarray(y).dtype and np.array_equal(np.asarray(x), np.asarray(y))
     assert da == db == 3 and int(sa.step) == 3 and ha == hb and len(ha["d_loss"]) == 3
-    assert meta["command"] == "train-gan" and meta["config"] == cfg.to_json()
+    assert meta["command"] == "train-gan" and meta["config"] == run.config.to_json()
     moved = [float(np.abs(np.asarray(x) - np.asarray(y)).max()) for x, y in zip(
         jax.tree_util.tree_leaves(sa.g_params), jax.tree_util.tree_leaves(like.g_params))]
     assert max(moved) > 0  # training changed the generator
@@ -237,21 +233,20 @@ def test_train_checkpoint_resume_bit_equal(tmp_path, monkeypatch):
     assert gen.render(gen.sample(jax.random.PRNGKey(0), 2)).shape == (2, 32, 32)
 
 
-def test_train_time_limit_stops_after_a_checkpoint(tmp_path, monkeypatch):
-    from experiments import common, train_gan
+def test_train_time_limit_stops_after_a_checkpoint(tmp_path, sample_tiles):
+    """A limit of 10 us: the run stops after its first chunk, with a checkpoint, no final/ folder and no
+    variables; resumed, it ends."""
     from jaxterrain.runtime import driver
     from jaxterrain.generators import gan_train
 
-    monkeypatch.setitem(train_gan.PRESETS, "smoke", dict(
-        train_gan.PRESETS["smoke"], channels=(16, 8, 4), disc_channels=(8, 16)))
-    like = gan_train.init_state(jax.random.PRNGKey(0), G.GanConfig(size=32, channels=(16, 8, 4),
-                                                                     disc_channels=(8, 16)))
-    # a limit of 0.6 ms: the run stops after its first chunk, with a checkpoint and no final/ folder
-    assert train_gan.main(_args(tmp_path / "c", 3, extra=["--time-limit", "0.00001"])) == 3  # as evolve
+    run = tiny_run(3)
+    like = gan_train.init_state(jax.random.PRNGKey(0), run.config)
+    stopped = gan_train.train_gan(run, sample_tiles, tmp_path / "c", time_limit_s=1e-5, progress=False)
+    assert stopped.done == 1 and stopped.variables is None and stopped.quality is None
     assert driver.restore(tmp_path / "c", like)[1] == 1
     assert not (tmp_path / "c" / "final").exists()
-    with pytest.raises(ValueError, match="different runs"):
-        common.resume_folder("train-gan", str(tmp_path / "c"), str(tmp_path / "d"))
+    assert gan_train.train_gan(run, sample_tiles, tmp_path / "c", resume=True, progress=False).done == 3
+    assert (tmp_path / "c" / "final" / "generator.msgpack").is_file()
 
 
 def test_wasserstein_and_quality_report(tiny_weights):

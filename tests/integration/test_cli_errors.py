@@ -33,6 +33,7 @@ def run_cli(args: list[str], cwd: Path) -> subprocess.CompletedProcess:
     (["gradient", "RANDOM.npz"], "archive RANDOM.npz"),
     (["learn", "--curriculum", "badmod:factory"], "--curriculum 'badmod:factory'"),
     (["learn", "--curriculum", "map", "--plr-capacity", "5"], "--plr-capacity"),
+    (["train-base-policy", "--randomise", "mass=0:1"], "--randomise: randomisation.mass"),
 ])
 def test_subprocess_one_line_error_before_any_compile(tmp_path, args, flag):
     (tmp_path / "FILE").write_text("not a folder\n")
@@ -190,6 +191,13 @@ CASES = [
     (["train-base-policy", "--scan-noise", "0.1"], "--scan-noise needs --observation perceptive"),
     (["train-base-policy", "--observation", "perceptive", "--scan-noise", "-1"], "--scan-noise must be a finite "
                                                                                 "number >= 0"),
+    # issue 62: physics randomisation
+    (["train-base-policy", "--randomise", "friction=0:1"], "--randomise: randomisation.friction must be (low, high) "
+                                                           "with 0 < low <= high"),
+    (["learn", "--randomise", "fiction=1"], "--randomise: unknown item 'fiction=1'"),
+    (["curriculum", "--randomise", "delay=2:1"], "--randomise: randomisation.delay must be (low, high) env steps"),
+    (["evaluate", "--randomise", "push=10"], "--randomise: item push=10: give EVERY:VELOCITY"),
+    (["evaluate", "--randomise", "legged-gym", "--videos"], "--videos draws the walks under the nominal physics"),
     (["perceptive-policy"], "give --out FOLDER or --export-assets"),
     (["perceptive-policy", "--out", "x", "--std-floor", "0"], "--std-floor must be a finite number > 0"),
     (["perceptive-policy", "--out", "x", "--robot", "dog"], "--robot: robot must be one of humanoid, ant, got 'dog'"),

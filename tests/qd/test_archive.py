@@ -385,10 +385,10 @@ def test_cppn_evolve(tmp_path):
 
 
 def test_evolve_smoke_preset_end_to_end(tmp_path):
-    """The experiment's smoke preset with the real generator, descriptors and Algorithm 1, cheap fitness."""
-    from experiments import evolve as ev
-
-    cfg = ev.preset_config("smoke")
+    """A smoke-sized run (``evolve --preset smoke``'s grid) with the real generator, descriptors and Algorithm 1,
+    cheap fitness."""
+    cfg = A.EvolveConfig(generations=4, batch_size=8, initial_population=16, bins=10, window=8, stride=2, attempts=2,
+                         best=1, checkpoint_every=2, ranges=((0.0, 0.5), (-0.02, 0.02)))
     arch = A.evolve("perlin", ("roughness", "tpi"), cfg._replace(generations=2), jax.random.key(0),
                     fitness_fn=S.ignore_needed(difficulty.slope_fitness), checkpoint_dir=tmp_path, progress=False,
                     generator_options={"size": 32})

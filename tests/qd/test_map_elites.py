@@ -21,8 +21,6 @@ class UV(NamedTuple):  # a two-leaf genome: mixing leaves of two offspring gives
     v: jax.Array
 
 
-
-
 SIZE = 8
 YY, XX = np.mgrid[0:SIZE, 0:SIZE].astype(np.float32)
 
@@ -349,12 +347,9 @@ def test_combined_generators_step_equals_separate_steps():
 def test_evolve_many_resumes_to_the_same_archives(tmp_path):
     """evolve_many: one archive per treatment, each elite in its own cell; a killed run resumes to the same
     archives (two generators, 32 x 32, a slope fitness: no walker)."""
-    from experiments import coverage
-
-    smoke = coverage.PRESETS["smoke"]
     config = A.EvolveConfig(generations=2, batch_size=4, initial_population=6, bins=4, window=8, stride=2,
                             checkpoint_every=1, store_heightmaps=False)
-    ranges = {k: tuple(v) for k, v in smoke["ranges"].items()}
+    ranges = {"tri": (0.0, 0.5), "tpi": (-0.02, 0.02), "roughness": (0.0, 1.0)}  # coverage --preset smoke's
     treatments = [A.Treatment(g, p, jax.random.key(i)) for i, (g, p) in
                   enumerate([("perlin", ("tri", "tpi")), ("perlin", ("tpi", "roughness")),
                              ("diamond_square", ("tri", "tpi"))])]
@@ -384,16 +379,3 @@ def test_evolve_many_resumes_to_the_same_archives(tmp_path):
                                       b.genomes[0] if not isinstance(b.genomes[0], tuple) else b.genomes[0][0])
         for k in a.metrics:
             np.testing.assert_array_equal(a.metrics[k], b.metrics[k])
-
-
-@pytest.mark.slow  # about 40 s on 2 CPU cores; the unbatched coverage command: tests/test_experiments.py
-def test_batched_coverage_command_writes_the_tables(tmp_path):
-    """coverage --batched (evolve_many under the command: smoke preset, two generators) writes the coverage table,
-    the batched run's checkpoint and one archive per treatment."""
-    from experiments.__main__ import main
-
-    out = tmp_path / "cov"
-    assert main(["coverage", "--preset", "smoke", "--batched", "--generators", "perlin", "diamond_square",
-                 "--generations", "1", "--out", str(out)]) == 0
-    assert "Perlin Noise" in (out / "coverage.md").read_text() and (out / "batched" / "checkpoint.npz").exists()
-    assert len(list((out / "archives").glob("*/archive.npz"))) == 6

@@ -1,4 +1,4 @@
-"""The report (jaxterrain.report, ``python -m experiments report``) and the terrain export command."""
+"""The report (jaxterrain.report); the report and export commands: tests/integration/test_stage_commands.py."""
 
 import base64
 import json
@@ -8,52 +8,15 @@ import numpy as np
 import pytest
 
 from jaxterrain.report import render
+from report_runs import make_smoke_run
 
 render.setup_gl()  # before this module imports mujoco (when it is the first to); harmless otherwise
 
 
-def _tiny_archive(bins=4, size=16, filled=(0, 5, 6, 10, 15)):
-    from jaxterrain import qd as A
-
-    cells = bins * bins
-    config = A.resolve_config(A.EvolveConfig(generations=1, batch_size=2, initial_population=2, bins=bins,
-                                             ranges=((0.0, 1.0), (0.0, 0.5))))
-    rng = np.random.default_rng(0)
-    source = np.full(cells, -1, np.int32)
-    source[list(filled)] = 0
-    fitness = np.full(cells, -np.inf, np.float32)
-    fitness[list(filled)] = np.linspace(0.9, 0.1, len(filled))
-    maps = np.zeros((cells, size, size), np.uint16)
-    maps[list(filled)] = (rng.random((len(filled), size, size)) * 65535).astype(np.uint16)
-    descriptors = np.where(source[:, None] >= 0, rng.random((cells, 2)), 0).astype(np.float32)
-    b0, b1 = np.meshgrid(np.arange(bins), np.arange(bins))
-    centroids = np.stack([(b0.ravel() + 0.5) / bins, (b1.ravel() + 0.5) / bins * 0.5], -1).astype(np.float32)
-    return A.Archive(genomes=(np.zeros((cells, 3), np.float32),), generator_names=("perlin",), source=source,
-                     fitness=fitness, descriptors=descriptors, centroids=centroids, heightmaps=maps, config=config,
-                     metrics={"coverage": np.array([10.0, 31.25], np.float32)})
-
-
 @pytest.fixture
 def smoke_run(tmp_path):
-    """A run folder as the commands write them: config.json, a CSV, a Markdown table, a PNG, an archive, a
-    checkpoint (not an archive) and a JSON file in sub-folders."""
-    from PIL import Image
-
-    from jaxterrain import qd as A
-
-    run = tmp_path / "evolve-smoke"
-    (run / "checkpoint").mkdir(parents=True)
-    (run / "config.json").write_text(json.dumps({"generator": "perlin", "bins": 4, "seed": 7}))
-    (run / "metrics.csv").write_text("generation,coverage,qd_score\n0,10,1.5\n1,31.25,2.75\n")
-    (run / "summary.md").write_text("# smoke\n\n| generator | coverage |\n|---|---|\n| perlin | 31.25 % |\n\n"
-                                    "See [the docs](https://example.org/x) and `code`.\n")
-    img = np.zeros((20, 30, 3), np.uint8)
-    img[:, :15] = (200, 30, 30)
-    Image.fromarray(img).save(run / "archive.png")
-    A.save(run / "archive.npz", _tiny_archive())
-    np.savez(run / "checkpoint" / "checkpoint.npz", x=np.arange(3))
-    (run / "checkpoint" / "state.json").write_text('{"generation": 1}')
-    return run
+    """A run folder as the commands write them (``report_runs.make_smoke_run``)."""
+    return make_smoke_run(tmp_path)
 
 
 def _write(run, out, **kw):
@@ -105,37 +68,6 @@ def test_report_says_why_renders_were_skipped(smoke_run, tmp_path, monkeypatch):
     assert page.count("No video: renders skipped") == 3  # easy, medium, hard of the archive
     md = (tmp_path / "rep" / "report.md").read_text()
     assert "Renders skipped" in md
-
-
-def test_report_command_and_export_command(smoke_run, tmp_path, capsys):
-    import trimesh
-
-    from experiments.__main__ import main
-    from jaxterrain import qd as A
-    from jaxterrain import terrain as T
-
-    assert main(["report", str(smoke_run), "--no-videos"]) == 0
-    assert (smoke_run / "report" / "report.html").is_file() and (smoke_run / "report" / "report.md").is_file()
-
-    out = tmp_path / "terrains"
-    assert main(["export", str(smoke_run / "archive.npz"), "--cells", "easy,10,hard", "--format", "obj", "stl",
-                 "png", "npy", "mjcf", "--out", str(out)]) == 0
-    names = sorted(p.name for p in out.iterdir())
-    for cell in (0, 10, 15):  # easy = highest fitness (cell 0), hard = lowest (cell 15)
-        for ext in (".obj", ".stl", ".png", ".npy", ".xml", ".hfield.bin"):
-            assert f"cell{cell:04d}_perlin{ext}" in names
-    arch = A.load(smoke_run / "archive.npz")
-    expected = arch.heightmaps[10].astype(np.float32) / 65535.0
-    np.testing.assert_allclose(T.load_npy(out / "cell0010_perlin.npy"), expected, atol=1e-6)
-    mesh = trimesh.load(out / "cell0010_perlin.obj", process=False)
-    assert len(mesh.vertices) == 16 * 16
-    np.testing.assert_allclose(mesh.vertices[:, 2], expected.ravel(), atol=1e-5)
-    rows = (out / "cells.csv").read_text().splitlines()
-    assert rows[0] == "cell,generator,fitness,roughness,tpi,file" and len(rows) == 1 + 3 * 5
-    with pytest.raises(SystemExit) as stop:  # one line naming the problem, exit status 2
-        main(["export", str(smoke_run / "archive.npz"), "--cells", "1", "--out", str(out)])
-    err = capsys.readouterr().err.strip()
-    assert stop.value.code == 2 and err == "python -m experiments export: error: --cells: cell 1 is empty"
 
 
 def test_markdown_to_html():

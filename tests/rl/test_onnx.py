@@ -15,7 +15,6 @@ import mujoco
 import numpy as np
 import pytest
 
-from experiments import __main__ as cli
 from jaxterrain import rl
 from jaxterrain.rl import networks as nets
 from jaxterrain.rl import onnx as rl_onnx
@@ -207,51 +206,8 @@ def test_a_policy_that_does_not_fit_its_walker_a_bad_batch_and_a_failed_check_wr
     assert not list(tmp_path.glob("*.onnx"))
 
 
-def test_without_the_extra_one_line_names_it(tmp_path, monkeypatch, capsys):
+def test_without_the_extra_one_line_names_it(tmp_path, monkeypatch):
     monkeypatch.setitem(sys.modules, "onnx", None)
     with pytest.raises(ImportError, match=r"^ONNX export needs the onnx extra: pip install 'jaxterrain\[onnx\]'$"):
         rl.export_onnx(POLICIES["ant"], tmp_path / "a.onnx")
-    with pytest.raises(SystemExit) as exit_:
-        cli.main(["export-policy", "--robot", "ant", "--onnx", str(tmp_path / "a.onnx")])
-    err = capsys.readouterr().err.strip()
-    assert exit_.value.code == 2 and err == ("python -m experiments export-policy: error: " + rl_onnx.MISSING_EXTRA)
     assert not (tmp_path / "a.onnx").exists()
-
-
-def test_cli_writes_a_checked_file(tmp_path, capsys):
-    out = tmp_path / "sub" / "walker.onnx"
-    assert cli.main(["export-policy", "--policy", str(POLICIES["trained"]), "--onnx", str(out)]) == 0
-    line = capsys.readouterr().out.strip()
-    assert line.startswith(f"wrote {out} (") and "humanoid, obs [batch, 45] -> action [batch, 17], dt 0.015 s" in line
-    assert "matches the JAX policy" in line
-    meta = rl.read_onnx_metadata(out)
-    assert meta["provenance"]["source"] == Path(os.path.relpath(POLICIES["trained"], out.parent)).as_posix()
-    assert cli.main(["export-policy", "--robot", "humanoid", "--onnx", str(tmp_path / "h.onnx"), "--batch", "2",
-                     "--no-verify"]) == 0
-    assert "not checked (--no-verify)" in capsys.readouterr().out
-    assert rl.read_onnx_metadata(tmp_path / "h.onnx")["verification"] is None
-
-
-@pytest.mark.parametrize("argv,message", [
-    (["--policy", "MISSING", "--onnx", "w.onnx"], "--policy 'MISSING': no such folder"),
-    (["--policy", ".", "--onnx", "w.onnx"], "--policy '.': not a policy folder (no policy.msgpack or config.json)"),
-    (["--robot", "ant", "--onnx", "w.txt"], "--onnx 'w.txt': the file name must end in .onnx"),
-    (["--robot", "ant", "--onnx", "DIR.onnx"], "--onnx 'DIR.onnx' is a folder"),
-    (["--robot", "ant", "--onnx", "FILE/w.onnx"], "--onnx 'FILE/w.onnx' lies under FILE, which is a file"),
-    (["--robot", "spider", "--onnx", "w.onnx"], "--robot: robot must be one of"),
-    (["--robot", "ant", "--onnx", "w.onnx", "--batch", "0"], "--batch must be an integer >= 1; got 0"),
-    (["--policy", "BROKEN", "--onnx", "w.onnx"], "--policy 'BROKEN': "),
-])
-def test_cli_bad_input_is_one_line_and_exit_2(tmp_path, monkeypatch, capsys, argv, message):
-    monkeypatch.chdir(tmp_path)
-    (tmp_path / "DIR.onnx").mkdir()
-    (tmp_path / "FILE").write_text("a file\n")
-    (tmp_path / "BROKEN").mkdir()
-    (tmp_path / "BROKEN" / "config.json").write_text("{not json")
-    (tmp_path / "BROKEN" / "policy.msgpack").write_bytes(b"\x00")
-    with pytest.raises(SystemExit) as exit_:
-        cli.main(["export-policy", *argv])
-    err = capsys.readouterr().err.strip()
-    assert exit_.value.code == 2 and len(err.splitlines()) == 1, err
-    assert err.startswith("python -m experiments export-policy: error: ") and message in err, err
-    assert not list(tmp_path.rglob("w.*"))

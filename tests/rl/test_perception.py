@@ -78,28 +78,29 @@ def test_an_env_of_another_observation_set_is_refused_in_one_line():
 def test_every_command_that_walks_a_policy_takes_the_observation_set():
     """learn / curriculum (``runner.start_policy``), evaluate (``load_policies``), evolve (``EvolveConfig``) and
     train-base-policy (``resolve_settings``) pick the perceptive set; a ``--policy`` of another set than
-    ``--observation`` is one line. Host only: nothing compiles."""
-    from experiments import evaluate, train_base_policy
+    ``--observation`` is one line. Host only: nothing compiles. (evaluate's and train-base-policy's own choices:
+    tests/integration/test_stage_commands.py.)"""
     from jaxterrain import qd
     from jaxterrain.curriculum import runner
 
+    from jaxterrain.curriculum import run_config
+    from jaxterrain.curriculum.presets import FLAT_PRESETS
+
+    def run(**walker):  # the smoke preset's run with these walker settings
+        return run_config.from_flat({**FLAT_PRESETS["smoke"], **walker})
+
     seeing_dir = rl.base_policy_dir("humanoid", "perceptive")
-    assert runner.start_policy({"observation": "perceptive"}).path == seeing_dir
-    assert runner.start_policy({"observation": "perceptive", "robot": "ant"}).path == rl.base_policy_dir("ant",
-                                                                                                        "perceptive")
-    assert runner.start_policy({"policy": str(seeing_dir)}).observation_size == 198  # a --policy brings its own set
-    with pytest.raises(runner.BadInput, match="^--policy .*base_policy: it observes blind, not --observation "
-                                              "perceptive$"):
-        runner.start_policy({"observation": "perceptive", "policy": str(rl.base_policy_dir())})
-    assert evaluate.load_policies([], None, "perceptive")[0].path == seeing_dir
+    assert runner.start_policy(run(observation="perceptive")).path == seeing_dir
+    assert runner.start_policy(run(observation="perceptive", robot="ant")).path == rl.base_policy_dir("ant",
+                                                                                                   "perceptive")
+    assert runner.start_policy(run(policy=str(seeing_dir))).observation_size == 198  # a policy brings its own set
+    with pytest.raises(runner.BadInput, match="^LearnConfig.walker.policy .*base_policy: it observes blind, not "
+                                              "LearnConfig.walker.observation perceptive$"):
+        runner.start_policy(run(observation="perceptive", policy=str(rl.base_policy_dir())))
     assert qd.config.config_from_dict(qd.config.config_to_dict(qd.EvolveConfig(observation="perceptive"))
                                       ).observation == "perceptive"
     with pytest.raises(ValueError, match="EvolveConfig.observation must be 'blind' or 'perceptive'"):
         qd.config.resolve_config(qd.EvolveConfig(observation="eyes"))
-    settings = train_base_policy.resolve_settings({**train_base_policy.PRESETS["smoke"], "preset": "smoke",
-                                                   "observation": "perceptive", "scan_noise": 0.02})
-    assert settings.env_config.observation == "perceptive" and settings.env_config.scan_points == (17, 9)
-    assert settings.env_config.scan_noise == pytest.approx(0.02)
 
 
 def test_the_perceptive_twin_walks_flat_ground_with_the_blind_actions():

@@ -7,6 +7,7 @@ import shutil
 import subprocess
 
 import pytest
+from pathlib import Path
 
 from jaxterrain.runtime import provenance
 
@@ -50,10 +51,10 @@ def test_git_commit_outside_a_checkout_and_without_git(monkeypatch, tmp_path):
 def test_recorded_paths_carry_no_machines_layout_and_read_back(tmp_path):
     """What a run's files record: the package's files as <jaxterrain>/..., anything else relative to the run folder;
     both read back to the same file, and an old file's absolute path reads as it is."""
-    from experiments.common import shipped
+    import jaxterrain
 
     run = tmp_path / "runs" / "learn-1"
-    asset = shipped("archives/cppn_headings.npz")
+    asset = str(Path(jaxterrain.__file__).parent / "assets" / "archives" / "cppn_headings.npz")
     assert provenance.portable_path(asset, run) == "<jaxterrain>/assets/archives/cppn_headings.npz"
     assert provenance.resolve_recorded("<jaxterrain>/assets/archives/cppn_headings.npz", run) == asset
     mine = tmp_path / "archives" / "a.npz"
@@ -74,28 +75,3 @@ def test_device_names_count_kind_and_platform():
     d = jax.devices()[0]
     assert text.startswith(f"{jax.device_count()} x ") and f"({d.platform}" in text
     assert ("CPU cores" in text) == (d.platform == "cpu")
-
-
-def test_a_run_config_records_no_absolute_path_and_reads_back(tmp_path):
-    """``config.json`` written from now on holds its paths relative to the run folder (or <jaxterrain>/...); read
-    back, they name the same files; an older config's absolute paths read as they are."""
-    import json
-
-    from experiments import common
-
-    run = tmp_path / "runs" / "learn-1"
-    run.mkdir(parents=True)
-    asset = common.shipped("archives/cppn_headings.npz")
-    mine = str(tmp_path / "mine" / "a.npz")
-    config = {"archive": asset, "policy": str(tmp_path / "p"), "archives": {"cppn": mine}, "curriculum": "map",
-              "data": None, "out": str(run)}
-    common.write_config(run, config)
-    text = (run / "config.json").read_text()
-    assert str(tmp_path) not in text and "/work/" not in text
-    saved = json.loads(text)
-    assert saved["archive"] == "<jaxterrain>/assets/archives/cppn_headings.npz" and saved["out"] == "."
-    assert saved["archives"] == {"cppn": "../../mine/a.npz"} and saved["policy"] == "../../p"
-    assert common.load_config(run) == config  # the same values as written, on this machine
-    old = {"archive": "/root/exp3/combined_archive.npz", "policy": "runs/x/policies/trial_0"}
-    (run / "config.json").write_text(json.dumps(old))
-    assert common.load_config(run) == old  # an older file: as it is

@@ -29,9 +29,9 @@ def cal():
 
 def test_every_robot_has_a_candidate_range_for_every_graded_family_inside_v2s_bounds(cal):
     graded = [f for f, fam in suite.FAMILIES_V2.items() if fam.levels > 1]
-    for robot in suite.ROBOTS:
-        assert sorted(cal.CANDIDATES[robot]) == sorted(graded)
-        for f, spec in cal.CANDIDATES[robot].items():
+    for robot, grid in [(r, g) for r in suite.ROBOTS for g in (cal.CANDIDATES, cal.REFINED)]:
+        assert sorted(grid[robot]) == sorted(graded)
+        for f, spec in grid[robot].items():
             v = cal.grid_values(spec, 20)
             assert v.shape == (20,) and np.all(np.diff(v) > 0), (robot, f)
             assert suite.FAMILIES_V2[f].lo <= v[0] and v[-1] <= suite.FAMILIES_V2[f].hi + 1e-12, (robot, f)
@@ -43,6 +43,8 @@ def test_the_candidate_terrains_are_v2s_terrains(cal):
     assert len(rows) == 1 + 3 * 2 and maps.shape == (7, 96, 96)
     for h, (f, i, v, unit, s) in zip(maps, rows):
         np.testing.assert_array_equal(h, suite.v2_terrain(f, v, s, 96))
+    _, rows = cal.build("ant", "refined", 3, 1, 96, ["boxes"])
+    np.testing.assert_allclose([r[2] for r in rows], cal.grid_values(cal.REFINED["ant"]["boxes"], 3))
     maps, rows = cal.build("humanoid", "v2", 3, 1, 96, ["boxes"])
     assert [r[2] for r in rows] == list(suite.V2_LEVELS["humanoid"]["boxes"])
 
@@ -76,6 +78,9 @@ def test_the_page_picks_measured_levels_that_pass_and_marks_what_cannot(cal, tmp
     assert calibration.check_curve(means)["ok"]
     assert not levels["rough"]["measured"] and len(levels["rough"]["values"]) == 10
     assert levels["waves"] == {"values": None, "measured": False}
+    literal = (tmp_path / "V2_LEVELS.txt").read_text()
+    assert literal.startswith('    "humanoid": {\n        "boxes": (') and "# waves: no values" in literal
+    assert "NOT MEASURED" in literal and max(map(len, literal.splitlines())) <= 120
     md = (tmp_path / "calibration_humanoid.md").read_text()
     assert md.startswith("# Held-out suite v2: calibration for the humanoid")
     assert "| boxes | m | 25 |" in md and "pass (measured grid values)" in md

@@ -115,29 +115,6 @@ def test_robots_are_registered_by_name_and_unknown_names_are_refused(monkeypatch
         robots.register_robot(robots.HUMANOID._replace(name="dog"))
 
 
-@pytest.mark.slow
-def test_train_base_policy_trains_the_ant_and_its_policy_walks_the_ant(tmp_path):
-    """``train-base-policy --robot ant`` (smoke): the policy records its robot, and the library's evaluation builds
-    the ant's env for it (27 observations, 8 actions)."""
-    import json
-
-    from experiments.__main__ import main
-    from jaxterrain import difficulty, rl
-
-    out = tmp_path / "ant"
-    assert main(["train-base-policy", "--robot", "ant", "--out", str(out), "--no-progress"]) == 0
-    meta = json.loads((out / "policy" / "config.json").read_text())
-    assert meta["walker_config"]["robot"] == "ant" and (meta["observation_size"], meta["action_size"]) == (27, 8)
-    policy = rl.load_policy(out / "policy")
-    assert difficulty.evaluation.default_env_config((32, 64), policy=policy).robot == "ant"
-    assert 0.0 <= json.loads((out / "eval.json").read_text())["best_mean"] <= 1.0
-    # learn starts from a policy of the robot it names, else refuses in one line; an archive of the humanoid's
-    # fitness does not serve the ant
-    assert main(["learn", "--policy", str(out / "policy"), "--robot", "humanoid", "--out", str(tmp_path / "l")]) == 2
-    assert main(["learn", "--policy", str(out / "policy"), "--out", str(tmp_path / "l")]) == 2
-    assert not (tmp_path / "l").exists()
-
-
 def test_the_robot_tutorial_runs_as_written(monkeypatch, capsys):
     """docs/tutorials/robot.md's Python block: a registered variant of the ant builds its walker."""
     import re
@@ -151,11 +128,10 @@ def test_the_robot_tutorial_runs_as_written(monkeypatch, capsys):
     assert robots.get("low_ant").start_joints[1] == 0.8
 
 
-def test_the_walker_fitness_and_evolve_take_a_robot_and_refuse_one_without_a_base_policy(tmp_path, monkeypatch,
-                                                                                        capsys):
+def test_the_walker_fitness_and_evolve_take_a_robot_and_refuse_one_without_a_base_policy(monkeypatch):
     """``EvolveConfig.robot`` (recorded in archives) chooses whose base policy the fitness walks; the humanoid's is
-    the same function as before; a robot without a shipped base policy is refused naming how to train one."""
-    from experiments.__main__ import main
+    the same function as before; a robot without a shipped base policy is refused naming how to train one (``evolve
+    --robot``: tests/integration/test_stage_commands.py)."""
     from jaxterrain import difficulty, qd
 
     assert qd.EvolveConfig().robot == "humanoid"
@@ -167,11 +143,6 @@ def test_the_walker_fitness_and_evolve_take_a_robot_and_refuse_one_without_a_bas
     robots.register_robot(robots.ANT._replace(name="dog"))  # a robot nobody trained
     with pytest.raises(ValueError, match="robot 'dog': no base policy is shipped .* train-base-policy --robot dog"):
         difficulty.fitness_fn(128, robot="dog")
-    monkeypatch.chdir(tmp_path)
-    with pytest.raises(SystemExit) as stop:
-        main(["evolve", "--robot", "dog", "--fitness", "difficulty"])
-    assert stop.value.code == 2
-    assert "--robot: robot 'dog': no base policy" in capsys.readouterr().err and not (tmp_path / "runs").exists()
 
 
 def test_the_ant_ships_a_base_policy_that_records_its_robot_and_passed_the_bar():

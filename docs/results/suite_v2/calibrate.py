@@ -5,7 +5,7 @@ grid of values and seeds, and the level curves say which values map to mean fitn
     PYTHONPATH=. python docs/results/suite_v2/calibrate.py --grid v2 --out runs/suite_v2_check  # v2's own levels
     PYTHONPATH=. python docs/results/suite_v2/calibrate.py --select runs/suite_v2_cal           # CPU: pick levels
 
-``--grid candidates`` (default): each family at ``--values`` (20) values of the robot's candidate range
+``--grid candidates`` (default; ``refined``: the ranges of :data:`REFINED`, narrowed from the first run): each family at ``--values`` (20) values of the robot's candidate range
 (:data:`CANDIDATES`: linear where v1's curves located the range, geometric and wider for the re-parametrised
 families), ``--seeds`` (5) terrains each: v2's terrains (``suite.v2_terrain``: a seed's layout does not depend on
 the value, so a candidate value picked as a level IS that level's terrain, measured). ``--grid v2``: the levels of
@@ -22,8 +22,8 @@ Writes into ``--out``: ``fitness_<robot>.csv`` (robot, family, index, value, uni
 per robot, ``calibration_<robot>.md``: for ``--grid v2`` the checks of every family's level curve (level 0 >= 0.8, level 9 <= 0.3, no
 rise > 0.03; failures marked); for candidates, the 10 grid values per family that pass (``suite.calibration.
 select_levels``), or, where none do, values interpolated on the curve's monotone fit (to measure with ``--grid v2``).
-``--select FOLDER`` rewrites the page, figure and ``levels.json`` (the proposed ``V2_LEVELS``) from a folder's CSVs
-on the CPU. At the GPU's size: 10 families x 20 values x 5 seeds + flat = 1001 terrains a robot.
+``--select FOLDER`` rewrites the page, figure, ``levels.json`` and ``V2_LEVELS.txt`` (the proposed levels, as the body
+of ``heldout.V2_LEVELS`` to paste) from a folder's CSVs on the CPU. At the GPU's size: 10 families x 20 values x 5 seeds + flat = 1001 terrains a robot.
 """
 
 from __future__ import annotations
@@ -60,15 +60,40 @@ CANDIDATES: dict[str, dict[str, tuple[str, float, float]]] = {
         "waves": ("lin", 0.12, 0.5), "rough": ("geo", 0.05, 0.35),
     },
 }
-"""Each robot's candidate range per family: ``(spacing "lin" | "geo", lo, hi)``."""
+"""Each robot's candidate range per family: ``(spacing "lin" | "geo", lo, hi)``: the first run's grid."""
+
+REFINED: dict[str, dict[str, tuple[str, float, float]]] = {
+    # the first run's curves (one H200, 2026-11-29, MuJoCo Warp; docs/results/suite_v2/): from where each family's
+    # monotone fit is about 0.95 to where it is about 0.2 (or flattens, 0.25 for the humanoid), so that the 20
+    # values fall where the curve falls; geometric where that span is more than 3x
+    "humanoid": {
+        "slope_up": ("geo", 0.08, 0.22), "slope_down": ("geo", 0.065, 0.9),
+        "stairs_up": ("lin", 0.02, 0.07), "stairs_down": ("geo", 0.019, 0.12),
+        "boxes": ("lin", 0.025, 0.13), "obstacles": ("geo", 0.014, 0.3),
+        "stepping_stones": ("geo", 0.017, 0.2), "gaps": ("lin", 0.032, 0.18),
+        "waves": ("geo", 0.028, 0.4), "rough": ("geo", 0.008, 0.11),
+    },
+    "ant": {
+        "slope_up": ("lin", 0.236, 0.29), "slope_down": ("lin", 0.21, 0.53),
+        "stairs_up": ("lin", 0.046, 0.078), "stairs_down": ("lin", 0.085, 0.16),
+        "boxes": ("lin", 0.15, 0.45), "obstacles": ("lin", 0.12, 0.32),
+        "stepping_stones": ("lin", 0.06, 0.22), "gaps": ("lin", 0.1, 0.2),
+        "waves": ("lin", 0.17, 0.4), "rough": ("geo", 0.05, 0.16),
+    },
+}
+"""The second run's grid (``--grid refined``): each robot's range narrowed to where the first run's curve fell."""
+GRIDS = {"candidates": CANDIDATES, "refined": REFINED}
 
 SEEDS, VALUES = 5, 20
 
 
 def grid_values(spec: tuple[str, float, float], n: int) -> np.ndarray:
-    """[n] increasing values of a candidate range ``(spacing, lo, hi)``: evenly spaced, or in ``log`` for "geo"."""
+    """[n] increasing values of a candidate range ``(spacing, lo, hi)``: evenly spaced, or in ``log`` for "geo",
+    each rounded to 4 significant digits (so that the CSVs, which write 6, hold the exact value a level is built
+    from)."""
     kind, lo, hi = spec
-    return np.geomspace(lo, hi, n) if kind == "geo" else np.linspace(lo, hi, n)
+    v = np.geomspace(lo, hi, n) if kind == "geo" else np.linspace(lo, hi, n)
+    return np.array([float(f"{x:.4g}") for x in v])
 
 
 def plan(robot: str, grid: str, values: int, families) -> dict[str, np.ndarray]:
@@ -80,7 +105,7 @@ def plan(robot: str, grid: str, values: int, families) -> dict[str, np.ndarray]:
         elif grid == "v2":
             out[f] = np.asarray(V2_LEVELS[robot][f], np.float64)
         else:
-            out[f] = grid_values(CANDIDATES[robot][f], values)
+            out[f] = grid_values(GRIDS[grid][robot][f], values)
     return out
 
 
@@ -177,7 +202,7 @@ def summarise(out: Path, grid: str) -> None:
                 note = "measured grid values"
             if idx is not None:
                 c = calibration.check_curve(means[idx])
-                chosen[rb][f] = {"values": [round(float(x), 4) for x in vals[idx]], "measured": True}
+                chosen[rb][f] = {"values": [float(x) for x in vals[idx]], "measured": True}
                 marks = "pass" if c["ok"] else "**FAIL**: " + ", ".join(
                     k for k, ok in (("level 0 < 0.8", c["ok_level0"]), ("last > 0.3", c["ok_last"]),
                                     ("rise > 0.03", c["ok_rises"])) if not ok)
@@ -185,7 +210,7 @@ def summarise(out: Path, grid: str) -> None:
                 lines.append(f"| {f} | {unit} | {vals.size} | {c['level0']:.3f} | {c['last']:.3f} | "
                              f"{c['max_rise']:+.3f} ({c['rise_at']}) | {marks} ({note}) | {levels} |")
             else:
-                geo = CANDIDATES.get(rb, {}).get(f, ("lin",))[0] == "geo" and vals[0] > 0
+                geo = GRIDS.get(grid, CANDIDATES).get(rb, {}).get(f, ("lin",))[0] == "geo" and vals[0] > 0
                 prop = calibration.propose_values(vals, means, geometric=geo)
                 if prop is None:
                     why = "**FAIL**: the grid does not span 0.88 .. 0.22 (range " + \
@@ -207,12 +232,33 @@ def summarise(out: Path, grid: str) -> None:
                 "![level curves](curves.png)", ""]
         atomic_write_text(out / f"calibration_{rb}.md", "\n".join(head + lines))
     atomic_write_text(out / "levels.json", json.dumps(chosen, indent=2) + "\n")
+    atomic_write_text(out / "V2_LEVELS.txt", levels_literal(chosen))
     figure(out, data, chosen)
     print(f"-> {', '.join(str(out / f'calibration_{rb}.md') for rb in pages)}", flush=True)
 
 
+def levels_literal(chosen: dict) -> str:
+    """``chosen`` (``levels.json``) as the body of ``heldout.V2_LEVELS`` to paste (families with no values left out,
+    unmeasured ones marked), wrapped at 120 columns."""
+    import textwrap
+
+    lines = []
+    for rb, fams in chosen.items():
+        lines.append(f'    "{rb}": {{')
+        for f, e in fams.items():
+            if not e["values"]:
+                lines.append(f"        # {f}: no values (widen its range)")
+                continue
+            text = f'"{f}": (' + ", ".join(repr(v) for v in e["values"]) + "),"
+            text += "" if e["measured"] else "  # NOT MEASURED: interpolated"
+            lines += textwrap.wrap(text, 118, initial_indent=" " * 8, subsequent_indent=" " * 12)
+        lines.append("    },")
+    return "\n".join(lines) + "\n"
+
+
 def figure(out: Path, data, chosen) -> None:
     from matplotlib.figure import Figure
+    from matplotlib.ticker import NullFormatter
 
     from jaxterrain.runtime.io import save_figure
 
@@ -238,8 +284,9 @@ def figure(out: Path, data, chosen) -> None:
         ax.axhline(calibration.LEVEL0, color="grey", lw=0.6, ls="--")
         ax.axhline(calibration.LAST, color="grey", lw=0.6, ls="--")
         ax.set_ylim(-0.02, 1.02)
-        if any(CANDIDATES.get(rb, {}).get(f, ("lin",))[0] == "geo" for rb in data):
+        if any(v[0] > 0 and v[-1] / v[0] > 3 for v in ([p[1] for p in d[f]] for d in data.values() if f in d)):
             ax.set_xscale("log")
+            ax.xaxis.set_minor_formatter(NullFormatter())
         ax.set_title(f"{f} ({FAMILIES_V2[f].unit})", fontsize=8)
         ax.tick_params(labelsize=6)
     for ax in axes[len(fams):]:
@@ -253,7 +300,9 @@ def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--out", type=Path, default=Path("runs/suite_v2_calibration"))
     p.add_argument("--robots", nargs="+", default=list(ROBOTS), help="robots to calibrate (default: both)")
-    p.add_argument("--grid", choices=("candidates", "v2"), default="candidates")
+    p.add_argument("--grid", choices=("candidates", "refined", "v2"), default="candidates",
+                   help="candidates: the first run's wide ranges; refined: the ranges narrowed from its curves; v2: "
+                        "v2's levels")
     p.add_argument("--values", type=int, default=VALUES, help="candidate values per family (default 20)")
     p.add_argument("--seeds", type=int, default=SEEDS, help="terrains per value (default 5)")
     p.add_argument("--size", type=int, default=256, help="terrain side in pixels (v2: 256)")

@@ -1,0 +1,45 @@
+"""The command-line parts of features whose library lives in stage tests: the randomisation's flag list and
+policy-file record (`tests/walker/test_randomisation.py`), and `evaluate`'s suite v2 (`tests/suite/test_suite_v2.py`)."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+
+from jaxterrain import suite
+from jaxterrain.terrain import TerrainScale
+from jaxterrain.walker import WalkerConfig, resolve_config
+from jaxterrain.walker import RANDOMISATION_PRESETS, parse_randomisation, randomisation_json
+
+TINY = WalkerConfig(terrain_shape=(16, 32), scale=TerrainScale(cell_size=0.2, height=0.5), episode_length=30)
+ALL = "friction=0.5:1.25,mass=0.9:1.1,added-mass=-1:1,motor=0.8:1.2,obs-noise=0.01,delay=1:2,push=3:0.5"
+
+
+def test_the_randomise_flag_lists_the_presets():
+    from experiments import common
+
+    assert common.RANDOMISATION_PRESET_NAMES == tuple(RANDOMISATION_PRESETS)  # --help's literal list
+
+
+def test_policy_files_record_the_randomisation_only_when_on():
+    from experiments.train_base_policy import _to_jsonable
+    from jaxterrain.rl.onnx import walker_config_of
+
+    r = parse_randomisation(ALL)
+    assert "randomisation" not in _to_jsonable(TINY)  # policy files of unrandomised runs read as before
+    assert _to_jsonable(TINY._replace(randomisation=r))["randomisation"] == randomisation_json(r)
+    recorded = _to_jsonable(resolve_config(TINY._replace(randomisation=r)))
+    assert walker_config_of({"walker_config": json.loads(json.dumps(recorded))}).randomisation == r
+
+
+def test_evaluate_builds_v2_with_the_levels_of_its_robot_and_v1_without_one():
+    from experiments.evaluate import terrains
+
+    cfg = dict(archive=None, suite="v2", robot="ant", size=128, seeds=1, samples=1, families=["boxes"],
+               generators=[])
+    s = terrains(cfg)
+    assert s.robot == "ant" and s.value.tolist() == list(suite.V2_LEVELS["ant"]["boxes"])
+    assert terrains({**cfg, "robot": None}).robot == "humanoid"
+    v1 = terrains({**cfg, "suite": "v1"})  # one geometry: the robot does not choose it
+    assert v1.robot is None and np.allclose(v1.value, suite.FAMILIES["boxes"].values())
