@@ -223,13 +223,29 @@ def add_deprecated_alias(parser: argparse.ArgumentParser, old: str, new: str, de
                         help=argparse.SUPPRESS, **kwargs)
 
 
+def count_or_folder(value: str) -> int | str:
+    """``--terrains``' value where it takes either: an integer (terrains sampled per generator) or a folder of
+    heightmaps (any other text)."""
+    try:
+        return int(value)
+    except ValueError:
+        return value
+
+
 def add_terrains_argument(parser: argparse.ArgumentParser, dest: str, what: str, default: Any = None,
-                          aliases: tuple[str, ...] = ()) -> None:
+                          aliases: tuple[str, ...] = (), folder: str | None = None) -> None:
     """``--terrains N``: terrains sampled per generator, one flag in every command (``dest``: the config key, ``n`` or
     ``samples`` in older commands, kept so saved configs read); ``what`` says what the command does with them.
-    ``aliases``: older spellings kept hidden (:func:`add_deprecated_alias`)."""
-    parser.add_argument("--terrains", dest=dest, type=int, default=default, metavar="N",
-                        help=f"terrains sampled per generator, >= 1: {what}")
+    ``aliases``: older spellings kept hidden (:func:`add_deprecated_alias`). ``folder``: what the command does with
+    ``--terrains DIR``, a folder of heightmaps, where it also takes one (:func:`count_or_folder`: the command splits
+    the two)."""
+    if folder is not None:
+        parser.add_argument("--terrains", dest=dest, type=count_or_folder, default=default, metavar="N|DIR",
+                            help=f"terrains sampled per generator, >= 1: {what}; or DIR, a folder of heightmaps: "
+                                 f"{folder}")
+    else:
+        parser.add_argument("--terrains", dest=dest, type=int, default=default, metavar="N",
+                            help=f"terrains sampled per generator, >= 1: {what}")
     for old in aliases:
         add_deprecated_alias(parser, old, "--terrains", dest, type=int, metavar="N")
 

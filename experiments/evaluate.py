@@ -7,7 +7,11 @@
 Walks the shipped base policy (always, as ``base``) and every ``--policy`` folder (``rl.save_policy``'s format, as
 ``learn`` writes ``policies/trial_K/``) on the held-out suite (``--suite v1``, ``jaxterrain.suite``: the field's
 sub-terrains at 10 graded levels and fresh samples of every generator) or on an archive's elites (``--archive``,
-family ``archive``, levels = bands of 7.07 cells of distance from cell (0, 0)), under ``--protocol`` (default
+family ``archive``, levels = bands of 7.07 cells of distance from cell (0, 0)) or on your own terrains
+(``--terrains DIR``: a folder of PNG / GeoTIFF / .npy / .npz heightmaps, one family per file, one level, value its
+relief in metres, each resized to ``--size``, by default 256 cells as ``learn --terrains`` trains on; smoke: 128;
+``jaxterrain.suite.folder``, images at ``--terrain-height M`` metres of full grey), under
+``--protocol`` (default
 ``headings``: 20 walks in each of 4 headings, best 5 per heading). Every policy walks with the same key. A policy for
 another robot or observation set is refused with one line naming its folder, before the run folder is made.
 
@@ -53,11 +57,13 @@ import sys
 from experiments import common
 
 PRESETS: dict[str, dict] = common.with_preset_names({
-    "gpu": dict(suite="v1", archive=None, policy=[], robot=None, observation=None, size=None, seeds=None, samples=None,
+    "gpu": dict(suite="v1", archive=None, terrain_folder=None, terrain_height=None,
+                policy=[], robot=None, observation=None, size=None, seeds=None, samples=None,
                 families=None, generators=None, attempts=80, best=5, headings=4, backend="auto", slots=None, chunk=None,
                 repeat=True, keys=1, videos=False, video_terrains=None, video_frames=75, video_width=320,
                 video_height=240, video_starts=8, engine="mjx", workers=None, randomise=None),
-    "smoke": dict(suite="v1", archive=None, policy=[], robot=None, observation=None, size=128, seeds=1, samples=4,
+    "smoke": dict(suite="v1", archive=None, terrain_folder=None, terrain_height=None,
+                  policy=[], robot=None, observation=None, size=128, seeds=1, samples=4,
                   families=["flat", "stairs_up", "gaps"],
                   generators=["perlin"], attempts=2, best=1, headings=1, backend="jax", slots=None, chunk=None,
                   repeat=False, keys=1, videos=False, video_terrains=None, video_frames=75, video_width=320,
@@ -88,7 +94,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--archive", default=None, help="walk an archive's elites instead of the suite")
     parser.add_argument("--size", type=int, default=None, help="suite heightmap side in pixels (v1: 256)")
     parser.add_argument("--seeds", type=int, default=None, help="suite terrains per family level (v1: 3)")
-    common.add_terrains_argument(parser, "samples", "the suite's generator terrains (v1: 96)", aliases=("--samples",))
+    common.add_terrains_argument(parser, "samples", "the suite's generator terrains (v1: 96)", aliases=("--samples",),
+                                 folder="walk your own terrains instead of the suite (.png, .tif/.tiff, .npy, .npz; "
+                                        "jaxterrain.suite.folder), one family per file")
+    parser.add_argument("--terrain-height", type=float, default=None, metavar="M",
+                        help="--terrains DIR: metres of an image's full grey (default 1.0), and the relief every "
+                             "metre file is rescaled to (default: its own metres), in (0, 1]")
     parser.add_argument("--families", nargs="+", default=None, help="suite families to build (default: all of the "
                         "version's; smoke: flat stairs_up gaps)")
     parser.add_argument("--generators", nargs="*", default=None, help="generators to sample (default: the version's "
@@ -135,7 +146,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 def overrides(args) -> dict:
     return dict(policy=args.policy, robot=args.robot, observation=args.observation, keys=args.keys, suite=args.suite,
                 archive=args.archive, size=args.size, seeds=args.seeds,
-                samples=args.samples, families=args.families, generators=args.generators, repeat=args.repeat,
+                samples=None if isinstance(args.samples, str) else args.samples,
+                terrain_folder=args.samples if isinstance(args.samples, str) else None,
+                terrain_height=args.terrain_height, families=args.families, generators=args.generators, repeat=args.repeat,
                 backend=args.backend, slots=args.slots, chunk=args.chunk, videos=args.videos,
                 video_terrains=args.video_terrains, video_frames=args.video_frames, video_width=args.video_width,
                 video_height=args.video_height, video_starts=args.video_starts, engine=args.engine, workers=args.workers,
@@ -201,6 +214,12 @@ def check_terrain_flags(cfg: dict) -> None:
             qd.load(cfg["archive"])
         except (OSError, ValueError) as err:
             raise UsageError(f"--archive {cfg['archive']}: {str(err).splitlines()[0]}") from None
+    if cfg.get("terrain_folder") and cfg["archive"]:
+        raise UsageError("--terrains DIR walks a folder of heightmaps instead of --archive: give one")
+    if cfg.get("terrain_height") is not None and not cfg.get("terrain_folder"):
+        raise UsageError("--terrain-height applies to --terrains DIR (a folder of heightmaps), which is not given")
+    if cfg.get("terrain_folder"):
+        folder_suite(cfg)
 
 
 def check_video_flags(cfg: dict) -> list | None:
@@ -225,6 +244,8 @@ def check_video_flags(cfg: dict) -> list | None:
         raise UsageError(f"--video-{err}") from None
     if cfg["archive"]:
         levels = {"archive": suite.LEVELS}
+    elif cfg.get("terrain_folder"):
+        levels = {name: 1 for name in folder_suite(cfg).family}
     else:
         fams = cfg["families"] or suite.VERSIONS[cfg["suite"]]["families"]
         gens = suite.VERSIONS[cfg["suite"]]["generators"] if cfg["generators"] is None else cfg["generators"]
@@ -306,11 +327,29 @@ def check_mujoco_cost(cfg: dict, terrains_n: int, policies_n: int) -> None:
                          "(--attempts)")
 
 
+def folder_suite(cfg: dict):
+    """``--terrains DIR``'s folder as a suite, one family per file (``suite.folder_suite``); UsageError naming the
+    flag and the file."""
+    from experiments.common import UsageError
+    from jaxterrain import suite
+
+    try:
+        side = cfg.get("size") or suite.TERRAIN_SIDE  # --size, else the curriculum's 256 cells
+        return suite.folder_suite(suite.load_folder(cfg["terrain_folder"], cfg.get("terrain_height"), side))
+    except ValueError as err:
+        msg = str(err).replace("give a terrain height M", "give --terrain-height M")
+        if msg.startswith("terrain height"):
+            raise UsageError(f"--terrain-height{msg[len('terrain height'):]}") from None
+        raise UsageError(f"--{msg}" if msg.startswith("terrains ") else f"--terrains: {msg}") from None
+
+
 def terrains(cfg: dict):
-    """The suite of the config, or the archive's elites as a one-family suite."""
+    """The suite of the config, the archive's elites as a one-family suite, or a folder's terrains."""
     from experiments.common import UsageError
     from jaxterrain import qd, suite
 
+    if cfg.get("terrain_folder"):
+        return folder_suite(cfg)
     if cfg["archive"]:
         try:
             return suite.archive_suite(qd.load(cfg["archive"]))
@@ -341,7 +380,8 @@ def main(args) -> int:
     check_engine(args, cfg0)
     policies = load_policies(cfg0["policy"], cfg0.get("robot"), cfg0.get("observation"))  # before the run folder: a bad folder is one line, nothing left behind
     check_terrain_flags(cfg0)
-    if suite.VERSIONS[cfg0["suite"]]["robot"] is not None and not cfg0["archive"]:  # v2: levels per robot
+    own = cfg0["archive"] or cfg0.get("terrain_folder")  # an archive's or a folder's terrains, not the suite's
+    if suite.VERSIONS[cfg0["suite"]]["robot"] is not None and not own:  # v2: levels per robot
         robot = cfg0.get("robot") or "humanoid"
         other = [str(getattr(p, "path", p)) for p in policies[1:] if difficulty.policy_robot(p) != robot]
         if other:
@@ -368,7 +408,8 @@ def main(args) -> int:
     folder, cfg = common.setup_run("evaluate", args, PRESETS, "smoke", overrides(args))
     n_keys = int(cfg.get("keys", 1))
     names = base_names(n_keys) + [str(p) for p in cfg["policy"]]
-    terrain_keys = ("suite", "archive", "size", "seeds", "samples", "families", "generators")
+    terrain_keys = ("suite", "archive", "terrain_folder", "terrain_height", "size", "seeds", "samples", "families",
+                    "generators")
     if s is None or any(cfg[k] != cfg0[k] for k in terrain_keys):
         s = terrains(cfg)
     build_s = time.perf_counter() - t0

@@ -9,7 +9,18 @@ roughness, every fifth, in order), ``random`` (uniform over the archive), ``dr``
 terrains a chunk, each env on one), ``levels`` (legged_gym's terrain levels over bands of the archive), ``plr``
 (prioritised level replay over the archive's terrains; a curriculum's own flag, e.g. ``--plr-capacity``, with
 another built-in one is refused), or
-``module:object`` (your own :class:`jaxterrain.curriculum.Selector`; ``jaxterrain.curriculum.selectors``). Every trial starts from the shipped base
+``module:object`` (your own :class:`jaxterrain.curriculum.Selector`; ``jaxterrain.curriculum.selectors``).
+
+Your own terrains: ``--terrains DIR`` (a folder of PNG / GeoTIFF / .npy / .npz heightmaps, each one terrain:
+``jaxterrain.suite.folder`` says how a file becomes a 256 x 256 terrain of 4 cm cells with flat start strips; images
+at ``--terrain-height M`` metres for full grey, 1 m by default) instead of ``--archive``, with a curriculum that needs
+no archive's grid: ``dr`` (without ``--curriculum``), ``plr``, ``levels`` or ``random`` (``map``, ``roughness`` and
+``accel`` are refused). The
+terrains rank by hardness in file-name order (``--terrain-order name``) or by the start policy's fitness on each
+(``difficulty``, measured once before the run, in ``terrains.csv``); ``levels``' bands and the "hardest terrain
+traversed" (then a rank, 0 to N - 1) read that rank. The folder's files' sha256 are checkpointed: ``--resume``
+refuses a folder whose files changed. Evaluations walk under ``difficulty.HEADINGS`` (80 walks in 4 headings) unless
+the preset or ``--protocol`` / ``--attempts`` say otherwise (smoke: 2 along +x). Every trial starts from the shipped base
 policy (``--policy DIR`` for another), and the ``--trials`` trials run together (vmap) in one jitted function per
 block of ``chunks_per_call`` chunks (a chunk = 40 epochs of 4 000 env steps + one evaluation; the curriculum's
 choices: ``jaxterrain.curriculum.config``). The trials' env states ride from block to block and into every
@@ -115,6 +126,18 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     common.add_run_arguments(parser, PRESETS, "smoke")
     common.add_devices_argument(parser)  # the trials are split over the devices (curriculum.make_runner)
     parser.add_argument("--archive", default=None, help="archive .npz (default: the shipped CPPN archive, jaxterrain/assets/archives/cppn_headings.npz)")
+    parser.add_argument("--terrains", default=None, metavar="DIR",
+                        help="DIR, a folder of your own heightmaps, trained on instead of an archive: .png "
+                             "(8/16-bit grey), .tif/.tiff (GeoTIFF, metres), .npy/.npz (metres), one terrain each, "
+                             "cropped to a centred square, resized to 256 x 256 cells of 4 cm, flat 1 m start strips "
+                             "(jaxterrain.suite.folder); curricula dr (the default with it), plr, levels, random")
+    parser.add_argument("--terrain-height", type=float, default=None, metavar="M",
+                        help="--terrains: metres of an image's full grey (default 1.0), and the relief every metre "
+                             "file is rescaled to (default: its own metres), in (0, 1]")
+    parser.add_argument("--terrain-order", choices=("name", "difficulty"), default=None,
+                        help="--terrains: how the terrains rank by hardness (levels' bands, the hardest traversed): "
+                             "name (file-name order, the default; free) or difficulty (the start policy walked on "
+                             "each before the run under its protocol, hardest last; one more compile)")
     parser.add_argument("--curriculum", type=common.selector_name, default=None, metavar="NAME",
                         help=f"{', '.join(common.SELECTOR_NAMES)} or module:object (a factory config -> "
                              f"jaxterrain.curriculum.Selector); jaxterrain.curriculum.selectors")
@@ -269,13 +292,29 @@ def fine_tuning_overrides(args) -> dict:
 
 
 def overrides(args) -> dict:
-    out = dict(archive=args.archive, curriculum=args.curriculum, trials=args.trials, threshold=args.threshold,
+    out = dict(archive=args.archive, terrains=args.terrains, terrain_height=args.terrain_height,
+               terrain_order=args.terrain_order,
+               curriculum=args.curriculum or ("dr" if args.terrains is not None else None), trials=args.trials, threshold=args.threshold,
                max_epochs=args.max_epochs, policy=args.policy, robot=args.robot, chunks_per_call=args.chunks_per_call,
                backend=args.backend, policy_every=args.policy_every, **fine_tuning_overrides(args),
                **selector_overrides(args), **common.protocol_overrides(args))
     if args.num_envs is not None or "num_envs" not in out:  # --num-envs over --recipe's envs
         out["num_envs"] = args.num_envs
     return out
+
+
+def check_terrain_flags(args, cfg: dict) -> None:
+    """``--terrains DIR`` read and checked before the run folder is made (``own_terrains.check_terrains``: the
+    folder and its files, the height, the order, a curriculum that needs no archive), and not given with
+    ``--archive``; :class:`~experiments.common.UsageError` naming the flag."""
+    from jaxterrain.curriculum import own_terrains
+
+    if args.terrains is not None and args.archive is not None:
+        raise common.UsageError("--terrains DIR trains on a folder of heightmaps instead of --archive: give one")
+    try:
+        own_terrains.check_terrains(run_of(cfg))
+    except ValueError as err:
+        raise common.UsageError(flags_in(str(err), cfg.get("curriculum") or "map")) from None
 
 
 def report(summary: dict | None, folder) -> int:
@@ -298,7 +337,8 @@ def main(args) -> int:
         raise common.UsageError("--export-policies needs --resume RUN (the run whose walkers to write)")
     mesh = common.device_mesh(args.devices)
     folder, cfg = common.setup_run("learn", args, PRESETS, "smoke", overrides(args),
-                                   check=lambda c: (check_selector_flags(args, [c["curriculum"]]), run_of(c)))
+                                   check=lambda c: (check_selector_flags(args, [c["curriculum"]]), run_of(c),
+                                                    check_terrain_flags(args, c)))
     run = run_of(cfg)
     try:  # the library validates the run once, before anything compiles (runner.validate)
         if args.export_policies:
@@ -318,6 +358,8 @@ def main(args) -> int:
     if summary is None:
         print(f"time limit reached; continue with: python -m experiments learn --resume {folder}", flush=True)
         return 3
-    print(f"done: hardest traversed {summary['hardest_mean']:.2f} +- {summary['hardest_se']:.2f} cells "
-          f"(of 70.71) after {summary['epochs_max']} epochs -> {folder}; walkers in {folder / 'policies'}", flush=True)
+    of = (f"rank (of {summary['bank_terrains'] - 1}, the hardest of the terrains)" if run.terrains else
+          "cells (of 70.71)")
+    print(f"done: hardest traversed {summary['hardest_mean']:.2f} +- {summary['hardest_se']:.2f} {of} after "
+          f"{summary['epochs_max']} epochs -> {folder}; walkers in {folder / 'policies'}", flush=True)
     return 0

@@ -14,12 +14,13 @@ yours), :mod:`.config` (CurriculumConfig and the choices the paper leaves open),
 trials: pure, whichever selector runs),
 :mod:`.walker` (the PPO + walker harness), :mod:`.analysis` (Table 2, Figure 7), :mod:`.outputs` (a treatment's
 files), :mod:`.presets` and :mod:`.run_config` (one run as a typed, nested ``LearnConfig``, its presets and its
-``config.json`` form), :mod:`.progress` (metrics and progress lines inside compiled blocks) and :mod:`.runner` (a
-treatment from a ``LearnConfig``: validation, compiled blocks, checkpoints, time limits; the ``learn`` command is a
-thin layer over it).
+``config.json`` form), :mod:`.progress` (metrics and progress lines inside compiled blocks),
+:mod:`.own_terrains` (a run on a folder of your own heightmaps) and :mod:`.runner` (a treatment from a
+``LearnConfig``: validation, compiled blocks, checkpoints, time limits; the ``learn`` command is a thin layer over
+it).
 """
 
-from jaxterrain.curriculum import gp, outputs, presets, progress, run_config, runner, selectors, walker
+from jaxterrain.curriculum import gp, outputs, own_terrains, presets, progress, run_config, runner, selectors, walker
 from jaxterrain.curriculum.analysis import (
     MILESTONES,
     PAPER_TABLE2,
@@ -60,7 +61,7 @@ from jaxterrain.curriculum.core import (
 __all__ = [
     "Assignment", "CurriculumConfig", "Decision", "FINE_TUNING", "Outcome", "RECIPES", "recipe", "Selector", "get_selector",
     "register_selector", "selector_names", "selectors", "Harness", "History", "MILESTONES", "PAPER_TABLE2", "SELECTORS", "State", "first_epochs",
-    "format_milestone", "gp", "gp_params", "outputs", "presets", "progress", "run_config", "runner", "walker", "hardest_curve", "init", "init_trials", "live_rows", "make_runner",
+    "format_milestone", "gp", "gp_params", "outputs", "own_terrains", "presets", "progress", "run_config", "runner", "walker", "hardest_curve", "init", "init_trials", "live_rows", "make_runner",
     "milestone_summary", "removal_mask", "roughness_sequence", "run_live", "run_trials", "select", "step",
     "terrain_hardness", "terrain_runs", "validate_config",
 ]

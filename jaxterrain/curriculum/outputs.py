@@ -136,7 +136,7 @@ def write_outputs(folder: Path, run, config, bank, states, seconds: float | None
                                   "distance", "evaluation", "hardest"], rows)
     sequences = sequence_rows(hist, bank, config, names)
     atomic_write_csv(folder / "sequences.csv", list(SEQUENCE_COLUMNS), sequences)
-    label = f"{Path(run.archive).stem} {run.curriculum.selector}"
+    label = f"{Path(getattr(run, 'terrains', None) or run.archive).stem} {run.curriculum.selector}"
     pct = [f"{round(100 * m)}%" for m in MILESTONES]
     csv_row, cells = milestone_rows(label, hist)
     atomic_write_csv(folder / "milestones.csv", ["treatment"] + [f"epochs_{p}" for p in pct] + [f"trials_{p}" for p in pct],
@@ -192,14 +192,16 @@ def export_policies(folder: Path, run, config, ppo, env, start_policy, bank, sta
     ``config.json`` keeps the starting policy's ``walker_config`` (its contact solver: a walker walks as trained only
     under it; with ``randomisation`` set to the walker's when fine-tuning randomised the physics) and adds ``curriculum``: the archive (its path relative to the run folder ``folder``, or
     ``<jaxterrain>/...`` for a shipped one: ``runtime.provenance.portable_path``, no machine's absolute path; and
-    its file's sha256), the starting policy (the same way), the selector, the trial, its seed, the epochs and env steps it
-    trained, its terrain sequence (bank indices, cells, distances and generators in the order trained), the hardest
+    its file's sha256; None, and ``terrain_folder`` the folder, for a run on a folder of heightmaps), the starting
+    policy (the same way), the selector, the trial, its seed, the epochs and env steps it trained, its terrain
+    sequence (bank indices, cells, distances and generators in the order trained), the hardest
     terrain it traversed, the chunk of the run; and ``provenance`` (commit, device, date). ``run`` is the treatment's
     ``LearnConfig``, ``ppo`` the fine-tuning PPOConfig (the networks' shapes); ``env`` the walker env (observation and action sizes). Returns the
     folders, in trial order."""
     hist = histories(states)
     epochs = np.asarray(states.epoch)
-    archive_sha = provenance.file_sha256(run.archive) if run.archive else None
+    terrains = getattr(run, "terrains", None)  # a folder of heightmaps instead of the archive (runner.OwnTerrains)
+    archive_sha = provenance.file_sha256(run.archive) if run.archive and not terrains else None
     out = []
     base_meta = dict(getattr(start_policy, "meta", None) or {})
     walker_config = base_meta.get("walker_config")
@@ -214,7 +216,8 @@ def export_policies(folder: Path, run, config, ppo, env, start_policy, bank, sta
         extra = {
             "walker_config": walker_config,
             "curriculum": {
-                "archive": provenance.portable_path(str(run.archive), folder),
+                "archive": None if terrains else provenance.portable_path(str(run.archive), folder),
+                **({"terrain_folder": provenance.portable_path(str(terrains), folder)} if terrains else {}),
                 "archive_file_sha256": archive_sha, "selector": run.curriculum.selector, "trial": t,
                 "seed": int(run.seed), "epochs": int(epochs[t]),
                 "env_steps": int(epochs[t]) * int(config.steps_per_epoch),

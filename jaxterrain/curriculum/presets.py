@@ -34,7 +34,8 @@ _PAPER = dict(archive=CPPN_ARCHIVE, curriculum="map", trials=10, descriptors=["r
               truncation="bootstrap", overlap=False, compact=True, policy_every=None, terrains_per_chunk=8, levels=10,
               levels_init=None, levels_promote=None, levels_demote=0.5, plr_capacity=None, plr_replay_prob=0.8,
               plr_staleness=0.3, plr_temperature=0.3, plr_min_fill=0.5, accel_generator=None, accel_edits=1,
-              robot=None, recipe="paper", observation=None, randomise=None)
+              robot=None, recipe="paper", observation=None, randomise=None, terrains=None, terrain_height=None,
+              terrain_order="name")
 
 FLAT_PRESETS: dict[str, dict] = {
     "smoke": {**_PAPER, "trials": 2, "epochs_per_chunk": 1, "steps_per_epoch": 80, "max_epochs": 4, "max_evals": 2,

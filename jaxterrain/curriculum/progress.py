@@ -53,10 +53,11 @@ class ChunkMetrics:
 class ChunkProgress:
     """A treatment's progress inside its compiled blocks: one line on stderr at most every ``every_s`` seconds (the
     driver's :data:`~jaxterrain.runtime.driver.PLAIN_EVERY_S`), ``desc: chunk C of N, hardest H cells (mean of the
-    trials), S s/chunk``; through ``tqdm.write`` (above a progress bar) when stderr is a terminal."""
+    trials), S s/chunk``; through ``tqdm.write`` (above a progress bar) when stderr is a terminal. ``unit``: what
+    the hardest terrain is measured in (``cells`` of an archive's grid; ``rank`` for a folder of terrains)."""
 
-    def __init__(self, desc: str, total: int, start: int, every_s: float | None = None):
-        self.desc, self.total, self.start = desc, int(total), int(start)
+    def __init__(self, desc: str, total: int, start: int, every_s: float | None = None, unit: str = "cells"):
+        self.desc, self.total, self.start, self.unit = desc, int(total), int(start), unit
         self.every_s = float(driver.PLAIN_EVERY_S if every_s is None else every_s)
         self.t0 = self.last = time.perf_counter()
         self.lines: list[str] = []
@@ -68,8 +69,8 @@ class ChunkProgress:
             return
         self.last = now
         rate = (now - self.t0) / max(reached - self.start, 1)
-        line = (f"{self.desc}: chunk {reached} of {self.total}, hardest {float(np.mean(hardest)):.2f} cells (mean of "
-                f"{hardest.size} trials, {int(np.sum(~done))} running), {rate:.1f} s/chunk")
+        line = (f"{self.desc}: chunk {reached} of {self.total}, hardest {float(np.mean(hardest)):.2f} {self.unit} "
+                f"(mean of {hardest.size} trials, {int(np.sum(~done))} running), {rate:.1f} s/chunk")
         self.lines.append(line)
         if sys.stderr.isatty():
             try:

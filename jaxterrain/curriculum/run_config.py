@@ -11,6 +11,8 @@ The shape (each field consumed where ``docs/CONTRIBUTING.md`` says)::
 
     LearnConfig
       archive, descriptors          the archive and the descriptors it must have (runner.load_archive)
+      terrains, terrain_height,     or a folder of your own heightmaps instead of the archive, the metres of an
+      terrain_order                 image's full grey, and how its terrains rank by hardness (own_terrains)
       trials, seed                  trials run together (vmap) and the root key (runner.inputs)
       recipe                        the name of the fine-tuning recipe its PPO shape came from (recorded; RECIPES)
       preset                        the preset it was made from (recorded)
@@ -82,10 +84,18 @@ class Budget(NamedTuple):
 
 
 class LearnConfig(NamedTuple):
-    """One curriculum run (the module docstring shows the shape). Hashable and frozen; ``_replace`` to change."""
+    """One curriculum run (the module docstring shows the shape). Hashable and frozen; ``_replace`` to change.
+
+    ``terrains``: a folder of heightmaps (``jaxterrain.suite.folder``) trained on instead of ``archive`` (which, with
+    ``descriptors``, is then not read); ``terrain_height``: metres of an image's full grey, or the relief a metre
+    file is rescaled to (None: 1 m for images, metre files as they are); ``terrain_order``: ``name`` (hardness = the
+    file-name order) or ``difficulty`` (the base policy walked on each terrain before the run, hardest last)."""
 
     archive: str = CPPN_ARCHIVE
     descriptors: tuple = ("roughness", "tpi")
+    terrains: Optional[str] = None
+    terrain_height: Optional[float] = None
+    terrain_order: str = "name"
     trials: int = 10
     seed: int = 0
     recipe: Optional[str] = "paper"
@@ -96,11 +106,11 @@ class LearnConfig(NamedTuple):
     budget: Budget = Budget()
 
 
-_TOP = ("archive", "descriptors", "trials", "seed", "recipe", "preset")
+_TOP = ("archive", "descriptors", "terrains", "terrain_height", "terrain_order", "trials", "seed", "recipe", "preset")
 _CURRICULUM = ("epochs_per_chunk", "steps_per_epoch", "max_epochs", "threshold", "max_fitness", "max_evals",
                "credit", "distance_origin", "overlap")
 LEGACY = {"truncation": "mask", "backend": "jax", "overlap": False, "fast_compile": False, "compact": True,
-          "seed": 0}
+          "seed": 0, "terrains": None, "terrain_height": None, "terrain_order": "name"}
 """The value a ``config.json`` key had in the runs made before it was written (what :func:`from_flat` fills in)."""
 
 RENAMED = {"dr_terrains": "terrains_per_chunk"}
@@ -150,6 +160,7 @@ def from_flat(flat: dict) -> LearnConfig:
     base = LearnConfig()
     return LearnConfig(
         archive=d.get("archive", base.archive), descriptors=tuple(d.get("descriptors", base.descriptors)),
+        terrains=get("terrains"), terrain_height=get("terrain_height"), terrain_order=get("terrain_order"),
         trials=d.get("trials", base.trials), seed=get("seed"), recipe=d.get("recipe"), preset=d.get("preset"),
         curriculum=CurriculumConfig.from_json_dict(curriculum),
         protocol=ProtocolOverride(**{k: d.get(k) for k in ProtocolOverride._fields}),

@@ -33,8 +33,8 @@ from jaxterrain.curriculum.progress import ChunkMetrics, ChunkProgress, chunk_me
 from jaxterrain.curriculum.run_config import LearnConfig, to_flat
 from jaxterrain.curriculum.selectors import get_selector, selector_params
 from jaxterrain.qd.archive_io import load as load_archive_file
-from jaxterrain.qd.bank import from_archive
 from jaxterrain.runtime import driver, estimates, sharding, xla
+from jaxterrain.curriculum.own_terrains import OwnTerrains, bank_of, check_terrains, rank_terrains
 from jaxterrain.terrain import TerrainScale
 from jaxterrain.difficulty import policy_observation, policy_robot, robot_base_policy
 from jaxterrain.walker import robots, tiles
@@ -120,12 +120,16 @@ def check_resumable(folder: Path, run: LearnConfig, arch, physics: bool = True) 
     simulators; ``physics=False``, for a report that only reads the checkpoint, skips this). Reads only the
     checkpoint's header; checkpoints written before the digest (or the backend) was recorded are not checked for
     it."""
-    digest = archive_digest(arch)
+    digest = arch.folder.digest if isinstance(arch, OwnTerrains) else archive_digest(arch)
     try:
         meta = driver.read_meta(folder)
     except ValueError as err:
         raise BadInput(str(err)) from None
     stored = (meta or {}).get("archive_sha256")
+    if stored is not None and stored != digest and isinstance(arch, OwnTerrains):
+        raise BadInput(f"LearnConfig.terrains {run.terrains}: its files are not the ones {folder} was checkpointed "
+                       f"with (sha256 {stored[:12]}... then, {digest[:12]}... now); put those files back or start a "
+                       f"new run")
     if stored is not None and stored != digest:
         raise BadInput(f"LearnConfig.archive {run.archive}: it is not the archive {folder} was checkpointed with "
                        f"(sha256 {stored[:12]}... then, {digest[:12]}... now); put that file back or start a new run")
@@ -219,15 +223,20 @@ def _check_top(run: LearnConfig) -> None:
 
 def validate(run: LearnConfig):
     """``(resolved run, CurriculumConfig, archive, policy, env)`` or :class:`BadInput` naming the field
-    (``LearnConfig.<path>``) or file. The one check of a run: the archive, the curriculum (its selector's params
+    (``LearnConfig.<path>``) or file. The one check of a run: the archive (or the folder of ``terrains``:
+    :func:`check_terrains`, an unranked :class:`OwnTerrains` as ``arch``), the curriculum (its selector's params
     by the selector's own rule), the policy and the walker env, built here."""
     _check_top(run)
-    arch = load_archive(run.archive, run.descriptors)
+    try:
+        own = check_terrains(run)
+    except ValueError as err:
+        raise BadInput(str(err)) from None
+    arch = own if own is not None else load_archive(run.archive, run.descriptors)
     run = resolve(run, arch)
     config = curriculum_config(run)
     policy = start_policy(run)
     archive_robot = getattr(arch.config, "robot", None) or "humanoid"
-    if archive_robot != policy_robot(policy):
+    if own is None and archive_robot != policy_robot(policy):
         raise BadInput(f"LearnConfig.archive {run.archive}: its fitness is the {archive_robot}'s, but the policy walks "
                        f"the {policy_robot(policy)} (evolve an archive with --robot {policy_robot(policy)})")
     env = make_env(run, arch, policy)
@@ -304,7 +313,7 @@ def inputs(run: LearnConfig, config, arch, policy, env):
     bank, the fine-tuning PPOConfig, the walker harness, the starting policy state, the trials' keys [trials] and
     ``init(keys, bank, start)`` -> the initial trial states, their env states zeros due for a restart on the first
     terrains (pure: jit or ``eval_shape`` it)."""
-    bank = from_archive(arch)
+    bank = bank_of(arch)
     ppo = config.ppo_config(policy.config)
     harness = W.walker_harness(env, ppo, config)
     start = W.start_state(env, ppo, policy, bank.heightmaps.shape[1:])
@@ -372,6 +381,8 @@ def run_treatment(run: LearnConfig, folder: Path, time_limit_s: float | None = N
     run, config, arch, policy, env = validate(run)
     digest = check_resumable(folder, run, arch)
     t0 = time.perf_counter()
+    if isinstance(arch, OwnTerrains):  # a folder's terrains, ranked (measured once for the difficulty order)
+        arch = rank_terrains(run, arch, policy, folder)
     bank, block, states = setup(run, config, arch, policy, env, mesh)
     restored = driver.restore(folder, like=states, **CHECKPOINT_COMPAT, optional=(ENV_STATES,))
     done, history, before = 0, None, 0.0  # before: wall seconds of the commands that ran it so far
@@ -397,7 +408,8 @@ def run_treatment(run: LearnConfig, folder: Path, time_limit_s: float | None = N
                             names=arch.generator_names)
         return s, chunk_metrics(s, a, b)
 
-    _LISTENERS[:] = [ChunkProgress(desc or config.selector, config.max_chunks, done)] + (
+    unit = "rank" if isinstance(arch, OwnTerrains) else "cells"  # a folder's hardness is its terrains' rank
+    _LISTENERS[:] = [ChunkProgress(desc or config.selector, config.max_chunks, done, unit=unit)] + (
         [metrics_csv] if metrics_csv is not None else [])
     try:
         states, done, _ = driver.run_chunks(
@@ -432,6 +444,11 @@ def restored(run: LearnConfig, folder: Path) -> tuple:
         raise BadInput(f"{folder} has no checkpoint ({driver.CHECKPOINT_NAME})")
     resolved, config, arch, policy, env = validate(report_run(run))
     check_resumable(folder, run, arch, physics=False)
+    if isinstance(arch, OwnTerrains):
+        try:
+            arch = rank_terrains(resolved, arch, policy, folder, measure=False)
+        except ValueError as err:
+            raise BadInput(str(err)) from None
     bank, _, _, start, keys, init = inputs(resolved, config, arch, policy, env)
     shapes = jax.eval_shape(init, keys, bank, start)
 

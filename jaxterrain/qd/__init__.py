@@ -32,7 +32,7 @@ from jaxterrain.qd.archive import (
     reseat,
 )
 from jaxterrain.qd.archive_io import FORMAT, VERSION, load, save
-from jaxterrain.qd.bank import TerrainBank, from_archive, to_device
+from jaxterrain.qd.bank import TerrainBank, from_archive, from_heightmaps, to_device
 from jaxterrain.qd.config import (
     Archive,
     DEFAULT_RANGES,
@@ -96,6 +96,7 @@ __all__ = [
     "reseat",
     "TerrainBank",
     "from_archive",
+    "from_heightmaps",
     "to_device",
     "CHECKPOINT_NAME",
     "Treatment",

@@ -22,7 +22,7 @@ from jaxterrain import generators
 from jaxterrain.qd.grid import cell_bins, cell_distance
 from jaxterrain.terrain import TerrainScale, validate_scale
 
-__all__ = ["TerrainBank", "from_archive", "to_device"]
+__all__ = ["TerrainBank", "from_archive", "from_heightmaps", "to_device"]
 
 
 
@@ -87,6 +87,25 @@ def from_archive(archive, scale: TerrainScale | None = None, render_chunk: int =
         cell=jnp.asarray(idx.astype(np.int32)),
         source=jnp.asarray(np.asarray(archive.source, np.int32)[idx]),
     )
+
+
+def from_heightmaps(heightmaps, hardness, fitness=None) -> TerrainBank:
+    """A :class:`TerrainBank` of terrains that no archive holds (``suite.folder``: a folder of your own heightmaps):
+    ``heightmaps`` [N, H, W] metres; ``hardness`` [N] goes into ``distance`` (what ``levels`` bands and the "hardest
+    terrain traversed" read); ``fitness`` [N] (default zeros: unmeasured). There is no grid: descriptors, points and
+    bins are zeros, ``cell`` and ``source`` the terrain's index. ``ValueError`` for mismatched shapes or no terrain."""
+    maps = np.asarray(heightmaps, np.float32)
+    n = maps.shape[0] if maps.ndim == 3 else 0
+    hard = np.asarray(hardness, np.float32)
+    fit = np.zeros(n, np.float32) if fitness is None else np.asarray(fitness, np.float32)
+    if n < 1 or hard.shape != (n,) or fit.shape != (n,):
+        raise ValueError(f"from_heightmaps: heightmaps [N >= 1, H, W] with hardness and fitness [N]; got "
+                         f"{maps.shape}, {hard.shape}, {fit.shape}")
+    index = np.arange(n, dtype=np.int32)
+    zeros2 = np.zeros((n, 2), np.float32)
+    return TerrainBank(heightmaps=jnp.asarray(maps), fitness=jnp.asarray(fit), descriptors=jnp.asarray(zeros2),
+                       points=jnp.asarray(zeros2), bins=jnp.zeros((n, 2), jnp.int32), distance=jnp.asarray(hard),
+                       cell=jnp.asarray(index), source=jnp.asarray(index))
 
 
 def _render_filled(archive, idx: np.ndarray, chunk: int) -> np.ndarray:

@@ -9,7 +9,9 @@
   and the choice of levels from a measured grid;
 - :mod:`~jaxterrain.suite.evaluation`: :func:`evaluate_policies` (``[P, N]`` fitness) and :func:`passed_levels` (the
   highest level of each family passed with every level below it passed);
-- :mod:`~jaxterrain.suite.outputs`: an evaluation's files (CSV, Markdown, figures).
+- :mod:`~jaxterrain.suite.outputs`: an evaluation's files (CSV, Markdown, figures);
+- :mod:`~jaxterrain.suite.folder`: your own terrains, a folder of PNG / GeoTIFF / .npy / .npz heightmaps
+  (:func:`load_folder`), as a suite (:func:`folder_suite`) or a curriculum bank (:func:`folder_bank`).
 
     from jaxterrain import rl, suite
     s = suite.load("v1")
@@ -22,12 +24,16 @@ from jaxterrain.suite.evaluation import (CVAR_ALPHA, THRESHOLD, cell_scores, che
                                         generator_robustness, highest_level_passed, level_fitness, passed_levels)
 from jaxterrain.suite.families import (FAMILIES, FAMILIES_V2, Family, START_STRIP, TABLES, build_terrain, edge_distance,
                                       family_names, family_table, misfit, room)
+from jaxterrain.suite.folder import (EXTENSIONS, ORDERS, TERRAIN_SIDE, TerrainFolder, difficulty_order, fit_terrain,
+                                    folder_bank, folder_suite, load_folder, name_order, read_terrain)
 from jaxterrain.suite.heldout import (GENERATORS, LEVELS, ROBOTS, SEED, Suite, V2_LEVELS, VERSIONS, archive_suite,
                                      descriptor_levels, load, v2_terrain)
 from jaxterrain.suite.outputs import (Evaluation, level_table, read_fitness, plot_levels, plot_suite, short_names,
                                      write_evaluation)
 
 __all__ = [
+    "EXTENSIONS", "ORDERS", "TERRAIN_SIDE", "TerrainFolder", "difficulty_order", "fit_terrain", "folder_bank",
+    "folder_suite", "load_folder", "name_order", "read_terrain",
     "check_curve",
     "decreasing_fit",
     "propose_values",

@@ -124,11 +124,10 @@ def _read_npz(path: Path) -> np.ndarray:
     )
 
 
-def read_dem(path: str | os.PathLike, min_size: int = 1) -> np.ndarray:
-    """Read one DEM file (``.tif``/``.tiff``, ``.npy``, ``.npz``) as float32 ``[H, W]``, checked by :func:`check_dem`.
-
-    Raises ``ValueError`` naming the file for an unknown extension, an unreadable file or bad content.
-    """
+def read_elevation(path: str | os.PathLike) -> np.ndarray:
+    """Read one DEM file (``.tif``/``.tiff``, ``.npy``, ``.npz``) as it is stored, unchecked: the array (any shape and
+    dtype; a GeoTIFF's ``GDAL_NODATA`` cells as NaN). :func:`read_dem` checks it; ``suite.folder`` reads terrains
+    with it. Raises ``ValueError`` naming the file for an unknown extension, a missing or unreadable file."""
     path = Path(path)
     ext = path.suffix.lower()
     if ext not in DEM_EXTENSIONS:
@@ -137,18 +136,24 @@ def read_dem(path: str | os.PathLike, min_size: int = 1) -> np.ndarray:
         raise ValueError(f"DEM {path}: no such file")
     try:
         if ext in (".tif", ".tiff"):
-            z = _read_tiff(path)
-        elif ext == ".npy":
-            z = np.load(path, allow_pickle=False)
-        else:
-            z = _read_npz(path)
+            return _read_tiff(path)
+        if ext == ".npy":
+            return np.load(path, allow_pickle=False)
+        return _read_npz(path)
     except ValueError as err:
         if str(err).startswith(f"DEM {path}"):
             raise
         raise ValueError(f"DEM {path}: unreadable {ext} file ({err})") from err
     except Exception as err:  # corrupt file: tifffile / zipfile / numpy raise many different types
         raise ValueError(f"DEM {path}: unreadable {ext} file ({type(err).__name__}: {err})") from err
-    return check_dem(z, str(path), min_size)
+
+
+def read_dem(path: str | os.PathLike, min_size: int = 1) -> np.ndarray:
+    """Read one DEM file (``.tif``/``.tiff``, ``.npy``, ``.npz``) as float32 ``[H, W]``, checked by :func:`check_dem`.
+
+    Raises ``ValueError`` naming the file for an unknown extension, an unreadable file or bad content.
+    """
+    return check_dem(read_elevation(path), str(Path(path)), min_size)
 
 
 def builtin_dems() -> list[tuple[str, np.ndarray]]:
@@ -305,6 +310,7 @@ def random_patches(
 
 
 __all__ = [
+    "read_elevation",
     "DEFAULT_SCALES",
     "DemTiles",
     "builtin_dems",

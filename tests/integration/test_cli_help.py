@@ -131,7 +131,10 @@ def test_one_flag_per_concept_across_commands():
     assert set(backends) >= {"learn", "curriculum", "evaluate", "evolve"}
     assert set(backends.values()) == {common.BACKEND_NAMES}
     assert set(terrains) >= {"quickstart", "difficulty-spread", "features", "evaluate", "train-traversability"}
-    assert all(h.startswith("terrains sampled per generator") for h in terrains.values())
+    # --terrains N: terrains sampled per generator; --terrains DIR: a folder of your own heightmaps (learn: only that)
+    assert all(h.startswith("terrains sampled per generator") for n, h in terrains.items() if n != "learn")
+    assert "or DIR, a folder of heightmaps" in terrains["evaluate"]
+    assert terrains["learn"].startswith("DIR, a folder of your own heightmaps")
 
 
 def test_backend_names_match_the_library():
