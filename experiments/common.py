@@ -705,18 +705,11 @@ def fitness_of(name: str):
 
 
 def generator_available(name: str, size: int) -> tuple[bool, str]:
-    """Whether generator ``name`` can be built and render at ``size`` (e.g. the GAN needs weights)."""
-    try:
-        import jax
+    """Whether generator ``name`` can be built and render at ``size`` (e.g. the GAN needs weights), and why not:
+    ``jaxterrain.features.alignment.generator_available``."""
+    from jaxterrain.features.alignment import generator_available as available
 
-        from jaxterrain import generators
-
-        gen = generators.get(name, size=size)
-        gen.render(gen.sample(jax.random.key(0), 1))
-        return True, ""
-    except Exception as err:  # noqa: BLE001 - any failure means "skip this generator", reported to the user
-        msg = str(err).splitlines()[0] if str(err) else ""
-        return False, f"{type(err).__name__}: {msg[:100]}{'...' if len(msg) > 100 else ''}"
+    return available(name, size)
 
 
 def resume_folder(command: str, resume: Any, out: Any = None) -> Path:
