@@ -9,6 +9,8 @@
   and the choice of levels from a measured grid;
 - :mod:`~jaxterrain.suite.evaluation`: :func:`evaluate_policies` (``[P, N]`` fitness) and :func:`passed_levels` (the
   highest level of each family passed with every level below it passed);
+- :mod:`~jaxterrain.suite.passing`: levels passed with the trial as the unit (:func:`levels_passed_gain`: how many
+  more levels of each family a treatment's walkers pass than the base policy, with a bootstrap interval);
 - :mod:`~jaxterrain.suite.outputs`: an evaluation's files (CSV, Markdown, figures);
 - :mod:`~jaxterrain.suite.folder`: your own terrains, a folder of PNG / GeoTIFF / .npy / .npz heightmaps
   (:func:`load_folder`), as a suite (:func:`folder_suite`) or a curriculum bank (:func:`folder_bank`).
@@ -28,6 +30,7 @@ from jaxterrain.suite.folder import (EXTENSIONS, ORDERS, TERRAIN_SIDE, TerrainFo
                                     folder_bank, folder_suite, load_folder, name_order, read_terrain)
 from jaxterrain.suite.heldout import (GENERATORS, LEVELS, ROBOTS, SEED, Suite, V2_LEVELS, VERSIONS, archive_suite,
                                      descriptor_levels, load, v2_terrain)
+from jaxterrain.suite.passing import highest_passed, levels_passed, levels_passed_gain
 from jaxterrain.suite.outputs import (Evaluation, level_table, read_fitness, plot_levels, plot_suite, short_names,
                                      write_evaluation)
 
@@ -76,4 +79,7 @@ __all__ = [
     "highest_level_passed",
     "level_fitness",
     "passed_levels",
+    "highest_passed",
+    "levels_passed",
+    "levels_passed_gain",
 ]
