@@ -1,0 +1,254 @@
+"""Every shipped walker on held-out suite v2 (issue 61 item 4), resumably, in commands that fit a GPU call.
+
+    PYTHONPATH=. python docs/results/suite_v2/reevaluate.py --plan                        # CPU: what is left, how long
+    PYTHONPATH=. python docs/results/suite_v2/reevaluate.py --time-limit 8 --pack $OUT/v2eval.tar.gz   # GPU
+
+Walks, in this order, so that a run cut short still leaves whole experiments: each robot's shipped base policy with
+``--keys`` (10) independent evaluation keys (the comparator of every page, as ``evaluate --keys 10`` walked it on
+v1: ``docs/results/base_v1_keys_h200_2026-11-29/``), then every walker (``policies/trial_K``) of the experiment
+folders given (default :data:`EXPERIMENTS`: Experiment 3, 3b, 3c, the wide recipe, the ant; 170 walkers), each
+robot's walkers on ``suite.load("v2", robot=...)``. The protocol is the shipped held-out evaluations'
+(``heldout/config.json``: ``evaluate --preset gpu --no-repeat --backend warp --slots 16384``; HEADINGS, 80 walks a
+terrain, best 5 per heading, 4 headings, seed 0): every walker walks with the key ``evaluate`` gives every policy,
+the base policy with keys 0..9, so each result is the row ``evaluate --suite v2 --robot R --keys 10 --policy ...``
+would write.
+
+The logic is :mod:`jaxterrain.suite.batch`'s: each walk's fitness is written to ``--work`` (default
+``runs/v2eval``) the moment it ends, atomically; a rerun skips what is there; under ``--time-limit MIN`` no walk
+starts that is predicted to end past the limit (counted from this script's start). When the last walk of a group
+ends, its evaluation is written in ``evaluate``'s files (``fitness.csv.gz``, ``levels.csv``, ``summary.md``,
+``robustness.csv``, ``levels.png``, ``config.json``, ``timing.json``):
+
+- a treatment's into ``<treatment>/<--heldout-name>/`` (default ``heldout_v2``, beside the v1 ``heldout/``): the
+  base policy's key-0 walk as its ``base`` row, then its walkers, as on v1;
+- a robot's base policy into ``<--base-out>/<robot>/`` (default ``docs/results/base_v2_keys_h200``): rows
+  ``base``, ``base:key1`` .. ``base:key9``, with ``suite.png``.
+
+``--pack FILE.tar.gz`` then writes ONE gzipped tar of the work folder and every group folder written so far (paths
+relative to the current folder, the repository root): unpack it in the repository root (``tar xzf FILE``) and carry
+``runs/v2eval`` into the next command. ``--plan`` prints the groups, what is done and the predicted seconds of the
+rest (from the walks recorded in ``--work``) and walks nothing.
+
+Then, on the CPU: ``python -m experiments generalise ... --heldout heldout_v2 --base docs/results/base_v2_keys_h200/
+humanoid --beside <the v1 aggregate>`` per page; ``restate.py`` beside this file runs all four pages' aggregates.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+from pathlib import Path
+
+STARTED = time.perf_counter()
+
+ROOT = Path(__file__).resolve().parents[3]
+EXPERIMENTS = ("docs/results/exp3_gpushort", "docs/results/exp3b_gpushort", "docs/results/exp3c_gpushort",
+               "docs/results/wide_gpushort", "docs/results/ant_gpushort/learn")
+"""The shipped experiments' folders, in the order they are walked (repository-relative)."""
+BASE_OUT = "docs/results/base_v2_keys_h200"
+ROBOT_ORDER = ("humanoid", "ant")
+
+
+def parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument("folders", nargs="*", default=list(EXPERIMENTS), metavar="FOLDER",
+                   help="experiment folders (a treatment with policies/trial_K, or a folder of them), walked in this "
+                        "order after the base policies (default: the five shipped experiments)")
+    p.add_argument("--work", type=Path, default=Path("runs/v2eval"),
+                   help="the resumable results folder (default runs/v2eval): one file per walk")
+    p.add_argument("--time-limit", type=float, default=None, metavar="MIN",
+                   help="start no walk predicted to end later than MIN minutes after this script started")
+    p.add_argument("--pack", type=Path, default=None, metavar="FILE",
+                   help="afterwards, a gzipped tar of --work and every group folder written (relative to the "
+                        "current folder), e.g. $OUT/v2eval.tar.gz")
+    p.add_argument("--plan", action="store_true", help="print what is done and the predicted time of the rest; "
+                                                      "walk nothing")
+    p.add_argument("--robots", nargs="*", default=None,
+                   help="robots whose base policy walks with --keys keys first (default: the walkers' robots)")
+    p.add_argument("--keys", type=int, default=10, help="evaluation keys of each base policy (default 10)")
+    p.add_argument("--heldout-name", default="heldout_v2",
+                   help="a treatment's evaluation folder, inside it (default heldout_v2)")
+    p.add_argument("--base-out", type=Path, default=Path(BASE_OUT),
+                   help=f"the base policies' evaluations go to BASE_OUT/<robot>/ (default {BASE_OUT})")
+    p.add_argument("--suite", default="v2", help="held-out suite version (default v2)")
+    p.add_argument("--size", type=int, default=None, help="terrain side (a smaller build, for a CPU test)")
+    p.add_argument("--seeds", type=int, default=None, help="terrains per level (a smaller build)")
+    p.add_argument("--samples", type=int, default=None, help="generator samples (a smaller build)")
+    p.add_argument("--families", nargs="+", default=None, help="families (a smaller build)")
+    p.add_argument("--generators", nargs="*", default=None, help="generators (a smaller build)")
+    p.add_argument("--attempts", type=int, default=80, help="walks per terrain (default 80)")
+    p.add_argument("--best", type=int, default=5, help="best walks averaged per heading (default 5)")
+    p.add_argument("--headings", type=int, choices=(1, 2, 4), default=4, help="headings (default 4)")
+    p.add_argument("--backend", choices=("jax", "warp"), default="warp", help="MJX backend (default warp)")
+    p.add_argument("--slots", type=int, default=16384, help="rollout pool (default 16384; 0: all walks at once)")
+    p.add_argument("--chunk", type=int, default=None, help="terrains per call")
+    p.add_argument("--seed", type=int, default=0, help="the evaluation key's seed (default 0, as shipped)")
+    return p
+
+
+def check(p: argparse.ArgumentParser, args) -> None:
+    """One line naming the flag (exit 2) for a value out of range, before anything is built."""
+    from jaxterrain import suite
+
+    if args.time_limit is not None and not args.time_limit > 0:
+        p.error(f"--time-limit must be a number of minutes > 0; got {args.time_limit}")
+    for name, lo in (("keys", 1), ("attempts", 1), ("best", 1), ("size", 32), ("seeds", 1), ("samples", 1)):
+        v = getattr(args, name)
+        if v is not None and v < lo:
+            p.error(f"--{name} must be an integer >= {lo}; got {v}")
+    if args.best > args.attempts // args.headings:
+        p.error(f"--best must be <= attempts / headings = {args.attempts // args.headings}; got {args.best}")
+    if args.slots < 0:
+        p.error(f"--slots must be >= 0 (0: all walks at once); got {args.slots}")
+    if args.suite not in suite.VERSIONS:
+        p.error(f"--suite must be one of {', '.join(suite.VERSIONS)}; got {args.suite!r}")
+    if not args.heldout_name or "/" in args.heldout_name or args.heldout_name in (".", "..", "heldout", "policies"):
+        p.error(f"--heldout-name must be a new folder name inside each treatment (not heldout, v1's); got "
+                f"{args.heldout_name!r}")
+    if args.pack is not None and not args.pack.name.endswith((".tar.gz", ".tgz")):
+        p.error(f"--pack must name a .tar.gz or .tgz file; got {args.pack}")
+
+
+def groups(jobs) -> dict[str, list]:
+    """``{group: [jobs]}`` in order of first appearance."""
+    out: dict[str, list] = {}
+    for j in jobs:
+        out.setdefault(j.group, []).append(j)
+    return out
+
+
+def group_folder(group: str, args) -> Path:
+    """Where a group's evaluation goes: ``BASE_OUT/<robot>`` for ``base:<robot>``, else ``<treatment>/<name>``."""
+    return args.base_out / group.split(":", 1)[1] if group.startswith("base:") else Path(group) / args.heldout_name
+
+
+def written(folder: Path, names) -> bool:
+    """Whether ``folder`` holds the evaluation of exactly the jobs ``names``."""
+    cfg = folder / "config.json"
+    return (folder / "fitness.csv.gz").is_file() and cfg.is_file() and json.loads(cfg.read_text()).get("jobs") == list(names)
+
+
+def predict(store, jobs) -> dict[str, float]:
+    """Predicted seconds of each robot's pending walks in one process: its suite's build, its first walk (compile
+    included) and the others, from the walks recorded in ``store`` (``batch``'s defaults where none are)."""
+    from jaxterrain.suite import batch
+
+    metas = store.metas() if store is not None else []
+    out = {}
+    for r in dict.fromkeys(j.robot for j in jobs):
+        n = sum(1 for j in jobs if j.robot == r and (store is None or not store.has(j.name)))
+        first = [m["seconds"] for m in metas if m.get("robot") == r and not m.get("compiled_before")]
+        again = [m["seconds"] for m in metas if m.get("robot") == r and m.get("compiled_before")]
+        build = store.build_seconds(r) if store is not None else []
+        f = max(first or [batch.FIRST_WALK_S])
+        a = float(sum(again) / len(again)) if again else f
+        out[r] = 0.0 if n == 0 else max(build or [batch.BUILD_S]) + f + (n - 1) * a
+    return out
+
+
+def main(argv=None) -> int:
+    p = parser()
+    args = p.parse_args(argv)
+    check(p, args)
+    from jaxterrain import difficulty, suite
+    from jaxterrain.suite import batch
+
+    try:
+        walkers = batch.walker_jobs(args.folders)
+    except ValueError as err:
+        p.error(f"FOLDER: {err}")
+    robots = args.robots if args.robots is not None else sorted(
+        {j.robot for j in walkers}, key=lambda r: (ROBOT_ORDER.index(r) if r in ROBOT_ORDER else 99, r))
+    try:
+        bases = [j for r in robots for j in batch.base_jobs(r, args.keys)]
+    except ValueError as err:
+        p.error(f"--robots: {err}")
+    jobs = bases + walkers
+    protocol = difficulty.Protocol(args.attempts, args.best, args.headings)
+    build = {k: getattr(args, k) for k in ("size", "seeds", "samples", "families", "generators")
+             if getattr(args, k) is not None}
+    settings = batch.settings(args.suite, protocol, args.backend, args.slots or None, args.chunk, args.seed,
+                              **({"build": build} if build else {}))
+    by_group = groups(jobs)
+    if args.plan:
+        store = batch.Store(args.work) if (args.work / "settings.json").is_file() else None
+        if store is not None and store.settings != json.loads(json.dumps(settings)):
+            p.error(f"--work {args.work}: made with other settings than these flags")
+        done = lambda j: store is not None and store.has(j.name)  # noqa: E731
+        for g, js in by_group.items():
+            k = sum(map(done, js))
+            mark = "written" if written(group_folder(g, args), [j.name for j in js]) else ""
+            print(f"{g}: {k}/{len(js)} walked {mark}".rstrip())
+        left = predict(store, jobs)
+        measured = store is not None and store.metas()
+        print(f"{sum(map(done, jobs))} of {len(jobs)} walks done; the rest predicted at "
+              + ", ".join(f"{r} {s:.0f} s" for r, s in left.items()) + f" ({sum(left.values()) / 60:.1f} min, "
+              "one process; each further process adds a build and a compile per robot"
+              + ("" if measured else f"; no walk recorded in {args.work}: {batch.FIRST_WALK_S:.0f} s a walk, "
+                 "batch.FIRST_WALK_S") + ")")
+        return 0
+    try:
+        store = batch.Store(args.work, settings)
+    except batch.StoreMismatch as err:
+        p.error(f"--work: {err}")
+    built: dict = {}
+
+    def suites(robot: str):
+        if robot not in built:
+            robot_arg = robot if suite.VERSIONS[args.suite]["robot"] is not None else None
+            built[robot] = suite.load(args.suite, robot=robot_arg, size=args.size, seeds=args.seeds,
+                                      samples=args.samples, families=args.families, generator_names=args.generators)
+        return built[robot]
+
+    config = {"command": "docs/results/suite_v2/reevaluate.py", "suite": args.suite, "attempts": args.attempts,
+              "best": args.best, "headings": args.headings, "backend": args.backend, "slots": args.slots or None,
+              "chunk": args.chunk, "seed": args.seed, **build}
+    base_of = {r: f"base:{r}" for r in robots}
+
+    def write(group: str) -> None:
+        js = by_group[group]
+        names = [j.name for j in js]
+        folder = group_folder(group, args)
+        robot = js[0].robot
+        if group.startswith("base:"):
+            rows, labels = names, ["base"] + [f"base:key{j.key}" for j in js[1:]]
+        elif base_of.get(robot) is None or not store.has(base_of[robot]):
+            return  # its base row walks first; written when it has
+        else:
+            rows, labels = [base_of[robot]] + names, ["base"] + names
+        if not all(store.has(n) for n in rows) or written(folder, rows):
+            return
+        batch.write_group(store, rows, folder, suites(robot), labels,
+                          {**config, "robot": robot, "keys": len(js) if group.startswith("base:") else 1,
+                           "policy": [] if group.startswith("base:") else names},
+                          suite_figure=group.startswith("base:"))
+        print(f"{group}: written to {folder}", flush=True)
+
+    def after(job) -> None:
+        write(job.group)
+        if job.group.startswith("base:"):  # a treatment finished before its base row: written now
+            for g, js in by_group.items():
+                if js[0].robot == job.robot and not g.startswith("base:"):
+                    write(g)
+
+    for g in by_group:  # groups finished by a process that stopped before writing them
+        if all(store.has(j.name) for j in by_group[g]):
+            write(g)
+    limit = None if args.time_limit is None else args.time_limit * 60.0
+    report = batch.run(jobs, store, suites, time_limit_s=limit, started=STARTED, after=after,
+                       log=lambda line: print(line, flush=True))
+    if report["stopped"]:
+        print(f"stopped: {report['stopped']}", flush=True)
+    print(f"{len(report['walked'])} walked, {len(report['skipped'])} done before, {len(report['left'])} left; "
+          f"{report['seconds']:.0f} s", flush=True)
+    if args.pack is not None:
+        folders = [args.work] + [group_folder(g, args) for g in by_group if group_folder(g, args).is_dir()]
+        batch.pack(folders, args.pack, Path.cwd())
+        print(f"packed {len(folders)} folders into {args.pack} ({args.pack.stat().st_size / 1e6:.2f} MB)", flush=True)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
