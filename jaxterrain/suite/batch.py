@@ -58,6 +58,7 @@ from jaxterrain.runtime.io import atomic_save_npz, atomic_write_bytes, atomic_wr
 from jaxterrain.suite.evaluation import evaluate_policies
 from jaxterrain.suite.heldout import Suite
 from jaxterrain.suite.outputs import write_evaluation
+from jaxterrain.terrain import TerrainScale
 
 __all__ = ["FORMAT", "FIRST_WALK_S", "BUILD_S", "MARGIN", "Job", "StoreMismatch", "Store", "settings", "walk_key",
            "base_jobs", "walker_jobs", "treatment_folders", "run", "write_group", "pack"]
@@ -234,6 +235,20 @@ class Store:
         path = self.folder / f"suite_{robot}.json"
         return json.loads(path.read_text()) if path.is_file() else None
 
+    def suite(self, robot: str) -> Suite:
+        """The recorded suite of ``robot`` as a :class:`~jaxterrain.suite.Suite` without its heightmaps (shape
+        ``[N, 0, 0]``): the table of its terrains (family, level, seed, value, units, scale), enough to write an
+        evaluation's files (:func:`write_group`) on a machine that never built it. ValueError before its first
+        build."""
+        r = self.suite_record(robot)
+        if r is None:
+            raise ValueError(f"{self.folder}: robot {robot} has walked no suite here yet")
+        n = int(r["terrains"])
+        return Suite(r["name"], np.zeros((n, 0, 0), np.float32), np.asarray(r["family"]),
+                     np.asarray(r["level"], np.int64), np.asarray(r["seed"], np.int64),
+                     np.asarray(r["value"], np.float64), dict(r["unit"]), TerrainScale(r["cell_size"], r["height"]),
+                     dict(r["missing"]), dict(r["dropped"]), r["robot"])
+
     def check_suite(self, robot: str, s: Suite, build_s: float | None = None) -> None:
         """Record ``s`` as ``robot``'s suite at its first build; later builds must hold the same terrains (the same
         rows and units, mean heights within 1e-6 m; the sha256 may differ by float rounding across machines), else
@@ -371,9 +386,12 @@ def write_group(store: Store, names: Sequence[str], folder: str | Path, suite: S
     ``suite.png`` with ``suite_figure``) with ``fitness.csv`` gzipped (``fitness.csv.gz``, what ``generalise``
     reads), rows named ``labels`` (default ``names``); ``config.json``: ``config`` and the store's settings, the
     rows, and the devices and commits that walked them; ``timing.json``: each row's seconds. ``suite``: the one the
-    results were walked on (ValueError when its size differs from theirs, or its terrains from the store's record).
-    Returns the folder."""
+    results were walked on, built or as the store recorded it (:meth:`Store.suite`: no heightmaps, so no
+    ``suite.png``); ValueError when its size differs from theirs, or its terrains from the store's record. Returns
+    the folder."""
     folder = Path(folder)
+    if suite_figure and suite.heightmaps.size == 0:
+        raise ValueError(f"suite {suite.name}: no heightmaps (a recorded suite): suite_figure must be False")
     labels = list(names if labels is None else labels)
     if len(labels) != len(names):
         raise ValueError(f"labels: one per name ({len(names)}); got {len(labels)}")

@@ -62,6 +62,7 @@ def test_the_walks_are_evaluates_rows_and_a_robots_policies_share_one_program(sc
     slow = [[e for e in call if e[1] > 1.0] for call in per_call]
     assert slow[0], "the first walk compiles its program"
     assert slow[1:] == [[], [], []], slow  # ...but in this one, the program compiled once: nothing retraced
+    assert script.main(args("--write")) == 0
     from experiments.__main__ import main as cli
 
     assert cli(["evaluate", "--preset", "smoke", "--suite", "v2", "--robot", "humanoid", "--size", "96", "--seeds",

@@ -86,10 +86,7 @@ def test_the_digest_sets_v2_beside_v1_with_the_figures_the_files_imply(restate, 
     assert (tmp_path / "docs/results/expA/generalisation_v2/beside.csv").is_file()
     data = json.loads((tmp_path / "docs/results/suite_v2/restated/expA.json").read_text())
     assert data["v2"]["order"] == ["fair", "good"]
-
-
-def test_without_the_v2_evaluations_it_refuses_naming_what_is_missing(restate, small, tmp_path):
-    spec = page(tmp_path, small)
+    # without the v2 evaluations it refuses, naming what is missing
     with pytest.raises(ValueError, match="no v2 base evaluation"):
         restate.restate("expA", spec, tmp_path, tmp_path / "nowhere")
     (tmp_path / "docs/results/expA/fair/heldout_v2/fitness.csv").unlink()

@@ -127,7 +127,10 @@ def test_a_groups_results_are_written_as_evaluate_writes_them_and_packed_into_on
     walks = FakeWalks()
     batch.run(jobs, store, lambda robot: tiny, walk=walks, clock=walks.clock, log=lambda _: None)
     names = [jobs[0].name, jobs[2].name]
-    out = batch.write_group(store, names, tmp_path / "exp" / "a" / "heldout_v2", tiny, ["base", jobs[2].name],
+    recorded = store.suite("humanoid")   # the terrains' table, no heightmaps: what a CPU writes from
+    assert recorded.heightmaps.shape == (tiny.size, 0, 0) and recorded.rows() == tiny.rows()
+    assert recorded.name == tiny.name and recorded.scale == tiny.scale and recorded.unit == tiny.unit
+    out = batch.write_group(store, names, tmp_path / "exp" / "a" / "heldout_v2", recorded, ["base", jobs[2].name],
                             {"robot": "humanoid"})
     assert sorted(p.name for p in out.iterdir()) == ["config.json", "fitness.csv.gz", "levels.csv", "levels.png",
                                                      "summary.md", "timing.json"]
@@ -139,6 +142,8 @@ def test_a_groups_results_are_written_as_evaluate_writes_them_and_packed_into_on
     assert cfg["jobs"] == names and cfg["rows"] == ["base", jobs[2].name] and cfg["walked_with"] == store.settings
     with pytest.raises(ValueError, match="terrains"):
         batch.write_group(store, names, tmp_path / "x", tiny._replace(level=tiny.level[::-1].copy()))
+    with pytest.raises(ValueError, match="suite_figure must be False"):
+        batch.write_group(store, names, tmp_path / "x", recorded, suite_figure=True)
     monkeypatch.chdir(tmp_path)
     archive = batch.pack(["work", "exp/a/heldout_v2"], tmp_path / "out" / "v2eval.tar.gz")
     with tarfile.open(archive) as tar:

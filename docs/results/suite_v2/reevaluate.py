@@ -15,22 +15,22 @@ would write.
 
 The logic is :mod:`jaxterrain.suite.batch`'s: each walk's fitness is written to ``--work`` (default
 ``runs/v2eval``) the moment it ends, atomically; a rerun skips what is there; under ``--time-limit MIN`` no walk
-starts that is predicted to end past the limit (counted from this script's start). When the last walk of a group
-ends, its evaluation is written in ``evaluate``'s files (``fitness.csv.gz``, ``levels.csv``, ``summary.md``,
-``robustness.csv``, ``levels.png``, ``config.json``, ``timing.json``):
+starts that is predicted to end past the limit (counted from this script's start). ``--pack FILE.tar.gz`` then puts
+the work folder into ONE gzipped tar (about 1 MB when all 190 walks are done): unpack it in the repository root
+(``tar xzf FILE``) and carry ``runs/v2eval`` into the next command (a fresh machine); the GPU machine writes nothing
+else.
 
-- a treatment's into ``<treatment>/<--heldout-name>/`` (default ``heldout_v2``, beside the v1 ``heldout/``): the
-  base policy's key-0 walk as its ``base`` row, then its walkers, as on v1;
-- a robot's base policy into ``<--base-out>/<robot>/`` (default ``docs/results/base_v2_keys_h200``): rows
-  ``base``, ``base:key1`` .. ``base:key9``, with ``suite.png``.
+On the CPU, afterwards:
 
-``--pack FILE.tar.gz`` then writes ONE gzipped tar of the work folder and every group folder written so far (paths
-relative to the current folder, the repository root): unpack it in the repository root (``tar xzf FILE``) and carry
-``runs/v2eval`` into the next command. ``--plan`` prints the groups, what is done and the predicted seconds of the
-rest (from the walks recorded in ``--work``) and walks nothing.
-
-Then, on the CPU: ``python -m experiments generalise ... --heldout heldout_v2 --base docs/results/base_v2_keys_h200/
-humanoid --beside <the v1 aggregate>`` per page; ``restate.py`` beside this file runs all four pages' aggregates.
+- ``--plan``: each group's walks done, and the predicted seconds of the rest (from the walks recorded in ``--work``);
+- ``--write``: every group whose walks are all done, written in ``evaluate``'s files (``fitness.csv.gz``,
+  ``levels.csv``, ``summary.md``, ``robustness.csv``, ``levels.png``, ``config.json``, ``timing.json``; from the
+  store's records, no suite is built, so no ``suite.png``): a treatment's into ``<treatment>/<--heldout-name>/``
+  (default ``heldout_v2``, beside v1's ``heldout/``; the base policy's key-0 walk as its ``base`` row, then its
+  walkers, as on v1); a robot's base policy into ``<--base-out>/<robot>/`` (default
+  ``docs/results/base_v2_keys_h200``; rows ``base``, ``base:key1`` .. ``base:key9``);
+- ``python -m experiments generalise ... --heldout heldout_v2 --base docs/results/base_v2_keys_h200/humanoid
+  --beside v1=<the page's v1 aggregate>``, per page: ``restate.py`` beside this file runs all four pages'.
 """
 
 from __future__ import annotations
@@ -65,6 +65,8 @@ def parser() -> argparse.ArgumentParser:
                         "current folder), e.g. $OUT/v2eval.tar.gz")
     p.add_argument("--plan", action="store_true", help="print what is done and the predicted time of the rest; "
                                                       "walk nothing")
+    p.add_argument("--write", action="store_true",
+                   help="walk nothing: write every group whose walks are done as an evaluation folder (CPU, seconds)")
     p.add_argument("--robots", nargs="*", default=None,
                    help="robots whose base policy walks with --keys keys first (default: the walkers' robots)")
     p.add_argument("--keys", type=int, default=10, help="evaluation keys of each base policy (default 10)")
@@ -172,27 +174,17 @@ def main(argv=None) -> int:
     settings = batch.settings(args.suite, protocol, args.backend, args.slots or None, args.chunk, args.seed,
                               **({"build": build} if build else {}))
     by_group = groups(jobs)
-    if args.plan:
-        store = batch.Store(args.work) if (args.work / "settings.json").is_file() else None
-        if store is not None and store.settings != json.loads(json.dumps(settings)):
-            p.error(f"--work {args.work}: made with other settings than these flags")
-        done = lambda j: store is not None and store.has(j.name)  # noqa: E731
-        for g, js in by_group.items():
-            k = sum(map(done, js))
-            mark = "written" if written(group_folder(g, args), [j.name for j in js]) else ""
-            print(f"{g}: {k}/{len(js)} walked {mark}".rstrip())
-        left = predict(store, jobs)
-        measured = store is not None and store.metas()
-        print(f"{sum(map(done, jobs))} of {len(jobs)} walks done; the rest predicted at "
-              + ", ".join(f"{r} {s:.0f} s" for r, s in left.items()) + f" ({sum(left.values()) / 60:.1f} min, "
-              "one process; each further process adds a build and a compile per robot"
-              + ("" if measured else f"; no walk recorded in {args.work}: {batch.FIRST_WALK_S:.0f} s a walk, "
-                 "batch.FIRST_WALK_S") + ")")
-        return 0
+    fresh = not (args.work / "settings.json").is_file()
+    if args.write and fresh:
+        p.error(f"--work {args.work}: no walks here yet (unpack the GPU's tar in the repository root first)")
     try:
-        store = batch.Store(args.work, settings)
+        store = None if args.plan and fresh else batch.Store(args.work, settings)
     except batch.StoreMismatch as err:
         p.error(f"--work: {err}")
+    if args.plan:
+        return plan(store, jobs, by_group, args)
+    if args.write:
+        return write_groups(store, by_group, args, build)
     built: dict = {}
 
     def suites(robot: str):
@@ -202,51 +194,68 @@ def main(argv=None) -> int:
                                       samples=args.samples, families=args.families, generator_names=args.generators)
         return built[robot]
 
-    config = {"command": "docs/results/suite_v2/reevaluate.py", "suite": args.suite, "attempts": args.attempts,
-              "best": args.best, "headings": args.headings, "backend": args.backend, "slots": args.slots or None,
-              "chunk": args.chunk, "seed": args.seed, **build}
-    base_of = {r: f"base:{r}" for r in robots}
-
-    def write(group: str) -> None:
-        js = by_group[group]
-        names = [j.name for j in js]
-        folder = group_folder(group, args)
-        robot = js[0].robot
-        if group.startswith("base:"):
-            rows, labels = names, ["base"] + [f"base:key{j.key}" for j in js[1:]]
-        elif base_of.get(robot) is None or not store.has(base_of[robot]):
-            return  # its base row walks first; written when it has
-        else:
-            rows, labels = [base_of[robot]] + names, ["base"] + names
-        if not all(store.has(n) for n in rows) or written(folder, rows):
-            return
-        batch.write_group(store, rows, folder, suites(robot), labels,
-                          {**config, "robot": robot, "keys": len(js) if group.startswith("base:") else 1,
-                           "policy": [] if group.startswith("base:") else names},
-                          suite_figure=group.startswith("base:"))
-        print(f"{group}: written to {folder}", flush=True)
-
-    def after(job) -> None:
-        write(job.group)
-        if job.group.startswith("base:"):  # a treatment finished before its base row: written now
-            for g, js in by_group.items():
-                if js[0].robot == job.robot and not g.startswith("base:"):
-                    write(g)
-
-    for g in by_group:  # groups finished by a process that stopped before writing them
-        if all(store.has(j.name) for j in by_group[g]):
-            write(g)
     limit = None if args.time_limit is None else args.time_limit * 60.0
-    report = batch.run(jobs, store, suites, time_limit_s=limit, started=STARTED, after=after,
+    report = batch.run(jobs, store, suites, time_limit_s=limit, started=STARTED,
                        log=lambda line: print(line, flush=True))
     if report["stopped"]:
         print(f"stopped: {report['stopped']}", flush=True)
     print(f"{len(report['walked'])} walked, {len(report['skipped'])} done before, {len(report['left'])} left; "
           f"{report['seconds']:.0f} s", flush=True)
     if args.pack is not None:
-        folders = [args.work] + [group_folder(g, args) for g in by_group if group_folder(g, args).is_dir()]
-        batch.pack(folders, args.pack, Path.cwd())
-        print(f"packed {len(folders)} folders into {args.pack} ({args.pack.stat().st_size / 1e6:.2f} MB)", flush=True)
+        batch.pack([args.work], args.pack, Path.cwd())
+        print(f"packed {args.work} into {args.pack} ({args.pack.stat().st_size / 1e6:.2f} MB)", flush=True)
+    return 0
+
+
+def plan(store, jobs, by_group: dict, args) -> int:
+    """``--plan``: each group's walks done (and whether its evaluation is written), the predicted seconds of the
+    rest."""
+    from jaxterrain.suite import batch
+
+    has = (lambda name: False) if store is None else store.has  # noqa: E731
+    for g, js in by_group.items():
+        k = sum(has(j.name) for j in js)
+        mark = "written" if written(group_folder(g, args), [j.name for j in js] if g.startswith("base:") else
+                                    [f"base:{js[0].robot}"] + [j.name for j in js]) else ""
+        print(f"{g}: {k}/{len(js)} walked {mark}".rstrip())
+    left = predict(store, jobs)
+    measured = store is not None and bool(store.metas())
+    print(f"{sum(has(j.name) for j in jobs)} of {len(jobs)} walks done; the rest predicted at "
+          + ", ".join(f"{r} {s:.0f} s" for r, s in left.items()) + f" ({sum(left.values()) / 60:.1f} min, one "
+          "process; each further process adds a build and a compile per robot"
+          + ("" if measured else f"; no walk recorded in {args.work}: {batch.FIRST_WALK_S:.0f} s a walk, "
+             "batch.FIRST_WALK_S") + ")")
+    return 0
+
+
+def write_groups(store, by_group: dict, args, build: dict) -> int:
+    """``--write``: every group whose walks are all in ``store`` written as an evaluation (``batch.write_group``,
+    from the store's records: no suite is built); the others named."""
+    from jaxterrain.suite import batch
+
+    config = {"command": "docs/results/suite_v2/reevaluate.py", "suite": args.suite, "attempts": args.attempts,
+              "best": args.best, "headings": args.headings, "backend": args.backend, "slots": args.slots or None,
+              "chunk": args.chunk, "seed": args.seed, **build}
+    done, wrote, waiting = lambda n: store.has(n), 0, []  # noqa: E731
+    for group, js in by_group.items():
+        names = [j.name for j in js]
+        robot = js[0].robot
+        if group.startswith("base:"):
+            rows, labels = names, ["base"] + [f"base:key{j.key}" for j in js[1:]]
+        else:  # the base policy's key-0 walk as the treatment's base row, as on v1
+            rows, labels = [f"base:{robot}"] + names, ["base"] + names
+        folder = group_folder(group, args)
+        if not all(map(done, rows)):
+            waiting.append(f"{group} ({sum(map(done, rows))}/{len(rows)})")
+            continue
+        if written(folder, rows):
+            continue
+        batch.write_group(store, rows, folder, store.suite(robot), labels,
+                          {**config, "robot": robot, "keys": len(js) if group.startswith("base:") else 1,
+                           "policy": [] if group.startswith("base:") else names})
+        wrote += 1
+        print(f"{group}: {folder}", flush=True)
+    print(f"{wrote} evaluations written" + (f"; not yet walked: {', '.join(waiting)}" if waiting else ""), flush=True)
     return 0
 
 
