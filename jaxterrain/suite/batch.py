@@ -61,7 +61,7 @@ from jaxterrain.suite.outputs import write_evaluation
 from jaxterrain.terrain import TerrainScale
 
 __all__ = ["FORMAT", "FIRST_WALK_S", "BUILD_S", "MARGIN", "Job", "StoreMismatch", "Store", "settings", "walk_key",
-           "base_jobs", "walker_jobs", "treatment_folders", "run", "write_group", "pack"]
+           "base_jobs", "walker_jobs", "treatment_folders", "part", "run", "write_group", "pack"]
 
 FORMAT = "jaxterrain.suite.batch/1"
 FIRST_WALK_S = 120.0
@@ -152,6 +152,16 @@ def walker_jobs(folders: Sequence[str | Path]) -> list[Job]:
                     raise ValueError(f"{p}: {str(err).splitlines()[0]}") from None
                 jobs.append(Job(str(p), robot, str(p), 0, str(t)))
     return jobs
+
+
+def part(jobs: Sequence[Job], k: int, n: int) -> list[Job]:
+    """Part ``k`` of ``n`` of ``jobs``: every ``n``-th job from the ``k``-th (``jobs[k::n]``), so that ``n``
+    processes (one per GPU) walking the parts into one store go through the list in its order together (whole
+    groups early, as one process would). ValueError unless ``0 <= k < n``."""
+    if isinstance(n, bool) or not isinstance(n, int) or n < 1 or isinstance(k, bool) or not isinstance(k, int) \
+            or not 0 <= k < n:
+        raise ValueError(f"part: need integers 0 <= k < n; got k={k!r}, n={n!r}")
+    return list(jobs)[k::n]
 
 
 def _file_name(name: str) -> str:

@@ -76,3 +76,22 @@ def test_the_walks_are_evaluates_rows_and_a_robots_policies_share_one_program(sc
     assert ev.policies == ["base", "base:key1", "exp/a/policies/trial_0", "exp/b/policies/trial_0"]
     np.testing.assert_array_equal(ev.fitness, np.stack([base.fitness[0], base.fitness[1], a.fitness[1], b.fitness[1]]))
     assert ev.fitness[0, 0] == pytest.approx(1.0)  # flat ground: crossed
+
+
+@pytest.mark.slow
+def test_gpus_n_runs_n_processes_on_parts_of_the_jobs_into_one_work_folder_and_packs_it(script, exp, capsys):
+    """``--gpus 2`` on the CPU (CUDA_VISIBLE_DEVICES set but unused): two processes, each with its part of the 4
+    walks and its own compile, then one tar of the work folder."""
+    import subprocess
+    import sys
+    import tarfile
+
+    run = subprocess.run([sys.executable, str(SCRIPT), *args("--gpus", "2", "--pack", "out/v2eval.tar.gz")],
+                         capture_output=True, text=True, cwd=exp, env={**__import__("os").environ,
+                                                                       "PYTHONPATH": str(ROOT)}, timeout=900)
+    assert run.returncode == 0, run.stdout + run.stderr
+    lines = run.stdout.splitlines()
+    assert sum(line.startswith("[gpu 0] ") and "mean fitness" in line for line in lines) == 2
+    assert sum(line.startswith("[gpu 1] ") and "mean fitness" in line for line in lines) == 2
+    with tarfile.open(exp / "out" / "v2eval.tar.gz") as tar:
+        assert sum(m.startswith("work/results/") for m in tar.getnames()) == 4

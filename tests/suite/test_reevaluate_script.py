@@ -113,6 +113,32 @@ def test_each_call_walks_what_fits_the_next_skips_it_and_write_makes_each_whole_
     assert stop.value.code == 2 and "no walks here yet" in capsys.readouterr().err
 
 
+def test_parts_of_the_jobs_walk_them_all_once_between_them(script, exp, capsys, monkeypatch):
+    """``--part K/N`` (what ``--gpus N`` gives process k): every N-th job from the K-th; two parts into one work
+    folder walk every job once; ``--gpus`` with ``--part`` is refused."""
+    walked = {}
+
+    def walk(policies, heightmaps, key, *rest):
+        walked.setdefault(part, []).append(str(getattr(policies[0], "path", "base")))
+        return np.asarray(jax.random.uniform(key, (1, heightmaps.shape[0])), np.float32)
+
+    monkeypatch.setattr(batch, "evaluate_policies", walk)
+    for part in ("1/2", "0/2"):
+        assert script.main(args("--part", part)) == 0
+    out = capsys.readouterr().out
+    assert [len(walked[k]) for k in ("0/2", "1/2")] == [2, 2] and "4 of 4" not in out
+    assert script.main(args("--part", "0/2")) == 0 and "0 walked, 2 done before, 0 left" in capsys.readouterr().out
+    store = batch.Store(exp / "work")
+    names = ["base:humanoid", "base:humanoid:key1", "exp/a/policies/trial_0", "exp/b/policies/trial_0"]
+    assert all(map(store.has, names)) and len(list((exp / "work" / "results").iterdir())) == 4
+    assert sorted(walked["0/2"] + walked["1/2"]) == sorted(set(walked["0/2"] + walked["1/2"]))
+    for argv, text in ((["--part", "2/2"], "--part must be K/N"), (["--gpus", "2", "--part", "0/2"], "--gpus must"),
+                       (["--gpu", "2"], "unrecognized arguments")):
+        with pytest.raises(SystemExit) as stop:
+            script.main(args(*argv))
+        assert stop.value.code == 2 and text in capsys.readouterr().err
+
+
 def test_the_shipped_experiments_walk_in_the_issues_order(script):
     """Base policies first (every walker's robot), then Experiment 3, 3b, 3c, the wide recipe and the ant, so that a
     run cut short leaves whole experiments (the plan itself, which loads all 170 walkers: the slow test below)."""

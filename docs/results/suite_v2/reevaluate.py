@@ -52,7 +52,7 @@ ROBOT_ORDER = ("humanoid", "ant")
 
 
 def parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0], allow_abbrev=False)
     p.add_argument("folders", nargs="*", default=list(EXPERIMENTS), metavar="FOLDER",
                    help="experiment folders (a treatment with policies/trial_K, or a folder of them), walked in this "
                         "order after the base policies (default: the five shipped experiments)")
@@ -67,6 +67,10 @@ def parser() -> argparse.ArgumentParser:
                                                       "walk nothing")
     p.add_argument("--write", action="store_true",
                    help="walk nothing: write every group whose walks are done as an evaluation folder (CPU, seconds)")
+    p.add_argument("--part", default=None, metavar="K/N",
+                   help="walk only every N-th job from the K-th (0 <= K < N), e.g. one process per GPU into one --work")
+    p.add_argument("--gpus", type=int, default=None, metavar="N",
+                   help="N processes, process k walking part k/N on GPU k (CUDA_VISIBLE_DEVICES=k), then --pack")
     p.add_argument("--robots", nargs="*", default=None,
                    help="robots whose base policy walks with --keys keys first (default: the walkers' robots)")
     p.add_argument("--keys", type=int, default=10, help="evaluation keys of each base policy (default 10)")
@@ -109,6 +113,13 @@ def check(p: argparse.ArgumentParser, args) -> None:
     if not args.heldout_name or "/" in args.heldout_name or args.heldout_name in (".", "..", "heldout", "policies"):
         p.error(f"--heldout-name must be a new folder name inside each treatment (not heldout, v1's); got "
                 f"{args.heldout_name!r}")
+    if args.gpus is not None and (args.gpus < 1 or args.part is not None or args.plan or args.write):
+        p.error(f"--gpus must be an integer >= 1, without --part, --plan or --write; got {args.gpus}")
+    if args.part is not None:
+        k, sep, n = args.part.partition("/")
+        if not (sep and k.isdigit() and n.isdigit() and 0 <= int(k) < int(n)):
+            p.error(f"--part must be K/N with integers 0 <= K < N; got {args.part!r}")
+        args.part = (int(k), int(n))
     if args.pack is not None and not args.pack.name.endswith((".tar.gz", ".tgz")):
         p.error(f"--pack must name a .tar.gz or .tgz file; got {args.pack}")
 
@@ -150,10 +161,72 @@ def predict(store, jobs) -> dict[str, float]:
     return out
 
 
+def spawn(argv: list[str], args) -> int:
+    """``--gpus N``: this script N times at once, process k with ``--part k/N`` on GPU k (``CUDA_VISIBLE_DEVICES``),
+    its lines prefixed ``[gpu k]``, under what is left of ``--time-limit``; then ``--pack``. Returns the first
+    nonzero exit status of a process, else 0."""
+    import os
+    import subprocess
+    import threading
+
+    from jaxterrain.suite import batch
+
+    drop = {"--gpus": 1, "--pack": 1}
+    rest, i = [], 0
+    while i < len(argv):
+        flag = argv[i].split("=", 1)[0]
+        if flag in drop:
+            i += 1 + (drop[flag] if "=" not in argv[i] else 0)
+            continue
+        rest.append(argv[i])
+        i += 1
+    if args.time_limit is not None:
+        left = args.time_limit - (time.perf_counter() - STARTED) / 60.0
+        rest = _replace_flag(rest, "--time-limit", f"{max(left, 0.01):.3f}")
+    procs = []
+    for k in range(args.gpus):
+        env = {**os.environ, "CUDA_VISIBLE_DEVICES": str(k), "PYTHONUNBUFFERED": "1"}
+        procs.append(subprocess.Popen([sys.executable, str(Path(__file__).resolve()), *rest, "--part",
+                                       f"{k}/{args.gpus}"], env=env, stdout=subprocess.PIPE,
+                                      stderr=subprocess.STDOUT, text=True))
+
+    def relay(k, proc):
+        for line in proc.stdout:
+            print(f"[gpu {k}] {line}", end="", flush=True)
+
+    threads = [threading.Thread(target=relay, args=(k, pr)) for k, pr in enumerate(procs)]
+    for t in threads:
+        t.start()
+    codes = [pr.wait() for pr in procs]
+    for t in threads:
+        t.join()
+    if args.pack is not None:
+        batch.pack([args.work], args.pack, Path.cwd())
+        print(f"packed {args.work} into {args.pack} ({args.pack.stat().st_size / 1e6:.2f} MB)", flush=True)
+    return next((c for c in codes if c), 0)
+
+
+def _replace_flag(argv: list[str], flag: str, value: str) -> list[str]:
+    out, i = [], 0
+    while i < len(argv):
+        if argv[i] == flag:
+            i += 2
+            continue
+        if argv[i].startswith(flag + "="):
+            i += 1
+            continue
+        out.append(argv[i])
+        i += 1
+    return [*out, flag, value]
+
+
 def main(argv=None) -> int:
     p = parser()
+    argv = list(sys.argv[1:] if argv is None else argv)
     args = p.parse_args(argv)
     check(p, args)
+    if args.gpus is not None:
+        return spawn(argv, args)
     from jaxterrain import difficulty, suite
     from jaxterrain.suite import batch
 
@@ -195,7 +268,8 @@ def main(argv=None) -> int:
         return built[robot]
 
     limit = None if args.time_limit is None else args.time_limit * 60.0
-    report = batch.run(jobs, store, suites, time_limit_s=limit, started=STARTED,
+    mine = jobs if args.part is None else batch.part(jobs, *args.part)
+    report = batch.run(mine, store, suites, time_limit_s=limit, started=STARTED,
                        log=lambda line: print(line, flush=True))
     if report["stopped"]:
         print(f"stopped: {report['stopped']}", flush=True)
