@@ -32,6 +32,11 @@ through an already compiled program, or, for the first walk of a program in this
 recorded in the store (compile included), else :data:`FIRST_WALK_S`. The first pending job of a process always
 runs. Walks of one policy network and walker config share one compiled program
 (:func:`jaxterrain.suite.evaluate_policies`), so a robot's base policy and all its walkers compile once per process.
+:func:`part` splits the jobs over processes (one per GPU) walking into one store.
+
+Afterwards, on any machine (no suite is built, no GPU needed): :meth:`Store.suite` (the recorded terrains' table),
+:func:`write_group` (a group's results as ``evaluate``'s files, ``fitness.csv.gz`` that ``generalise`` reads) and
+:func:`pack` (folders into one tar, what a GPU machine hands back).
 """
 
 from __future__ import annotations
