@@ -27,14 +27,23 @@ def restate():
 
 @pytest.fixture(scope="module")
 def small():
-    return suite.load("v2", robot="humanoid", size=96, seeds=2, families=["flat", "boxes"], generator_names=["perlin"],
-                      samples=10)
+    """A suite's table (no heightmaps: nothing here walks or draws a terrain): flat, boxes at 10 levels x 2 seeds
+    and 10 Perlin samples in 3 bands (``Suite`` as ``batch.Store.suite`` gives it)."""
+    from jaxterrain.terrain import TerrainScale
+
+    rows = [("flat", 0, 0, 0.0)] + [("boxes", lv, s, 0.03 + 0.01 * lv) for lv in range(10) for s in range(2)] + \
+        [("gen:perlin", k % 3, k // 3, 1.0 + k) for k in range(10)]
+    rows = rows[:21] + sorted(rows[21:], key=lambda r: (r[1], r[2]))
+    return suite.Suite("v2:humanoid-custom(test)", np.zeros((len(rows), 0, 0), np.float32),
+                       np.array([r[0] for r in rows]), np.array([r[1] for r in rows]),
+                       np.array([r[2] for r in rows]), np.array([r[3] for r in rows]),
+                       {"flat": "-", "boxes": "m height", "gen:perlin": "cells"}, TerrainScale(), {}, {}, "humanoid")
 
 
 def evaluation(folder: Path, s, base: np.ndarray, walkers: np.ndarray, prefix: str):
     names = ["base"] + [f"{prefix}/policies/trial_{k}" for k in range(len(walkers))]
     suite.write_evaluation(folder, names, s, np.vstack([base[None], walkers]), suite_figure=False)
-    (folder / "config.json").write_text(json.dumps({"suite": s.name.split(":")[0].split("-")[0], "robot": "humanoid"}))
+    (folder / "config.json").write_text(json.dumps({"suite": s.name.split(":")[0], "robot": "humanoid"}))
 
 
 def page(root: Path, s):
