@@ -61,6 +61,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "folder; `evaluate --keys K` makes K runs of it), on the treatments' terrains: every "
                              "page then uses the same base evaluation (default: the base rows of each treatment's "
                              "heldout/fitness.csv, one run each)")
+    parser.add_argument("--heldout", default="heldout", metavar="NAME",
+                        help="the held-out evaluation folder inside each treatment (default heldout, suite v1's; "
+                             "heldout_v2: suite v2's, docs/results/suite_v2/reevaluate.py)")
+    parser.add_argument("--beside", type=labelled_path, default=None, metavar="[LABEL=]DIR",
+                        help="another generalise output folder (e.g. the same treatments on suite v1) to set beside "
+                             "this one: beside.csv and a section of generalisation.md (each treatment's IQM, mean and "
+                             "P(beats base) on both, the ranks, which pairs each separates)")
     parser.add_argument("--reps", type=int, default=2000, help="bootstrap resamples per interval")
     parser.add_argument("--seed", type=int, default=0, help="seed of the bootstrap and of the permutation test")
     parser.add_argument("--permutations", type=int, default=10000,
@@ -84,31 +91,31 @@ def labelled_path(text: str) -> LabelledPath:
     return path
 
 
-def treatment_folders(runs) -> list[tuple[Path, str | None]]:
+def treatment_folders(runs, heldout: str = "heldout") -> list[tuple[Path, str | None]]:
     """``(folder, label)`` of every folder of ``runs`` (itself or a direct subfolder) holding a held-out evaluation
-    and a summary, sorted; the label from ``LABEL=``: LABEL for the run folder itself, ``"LABEL <name>"`` for its
-    subfolders, else None (the folder's name)."""
+    (``<heldout>/fitness.csv[.gz]``) and a summary, sorted; the label from ``LABEL=``: LABEL for the run folder
+    itself, ``"LABEL <name>"`` for its subfolders, else None (the folder's name)."""
     out = []
     for run in runs:
         label = getattr(run, "label", None)
         for d in [run, *sorted(p for p in run.iterdir() if p.is_dir())]:
-            if (d / "summary.json").is_file() and any((d / "heldout" / f).is_file()
+            if (d / "summary.json").is_file() and any((d / heldout / f).is_file()
                                                        for f in ("fitness.csv", "fitness.csv.gz")):
                 own = None if label is None else label if d == run else f"{label} {d.name.replace('-', ' ')}"
                 out.append((d, own))
     return out
 
 
-def load_treatment(folder: Path, label: str | None = None) -> dict:
-    """One treatment: its label, trials' hardest cell traversed, the held-out evaluation (trials in trial order, the
-    base policy's rows apart). A :class:`~experiments.common.UsageError` naming the file (and the row or field) when
-    either file is damaged."""
+def load_treatment(folder: Path, label: str | None = None, heldout: str = "heldout") -> dict:
+    """One treatment: its label, trials' hardest cell traversed, the held-out evaluation of ``folder/<heldout>/``
+    (trials in trial order, the base policy's rows apart). A :class:`~experiments.common.UsageError` naming the file
+    (and the row or field) when either file is damaged."""
     import math
 
     from experiments.common import UsageError
     from jaxterrain import suite
 
-    path = folder / "heldout" / "fitness.csv"
+    path = folder / heldout / "fitness.csv"
     path = path if path.is_file() else path.with_suffix(".csv.gz")
     try:
         ev = suite.read_fitness(path)
@@ -176,10 +183,17 @@ def main(args: argparse.Namespace) -> int:
         raise UsageError(f"--reps must be an integer >= 1; got {args.reps}")
     if args.permutations < 1:
         raise UsageError(f"--permutations must be an integer >= 1; got {args.permutations}")
-    folders = treatment_folders(args.runs)
+    heldout = getattr(args, "heldout", "heldout")
+    if not heldout or "/" in heldout or heldout in (".", ".."):
+        raise UsageError(f"--heldout must be a folder name inside each treatment (heldout, heldout_v2); got {heldout!r}")
+    beside = getattr(args, "beside", None)
+    if beside is not None and not (beside / "intervals.csv").is_file():
+        raise UsageError(f"--beside {beside}: no intervals.csv in it (give a generalise output folder)")
+    folders = treatment_folders(args.runs, heldout)
     if not folders:
-        raise UsageError(f"no treatment with heldout/fitness.csv and summary.json in {', '.join(map(str, args.runs))}")
-    ts = [load_treatment(f, label) for f, label in folders]
+        raise UsageError(f"no treatment with {heldout}/fitness.csv and summary.json in "
+                         f"{', '.join(map(str, args.runs))}")
+    ts = [load_treatment(f, label, heldout) for f, label in folders]
     seen: dict[str, Path] = {}
     for t in ts:
         if t["label"] in seen:
@@ -269,8 +283,15 @@ def main(args: argparse.Namespace) -> int:
     helped = {f: [n for n in names[:-1] if est[f][n]["trial_iqm"].low > base_hi[f]] for f in families}
     hurt = {f: [n for n in names[:-1] if est[f][n]["trial_iqm"].high < base_lo[f]] for f in families}
     runs = {n: s.shape[0] for n, s in scores.items()}
-    atomic_write_text(out / "generalisation.md", markdown(names, runs, families, est, two, strat, pi, pi_strat,
-                                                          test, above, corr, helped, hurt, len(cells), args))
+    text = markdown(names, runs, families, est, two, strat, pi, pi_strat, test, above, corr, helped, hurt, len(cells),
+                    args)
+    suite_name = evaluated_suite(first["folder"] / heldout) or heldout
+    atomic_write_text(out / "meta.json", json.dumps({"suite": suite_name, "heldout": heldout, "base": None if args.base
+                                                     is None else str(args.base), "cells": len(cells),
+                                                     "treatments": names[:-1]}, indent=2) + "\n")
+    if beside is not None:
+        text += beside_section(out, beside, suite_name, names, est, pi, test, trial_rows)
+    atomic_write_text(out / "generalisation.md", text)
     figures(out, names, families, est, strat, pi, ts, scores)
     best = max(names[:-1], key=lambda n: est["all"][n]["iqm"].point)
     iv = est["all"][best]["iqm"]
@@ -278,6 +299,149 @@ def main(args: argparse.Namespace) -> int:
           f"{iv.high:.3f}] (95 % interval over trials; base {est['all'][BASE]['iqm'].point:.3f}, "
           f"{runs[BASE]} evaluation{'s' if runs[BASE] > 1 else ''} of one policy) -> {out}", flush=True)
     return 0
+
+
+def evaluated_suite(folder: Path) -> str | None:
+    """The suite an ``evaluate`` folder walked, from its ``config.json`` (``v1``; ``v2:<robot>`` for a per-robot
+    version), or None where it does not say."""
+    try:
+        cfg = json.loads((folder / "config.json").read_text())
+    except (OSError, ValueError):
+        return None
+    name = cfg.get("suite") if isinstance(cfg, dict) else None
+    if not isinstance(name, str) or cfg.get("archive") or cfg.get("terrain_folder"):
+        return None
+    return f"{name}:{cfg.get('robot') or 'humanoid'}" if name != "v1" else name
+
+
+SEPARATED = 0.05
+"""A pair of treatments is separated when Welch's test on the trials' IQMs, Holm-adjusted over all pairs, is below
+this."""
+
+
+def beside_section(out: Path, beside: Path, here: str, names, est, pi, test, trial_rows) -> str:
+    """``beside.csv`` (each treatment on this run's suite and on ``beside``'s: IQM, mean, trial IQM and
+    P(beats base policy) with their intervals over trials, rank by IQM), ``beside.png`` and the section of
+    ``generalisation.md`` that compares the two: how the treatments' ranks agree (Spearman, Kendall over
+    treatments), how each trial's cell mean agrees (Spearman over trials), which pairs each separates (Holm-adjusted
+    Welch p < :data:`SEPARATED`) and whether the other agrees. ``beside``: a generalise output folder (its
+    ``intervals.csv``, ``improvement.csv``, ``trials.csv``; ``meta.json`` names its suite)."""
+    import csv
+
+    import numpy as np
+    from matplotlib.figure import Figure
+
+    from experiments.common import UsageError
+    from jaxterrain.runtime import statistics
+    from jaxterrain.runtime.io import atomic_write_csv, save_figure
+
+    try:
+        meta = json.loads((beside / "meta.json").read_text()) if (beside / "meta.json").is_file() else {}
+        there = getattr(beside, "label", None) or meta.get("suite") or "beside"
+        iv = {r["treatment"]: r for r in csv.DictReader((beside / "intervals.csv").open()) if r["scope"] == "all"}
+        imp = ({(r["x"], r["y"]): r for r in csv.DictReader((beside / "improvement.csv").open())}
+               if (beside / "improvement.csv").is_file() else {})
+        tr = ({(r["treatment"], r["trial"]): float(r["cell_mean"]) for r in csv.DictReader((beside / "trials.csv").open())}
+              if (beside / "trials.csv").is_file() else {})
+        num = lambda r, k: float(r[k]) if r.get(k) not in (None, "") else float("nan")  # noqa: E731
+    except (OSError, KeyError, ValueError) as err:
+        raise UsageError(f"--beside {beside}: not a generalise output ({type(err).__name__}: {err})") from None
+    if here == there:
+        here, there = f"{here} (here)", f"{there} (beside)"
+    common = [n for n in names if n in iv]
+    if not common:
+        raise UsageError(f"--beside {beside}: none of these treatments is in it ({', '.join(names[:-1])})")
+    walkers = [n for n in common if n != BASE]
+    rank_here = {n: k + 1 for k, n in enumerate(sorted(walkers, key=lambda n: -est["all"][n]["iqm"].point))}
+    rank_there = {n: k + 1 for k, n in enumerate(sorted(walkers, key=lambda n: -num(iv[n], "iqm")))}
+    rows = []
+    for n in common:
+        e, r = est["all"][n], iv[n]
+        p_here = pi.get(f"{n} > {BASE}")
+        p_there = imp.get((n, BASE))
+        rows.append((n, *(f"{v:.4f}" for v in (*e["iqm"], num(r, "iqm"), num(r, "iqm_low"), num(r, "iqm_high"),
+                                                e["mean"].point, num(r, "mean"), e["trial_iqm"].point,
+                                                num(r, "trial_iqm"))),
+                     *(f"{v:.4f}" for v in ((*p_here,) if p_here else (np.nan,) * 3)),
+                     *((f"{num(p_there, k):.4f}" for k in ("probability", "low", "high")) if p_there else ("",) * 3),
+                     rank_here.get(n, ""), rank_there.get(n, "")))
+    atomic_write_csv(out / "beside.csv", ["treatment", "iqm", "iqm_low", "iqm_high", "iqm_beside", "iqm_low_beside",
+                                          "iqm_high_beside", "mean", "mean_beside", "trial_iqm", "trial_iqm_beside",
+                                          "p_beats_base", "p_beats_base_low", "p_beats_base_high",
+                                          "p_beats_base_beside", "p_beats_base_low_beside",
+                                          "p_beats_base_high_beside", "rank", "rank_beside"], rows)
+    lines = ["", f"## Beside {there} (`{beside}`)", "",
+             f"The same treatments on {here} (this page) and on {there}; intervals over trials (95 %). Ranks by IQM "
+             "among the treatments in both.", "",
+             f"| treatment | IQM {here} | IQM {there} | mean {here} | mean {there} | P(beats base) {here} | "
+             f"P(beats base) {there} | rank {here} | rank {there} |", "|---|---|---|---|---|---|---|---|---|"]
+    for n in common:
+        r = iv[n]
+        p_here, p_there = pi.get(f"{n} > {BASE}"), imp.get((n, BASE))
+        lines.append(f"| {n} | {_iv(est['all'][n]['iqm'])} | {num(r, 'iqm'):.3f} [{num(r, 'iqm_low'):.3f}, "
+                     f"{num(r, 'iqm_high'):.3f}] | {est['all'][n]['mean'].point:.3f} | {num(r, 'mean'):.3f} | "
+                     + (_iv(p_here) if p_here else "-") + " | "
+                     + (f"{num(p_there, 'probability'):.3f} [{num(p_there, 'low'):.3f}, {num(p_there, 'high'):.3f}]"
+                        if p_there else "-") + f" | {rank_here.get(n, '-')} | {rank_there.get(n, '-')} |")
+    missing = [n for n in names if n not in iv]
+    if missing:
+        lines += ["", f"Not in {there}: {', '.join(missing)}."]
+    lines.append("")
+    if len(walkers) >= 3:
+        c = statistics.rank_correlation([est["all"][n]["iqm"].point for n in walkers], [num(iv[n], "iqm") for n in walkers])
+        lines.append(f"- Treatments' IQMs, {here} against {there} (n = {c['n']}): Spearman {c['spearman']:.2f} "
+                     f"(p = {c['spearman_p']:.3g}), Kendall {c['kendall']:.2f} (p = {c['kendall_p']:.3g}).")
+    pairs = [(str(t), str(k), float(m)) for t, k, _, _, m, *_ in trial_rows if (str(t), str(k)) in tr]
+    if len(pairs) >= 3:
+        c = statistics.rank_correlation([m for *_, m in pairs], [tr[(t, k)] for t, k, _ in pairs])
+        lines.append(f"- Each trial's cell mean, {here} against {there} (n = {c['n']} walkers): Spearman "
+                     f"{c['spearman']:.2f} (p = {c['spearman_p']:.3g}).")
+    beats = lambda lo: lo > 0.5  # noqa: E731
+    b_here = [n for n in walkers if pi.get(f"{n} > {BASE}") and beats(pi[f"{n} > {BASE}"].low)]
+    b_there = [n for n in walkers if imp.get((n, BASE)) and beats(num(imp[(n, BASE)], "low"))]
+    lines.append(f"- Treatments whose P(beats base policy) interval lies above 0.5: {len(b_here)} of {len(walkers)} "
+                 f"on {here}, {len(b_there)} of {len(walkers)} on {there}"
+                 + (f"; on one only: {', '.join(sorted(set(b_here) ^ set(b_there)))}" if set(b_here) ^ set(b_there)
+                    else "") + ".")
+    verdict = {}
+    for i, a in enumerate(walkers):
+        for b in walkers[i + 1:]:
+            h = test.get(f"{a} > {b}")
+            t = imp.get((a, b))
+            if h is None or t is None or t.get("holm_p") in (None, ""):
+                continue
+            sep_h = pi[f"{a} > {b}"].point - 0.5 if h[1] < SEPARATED else 0.0
+            sep_t = num(t, "probability") - 0.5 if num(t, "holm_p") < SEPARATED else 0.0
+            key = ("both" if sep_h * sep_t > 0 else "reversed" if sep_h * sep_t < 0 else
+                   "here" if sep_h else "there" if sep_t else "neither")
+            winner = (a, b) if (sep_h or sep_t) >= 0 else (b, a)
+            verdict.setdefault(key, []).append(f"{winner[0]} > {winner[1]}" if key != "neither" else f"{a} / {b}")
+    if verdict:
+        n_pairs = sum(map(len, verdict.values()))
+        lines.append(f"- Pairs of treatments (Welch on the trials' IQMs, Holm-adjusted p < {SEPARATED:g} on each page's "
+                     f"own pairs), {n_pairs} in both: separated on both, the same way: {len(verdict.get('both', []))}; "
+                     f"on {here} only: {len(verdict.get('here', []))}; on {there} only: "
+                     f"{len(verdict.get('there', []))}; reversed: {len(verdict.get('reversed', []))}; on neither: "
+                     f"{len(verdict.get('neither', []))}.")
+        for key, said in (("here", f"on {here} only"), ("there", f"on {there} only"),
+                          ("reversed", f"reversed (as {here} has them)")):
+            if verdict.get(key):
+                lines.append(f"  - {said}: " + "; ".join(verdict[key]))
+    fig = Figure(figsize=(5.0, 4.5))
+    ax = fig.subplots()
+    for n in common:
+        e, r = est["all"][n]["iqm"], iv[n]
+        x, y = num(r, "iqm"), e.point
+        ax.errorbar(x, y, xerr=[[x - num(r, "iqm_low")], [num(r, "iqm_high") - x]],
+                    yerr=[[y - e.low], [e.high - y]], fmt="o", capsize=2, color="grey" if n == BASE else None)
+        ax.annotate(n, (x, y), fontsize=6, xytext=(3, 3), textcoords="offset points")
+    ax.set_xlabel(f"IQM on {there} (95 % CI over trials)")
+    ax.set_ylabel(f"IQM on {here} (95 % CI over trials)")
+    ax.set_title("Held-out IQM per treatment on both suites", fontsize=9)
+    fig.tight_layout()
+    save_figure(fig, out / "beside.png")
+    lines += ["", "![IQM on both suites](beside.png)", ""]
+    return "\n".join(lines)
 
 
 NO_TRIAL_VARIANCE = "one policy: its runs are evaluations of the same weights, so its interval holds no trial variance"

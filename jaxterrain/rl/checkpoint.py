@@ -31,7 +31,7 @@ from jaxterrain.runtime import driver
 from jaxterrain.runtime.io import atomic_write_bytes, atomic_write_text
 
 __all__ = ["CHECKPOINT_FORMAT", "POLICY_FORMAT", "BASE_POLICY_DIR", "base_policy_dir", "save_checkpoint", "checkpoint_metadata",
-           "load_checkpoint", "save_policy", "load_policy", "policy_fn"]
+           "load_checkpoint", "save_policy", "load_policy", "policy_fn", "POLICY_FIELDS"]
 
 CHECKPOINT_FORMAT = "jaxterrain.rl.checkpoint/2"
 POLICY_FORMAT = "jaxterrain.rl.policy/1"
@@ -209,18 +209,41 @@ def _read_policy(folder: Path, weights: Path):
     return config, meta, action_size, params, normaliser
 
 
-@functools.lru_cache(maxsize=32)
-def policy_fn(config: PPOConfig, action_size: int) -> Callable[[Any, jax.Array], jax.Array]:
-    """``f((params, normaliser), obs [..., O]) -> action [..., A]``: the deterministic policy with its parameters
-    as an argument, so new parameters (e.g. during a curriculum) do not re-compile a jitted caller
-    (``jaxterrain.difficulty.evaluate(..., policy=f, policy_params=(state.params, state.normaliser))``).
+POLICY_FIELDS = ("normalize_observations", "policy_hidden", "activation", "action_distribution", "min_std",
+                 "init_std")
+"""The :class:`PPOConfig` fields the deterministic policy depends on (its network and observation normalisation);
+the others (envs, unrolls, minibatches, learning rate, truncation, the value network, ...) only shape training."""
 
-    Cached per ``(config, action_size)`` (at most 32): every walker of one network config gets the SAME function,
-    so a caller's program cache keyed on it (``difficulty``'s) compiles one program for all of them
-    (``suite.evaluate_policies`` compiled one per walker before: 60 s each with MJX on an H200)."""
 
+def _policy_network(config: PPOConfig) -> PPOConfig:
+    """``config``'s policy network on the default training fields: the key of :func:`policy_fn`'s cache."""
+    return PPOConfig()._replace(**{f: getattr(config, f) for f in POLICY_FIELDS})
+
+
+def _make_policy_fn(config: PPOConfig, action_size: int) -> Callable[[Any, jax.Array], jax.Array]:
     def f(policy_params, obs):
         params, normaliser = policy_params
         return nets.deterministic_action(config, action_size, params, normaliser, jnp.asarray(obs, jnp.float32))
 
     return f
+
+
+_policy_fn_cached = functools.lru_cache(maxsize=32)(_make_policy_fn)
+
+
+def policy_fn(config: PPOConfig, action_size: int) -> Callable[[Any, jax.Array], jax.Array]:
+    """``f((params, normaliser), obs [..., O]) -> action [..., A]``: the deterministic policy with its parameters
+    as an argument, so new parameters (e.g. during a curriculum) do not re-compile a jitted caller
+    (``jaxterrain.difficulty.evaluate(..., policy=f, policy_params=(state.params, state.normaliser))``).
+
+    Cached per policy network (the :data:`POLICY_FIELDS` of ``config``, at most 32) and action size: every walker of
+    one network gets the SAME function, whatever it was trained with (a fine-tuned walker's envs and minibatches
+    differ from its base policy's), so a caller's program cache keyed on it (``difficulty``'s) compiles one program
+    for all of them (``suite.evaluate_policies`` compiled one per walker before: 60 s each with MJX on an H200; then
+    one per training config: the base policy, the paper recipe's and the wide recipe's walkers apart). ``params``
+    needs only its ``"policy"`` entry. ``policy_fn.__wrapped__(config, action_size)``: a new, uncached function."""
+    return _policy_fn_cached(_policy_network(config), int(action_size))
+
+
+policy_fn.__wrapped__ = _make_policy_fn
+policy_fn.cache_info = _policy_fn_cached.cache_info

@@ -12,6 +12,8 @@
 - :mod:`~jaxterrain.suite.passing`: levels passed with the trial as the unit (:func:`levels_passed_gain`: how many
   more levels of each family a treatment's walkers pass than the base policy, with a bootstrap interval);
 - :mod:`~jaxterrain.suite.outputs`: an evaluation's files (CSV, Markdown, figures);
+- :mod:`~jaxterrain.suite.batch`: many walkers on a suite resumably (one result file per walker, written when it is
+  walked; a time limit; a rerun skips what is done): the re-evaluation of every shipped walker on v2;
 - :mod:`~jaxterrain.suite.folder`: your own terrains, a folder of PNG / GeoTIFF / .npy / .npz heightmaps
   (:func:`load_folder`), as a suite (:func:`folder_suite`) or a curriculum bank (:func:`folder_bank`).
 
@@ -21,6 +23,7 @@
     suite.passed_levels(fitness[0], s)
 """
 
+from jaxterrain.suite import batch
 from jaxterrain.suite.calibration import check_curve, decreasing_fit, propose_values, select_levels
 from jaxterrain.suite.evaluation import (CVAR_ALPHA, THRESHOLD, cell_scores, check_policies, evaluate_policies,
                                         generator_robustness, highest_level_passed, level_fitness, passed_levels)
@@ -35,6 +38,7 @@ from jaxterrain.suite.outputs import (Evaluation, level_table, read_fitness, plo
                                      write_evaluation)
 
 __all__ = [
+    "batch",
     "EXTENSIONS", "ORDERS", "TERRAIN_SIDE", "TerrainFolder", "difficulty_order", "fit_terrain", "folder_bank",
     "folder_suite", "load_folder", "name_order", "read_terrain",
     "check_curve",

@@ -11,7 +11,8 @@ the stairs up to 0.06 m, not 0.19 m.
 Fitness is :func:`jaxterrain.difficulty.evaluate`'s (the walker's normalised distance under a
 :class:`~jaxterrain.difficulty.Protocol`, :data:`~jaxterrain.difficulty.HEADINGS` by default), each policy walking
 as it was trained: its own contact solver (``config.json``'s ``walker_config``) and the same env otherwise. The
-policies' weights are data to ONE compiled program per walker config, so ten policies of one robot compile once;
+policies' weights (their actor's, the value network left out) are data to ONE compiled program per policy network
+and walker config, so a robot's base policy and all its walkers compile once, whatever each was trained with;
 every policy walks with the same key (the same start poses and noise: common random numbers, so differences between
 policies are the policies').
 """
@@ -108,8 +109,9 @@ def evaluate_policies(policies: Sequence[Callable], heightmaps, key: jax.Array, 
                 pool.terminate()
     out = []
     for p, cfg in zip(policies, configs):
-        apply = policy_fn(p.config, int(p.action_size))  # weights as data: one program per walker config
-        out.append(np.asarray(difficulty.evaluate(h, key, policy=apply, policy_params=(p.params, p.normaliser),
+        apply = policy_fn(p.config, int(p.action_size))  # weights as data: one program per network and walker config
+        weights = ({"policy": p.params["policy"]}, p.normaliser)  # the actor alone: a base policy's value net too
+        out.append(np.asarray(difficulty.evaluate(h, key, policy=apply, policy_params=weights,  # would re-compile
                                                   env_config=cfg, protocol=protocol, slots=slots, chunk=chunk)))
     return np.stack(out).astype(np.float32)
 

@@ -131,9 +131,10 @@ def plot_suite(suite: Suite, levels: Sequence[int] = (0, 4, 9)) -> Figure:
 
 
 def write_evaluation(folder: Path, names: Sequence[str], suite: Suite, fitness: np.ndarray,
-                     threshold: float = THRESHOLD) -> dict:
+                     threshold: float = THRESHOLD, suite_figure: bool = True) -> dict:
     """Write the evaluation of ``names`` (one per row of ``fitness`` [P, N]) on ``suite`` into ``folder``; returns
-    ``{policy: {family: highest level passed}}`` (every level below it passed too; -1: level 0 fails)."""
+    ``{policy: {family: highest level passed}}`` (every level below it passed too; -1: level 0 fails).
+    ``suite_figure=False`` leaves out ``suite.png`` (the terrains, the same for every evaluation of a suite)."""
     folder = Path(folder)
     fitness = np.asarray(fitness, np.float64)
     if fitness.shape != (len(names), suite.size):
@@ -186,7 +187,8 @@ def write_evaluation(folder: Path, names: Sequence[str], suite: Suite, fitness: 
         title += f"\ndropped at {side} pixels (too small for them): {', '.join(suite.dropped)}"
     levels = [int(suite.level[suite.family == fam].max()) + 1 for fam in fams]
     save_figure(_levels_figure(labels, fams, passed, title, levels), folder / "levels.png")
-    save_figure(plot_suite(suite), folder / "suite.png", dpi=90)
+    if suite_figure:
+        save_figure(plot_suite(suite), folder / "suite.png", dpi=90)
     return {n: dict(zip(fams, map(int, passed[i]))) for i, n in enumerate(names)}
 
 

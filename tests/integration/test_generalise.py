@@ -240,3 +240,44 @@ def test_generalise_takes_the_base_policys_k_evaluations_as_k_runs_of_the_compar
     err = capsys.readouterr().err
     assert stop.value.code == 2
     assert "--base" in err and "other terrains" in err and len(err.strip().splitlines()) == 1
+
+
+def test_generalise_reads_another_heldout_folder_and_sets_another_aggregate_beside(tmp_path, capsys):
+    """``--heldout heldout_v2`` reads each treatment's suite-v2 evaluation (``reevaluate.py``'s folder) instead of
+    ``heldout/``; ``--beside v1=DIR`` sets the same treatments' v1 aggregate beside it: both IQMs, the ranks (here
+    the order of two treatments flips between the suites), each trial's cell mean on both and the pairs each
+    separates."""
+    run = tmp_path / "exp3"
+    spec = {"a-map": (0.70, 0.40), "b-map": (0.50, 0.60), "c-map": (0.30, 0.20)}   # (v1, v2) trial means' centre
+    for name, (v1, v2) in spec.items():
+        write_treatment(run / name, (v2 + np.linspace(0, 0.03, 5))[:, None], 0.1, [1, 2, 3, 4, 5])
+        (run / name / "heldout").rename(run / name / "heldout_v2")
+        write_treatment(run / name, (v1 + np.linspace(0, 0.03, 5))[:, None], 0.1, [1, 2, 3, 4, 5])
+    (run / "a-map" / "heldout_v2" / "config.json").write_text(json.dumps({"suite": "v2", "robot": "humanoid"}))
+    assert cli("generalise", str(run), "--reps", "40", "--permutations", "20", "--out", str(tmp_path / "v1")) == 0
+    rows = {(r["treatment"], r["scope"]): r for r in csv.DictReader((tmp_path / "v1" / "intervals.csv").open())}
+    assert float(rows[("a map", "all")]["mean"]) == pytest.approx(0.715, abs=1e-4)
+    assert cli("generalise", str(run), "--heldout", "heldout_v2", "--beside", f"v1={tmp_path / 'v1'}", "--reps", "40",
+               "--permutations", "20", "--out", str(tmp_path / "v2")) == 0
+    out = tmp_path / "v2"
+    rows = {(r["treatment"], r["scope"]): r for r in csv.DictReader((out / "intervals.csv").open())}
+    assert float(rows[("a map", "all")]["mean"]) == pytest.approx(0.415, abs=1e-4)  # heldout_v2's walkers
+    assert json.loads((out / "meta.json").read_text())["suite"] == "v2:humanoid"
+    beside = {r["treatment"]: r for r in csv.DictReader((out / "beside.csv").open())}
+    assert [beside[n]["rank"] for n in ("a map", "b map", "c map")] == ["2", "1", "3"]
+    assert [beside[n]["rank_beside"] for n in ("a map", "b map", "c map")] == ["1", "2", "3"]
+    assert float(beside["a map"]["iqm_beside"]) == pytest.approx(float(rows[("a map", "all")]["iqm"]) + 0.3, abs=1e-3)
+    md = (out / "generalisation.md").read_text()
+    assert "## Beside v1 (`" in md and "| treatment | IQM v2:humanoid | IQM v1 |" in md
+    assert "Each trial's cell mean, v2:humanoid against v1 (n = 15 walkers)" in md
+    assert "separated on both, the same way: 2; on v2:humanoid only: 0; on v1 only: 0; reversed: 1" in md
+    assert "reversed (as v2:humanoid has them): b map > a map" in md
+    assert (out / "beside.png").stat().st_size > 0
+    capsys.readouterr()
+    for argv, text in ((["--heldout", "a/b"], "--heldout must be a folder name"),
+                       (["--heldout", "heldout_v3"], "no treatment with heldout_v3/fitness.csv"),
+                       (["--beside", str(tmp_path)], "no intervals.csv in it")):
+        with pytest.raises(SystemExit) as stop:
+            cli("generalise", str(run), "--reps", "10", *argv)
+        err = capsys.readouterr().err
+        assert stop.value.code == 2 and text in err and len(err.strip().splitlines()) == 1
