@@ -289,6 +289,9 @@ def main(args: argparse.Namespace) -> int:
     atomic_write_text(out / "meta.json", json.dumps({"suite": suite_name, "heldout": heldout, "base": None if args.base
                                                      is None else str(args.base), "cells": len(cells),
                                                      "treatments": names[:-1]}, indent=2) + "\n")
+    text += levels_section(out, {t["label"]: suite.levels_passed_gain(terrain[t["label"]], terrain[BASE],
+                                                                     first["family"], first["level"], args.reps,
+                                                                     args.seed) for t in ts})
     if beside is not None:
         text += beside_section(out, beside, suite_name, names, est, pi, test, trial_rows)
     atomic_write_text(out / "generalisation.md", text)
@@ -299,6 +302,36 @@ def main(args: argparse.Namespace) -> int:
           f"{iv.high:.3f}] (95 % interval over trials; base {est['all'][BASE]['iqm'].point:.3f}, "
           f"{runs[BASE]} evaluation{'s' if runs[BASE] > 1 else ''} of one policy) -> {out}", flush=True)
     return 0
+
+
+def levels_section(out: Path, gains: dict) -> str:
+    """``levels.csv`` (per treatment and family: the trials' mean highest level passed, the base policy's, and the
+    gain, each with its interval over trials, base keys and terrains: ``suite.levels_passed_gain``) and the section of
+    ``generalisation.md`` that shows the gains (a family's levels passed: level 0 up to the highest with every level
+    below passed, mean fitness >= 0.9)."""
+    from jaxterrain.runtime.io import atomic_write_csv
+
+    names = list(gains)
+    families = list(next(iter(gains.values())))
+    atomic_write_csv(out / "levels.csv", ["treatment", "family", "walkers", "walkers_low", "walkers_high", "base",
+                                          "base_low", "base_high", "gain", "gain_low", "gain_high"],
+                     [(n, f, *(f"{v:.3f}" for k in ("walkers", "base", "gain") for v in gains[n][f][k]))
+                      for n in names for f in families])
+    lines = ["", "## Levels passed", "",
+             "Highest level passed per family (every level below passed; a level passes at mean fitness >= 0.9; -1: "
+             "level 0 fails): each treatment's gain over the base policy in levels, the mean over its trials minus "
+             "the base's over its evaluations, with a 95 % interval over trials, base evaluations and the terrains "
+             "of each level (`levels.csv` has both means). **Bold**: the interval clears 0.", "",
+             "| family | base | " + " | ".join(names) + " |", "|---|---|" + "---|" * len(names)]
+    for f in families:
+        b = gains[names[0]][f]["base"]
+        cells = []
+        for n in names:
+            g = gains[n][f]["gain"]
+            txt = f"{g.point:+.1f} [{g.low:+.1f}, {g.high:+.1f}]"
+            cells.append(f"**{txt}**" if g.low > 0 or g.high < 0 else txt)
+        lines.append(f"| {f} | {b.point:.1f} | " + " | ".join(cells) + " |")
+    return "\n".join(lines) + "\n"
 
 
 def evaluated_suite(folder: Path) -> str | None:

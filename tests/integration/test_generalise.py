@@ -281,3 +281,16 @@ def test_generalise_reads_another_heldout_folder_and_sets_another_aggregate_besi
             cli("generalise", str(run), "--reps", "10", *argv)
         err = capsys.readouterr().err
         assert stop.value.code == 2 and text in err and len(err.strip().splitlines()) == 1
+
+
+def test_generalise_reports_the_levels_each_treatment_passes_beyond_the_base_policy(tmp_path):
+    run = tmp_path / "exp4"  # walkers at 0.95 everywhere pass every level; the base policy (0.3) fails level 0
+    write_treatment(run / "climber", np.full((3, 1), 0.95), 0.3, [1, 2, 3])
+    write_treatment(run / "sitter", np.full((3, 1), 0.5), 0.3, [1, 2, 3])
+    assert cli("generalise", str(run), "--reps", "30") == 0
+    rows = {(r["treatment"], r["family"]): r for r in csv.DictReader((run / "generalisation" / "levels.csv").open())}
+    assert float(rows[("climber", "gaps")]["walkers"]) == 2.0 and float(rows[("climber", "gaps")]["base"]) == -1.0
+    assert (float(rows[("climber", "gaps")]["gain_low"]), float(rows[("climber", "gaps")]["gain_high"])) == (3.0, 3.0)
+    assert float(rows[("sitter", "gaps")]["gain"]) == 0.0
+    md = (run / "generalisation" / "generalisation.md").read_text()
+    assert "## Levels passed" in md and "| gaps | -1.0 | **+3.0 [+3.0, +3.0]** | +0.0 [+0.0, +0.0] |" in md
