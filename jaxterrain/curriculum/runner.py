@@ -27,7 +27,8 @@ import numpy as np
 
 from jaxterrain.curriculum import walker as W
 from jaxterrain.curriculum.config import RECIPES, CurriculumConfig, validate_config
-from jaxterrain.curriculum.core import CHECKPOINT_COMPAT, init_trials, run_live, run_trials
+from jaxterrain.curriculum.core import CHECKPOINT_COMPAT, init_trials
+from jaxterrain.curriculum.population import run_live, run_trials
 from jaxterrain.curriculum.outputs import PARTIAL, export_policies, write_outputs
 from jaxterrain.curriculum.progress import ChunkMetrics, ChunkProgress, chunk_metrics
 from jaxterrain.curriculum.run_config import LearnConfig, to_flat
