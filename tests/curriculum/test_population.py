@@ -80,8 +80,8 @@ def solo(banks, configs, harness, init, chunks):
 @pytest.mark.parametrize("overlap", [False, pytest.param(True, marks=pytest.mark.slow)])
 def test_a_population_equals_each_treatment_run_alone(overlap):
     """Two map treatments (banks of 16 and 9 terrains, budgets of 30 and 24 epochs) in one program, to the end:
-    every leaf of each member's states (histories, GP observations, policies, keys) equals its solo run's. In
-    blocks of 4 (the running rows only), the same."""
+    every leaf of each member's states (histories, GP observations, policies, keys) equals its solo run's, bit for
+    bit. With overlap, in blocks of 4 on the running rows only, the same."""
     banks, configs, harness, init = members(overlap)
     alone = solo(banks, configs, harness, init, 100)
     run = C.make_population_runner(configs, harness)
@@ -90,6 +90,8 @@ def test_a_population_equals_each_treatment_run_alone(overlap):
     assert all(np.all(np.asarray(s.done)) for s in alone)
     terrains = [np.asarray(s.history.terrain) for s in alone]
     assert not np.array_equal(terrains[0][:, :24], terrains[1][:, :24])  # two curricula, not one copied
+    if not overlap:
+        return  # the running rows: below, and in the killed population's test
     states, sizes = init(), []
     while not all(np.all(np.asarray(s.done)) for s in states):
         rows = P.population_rows([s.done for s in states])
@@ -117,15 +119,65 @@ def test_members_run_their_own_blocks_and_selectors():
         C.make_population_runner((configs[0], small(steps_per_epoch=16)), harness)
 
 
-def test_a_population_stopped_between_blocks_resumes_to_the_uninterrupted_run(tmp_path):
-    """Each member checkpointed on its own (``driver`` files in its folder) after a block, restored into fresh
-    states and run on: the states of the population run without a stop."""
+# ---------------------------------------------------------------------------------------------------------------
+# The host loop of a population (jaxterrain.curriculum.batch): per-member checkpoints, time limit, resume
+# ---------------------------------------------------------------------------------------------------------------
+def test_plan_groups_keeps_equal_keys_together_under_the_env_cap():
+    from jaxterrain.curriculum.batch import plan_groups
+
+    keys = ["map", "map", "dr", "map", "dr"]
+    assert plan_groups(keys, [10, 10, 10, 10, 10], 100) == [[0, 1, 3], [2, 4]]
+    assert plan_groups(keys, [10, 10, 10, 10, 10], 20) == [[0, 1], [2, 4], [3]]
+    assert plan_groups(keys, [50, 10, 10, 10, 10], 20) == [[0], [1, 3], [2, 4]]  # one over the cap: alone
+
+
+def _hosted(folders, restore=False):
+    """The members of :func:`members` as host members of ``batch.drive`` in ``folders``, fresh or each restored
+    from its own checkpoint; and the population's block."""
+    from jaxterrain.curriculum import batch
+
     banks, configs, harness, init = members()
     run = C.make_population_runner(configs, harness)
-    whole = run(init(), banks, 100)
-    states = run(init(), banks, np.array([5, 5], np.int32))
-    for m, s in enumerate(states):
-        driver.save_checkpoint(tmp_path / f"m{m}.npz", s, done=5)
-    restored = tuple(driver.load_checkpoint(tmp_path / f"m{m}.npz", like=s)[0] for m, s in enumerate(init()))
-    assert all(np.asarray(s.chunk).tolist() == [5, 5] for s in restored)
-    assert all(tree_equal(a, b) for a, b in zip(run(restored, banks, 100), whole))
+    out = []
+    for m, (s, c, folder) in enumerate(zip(init(), configs, folders)):
+        got = batch.restore_member(folder, s, {"trials": 4, "offset": 2 * m}, tiled=False) if restore else None
+        s, done, history = (s, 0, None) if got is None else got[:3]
+        out.append(batch.Member(f"m{m}", folder, s, c.max_chunks, done=done, history=history))
+    return out, (lambda states, n, rows: run(states, banks, n, rows))
+
+
+def test_a_killed_population_resumes_each_member_to_the_uninterrupted_run(tmp_path, monkeypatch):
+    """``batch.drive`` writes each member's checkpoint and metrics after every block. Killed while writing the
+    second block's checkpoints (member 0's written, member 1's not: the members restore at different chunks), and
+    resumed from the checkpoints, every member ends with the states, metrics.csv and metric history of the
+    uninterrupted run (which computes every trial in every block; the others the running trials only); under a
+    time limit the first block is one chunk."""
+    from jaxterrain.curriculum import batch
+
+    whole, block = _hosted([tmp_path / "whole" / f"m{m}" for m in range(2)])
+    assert batch.drive(whole, block, every=4, progress=False, compact=False)
+    assert [m.summary for m in whole] == [{"chunks": 30}, {"chunks": 24}]
+    folders = [tmp_path / "part" / f"m{m}" for m in range(2)]
+    part, block = _hosted(folders)
+    assert not batch.drive(part, block, every=4, time_limit_s=1e-9, progress=False)  # the probe: one chunk
+    assert [m.done for m in part] == [1, 1]
+    part, block = _hosted(folders, restore=True)
+    written, real = [], driver.write_checkpoint
+
+    def kill(folder, *args):
+        if len(written) == 3:  # block 2: member 0 written, then the process dies
+            raise KeyboardInterrupt
+        written.append(folder)
+        real(folder, *args)
+
+    monkeypatch.setattr(driver, "write_checkpoint", kill)
+    with pytest.raises(KeyboardInterrupt):
+        batch.drive(part, block, every=4, progress=False)
+    monkeypatch.setattr(driver, "write_checkpoint", real)
+    part, block = _hosted(folders, restore=True)
+    assert [m.done for m in part] == [9, 5]
+    assert batch.drive(part, block, every=4, progress=False)
+    for a, b in zip(part, whole):
+        assert tree_equal(a.states, b.states) and sorted(a.history) == sorted(b.history)
+        assert all(np.array_equal(a.history[k], b.history[k], equal_nan=True) for k in a.history)
+        assert (a.folder / "metrics.csv").read_text() == (b.folder / "metrics.csv").read_text()
