@@ -24,8 +24,9 @@ each runs its own blocks), to the result of an uninterrupted run; a treatment fi
 restored where it sat in another population (or alone) restarts its envs on its current terrains (one line).
 
 Equal to a run alone: each member's trials take the keys, terrains, starting policies and choices of its solo run
-(:mod:`.population`), and on a CPU its files are its solo run's bit for bit
-(``tests/integration/test_population_command.py``), ``summary.json``'s ``seconds`` aside.
+(:mod:`.population`). On a CPU its checkpoint and history are bit for bit those of the first trials of its run alone
+with the population's trial count; against its run alone with its own trials, the same terrain sequences and
+evaluations within 0.05 (``tests/integration/test_population_command.py``).
 
 Blocks: ``chunks_per_call`` chunks at most, shortened so that one takes about ``block_seconds`` at the rate
 measured in the blocks before (a population chunk is longer than a treatment's); under a time limit the first block
@@ -56,7 +57,7 @@ from jaxterrain.curriculum.run_config import LearnConfig, to_flat
 from jaxterrain.runtime import driver, estimates, xla
 
 __all__ = ["Treatment", "Member", "DEFAULT_ENVS", "BLOCK_SECONDS", "group_key", "envs_of", "plan_groups",
-           "device_memory", "program_bytes", "restore_member", "drive", "run_treatments"]
+           "device_memory", "program_bytes", "restore_member", "drive", "population", "run_treatments"]
 
 DEFAULT_ENVS = 131_072
 """Envs stepped together in one program at most (``max_envs``), unless set: the top of the range where the
@@ -350,6 +351,19 @@ def _setup(valid: Sequence[_Valid], memory_bytes: Optional[int], say: Callable):
     return members, (lambda s, n, rows: program(rows)(s, banks, n, rows)), v0.run.budget, total
 
 
+def population(treatments: Sequence[Treatment], memory_bytes: Optional[int] = None, say: Callable = print):
+    """``(members, block, budget, trials)``: ``treatments`` (one group: :func:`group_key` equal) set up as one
+    population, its program of all trials compiled: the host :class:`Member` s (states restored from their
+    folders' checkpoints where there are any), ``block(states tuple, chunks [M], rows) -> states`` (for
+    :func:`drive`, or to time it), the first run's ``Budget`` and the trial count. ``ValueError`` when the program
+    needs more than ``memory_bytes`` (None: :func:`device_memory`). Validates first (:class:`runner.BadInput`)."""
+    try:
+        return _setup([_validate(t) for t in treatments], memory_bytes, say)
+    except _TooBig as err:
+        raise ValueError(f"the population's program needs {err.need / GIB:.1f} GiB, the device has "
+                         f"{err.limit / GIB:.1f} GiB") from None
+
+
 def _finish(folder, v: _Valid, ppo, bank, names, states, seconds):
     export_policies(folder, v.run, v.config, ppo, v.env, v.policy, bank, states, names=names)
     return write_outputs(folder, v.run, v.config, bank, states, seconds=seconds, names=names)
@@ -372,7 +386,8 @@ def run_treatments(treatments: Sequence[Treatment], time_limit_s: Optional[float
     :func:`plan_groups` under ``max_envs`` (None: :data:`DEFAULT_ENVS`); a group whose program needs more than
     ``memory_bytes`` (None: :func:`device_memory`) is split in two. ``say`` gets one line per group (which
     treatments share a program) and per split. ``time_limit_s`` counts from this call, set-up and compiles
-    included; ``block_seconds``: :func:`drive`'s."""
+    included (the first population runs at least one chunk, as ``runner.run_treatment`` does); ``block_seconds``:
+    :func:`drive`'s."""
     t0 = time.perf_counter()
     out: list[Optional[dict]] = [None] * len(treatments)
     todo = []
@@ -390,7 +405,7 @@ def run_treatments(treatments: Sequence[Treatment], time_limit_s: Optional[float
     while queue:
         group = queue.pop(0)
         left = None if time_limit_s is None else time_limit_s - (time.perf_counter() - t0)
-        if left is not None and left <= 0:
+        if left is not None and left <= 0 and number:  # the first population runs at least its probe chunk
             break
         names = ", ".join(treatments[i].desc for i in group)
         try:

@@ -16,8 +16,10 @@ together (one bank of tiles on a tiled walker), ONE vmapped call of :func:`~.cor
 evaluates all of them (``T x num_envs`` envs in each physics call), and each member's selector updates its own
 trials (:func:`~.core.chunk_update`, the member's own code and bank: a map curriculum's GP over its own archive).
 So a member's trials take the same keys, terrains, starting policies and decisions as in a run of that treatment
-alone; on a CPU its states are bit for bit those of its solo run (``tests/curriculum/test_population.py``), where
-the batched physics gives every trial the floats it gives it in a smaller batch.
+alone. On a CPU its states are bit for bit those of the first trials of its run alone with as many trials as the
+population has (trial keys do not depend on the count); against its run alone with its own trial count they differ
+in the last bits wherever the physics' matrix products sum in blocks that depend on the batch's size (XLA's CPU
+matmuls; a fake harness without them: bit for bit, ``tests/curriculum/test_population.py``).
 
 The members must agree on what the harness runs (:func:`check_population`): the same ``Selector.slots``, overlap,
 env steps per chunk, evaluation protocol and PPO config; their selectors, banks, budgets and trial counts may
