@@ -18,11 +18,12 @@ files), :mod:`.presets` and :mod:`.run_config` (one run as a typed, nested ``Lea
 ``config.json`` form), :mod:`.progress` (metrics and progress lines inside compiled blocks),
 :mod:`.own_terrains` (a run on a folder of your own heightmaps) and :mod:`.runner` (a treatment from a
 ``LearnConfig``: validation, compiled blocks, checkpoints, time limits; the ``learn`` command is a thin layer over
-it).
+it), :mod:`.checkpoints` (a treatment's states back from its checkpoint) and :mod:`.batch` (treatments grouped into
+populations, one compiled program each: the ``curriculum`` command's default).
 """
 
-from jaxterrain.curriculum import (gp, outputs, own_terrains, population, presets, progress, run_config, runner,
-                                   selectors, walker)
+from jaxterrain.curriculum import (batch, checkpoints, gp, outputs, own_terrains, population, presets, progress,
+                                   run_config, runner, selectors, walker)
 from jaxterrain.curriculum.analysis import (
     MILESTONES,
     PAPER_TABLE2,
@@ -69,6 +70,6 @@ __all__ = [
     "register_selector", "selector_names", "selectors", "Harness", "History", "MILESTONES", "PAPER_TABLE2", "SELECTORS", "State", "first_epochs",
     "format_milestone", "gp", "gp_params", "outputs", "own_terrains", "presets", "progress", "run_config", "runner", "walker", "hardest_curve", "init", "init_trials", "live_rows", "make_runner",
     "milestone_summary", "removal_mask", "roughness_sequence", "run_live", "run_trials", "select", "step",
-    "run_population", "make_population_runner", "population",
+    "run_population", "make_population_runner", "population", "batch", "checkpoints",
     "terrain_hardness", "terrain_runs", "validate_config",
 ]

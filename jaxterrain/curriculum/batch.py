@@ -48,7 +48,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from jaxterrain.curriculum import runner
-from jaxterrain.curriculum.core import CHECKPOINT_COMPAT
+from jaxterrain.curriculum.checkpoints import restore_states
 from jaxterrain.curriculum.outputs import export_policies, write_outputs
 from jaxterrain.curriculum.own_terrains import OwnTerrains, rank_terrains
 from jaxterrain.curriculum.population import population_key, population_rows, run_population
@@ -57,7 +57,7 @@ from jaxterrain.curriculum.run_config import LearnConfig, to_flat
 from jaxterrain.runtime import driver, estimates, xla
 
 __all__ = ["Treatment", "Member", "DEFAULT_ENVS", "BLOCK_SECONDS", "group_key", "envs_of", "plan_groups",
-           "device_memory", "program_bytes", "restore_member", "drive", "population", "run_treatments"]
+           "device_memory", "program_bytes", "drive", "population", "run_treatments"]
 
 DEFAULT_ENVS = 131_072
 """Envs stepped together in one program at most (``max_envs``), unless set: the top of the range where the
@@ -145,25 +145,6 @@ def program_bytes(compiled) -> Optional[int]:
         return int(m.argument_size_in_bytes + m.output_size_in_bytes + m.temp_size_in_bytes - m.alias_size_in_bytes)
     except Exception:  # noqa: BLE001 - memory_analysis is optional per backend
         return None
-
-
-def restore_member(folder: Path, states, placement: dict, tiled: bool, say: Callable = print):
-    """``driver.restore`` of a member's checkpoint into ``states`` (its fresh states), or None without one. The env
-    states come back too, except on a tiled walker (``tiled``) when the checkpoint's ``population`` placement (where
-    its trials sat: ``{"trials": T, "offset": o}``; a run alone: its own trials at 0) is not ``placement``: the
-    envs lived on other tiles, so they restart on the trials' current terrains (``restart`` True; one line)."""
-    meta = driver.read_meta(folder)
-    if meta is None:
-        return None
-    trials = int(np.asarray(states.done).shape[0])
-    before = meta.get("population") or {"trials": trials, "offset": 0}
-    if tiled and before != placement:
-        say(f"{folder.name}: its envs walked on other tiles (trials {before}, now {placement}): they restart on the "
-            f"current terrains")
-        s, done, history, saved = driver.restore(folder, like=runner.strip_envs(states), **CHECKPOINT_COMPAT)
-        s = s._replace(policy=s.policy._replace(env_state=states.policy.env_state), restart=jnp.ones_like(s.restart))
-        return s, done, history, saved
-    return driver.restore(folder, like=states, **CHECKPOINT_COMPAT, optional=(runner.ENV_STATES,))
 
 
 class Member:
@@ -310,7 +291,7 @@ def _setup(valid: Sequence[_Valid], memory_bytes: Optional[int], say: Callable):
         states = jax.jit(init)(keys, bank, start)
         placement = {"trials": total, "offset": offset}
         offset += t
-        restored = restore_member(Path(v.treatment.folder), states, placement, bool(env.tiles), say)
+        restored = restore_states(Path(v.treatment.folder), states, placement, bool(env.tiles), say)
         done, history, before = 0, None, 0.0
         if restored is not None:
             states, done, history, saved = restored

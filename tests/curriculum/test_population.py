@@ -14,6 +14,7 @@ import pytest
 
 from jaxterrain import curriculum as C
 from jaxterrain.curriculum import population as P
+from jaxterrain.curriculum.checkpoints import restore_states
 from jaxterrain.qd import TerrainBank, cell_distance
 from jaxterrain.runtime import driver
 
@@ -140,7 +141,7 @@ def _hosted(folders, restore=False):
     run = C.make_population_runner(configs, harness)
     out = []
     for m, (s, c, folder) in enumerate(zip(init(), configs, folders)):
-        got = batch.restore_member(folder, s, {"trials": 4, "offset": 2 * m}, tiled=False) if restore else None
+        got = restore_states(folder, s, {"trials": 4, "offset": 2 * m}, tiled=False) if restore else None
         s, done, history = (s, 0, None) if got is None else got[:3]
         out.append(batch.Member(f"m{m}", folder, s, c.max_chunks, done=done, history=history))
     return out, (lambda states, n, rows: run(states, banks, n, rows))
