@@ -26,7 +26,7 @@ when that file says it is done, so a command that a time limit stopped is simply
 
 ``--time-limit MIN`` bounds every command: ``chunk`` times fewer chunks, ``six`` / ``alone`` checkpoint and stop
 (run them again). On a CPU, test it at tiny size: ``--preset smoke --archives a=A.npz b=B.npz --trials 1
---peak-envs 8 --peak-size 32 --backend jax --peak-layout classic``.
+--peak-envs 8 --peak-size 48 --backend jax --peak-layout classic``.
 """
 
 from __future__ import annotations
@@ -43,6 +43,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
+import rollouts  # noqa: E402
 from common import environment, markdown_table, write_json  # noqa: E402
 
 PARTS = ("peak", "chunk", "alone", "six", "report")
@@ -117,8 +118,6 @@ def treatments(args, folder: Path):
 
 def part_peak(args, out: Path) -> dict:
     """``benchmarks/rollouts.py``'s walker + policy at ``--peak-envs``: the best physics steps/s."""
-    import rollouts
-
     path = out / "rollouts.json"
     rollouts.main(["--skip", "raw,c,eval,solver,backend", "--backend", "warp" if args.backend == "auto" else
                    args.backend, "--layout", args.peak_layout, "--batch-sizes", args.peak_envs, "--size",

@@ -310,7 +310,7 @@ def report(folder: Path, cfg: dict, plan) -> int:
 
 def check_population_flags(args) -> None:
     """``--population-envs`` (an integer >= 1) and ``--block-seconds`` (> 0) size a population: refused with
-    ``--no-batch-treatments`` (nothing would read them); :class:`~experiments.common.UsageError`."""
+    ``--no-batch-treatments`` or ``--report`` (nothing would read them); :class:`~experiments.common.UsageError`."""
     import math
 
     given = [f for f, v in (("--population-envs", args.population_envs), ("--block-seconds", args.block_seconds))
@@ -318,6 +318,8 @@ def check_population_flags(args) -> None:
     if given and not args.batch_treatments:
         raise common.UsageError(f"{' and '.join(given)}: size a population of treatments; --no-batch-treatments "
                                 f"runs them one after another")
+    if given and args.report:
+        raise common.UsageError(f"{' and '.join(given)}: size a population of treatments; --report trains nothing")
     if args.population_envs is not None and args.population_envs < 1:
         raise common.UsageError(f"--population-envs must be an integer >= 1; got {args.population_envs}")
     if args.block_seconds is not None and not (math.isfinite(args.block_seconds) and args.block_seconds > 0):
@@ -345,9 +347,9 @@ def run_populations(args, cfg: dict, folder: Path, mine: list, left: float | Non
 def main(args) -> int:
     from jaxterrain.curriculum import runner
 
+    check_population_flags(args)
     if args.report and args.resume is None:
         raise common.UsageError("--report needs --resume RUN (the run to report on)")
-    check_population_flags(args)
     if args.baseline is not None and len(set(args.baseline)) < len(args.baseline):
         raise common.UsageError(f"--baseline: each of {', '.join(BASELINES)} at most once; got {' '.join(args.baseline)}")
     over = dict(archives=parse_archives(args.archives), trials=args.trials, max_epochs=args.max_epochs,

@@ -210,11 +210,11 @@ def drive(members: Sequence[Member], block: Callable, *, every: int, time_limit_
           progress: bool | str = True, compact: bool = True) -> bool:
     """Run a population's blocks until every member has finished or the time limit: ``block(states tuple, chunks
     [M] int32, rows [R] int32 or None) -> states tuple`` (a compiled :func:`run_population`; ``rows``:
-    :func:`population_rows` with ``compact``, else None). Each block is ``every`` chunks at most (fewer to take about ``block_seconds`` at the
-    rate measured so far; under ``time_limit_s``, counted from ``start``, the first is one chunk and later ones are
-    cut to what fits); member m moves ``min(n, total_m - done_m)`` of them, then writes its checkpoint and metrics
-    (:meth:`Member.advance`); a member whose trials are all done moves to its end at once. True when every member
-    has finished."""
+    :func:`population_rows` with ``compact``, else None). Each block is ``every`` chunks at most (fewer, to take
+    about ``block_seconds`` at the rate measured so far; under ``time_limit_s``, counted from ``start``, the first
+    is one chunk and later ones are cut to what fits); member m moves ``min(n, total_m - done_m)`` of them, then
+    writes its checkpoint and metrics (:meth:`Member.advance`); a member whose trials are all done moves to its end
+    at once. True when every member has finished."""
     t0 = time.perf_counter() if start is None else start
     wall = lambda m: m.before + time.perf_counter() - t0  # noqa: E731
     rate, probed = float("inf"), False

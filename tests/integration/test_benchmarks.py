@@ -163,7 +163,7 @@ def test_evaluate_policies_benchmark_walks_shipped_walkers_through_one_program(t
 @pytest.mark.slow
 def test_population_benchmark_at_cpu_size(tmp_path):
     """``benchmarks/population.py`` at CPU size (the smoke preset on two 4-terrain archives and their combination, one
-    trial each; the peak at 8 envs on 32 x 32 terrains): every part writes its JSON, the ratios are the measured
+    trial each; the peak at 8 envs on 48 x 48 terrains): every part writes its JSON, the ratios are the measured
     figures' quotients, a part done before is skipped, and a command out of time says so (exit 3). Three programs
     compile: minutes of CPU."""
     import json
@@ -178,7 +178,7 @@ def test_population_benchmark_at_cpu_size(tmp_path):
                                                                       arch.fitness).astype(np.float32))))
     out = tmp_path / "bench"
     tiny = ["--preset", "smoke", "--archives", f"a={a}", f"b={b}", "--trials", "1", "--backend", "jax",
-            "--peak-envs", "8", "--peak-size", "32", "--peak-layout", "classic", "--chunks", "2", "--out", str(out)]
+            "--peak-envs", "8", "--peak-size", "48", "--peak-layout", "classic", "--chunks", "2", "--out", str(out)]
     assert bench.main(["--parts", "six", "--time-limit", "1e-9", *tiny]) == 3
     assert bench.main(["--parts", "peak,chunk,alone,six,report", *tiny]) == 0
     got = {p: json.loads((out / f"{p}.json").read_text()) for p in ("peak", "chunk", "alone", "six", "population")}

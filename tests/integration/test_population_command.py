@@ -170,3 +170,19 @@ def test_populations_split_in_one_line_where_a_program_does_not_fit(archives, tm
     lines.clear()
     batch.run_treatments(treatments, max_envs=16, say=lines.append)
     assert lines[0].startswith("population a map, b map: its program needs") and len(lines) == 4
+
+
+def test_population_flags_are_checked_before_a_run_folder(tmp_path, capsys):
+    """``--population-envs`` / ``--block-seconds``: out of range, or given where no population runs
+    (``--no-batch-treatments``, ``--report``): one line naming the flag, exit status 2, no run folder."""
+    cases = [(["--population-envs", "0"], "--population-envs must be an integer >= 1"),
+             (["--block-seconds", "nan"], "--block-seconds must be a finite number > 0"),
+             (["--population-envs", "64", "--no-batch-treatments"], "--no-batch-treatments runs them one after"),
+             (["--block-seconds", "60", "--report"], "--report trains nothing")]
+    for i, (argv, needle) in enumerate(cases):
+        out = tmp_path / f"run{i}"
+        with pytest.raises(SystemExit) as stop:
+            cli("curriculum", "--preset", "smoke", "--out", str(out), *argv)
+        err = capsys.readouterr().err.strip().splitlines()
+        assert stop.value.code == 2 and len(err) == 1 and needle in err[0], (argv, err)
+        assert not out.exists()
