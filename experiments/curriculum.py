@@ -17,6 +17,16 @@ one per GPU: ``CUDA_VISIBLE_DEVICES=I ... --out RUN --shard I/N``) share one run
 and figures from the treatments as they stand, the unfinished ones from their last checkpoint (``learn --report``;
 marked ``[partial: E epochs]``), without training: e.g. before a GPU machine is given back.
 
+Treatments run as populations (``jaxterrain.curriculum.batch``): those that share a walker and the harness's work
+(the map curriculum on every archive; with it roughness and random, one terrain a chunk each) run their trials
+together in ONE compiled program, each treatment with its own archive, selector and keys, and each treatment's
+folder gets the files its run alone writes (on a CPU bit for bit; docs/tutorials/curriculum.md). One line per
+population says which treatments share a program. ``--population-envs N`` caps the envs stepped together in one
+program (default 131 072; a program that does not fit in the device's memory is split in two, said in one line);
+``--block-seconds S`` the time between checkpoints; ``--no-batch-treatments`` runs them one after another, as
+before (``--devices`` over several devices does too). A killed population resumes each treatment from its own
+checkpoint.
+
 Writes ``figure7a.png`` (hardest terrain traversed vs epoch, every map treatment, mean +- 1 standard error),
 ``figure7b.png`` (CPPN: map vs standard CL), ``table2.csv`` / ``table2.md`` (epochs to first traverse a terrain at
 5 %, ..., 50 % of 70.71, ours beside the paper's), ``hardest.csv`` / ``hardest.md`` (each treatment's hardest
@@ -47,6 +57,8 @@ archive (evolved after the fix of tied insertion), reseated under ``difficulty.H
 (``jaxterrain/assets/archives/G_headings.npz``, copies of ``docs/results/exp2_G_headings_archive.npz``)."""
 BASELINES = ("roughness", "random", "dr", "levels", "plr", "accel")
 """The curricula of ``--baseline`` (``jaxterrain.curriculum.CurriculumConfig.selector``'s other than ``map``)."""
+DEFAULT_ENVS = 131_072
+"""``--population-envs``' default (``jaxterrain.curriculum.batch.DEFAULT_ENVS``, read here without importing JAX)."""
 PRESETS = {name: {**{k: v for k, v in p.items() if k not in ("archive", "curriculum")},
                   "archives": dict(DEFAULT_ARCHIVES), "baseline": "roughness"}
            for name, p in learn.PRESETS.items()}
@@ -76,6 +88,18 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="run only the treatments t %% N == I of the fixed order (independent processes, e.g. one "
                              "per GPU, on one run folder); then --resume without --shard writes the tables")
     common.add_backend_argument(parser, "walker physics of every treatment", "on one tile per trial")
+    parser.add_argument("--batch-treatments", action=argparse.BooleanOptionalAction, default=True,
+                        help="run the treatments that share a walker and the harness's work (e.g. the map "
+                             "curriculum on every archive) as one population in one compiled program, each "
+                             "treatment's files as its run alone writes them; --no-batch-treatments: one after "
+                             "another (the results are the same)")
+    parser.add_argument("--population-envs", type=int, default=None, metavar="N",
+                        help=f"envs stepped together in one population's program at most (default "
+                             f"{DEFAULT_ENVS}, the walker's peak range on a GPU; a program that does not fit in the "
+                             f"device's memory is split anyway)")
+    parser.add_argument("--block-seconds", type=float, default=None, metavar="S",
+                        help="a population's compiled block (chunks between checkpoints) is cut to about S seconds "
+                             "at the rate measured (default 300; at most --chunks-per-call chunks)")
     common.add_progress_argument(parser)
 
 
@@ -284,9 +308,46 @@ def report(folder: Path, cfg: dict, plan) -> int:
     return 0
 
 
+def check_population_flags(args) -> None:
+    """``--population-envs`` (an integer >= 1) and ``--block-seconds`` (> 0) size a population: refused with
+    ``--no-batch-treatments`` or ``--report`` (nothing would read them); :class:`~experiments.common.UsageError`."""
+    import math
+
+    given = [f for f, v in (("--population-envs", args.population_envs), ("--block-seconds", args.block_seconds))
+             if v is not None]
+    if given and not args.batch_treatments:
+        raise common.UsageError(f"{' and '.join(given)}: size a population of treatments; --no-batch-treatments "
+                                f"runs them one after another")
+    if given and args.report:
+        raise common.UsageError(f"{' and '.join(given)}: size a population of treatments; --report trains nothing")
+    if args.population_envs is not None and args.population_envs < 1:
+        raise common.UsageError(f"--population-envs must be an integer >= 1; got {args.population_envs}")
+    if args.block_seconds is not None and not (math.isfinite(args.block_seconds) and args.block_seconds > 0):
+        raise common.UsageError(f"--block-seconds must be a finite number > 0; got {args.block_seconds}")
+
+
+def run_populations(args, cfg: dict, folder: Path, mine: list, left: float | None) -> list | None:
+    """The treatments ``mine`` (``(name, archive, curriculum)``) in populations (``jaxterrain.curriculum.batch``):
+    one line per population saying which treatments share a program; their summaries (None where the time limit
+    stopped one), or None after a one-line error (a treatment's input, checked before anything compiles)."""
+    from jaxterrain.curriculum import batch, runner
+
+    treatments = [batch.Treatment(f"{name} {curriculum}", treatment_run(cfg, path, curriculum),
+                                  folder / f"{name}-{curriculum}") for name, path, curriculum in mine]
+    try:
+        return batch.run_treatments(treatments, None if left is None else max(left, 1e-3),
+                                    max_envs=args.population_envs,
+                                    block_seconds=args.block_seconds or batch.BLOCK_SECONDS,
+                                    progress=common.progress_mode(args), say=lambda line: print(line, flush=True))
+    except runner.BadInput as err:
+        print(f"curriculum: {learn.flags_in(str(err), mine[0][2])}", file=sys.stderr)
+        return None
+
+
 def main(args) -> int:
     from jaxterrain.curriculum import runner
 
+    check_population_flags(args)
     if args.report and args.resume is None:
         raise common.UsageError("--report needs --resume RUN (the run to report on)")
     if args.baseline is not None and len(set(args.baseline)) < len(args.baseline):
@@ -318,22 +379,36 @@ def main(args) -> int:
     rows, done = [], []
     shard_i, shard_n = args.shard or (0, 1)
     shard = "" if args.shard is None else f" --shard {shard_i}/{shard_n}"
-    for t, (name, path, curriculum) in enumerate(plan):
-        if t % shard_n != shard_i:
-            continue
+    mine = [(name, path, curriculum) for t, (name, path, curriculum) in enumerate(plan) if t % shard_n == shard_i]
+    for name, path, curriculum in mine:
         sub = folder / f"{name}-{curriculum}"
         sub.mkdir(parents=True, exist_ok=True)
-        tcfg = _treatment_cfg(cfg, path, curriculum)
-        common.write_config(sub, tcfg)
-        left = None if limit is None else max(limit - (time.perf_counter() - start), 1e-3)
-        summary = runner.run_treatment(learn.run_of(tcfg), sub, left, desc=f"{name} {curriculum}", mesh=mesh,
-                                       progress=common.progress_mode(args))
+        common.write_config(sub, _treatment_cfg(cfg, path, curriculum))
+    batched = args.batch_treatments and len(mine) > 1 and mesh.size == 1
+    if args.batch_treatments and len(mine) > 1 and mesh.size > 1:
+        print(f"curriculum: each treatment's trials split over the {mesh.size} devices, one treatment after another "
+              f"(a population runs on one device: --devices 1 batches them)", flush=True)
+    if batched:
+        summaries = run_populations(args, cfg, folder, mine, None if limit is None else limit - (time.perf_counter()
+                                                                                                   - start))
+        if summaries is None:
+            return 2
+    else:
+        summaries = []
+        for name, path, curriculum in mine:
+            left = None if limit is None else max(limit - (time.perf_counter() - start), 1e-3)
+            summaries.append(runner.run_treatment(treatment_run(cfg, path, curriculum), folder / f"{name}-{curriculum}",
+                                                  left, desc=f"{name} {curriculum}", mesh=mesh,
+                                                  progress=common.progress_mode(args)))
+            if summaries[-1] is None:
+                break
+    for (name, _, curriculum), summary in zip(mine, summaries):
         if summary is None:
             print(f"time limit reached; continue with: python -m experiments curriculum --resume {folder}{shard}",
                   flush=True)
             return 3
         rows.append((f"{name} {curriculum}", summary))
-        done.append((f"{name} {curriculum}", sub))
+        done.append((f"{name} {curriculum}", folder / f"{name}-{curriculum}"))
     if args.shard is not None:
         print(f"shard {shard_i}/{shard_n} done ({len(rows)} of {len(plan)} treatments); when every shard is, write the "
               f"tables with: python -m experiments curriculum --resume {folder}", flush=True)

@@ -10,17 +10,20 @@ field's (domain randomisation, terrain levels), all behind one selector protocol
 
 Modules, in the order they build on each other: :mod:`.gp` (the IT&E Gaussian process), :mod:`.selectors` (a
 curriculum as ``Selector(init, assign, update, summary)`` over its own state: map, roughness, random, dr, levels,
-yours), :mod:`.config` (CurriculumConfig and the choices the paper leaves open), :mod:`.core` (state, init, step,
-trials: pure, whichever selector runs),
+yours), :mod:`.config` (CurriculumConfig and the choices the paper leaves open), :mod:`.core` (state, init, step
+of one trial: pure, whichever selector runs), :mod:`.population` (the loops over many trials, of one treatment or of
+several in one program),
 :mod:`.walker` (the PPO + walker harness), :mod:`.analysis` (Table 2, Figure 7), :mod:`.outputs` (a treatment's
 files), :mod:`.presets` and :mod:`.run_config` (one run as a typed, nested ``LearnConfig``, its presets and its
 ``config.json`` form), :mod:`.progress` (metrics and progress lines inside compiled blocks),
 :mod:`.own_terrains` (a run on a folder of your own heightmaps) and :mod:`.runner` (a treatment from a
 ``LearnConfig``: validation, compiled blocks, checkpoints, time limits; the ``learn`` command is a thin layer over
-it).
+it), :mod:`.checkpoints` (a treatment's states back from its checkpoint) and :mod:`.batch` (treatments grouped into
+populations, one compiled program each: the ``curriculum`` command's default).
 """
 
-from jaxterrain.curriculum import gp, outputs, own_terrains, presets, progress, run_config, runner, selectors, walker
+from jaxterrain.curriculum import (batch, checkpoints, gp, outputs, own_terrains, population, presets, progress,
+                                   run_config, runner, selectors, walker)
 from jaxterrain.curriculum.analysis import (
     MILESTONES,
     PAPER_TABLE2,
@@ -47,15 +50,19 @@ from jaxterrain.curriculum.core import (
     gp_params,
     init,
     init_trials,
-    live_rows,
-    make_runner,
     removal_mask,
     roughness_sequence,
-    run_live,
-    run_trials,
     select,
     step,
     terrain_hardness,
+)
+from jaxterrain.curriculum.population import (
+    live_rows,
+    make_population_runner,
+    make_runner,
+    run_live,
+    run_population,
+    run_trials,
 )
 
 __all__ = [
@@ -63,5 +70,6 @@ __all__ = [
     "register_selector", "selector_names", "selectors", "Harness", "History", "MILESTONES", "PAPER_TABLE2", "SELECTORS", "State", "first_epochs",
     "format_milestone", "gp", "gp_params", "outputs", "own_terrains", "presets", "progress", "run_config", "runner", "walker", "hardest_curve", "init", "init_trials", "live_rows", "make_runner",
     "milestone_summary", "removal_mask", "roughness_sequence", "run_live", "run_trials", "select", "step",
+    "run_population", "make_population_runner", "population", "batch", "checkpoints",
     "terrain_hardness", "terrain_runs", "validate_config",
 ]

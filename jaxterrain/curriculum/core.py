@@ -1,13 +1,14 @@
-"""The map-based curriculum (and its baselines) as one state pytree and pure functions over it.
+"""The map-based curriculum (and its baselines) as one state pytree and pure functions over it: one trial.
 
     harness = Harness(train=..., evaluate=..., reset=...)               # injected pure functions (see Harness)
     state = init(key, bank, policy_state, config=config, harness=harness)
     state = step(state, key, bank, config=config, harness=harness)      # one chunk: train, evaluate, update, switch
-
     states = init_trials(keys [T], bank, policy_state, config=..., harness=...)    # T trials, leading axis [T]
-    run = make_runner(config, harness)                                   # jitted; re-use it (one compile)
-    states = run(states, bank, num_chunks)                               # up to num_chunks chunks of every trial
-    states = run_live(run, states, bank, num_chunks)                     # the same, computing running trials only
+
+The loops over many trials (``run_trials``, ``make_runner``, ``run_live``) and over the trials of several
+treatments at once (``run_population``) are in :mod:`jaxterrain.curriculum.population`; they run the phases of
+:func:`step` (:func:`chunk_keys`, :func:`terrain_maps`, :func:`chunk_physics`, :func:`chunk_update`,
+:func:`chunk_result`) on a trial axis.
 
 One chunk (:func:`step`) trains the policy on the current terrain for ``epochs_per_chunk`` epochs
 (``harness.train``), evaluates it there (``harness.evaluate``), records epoch / terrain / evaluation / hardest
@@ -25,7 +26,7 @@ Terrain layouts. By default every trial indexes the bank inside its own (vmapped
     terrain, in_axes = harness.layout(bank.heightmaps[states.terrain])    # [T, H, W] -> e.g. Tile(bank of T, [T])
     jax.vmap(step, in_axes=(0, ..., in_axes))(states, ..., terrain)       # trial i gets terrain i (bank.at(i))
 
-:func:`run_trials` does this once per chunk, OUTSIDE the trial vmap, so the T trials' current terrains become
+The trial loops do this once per chunk, OUTSIDE the trial vmap, so the T trials' current terrains become
 one small bank rebuilt every chunk; ``step`` on a single trial still works (``layout(heightmaps[terrain][None])``,
 trial 0 of it). ``Harness.where`` merges two policy states where a per-leaf ``jnp.where`` would not do (the
 walker's env states under MuJoCo Warp).
@@ -42,16 +43,15 @@ from typing import Any, Callable, NamedTuple, Optional
 
 import jax
 import jax.numpy as jnp
-import numpy as np
 
 from jaxterrain.curriculum.config import CurriculumConfig
 from jaxterrain.curriculum.selectors import (Outcome, Selector, get_selector, gp_params, removal_mask,
                                              roughness_sequence, select, terrain_hardness)
 from jaxterrain.qd import TerrainBank
-from jaxterrain.runtime import sharding
 
-__all__ = ["Harness", "History", "State", "init", "step", "init_trials", "run_trials", "make_runner", "live_rows",
-           "run_live", "terrain_hardness", "roughness_sequence", "select", "removal_mask", "gp_params"]
+__all__ = ["Harness", "History", "State", "Physics", "init", "step", "chunk_keys", "terrain_maps", "chunk_physics",
+           "chunk_update", "chunk_result", "init_trials", "terrain_hardness", "roughness_sequence", "select",
+           "removal_mask", "gp_params"]
 # terrain_hardness, roughness_sequence, select, removal_mask and gp_params live in .selectors (re-exported here)
 
 
@@ -199,16 +199,6 @@ def _split_terrain(terrain, assignment, harness: Harness, slots: int):
     return _pick(harness, terrain, env_slot), _pick(harness, terrain, assignment.evaluated)
 
 
-def _split_axes(terrain, axes, trials: int, slots: int):
-    """``layout``'s terrain of ``trials x slots`` maps with its batched leaves split ``[T x K, ...] -> [T, K, ...]``
-    (trial i's slice: its K slots)."""
-    def split(a, x):
-        if a is None:
-            return x
-        return jax.tree.map(lambda v: v.reshape(v.shape[:a] + (trials, slots) + v.shape[a + 1:]), x)
-    return jax.tree.map(split, axes, terrain, is_leaf=lambda a: a is None)
-
-
 def _raw(key):
     return jax.random.key_data(key) if jnp.issubdtype(key.dtype, jax.dtypes.prng_key) else key
 
@@ -247,13 +237,16 @@ def init(key: jax.Array, bank: TerrainBank, policy: Any, *, config: CurriculumCo
 def step(state: State, key: jax.Array, bank: TerrainBank, *, config: CurriculumConfig, harness: Harness,
          terrain: Any = None) -> State:
     """One chunk of one trial (pure; see the module docstring). A trial that is ``done`` is returned unchanged.
+    The composition of the chunk's phases, which a population of trials runs on other axes
+    (:func:`jaxterrain.curriculum.population.run_population`): :func:`chunk_keys`, :func:`terrain_maps`,
+    :func:`chunk_physics` (the harness's work), :func:`chunk_update` (the selector's) and :func:`chunk_result`.
 
     ``terrain``: the current terrain ``state.terrain`` as the harness takes it; None (the default) builds it here,
-    ``bank.heightmaps[state.terrain]`` [H, W] (through ``harness.layout`` when set). :func:`run_trials` passes
+    ``bank.heightmaps[state.terrain]`` [H, W] (through ``harness.layout`` when set). The population loop passes
     trial i's slice of the layout of all trials' terrains.
 
     With ``config.overlap`` a call is one step of the overlapped loop instead (``key`` unused: chunk c's keys are
-    ``fold_in(state.key, c)``, as :func:`run_trials` gives them): ``harness.train_evaluate`` trains the next chunk
+    ``fold_in(state.key, c)``, as the trial loops give them): ``harness.train_evaluate`` trains the next chunk
     while the walks of the pending evaluation ride along. Not pending (the start, after a switch): train chunk
     ``chunk`` and mark it pending. Pending: evaluate the policy of chunk ``chunk`` (the curriculum's update of a
     chunk, below) while chunk ``chunk + 1`` trains on the same terrain; keep that training when the trial stays on
@@ -261,38 +254,108 @@ def step(state: State, key: jax.Array, bank: TerrainBank, *, config: CurriculumC
     restart). Every chunk has the keys, starting policy, terrain and evaluation of the plain loop, so the records,
     the GP and the choices are the plain loop's (given the same env states at block starts); a terrain switch costs
     one step more."""
-    if config.overlap:
-        return _overlapped(state, bank, config=config, harness=harness, terrain=terrain)
-    train_key, eval_key, select_key, reset_key = jax.random.split(_typed(key), 4)
-    del key
     selector = get_selector(config)
-    assignment = selector.assign(state.selector)
+    keys = chunk_keys(state, config, key)
     if terrain is None:
-        maps = _assigned_maps(selector, state.selector, bank) if selector.slots > 1 else None
-        terrain = _current_terrain(bank, state.terrain, harness, selector.slots, maps)
-    trained_on, evaluated_on = _split_terrain(terrain, assignment, harness, selector.slots)
-    policy = _restarted(state, reset_key, trained_on, harness)
-    policy = harness.train(policy, train_key, trained_on)
-    fitness = harness.evaluate(policy, eval_key, evaluated_on)
-    progress = None
-    if selector.progress:
-        if harness.progress is None:
-            raise ValueError(f"selector {selector.name!r} needs a harness with progress (each env's distance)")
-        progress = harness.progress(policy)
-    return _kept(state, _evaluated(state, policy, fitness, bank, select_key, config, selector, progress), harness)
+        terrain = _current_terrain(bank, state.terrain, harness, 1 if config.overlap else selector.slots,
+                                   terrain_maps(state, bank, config=config))
+    physics = chunk_physics(state.policy, state.restart, keys, terrain, selector.assign(state.selector),
+                            config=config, harness=harness, progress=selector.progress)
+    new, use_trained = chunk_update(state, physics.fitness, physics.progress, keys, bank, config=config)
+    return chunk_result(state, new, physics, use_trained, state.done, harness)
 
 
-def _restarted(state: State, key, terrain, harness: Harness):
-    """``state.policy`` with its envs restarted on ``terrain`` where ``state.restart``."""
+class Physics(NamedTuple):
+    """What a chunk's physics gives back (:func:`chunk_physics`). start: the policy state the chunk started from
+    (its envs restarted where ``State.restart``). trained: after the chunk's training. fitness: [] float32 the
+    evaluation (plain: of ``trained``; overlap: of ``start``). progress: [E] float32 each env's furthest distance
+    (``Harness.progress`` of ``trained``), or None."""
+
+    start: Any
+    trained: Any
+    fitness: jax.Array
+    progress: Any = None
+
+
+def chunk_keys(state: State, config: CurriculumConfig, key: Optional[jax.Array] = None) -> jax.Array:
+    """``[4, 2]`` uint32: the (train, eval, select, reset) keys of the chunk a trial is at: ``split(key, 4)``,
+    ``key`` by default ``fold_in(state.key, state.chunk)``. With ``config.overlap`` (``key`` unused): eval and
+    select of chunk ``chunk``, train and reset of the chunk trained next (``chunk + pending``)."""
+    if config.overlap:
+        train, _, _, reset = _chunk_keys(state, state.chunk + state.pending.astype(jnp.int32))
+        _, evaluate, select_key, _ = _chunk_keys(state, state.chunk)
+        return _raw(jnp.stack([train, evaluate, select_key, reset]))
+    key = jax.random.fold_in(_typed(state.key), state.chunk) if key is None else _typed(key)
+    return _raw(jax.random.split(key, 4))
+
+
+def terrain_maps(state: State, bank: TerrainBank, *, config: CurriculumConfig) -> jax.Array:
+    """The maps a trial's chunk is on: ``[H, W]`` ``bank.heightmaps[state.terrain]`` (one-terrain selectors), or
+    ``[K, H, W]`` its K slots' maps (``Selector.slots`` K > 1). Pure; vmap it over trials."""
+    selector = get_selector(config)
+    if selector.slots > 1 and not config.overlap:
+        return _assigned_maps(selector, state.selector, bank)
+    return bank.heightmaps[state.terrain]
+
+
+def chunk_physics(policy: Any, restart: jax.Array, keys: jax.Array, terrain: Any, assignment: Any, *,
+                  config: CurriculumConfig, harness: Harness, progress: bool = False) -> Physics:
+    """A chunk's harness work for one trial: the envs restarted where ``restart`` ([] bool), the training and the
+    evaluation (plain: ``harness.train`` then ``harness.evaluate`` of the trained policy; ``config.overlap``:
+    ``harness.train_evaluate``, the evaluation of the starting policy riding along). ``keys``: :func:`chunk_keys`;
+    ``terrain``: the trial's terrain argument (one ``[H, W]`` map, or its slice of ``harness.layout``); for K > 1
+    slots the trial's K terrains, which ``assignment`` (``Selector.assign``) deals to the envs. ``progress``: also
+    ``harness.progress`` of the trained policy (a selector that reads ``Outcome.progress`` runs). Pure."""
+    train_key, eval_key, _, reset_key = (_typed(keys[i]) for i in range(4))
+    if config.overlap:
+        if harness.train_evaluate is None:
+            raise ValueError("CurriculumConfig.overlap needs a harness with train_evaluate (the walker's on tiles)")
+        start = _restart(policy, restart, reset_key, terrain, harness)
+        trained, fitness = harness.train_evaluate(start, train_key, terrain, eval_key)
+        return Physics(start, trained, fitness)
+    trained_on, evaluated_on = _split_terrain(terrain, assignment, harness, get_selector(config).slots)
+    start = _restart(policy, restart, reset_key, trained_on, harness)
+    trained = harness.train(start, train_key, trained_on)
+    fitness = harness.evaluate(trained, eval_key, evaluated_on)
+    if not progress:
+        return Physics(start, trained, fitness)
+    if harness.progress is None:
+        raise ValueError(f"selector {config.selector!r} needs a harness with progress (each env's distance)")
+    return Physics(start, trained, fitness, harness.progress(trained))
+
+
+def chunk_update(state: State, fitness: jax.Array, progress: Any, keys: jax.Array, bank: TerrainBank, *,
+                 config: CurriculumConfig) -> tuple[State, Optional[jax.Array]]:
+    """A trial's curriculum after its chunk's physics (``fitness`` [], ``progress`` [E] or None, ``keys``
+    :func:`chunk_keys`): ``(new, use_trained)``. ``new``: the state's counters, history, selector (its next
+    terrains) and done, ``policy`` None (``state.policy`` is not read). ``use_trained``: None (plain: the policy
+    after the chunk is the trained one), or with ``config.overlap`` [] bool: the trained policy (True) or the
+    starting one (the training dropped on a terrain switch). Pure; vmap it over trials."""
+    selector = get_selector(config)
+    bare = state._replace(policy=None)
+    new = _evaluated(bare, None, fitness, bank, _typed(keys[2]), config, selector,
+                     progress if selector.progress else None)
+    if not config.overlap:
+        return new, None
+    stays = ~new.done & ~new.restart  # the chunk just trained was trained on the right terrain
+    started = bare._replace(restart=jnp.zeros((), bool), pending=jnp.ones((), bool))
+    return _where_tree(state.pending, new._replace(pending=stays), started), ~state.pending | stays
+
+
+def chunk_result(state: State, new: State, physics: Physics, use_trained, hold, harness: Harness) -> State:
+    """The trial after its chunk: ``new`` (:func:`chunk_update`) with the policy it ends with, or ``state``
+    unchanged where ``hold`` ([] bool: the trial is done, or not stepped)."""
+    policy = physics.trained if use_trained is None else _where_policy(harness, use_trained, physics.trained,
+                                                                       physics.start)
+    kept = _where_tree(hold, state._replace(policy=None), new)
+    return kept._replace(policy=_where_policy(harness, hold, state.policy, policy))
+
+
+def _restart(policy, restart, key, terrain, harness: Harness):
+    """``policy`` with its envs restarted on ``terrain`` where ``restart``."""
     if harness.reset is None:
-        return state.policy
-    return _where_policy(harness, state.restart, harness.reset(state.policy, key, terrain), state.policy)
-
-
-def _kept(state: State, new: State, harness: Harness) -> State:
-    """``new``, or ``state`` unchanged where the trial was already done."""
-    kept = _where_tree(state.done, state._replace(policy=None), new._replace(policy=None))
-    return kept._replace(policy=_where_policy(harness, state.done, state.policy, new.policy))
+        return policy
+    return _where_policy(harness, restart, harness.reset(policy, key, terrain), policy)
 
 
 def _evaluated(state: State, policy, fitness, bank: TerrainBank, select_key, config: CurriculumConfig,
@@ -325,134 +388,11 @@ def _chunk_keys(state: State, chunk):
     return jax.random.split(jax.random.fold_in(_typed(state.key), chunk), 4)
 
 
-def _overlapped(state: State, bank: TerrainBank, *, config: CurriculumConfig, harness: Harness,
-                terrain: Any = None) -> State:
-    """One step of the overlapped loop (:func:`step` with ``config.overlap``)."""
-    if harness.train_evaluate is None:
-        raise ValueError("CurriculumConfig.overlap needs a harness with train_evaluate (the walker's on tiles)")
-    if terrain is None:
-        terrain = _current_terrain(bank, state.terrain, harness)
-    pending = state.pending
-    train_key, _, _, reset_key = _chunk_keys(state, state.chunk + pending.astype(jnp.int32))
-    _, eval_key, select_key, _ = _chunk_keys(state, state.chunk)
-    policy = _restarted(state, reset_key, terrain, harness)
-    trained, fitness = harness.train_evaluate(policy, train_key, terrain, eval_key)
-    evaluated = _evaluated(state, policy, fitness, bank, select_key, config, get_selector(config))
-    stays = ~evaluated.done & ~evaluated.restart  # the chunk just trained was trained on the right terrain
-    started = state._replace(policy=trained, restart=jnp.zeros((), bool), pending=jnp.ones((), bool))
-    moved = evaluated._replace(policy=_where_policy(harness, stays, trained, policy), pending=stays)
-    new = _where_tree(pending, moved._replace(policy=None), started._replace(policy=None))
-    return _kept(state, new._replace(policy=_where_policy(harness, pending, moved.policy, started.policy)), harness)
-
-
-def _chunk(state: State, bank: TerrainBank, terrain: Any = None, *, config: CurriculumConfig,
-           harness: Harness) -> State:
-    """:func:`step` with the trial's own key for this chunk, ``fold_in(state.key, state.chunk)``."""
-    return step(state, jax.random.fold_in(_typed(state.key), state.chunk), bank, config=config, harness=harness,
-                terrain=terrain)
-
-
 # ----------------------------------------------------------------------------------------------------------------
-# Many trials at once
+# Many trials at once (the loops over them: jaxterrain.curriculum.population)
 # ----------------------------------------------------------------------------------------------------------------
 def init_trials(keys: jax.Array, bank: TerrainBank, policy: Any, *, config: CurriculumConfig,
                 harness: Harness) -> State:
     """:func:`init` vmapped over ``keys`` [T] (typed or raw [T, 2]); the bank and starting policy are shared."""
     fn = functools.partial(init, config=config, harness=harness)
     return jax.vmap(fn, in_axes=(0, None, None))(keys, bank, policy)
-
-
-def run_trials(states: State, bank: TerrainBank, num_chunks: jax.Array, *, config: CurriculumConfig,
-               harness: Harness, on_chunk: Optional[Callable] = None) -> State:
-    """Up to ``num_chunks`` chunks of every trial ([T]-batched ``states``), all trials in one vmapped step per
-    chunk; stops early once every trial is done. ``num_chunks`` may be traced (no re-compile per value). Pure.
-    With ``config.overlap``: steps until every running trial has done ``num_chunks`` chunks more than the least
-    advanced one had (a trial with fewer terrain switches may do a few more).
-
-    With ``harness.layout`` every chunk first lays out the T trials' current terrains (``bank.heightmaps
-    [states.terrain]`` [T, H, W] -> one terrain pytree, e.g. a bank of T tiles) and trial i trains and is evaluated
-    on its slice i.
-
-    ``on_chunk``: a host function ``(chunk [T] int32, hardest [T] float32, done [T] bool, history) -> None``
-    (``history``: the trials' :class:`History`, leaves ``[T, C]``) called after every loop step through
-    ``jax.debug.callback`` (progress and metrics inside a compiled block; it changes no result)."""
-    one = functools.partial(_chunk, config=config, harness=harness)
-    selector = get_selector(config)
-    slots = selector.slots
-    if harness.layout is None:
-        chunk = jax.vmap(one, in_axes=(0, None))
-    elif slots == 1:
-        def chunk(s, bank):
-            terrain, axes = harness.layout(bank.heightmaps[s.terrain])
-            return jax.vmap(one, in_axes=(0, None, axes))(s, bank, terrain)
-    else:  # every trial's K terrains laid out together ([T x K] maps), trial i gets its K
-        def chunk(s, bank):
-            maps = jax.vmap(lambda st: _assigned_maps(selector, st, bank))(s.selector)  # [T, K, H, W]
-            trials = maps.shape[0]
-            terrain, axes = harness.layout(maps.reshape((-1,) + maps.shape[2:]))
-            return jax.vmap(one, in_axes=(0, None, axes))(s, bank, _split_axes(terrain, axes, trials, slots))
-
-    # overlap: a trial's step does not always finish a chunk (a terrain switch costs one step more), so the loop
-    # runs until every running trial has done num_chunks more (at most 2 num_chunks + 1 steps)
-    target = jnp.min(jnp.where(states.done, jnp.iinfo(jnp.int32).max, states.chunk)) + num_chunks
-    limit = 2 * num_chunks + 1 if config.overlap else num_chunks
-
-    def cond(carry):
-        i, s = carry
-        return (i < limit) & jnp.any(~s.done & (s.chunk < target))
-
-    def body(carry):
-        i, s = carry
-        s = chunk(s, bank)
-        if on_chunk is not None:
-            jax.debug.callback(on_chunk, s.chunk, s.hardest, s.done, s.history)
-        return i + 1, s
-
-    return jax.lax.while_loop(cond, body, (jnp.zeros((), jnp.int32), states))[1]
-
-
-def make_runner(config: CurriculumConfig, harness: Harness, mesh=None) -> Callable[[State, TerrainBank, Any], State]:
-    """The jitted ``(states [T], bank, num_chunks) -> states`` of :func:`run_trials` (``states`` donated). Build it
-    once per (config, harness) and call it per block of chunks: neither terrain switches nor the block length
-    re-compile it (a new trial count, a new bank shape does).
-
-    ``mesh`` (a ``jax.sharding.Mesh``): the trials are split over its devices (``sharding.map_rows``: the trial
-    axis sharded, the bank replicated; a trial count that does not divide is padded with copies of the last trial,
-    cut off again), each device running its own trials' loop (it stops when ITS trials are done). A trial's chunks
-    depend only on its own state and key, so the states are those of the one-device runner, except with
-    ``config.overlap``: there a block runs until the least advanced running trial has done ``num_chunks`` (trials
-    ahead of it step on meanwhile), and each device counts that among its own trials, so a trial's block may end at
-    another chunk than on one device, and its envs restart there (the same curriculum rules, other PPO data)."""
-    fn = functools.partial(run_trials, config=config, harness=harness)
-    if mesh is not None:
-        return sharding.map_rows(lambda s, b, n: fn(s, b, jnp.asarray(n, jnp.int32)), mesh, replicated=(1, 2))
-    return jax.jit(lambda s, b, n: fn(s, b, jnp.asarray(n, jnp.int32)), donate_argnums=(0,))
-
-
-def live_rows(done) -> np.ndarray:
-    """The trial rows a block has to compute: every running trial (``~done`` [T]), then finished ones up to the next
-    power of two, in index order ([k] int, k <= T). Padding to powers of two bounds a run's block sizes (and so its
-    compiles) to log2(T) + 2. Host-side: reads ``done``."""
-    done = np.asarray(done, bool)
-    live = np.flatnonzero(~done)
-    size = min(done.size, 1 << max(live.size - 1, 0).bit_length())
-    return np.sort(np.concatenate([live, np.flatnonzero(done)[:size - live.size]]))
-
-
-def run_live(run: Callable[[State, TerrainBank, Any], State], states: State, bank: TerrainBank,
-             num_chunks) -> State:
-    """``run(states, bank, num_chunks)`` (a :func:`make_runner` runner or any function of that shape that takes any
-    trial count) computed on the rows of :func:`live_rows` only and written back into ``states`` [T].
-
-    The same states as ``run`` on all T rows (a block leaves a finished trial unchanged, and rows are independent),
-    without the cost of the finished ones: under ``vmap`` a finished trial still takes its share of every physics
-    step and evaluation walk, so once trials end at different times (the map curriculum empties some maps early)
-    a block of 4 rows instead of 10 is faster. Host-side (reads ``states.done``); a jitted ``run`` compiles once
-    per block size. Not exact for a mesh runner under ``config.overlap``: fewer rows regroup the trials over the
-    devices, and there each device ends a block by its own trials (:func:`make_runner`)."""
-    rows = live_rows(states.done)
-    if rows.size == states.done.shape[0]:
-        return run(states, bank, num_chunks)
-    index = jnp.asarray(rows)
-    part = run(jax.tree.map(lambda x: x[index], states), bank, num_chunks)
-    return jax.tree.map(lambda x, y: x.at[index].set(y), states, part)

@@ -10,7 +10,7 @@ from pathlib import Path
 
 import numpy as np
 
-from jaxterrain.curriculum.core import live_rows
+from jaxterrain.curriculum.population import live_rows
 from jaxterrain.runtime import driver
 
 __all__ = ["ChunkMetrics", "ChunkProgress", "chunk_metrics", "history_metrics"]
@@ -20,7 +20,7 @@ class ChunkMetrics:
     """A treatment's ``metrics.csv`` inside its compiled blocks: after every chunk, the rows (:func:`chunk_metrics`)
     of the chunks that every trial still running has finished, up to the block's end, from the block's per-chunk
     callback; the driver writes the same rows again at the block's end, with TensorBoard's. Call :meth:`begin`
-    before each block: the trials' history so far and the rows the block computes (``compact``: ``core.live_rows``,
+    before each block: the trials' history so far and the rows the block computes (``compact``: ``population.live_rows``,
     else all), so a block of fewer rows updates its own trials. Not for a mesh of several devices (a callback there
     sees one device's rows): there metrics.csv moves per block."""
 

@@ -27,7 +27,9 @@ import numpy as np
 
 from jaxterrain.curriculum import walker as W
 from jaxterrain.curriculum.config import RECIPES, CurriculumConfig, validate_config
-from jaxterrain.curriculum.core import CHECKPOINT_COMPAT, init_trials, run_live, run_trials
+from jaxterrain.curriculum.checkpoints import ENV_STATES, restore_states, strip_envs
+from jaxterrain.curriculum.core import CHECKPOINT_COMPAT, init_trials
+from jaxterrain.curriculum.population import run_live, run_trials
 from jaxterrain.curriculum.outputs import PARTIAL, export_policies, write_outputs
 from jaxterrain.curriculum.progress import ChunkMetrics, ChunkProgress, chunk_metrics
 from jaxterrain.curriculum.run_config import LearnConfig, to_flat
@@ -259,18 +261,6 @@ def make_env(run: LearnConfig, arch, policy):
 # ----------------------------------------------------------------------------------------------------------------
 # The treatment
 # ----------------------------------------------------------------------------------------------------------------
-def strip_envs(states):
-    """The carried state without the envs' physics: what a report reads from a checkpoint (the env states of a
-    MuJoCo Warp run have another structure than MJX-JAX's, and nothing is stepped)."""
-    return states._replace(policy=states.policy._replace(env_state=None))
-
-
-ENV_STATES = ".policy.env_state"
-"""The checkpoint leaves of the trials' env states (``State.policy.env_state``). Checkpoints written before they
-were carried (2026-11-29) lack them and stored ``restart`` True: restored, their envs restart on the current
-terrains, as they did at every block then."""
-
-
 FAST_COMPILE = xla.FAST_CPU_COMPILE
 
 
@@ -384,7 +374,7 @@ def run_treatment(run: LearnConfig, folder: Path, time_limit_s: float | None = N
     if isinstance(arch, OwnTerrains):  # a folder's terrains, ranked (measured once for the difficulty order)
         arch = rank_terrains(run, arch, policy, folder)
     bank, block, states = setup(run, config, arch, policy, env, mesh)
-    restored = driver.restore(folder, like=states, **CHECKPOINT_COMPAT, optional=(ENV_STATES,))
+    restored = restore_states(folder, states, {"trials": int(run.trials), "offset": 0}, bool(env.tiles))
     done, history, before = 0, None, 0.0  # before: wall seconds of the commands that ran it so far
     if restored is not None:
         states, done, history, saved = restored

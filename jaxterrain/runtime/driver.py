@@ -58,7 +58,7 @@ import numpy as np
 from jaxterrain.runtime.io import atomic_save_npz, atomic_write_text
 
 __all__ = ["CHECKPOINT_NAME", "METRICS_NAME", "PLAIN_EVERY_S", "MetricLog", "load_checkpoint", "read_meta", "restore", "run_chunks",
-           "save_checkpoint", "write_metrics_csv"]
+           "save_checkpoint", "write_checkpoint", "write_metrics_csv"]
 
 FORMAT = "jaxterrain-checkpoint"
 VERSION = 1
@@ -185,12 +185,14 @@ def restore(run_dir: str | os.PathLike, like: Any, **compat) -> Optional[tuple[A
         raise
 
 
-def _checkpoint(run_dir: Path, state, done: int, history: dict, meta: Optional[dict]) -> None:
+def write_checkpoint(run_dir: str | os.PathLike, state, done: int, history: dict, meta: Optional[dict]) -> None:
     """Write ``checkpoint.npz`` and keep the one it replaces as ``checkpoint.prev.npz``.
 
     The new checkpoint is complete (written to a temporary file and fsynced) before anything is renamed, the old
     one is linked to ``checkpoint.prev.npz`` first, and the new one then replaces it with one ``os.replace``: a kill
-    at any moment leaves ``checkpoint.npz`` readable (the old or the new one)."""
+    at any moment leaves ``checkpoint.npz`` readable (the old or the new one). :func:`run_chunks` writes its
+    checkpoints with it; a loop of its own (several runs in one program) may too."""
+    run_dir = Path(run_dir)
     tmp = run_dir / f".{CHECKPOINT_NAME}.next"
     save_checkpoint(tmp, state, done=done, history=history, meta=meta)
     latest = run_dir / CHECKPOINT_NAME
@@ -371,7 +373,7 @@ def run_chunks(chunk_fn: ChunkFn, state: Any, *, total: int, every: int, start: 
             _extend(history, metrics, stop - done)
             seconds = time.perf_counter() - t1
             if run_dir is not None:
-                _checkpoint(Path(run_dir), state, stop, history,
+                write_checkpoint(Path(run_dir), state, stop, history,
                             {**(meta or {}), "wall_s": float(wall_s) + time.perf_counter() - t0})
                 log.write(history, done, stop)
             info = {"done": stop, "total": total, "seconds": seconds, "steps_per_s": (stop - done) / max(seconds, 1e-9),

@@ -158,3 +158,41 @@ def test_evaluate_policies_benchmark_walks_shipped_walkers_through_one_program(t
     assert r["shared_total_s"] == pytest.approx(sum(r["shared_s"]), abs=0.2)
     assert r["first_call_s"] > r["walk_s"] > 0  # the first walker compiled, the second did not
     assert all(w.startswith("docs/results/exp3_gpushort/") for w in r["walkers"])
+
+
+@pytest.mark.slow
+def test_population_benchmark_at_cpu_size(tmp_path):
+    """``benchmarks/population.py`` at CPU size (the smoke preset on two 4-terrain archives and their combination, one
+    trial each; the peak at 8 envs on 48 x 48 terrains): every part writes its JSON, the ratios are the measured
+    figures' quotients, a part done before is skipped, and a command out of time says so (exit 3). Three programs
+    compile: minutes of CPU."""
+    import json
+
+    from curriculum_archives import tiny_archive_file
+    from jaxterrain import qd as A
+
+    bench = load_benchmark("population")
+    a = tiny_archive_file(tmp_path, 4, "a.npz")
+    arch = A.load(a)
+    b = str(A.save(tmp_path / "b.npz", arch._replace(fitness=np.where(arch.source >= 0, 0.7 * arch.fitness + 0.1,
+                                                                      arch.fitness).astype(np.float32))))
+    out = tmp_path / "bench"
+    tiny = ["--preset", "smoke", "--archives", f"a={a}", f"b={b}", "--trials", "1", "--backend", "jax",
+            "--peak-envs", "8", "--peak-size", "48", "--peak-layout", "classic", "--chunks", "2", "--out", str(out)]
+    assert bench.main(["--parts", "six", "--time-limit", "1e-9", *tiny]) == 3
+    assert bench.main(["--parts", "peak,chunk,alone,six,report", *tiny]) == 0
+    got = {p: json.loads((out / f"{p}.json").read_text()) for p in ("peak", "chunk", "alone", "six", "population")}
+    assert got["peak"]["done"] and got["peak"]["peak_physics_steps_per_s"] > 0 and got["peak"]["envs"] == 8
+    chunk = got["chunk"]
+    assert chunk["treatments"] == ["a map", "b map", "combined map"] and chunk["population"]["trials"] == 3
+    assert chunk["alone"]["trials"] == 1 and chunk["population"]["chunks_timed"] == 2
+    assert chunk["population_vs_alone_s_per_chunk"] == pytest.approx(chunk["population"]["s_per_chunk"]
+                                                                     / chunk["alone"]["s_per_chunk"])
+    assert got["six"]["done"] and set(got["six"]["hardest_mean"]) == {"a map", "b map", "combined map"}
+    assert got["alone"]["treatments"] == ["a map"] and got["alone"]["wall_s"] > 0
+    report = got["population"]
+    assert report["six_vs_alone_wall"] == pytest.approx(got["six"]["wall_s"] / got["alone"]["wall_s"])
+    assert report["population_of_peak"] == pytest.approx(chunk["population"]["physics_steps_per_s"]
+                                                         / got["peak"]["peak_physics_steps_per_s"])
+    assert bench.main(["--parts", "chunk", *tiny]) == 0  # done before: skipped
+    assert json.loads((out / "chunk.json").read_text()) == chunk
