@@ -24,7 +24,7 @@ import math
 import sys
 import time
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any, Callable, NamedTuple
 
 CONFIG_NAME = "config.json"
 PROVENANCE_NAME = "provenance.jsonl"
@@ -95,17 +95,31 @@ PRESET_HELP = {
 
 
 def library_file(name: str):
-    """The library module ``name`` (``"runtime.estimates"``, ``"curriculum.presets"``: one that imports only the
-    standard library), read from its file: ``--help`` imports no JAX (the package's ``__init__`` does)."""
+    """The library module ``name`` (``"runtime.estimates"``, ``"qd.run_config"``: one that imports only the standard
+    library and ``jaxterrain.runtime.schema``), read from its file without running the package's ``__init__`` (which
+    imports JAX), so ``--help`` stays fast. It is registered under its own name (``jaxterrain.qd.run_config``), so the
+    package imported later uses the same module (the same classes); ``runtime.schema`` is read first, so a config
+    module's ``from jaxterrain.runtime.schema import ...`` finds it."""
+    import importlib
     import importlib.util
 
-    if f"jaxterrain.{name}" in sys.modules:
-        return sys.modules[f"jaxterrain.{name}"]
+    full = f"jaxterrain.{name}"
+    if full in sys.modules:
+        return sys.modules[full]
+    if "jaxterrain" in sys.modules:  # the package is imported: the ordinary import
+        return importlib.import_module(full)
+    if name != "runtime.schema":
+        library_file("runtime.schema")
     spec = importlib.util.find_spec("jaxterrain")
     path = Path(spec.origin).parent.joinpath(*name.split(".")).with_suffix(".py")
-    spec = importlib.util.spec_from_file_location(f"_jaxterrain_{name.replace('.', '_')}", path)
+    spec = importlib.util.spec_from_file_location(full, path)
     module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
+    sys.modules[full] = module
+    try:
+        spec.loader.exec_module(module)
+    except BaseException:
+        del sys.modules[full]
+        raise
     return module
 
 
@@ -192,7 +206,7 @@ def shipped(relative: str) -> str:
 
 
 FLAG_NAMES = {"n": "--terrains", "samples": "--terrains", "slots": "--rollout-slots", "rollout_backend": "--backend",
-              "lr": "--learning-rate", "ckpt_every": "--checkpoint-every"}
+              "lr": "--learning-rate", "ckpt_every": "--checkpoint-every", "terrain_folder": "--terrains"}
 """Config keys whose flag has another name (the key kept so that older runs' ``config.json`` still read): terrains
 sampled per generator is ``--terrains`` in every command, the rollout pool's env slots ``--rollout-slots``, the
 walker's physics ``--backend``. The older spellings (``--n``, ``--samples``, ``--slots``, ``--rollout-backend``, ...)
@@ -452,13 +466,15 @@ def check_resume(command: str, resume: Any, flags: str | None = None) -> None:
         raise UsageError(f"{flags} is a run of {other!r}, not of {command!r}")
 
 
-def check_args(command: str, args: argparse.Namespace) -> None:
+def check_args(command: str, args: argparse.Namespace, typed: "Typed | None" = None) -> None:
     """Check a parsed command line before the command runs (``python -m experiments`` calls this): numbers by
     option name (sizes, counts >= 1, ...), fitness and generator names, ``--out`` (not a file), ``--resume`` (with
     ``--out``: one run folder of this command, :func:`resume_folder`), ``--config`` and ``--data`` (exist). Raises
-    :class:`UsageError` naming the flag."""
+    :class:`UsageError` naming the flag. A command whose run is a typed config (``typed``, :class:`Typed`) has its
+    config's values checked once, by the library, on the resolved config (:func:`setup_typed`): here only its other
+    flags (``--time-limit``, ``--devices``, ...)."""
     values = vars(args)
-    check_values(values)
+    check_values({k: v for k, v in values.items() if typed is None or k not in typed.fields})
     check_out(values.get("out"))
     check_resume(command, values.get("resume"))
     if values.get("resume") is not None:
@@ -811,3 +827,111 @@ def protocol_overrides(args: argparse.Namespace) -> dict:
         if getattr(args, key, None) is not None:
             out[key] = getattr(args, key)
     return out
+
+
+# ----------------------------------------------------------------------------------------------------------------
+# Commands whose run is a typed config of the library (evolve, coverage, train-base-policy, evaluate)
+# ----------------------------------------------------------------------------------------------------------------
+
+
+class Typed(NamedTuple):
+    """A command's run as a typed config of the library (``jaxterrain.qd.run_config.EvolveRun``, ...): ``owner``,
+    the config's name in the library's messages (``EvolveRun.map_elites.bins must be ...``); ``fields``, its
+    ``{flat key: field path}`` table (the flat keys are ``config.json``'s and the flags' names: :func:`flag`);
+    ``from_flat`` / ``to_flat``, its serialised form. The one place where a field becomes a flag is
+    :func:`flags_in` over ``fields``."""
+
+    owner: str
+    fields: dict
+    from_flat: Callable[[dict], Any]
+    to_flat: Callable[..., dict]
+
+
+def flags_in(text: str, typed: Typed, where: Callable[[str], str] = flag) -> str:
+    """A library message with its fields (``<owner>.<path>``) named as this command's flags:
+    ``EvolveRun.map_elites.bins`` -> ``--bins`` (``where(flat key)``, by default :func:`flag`); a path that is no
+    flat key (a part) -> the flag of its last name."""
+    inverse = {path: key for key, path in typed.fields.items()}
+    schema = library_file("runtime.schema")
+    return schema.rename_fields(text, typed.owner, lambda path: where(inverse.get(path, path.rsplit(".", 1)[-1])))
+
+
+def typed_run(typed: Typed, config: dict, where: Callable[[str], str] = flag,
+              validate: Callable[[Any], Any] | None = None):
+    """The typed run of a flat ``config`` (``typed.from_flat``), checked by the library's ``validate`` (which
+    returns the run to record, e.g. with a size it raised); :class:`UsageError` naming the flags (:func:`flags_in`
+    with ``where``) for an unknown key or a bad value."""
+    try:
+        run = typed.from_flat({k: v for k, v in config.items() if k != "command"})
+        return run if validate is None else validate(run)
+    except (ValueError, TypeError) as err:
+        raise UsageError(flags_in(str(err).splitlines()[0] if str(err) else repr(err), typed, where)) from None
+
+
+def setup_typed(command: str, args: argparse.Namespace, presets: dict[str, dict], default_preset: str, typed: Typed,
+                overrides: dict[str, Any], validate: Callable[[Any], Any], extendable: tuple[str, ...] = (),
+                check: Callable[[Any], None] | None = None) -> tuple[Path, Any]:
+    """:func:`setup_run` for a command whose run is a typed config: the flat settings resolved as there (the preset,
+    ``--config``, the flags; or ``--resume``'s saved ones with the ``extendable`` keys given), read into the typed
+    run and validated ONCE, by the library's ``validate`` (its errors name the flags: a value given on the command
+    line or by a preset by its flag, one read from a file as ``FILE: key 'k'``), then ``check(run)`` (the command's
+    checks of the flags themselves, e.g. one accepted and ignored); ``--print-config`` prints the run's flat form;
+    the run folder is made and ``config.json`` written only then. Returns ``(folder, run)``."""
+    resumed = args.resume is not None
+    if resumed:
+        folder = resume_folder(command, args.resume, getattr(args, "out", None))
+        config = load_config(folder)
+        given = {k: v for k, v in overrides.items() if v is not None}
+        changed = {k: v for k, v in given.items() if k in extendable}
+        ignored = sorted(set(given) - set(changed))
+        if ignored:
+            print(f"--resume: ignoring {ignored}; the run continues with its saved config", file=sys.stderr)
+        config.update(changed)
+        source = f"{folder / CONFIG_NAME}: key"
+    else:
+        changed = {}
+        if args.config is not None:
+            config = load_config(args.config)
+            if args.preset is not None:
+                config = {**presets[args.preset], **config, "preset": args.preset}
+            source = f"{args.config}: key"
+        else:
+            preset = args.preset or default_preset
+            config, source = {**presets[preset], "preset": preset}, None
+        given = {k: v for k, v in overrides.items() if v is not None}
+        config.update(given)
+        if args.seed is not None:
+            config["seed"] = given["seed"] = args.seed
+        config.setdefault("seed", 0)
+    where = lambda k: flag(k) if k in given or source is None else f"{source} {k!r}"  # noqa: E731
+    run = typed_run(typed, config, where, validate)
+    if check is not None:
+        check(run)
+    flat = {**typed.to_flat(run), "command": command}
+    print_config(args, flat)
+    if resumed:
+        if changed:
+            write_config(folder, flat)
+        record_provenance(folder, command, vars(args), resumed=True)
+        print(f"resuming {folder}", flush=True)
+        return folder, run
+    check_out(args.out)
+    folder = run_folder(command, args.out)
+    folder.mkdir(parents=True, exist_ok=True)
+    write_config(folder, flat)
+    record_provenance(folder, command, vars(args))
+    print(f"run folder {folder}", flush=True)
+    return folder, run
+
+
+def flag_values(args: argparse.Namespace, typed: Typed) -> dict:
+    """The config values given on the command line, ``{flat key: value}`` (None: not given) of every field with a
+    flag of the same name (``args``' dest = the flat key), ``--protocol`` resolved (:func:`protocol_overrides`)."""
+    out = {k: getattr(args, k) for k in typed.fields if k not in ("seed", "preset") and hasattr(args, k)}
+    out.update(protocol_overrides(args))
+    return out
+
+
+def minutes_to_seconds(minutes: float | None) -> float | None:
+    """``--time-limit MIN`` as the library's ``time_limit_s``."""
+    return None if minutes is None else 60.0 * minutes

@@ -30,6 +30,9 @@ from jaxterrain.suite.heldout import (GENERATORS, LEVELS, ROBOTS, SEED, Suite, V
                                      descriptor_levels, load, v2_terrain)
 from jaxterrain.suite.outputs import (Evaluation, level_table, read_fitness, plot_levels, plot_suite, short_names,
                                      write_evaluation)
+from jaxterrain.suite import run_config, runs  # the evaluate run
+from jaxterrain.suite.run_config import EvaluateRun
+from jaxterrain.suite.runs import EvaluationResult, evaluate_run, validate_evaluate
 
 __all__ = [
     "EXTENSIONS", "ORDERS", "TERRAIN_SIDE", "TerrainFolder", "difficulty_order", "fit_terrain", "folder_bank",
@@ -76,4 +79,10 @@ __all__ = [
     "highest_level_passed",
     "level_fitness",
     "passed_levels",
+    "run_config",
+    "runs",
+    "EvaluateRun",
+    "EvaluationResult",
+    "evaluate_run",
+    "validate_evaluate",
 ]
