@@ -46,7 +46,6 @@ import argparse
 import json
 from pathlib import Path
 
-from experiments.evaluate import is_base
 
 BASE = "base policy"
 
@@ -120,7 +119,7 @@ def load_treatment(folder: Path, label: str | None = None) -> dict:
     except (OSError, ValueError) as err:
         raise UsageError(f"{summary_path}: not readable JSON ({type(err).__name__}: {err})") from None
     trial = lambda name: int(name.rsplit("trial_", 1)[1]) if name.rsplit("trial_", 1)[-1].isdigit() else -1  # noqa: E731
-    walkers = sorted((trial(n), i) for i, n in enumerate(ev.policies) if not is_base(n) and trial(n) >= 0)
+    walkers = sorted((trial(n), i) for i, n in enumerate(ev.policies) if not suite.runs.is_base(n) and trial(n) >= 0)
     if not walkers:
         raise UsageError(f"{path}: no policies/trial_K walker in it")
     hardest = summary.get("hardest") if isinstance(summary, dict) else None
@@ -134,7 +133,7 @@ def load_treatment(folder: Path, label: str | None = None) -> dict:
     return {"label": label or folder.name.replace("-", " "), "folder": folder, "family": ev.family, "level": ev.level,
             "trials": [t for t, _ in walkers], "fitness": ev.fitness[[i for _, i in walkers]],
             "hardest": [float(hardest[t]) for t, _ in walkers],
-            "base": ev.fitness[[i for i, n in enumerate(ev.policies) if is_base(n)]]}
+            "base": ev.fitness[[i for i, n in enumerate(ev.policies) if suite.runs.is_base(n)]]}
 
 
 def load_base(path: Path, family, level) -> "np.ndarray":
@@ -153,7 +152,7 @@ def load_base(path: Path, family, level) -> "np.ndarray":
         ev = suite.read_fitness(path)
     except (OSError, ValueError) as err:
         raise UsageError(f"--base: {str(err).splitlines()[0]}") from None
-    rows = [i for i, n in enumerate(ev.policies) if is_base(n)]
+    rows = [i for i, n in enumerate(ev.policies) if suite.runs.is_base(n)]
     if not rows:
         raise UsageError(f"--base {path}: no base policy rows (base, base:key1, ...) in it")
     if not (np.array_equal(ev.family, family) and np.array_equal(ev.level, level)):

@@ -101,7 +101,7 @@ class Origin(NamedTuple):
 class BasePolicyResult(NamedTuple):
     """What :func:`train_base_policy` made: the last training ``state``, the ``policy_dir``, the flat-ground
     ``evaluation`` (``eval.json``'s content; None when not evaluated), ``stopped`` (a time limit stopped the
-    training: call again with ``resume=True``), the env steps trained and the updates asked for."""
+    training: call again with ``resume=True``), the env steps trained, the updates asked for and their env steps."""
 
     state: Any
     policy_dir: Path
@@ -109,6 +109,7 @@ class BasePolicyResult(NamedTuple):
     stopped: bool
     env_steps: int
     num_updates: int
+    target_env_steps: int
 
 
 def resolve_settings(run: BasePolicyRun) -> RunSettings:
@@ -370,4 +371,4 @@ def train_base_policy(run: BasePolicyRun, folder, time_limit_s: Optional[float] 
             provenance = build_provenance(run, info, state, origin, device, result)
             say(f"exported the base policy to "
                 f"{export_policy_assets(export_to, folder, state, settings, env, provenance, result)}")
-    return BasePolicyResult(state, folder / "policy", result, stopped, steps_done, settings.num_updates)
+    return BasePolicyResult(state, folder / "policy", result, stopped, steps_done, settings.num_updates, total_steps)
