@@ -108,12 +108,12 @@ def test_one_table_of_fitness_names(tmp_path, monkeypatch, capsys):
     in a saved config is one line naming its key before the run folder."""
     import jax
 
-    from experiments import evolve
     from jaxterrain import difficulty
+    from jaxterrain.qd import run_config, runs
 
-    assert list(difficulty.FITNESSES) == ["difficulty", "slope"]
-    assert evolve.fitness_fn("difficulty") is None  # archive.evolve builds the walker fitness from its config
-    assert evolve.fitness_fn("slope") is difficulty.slope_fitness is difficulty.named_fitness("slope", 2, 1, 32)
+    assert list(difficulty.FITNESSES) == ["difficulty", "slope"] == list(run_config._FITNESSES)  # evolve's literal
+    assert runs.fitness_of("difficulty") is None  # qd.evolve builds the walker fitness from its config
+    assert runs.fitness_of("slope") is difficulty.slope_fitness is difficulty.named_fitness("slope", 2, 1, 32)
     assert difficulty.named_fitness("difficulty", 2, 1, 64, slots=8) is difficulty.fitness_fn(
         64, difficulty.Protocol(2, 1), slots=8)  # the library's factory, same (cached) function
     maps = np.linspace(0, 0.2, 2 * 8 * 8, dtype=np.float32).reshape(2, 8, 8)
@@ -124,5 +124,5 @@ def test_one_table_of_fitness_names(tmp_path, monkeypatch, capsys):
     monkeypatch.chdir(tmp_path)
     Path("bad.json").write_text(json.dumps({"fitness": "walk"}))
     err = _usage_error(["evolve", "--config", "bad.json", "--out", "run"], capsys)
-    assert "bad.json: key 'fitness': unknown fitness 'walk'; choose from difficulty, slope" in err
+    assert "bad.json: key 'fitness' must be one of difficulty, slope; got 'walk'" in err
     assert not Path("run").exists()
