@@ -624,41 +624,72 @@ def setup_run(command: str, args: argparse.Namespace, presets: dict[str, dict], 
     except the keys of ``extendable`` (how long the run lasts and how often it logs, e.g. ``steps``): those replace
     the saved values, are checked as a fresh config is, and are written back to the run's ``config.json``.
     ``check(config)``: the command's own checks of the resolved config (raise :class:`UsageError`), run before any
-    folder is made.
+    folder is made. Values are checked by name (:func:`check_values`); a command whose run is a typed config of the
+    library uses :func:`setup_typed`.
     """
-    if args.resume is not None:
-        return _resume_run(command, args, overrides, extendable)
-    if args.config is not None:
+
+    def settle(config: dict, where, resumed: bool, changed: bool) -> dict:
+        if not resumed:
+            unknown = set(config) - set(presets[default_preset]) - {"preset", "seed", "command"}
+            if unknown:
+                raise SystemExit(f"unknown config key(s) {sorted(unknown)}; known: {sorted(presets[default_preset])}")
+        if not resumed or changed:
+            check_values(config, where)
+        if not resumed and check is not None:
+            check(config)
+        return config
+
+    return prepare_run(command, args, presets, default_preset, overrides, extendable, settle, preset_by_flag=False)
+
+
+def prepare_run(command: str, args: argparse.Namespace, presets: dict[str, dict], default_preset: str,
+           overrides: dict[str, Any], extendable: tuple[str, ...], settle: Callable[..., dict],
+           preset_by_flag: bool) -> tuple[Path, dict]:
+    """The one resolution of a run's settings (:func:`setup_run`, :func:`setup_typed`): the preset's, a saved
+    ``--config``'s or, with ``--resume``, the run's own; the flags given (on a resumed run only those of
+    ``extendable``; the others are ignored with a note); ``settle(config, where, resumed, changed)`` checks them and
+    returns the flat config to record (``where(key)``: how a message names a key: its flag where given on the
+    command line, or, with ``preset_by_flag``, set by a preset; else ``FILE: key 'k'`` / ``preset 'P': 'k'``);
+    ``--print-config`` prints it; then the run folder is made (or found) and ``config.json`` written."""
+    resumed = args.resume is not None
+    given = {k: v for k, v in overrides.items() if v is not None}
+    if resumed:
+        folder = resume_folder(command, args.resume, getattr(args, "out", None))
+        config = load_config(folder)
+        ignored = sorted(k for k in given if k not in extendable)
+        if ignored:
+            print(f"--resume: ignoring {ignored}; the run continues with its saved config", file=sys.stderr)
+        given = {k: v for k, v in given.items() if k in extendable}
+        source = f"{folder / CONFIG_NAME}: key"
+    elif args.config is not None:
         config = load_config(args.config)
         if args.preset is not None:
             config = {**presets[args.preset], **config, "preset": args.preset}
+        source = f"{args.config}: key"
     else:
         preset = args.preset or default_preset
-        config = {**presets[preset], "preset": preset}
-    for key, value in overrides.items():
-        if value is not None:
-            config[key] = value
-    if args.seed is not None:
-        config["seed"] = args.seed
-    config.setdefault("seed", 0)
-    unknown = set(config) - set(presets[default_preset]) - {"preset", "seed", "command"}
-    if unknown:
-        raise SystemExit(f"unknown config key(s) {sorted(unknown)}; known: {sorted(presets[default_preset])}")
-    given = {k for k, v in overrides.items() if v is not None}
-    source = f"preset {config.get('preset')!r}:" if args.config is None else f"{args.config}: key"
-    check_values(config, lambda k: flag(k) if k in given or (k == "seed" and args.seed is not None)
-                 else f"{source} {k!r}")
-    if check is not None:
-        check(config)
-    print_config(args, {**config, "command": command})
+        config, source = {**presets[preset], "preset": preset}, None if preset_by_flag else f"preset {preset!r}:"
+    config.update(given)
+    if not resumed:
+        if args.seed is not None:
+            config["seed"] = given["seed"] = args.seed
+        config.setdefault("seed", 0)
+    where = lambda k: flag(k) if k in given or source is None else f"{source} {k!r}"  # noqa: E731
+    flat = {**settle(config, where, resumed, bool(given)), "command": command}
+    print_config(args, flat)
+    if resumed:
+        if given:
+            write_config(folder, flat)
+        record_provenance(folder, command, vars(args), resumed=True)
+        print(f"resuming {folder}", flush=True)
+        return folder, flat
     check_out(args.out)
     folder = run_folder(command, args.out)
     folder.mkdir(parents=True, exist_ok=True)
-    config["command"] = command
-    write_config(folder, config)
+    write_config(folder, flat)
     record_provenance(folder, command, vars(args))
     print(f"run folder {folder}", flush=True)
-    return folder, config
+    return folder, flat
 
 
 def record_provenance(folder: Path, command: str, options: dict | None = None, resumed: bool = False) -> dict:
@@ -757,27 +788,6 @@ def setup_resumable_run(command: str, args: argparse.Namespace, presets: dict[st
     return setup_run(command, args, presets, default_preset, overrides, extendable, check)
 
 
-def _resume_run(command: str, args: argparse.Namespace, overrides: dict[str, Any],
-                extendable: tuple[str, ...]) -> tuple[Path, dict]:
-    """The ``--resume`` half of :func:`setup_run`."""
-    folder = resume_folder(command, args.resume, getattr(args, "out", None))
-    config = load_config(folder)
-    given = {k: v for k, v in overrides.items() if v is not None}
-    changed = {k: v for k, v in given.items() if k in extendable}
-    ignored = sorted(set(given) - set(changed))
-    if ignored:
-        print(f"--resume: ignoring {ignored}; the run continues with its saved config", file=sys.stderr)
-    if changed:
-        config.update(changed)
-        check_values(config, lambda k: flag(k) if k in changed else f"{folder / CONFIG_NAME}: key {k!r}")
-    print_config(args, config)
-    if changed:
-        write_config(folder, config)
-    record_provenance(folder, command, vars(args), resumed=True)
-    print(f"resuming {folder}", flush=True)
-    return folder, config
-
-
 def say(line: str) -> None:
     """Print ``line`` to stdout above the progress bar of ``jaxterrain.runtime.driver.run_chunks`` (``tqdm.write``), or
     plainly without tqdm."""
@@ -871,57 +881,23 @@ def typed_run(typed: Typed, config: dict, where: Callable[[str], str] = flag,
 def setup_typed(command: str, args: argparse.Namespace, presets: dict[str, dict], default_preset: str, typed: Typed,
                 overrides: dict[str, Any], validate: Callable[[Any], Any], extendable: tuple[str, ...] = (),
                 check: Callable[[Any], None] | None = None) -> tuple[Path, Any]:
-    """:func:`setup_run` for a command whose run is a typed config: the flat settings resolved as there (the preset,
-    ``--config``, the flags; or ``--resume``'s saved ones with the ``extendable`` keys given), read into the typed
-    run and validated ONCE, by the library's ``validate`` (its errors name the flags: a value given on the command
-    line or by a preset by its flag, one read from a file as ``FILE: key 'k'``), then ``check(run)`` (the command's
-    checks of the flags themselves, e.g. one accepted and ignored); ``--print-config`` prints the run's flat form;
-    the run folder is made and ``config.json`` written only then. Returns ``(folder, run)``."""
-    resumed = args.resume is not None
-    if resumed:
-        folder = resume_folder(command, args.resume, getattr(args, "out", None))
-        config = load_config(folder)
-        given = {k: v for k, v in overrides.items() if v is not None}
-        changed = {k: v for k, v in given.items() if k in extendable}
-        ignored = sorted(set(given) - set(changed))
-        if ignored:
-            print(f"--resume: ignoring {ignored}; the run continues with its saved config", file=sys.stderr)
-        config.update(changed)
-        source = f"{folder / CONFIG_NAME}: key"
-    else:
-        changed = {}
-        if args.config is not None:
-            config = load_config(args.config)
-            if args.preset is not None:
-                config = {**presets[args.preset], **config, "preset": args.preset}
-            source = f"{args.config}: key"
-        else:
-            preset = args.preset or default_preset
-            config, source = {**presets[preset], "preset": preset}, None
-        given = {k: v for k, v in overrides.items() if v is not None}
-        config.update(given)
-        if args.seed is not None:
-            config["seed"] = given["seed"] = args.seed
-        config.setdefault("seed", 0)
-    where = lambda k: flag(k) if k in given or source is None else f"{source} {k!r}"  # noqa: E731
-    run = typed_run(typed, config, where, validate)
-    if check is not None:
-        check(run)
-    flat = {**typed.to_flat(run), "command": command}
-    print_config(args, flat)
-    if resumed:
-        if changed:
-            write_config(folder, flat)
-        record_provenance(folder, command, vars(args), resumed=True)
-        print(f"resuming {folder}", flush=True)
-        return folder, run
-    check_out(args.out)
-    folder = run_folder(command, args.out)
-    folder.mkdir(parents=True, exist_ok=True)
-    write_config(folder, flat)
-    record_provenance(folder, command, vars(args))
-    print(f"run folder {folder}", flush=True)
-    return folder, run
+    """:func:`setup_run` for a command whose run is a typed config of the library: the flat settings resolved as there
+    (the preset, ``--config``, the flags; or ``--resume``'s saved ones with the ``extendable`` keys given), read into
+    the typed run and validated ONCE, by the library's ``validate`` (which returns the run to record; its errors name
+    the flags: a value given on the command line or set by a preset by its flag, one read from a file as ``FILE: key
+    'k'``), then, for a new run, ``check(run)`` (the command's checks of the flags themselves, e.g. one accepted and
+    ignored); ``--print-config`` prints the run's flat form; the run folder is made and ``config.json`` written only
+    then. Returns ``(folder, run)``."""
+    runs = []
+
+    def settle(config: dict, where, resumed: bool, changed: bool) -> dict:
+        runs.append(typed_run(typed, config, where, validate))
+        if not resumed and check is not None:
+            check(runs[-1])
+        return typed.to_flat(runs[-1])
+
+    folder, _ = prepare_run(command, args, presets, default_preset, overrides, extendable, settle, preset_by_flag=True)
+    return folder, runs[-1]
 
 
 def flag_values(args: argparse.Namespace, typed: Typed) -> dict:

@@ -153,7 +153,7 @@ def main(args) -> int:
     ready = []
 
     def validate(run):
-        if run.videos.on:  # before anything imports mujoco
+        if run.videos.on:  # the OpenGL backend, before the renderer is made
             from jaxterrain.report import render
 
             render.setup_gl(args.gl)
@@ -161,5 +161,8 @@ def main(args) -> int:
         return ready[-1].run
 
     folder, run = common.setup_typed("evaluate", args, PRESETS, "smoke", TYPED, overrides(args), validate)
-    runs.evaluate_run(ready[-1], folder, videos=compare.evaluation_videos, note=say_err)
+    try:
+        runs.evaluate_run(ready[-1], folder, videos=compare.evaluation_videos, note=say_err)
+    except runs.TerrainError as err:  # built when walked (after the run folder): e.g. a size that holds no family
+        raise common.UsageError(common.flags_in(str(err), TYPED)) from None
     return 0

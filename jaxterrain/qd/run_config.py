@@ -112,8 +112,8 @@ class CoverageRun(NamedTuple):
     """Experiment 1b: an archive of every generator of ``generators`` for every descriptor pair of ``pairs`` (in
     that order, pairs outer: treatment ``k``'s key folds in its pair's and its generator's index), each an
     :class:`EvolveRun` of the same ``size``, ``fitness``, ``map_elites`` and ``walks``; ``ranges``: per
-    descriptor ``((name, (lo, hi)), ...)`` sorted by name (None: ``qd.DEFAULT_RANGES``); ``batched``: every treatment at once
-    (``qd.evolve_many``)."""
+    descriptor ``((name, (lo, hi)), ...)`` sorted by name (None: ``qd.DEFAULT_RANGES``); ``batched``: every treatment
+    at once (``qd.evolve_many``)."""
 
     generators: tuple = GENERATORS
     pairs: tuple = PAIRS
@@ -152,7 +152,8 @@ _COMMON_RULES = {
                                                  "checkpoint_every", "stride")},
     "map_elites.window": (at_least(2), at_most("size")), "map_elites.robot_height": positive(),
     "map_elites.out_of_range": one_of(("clip", "reject")), "map_elites.store_heightmaps": one_of((True, False)),
-    "walks.attempts": at_least(1), "walks.best": (at_least(1), at_most("walks.attempts")), "walks.headings": walks("walks.attempts", "walks.best"),
+    "walks.attempts": at_least(1), "walks.best": (at_least(1), at_most("walks.attempts")),
+    "walks.headings": walks("walks.attempts", "walks.best"),
     "walks.observation": one_of(("blind", "perceptive")), "walks.backend": one_of(("auto", "jax", "warp")),
     "walks.rollout_slots": at_least(1),
 }

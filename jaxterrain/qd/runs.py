@@ -37,8 +37,8 @@ from jaxterrain.runtime.io import atomic_write_text, save_figure
 from jaxterrain.walker import WalkerConfig, min_terrain_side, resolve_backend, robots
 
 __all__ = ["TimeUp", "Deadline", "fitness_of", "generator_of", "evolve_config", "check_generators", "check_walker",
-           "check_descriptors", "check_evolve_config", "validate_evolve", "announce_compile", "evolve_run", "write_metrics_csv", "plot_archive",
-           "write_archive_figure", "summary_line"]
+           "check_descriptors", "check_evolve_config", "validate_evolve", "announce_compile", "evolve_run",
+           "write_metrics_csv", "plot_archive", "write_archive_figure", "summary_line"]
 
 
 class TimeUp(Exception):
@@ -173,7 +173,7 @@ def validate_evolve(run: EvolveRun) -> EvolveRun:
         check_generators(mix, int(run.size), owner, "mixture.generators")
         need = int(run.mixture.fresh) * len(mix)
         if int(run.map_elites.batch_size) <= need:
-            raise ValueError(f"{owner}.map_elites.batch_size must be > {need} with generator mixed "
+            raise ValueError(f"{owner}.map_elites.batch_size must be > {need} with {owner}.generator mixed "
                              f"({owner}.mixture.fresh {run.mixture.fresh} of each of {len(mix)} generators); got "
                              f"{run.map_elites.batch_size}")
     else:

@@ -27,8 +27,8 @@ import re
 from typing import Any, Callable, Iterable, Mapping, Optional
 
 __all__ = ["is_config", "parts", "leaf_paths", "get", "replace", "frozen", "jsonable", "to_flat", "from_flat",
-           "Rule", "at_least", "int_in", "positive", "non_negative", "unit", "fraction", "one_of", "at_most", "walks", "check",
-           "rename_fields", "FIELD_PATTERN", "shape_lines"]
+           "Rule", "at_least", "int_in", "positive", "non_negative", "unit", "fraction", "one_of", "at_most", "walks",
+           "check", "rename_fields", "FIELD_PATTERN", "shape_lines"]
 
 
 def is_config(value: Any) -> bool:

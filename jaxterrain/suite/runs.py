@@ -39,7 +39,7 @@ from jaxterrain.terrain import TerrainScale
 from jaxterrain.walker import (WalkerConfig, min_terrain_side, parse_randomisation, randomisation_label,
                                resolve_backend, robots)
 
-__all__ = ["MUJOCO_STEPS_PER_CORE_S", "MUJOCO_MAX_HOURS", "Prepared", "EvaluationResult", "base_names", "is_base",
+__all__ = ["MUJOCO_STEPS_PER_CORE_S", "MUJOCO_MAX_HOURS", "TerrainError", "Prepared", "EvaluationResult", "base_names", "is_base",
            "parse_picks", "load_policies", "terrains_of", "fit_size", "mujoco_workers", "check_physics",
            "video_picks", "validate_evaluate", "evaluate_run"]
 
@@ -48,6 +48,11 @@ MUJOCO_STEPS_PER_CORE_S = 1000
 MUJOCO_MAX_HOURS = 24.0
 """``engine`` ``mujoco`` refuses evaluations whose walks could take longer than this."""
 _OWNER = "EvaluateRun"
+
+
+class TerrainError(ValueError):
+    """The terrains of a run cannot be built (e.g. a size that holds none of its families): one line naming the
+    field, raised by :func:`terrains_of`, so also by :func:`evaluate_run`, which builds them when it walks."""
 
 
 class Prepared(NamedTuple):
@@ -127,21 +132,24 @@ def _folder_suite(t) -> Suite:
 
 def terrains_of(run: EvaluateRun) -> Suite:
     """What ``run`` walks: the folder's terrains, the archive's elites as a one-family suite, or the suite version
-    built at the run's size, seeds, samples, families and generators; ``ValueError`` naming the field."""
+    built at the run's size, seeds, samples, families and generators; :class:`TerrainError` naming the field."""
     t = run.terrains
-    if t.folder:
-        return _folder_suite(t)
-    if t.archive:
-        try:
-            return archive_suite(load_archive(t.archive))
-        except (OSError, ValueError) as err:
-            raise ValueError(f"{_OWNER}.terrains.archive {t.archive}: {str(err).splitlines()[0]}") from None
     try:
-        robot = None if VERSIONS[t.suite]["robot"] is None else (run.base.robot or "humanoid")
-        return load(t.suite, robot=robot, size=t.size, seeds=t.seeds, samples=t.samples, families=t.families,
-                    generator_names=t.generators)
+        if t.folder:
+            return _folder_suite(t)
+        if t.archive:
+            try:
+                return archive_suite(load_archive(t.archive))
+            except (OSError, ValueError) as err:
+                raise ValueError(f"{_OWNER}.terrains.archive {t.archive}: {str(err).splitlines()[0]}") from None
+        try:
+            robot = None if VERSIONS[t.suite]["robot"] is None else (run.base.robot or "humanoid")
+            return load(t.suite, robot=robot, size=t.size, seeds=t.seeds, samples=t.samples, families=t.families,
+                        generator_names=t.generators)
+        except ValueError as err:
+            raise ValueError(f"{_OWNER}.terrains.{err}") from None
     except ValueError as err:
-        raise ValueError(f"{_OWNER}.terrains.{err}") from None
+        raise TerrainError(str(err)) from None
 
 
 def _check_terrains(run: EvaluateRun) -> None:

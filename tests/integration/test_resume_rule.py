@@ -18,7 +18,7 @@ COMMANDS = ["evolve", "coverage", "learn", "curriculum", "gradient", "features",
 
 
 class Resolved(Exception):
-    """Raised by the spied ``setup_run`` with its ``(folder, config)``: the command stops before any work."""
+    """Raised by the spied ``common.prepare_run`` with its ``(folder, config)``: the command stops before any work."""
 
 
 def _usage_error(argv, capsys) -> str:
@@ -45,12 +45,13 @@ def test_out_with_resume_means_the_same_in_every_command(tmp_path, monkeypatch, 
     Path("other").mkdir()
     common.write_config(Path("other"), {"command": "report", "seed": 0})
     Path("empty").mkdir()
-    real = common.setup_run
+    real = common.prepare_run  # every command's settings are resolved there (setup_run, setup_typed)
 
-    def spy(*args, **kwargs):
-        raise Resolved(real(*args, **kwargs))
+    def spy(command, args, presets, default_preset, overrides, extendable, settle, preset_by_flag):
+        unchecked = lambda config, where, resumed, changed: config  # noqa: E731  (the folder, not the values)
+        raise Resolved(real(command, args, presets, default_preset, overrides, extendable, unchecked, preset_by_flag))
 
-    monkeypatch.setattr(common, "setup_run", spy)
+    monkeypatch.setattr(common, "prepare_run", spy)
 
     def resolved(*argv):
         with pytest.raises(Resolved) as stop:

@@ -44,7 +44,8 @@ def test_an_older_config_json_reads_with_the_values_its_run_had():
     ({"fitness": "difficulty"}, "EvolveRun.size must be >= 39 pixels for the walker fitness of robot humanoid"),
     ({"walks.robot": "dog"}, "EvolveRun.walks.robot: robot must be one of"),
     ({"generator": "mixed", "mixture.generators": ("perlin", "worley"), "mixture.fresh": 4},
-     "EvolveRun.map_elites.batch_size must be > 8 with generator mixed (EvolveRun.mixture.fresh 4 of each of 2"),
+     "EvolveRun.map_elites.batch_size must be > 8 with EvolveRun.generator mixed (EvolveRun.mixture.fresh 4 of "
+     "each of 2"),
     ({"ranges": ((0.5, 0.0), (0.0, 1.0))}, "EvolveRun.ranges must be two finite (lo, hi) pairs with hi > lo"),
 ])
 def test_validate_evolve_names_the_field(changes, message):
