@@ -133,7 +133,7 @@ def main(args: argparse.Namespace) -> int:
                                                resume=args.resume is not None, evaluate=not args.skip_eval,
                                                export_to=export, mesh=mesh, progress=args.progress,
                                                command_line=command, started=started)
-    except ValueError as err:  # a run.json of other walker / PPO configs than the code's: resume with that code
+    except base_policy.ResumeMismatch as err:  # run.json's walker / PPO configs are not the code's: resume with that
         raise SystemExit(f"--{err}") from None
     if result.stopped:
         print(f"time limit reached at {result.env_steps:,d} / {result.target_env_steps:,d} env steps "

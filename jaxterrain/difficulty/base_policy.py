@@ -40,11 +40,11 @@ from jaxterrain.runtime.estimates import announce
 from jaxterrain.runtime.io import atomic_write_text
 from jaxterrain.runtime.provenance import git_commit
 from jaxterrain.terrain import TerrainScale
-from jaxterrain.walker import (Randomisation, WalkerConfig, WalkerEnv, observation_fields, parse_randomisation,
-                               parse_solver, randomisation_json, resolve_config, robots)
+from jaxterrain.walker import (Randomisation, WalkerConfig, WalkerEnv, min_terrain_side, observation_fields,
+                               parse_randomisation, parse_solver, randomisation_json, resolve_config, robots)
 
 __all__ = ["RUN_INFO", "EVAL_NAME", "shapes", "walker_json", "RunSettings", "Origin", "BasePolicyResult",
-           "validate_base_run", "resolve_settings", "write_run_info", "init_or_resume", "training_origin",
+           "ResumeMismatch", "validate_base_run", "resolve_settings", "write_run_info", "init_or_resume", "training_origin",
            "train_chunks", "save_run_policy", "evaluate_flat", "write_eval", "bar_verdict", "build_provenance",
            "provenance_markdown", "export_policy_assets", "train_base_policy", "device_name"]
 
@@ -53,15 +53,18 @@ EVAL_NAME = "eval.json"
 _EVAL_RESERVE_S = 60.0  # the time a time limit leaves the flat-ground evaluation
 
 
-def shapes(preset: Optional[str]) -> tuple[WalkerConfig, PPOConfig]:
+def shapes(preset: Optional[str], robot: str = "humanoid") -> tuple[WalkerConfig, PPOConfig]:
     """The walker and PPO configs a preset trains, before the run's changes: ``smoke`` (and None) a 16 x 32
-    heightfield of 0.2 m cells, 30-step episodes, 8 envs x 5 steps, tiny networks; the others the paper-sized env
-    (``WalkerConfig()``) and brax's MJX-humanoid recipe (``PPOConfig()``: 3 072 envs, 122 880 env steps per
-    update)."""
+    heightfield of 0.2 m cells (widened to the fewest rows ``robot``'s margins take: the ant's 17), 30-step episodes,
+    8 envs x 5 steps, tiny networks; the others the paper-sized env (``WalkerConfig()``) and brax's MJX-humanoid
+    recipe (``PPOConfig()``: 3 072 envs, 122 880 env steps per update)."""
     if preset in (None, "smoke"):
-        return (WalkerConfig(terrain_shape=(16, 32), scale=TerrainScale(cell_size=0.2, height=0.5), episode_length=30),
-                PPOConfig(num_envs=8, unroll_length=5, num_unrolls=1, num_minibatches=2, update_epochs=2,
-                          policy_hidden=(16, 16), value_hidden=(32, 32)))
+        env = WalkerConfig(terrain_shape=(16, 32), scale=TerrainScale(cell_size=0.2, height=0.5), episode_length=30)
+        need = min_terrain_side(env._replace(robot=robot)) if robot in robots.names() else 0
+        if need > 16:
+            env = env._replace(terrain_shape=(need, max(32, need)))
+        return env, PPOConfig(num_envs=8, unroll_length=5, num_unrolls=1, num_minibatches=2, update_epochs=2,
+                              policy_hidden=(16, 16), value_hidden=(32, 32))
     return WalkerConfig(), PPOConfig()
 
 
@@ -116,8 +119,8 @@ def resolve_settings(run: BasePolicyRun) -> RunSettings:
     """The walker and PPO configs (the preset's :func:`shapes` with the run's walker and ``num_envs``) and the
     schedule of ``run``; ``ValueError`` naming ``BasePolicyRun.<path>`` for a bad solver, randomisation or PPO
     config."""
-    env_cfg, ppo_cfg = shapes(run.preset)
     w = run.walker
+    env_cfg, ppo_cfg = shapes(run.preset, w.robot or "humanoid")
     try:
         randomisation = parse_randomisation(w.randomise)
     except ValueError as err:
@@ -154,13 +157,23 @@ def validate_base_run(run: BasePolicyRun) -> RunSettings:
     if run.walker.scan_noise and run.walker.observation != "perceptive":
         raise ValueError(f"{owner}.walker.scan_noise needs {owner}.walker.observation perceptive (a blind walker "
                          f"scans nothing)")
-    return resolve_settings(run)
+    settings = resolve_settings(run)
+    env = settings.env_config
+    need = min_terrain_side(env)
+    if min(env.terrain_shape) < need:
+        raise ValueError(f"{owner}.walker.robot {env.robot}: the {env.terrain_shape[0]} x {env.terrain_shape[1]} flat "
+                         f"ground of preset {run.preset} is narrower than its margins take ({need} samples a side)")
+    return settings
+
+
+class ResumeMismatch(ValueError):
+    """A run resumed by code whose walker or PPO configs differ from those it started with (``run.json``)."""
 
 
 def write_run_info(folder: Path, settings: RunSettings, resumed: bool, command_line: str) -> dict:
     """Write ``run.json``: the command line that started the run (and, resumed, those that continued it), the PPO
     updates and the walker and PPO configs; returns its content. Resumed, the configs must be those the run started
-    with (``ValueError`` otherwise: the library's defaults changed since)."""
+    with (:class:`ResumeMismatch` otherwise: the library's defaults changed since)."""
     info = {"command_line": command_line, "num_updates": settings.num_updates,
             "walker_config": walker_json(settings.env_config), "ppo_config": settings.ppo_config.to_json_dict()}
     path = Path(folder) / RUN_INFO
@@ -170,7 +183,7 @@ def write_run_info(folder: Path, settings: RunSettings, resumed: bool, command_l
             old["walker_config"].setdefault("robot", "humanoid")
         for k in ("walker_config", "ppo_config"):
             if _comparable(old.get(k)) != _comparable(info[k]):
-                raise ValueError(f"resume: {k} differs from the run's {RUN_INFO} (the library's defaults changed "
+                raise ResumeMismatch(f"resume: {k} differs from the run's {RUN_INFO} (the library's defaults changed "
                                  "since the run started?); resume it with the code that started it")
         info["command_line"] = old.get("command_line", command_line)  # the command that started the run
         info["resumed_with"] = list(old.get("resumed_with", [])) + [command_line]

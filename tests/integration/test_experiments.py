@@ -164,13 +164,20 @@ def test_features_time_limit_stops_between_batches_and_resumes_to_the_same_value
 
 
 @pytest.mark.slow
-def test_coverage_smoke_skips_unavailable(tmp_path):
+def test_coverage_smoke_skips_unavailable(tmp_path, monkeypatch):
+    """A registered generator that cannot render here (the GAN without its weights, faked) is skipped: said in the
+    tables and left out of the combined archive; an unknown name is refused before anything runs."""
+    from jaxterrain.qd import table1
+
+    real = table1.generator_available
+    monkeypatch.setattr(table1, "generator_available",
+                        lambda name, size: (False, "OSError: no weights") if name == "gan" else real(name, size))
     out = tmp_path / "c"
-    assert cli("coverage", "--preset", "smoke", "--generators", "perlin", "no_such_generator", "--out", str(out)) == 0
+    assert cli("coverage", "--preset", "smoke", "--generators", "perlin", "gan", "--out", str(out)) == 0
     md = (out / "coverage.md").read_text()
-    assert "Perlin Noise" in md and "Combined" in md and "no_such_generator" in md and "Skipped" in md
+    assert "Perlin Noise" in md and "Combined" in md and "gan (OSError: no weights)" in md and "Skipped" in md
     csv_rows = (out / "coverage.csv").read_text().splitlines()
-    assert any(row.startswith("no_such_generator,,skipped") for row in csv_rows)
+    assert any(row.startswith("gan,,skipped") for row in csv_rows)
     assert (out / "coverage.png").exists() and (out / "archives.png").exists()
 
 
