@@ -606,13 +606,6 @@ def save_figure(fig, path: str | Path, dpi: int = 120) -> Path:
     return save(fig, path, dpi)
 
 
-def preset_with_flags(presets: dict[str, dict], args: argparse.Namespace, overrides: dict[str, Any],
-                      default_preset: str = "smoke") -> dict:
-    """The preset's settings with the flags given (``overrides``' non-None values): what a new run's config will hold,
-    for checks made before :func:`setup_run` makes its folder (``--config`` / ``--resume`` are not read)."""
-    return {**presets[args.preset or default_preset], **{k: v for k, v in overrides.items() if v is not None}}
-
-
 def setup_run(command: str, args: argparse.Namespace, presets: dict[str, dict], default_preset: str,
               overrides: dict[str, Any], extendable: tuple[str, ...] = (),
               check: Callable[[dict], None] | None = None) -> tuple[Path, dict]:

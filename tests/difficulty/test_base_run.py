@@ -24,6 +24,9 @@ def test_presets_round_trip_and_their_schedules_are_whole_updates():
     s = base_policy.resolve_settings(schema.replace(SMOKE, {"ppo.num_envs": 16}))
     assert s.ppo_config.num_envs == 16 and s.num_updates == 2  # 160 env steps of 16 x 5 per update
     assert base_policy.shapes(None) == base_policy.shapes("smoke")  # a config.json without a preset ran smoke's
+    assert base_policy.shapes("smoke")[0].terrain_shape == (16, 32)  # the humanoid's tiny flat ground
+    ant = base_policy.validate_base_run(schema.replace(SMOKE, {"walker.robot": "ant"}))
+    assert ant.env_config.terrain_shape == (17, 32)  # widened to the rows the ant's 1.3 m side margins take
 
 
 def test_the_solver_is_read_and_a_bad_one_names_the_field():
