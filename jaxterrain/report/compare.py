@@ -269,11 +269,12 @@ def write_videos(folder, names: Sequence[str], policies: Sequence, s, fitness, k
     return out
 
 
-def evaluation_videos(ready, folder, names: Sequence[str], s, fitness, say: Callable[[str], None] = print):
+def evaluation_videos(ready, folder, names: Sequence[str], s, fitness, say: Callable[[str], None] = print,
+                      note: Callable[[str], None] = print):
     """The videos of an ``evaluate`` run (``jaxterrain.suite.runs.evaluate_run``'s ``videos`` hook): each walker
     beside the base policy's first key on ``ready.run.videos``' terrains (:func:`write_videos` into
-    ``folder/videos``); ``ready``: the run validated (``suite.runs.Prepared``). Returns what :func:`write_videos`
-    returns (the videos, or why none: no OpenGL here)."""
+    ``folder/videos``); ``ready``: the run validated (``suite.runs.Prepared``). ``say`` receives the count made,
+    ``note`` the progress lines and why none were made (no OpenGL here). Returns what :func:`write_videos` returns."""
     run = ready.run
     v = run.videos
     own = [0] + list(range(int(run.base.keys), len(names)))  # one row per policy: the base policy's first key
@@ -282,9 +283,9 @@ def evaluation_videos(ready, folder, names: Sequence[str], s, fitness, say: Call
     made = write_videos(Path(folder) / "videos", [names[i] for i in own], ready.policies, s,
                         np.asarray(fitness)[own], jax.random.fold_in(jax.random.key(int(run.seed)), 5),
                         picks=video_picks(run), frames=int(v.frames), width=int(v.width), height=int(v.height),
-                        starts=int(v.starts), backend=backend, progress=lambda line: say(f"evaluate: {line}"))
+                        starts=int(v.starts), backend=backend, progress=lambda line: note(f"evaluate: {line}"))
     if isinstance(made, str):
-        say(f"evaluate: videos skipped: {made}")
+        note(f"evaluate: videos skipped: {made}")
     else:
         say(f"{len(made)} videos in {time.perf_counter() - t0:.0f} s -> {Path(folder) / 'videos'}")
     return made

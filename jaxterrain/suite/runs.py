@@ -39,8 +39,8 @@ from jaxterrain.terrain import TerrainScale
 from jaxterrain.walker import (WalkerConfig, min_terrain_side, parse_randomisation, randomisation_label,
                                resolve_backend, robots)
 
-__all__ = ["MUJOCO_STEPS_PER_CORE_S", "MUJOCO_MAX_HOURS", "TerrainError", "Prepared", "EvaluationResult", "base_names", "is_base",
-           "parse_picks", "load_policies", "terrains_of", "fit_size", "mujoco_workers", "check_physics",
+__all__ = ["MUJOCO_STEPS_PER_CORE_S", "MUJOCO_MAX_HOURS", "TerrainError", "Prepared", "EvaluationResult", "base_names",
+           "is_base", "parse_picks", "load_policies", "terrains_of", "fit_size", "mujoco_workers", "check_physics",
            "video_picks", "validate_evaluate", "evaluate_run"]
 
 MUJOCO_STEPS_PER_CORE_S = 1000
@@ -310,8 +310,9 @@ def evaluate_run(run: EvaluateRun | Prepared, folder, videos: Optional[Callable]
                  say: Callable[[str], None] = print, note: Callable[[str], None] = print) -> EvaluationResult:
     """Walk the base policy (with ``base.keys`` keys) and every policy of ``run`` (an :class:`EvaluateRun`, validated
     here, or :func:`validate_evaluate`'s :class:`Prepared`) on its terrains with the same key and write the
-    evaluation into ``folder`` (module docstring). ``videos(prepared, folder, names, suite, fitness, say)``: called when
-    ``run.videos.on`` (``jaxterrain.report.compare.evaluation_videos``), its seconds recorded in ``timing.json``.
+    evaluation into ``folder`` (module docstring). ``videos(prepared, folder, names, suite, fitness, say, note)``:
+    called when ``run.videos.on`` (``jaxterrain.report.compare.evaluation_videos``), its seconds recorded in
+    ``timing.json``.
     ``say``: progress lines; ``note``: what was dropped or changed (stderr on the command line)."""
     t0 = time.perf_counter()
     ready = run if isinstance(run, Prepared) else validate_evaluate(run, note=note)
@@ -357,7 +358,7 @@ def evaluate_run(run: EvaluateRun | Prepared, folder, videos: Optional[Callable]
     videos_s = None
     if run.videos.on and videos is not None:
         t3 = time.perf_counter()
-        videos(ready, folder, names, s, fitness, say)
+        videos(ready, folder, names, s, fitness, say, note)
         videos_s = round(time.perf_counter() - t3, 3)
     timing = {"suite": s.name, "terrains": s.size, "policies": len(policies), "base_keys": n_keys, "backend": backend,
               "engine": p.engine, "workers": walk["workers"] if p.engine == "mujoco" else None,
