@@ -153,7 +153,7 @@ def main(argv: list[str] | None = None, prog: str = "python -m experiments") -> 
     from experiments.common import UsageError, check_args
 
     try:  # bad flag values: one line naming the flag, exit status 2 (as argparse), before any JAX work
-        check_args(args.command, args)
+        check_args(args.command, args, getattr(available[args.command], "TYPED", None))
         return int(available[args.command].main(args) or 0)
     except UsageError as err:
         parser.exit(2, f"{parser.prog} {args.command}: error: {err}\n")

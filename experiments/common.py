@@ -24,7 +24,7 @@ import math
 import sys
 import time
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any, Callable, NamedTuple
 
 CONFIG_NAME = "config.json"
 PROVENANCE_NAME = "provenance.jsonl"
@@ -95,17 +95,31 @@ PRESET_HELP = {
 
 
 def library_file(name: str):
-    """The library module ``name`` (``"runtime.estimates"``, ``"curriculum.presets"``: one that imports only the
-    standard library), read from its file: ``--help`` imports no JAX (the package's ``__init__`` does)."""
+    """The library module ``name`` (``"runtime.estimates"``, ``"qd.run_config"``: one that imports only the standard
+    library and ``jaxterrain.runtime.schema``), read from its file without running the package's ``__init__`` (which
+    imports JAX), so ``--help`` stays fast. It is registered under its own name (``jaxterrain.qd.run_config``), so the
+    package imported later uses the same module (the same classes); ``runtime.schema`` is read first, so a config
+    module's ``from jaxterrain.runtime.schema import ...`` finds it."""
+    import importlib
     import importlib.util
 
-    if f"jaxterrain.{name}" in sys.modules:
-        return sys.modules[f"jaxterrain.{name}"]
+    full = f"jaxterrain.{name}"
+    if full in sys.modules:
+        return sys.modules[full]
+    if "jaxterrain" in sys.modules:  # the package is imported: the ordinary import
+        return importlib.import_module(full)
+    if name != "runtime.schema":
+        library_file("runtime.schema")
     spec = importlib.util.find_spec("jaxterrain")
     path = Path(spec.origin).parent.joinpath(*name.split(".")).with_suffix(".py")
-    spec = importlib.util.spec_from_file_location(f"_jaxterrain_{name.replace('.', '_')}", path)
+    spec = importlib.util.spec_from_file_location(full, path)
     module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
+    sys.modules[full] = module
+    try:
+        spec.loader.exec_module(module)
+    except BaseException:
+        del sys.modules[full]
+        raise
     return module
 
 
@@ -192,7 +206,7 @@ def shipped(relative: str) -> str:
 
 
 FLAG_NAMES = {"n": "--terrains", "samples": "--terrains", "slots": "--rollout-slots", "rollout_backend": "--backend",
-              "lr": "--learning-rate", "ckpt_every": "--checkpoint-every"}
+              "lr": "--learning-rate", "ckpt_every": "--checkpoint-every", "terrain_folder": "--terrains"}
 """Config keys whose flag has another name (the key kept so that older runs' ``config.json`` still read): terrains
 sampled per generator is ``--terrains`` in every command, the rollout pool's env slots ``--rollout-slots``, the
 walker's physics ``--backend``. The older spellings (``--n``, ``--samples``, ``--slots``, ``--rollout-backend``, ...)
@@ -452,13 +466,15 @@ def check_resume(command: str, resume: Any, flags: str | None = None) -> None:
         raise UsageError(f"{flags} is a run of {other!r}, not of {command!r}")
 
 
-def check_args(command: str, args: argparse.Namespace) -> None:
+def check_args(command: str, args: argparse.Namespace, typed: "Typed | None" = None) -> None:
     """Check a parsed command line before the command runs (``python -m experiments`` calls this): numbers by
     option name (sizes, counts >= 1, ...), fitness and generator names, ``--out`` (not a file), ``--resume`` (with
     ``--out``: one run folder of this command, :func:`resume_folder`), ``--config`` and ``--data`` (exist). Raises
-    :class:`UsageError` naming the flag."""
+    :class:`UsageError` naming the flag. A command whose run is a typed config (``typed``, :class:`Typed`) has its
+    config's values checked once, by the library, on the resolved config (:func:`setup_typed`): here only its other
+    flags (``--time-limit``, ``--devices``, ...)."""
     values = vars(args)
-    check_values(values)
+    check_values({k: v for k, v in values.items() if typed is None or k not in typed.fields})
     check_out(values.get("out"))
     check_resume(command, values.get("resume"))
     if values.get("resume") is not None:
@@ -590,13 +606,6 @@ def save_figure(fig, path: str | Path, dpi: int = 120) -> Path:
     return save(fig, path, dpi)
 
 
-def preset_with_flags(presets: dict[str, dict], args: argparse.Namespace, overrides: dict[str, Any],
-                      default_preset: str = "smoke") -> dict:
-    """The preset's settings with the flags given (``overrides``' non-None values): what a new run's config will hold,
-    for checks made before :func:`setup_run` makes its folder (``--config`` / ``--resume`` are not read)."""
-    return {**presets[args.preset or default_preset], **{k: v for k, v in overrides.items() if v is not None}}
-
-
 def setup_run(command: str, args: argparse.Namespace, presets: dict[str, dict], default_preset: str,
               overrides: dict[str, Any], extendable: tuple[str, ...] = (),
               check: Callable[[dict], None] | None = None) -> tuple[Path, dict]:
@@ -608,41 +617,72 @@ def setup_run(command: str, args: argparse.Namespace, presets: dict[str, dict], 
     except the keys of ``extendable`` (how long the run lasts and how often it logs, e.g. ``steps``): those replace
     the saved values, are checked as a fresh config is, and are written back to the run's ``config.json``.
     ``check(config)``: the command's own checks of the resolved config (raise :class:`UsageError`), run before any
-    folder is made.
+    folder is made. Values are checked by name (:func:`check_values`); a command whose run is a typed config of the
+    library uses :func:`setup_typed`.
     """
-    if args.resume is not None:
-        return _resume_run(command, args, overrides, extendable)
-    if args.config is not None:
+
+    def settle(config: dict, where, resumed: bool, changed: bool) -> dict:
+        if not resumed:
+            unknown = set(config) - set(presets[default_preset]) - {"preset", "seed", "command"}
+            if unknown:
+                raise SystemExit(f"unknown config key(s) {sorted(unknown)}; known: {sorted(presets[default_preset])}")
+        if not resumed or changed:
+            check_values(config, where)
+        if not resumed and check is not None:
+            check(config)
+        return config
+
+    return prepare_run(command, args, presets, default_preset, overrides, extendable, settle, preset_by_flag=False)
+
+
+def prepare_run(command: str, args: argparse.Namespace, presets: dict[str, dict], default_preset: str,
+           overrides: dict[str, Any], extendable: tuple[str, ...], settle: Callable[..., dict],
+           preset_by_flag: bool) -> tuple[Path, dict]:
+    """The one resolution of a run's settings (:func:`setup_run`, :func:`setup_typed`): the preset's, a saved
+    ``--config``'s or, with ``--resume``, the run's own; the flags given (on a resumed run only those of
+    ``extendable``; the others are ignored with a note); ``settle(config, where, resumed, changed)`` checks them and
+    returns the flat config to record (``where(key)``: how a message names a key: its flag where given on the
+    command line, or, with ``preset_by_flag``, set by a preset; else ``FILE: key 'k'`` / ``preset 'P': 'k'``);
+    ``--print-config`` prints it; then the run folder is made (or found) and ``config.json`` written."""
+    resumed = args.resume is not None
+    given = {k: v for k, v in overrides.items() if v is not None}
+    if resumed:
+        folder = resume_folder(command, args.resume, getattr(args, "out", None))
+        config = load_config(folder)
+        ignored = sorted(k for k in given if k not in extendable)
+        if ignored:
+            print(f"--resume: ignoring {ignored}; the run continues with its saved config", file=sys.stderr)
+        given = {k: v for k, v in given.items() if k in extendable}
+        source = f"{folder / CONFIG_NAME}: key"
+    elif args.config is not None:
         config = load_config(args.config)
         if args.preset is not None:
             config = {**presets[args.preset], **config, "preset": args.preset}
+        source = f"{args.config}: key"
     else:
         preset = args.preset or default_preset
-        config = {**presets[preset], "preset": preset}
-    for key, value in overrides.items():
-        if value is not None:
-            config[key] = value
-    if args.seed is not None:
-        config["seed"] = args.seed
-    config.setdefault("seed", 0)
-    unknown = set(config) - set(presets[default_preset]) - {"preset", "seed", "command"}
-    if unknown:
-        raise SystemExit(f"unknown config key(s) {sorted(unknown)}; known: {sorted(presets[default_preset])}")
-    given = {k for k, v in overrides.items() if v is not None}
-    source = f"preset {config.get('preset')!r}:" if args.config is None else f"{args.config}: key"
-    check_values(config, lambda k: flag(k) if k in given or (k == "seed" and args.seed is not None)
-                 else f"{source} {k!r}")
-    if check is not None:
-        check(config)
-    print_config(args, {**config, "command": command})
+        config, source = {**presets[preset], "preset": preset}, None if preset_by_flag else f"preset {preset!r}:"
+    config.update(given)
+    if not resumed:
+        if args.seed is not None:
+            config["seed"] = given["seed"] = args.seed
+        config.setdefault("seed", 0)
+    where = lambda k: flag(k) if k in given or source is None else f"{source} {k!r}"  # noqa: E731
+    flat = {**settle(config, where, resumed, bool(given)), "command": command}
+    print_config(args, flat)
+    if resumed:
+        if given:
+            write_config(folder, flat)
+        record_provenance(folder, command, vars(args), resumed=True)
+        print(f"resuming {folder}", flush=True)
+        return folder, flat
     check_out(args.out)
     folder = run_folder(command, args.out)
     folder.mkdir(parents=True, exist_ok=True)
-    config["command"] = command
-    write_config(folder, config)
+    write_config(folder, flat)
     record_provenance(folder, command, vars(args))
     print(f"run folder {folder}", flush=True)
-    return folder, config
+    return folder, flat
 
 
 def record_provenance(folder: Path, command: str, options: dict | None = None, resumed: bool = False) -> dict:
@@ -741,27 +781,6 @@ def setup_resumable_run(command: str, args: argparse.Namespace, presets: dict[st
     return setup_run(command, args, presets, default_preset, overrides, extendable, check)
 
 
-def _resume_run(command: str, args: argparse.Namespace, overrides: dict[str, Any],
-                extendable: tuple[str, ...]) -> tuple[Path, dict]:
-    """The ``--resume`` half of :func:`setup_run`."""
-    folder = resume_folder(command, args.resume, getattr(args, "out", None))
-    config = load_config(folder)
-    given = {k: v for k, v in overrides.items() if v is not None}
-    changed = {k: v for k, v in given.items() if k in extendable}
-    ignored = sorted(set(given) - set(changed))
-    if ignored:
-        print(f"--resume: ignoring {ignored}; the run continues with its saved config", file=sys.stderr)
-    if changed:
-        config.update(changed)
-        check_values(config, lambda k: flag(k) if k in changed else f"{folder / CONFIG_NAME}: key {k!r}")
-    print_config(args, config)
-    if changed:
-        write_config(folder, config)
-    record_provenance(folder, command, vars(args), resumed=True)
-    print(f"resuming {folder}", flush=True)
-    return folder, config
-
-
 def say(line: str) -> None:
     """Print ``line`` to stdout above the progress bar of ``jaxterrain.runtime.driver.run_chunks`` (``tqdm.write``), or
     plainly without tqdm."""
@@ -811,3 +830,77 @@ def protocol_overrides(args: argparse.Namespace) -> dict:
         if getattr(args, key, None) is not None:
             out[key] = getattr(args, key)
     return out
+
+
+# ----------------------------------------------------------------------------------------------------------------
+# Commands whose run is a typed config of the library (evolve, coverage, train-base-policy, evaluate)
+# ----------------------------------------------------------------------------------------------------------------
+
+
+class Typed(NamedTuple):
+    """A command's run as a typed config of the library (``jaxterrain.qd.run_config.EvolveRun``, ...): ``owner``,
+    the config's name in the library's messages (``EvolveRun.map_elites.bins must be ...``); ``fields``, its
+    ``{flat key: field path}`` table (the flat keys are ``config.json``'s and the flags' names: :func:`flag`);
+    ``from_flat`` / ``to_flat``, its serialised form. The one place where a field becomes a flag is
+    :func:`flags_in` over ``fields``."""
+
+    owner: str
+    fields: dict
+    from_flat: Callable[[dict], Any]
+    to_flat: Callable[..., dict]
+
+
+def flags_in(text: str, typed: Typed, where: Callable[[str], str] = flag) -> str:
+    """A library message with its fields (``<owner>.<path>``) named as this command's flags:
+    ``EvolveRun.map_elites.bins`` -> ``--bins`` (``where(flat key)``, by default :func:`flag`); a path that is no
+    flat key (a part) -> the flag of its last name."""
+    inverse = {path: key for key, path in typed.fields.items()}
+    schema = library_file("runtime.schema")
+    return schema.rename_fields(text, typed.owner, lambda path: where(inverse.get(path, path.rsplit(".", 1)[-1])))
+
+
+def typed_run(typed: Typed, config: dict, where: Callable[[str], str] = flag,
+              validate: Callable[[Any], Any] | None = None):
+    """The typed run of a flat ``config`` (``typed.from_flat``), checked by the library's ``validate`` (which
+    returns the run to record, e.g. with a size it raised); :class:`UsageError` naming the flags (:func:`flags_in`
+    with ``where``) for an unknown key or a bad value."""
+    try:
+        run = typed.from_flat({k: v for k, v in config.items() if k != "command"})
+        return run if validate is None else validate(run)
+    except (ValueError, TypeError) as err:
+        raise UsageError(flags_in(str(err).splitlines()[0] if str(err) else repr(err), typed, where)) from None
+
+
+def setup_typed(command: str, args: argparse.Namespace, presets: dict[str, dict], default_preset: str, typed: Typed,
+                overrides: dict[str, Any], validate: Callable[[Any], Any], extendable: tuple[str, ...] = (),
+                check: Callable[[Any], None] | None = None) -> tuple[Path, Any]:
+    """:func:`setup_run` for a command whose run is a typed config of the library: the flat settings resolved as there
+    (the preset, ``--config``, the flags; or ``--resume``'s saved ones with the ``extendable`` keys given), read into
+    the typed run and validated ONCE, by the library's ``validate`` (which returns the run to record; its errors name
+    the flags: a value given on the command line or set by a preset by its flag, one read from a file as ``FILE: key
+    'k'``), then, for a new run, ``check(run)`` (the command's checks of the flags themselves, e.g. one accepted and
+    ignored); ``--print-config`` prints the run's flat form; the run folder is made and ``config.json`` written only
+    then. Returns ``(folder, run)``."""
+    runs = []
+
+    def settle(config: dict, where, resumed: bool, changed: bool) -> dict:
+        runs.append(typed_run(typed, config, where, validate))
+        if not resumed and check is not None:
+            check(runs[-1])
+        return typed.to_flat(runs[-1])
+
+    folder, _ = prepare_run(command, args, presets, default_preset, overrides, extendable, settle, preset_by_flag=True)
+    return folder, runs[-1]
+
+
+def flag_values(args: argparse.Namespace, typed: Typed) -> dict:
+    """The config values given on the command line, ``{flat key: value}`` (None: not given) of every field with a
+    flag of the same name (``args``' dest = the flat key), ``--protocol`` resolved (:func:`protocol_overrides`)."""
+    out = {k: getattr(args, k) for k in typed.fields if k not in ("seed", "preset") and hasattr(args, k)}
+    out.update(protocol_overrides(args))
+    return out
+
+
+def minutes_to_seconds(minutes: float | None) -> float | None:
+    """``--time-limit MIN`` as the library's ``time_limit_s``."""
+    return None if minutes is None else 60.0 * minutes

@@ -47,6 +47,10 @@ trained under.
 the terrains of ``--video-terrains`` (default: per family the hardest level the walker passes and the first it
 fails), and ``videos/videos.csv`` (``jaxterrain.report.compare.write_videos``). GIF only (no MP4 writer is a
 dependency). Without an OpenGL backend for MuJoCo's renderer one line says why and the evaluation is still written.
+
+This module is the command line only: the run is a ``jaxterrain.suite.run_config.EvaluateRun`` (its presets there,
+``config.json`` its flat form, ``--print-config`` its printout), validated and walked by
+``jaxterrain.suite.runs.evaluate_run``; the videos are ``jaxterrain.report.compare.evaluation_videos``.
 """
 
 from __future__ import annotations
@@ -56,23 +60,12 @@ import sys
 
 from experiments import common
 
-PRESETS: dict[str, dict] = common.with_preset_names({
-    "gpu": dict(suite="v1", archive=None, terrain_folder=None, terrain_height=None,
-                policy=[], robot=None, observation=None, size=None, seeds=None, samples=None,
-                families=None, generators=None, attempts=80, best=5, headings=4, backend="auto", slots=None, chunk=None,
-                repeat=True, keys=1, videos=False, video_terrains=None, video_frames=75, video_width=320,
-                video_height=240, video_starts=8, engine="mjx", workers=None, randomise=None),
-    "smoke": dict(suite="v1", archive=None, terrain_folder=None, terrain_height=None,
-                  policy=[], robot=None, observation=None, size=128, seeds=1, samples=4,
-                  families=["flat", "stairs_up", "gaps"],
-                  generators=["perlin"], attempts=2, best=1, headings=1, backend="jax", slots=None, chunk=None,
-                  repeat=False, keys=1, videos=False, video_terrains=None, video_frames=75, video_width=320,
-                  video_height=240, video_starts=8, engine="mjx", workers=None, randomise=None),
-}, {"gpu-short": "gpu", "paper": ("gpu", {"attempts": 20, "best": 5, "headings": 1})})
+_CONFIG = common.library_file("suite.run_config")  # jaxterrain.suite.run_config, read without JAX
+PRESETS: dict[str, dict] = _CONFIG.FLAT_PRESETS
+"""The presets in their flat (``config.json``) form, defined in the library: ``jaxterrain.suite.run_config.PRESETS``."""
 BACKENDS = common.BACKEND_NAMES  # jaxterrain.walker.layout.BACKEND_CHOICES (literal: --help imports no JAX)
 ENGINES = ("mjx", "mujoco")  # jaxterrain.difficulty.replay.ENGINES (literal: --help imports no JAX)
-MUJOCO_STEPS_PER_CORE_S = 1000  # MuJoCo C humanoid env steps / s / core, measured (docs/results/sim2sim.md)
-MUJOCO_MAX_HOURS = 24.0  # --engine mujoco refuses suites whose longest possible walk would take longer
+TYPED = common.Typed("EvaluateRun", _CONFIG.FIELDS, _CONFIG.from_flat, _CONFIG.to_flat)
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -144,336 +137,32 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def overrides(args) -> dict:
-    return dict(policy=args.policy, robot=args.robot, observation=args.observation, keys=args.keys, suite=args.suite,
-                archive=args.archive, size=args.size, seeds=args.seeds,
-                samples=None if isinstance(args.samples, str) else args.samples,
-                terrain_folder=args.samples if isinstance(args.samples, str) else None,
-                terrain_height=args.terrain_height, families=args.families, generators=args.generators, repeat=args.repeat,
-                backend=args.backend, slots=args.slots, chunk=args.chunk, videos=args.videos,
-                video_terrains=args.video_terrains, video_frames=args.video_frames, video_width=args.video_width,
-                video_height=args.video_height, video_starts=args.video_starts, engine=args.engine, workers=args.workers,
-                randomise=args.randomise,
-                **common.protocol_overrides(args))
-
-
-def base_names(keys: int) -> list[str]:
-    """The ``fitness.csv`` names of the base policy's ``keys`` evaluations: ``base`` (the key every policy walks
-    with), then ``base:key1`` .. ``base:key{keys-1}`` (``jax.random.fold_in`` of that key by 1 .. keys-1)."""
-    return ["base"] + [f"base:key{k}" for k in range(1, keys)]
-
-
-def is_base(name: str) -> bool:
-    """Whether a ``fitness.csv`` policy name is one of the base policy's evaluations (:func:`base_names`)."""
-    return name == "base" or (name.startswith("base:key") and name[8:].isdigit())
-
-
-def load_policies(paths, robot: str | None = None, observation: str | None = None) -> list:
-    """The base policy of ``robot`` (default the humanoid's; ``observation``: its blind, default, or perceptive one)
-    and every folder of ``paths``, loaded; UsageError naming a folder that does not load, an unknown robot or one
-    without a shipped base policy."""
-    from experiments.common import UsageError
-    from jaxterrain import difficulty, rl
-
-    try:
-        out = [difficulty.robot_base_policy("humanoid" if robot is None else robot, observation or "blind")]
-    except ValueError as err:
-        raise UsageError(f"--{'observation' if observation else 'robot'}: {err}") from None
-    for p in paths or []:
-        try:
-            out.append(rl.load_policy(p))
-        except (OSError, ValueError) as err:
-            raise UsageError(f"--policy {p}: {str(err).splitlines()[0]}") from None
+    """The config values given on the command line (None: not given); ``--terrains`` is a count of generator
+    samples or a folder of heightmaps."""
+    out = common.flag_values(args, TYPED)
+    folder = isinstance(args.samples, str)
+    out.update(samples=None if folder else args.samples, terrain_folder=args.samples if folder else None)
     return out
 
 
-def check_terrain_flags(cfg: dict) -> None:
-    """UsageError naming the flag for an unknown suite or family, a size below 32 pixels or an archive that is
-    missing or does not read (it is read again when walked)."""
-    from pathlib import Path
-
-    from experiments.common import UsageError
-    from jaxterrain import suite
-
-    if cfg["suite"] not in suite.VERSIONS:
-        raise UsageError(f"--suite must be one of {', '.join(suite.VERSIONS)}; got {cfg['suite']!r}")
-    unknown = [f for f in cfg["families"] or [] if f not in suite.FAMILIES]
-    if unknown:
-        raise UsageError(f"--families: unknown {', '.join(map(repr, unknown))}; choose from "
-                         f"{', '.join(suite.FAMILIES)}")
-    keys = cfg.get("keys", 1)
-    if not isinstance(keys, int) or isinstance(keys, bool) or keys < 1:
-        raise UsageError(f"--keys must be an integer >= 1; got {keys!r}")
-    if cfg["size"] is not None and cfg["size"] < 32:
-        raise UsageError(f"--size must be an integer >= 32 pixels; got {cfg['size']}")
-    if cfg["archive"] and not Path(cfg["archive"]).is_file():
-        raise UsageError(f"--archive {cfg['archive']}: no such file")
-    if cfg["archive"]:
-        from jaxterrain import qd
-
-        try:
-            qd.load(cfg["archive"])
-        except (OSError, ValueError) as err:
-            raise UsageError(f"--archive {cfg['archive']}: {str(err).splitlines()[0]}") from None
-    if cfg.get("terrain_folder") and cfg["archive"]:
-        raise UsageError("--terrains DIR walks a folder of heightmaps instead of --archive: give one")
-    if cfg.get("terrain_height") is not None and not cfg.get("terrain_folder"):
-        raise UsageError("--terrain-height applies to --terrains DIR (a folder of heightmaps), which is not given")
-    if cfg.get("terrain_folder"):
-        folder_suite(cfg)
-
-
-def check_video_flags(cfg: dict) -> list | None:
-    """The ``(family, level)`` pairs of ``--video-terrains`` (None: the default picks); UsageError naming the flag
-    for a malformed list, a family this evaluation does not walk, a level the family lacks, ``--video-terrains``
-    without ``--videos`` or a frame count / panel size out of range."""
-    from experiments.common import UsageError
-    from jaxterrain import suite
-    from jaxterrain.report import compare
-
-    for key, low in (("video_frames", 1), ("video_width", 16), ("video_height", 16), ("video_starts", 1)):
-        v = cfg[key]
-        if not isinstance(v, int) or isinstance(v, bool) or v < low or v > 4096:
-            raise UsageError(f"--{key.replace('_', '-')} must be an integer in [{low}, 4096]; got {v!r}")
-    if cfg["video_terrains"] is None:
-        return None
-    if not cfg["videos"]:
-        raise UsageError("--video-terrains chooses the terrains of --videos, which is off: give --videos too")
-    try:
-        picks = compare.parse_picks(cfg["video_terrains"])
-    except ValueError as err:
-        raise UsageError(f"--video-{err}") from None
-    if cfg["archive"]:
-        levels = {"archive": suite.LEVELS}
-    elif cfg.get("terrain_folder"):
-        levels = {name: 1 for name in folder_suite(cfg).family}
-    else:
-        fams = cfg["families"] or suite.VERSIONS[cfg["suite"]]["families"]
-        gens = suite.VERSIONS[cfg["suite"]]["generators"] if cfg["generators"] is None else cfg["generators"]
-        levels = {**{f: suite.FAMILIES[f].levels for f in fams}, **{f"gen:{g}": suite.LEVELS for g in gens}}
-    for fam, lv in picks:
-        if fam not in levels:
-            raise UsageError(f"--video-terrains: family {fam!r} is not walked here; choose from "
-                             f"{', '.join(levels)}")
-        if lv >= levels[fam]:
-            raise UsageError(f"--video-terrains: {fam} has levels 0 to {levels[fam] - 1}; got {lv}")
-    return picks
-
-
-def fit_size(args, cfg0: dict, policies) -> int:
-    """A terrain side every policy's robot can walk (``walker.min_terrain_side``): a ``--size`` below it is refused
-    naming it; a preset's (smoke: 128 pixels) is raised to the next multiple of 32 that fits, said on stderr, and
-    recorded in the run's config as if given (``args.size``). Returns a side the policies can be checked on: the
-    size, or the robots' minimum where the suite's own size (None) or an archive's terrains are walked."""
-    from experiments.common import UsageError
-    from jaxterrain import difficulty
-    from jaxterrain.walker import WalkerConfig, min_terrain_side
-
-    size = cfg0["size"]
-    robots = sorted({difficulty.policy_robot(p) for p in policies})
-    need = max(min_terrain_side(WalkerConfig(robot=r)) for r in robots)
-    if size is None or cfg0["archive"]:
-        return need
-    if size >= need:
-        return size
-    if args.size is not None:
-        raise UsageError(f"--size must be >= {need} pixels for robot {', '.join(robots)} (its episode margins at "
-                         f"4 cm a pixel); got {size}")
-    args.size = cfg0["size"] = -(-need // 32) * 32
-    print(f"evaluate: --size {args.size} (the {args.preset or 'smoke'} preset's {size} pixels are too small for robot "
-          f"{', '.join(robots)})", file=sys.stderr)
-    return args.size
-
-
-def mujoco_workers(cfg: dict) -> int:
-    """The CPU processes of ``--engine mujoco``: ``--workers``, else every core."""
-    import os
-
-    return int(cfg.get("workers") or os.cpu_count() or 1)
-
-
-def check_engine(args, cfg: dict) -> None:
-    """UsageError for flags that do not apply to the engine: ``--engine mujoco`` with an MJX ``--backend`` other than
-    jax, ``--rollout-slots`` or ``--chunk`` (MJX's batching), a ``--workers`` below 1 or ``--randomise``; ``--workers``
-    with MJX."""
-    from experiments.common import UsageError
-
-    if cfg.get("engine") == "mujoco":
-        if args.backend not in (None, "jax"):
-            raise UsageError(f"--backend {args.backend} is an MJX backend; --engine mujoco steps MuJoCo's C engine on "
-                             "the CPU (drop --backend)")
-        for flag, key in (("--rollout-slots", "slots"), ("--chunk", "chunk")):
-            if cfg.get(key) is not None:
-                raise UsageError(f"{flag} batches MJX's walks; --engine mujoco walks on CPU processes (--workers)")
-        if cfg.get("workers") is not None and cfg["workers"] < 1:
-            raise UsageError(f"--workers must be an integer >= 1; got {cfg['workers']}")
-        if cfg.get("randomise") is not None:
-            raise UsageError("--randomise randomises MJX's walks; --engine mujoco walks the nominal physics")
-    elif args.workers is not None:
-        raise UsageError("--workers sets the CPU processes of --engine mujoco; MJX walks on the accelerator")
-
-
-def check_mujoco_cost(cfg: dict, terrains_n: int, policies_n: int) -> None:
-    """UsageError when ``--engine mujoco``'s walks could take longer than :data:`MUJOCO_MAX_HOURS` on its workers,
-    at :data:`MUJOCO_STEPS_PER_CORE_S` env steps per second per core with every walk lasting the episode."""
-    from experiments.common import UsageError
-    from jaxterrain.walker import WalkerConfig
-
-    steps = policies_n * terrains_n * int(cfg["attempts"]) * WalkerConfig().episode_length
-    hours = steps / (MUJOCO_STEPS_PER_CORE_S * mujoco_workers(cfg)) / 3600
-    if hours > MUJOCO_MAX_HOURS:
-        raise UsageError(f"--engine mujoco: {policies_n} policies x {terrains_n} terrains x {cfg['attempts']} walks "
-                         f"could take up to {hours:.0f} h on {mujoco_workers(cfg)} CPU processes (more than "
-                         f"{MUJOCO_MAX_HOURS:.0f} h): walk fewer terrains (--seeds, --samples, --families) or walks "
-                         "(--attempts)")
-
-
-def folder_suite(cfg: dict):
-    """``--terrains DIR``'s folder as a suite, one family per file (``suite.folder_suite``); UsageError naming the
-    flag and the file."""
-    from experiments.common import UsageError
-    from jaxterrain import suite
-
-    try:
-        side = cfg.get("size") or suite.TERRAIN_SIDE  # --size, else the curriculum's 256 cells
-        return suite.folder_suite(suite.load_folder(cfg["terrain_folder"], cfg.get("terrain_height"), side))
-    except ValueError as err:
-        msg = str(err).replace("give a terrain height M", "give --terrain-height M")
-        if msg.startswith("terrain height"):
-            raise UsageError(f"--terrain-height{msg[len('terrain height'):]}") from None
-        raise UsageError(f"--{msg}" if msg.startswith("terrains ") else f"--terrains: {msg}") from None
-
-
-def terrains(cfg: dict):
-    """The suite of the config, the archive's elites as a one-family suite, or a folder's terrains."""
-    from experiments.common import UsageError
-    from jaxterrain import qd, suite
-
-    if cfg.get("terrain_folder"):
-        return folder_suite(cfg)
-    if cfg["archive"]:
-        try:
-            return suite.archive_suite(qd.load(cfg["archive"]))
-        except (OSError, ValueError) as err:
-            raise UsageError(f"--archive {cfg['archive']}: {str(err).splitlines()[0]}") from None
-    try:
-        robot = None if suite.VERSIONS[cfg["suite"]]["robot"] is None else (cfg.get("robot") or "humanoid")
-        return suite.load(cfg["suite"], robot=robot, size=cfg["size"], seeds=cfg["seeds"], samples=cfg["samples"],
-                          families=cfg["families"], generator_names=cfg["generators"])
-    except ValueError as err:
-        raise UsageError(f"--{str(err)}") from None
-
-
 def main(args) -> int:
-    import json
-    import time
+    from jaxterrain.report import compare
+    from jaxterrain.suite import runs
 
-    import jax
-    import numpy as np
+    say_err = lambda line: print(common.flags_in(line, TYPED), file=sys.stderr, flush=True)  # noqa: E731
+    ready = []
 
-    from jaxterrain import difficulty, suite
-    from jaxterrain.runtime import provenance
-    from jaxterrain.runtime.io import atomic_write_text
-    from jaxterrain.terrain import TerrainScale
-    from jaxterrain.walker import parse_randomisation, randomisation_label, resolve_backend
+    def validate(run):
+        if run.videos.on:  # the OpenGL backend, before the renderer is made
+            from jaxterrain.report import render
 
-    cfg0 = common.preset_with_flags(PRESETS, args, overrides(args))
-    check_engine(args, cfg0)
-    policies = load_policies(cfg0["policy"], cfg0.get("robot"), cfg0.get("observation"))  # before the run folder: a bad folder is one line, nothing left behind
-    check_terrain_flags(cfg0)
-    own = cfg0["archive"] or cfg0.get("terrain_folder")  # an archive's or a folder's terrains, not the suite's
-    if suite.VERSIONS[cfg0["suite"]]["robot"] is not None and not own:  # v2: levels per robot
-        robot = cfg0.get("robot") or "humanoid"
-        other = [str(getattr(p, "path", p)) for p in policies[1:] if difficulty.policy_robot(p) != robot]
-        if other:
-            raise common.UsageError(f"--suite {cfg0['suite']} holds the levels of robot {robot} (--robot); these "
-                                    f"policies walk another robot: {', '.join(other)}")
-    check_video_flags(cfg0)
-    if cfg0["videos"] and cfg0.get("randomise") is not None:
-        raise common.UsageError("--videos draws the walks under the nominal physics; evaluate --randomise without "
-                                "--videos (and the videos in a run without it)")
-    if cfg0["videos"]:  # before anything imports mujoco
-        from jaxterrain.report import render
+            render.setup_gl(args.gl)
+        ready.append(runs.validate_evaluate(run, raise_size=args.size is None, note=say_err))
+        return ready[-1].run
 
-        render.setup_gl(args.gl)
-    side = fit_size(args, cfg0, policies)
-    try:  # another robot or observation set: refused before anything is built
-        suite.check_policies(policies, (side, side), TerrainScale())
-    except ValueError as err:
-        raise common.UsageError(str(err)) from None
-    t0 = time.perf_counter()
-    s = None
-    if cfg0["engine"] == "mujoco":  # the CPU engine's cost is checked on the terrains, before the run folder
-        s = terrains(cfg0)
-        check_mujoco_cost(cfg0, s.size, len(policies))
-    folder, cfg = common.setup_run("evaluate", args, PRESETS, "smoke", overrides(args))
-    n_keys = int(cfg.get("keys", 1))
-    names = base_names(n_keys) + [str(p) for p in cfg["policy"]]
-    terrain_keys = ("suite", "archive", "terrain_folder", "terrain_height", "size", "seeds", "samples", "families",
-                    "generators")
-    if s is None or any(cfg[k] != cfg0[k] for k in terrain_keys):
-        s = terrains(cfg)
-    build_s = time.perf_counter() - t0
-    protocol = difficulty.Protocol(int(cfg["attempts"]), int(cfg["best"]), int(cfg["headings"]))
-    engine = cfg.get("engine") or "mjx"
-    backend = resolve_backend(cfg["backend"]) if engine == "mjx" else "jax"
-    walk = dict(engine=engine, workers=mujoco_workers(cfg))
-    randomised = parse_randomisation(cfg.get("randomise"))
-    if cfg.get("randomise") is not None:
-        walk["randomisation"] = randomised
-    for fam, why in s.dropped.items():
-        print(f"evaluate: family {fam} dropped at --size {cfg['size']}: {why}", file=sys.stderr)
-    on = backend if engine == "mjx" else f"MuJoCo C ({walk['workers']} CPU processes)"
-    print(f"{s.name}: {s.size} terrains, {len(s.families())} families; {len(policies)} policies on {on}, "
-          f"{protocol.attempts} walks each (best {protocol.best} per heading, {protocol.headings} headings)"
-          + (f", randomised physics: {randomisation_label(randomised)}" if "randomisation" in walk else ""), flush=True)
-    key = jax.random.fold_in(jax.random.key(int(cfg["seed"])), 3)
-    t1 = time.perf_counter()
-    from jaxterrain.runtime.estimates import compiling
-
-    with compiling("suite-walk", f"{s.size} terrains x {protocol.attempts} walks, {backend} physics"):
-        first = suite.evaluate_policies(policies[:1], s.heightmaps, key, protocol, backend, s.scale, cfg["slots"],
-                                        cfg["chunk"], **walk)
-    first_s = time.perf_counter() - t1  # compile + walk of the base policy
-    again, walk_s = None, None
-    if cfg["repeat"]:  # the same walks again, compiled: one policy on the whole suite
-        t2 = time.perf_counter()
-        again = suite.evaluate_policies(policies[:1], s.heightmaps, key, protocol, backend, s.scale, cfg["slots"],
-                                        cfg["chunk"], **walk)
-        walk_s = time.perf_counter() - t2
-    fitness = first
-    for k in range(1, n_keys):  # the base policy again, with independent keys: runs of the comparator
-        fitness = np.concatenate([fitness, suite.evaluate_policies(policies[:1], s.heightmaps, jax.random.fold_in(key, k),
-                                                                   protocol, backend, s.scale, cfg["slots"],
-                                                                   cfg["chunk"], **walk)])
-    if len(policies) > 1:  # the other policies: the same compiled program, their weights as data
-        fitness = np.concatenate([fitness, suite.evaluate_policies(policies[1:], s.heightmaps, key, protocol, backend,
-                                                                 s.scale, cfg["slots"], cfg["chunk"], **walk)])
-    suite.write_evaluation(folder, names, s, fitness)
-    videos_s = None
-    if cfg["videos"]:
-        from jaxterrain.report import compare
-
-        t3 = time.perf_counter()
-        own = [0] + list(range(n_keys, len(names)))  # one row per policy: the base policy's first key, then the walkers
-        made = compare.write_videos(folder / "videos", [names[i] for i in own], policies, s, fitness[own],
-                                    jax.random.fold_in(jax.random.key(int(cfg["seed"])), 5),
-                                    picks=check_video_flags(cfg), frames=int(cfg["video_frames"]),
-                                    width=int(cfg["video_width"]), height=int(cfg["video_height"]),
-                                    starts=int(cfg["video_starts"]), backend=backend,
-                                    progress=lambda line: print(f"evaluate: {line}", file=sys.stderr, flush=True))
-        videos_s = round(time.perf_counter() - t3, 3)
-        if isinstance(made, str):
-            print(f"evaluate: videos skipped: {made}", file=sys.stderr, flush=True)
-        else:
-            print(f"{len(made)} videos in {videos_s:.0f} s -> {folder / 'videos'}", flush=True)
-    timing = {"suite": s.name, "terrains": s.size, "policies": len(policies), "base_keys": n_keys, "backend": backend,
-              "engine": engine, "workers": walk["workers"] if engine == "mujoco" else None,
-              "walks_per_terrain": protocol.attempts, "build_s": round(build_s, 3),
-              "first_call_s": round(first_s, 3), "walk_s_one_policy": None if walk_s is None else round(walk_s, 3),
-              "all_policies_s": round(time.perf_counter() - t1, 3),
-              "repeat_equal": None if again is None else bool((first == again).all()),
-              "videos_s": videos_s, "device": provenance.device()}
-    atomic_write_text(folder / "timing.json", json.dumps(timing, indent=2) + "\n")
-    said = "" if walk_s is None else f", {walk_s:.1f} s compiled"
-    print(f"one policy on {s.size} terrains: {first_s:.1f} s the first call{said} -> {folder}", flush=True)
+    folder, run = common.setup_typed("evaluate", args, PRESETS, "smoke", TYPED, overrides(args), validate)
+    try:
+        runs.evaluate_run(ready[-1], folder, videos=compare.evaluation_videos, note=say_err)
+    except runs.TerrainError as err:  # built when walked (after the run folder): e.g. a size that holds no family
+        raise common.UsageError(common.flags_in(str(err), TYPED)) from None
     return 0

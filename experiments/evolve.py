@@ -28,7 +28,9 @@ per distance band (``python -m experiments shares`` compares it with the combine
 Writes into the run folder: ``config.json``, ``checkpoint/checkpoint.npz`` (every ``checkpoint_every`` generations),
 ``archive.npz`` (``jaxterrain.qd.save`` format), ``metrics.csv`` (one row per generation) and ``archive.png``.
 Re-run with ``--config <run>/config.json``; continue a killed or time-limited run with ``--resume <run>``. A mixed
-run writes ``shares.*`` too (above).
+run writes ``shares.*`` too (above). This module is the command line only: the run is a
+``jaxterrain.qd.run_config.EvolveRun`` (its presets there, ``config.json`` its flat form, ``--print-config`` its
+printout), validated and evolved by ``jaxterrain.qd.runs.evolve_run``.
 
 ``--devices N`` (default: every visible device) splits each generation's offspring over N devices (render,
 descriptors, Algorithm 1, walks; the repertoire replicated; ``jaxterrain.qd.evolution``): the same seed gives the same
@@ -45,60 +47,14 @@ Example (GPU machine, one 10-minute command at a time)::
 from __future__ import annotations
 
 import argparse
-import csv
-from pathlib import Path
 
 from experiments import common
 
-_PAPER = dict(generator="perlin", descriptors=["roughness", "tpi"], generations=5000, batch_size=20,
-              initial_population=100, bins=50, size=256, window=30, stride=2, attempts=20, best=5, headings=1,
-              checkpoint_every=250, fitness="difficulty", robot_height=None, out_of_range="clip", ranges=None,
-              store_heightmaps=True, rollout_slots=None, rollout_backend="jax", robot="humanoid",
-              observation="blind", mix=None, fresh=1)
-MIX_DEFAULT = ("perlin", "worley", "diamond_square", "cppn", "gan", "steps")
-"""``--generator mixed``'s generators by default: the six built-in ones (``jaxterrain.generators.BUILTIN``)."""
-PRESETS: dict[str, dict] = {
-    "paper": _PAPER,
-    "gpu": {**_PAPER, "generations": 25, "batch_size": 4000, "checkpoint_every": 1, "rollout_slots": 16384,
-            "fresh": 64},
-    "gpu-short": {**_PAPER, "generations": 5, "batch_size": 2000, "checkpoint_every": 1, "store_heightmaps": False,
-                  "rollout_slots": 8192, "fresh": 32},
-    "smoke": {**_PAPER, "generations": 4, "batch_size": 8, "initial_population": 16, "bins": 10, "size": 32,
-              "window": 8, "attempts": 2, "best": 1, "checkpoint_every": 2, "fitness": "slope",
-              "ranges": [[0.0, 0.5], [-0.02, 0.02]]},
-}
-
-
-def preset_config(name: str):
-    """The :class:`jaxterrain.qd.EvolveConfig` of a preset."""
-    return evolve_config(PRESETS[name])
-
-
-def _backend(name: str) -> str:
-    """``--backend auto`` -> the physics ``jaxterrain.walker.resolve_backend`` picks on this machine."""
-    if name != "auto":
-        return str(name)
-    from jaxterrain.walker import resolve_backend
-
-    return resolve_backend("auto")
-
-
-def evolve_config(cfg: dict):
-    from jaxterrain.qd import EvolveConfig
-
-    ranges = cfg.get("ranges")
-    return EvolveConfig(
-        generations=int(cfg["generations"]), batch_size=int(cfg["batch_size"]),
-        initial_population=int(cfg["initial_population"]), bins=int(cfg["bins"]),
-        descriptors=tuple(cfg["descriptors"]),
-        ranges=None if ranges is None else tuple(tuple(map(float, r)) for r in ranges),
-        window=int(cfg["window"]), stride=int(cfg["stride"]), attempts=int(cfg["attempts"]), best=int(cfg["best"]),
-        headings=int(cfg.get("headings", 1)), checkpoint_every=int(cfg["checkpoint_every"]), robot_height=cfg.get("robot_height"),
-        out_of_range=cfg.get("out_of_range", "clip"), store_heightmaps=bool(cfg.get("store_heightmaps", True)),
-        rollout_slots=None if cfg.get("rollout_slots") is None else int(cfg["rollout_slots"]),
-        rollout_backend=_backend(cfg.get("rollout_backend", "jax")), robot=str(cfg.get("robot") or "humanoid"),
-        observation=str(cfg.get("observation") or "blind"),
-    )
+_CONFIG = common.library_file("qd.run_config")  # jaxterrain.qd.run_config, read without JAX
+PRESETS: dict[str, dict] = _CONFIG.FLAT_PRESETS
+"""The presets in their flat (``config.json``) form, defined in the library: ``jaxterrain.qd.run_config.PRESETS``."""
+MIX_DEFAULT = _CONFIG.MIX_DEFAULT
+TYPED = common.Typed("EvolveRun", _CONFIG.EVOLVE_FIELDS, _CONFIG.from_flat, _CONFIG.to_flat)
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -148,189 +104,36 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def overrides(args) -> dict:
-    return dict(generator=args.generator, descriptors=args.descriptors, generations=args.generations,
-                batch_size=args.batch_size, initial_population=args.initial_population, bins=args.bins,
-                size=args.size, checkpoint_every=args.checkpoint_every, fitness=args.fitness,
-                **common.protocol_overrides(args), store_heightmaps=args.store_heightmaps,
-                rollout_slots=args.rollout_slots, rollout_backend=args.rollout_backend, robot=args.robot,
-                observation=args.observation, mix=args.mix, fresh=args.fresh)
+    """The config values given on the command line (None: not given)."""
+    return common.flag_values(args, TYPED)
 
 
-def announce_compile(cfg: dict, config) -> None:
-    """Say what the first generations compile and about how long that takes here (``jaxterrain.runtime.estimates``);
-    generation 0 (the initial population) and 1 (the first offspring batch) each compile."""
-    from jaxterrain.runtime.estimates import announce
-
-    walks = cfg.get("fitness") == "difficulty"
-    announce("map-elites" if walks else "map-elites-slope",
-             f"{config.batch_size} offspring" + (f", {config.rollout_backend} physics" if walks else ""))
-
-
-def run_treatment(cfg: dict, generator: str, descriptors, folder: Path, clock: common.Clock, key, label: str = "",
-                  mesh=None):
-    """Evolve one archive into ``folder`` (checkpointed there); returns the Archive, or the saved one if done.
-    ``mesh``: the devices each generation's offspring are split over (``qd.evolve``)."""
-    from jaxterrain import qd as A
-
-    folder = Path(folder)
-    done_path = folder / "archive.npz"
-    if done_path.exists():
-        print(f"{label}{generator} {descriptors}: already done ({done_path})", flush=True)
-        return A.load(done_path)
-    config = evolve_config({**cfg, "descriptors": list(descriptors)})
-    fitness = fitness_fn(cfg["fitness"])
-    announce_compile(cfg, config)
-    printer = A.progress_printer(label + generator)
-    if generator == "mixed":
-        generator = mixture_of(cfg)
-
-    def progress(info):
-        printer(info)
-        if info.get("generation", 0) < info.get("generations", 0):  # the last chunk goes on to save the archive
-            clock.check()
-
-    arch = A.evolve(generator, None, config, key, fitness_fn=fitness, checkpoint_dir=folder / "checkpoint",
-                    progress=progress, generator_options={"size": int(cfg["size"])}, mesh=mesh)
-    A.save(done_path, arch)
-    write_metrics_csv(folder / "metrics.csv", arch.metrics)
-    return arch
-
-
-def mixture_of(cfg: dict):
-    """The ``jaxterrain.generators.mixture`` of a ``--generator mixed`` config (its ``mix``, ``fresh`` and ``size``)."""
-    from jaxterrain import generators
-
-    return generators.mixture(tuple(cfg.get("mix") or MIX_DEFAULT), fresh=int(cfg.get("fresh", 1)),
-                              size=int(cfg["size"]))
-
-
-def check_mixed(args, cfg: dict) -> None:
-    """``--mix`` / ``--fresh`` only with ``--generator mixed``; a mixture of two or more distinct generators whose
-    fresh samples leave room for mutated offspring (``batch_size > fresh x generators``);
-    :class:`~experiments.common.UsageError`."""
-    if cfg.get("generator") != "mixed":
+def check_flags(args, run) -> None:
+    """Flags that this run would accept and ignore: ``--mix`` / ``--fresh`` without ``--generator mixed``,
+    ``--robot`` / ``--observation`` with a fitness that walks no robot; :class:`~experiments.common.UsageError`."""
+    if run.generator != "mixed":
         for flag, value in (("--mix", args.mix), ("--fresh", args.fresh)):
             if value is not None:
                 raise common.UsageError(f"{flag}: only with --generator mixed (this run's generator is "
-                                        f"{cfg.get('generator')!r})")
-        return
-    names = list(cfg.get("mix") or MIX_DEFAULT)
-    if len(names) < 2 or len(set(names)) != len(names):
-        raise common.UsageError(f"--mix: two or more distinct generator names; got {' '.join(names)}")
-    from jaxterrain import generators
-
-    for name in names:  # the default six are not checked by common.check_values: e.g. diamond-square's sizes
-        try:
-            generators.get(name, size=int(cfg["size"]))
-        except (ValueError, OSError) as err:
-            raise common.UsageError(f"--size {cfg['size']} does not suit generator {name!r} of --generator mixed: "
-                                    f"{str(err).splitlines()[0]}") from None
-    need = int(cfg.get("fresh", 1)) * len(names)
-    if int(cfg["batch_size"]) <= need:
-        raise common.UsageError(f"--batch-size must be > {need} with --generator mixed (--fresh {cfg.get('fresh', 1)} "
-                                f"of each of {len(names)} generators); got {cfg['batch_size']}")
-
-
-def check_robot_walks(args, cfg: dict) -> None:
-    """``--robot`` only with a fitness that walks a robot (``difficulty``, the walker's): with ``slope`` it would
-    be recorded in the archive yet walk nothing; :class:`~experiments.common.UsageError`."""
-    if args.robot is not None and cfg.get("fitness") != "difficulty":
-        raise common.UsageError(f"--robot {args.robot}: only the walker fitness walks a robot (--fitness difficulty); "
-                                f"this run's fitness is {cfg.get('fitness')!r}, which walks none")
-    if args.observation is not None and cfg.get("fitness") != "difficulty":
-        raise common.UsageError(f"--observation {args.observation}: only the walker fitness walks a policy "
-                                f"(--fitness difficulty); this run's fitness is {cfg.get('fitness')!r}")
-
-
-def fitness_fn(name: str):
-    """The ``fitness_fn`` of ``qd.evolve`` for ``--fitness NAME``: ``jaxterrain.difficulty.FITNESSES[name]``, where None (the
-    walker, ``"difficulty"``) lets ``qd.evolve`` build it from the config (attempts, best, rollout slots and
-    the ONE scale that Algorithm 1 uses too)."""
-    return common.fitness_of(name)
-
-
-def write_metrics_csv(path: Path, metrics: dict) -> None:
-    import io
-
-    from jaxterrain.runtime.io import atomic_write_text
-
-    names = sorted(metrics)
-    buf = io.StringIO()
-    w = csv.writer(buf)
-    w.writerow(["generation", *names])
-    for g in range(len(metrics[names[0]]) if names else 0):
-        w.writerow([g, *(f"{float(metrics[n][g]):.6g}" for n in names)])
-    atomic_write_text(path, buf.getvalue())
-
-
-def plot_archive(ax, arch, title: str = ""):
-    """Draw an archive's fitness grid on a matplotlib axis (darker = fitter, like the paper's Figure 6)."""
-    from jaxterrain import qd as A
-
-    (lo0, hi0), (lo1, hi1) = arch.config.ranges
-    img = ax.imshow(A.fitness_grid(arch), origin="lower", extent=(lo0, hi0, lo1, hi1), aspect="auto",
-                    cmap="viridis_r", vmin=0.0, vmax=1.0, interpolation="nearest")
-    ax.set_xlabel(arch.config.descriptors[0])
-    ax.set_ylabel(arch.config.descriptors[1])
-    ax.set_title(title or f"{'+'.join(arch.generator_names)}: {A.coverage(arch):.2f}%", fontsize=8)
-    return img
+                                        f"{run.generator!r})")
+    if run.fitness != "difficulty":
+        if args.robot is not None:
+            raise common.UsageError(f"--robot {args.robot}: only the walker fitness walks a robot (--fitness "
+                                    f"difficulty); this run's fitness is {run.fitness!r}, which walks none")
+        if args.observation is not None:
+            raise common.UsageError(f"--observation {args.observation}: only the walker fitness walks a policy "
+                                    f"(--fitness difficulty); this run's fitness is {run.fitness!r}")
 
 
 def main(args) -> int:
-    import jax
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    from jaxterrain import qd as A
+    from jaxterrain.qd import runs
 
     mesh = common.device_mesh(args.devices)
-    fitness = args.fitness or PRESETS.get(args.preset or "smoke", {}).get("fitness")
-    if args.robot is not None or args.observation is not None:  # before the run folder: one line (its base policy
-        from jaxterrain import difficulty  # only where the fitness walks)
-        from jaxterrain.walker import robots
-
-        try:
-            robots.get(args.robot or "humanoid")
-        except ValueError as err:
-            raise common.UsageError(f"--robot: {err}") from None
-        try:
-            if fitness == "difficulty":
-                difficulty.robot_base_policy(args.robot or "humanoid", args.observation or "blind")
-        except ValueError as err:
-            raise common.UsageError(f"--{'observation' if args.observation else 'robot'}: {err}") from None
-    if fitness == "difficulty":  # the walker fitness needs terrains the robot has a track on (its margins)
-        from jaxterrain.walker import WalkerConfig, min_terrain_side
-
-        cfg0 = common.preset_with_flags(PRESETS, args, overrides(args))
-        robot = cfg0.get("robot") or "humanoid"
-        need = min_terrain_side(WalkerConfig(robot=robot))
-        if cfg0.get("size") is not None and int(cfg0["size"]) < need:
-            raise common.UsageError(f"--size must be >= {need} pixels for the walker fitness of robot {robot} (its "
-                                    f"episode margins at 4 cm a pixel); got {cfg0['size']}")
-    def check(c):
-        check_robot_walks(args, c)
-        check_mixed(args, c)
-
-    folder, cfg = common.setup_run("evolve", args, PRESETS, "smoke", overrides(args), check=check)
-    clock = common.Clock(args.time_limit)
-    try:
-        arch = run_treatment(cfg, cfg["generator"], cfg["descriptors"], folder, clock, jax.random.key(cfg["seed"]),
-                             mesh=mesh)
-    except common.TimeUp:
+    folder, run = common.setup_typed("evolve", args, PRESETS, "smoke", TYPED, overrides(args), runs.validate_evolve,
+                                     check=lambda r: check_flags(args, r))
+    arch = runs.evolve_run(run, folder, common.minutes_to_seconds(args.time_limit), mesh=mesh)
+    if arch is None:
         print(f"time limit reached; continue with: python -m experiments evolve --resume {folder}", flush=True)
         return 3
-    fig, ax = plt.subplots(figsize=(4, 3.5))
-    fig.colorbar(plot_archive(ax, arch), ax=ax, label="fitness")
-    fig.tight_layout()
-    common.save_figure(fig, folder / "archive.png", dpi=120)
-    if cfg["generator"] == "mixed":
-        from experiments import shares
-
-        mix = mixture_of(cfg).spec
-        shares.write_all(folder, {"mixed": arch}, 10.0, f"{len(mix.names)} generators, fresh {mix.fresh}, preset "
-                                                        f"{cfg.get('preset')}")
-    print(f"done: coverage {A.coverage(arch):.2f}%  qd {A.qd_score(arch):.2f}  "
-          f"rejected by Algorithm 1: {int(arch.metrics['rejected'].sum())}  -> {folder}", flush=True)
+    print(f"done: {runs.summary_line(arch)}  -> {folder}", flush=True)
     return 0

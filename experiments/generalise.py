@@ -46,7 +46,6 @@ import argparse
 import json
 from pathlib import Path
 
-from experiments.evaluate import is_base
 
 BASE = "base policy"
 
@@ -127,7 +126,7 @@ def load_treatment(folder: Path, label: str | None = None, heldout: str = "heldo
     except (OSError, ValueError) as err:
         raise UsageError(f"{summary_path}: not readable JSON ({type(err).__name__}: {err})") from None
     trial = lambda name: int(name.rsplit("trial_", 1)[1]) if name.rsplit("trial_", 1)[-1].isdigit() else -1  # noqa: E731
-    walkers = sorted((trial(n), i) for i, n in enumerate(ev.policies) if not is_base(n) and trial(n) >= 0)
+    walkers = sorted((trial(n), i) for i, n in enumerate(ev.policies) if not suite.runs.is_base(n) and trial(n) >= 0)
     if not walkers:
         raise UsageError(f"{path}: no policies/trial_K walker in it")
     hardest = summary.get("hardest") if isinstance(summary, dict) else None
@@ -141,7 +140,7 @@ def load_treatment(folder: Path, label: str | None = None, heldout: str = "heldo
     return {"label": label or folder.name.replace("-", " "), "folder": folder, "family": ev.family, "level": ev.level,
             "trials": [t for t, _ in walkers], "fitness": ev.fitness[[i for _, i in walkers]],
             "hardest": [float(hardest[t]) for t, _ in walkers],
-            "base": ev.fitness[[i for i, n in enumerate(ev.policies) if is_base(n)]]}
+            "base": ev.fitness[[i for i, n in enumerate(ev.policies) if suite.runs.is_base(n)]]}
 
 
 def load_base(path: Path, family, level) -> "np.ndarray":
@@ -160,7 +159,7 @@ def load_base(path: Path, family, level) -> "np.ndarray":
         ev = suite.read_fitness(path)
     except (OSError, ValueError) as err:
         raise UsageError(f"--base: {str(err).splitlines()[0]}") from None
-    rows = [i for i, n in enumerate(ev.policies) if is_base(n)]
+    rows = [i for i, n in enumerate(ev.policies) if suite.runs.is_base(n)]
     if not rows:
         raise UsageError(f"--base {path}: no base policy rows (base, base:key1, ...) in it")
     if not (np.array_equal(ev.family, family) and np.array_equal(ev.level, level)):

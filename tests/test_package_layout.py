@@ -209,3 +209,28 @@ def test_only_integration_tests_import_the_command_line():
             bad += [f"{p.relative_to(ROOT)}:{node.lineno}: imports {n}" for n in names
                     if n.split(".")[0] == "experiments"]
     assert not bad, "\n".join(bad)
+
+
+def test_no_library_module_is_over_500_lines():
+    long = {f"{p.relative_to(ROOT)}: {n} lines" for p in PKG.rglob("*.py")
+            if (n := len(p.read_text().splitlines())) > 500}
+    assert not long, "\n".join(sorted(long))
+
+
+# Typed run configs read by ``--help`` (``experiments.common.library_file``): the standard library and
+# ``jaxterrain.runtime.schema`` only, so that the command line's help imports no JAX.
+JAX_FREE = ("jaxterrain.runtime.schema", "jaxterrain.runtime.estimates", "jaxterrain.curriculum.presets",
+            "jaxterrain.qd.run_config", "jaxterrain.difficulty.run_config", "jaxterrain.suite.run_config")
+
+
+def test_the_config_modules_import_only_the_standard_library():
+    import sys
+
+    bad = []
+    for mod in JAX_FREE:
+        for node in ast.parse(MODULES[mod].read_text()).body:  # module level: what reading the file runs
+            names = ([a.name for a in node.names] if isinstance(node, ast.Import)
+                     else [node.module or ""] if isinstance(node, ast.ImportFrom) and node.level == 0 else [])
+            bad += [f"{mod}: imports {n}" for n in names
+                    if n.split(".")[0] not in sys.stdlib_module_names and n != "jaxterrain.runtime.schema"]
+    assert not bad, "\n".join(bad)

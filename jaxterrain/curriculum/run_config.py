@@ -43,7 +43,7 @@ from jaxterrain.curriculum.presets import CPPN_ARCHIVE, FLAT_PRESETS
 from jaxterrain.curriculum.selectors.protocol import selector_fields, selector_spec
 
 __all__ = ["LearnConfig", "ProtocolOverride", "WalkerSettings", "Budget", "PRESETS", "CPPN_ARCHIVE", "from_flat",
-           "to_flat", "FLAT_FIELDS", "field_of", "LEGACY", "RENAMED"]
+           "to_flat", "FLAT_FIELDS", "field_of", "LEGACY", "RENAMED", "CONSUMERS"]
 
 
 class ProtocolOverride(NamedTuple):
@@ -200,3 +200,24 @@ def to_flat(config: LearnConfig, command: Optional[str] = None) -> dict:
 
 PRESETS: dict[str, LearnConfig] = {name: from_flat({**flat, "preset": name}) for name, flat in FLAT_PRESETS.items()}
 """The typed presets (``smoke``, ``gpu-short``, ``gpu``, ``paper``: :mod:`.presets`), ``preset`` set to the name."""
+
+CONSUMERS = {
+    "": "curriculum.runner.run_treatment",
+    "archive": "curriculum.runner.load_archive", "descriptors": "curriculum.runner.load_archive",
+    "terrains": "curriculum.own_terrains.load_terrains", "terrain_height": "curriculum.own_terrains.load_terrains",
+    "terrain_order": "curriculum.own_terrains.rank_terrains",
+    "trials": "curriculum.runner.inputs (keys), setup (vmap)", "seed": "curriculum.runner.inputs (the root key)",
+    "recipe": "curriculum.runner.validate (RECIPES; recorded)", "preset": "recorded",
+    "curriculum": "curriculum.core.step (the trial loop; outputs.write_outputs)",
+    "curriculum.selector": "curriculum.selectors.get_selector", "curriculum.params": "curriculum.selectors.get_selector",
+    "curriculum.attempts": "curriculum.walker.walker_harness (evaluations)",
+    "curriculum.best": "curriculum.walker.walker_harness", "curriculum.headings": "curriculum.walker.walker_harness",
+    "curriculum.ppo": "curriculum.walker.walker_harness (rl.ppo)",
+    "curriculum.overlap": "curriculum.core.step, runner.walker_layout",
+    "protocol": "curriculum.runner.resolve",
+    "walker": "curriculum.runner.make_env", "walker.backend": "curriculum.runner.walker_layout",
+    "walker.robot": "curriculum.runner.start_policy", "walker.policy": "curriculum.runner.start_policy",
+    "walker.observation": "curriculum.runner.start_policy",
+    "budget": "curriculum.runner.setup (compiled blocks), run_treatment (driver.run_chunks)",
+}
+"""Where each field of :class:`LearnConfig` is consumed (``docs/CONTRIBUTING.md``; a test checks the functions)."""

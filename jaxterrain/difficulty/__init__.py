@@ -48,8 +48,17 @@ from jaxterrain.difficulty.protocol import (
 )
 from jaxterrain.difficulty import replay  # noqa: E402  (after evaluation, which it imports)
 from jaxterrain.difficulty.replay import ENGINES, mujoco_evaluate
+from jaxterrain.difficulty import base_policy, run_config  # noqa: E402  (the base policy's training run)
+from jaxterrain.difficulty.base_policy import BasePolicyResult, train_base_policy, validate_base_run
+from jaxterrain.difficulty.run_config import BasePolicyRun
 
 __all__ = [
+    "base_policy",
+    "run_config",
+    "BasePolicyRun",
+    "BasePolicyResult",
+    "train_base_policy",
+    "validate_base_run",
     "replay",
     "ENGINES",
     "mujoco_evaluate",

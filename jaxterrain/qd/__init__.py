@@ -57,6 +57,10 @@ from jaxterrain.qd.evolution import (
 )
 from jaxterrain.qd.grid import GRID_BINS, MAX_DISTANCE_50, cell_bins, cell_distance, cell_of, centroids_for
 from jaxterrain.qd.map_elites import METRIC_NAMES
+from jaxterrain.qd import run_config, runs, shares, table1  # noqa: E402  (the evolve and coverage runs)
+from jaxterrain.qd.table1 import CoverageResult, coverage_run, validate_coverage
+from jaxterrain.qd.run_config import CoverageRun, EvolveRun
+from jaxterrain.qd.runs import evolve_run, validate_evolve
 
 __all__ = [
     "scoring",
@@ -108,4 +112,15 @@ __all__ = [
     "progress_printer",
     "to_archive",
     "traversable_fn",
+    "run_config",
+    "runs",
+    "shares",
+    "table1",
+    "coverage_run",
+    "EvolveRun",
+    "CoverageRun",
+    "CoverageResult",
+    "evolve_run",
+    "validate_evolve",
+    "validate_coverage",
 ]

@@ -27,6 +27,7 @@ import time
 from pathlib import Path
 from typing import Callable, Optional, Sequence
 
+import jax
 import numpy as np
 
 from jaxterrain import difficulty
@@ -34,10 +35,12 @@ from jaxterrain.report import render as R
 from jaxterrain.runtime.io import atomic_write_bytes, atomic_write_csv
 from jaxterrain.suite.evaluation import THRESHOLD, highest_level_passed, level_fitness
 from jaxterrain.suite.outputs import short_names
+from jaxterrain.suite.runs import parse_picks, video_picks
 from jaxterrain.terrain import TerrainScale
+from jaxterrain.walker import resolve_backend
 
 __all__ = ["default_picks", "parse_picks", "terrain_index", "record_pairs", "pair_frames", "pair_gif", "outcome",
-           "pair_frame_count", "write_videos", "VIDEO_COLUMNS", "PANEL_GAP", "LABEL_HEIGHT"]
+           "pair_frame_count", "write_videos", "evaluation_videos", "VIDEO_COLUMNS", "PANEL_GAP", "LABEL_HEIGHT"]
 
 PANEL_GAP = 4
 """Pixels of white between two panels."""
@@ -70,20 +73,6 @@ def default_picks(fitness, family, level, threshold: float = THRESHOLD) -> list[
         failed = [k for k in levels if k > top and means[k] < threshold]
         if failed:
             out.append((name, failed[0]))
-    return out
-
-
-def parse_picks(text: str) -> list[tuple[str, int]]:
-    """``"FAMILY:LEVEL,FAMILY:LEVEL,..."`` as ``[(family, level)]`` (a family may hold a colon itself:
-    ``gen:perlin:3``); ValueError saying the format for an empty item, a missing colon or a level that is not an
-    integer >= 0."""
-    out = []
-    for item in str(text).split(","):
-        name, sep, lv = item.strip().rpartition(":")
-        if not sep or not name or not lv.strip().isdigit():
-            raise ValueError(f"terrains must be FAMILY:LEVEL[,FAMILY:LEVEL...] with LEVEL an integer >= 0 (e.g. "
-                             f"slope_up:5,gen:perlin:3); got {item.strip()!r} in {text!r}")
-        out.append((name, int(lv)))
     return out
 
 
@@ -278,3 +267,25 @@ def write_videos(folder, names: Sequence[str], policies: Sequence, s, fitness, k
             progress(f"video {rel}: {n} frames, {len(gif) / 1024:.0f} KiB in {time.perf_counter() - t1:.0f} s")
     atomic_write_csv(folder / "videos.csv", VIDEO_COLUMNS, out)
     return out
+
+
+def evaluation_videos(ready, folder, names: Sequence[str], s, fitness, say: Callable[[str], None] = print,
+                      note: Callable[[str], None] = print):
+    """The videos of an ``evaluate`` run (``jaxterrain.suite.runs.evaluate_run``'s ``videos`` hook): each walker
+    beside the base policy's first key on ``ready.run.videos``' terrains (:func:`write_videos` into
+    ``folder/videos``); ``ready``: the run validated (``suite.runs.Prepared``). ``say`` receives the count made,
+    ``note`` the progress lines and why none were made (no OpenGL here). Returns what :func:`write_videos` returns."""
+    run = ready.run
+    v = run.videos
+    own = [0] + list(range(int(run.base.keys), len(names)))  # one row per policy: the base policy's first key
+    backend = resolve_backend(run.physics.backend) if run.physics.engine == "mjx" else "jax"
+    t0 = time.perf_counter()
+    made = write_videos(Path(folder) / "videos", [names[i] for i in own], ready.policies, s,
+                        np.asarray(fitness)[own], jax.random.fold_in(jax.random.key(int(run.seed)), 5),
+                        picks=video_picks(run), frames=int(v.frames), width=int(v.width), height=int(v.height),
+                        starts=int(v.starts), backend=backend, progress=lambda line: note(f"evaluate: {line}"))
+    if isinstance(made, str):
+        note(f"evaluate: videos skipped: {made}")
+    else:
+        say(f"{len(made)} videos in {time.perf_counter() - t0:.0f} s -> {Path(folder) / 'videos'}")
+    return made

@@ -11,6 +11,6 @@
   intervals, probability of improvement) and rank correlations.
 """
 
-from jaxterrain.runtime import driver, io, provenance, sharding, statistics, validation, xla
+from jaxterrain.runtime import driver, io, provenance, schema, sharding, statistics, validation, xla
 
-__all__ = ["driver", "io", "provenance", "sharding", "statistics", "validation", "xla"]
+__all__ = ["driver", "io", "provenance", "schema", "sharding", "statistics", "validation", "xla"]

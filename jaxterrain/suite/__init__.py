@@ -36,6 +36,9 @@ from jaxterrain.suite.heldout import (GENERATORS, LEVELS, ROBOTS, SEED, Suite, V
 from jaxterrain.suite.passing import highest_passed, levels_passed, levels_passed_gain
 from jaxterrain.suite.outputs import (Evaluation, level_table, read_fitness, plot_levels, plot_suite, short_names,
                                      write_evaluation)
+from jaxterrain.suite import run_config, runs  # the evaluate run
+from jaxterrain.suite.run_config import EvaluateRun
+from jaxterrain.suite.runs import EvaluationResult, evaluate_run, validate_evaluate
 
 __all__ = [
     "batch",
@@ -86,4 +89,10 @@ __all__ = [
     "highest_passed",
     "levels_passed",
     "levels_passed_gain",
+    "run_config",
+    "runs",
+    "EvaluateRun",
+    "EvaluationResult",
+    "evaluate_run",
+    "validate_evaluate",
 ]

@@ -103,7 +103,7 @@ CASES = [
     (["evolve", "--generator", "nope"], "--generator: unknown generator 'nope'; choose from"),
     (["evolve", "--time-limit", "-1"], "--time-limit must be a finite number > 0"),
     (["evolve", "--attempts", "2", "--best", "3"], "--best must be <= --attempts (2); got 3"),
-    (["evolve", "--best", "30"], "--best must be <= preset 'smoke': 'attempts' (2); got 30"),
+    (["evolve", "--best", "30"], "--best must be <= --attempts (2); got 30"),  # a preset's value: its flag
     (["evolve", "--out", "FILE/sub"], "--out 'FILE/sub' lies under FILE, which is a file"),
     (["evolve", "--resume", "OTHER"], "--resume 'OTHER' is a run of 'features', not of 'evolve'"),
     (["evolve", "--resume", "FILE"], "--resume 'FILE' is a file"),
@@ -148,7 +148,7 @@ CASES = [
     (["evolve", "--generator", "diamond_square", "--size", "100"],
      "--size 100 does not suit generator 'diamond_square' (--generator): size must be a power of two >= 2 (..., 64, "
      "128, 256"),
-    (["coverage", "--size", "100"], "--size 100 does not suit generator 'diamond_square' (preset 'smoke': 'generators'): size must be"),
+    (["coverage", "--size", "100"], "--size 100 does not suit generator 'diamond_square' (--generators): size must be"),
     (["gradient", "--band-width", "-1", "A.npz"], "--band-width must be a finite number > 0; got -1.0"),
     (["gradient", "RANDOM.npz"], "archive RANDOM.npz: cannot read it: 'RANDOM.npz': not an .npz archive file"),
     (["gradient", "NPY.npz"], "archive NPY.npz: cannot read it: 'NPY.npz': one .npy array, not an .npz archive"),
@@ -348,19 +348,28 @@ def test_recipes_shape_the_update_and_num_envs_overrides_theirs(capsys):
     assert (ppo.num_envs, ppo.unroll_length, ppo.num_unrolls) == (4000, 10, 1)
 
 
-def test_evaluate_raises_a_presets_size_to_one_the_robot_fits(capsys):
-    """The smoke preset's 64-pixel suite is too small for the ant (1.0 + 1.3 m of margins at 4 cm a pixel): the
-    size becomes the next multiple of 32 that fits, said on stderr and recorded; the humanoid keeps 64."""
-    import argparse
-
-    from experiments import evaluate
+def test_evaluate_raises_a_presets_size_to_one_the_robot_fits(tmp_path, capsys):
+    """A 64-pixel suite is too small for the ant (1.0 + 1.3 m of margins at 4 cm a pixel): a size the user did not
+    give (a preset's, a saved config's) becomes the next multiple of 32 that fits, said on stderr (naming the flag)
+    and recorded in the run's config; the humanoid keeps 64; a size the user gave is refused instead."""
     from jaxterrain import difficulty
+    from jaxterrain.runtime import schema
+    from jaxterrain.suite import run_config, runs
 
+    run = schema.replace(run_config.PRESETS["smoke"], {"terrains.size": 64})
     for robot, size in (("ant", 96), ("humanoid", 64)):
-        args, cfg0 = argparse.Namespace(size=None, preset="smoke"), {"size": 64, "archive": None}
-        evaluate.fit_size(args, cfg0, [difficulty.robot_base_policy(robot)])
-        assert cfg0["size"] == size and args.size == (size if robot == "ant" else None), robot
-    assert "--size 96 (the smoke preset's 64 pixels are too small for robot ant)" in capsys.readouterr().err
+        fitted, side = runs.fit_size(run, [difficulty.robot_base_policy(robot)], raise_size=True, note=print)
+        assert fitted.terrains.size == side == size, robot
+    with pytest.raises(ValueError, match="EvaluateRun.terrains.size must be >= 77 pixels for robot ant"):
+        runs.fit_size(run, [difficulty.robot_base_policy("ant")])
+    saved = tmp_path / "config.json"
+    saved.write_text(json.dumps(run_config.to_flat(run)))
+    capsys.readouterr()
+    with pytest.raises(SystemExit):
+        cli.main(["evaluate", "--config", str(saved), "--robot", "ant", "--print-config"])
+    out, err = capsys.readouterr()
+    assert json.loads(out)["size"] == 96
+    assert "evaluate: --size 96 (the smoke preset's 64 pixels are too small for robot ant)" in err
 
 
 def test_a_library_field_is_printed_as_its_flag():

@@ -23,7 +23,7 @@ def test_the_randomise_flag_lists_the_presets():
 
 
 def test_policy_files_record_the_randomisation_only_when_on():
-    from experiments.train_base_policy import _to_jsonable
+    from jaxterrain.difficulty.base_policy import walker_json as _to_jsonable
     from jaxterrain.rl.onnx import walker_config_of
 
     r = parse_randomisation(ALL)
@@ -34,12 +34,15 @@ def test_policy_files_record_the_randomisation_only_when_on():
 
 
 def test_evaluate_builds_v2_with_the_levels_of_its_robot_and_v1_without_one():
-    from experiments.evaluate import terrains
+    from jaxterrain.runtime import schema
+    from jaxterrain.suite.run_config import EvaluateRun
+    from jaxterrain.suite.runs import terrains_of
 
-    cfg = dict(archive=None, suite="v2", robot="ant", size=128, seeds=1, samples=1, families=["boxes"],
-               generators=[])
-    s = terrains(cfg)
+    run = schema.replace(EvaluateRun(), {"terrains.suite": "v2", "base.robot": "ant", "terrains.size": 128,
+                                         "terrains.seeds": 1, "terrains.samples": 1, "terrains.families": ("boxes",),
+                                         "terrains.generators": ()})
+    s = terrains_of(run)
     assert s.robot == "ant" and s.value.tolist() == list(suite.V2_LEVELS["ant"]["boxes"])
-    assert terrains({**cfg, "robot": None}).robot == "humanoid"
-    v1 = terrains({**cfg, "suite": "v1"})  # one geometry: the robot does not choose it
+    assert terrains_of(schema.replace(run, {"base.robot": None})).robot == "humanoid"
+    v1 = terrains_of(schema.replace(run, {"terrains.suite": "v1"}))  # one geometry: the robot does not choose it
     assert v1.robot is None and np.allclose(v1.value, suite.FAMILIES["boxes"].values())

@@ -164,13 +164,20 @@ def test_features_time_limit_stops_between_batches_and_resumes_to_the_same_value
 
 
 @pytest.mark.slow
-def test_coverage_smoke_skips_unavailable(tmp_path):
+def test_coverage_smoke_skips_unavailable(tmp_path, monkeypatch):
+    """A registered generator that cannot render here (the GAN without its weights, faked) is skipped: said in the
+    tables and left out of the combined archive; an unknown name is refused before anything runs."""
+    from jaxterrain.qd import table1
+
+    real = table1.generator_available
+    monkeypatch.setattr(table1, "generator_available",
+                        lambda name, size: (False, "OSError: no weights") if name == "gan" else real(name, size))
     out = tmp_path / "c"
-    assert cli("coverage", "--preset", "smoke", "--generators", "perlin", "no_such_generator", "--out", str(out)) == 0
+    assert cli("coverage", "--preset", "smoke", "--generators", "perlin", "gan", "--out", str(out)) == 0
     md = (out / "coverage.md").read_text()
-    assert "Perlin Noise" in md and "Combined" in md and "no_such_generator" in md and "Skipped" in md
+    assert "Perlin Noise" in md and "Combined" in md and "gan (OSError: no weights)" in md and "Skipped" in md
     csv_rows = (out / "coverage.csv").read_text().splitlines()
-    assert any(row.startswith("no_such_generator,,skipped") for row in csv_rows)
+    assert any(row.startswith("gan,,skipped") for row in csv_rows)
     assert (out / "coverage.png").exists() and (out / "archives.png").exists()
 
 
@@ -179,17 +186,19 @@ def test_coverage_shards_partition_the_treatments_and_resume_writes_the_tables(t
     archive and writes the same tables. The treatment itself is faked (a hand-made archive derived from its key)."""
     import jax
 
-    from experiments import evolve as evolve_cmd
     from jaxterrain import qd as A
+    from jaxterrain.qd import runs, table1
 
     calls = []
 
-    def fake_treatment(cfg, generator, descriptors, folder, clock, key, label="", mesh=None):
+    def fake_treatment(run, folder, time_limit_s=None, mesh=None, key=None, label="", figures=True, deadline=None,
+                       say=print):
         done = folder / "archive.npz"
         if done.exists():
             return A.load(done)
         calls.append((folder.name, tuple(np.asarray(jax.random.key_data(key)).ravel())))
-        config = A.resolve_config(evolve_cmd.evolve_config({**cfg, "descriptors": list(descriptors)}))
+        config = A.resolve_config(runs.evolve_config(run))
+        generator = run.generator
         rng = np.random.default_rng(calls[-1][1])
         fit = np.where(rng.random(config.bins**2) < 0.3, rng.random(config.bins**2), -np.inf).astype(np.float32)
         filled = np.isfinite(fit)
@@ -198,7 +207,7 @@ def test_coverage_shards_partition_the_treatments_and_resume_writes_the_tables(t
                          {"rejected": np.float32([1.0, 2.0])})
         return A.load(A.save(done, arch))
 
-    monkeypatch.setattr(evolve_cmd, "run_treatment", fake_treatment)
+    monkeypatch.setattr(table1, "evolve_run", fake_treatment)
     base = ["coverage", "--preset", "smoke", "--generators", "perlin", "diamond_square"]
     assert cli(*base, "--out", str(tmp_path / "whole")) == 0
     whole = dict(calls)
@@ -227,30 +236,6 @@ def test_help_lists_commands():
         assert name in res.stdout
 
 
-def test_train_base_policy_solver_option():
-    from experiments import train_base_policy as tbp
-    from jaxterrain.walker import SOLVER_SOUND, SolverOptions
-
-    smoke = {**tbp.PRESETS["smoke"], "preset": "smoke"}
-    settings = tbp.resolve_settings({**smoke, "solver": "2,8,0"})
-    assert settings.env_config.solver == SolverOptions("newton", 2, 8, False)
-    assert tbp.resolve_settings(smoke).env_config.solver == SOLVER_SOUND
-    with pytest.raises(SystemExit, match="--solver"):
-        tbp.resolve_settings({**smoke, "solver": "4,16"})
-
-
-def test_train_base_policy_presets_schedule():
-    """The presets' env steps are whole updates: smoke 4, gpu 410 (41 chunks of 10); num_envs scales an update."""
-    from experiments import train_base_policy as tbp
-
-    for name, updates, chunk, budget in (("smoke", 4, 2, None), ("gpu", 410, 10, None)):  # --time-limit bounds it
-        s = tbp.resolve_settings({**tbp.PRESETS[name], "preset": name})
-        assert s.env_steps == updates * s.ppo_config.steps_per_update and s.num_updates == updates
-        assert (s.updates_per_chunk, s.time_budget) == (chunk, budget)
-    s = tbp.resolve_settings({**tbp.PRESETS["smoke"], "preset": "smoke", "num_envs": 16})
-    assert s.ppo_config.num_envs == 16 and s.num_updates == 2  # 160 env steps of 16 x 5 per update
-
-
 def test_protocol_flag_sets_attempts_best_and_headings_together():
     """``--protocol headings`` = 80 walks, best 5 per heading, 4 headings (difficulty.HEADINGS); single-field flags
     win; evolve and coverage write them into the config (coverage has --protocol only)."""
@@ -268,8 +253,11 @@ def test_protocol_flag_sets_attempts_best_and_headings_together():
     assert "headings" not in {k for k, v in parsed(evolve, []).items() if v is not None}
     assert parsed(coverage, ["--protocol", "paper"])["headings"] == 1
     given = {k: v for k, v in over.items() if v is not None}
-    assert evolve.evolve_config({**evolve.PRESETS["gpu"], **given}).headings == 4
-    assert evolve.evolve_config({k: v for k, v in evolve.PRESETS["gpu"].items() if k != "headings"}).headings == 1
+    from jaxterrain.qd import run_config, runs
+
+    assert runs.evolve_config(run_config.from_flat({**evolve.PRESETS["gpu"], **given})).headings == 4
+    old = {k: v for k, v in evolve.PRESETS["gpu"].items() if k != "headings"}  # a config.json before headings
+    assert runs.evolve_config(run_config.from_flat(old)).headings == 1
     with pytest.raises(common.UsageError, match="'attempts' must be a multiple of --headings"):
         common.check_values({"attempts": 2, "best": 1, "headings": 4},
                             where=lambda k: f"'{k}'" if k == "attempts" else common.flag(k))

@@ -16,16 +16,20 @@ EXPECTED = {  # block -> the line it prints
     1: "3 3 ['batch_stats', 'params']",             # train-gan: 3 steps
     2: "[68, 27, 1] -0.85",                         # gradient: issue 13's shares of the sound Perlin archive
     3: "(4,) 16",                                   # features: 2 genomes + 2 mutants; 4 x 4 correlations
+    4: "('worley',) (100,) [('combined', 'tri-tpi'), ('perlin', 'tri-tpi'), ('worley', 'tri-tpi')]",  # 10 x 10 cells
+    5: "False 4 ['base'] (1, 24)",                  # 4 smoke updates; the base policy on 24 smoke terrains
 }
 
 
 def test_the_page_has_one_block_per_driver():
     assert len(BLOCKS) == len(EXPECTED)
     assert "result.run(" in BLOCKS[0] and "train_gan(" in BLOCKS[1] and "gradient.gradient(" in BLOCKS[2]
-    assert "feature_alignment(" in BLOCKS[3]
+    assert "feature_alignment(" in BLOCKS[3] and "evolve_run(" in BLOCKS[4] and "coverage_run(" in BLOCKS[4]
+    assert "train_base_policy(" in BLOCKS[5] and "evaluate_run(" in BLOCKS[5]
 
 
-@pytest.mark.parametrize("block", [pytest.param(0, marks=pytest.mark.slow), 1, 2, 3])  # 0: 377 s on 2 CPU cores (2026-11-29)
+@pytest.mark.parametrize("block", [pytest.param(0, marks=pytest.mark.slow), 1, 2, 3, pytest.param(4, marks=pytest.mark.slow),
+                                   pytest.param(5, marks=pytest.mark.slow)])  # 0: 377 s on 2 CPU cores (2026-11-29)
 def test_a_block_runs_as_written(block, tmp_path, monkeypatch, capsys):
     (tmp_path / "docs").symlink_to(ROOT / "docs")
     monkeypatch.chdir(tmp_path)

@@ -18,7 +18,7 @@ COMMANDS = ["evolve", "coverage", "learn", "curriculum", "gradient", "features",
 
 
 class Resolved(Exception):
-    """Raised by the spied ``setup_run`` with its ``(folder, config)``: the command stops before any work."""
+    """Raised by the spied ``common.prepare_run`` with its ``(folder, config)``: the command stops before any work."""
 
 
 def _usage_error(argv, capsys) -> str:
@@ -45,12 +45,13 @@ def test_out_with_resume_means_the_same_in_every_command(tmp_path, monkeypatch, 
     Path("other").mkdir()
     common.write_config(Path("other"), {"command": "report", "seed": 0})
     Path("empty").mkdir()
-    real = common.setup_run
+    real = common.prepare_run  # every command's settings are resolved there (setup_run, setup_typed)
 
-    def spy(*args, **kwargs):
-        raise Resolved(real(*args, **kwargs))
+    def spy(command, args, presets, default_preset, overrides, extendable, settle, preset_by_flag):
+        unchecked = lambda config, where, resumed, changed: config  # noqa: E731  (the folder, not the values)
+        raise Resolved(real(command, args, presets, default_preset, overrides, extendable, unchecked, preset_by_flag))
 
-    monkeypatch.setattr(common, "setup_run", spy)
+    monkeypatch.setattr(common, "prepare_run", spy)
 
     def resolved(*argv):
         with pytest.raises(Resolved) as stop:
@@ -108,12 +109,12 @@ def test_one_table_of_fitness_names(tmp_path, monkeypatch, capsys):
     in a saved config is one line naming its key before the run folder."""
     import jax
 
-    from experiments import evolve
     from jaxterrain import difficulty
+    from jaxterrain.qd import run_config, runs
 
-    assert list(difficulty.FITNESSES) == ["difficulty", "slope"]
-    assert evolve.fitness_fn("difficulty") is None  # archive.evolve builds the walker fitness from its config
-    assert evolve.fitness_fn("slope") is difficulty.slope_fitness is difficulty.named_fitness("slope", 2, 1, 32)
+    assert list(difficulty.FITNESSES) == ["difficulty", "slope"] == list(run_config._FITNESSES)  # evolve's literal
+    assert runs.fitness_of("difficulty") is None  # qd.evolve builds the walker fitness from its config
+    assert runs.fitness_of("slope") is difficulty.slope_fitness is difficulty.named_fitness("slope", 2, 1, 32)
     assert difficulty.named_fitness("difficulty", 2, 1, 64, slots=8) is difficulty.fitness_fn(
         64, difficulty.Protocol(2, 1), slots=8)  # the library's factory, same (cached) function
     maps = np.linspace(0, 0.2, 2 * 8 * 8, dtype=np.float32).reshape(2, 8, 8)
@@ -124,5 +125,5 @@ def test_one_table_of_fitness_names(tmp_path, monkeypatch, capsys):
     monkeypatch.chdir(tmp_path)
     Path("bad.json").write_text(json.dumps({"fitness": "walk"}))
     err = _usage_error(["evolve", "--config", "bad.json", "--out", "run"], capsys)
-    assert "bad.json: key 'fitness': unknown fitness 'walk'; choose from difficulty, slope" in err
+    assert "bad.json: key 'fitness' must be one of difficulty, slope; got 'walk'" in err
     assert not Path("run").exists()

@@ -160,6 +160,7 @@ def test_train_base_policy_resume_bit_identical(tmp_path):
     import argparse
 
     from experiments import train_base_policy as tbp
+    from jaxterrain.difficulty import base_policy
     from jaxterrain.runtime import driver
 
     parser = argparse.ArgumentParser()
@@ -168,24 +169,25 @@ def test_train_base_policy_resume_bit_identical(tmp_path):
     assert tbp.main(parser.parse_args(common + ["--out", str(tmp_path / "a")])) == 0
     assert tbp.main(parser.parse_args(common + ["--out", str(tmp_path / "b"), "--time-limit", "1e-6"])) == 3
     cfg_b = json.loads((tmp_path / "b" / "config.json").read_text())
-    info_b = json.loads((tmp_path / "b" / tbp.RUN_INFO).read_text())
+    info_b = json.loads((tmp_path / "b" / base_policy.RUN_INFO).read_text())
     assert cfg_b["command"] == "train-base-policy" and info_b["num_updates"] == 4
     # --resume FOLDER alone continues the run with its saved settings (preset, seed, steps), as in evolve
     assert tbp.main(parser.parse_args(["--resume", str(tmp_path / "b"), "--skip-eval", "--no-progress"])) == 0
     for name in ("policy.msgpack", "config.json"):
         assert (tmp_path / "a" / "policy" / name).read_bytes() == (tmp_path / "b" / "policy" / name).read_bytes()
-    like = _like_base_policy(tbp)
+    like = _like_base_policy()
     (sa, da, ha, _), (sb, db, hb, meta) = (driver.restore(tmp_path / r, like=like) for r in ("a", "b"))
     assert da == db == 4 and tree_equal(sa, sb) and ha == hb
     assert meta["command"] == "train-base-policy" and meta["train_devices"]
-    assert json.loads((tmp_path / "b" / tbp.RUN_INFO).read_text())["resumed_with"]
+    assert json.loads((tmp_path / "b" / base_policy.RUN_INFO).read_text())["resumed_with"]
 
 
-def _like_base_policy(tbp):
+def _like_base_policy():
     """A fresh smoke-preset PPO state (the structure of a train-base-policy checkpoint)."""
+    from jaxterrain.difficulty import base_policy
     from jaxterrain.walker import WalkerEnv
 
-    env_cfg, ppo_cfg = tbp.configs()["smoke"]
+    env_cfg, ppo_cfg = base_policy.shapes("smoke")
     env = WalkerEnv(env_cfg)
     return jax.jit(lambda k, t: rl.init(k, env, ppo_cfg, t))(
         jax.random.PRNGKey(0), jnp.zeros(tuple(env_cfg.terrain_shape), jnp.float32))
@@ -246,11 +248,15 @@ def test_evolve_refuses_a_robot_without_a_base_policy(tmp_path, monkeypatch, cap
 def test_evaluate_and_train_base_policy_take_the_observation_set():
     """``evaluate --observation perceptive`` walks the perceptive base policy beside; ``train-base-policy
     --observation perceptive --scan-noise`` trains on the scan grid of the robot. Host only: nothing compiles."""
-    from experiments import evaluate, train_base_policy
+    from jaxterrain.difficulty import base_policy, run_config
+    from jaxterrain.runtime import schema
+    from jaxterrain.suite import runs
+    from jaxterrain.suite.run_config import BaseWalker, EvaluateRun
 
-    assert evaluate.load_policies([], None, "perceptive")[0].path == rl.base_policy_dir("humanoid", "perceptive")
-    settings = train_base_policy.resolve_settings({**train_base_policy.PRESETS["smoke"], "preset": "smoke",
-                                                   "observation": "perceptive", "scan_noise": 0.02})
+    perceptive = EvaluateRun(base=BaseWalker(observation="perceptive"))
+    assert runs.load_policies(perceptive)[0].path == rl.base_policy_dir("humanoid", "perceptive")
+    settings = base_policy.validate_base_run(schema.replace(run_config.PRESETS["smoke"], {
+        "walker.observation": "perceptive", "walker.scan_noise": 0.02}))
     assert settings.env_config.observation == "perceptive" and settings.env_config.scan_points == (17, 9)
     assert settings.env_config.scan_noise == pytest.approx(0.02)
 
