@@ -466,7 +466,7 @@ def check_resume(command: str, resume: Any, flags: str | None = None) -> None:
         raise UsageError(f"{flags} is a run of {other!r}, not of {command!r}")
 
 
-def check_args(command: str, args: argparse.Namespace, typed: "Typed | None" = None) -> None:
+def check_args(command: str, args: argparse.Namespace, typed: Typed | None = None) -> None:
     """Check a parsed command line before the command runs (``python -m experiments`` calls this): numbers by
     option name (sizes, counts >= 1, ...), fitness and generator names, ``--out`` (not a file), ``--resume`` (with
     ``--out``: one run folder of this command, :func:`resume_folder`), ``--config`` and ``--data`` (exist). Raises
@@ -636,8 +636,8 @@ def setup_run(command: str, args: argparse.Namespace, presets: dict[str, dict], 
 
 
 def prepare_run(command: str, args: argparse.Namespace, presets: dict[str, dict], default_preset: str,
-           overrides: dict[str, Any], extendable: tuple[str, ...], settle: Callable[..., dict],
-           preset_by_flag: bool) -> tuple[Path, dict]:
+                overrides: dict[str, Any], extendable: tuple[str, ...], settle: Callable[..., dict],
+                preset_by_flag: bool) -> tuple[Path, dict]:
     """The one resolution of a run's settings (:func:`setup_run`, :func:`setup_typed`): the preset's, a saved
     ``--config``'s or, with ``--resume``, the run's own; the flags given (on a resumed run only those of
     ``extendable``; the others are ignored with a note); ``settle(config, where, resumed, changed)`` checks them and
