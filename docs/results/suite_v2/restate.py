@@ -127,7 +127,7 @@ def treatment_folders(spec: dict, root: Path, heldout: str) -> dict[str, Path]:
 
 def level0_passes(folder: Path) -> dict[str, int]:
     """``{family: walkers passing level 0}`` of an evaluation's ``levels.csv`` (base rows left out)."""
-    from experiments.evaluate import is_base
+    from jaxterrain.suite.runs import is_base
 
     out: dict[str, int] = {}
     for r in read_csv(folder / "levels.csv"):
@@ -139,7 +139,7 @@ def level0_passes(folder: Path) -> dict[str, int]:
 def robustness(folder: Path, base: bool = False) -> dict[str, float]:
     """``{generator: mean CVaR at 10 % over the walkers (or, with ``base``, over the base policy's rows)}`` of an
     evaluation's ``robustness.csv``; {} without one (v1's evaluations)."""
-    from experiments.evaluate import is_base
+    from jaxterrain.suite.runs import is_base
 
     path = folder / "robustness.csv"
     if not path.is_file():
