@@ -5,41 +5,24 @@ after the first walk nothing is traced or compiled again (issue 60 item 4, issue
 
 from __future__ import annotations
 
-import importlib.util
-import shutil
-from pathlib import Path
 
 import numpy as np
 import pytest
 
 from jaxterrain import suite
-
-ROOT = Path(__file__).resolve().parents[2]
-SCRIPT = ROOT / "docs" / "results" / "suite_v2" / "reevaluate.py"
-RESULTS = ROOT / "docs" / "results"
-TINY = ["--size", "96", "--seeds", "1", "--families", "flat", "boxes", "--generators", "--attempts", "2", "--best",
-        "1", "--headings", "1", "--backend", "jax", "--slots", "0", "--keys", "2"]
+from reevaluate_v2 import ROOT, SCRIPT, args, load_script, make_experiment
 
 
 @pytest.fixture
 def script():
-    spec = importlib.util.spec_from_file_location("suite_v2_reevaluate", SCRIPT)
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
+    return load_script()
 
 
 @pytest.fixture
 def exp(tmp_path, monkeypatch):
     """``tmp_path/exp``: treatments ``a`` (a paper-recipe walker) and ``b`` (a wide-recipe walker); cwd tmp_path."""
-    for name, src in (("a", "exp3_gpushort/cppn-map/policies/trial_0"), ("b", "wide_gpushort/perlin-map/policies/trial_3")):
-        shutil.copytree(RESULTS / src, tmp_path / "exp" / name / "policies" / "trial_0")
     monkeypatch.chdir(tmp_path)
-    return tmp_path
-
-
-def args(*extra):
-    return ["exp", "--work", "work", "--base-out", "base", *TINY, *extra]
+    return make_experiment(tmp_path)
 
 
 @pytest.mark.slow

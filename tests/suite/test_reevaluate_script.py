@@ -6,12 +6,9 @@ tests/integration/test_reevaluate_v2.py."""
 
 from __future__ import annotations
 
-import importlib.util
 import json
-import shutil
 import tarfile
 import time
-from pathlib import Path
 
 import jax
 import numpy as np
@@ -19,33 +16,19 @@ import pytest
 
 from jaxterrain import suite
 from jaxterrain.suite import batch
-
-ROOT = Path(__file__).resolve().parents[2]
-SCRIPT = ROOT / "docs" / "results" / "suite_v2" / "reevaluate.py"
-RESULTS = ROOT / "docs" / "results"
-TINY = ["--size", "96", "--seeds", "1", "--families", "flat", "boxes", "--generators", "--attempts", "2", "--best",
-        "1", "--headings", "1", "--backend", "jax", "--slots", "0", "--keys", "2"]
+from reevaluate_v2 import RESULTS, ROOT, args, load_script, make_experiment
 
 
 @pytest.fixture(scope="module")
 def script():
-    spec = importlib.util.spec_from_file_location("suite_v2_reevaluate", SCRIPT)
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
+    return load_script()
 
 
 @pytest.fixture
 def exp(tmp_path, monkeypatch):
     """``tmp_path/exp``: treatments ``a`` (a paper-recipe walker) and ``b`` (a wide-recipe walker); cwd tmp_path."""
-    for name, src in (("a", "exp3_gpushort/cppn-map/policies/trial_0"), ("b", "wide_gpushort/perlin-map/policies/trial_3")):
-        shutil.copytree(RESULTS / src, tmp_path / "exp" / name / "policies" / "trial_0")
     monkeypatch.chdir(tmp_path)
-    return tmp_path
-
-
-def args(*extra):
-    return ["exp", "--work", "work", "--base-out", "base", *TINY, *extra]
+    return make_experiment(tmp_path)
 
 
 def test_bad_flags_are_one_line_naming_them(script, exp, capsys):
