@@ -60,3 +60,30 @@ def test_the_summary_reads_the_stages_outputs(run, tmp_path):
     assert out["legged-gym"]["suite"]["mean"] == 0.5 and out["legged-gym"]["suite_randomised"]["mean"] == 0.25
     assert out["legged-gym"]["sim2sim_gap"] == 0.03 and "sim2sim_gap" not in out["nominal"]
     assert "| legged-gym | 0.950 / 0.800 | 0.500 | 0.250 | 0.030 | 120,000 |" in (tmp_path / "summary.md").read_text()
+    assert out["legged-gym"]["suite_vs_base"] == [-0.5, -0.5, -0.5]  # one terrain: the interval is its value
+    assert out["legged-gym"]["protocol_loss_vs_base"] == [-0.25, -0.25, -0.25]  # (0.25 - 0.5) - (1 - 1)
+
+
+def test_terrain_intervals_resample_within_families_and_read_gzipped_results(run, tmp_path):
+    """The page's intervals: terrains resampled within their family (a family's share of the mean is fixed), and
+    the sim2sim gap |C - MJX| per terrain from a gzipped ``fitness.csv.gz`` (how the results ship)."""
+    import gzip
+
+    mean, lo, hi = run.terrain_interval({("a", 0): 0.0, ("a", 1): 1.0, ("b", 0): 10.0})
+    assert mean == pytest.approx(11 / 3) and 10 / 3 <= lo < mean < hi <= 12 / 3
+    (tmp_path / "sim2sim").mkdir()
+    with gzip.open(tmp_path / "sim2sim" / "fitness.csv.gz", "wt", newline="") as f:
+        w = csv.writer(f)
+        w.writerow(["group", "policy", "robot", "family", "level", "terrain", "engine", "fitness", "mean_steps"])
+        for policy, gaps in (("nominal", (0.1, 0.3)), ("full", (0.0, 0.1))):
+            for terrain, gap in enumerate(gaps):
+                w.writerow([f"humanoid {policy}", policy, "humanoid", "perlin", terrain, terrain, "mjx", 0.5, 100])
+                w.writerow([f"humanoid {policy}", policy, "humanoid", "perlin", terrain, terrain, "mujoco",
+                            0.5 - gap, 100])
+    result = {"arms": {"nominal": {"policy": str(BASE_POLICY_DIR)}, "full": {"policy": str(tmp_path / "full" /
+                                                                                            "policy")}}}
+    run._intervals(tmp_path, result)
+    assert result["arms"]["nominal"]["sim2sim_gap_ci"][0] == pytest.approx(0.2)
+    assert result["arms"]["full"]["sim2sim_gap_ci"][0] == pytest.approx(0.05)
+    diff = result["arms"]["full"]["sim2sim_vs_nominal"]
+    assert diff[0] == pytest.approx(-0.15) and diff[1] <= -0.15 <= diff[2] and diff[2] < 0

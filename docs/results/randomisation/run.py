@@ -198,10 +198,79 @@ def warp_check(args) -> int:
 
 
 def _rows(path: Path) -> list[dict]:
+    """A CSV's rows; ``PATH.gz`` where only the gzipped file is there (the shipped results)."""
+    import gzip
+
     if not path.is_file():
-        return []
+        if not path.with_name(path.name + ".gz").is_file():
+            return []
+        with gzip.open(path.with_name(path.name + ".gz"), "rt", newline="") as f:
+            return list(csv.DictReader(f))
     with open(path, newline="") as f:
         return list(csv.DictReader(f))
+
+
+def terrain_interval(diff: dict, reps: int = 10_000, seed: int = 0) -> tuple[float, float, float]:
+    """Mean of ``diff`` ({(family, terrain): value}) and its 95 % percentile bootstrap over terrains, resampled within
+    each family (the families' sizes kept). The interval is terrain sampling for ONE walker per arm: it says nothing
+    about another training seed of the same arm."""
+    import numpy as np
+
+    rng = np.random.default_rng(seed)
+    fams = sorted({f for f, _ in diff})
+    groups = [np.array([v for (f, _), v in diff.items() if f == fam]) for fam in fams]
+    n = sum(len(g) for g in groups)
+    boots = sum(g[rng.integers(0, len(g), (reps, len(g)))].sum(axis=1) for g in groups) / n
+    lo, hi = np.percentile(boots, [2.5, 97.5])
+    return float(np.mean(np.concatenate(groups))), float(lo), float(hi)
+
+
+def _intervals(out: Path, result: dict) -> None:
+    """Per arm: the suite mean's difference from the base policy on the same terrains (``suite_vs_base``, nominal
+    and randomised protocol) and the sim2sim gap |C - MJX| with its difference from the nominal arm's
+    (``sim2sim_gap_ci``, ``sim2sim_vs_nominal``), each ``[mean, lo, hi]`` from :func:`terrain_interval`."""
+    per = {}  # (protocol, arm) -> {(family, terrain): fitness}
+    for name in ("suite", "suite_randomised"):
+        rows = _rows(out / name / "fitness.csv")
+        fit = {(x["policy"], x["family"], x["level"], x["seed"]): float(x["fitness"]) for x in rows}
+        base = {k[1:]: v for k, v in fit.items() if k[0] == "base"}
+        for arm, r in result["arms"].items():
+            own = {k[1:]: v for k, v in fit.items() if _is_arm(k[0], arm, Path(r["policy"]), out)}
+            per[name, arm] = own
+            if own and set(own) == set(base) and not _is_arm("base", arm, Path(r["policy"]), out):
+                r[f"{name}_vs_base"] = terrain_interval({(k[0], k[1:]): own[k] - base[k] for k in own})
+    nominal = ("suite", "nominal"), ("suite_randomised", "nominal")
+    for arm, r in result["arms"].items():  # the randomised protocol's loss, the arm's less the base policy's
+        mine = ("suite", arm), ("suite_randomised", arm)
+        if arm != "nominal" and all(per.get(k) for k in mine + nominal) \
+                and len({frozenset(per[k]) for k in mine + nominal}) == 1:
+            r["protocol_loss_vs_base"] = terrain_interval({
+                (k[0], k[1:]): (per[mine[1]][k] - per[mine[0]][k]) - (per[nominal[1]][k] - per[nominal[0]][k])
+                for k in per[mine[0]]})
+    rows = _rows(out / "sim2sim" / "fitness.csv")
+    gap: dict = {}
+    for x in rows:
+        gap.setdefault(x["policy"], {}).setdefault((x["family"], (x["level"], x["terrain"])), {})[x["engine"]] = \
+            float(x["fitness"])
+    gaps = {arm: {k: abs(v["mujoco"] - v["mjx"]) for k, v in g.items() if {"mujoco", "mjx"} <= set(v)}
+            for arm, g in gap.items()}
+    for arm, r in result["arms"].items():
+        if gaps.get(arm):
+            r["sim2sim_gap_ci"] = terrain_interval(gaps[arm])
+            if arm != "nominal" and gaps.get("nominal") and set(gaps[arm]) == set(gaps["nominal"]):
+                r["sim2sim_vs_nominal"] = terrain_interval({k: gaps[arm][k] - gaps["nominal"][k] for k in gaps[arm]})
+
+
+def _is_arm(policy: str, arm: str, pol: Path, out: Path) -> bool:
+    """Is ``policy`` (a fitness.csv row's) this arm's? The shipped base policy is row ``base``; a trained arm's rows
+    name its policy folder as the run gave it (``runs/dr/full/policy``), so the folder's last two parts decide."""
+    if arm == "nominal" and pol != out / arm / "policy":
+        return policy == "base"
+    return Path(policy).parts[-2:] == (arm, "policy")
+
+
+def _ci(v) -> str:
+    return f"{v[0]:+.3f} [{v[1]:+.3f}, {v[2]:+.3f}]" if v else "-"
 
 
 def summary(args) -> int:
@@ -221,13 +290,13 @@ def summary(args) -> int:
             e = json.loads(ev.read_text())
             r["flat_best"], r["flat_all"] = e["best_mean"], e["all_mean"]
         log = out / f"{arm}.log"  # train-base-policy's chunk lines: "update N/M  R env steps/s ..."
+        log = log if log.is_file() else out / arm / "train.log"  # where the shipped results keep it
         rates = [float(v.replace(",", "")) for v in re.findall(r"update +\d+/\d+ +([\d,]+) env steps/s",
                                                                log.read_text())] if log.is_file() else []
         if len(rates) > 1:
             r["env_steps_per_s"] = float(np.median(rates[1:]))  # the first chunk compiles
         for name in ("suite", "suite_randomised"):
-            rows = [x for x in _rows(out / name / "fitness.csv") if x["policy"] == (
-                "base" if arm == "nominal" and pol != out / arm / "policy" else str(pol))]
+            rows = [x for x in _rows(out / name / "fitness.csv") if _is_arm(x["policy"], arm, pol, out)]
             if rows:
                 fams = sorted({x["family"] for x in rows})
                 r[name] = {f: float(np.mean([float(x["fitness"]) for x in rows if x["family"] == f])) for f in fams}
@@ -241,6 +310,7 @@ def summary(args) -> int:
             gap = pairs.get(f"humanoid {arm}|all")
             if gap is not None:
                 r["sim2sim_gap"] = gap["mean_abs"]
+    _intervals(out, result)
     md = ["# Physics randomisation: held-out cost and sim2sim gap", "",
           f"Written {time.strftime('%Y-%m-%d %H:%M')} from {out}.", "",
           "| arm | flat best-5 / all-20 | suite mean (nominal) | suite mean (legged-gym physics) | sim2sim gap "
@@ -253,6 +323,17 @@ def summary(args) -> int:
         rate = f"{r['env_steps_per_s']:,.0f}" if "env_steps_per_s" in r else "-"
         gap = f"{r['sim2sim_gap']:.3f}" if "sim2sim_gap" in r else "-"
         md.append(f"| {arm} | {flat} | {nom} | {ran} | {gap} | {rate} |")
+    md += ["", "Differences on the same terrains, mean [95 % bootstrap over terrains within families; one walker per "
+           "arm, so the interval is terrain sampling, not training seed]:", "",
+           "| arm | suite - base (nominal) | suite - base (legged-gym physics) | its change under legged-gym physics, "
+           "less the base's | sim2sim gap | gap - nominal's gap |",
+           "|---|---|---|---|---|---|"]
+    for arm, r in result["arms"].items():
+        gap = r.get("sim2sim_gap_ci")
+        md.append(f"| {arm} | {_ci(r.get('suite_vs_base'))} | {_ci(r.get('suite_randomised_vs_base'))} | "
+                  f"{_ci(r.get('protocol_loss_vs_base'))} | "
+                  f"{f'{gap[0]:.3f} [{gap[1]:.3f}, {gap[2]:.3f}]' if gap else '-'} | "
+                  f"{_ci(r.get('sim2sim_vs_nominal'))} |")
     if s2s.is_file():
         md += ["", "Sim2sim (MuJoCo C vs MJX-JAX): `sim2sim/summary.md`."]
     atomic_write_text(out / "summary.json", json.dumps(result, indent=2) + "\n")
