@@ -1,10 +1,13 @@
-"""Test-process set-up: a persistent XLA compilation cache for this process (one per pytest-xdist worker).
+"""Test-process set-up: a persistent XLA compilation cache shared by the pytest process and its xdist workers.
 
 Many tests run a command twice in one process (a run, then its resume), and each run builds its jitted functions
 anew, so the in-memory jit cache misses where the program is the same; the on-disk cache turns those repeat
-compilations (the MJX ones take 30-70 s on a CPU) into reads. It is set here, at import, before any test module
-compiles anything, in a fresh temporary folder removed at exit, and only where ``JAX_COMPILATION_CACHE_DIR`` is not
-set already. The programs, and so the results, are the same with or without it.
+compilations (the MJX ones take 30-70 s on a CPU) into reads. Test files on different xdist workers compile many of
+the same programs (the smoke ``learn`` blocks, the suite walk), so the folder is one for the whole session: the
+pytest process makes it at import and hands it to the workers it starts through ``JAXTERRAIN_TEST_XLA_CACHE``, and JAX
+locks its files (with ``filelock``; without it each process keeps its own folder). It is set here, at import, before
+any test module compiles anything, in a fresh temporary folder removed at exit, and only where
+``JAX_COMPILATION_CACHE_DIR`` is not set already. The programs, and so the results, are the same with or without it.
 
 XLA's CPU compiles are the larger part of the suite's time, so the test processes also compile with the classic
 elemental emitter instead of XLA's fusion emitters (``--xla_cpu_use_fusion_emitters=false``, appended to
@@ -25,10 +28,24 @@ import jax
 
 from jaxterrain.runtime import xla
 
+SHARED = "JAXTERRAIN_TEST_XLA_CACHE"
+"""The folder the pytest process made, handed to its xdist workers through the environment."""
+
+try:
+    import filelock  # noqa: F401  (JAX's cache locks its files with it once a size limit is set)
+except ImportError:
+    filelock = None
+
 if not os.environ.get("JAX_COMPILATION_CACHE_DIR"):
-    _cache = tempfile.mkdtemp(prefix="jaxterrain-test-xla-cache-")
-    atexit.register(shutil.rmtree, _cache, ignore_errors=True)
+    _cache = os.environ.get(SHARED)
+    if _cache is None:  # the pytest process itself (the xdist controller, or the only process)
+        _cache = tempfile.mkdtemp(prefix="jaxterrain-test-xla-cache-")
+        atexit.register(shutil.rmtree, _cache, ignore_errors=True)
+        if filelock is not None:  # the xdist workers, started after this import, inherit it and share the folder
+            os.environ[SHARED] = _cache
     jax.config.update("jax_compilation_cache_dir", _cache)  # JAX's defaults: programs that took >= 1 s to compile
+    if filelock is not None:  # a (never reached) size limit turns on JAX's file lock: two workers read and write
+        jax.config.update("jax_compilation_cache_max_size", 1 << 40)  # one folder without a torn entry
 
 FUSION_FLAG = "--xla_cpu_use_fusion_emitters=false"
 if "xla_cpu_use_fusion_emitters" not in os.environ.get("XLA_FLAGS", "") \

@@ -155,7 +155,8 @@ def test_learn_smoke_end_to_end(learn_smoke):
     assert cli("learn", "--resume", str(out)) == 0  # a finished run reports its summary again
 
 
-@pytest.mark.parametrize("curriculum", ["levels", pytest.param("dr", marks=pytest.mark.slow),
+@pytest.mark.parametrize("curriculum", [pytest.param("levels", marks=pytest.mark.slow),  # default: learn_terrains
+                                        pytest.param("dr", marks=pytest.mark.slow),
                                         pytest.param("plr", marks=pytest.mark.slow),
                                         pytest.param("accel", marks=pytest.mark.slow)])
 def test_learn_runs_the_per_env_curricula_end_to_end(tmp_path, tiny_archive, curriculum):

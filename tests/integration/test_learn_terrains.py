@@ -1,7 +1,9 @@
 """``learn --terrains DIR`` and ``evaluate --terrains DIR``: your own heightmaps in one line (issue 62, item 5).
 
 The levels run shares its compiled block with ``test_curriculum.py``'s ``levels`` smoke run (the same selector,
-protocol and a bank of 4 terrains of 256 x 256: the bank's values are data), so in one process it costs its chunks."""
+protocol and a bank of 4 terrains of 256 x 256: the bank's values are data), so in one process it costs its chunks.
+It is also the default suite's end-to-end test of ``learn --curriculum levels`` (``test_learn_command.py``'s
+``levels`` case is slow: the same compile a second time)."""
 
 import json
 import shutil
@@ -50,6 +52,8 @@ def test_learn_trains_on_a_folder_of_heightmaps_stops_and_resumes(tmp_path, caps
     summary = json.loads((out / "summary.json").read_text())
     assert summary["epochs"] == [4, 4] and summary["bank_terrains"] == 4
     assert all(0 <= h <= 3 for h in summary["hardest"])  # the hardest traversed: a rank in file-name order
+    assert all(0 <= v <= 1 for v in summary["max_level"]) and all(m >= 0 for m in summary["level_moves"])
+    assert summary["ended_without_terrains"] == [False, False]  # the levels curriculum end to end (its CLI test)
     seq = (out / "sequences.csv").read_text().splitlines()
     assert all(r.split(",")[-1] in {"a_ramp.npy", "b_grey8.png", "c_grey16.png", "d_dem.tif"} for r in seq[1:])
     evals = [float(r.split(",")[9]) for r in (out / "history.csv").read_text().splitlines()[1:]]
