@@ -18,7 +18,7 @@ same start pose, so what differs between the panels is the policy. :func:`pair_f
 :func:`jaxterrain.report.render.render_walk` at the same env steps (a walk that ended early holds its last state)
 and puts them side by side under a label bar (the policy, how its walk went, the time); :func:`pair_gif` encodes
 that as a GIF (Pillow), :func:`pair_mp4` as an MP4 (H.264 through ``imageio-ffmpeg``, the optional extra
-``pip install 'jaxterrain[video]'``: :func:`jaxterrain.report.render.mp4_bytes`). :func:`write_videos` does all of
+``pip install 'jaxterrain[video]'``: :func:`jaxterrain.report.encode.mp4_bytes`). :func:`write_videos` does all of
 it for an evaluation (``python -m experiments evaluate --videos --video-format gif|mp4|both``).
 """
 
@@ -184,7 +184,7 @@ def pair_gif(walks: Sequence[R.Walk], labels: Sequence[str], width: int = 320, h
 
 def pair_mp4(walks: Sequence[R.Walk], labels: Sequence[str], width: int = 320, height: int = 240,
              frames: int = 75, fps: float = 15.0) -> bytes:
-    """:func:`pair_gif`'s video as an MP4 (:func:`jaxterrain.report.render.mp4_bytes`: H.264, an odd side padded to
+    """:func:`pair_gif`'s video as an MP4 (:func:`jaxterrain.report.encode.mp4_bytes`: H.264, an odd side padded to
     even): the same frames at the same ``fps``. ``ImportError`` naming ``pip install 'jaxterrain[video]'`` without
     imageio-ffmpeg (checked before anything is drawn)."""
     R.mp4_encoder()
@@ -303,7 +303,7 @@ def write_videos(folder, names: Sequence[str], policies: Sequence, s, fitness, k
                         " ".join(f"{x.distance:.3f}" for x in walks[w][row]),
                         " ".join(f"{x.distance:.3f}" for x in walks[0][row]), n, f"{fps:g}",
                         f"{stem}.mp4" if "mp4" in kinds else ""])
-            progress(f"video {stem}: {n} frames drawn in {time.perf_counter() - t1:.1f} s in all; {', '.join(said)}")
+            progress(f"video {stem}: {n} frames, {', '.join(said)}; {time.perf_counter() - t1:.1f} s in all")
     atomic_write_csv(folder / "videos.csv", VIDEO_COLUMNS, out)
     return out
 

@@ -269,7 +269,7 @@ def video_picks(run: EvaluateRun) -> Optional[list]:
 def check_video_format(run: EvaluateRun) -> None:
     """``videos.format`` (checked against ``VIDEO_FORMATS`` by ``RULES``) applies: ``mp4`` / ``both`` only with
     ``videos.on`` (else it would be ignored), and only where ``imageio-ffmpeg`` (the optional extra
-    ``jaxterrain[video]``, the MP4 writer of ``report.render.mp4_bytes``) imports and finds its ffmpeg binary.
+    ``jaxterrain[video]``, the MP4 writer of ``report.encode.mp4_bytes``) imports and finds its ffmpeg binary.
     ``ValueError`` naming the field, in one line; starts no process."""
     v, o = run.videos, _OWNER
     if v.format == "gif":
