@@ -7,9 +7,11 @@
 :func:`gif_bytes` is lossless against its palette of 255 colours; :func:`mp4_bytes` writes H.264 (yuv420p, x264 CRF
 25) through ``imageio-ffmpeg``, which ships its own static ffmpeg binary (the optional extra ``jaxterrain[video]``;
 no system ffmpeg needed), and :func:`mp4_encoder` says in one line when that extra is missing, before anything is
-drawn. Both give the same bytes for the same frames. One video of ``evaluate --videos``' default size (75 frames of
-644 x 274 pixels, two walkers side by side) on a 2-core CPU: MEASURED_FIGURES (``benchmarks/video_formats.py``,
-``docs/suite.md``). :mod:`jaxterrain.report.render` re-exports these names.
+drawn. Both give the same bytes for the same frames. One video at ``evaluate --videos``' default size (two 320 x 240
+panels under the label bar: 644 x 274 pixels, 15 frames a second; 47 frames of a 3.0-s walk of two walkers) on 2
+CPU cores shared with other work (2026-11-29, commit 2ed53e7, median of 5; ``benchmarks/video_formats.py``,
+``docs/suite.md``): GIF 984 KiB written in 0.33 s, MP4 81 KiB in 0.96 s (12.1 times smaller; the ffmpeg process
+start included). :mod:`jaxterrain.report.render` re-exports these names.
 """
 
 from __future__ import annotations

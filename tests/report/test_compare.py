@@ -139,14 +139,18 @@ def _bar_frames(n=5, h=35, w=47):
 
 def _read_mp4(data: bytes, tmp_path) -> tuple[dict, np.ndarray]:
     """``(imageio_ffmpeg's metadata, frames [F, h, w, 3] uint8)`` of an MP4's bytes, decoded by ffmpeg."""
+    import warnings
+
     import imageio_ffmpeg
 
     path = tmp_path / "back.mp4"
     path.write_bytes(data)
-    reader = imageio_ffmpeg.read_frames(str(path))
-    meta = next(reader)
-    w, h = meta["size"]
-    return meta, np.stack([np.frombuffer(b, np.uint8).reshape(h, w, 3) for b in reader])
+    with warnings.catch_warnings():  # JAX's warning of os.fork(): ffmpeg's child process execs at once
+        warnings.filterwarnings("ignore", message=r"os\.fork\(\) was called", category=RuntimeWarning)
+        reader = imageio_ffmpeg.read_frames(str(path))
+        meta = next(reader)
+        w, h = meta["size"]
+        return meta, np.stack([np.frombuffer(b, np.uint8).reshape(h, w, 3) for b in reader])
 
 
 def test_mp4_bytes_is_h264_with_every_frame_and_odd_sides_padded_to_even(tmp_path):
