@@ -1,7 +1,7 @@
 """GIF against MP4 for the same video of two walkers: file size and seconds to encode, at ``evaluate --videos``'
 default size (two 320 x 240 panels under the label bar: 644 x 274 pixels, at most 75 frames at 15 a second).
 
-    python benchmarks/video_formats.py --out runs/bench-video          # CPU is enough; needs OpenGL and jaxterrain[video]
+    python benchmarks/video_formats.py --out runs/bench-video      # a CPU will do; needs OpenGL and jaxterrain[video]
 
 The walk pair: the shipped blind humanoid base policy beside the shipped perceptive one, walked once along +x on one
 Perlin terrain (``--size`` pixels, seed ``--seed``, its heights times ``--relief``: at 1 both walkers fall within
@@ -40,7 +40,8 @@ def _frames(args, out: Path) -> tuple[np.ndarray, dict]:
         with np.load(saved) as z:
             was = json.loads(str(z["recorded"]))
             if was["walk"] != walk:
-                raise SystemExit(f"video_formats: {saved} holds frames of {was['walk']}, not {walk}: give another --out")
+                raise SystemExit(f"video_formats: {saved} holds frames of {was['walk']}, not {walk}: give another "
+                                 "--out")
             return z["frames"], {**was, "reused": str(saved)}
     import jax
 

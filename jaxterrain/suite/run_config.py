@@ -31,8 +31,8 @@ from typing import NamedTuple, Optional
 from jaxterrain.runtime.schema import at_least, at_most, from_flat as _from_flat, int_in, one_of, positive
 from jaxterrain.runtime.schema import replace, to_flat as _to_flat, walks
 
-__all__ = ["BaseWalker", "Terrains", "Walks", "Physics", "Videos", "VIDEO_FORMATS", "EvaluateRun", "FIELDS", "LEGACY", "RULES",
-           "PRESETS", "FLAT_PRESETS", "CONSUMERS", "from_flat", "to_flat"]
+__all__ = ["BaseWalker", "Terrains", "Walks", "Physics", "Videos", "VIDEO_FORMATS", "EvaluateRun", "FIELDS", "LEGACY",
+           "RULES", "PRESETS", "FLAT_PRESETS", "CONSUMERS", "from_flat", "to_flat"]
 
 
 class BaseWalker(NamedTuple):
