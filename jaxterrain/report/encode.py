@@ -47,14 +47,19 @@ def gif_bytes(frames: np.ndarray, fps: float = 15.0, loop: int = 0, optimize: bo
 
 def mp4_encoder():
     """The ``imageio_ffmpeg`` module (the optional extra ``jaxterrain[video]``), its ffmpeg binary found;
-    ``ImportError`` with :data:`MP4_EXTRA` (one line, and why) where it does not import or has no binary. Cheap
-    (no ffmpeg process): call it when the arguments are checked, before anything walks."""
+    ``ImportError`` with :data:`MP4_EXTRA` (one line, and why) where it does not import or has no binary. Cheap:
+    imageio-ffmpeg runs ``ffmpeg -version`` once per process to find the binary (0.09 s on a 2-core CPU,
+    2026-11-29); call it when the arguments are checked, before anything walks."""
+    import warnings
+
     try:
         import imageio_ffmpeg
     except ImportError:
         raise ImportError(MP4_EXTRA) from None
     try:
-        imageio_ffmpeg.get_ffmpeg_exe()
+        with warnings.catch_warnings():  # JAX's warning of os.fork(): the child process execs ffmpeg at once
+            warnings.filterwarnings("ignore", message=r"os\.fork\(\) was called", category=RuntimeWarning)
+            imageio_ffmpeg.get_ffmpeg_exe()
     except RuntimeError as err:  # installed without a binary, and none on IMAGEIO_FFMPEG_EXE / PATH
         raise ImportError(f"{MP4_EXTRA} (imageio-ffmpeg found no ffmpeg binary: {str(err).splitlines()[0]})") from None
     return imageio_ffmpeg

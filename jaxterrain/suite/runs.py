@@ -17,6 +17,7 @@ from __future__ import annotations
 import json
 import os
 import time
+import warnings
 from pathlib import Path
 from typing import Callable, NamedTuple, Optional
 
@@ -270,7 +271,7 @@ def check_video_format(run: EvaluateRun) -> None:
     """``videos.format`` (checked against ``VIDEO_FORMATS`` by ``RULES``) applies: ``mp4`` / ``both`` only with
     ``videos.on`` (else it would be ignored), and only where ``imageio-ffmpeg`` (the optional extra
     ``jaxterrain[video]``, the MP4 writer of ``report.encode.mp4_bytes``) imports and finds its ffmpeg binary.
-    ``ValueError`` naming the field, in one line; starts no process."""
+    ``ValueError`` naming the field, in one line (imageio-ffmpeg runs ``ffmpeg -version`` once to find it)."""
     v, o = run.videos, _OWNER
     if v.format == "gif":
         return
@@ -280,7 +281,9 @@ def check_video_format(run: EvaluateRun) -> None:
     try:
         import imageio_ffmpeg
 
-        imageio_ffmpeg.get_ffmpeg_exe()
+        with warnings.catch_warnings():  # JAX's warning of os.fork(): the child process execs ffmpeg at once
+            warnings.filterwarnings("ignore", message=r"os\.fork\(\) was called", category=RuntimeWarning)
+            imageio_ffmpeg.get_ffmpeg_exe()
     except (ImportError, RuntimeError) as err:
         why = "is not installed" if isinstance(err, ImportError) else "finds no ffmpeg binary"
         raise ValueError(f"{o}.videos.format {v.format} writes MP4 with imageio-ffmpeg, which {why}: "
