@@ -10,6 +10,8 @@ One module per stage:
 - :mod:`~jaxterrain.report.archives`: an archive's filled cells with thumbnails, and its easy / medium / hard elites;
 - :mod:`~jaxterrain.report.render`: MJX rollouts recorded, replayed by MuJoCo's offscreen renderer into GIFs
   (``MUJOCO_GL``: osmesa on a CPU machine, egl on a GPU one; :func:`~jaxterrain.report.render.setup_gl`);
+- :mod:`~jaxterrain.report.encode`: frames to the bytes of a GIF (Pillow) or an MP4 (H.264, the optional extra
+  ``pip install 'jaxterrain[video]'``);
 - :mod:`~jaxterrain.report.compare`: a walker beside the base policy on video, two panels in step (``evaluate
   --videos``);
 - :mod:`~jaxterrain.report.page`: the HTML page and the Markdown twin, with

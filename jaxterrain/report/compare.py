@@ -8,6 +8,7 @@ side, in step.
     rows = [compare.terrain_index(s.family, s.level, s.seed, fam, lv) for fam, lv in picks]
     walks = compare.record_pairs([walker, base], s.heightmaps[rows], jax.random.key(0), rows)
     gif = compare.pair_gif([walks[0][0], walks[1][0]], ["trial_0", "base"])          # bytes of an animated GIF
+    mp4 = compare.pair_mp4([walks[0][0], walks[1][0]], ["trial_0", "base"])          # an MP4 (jaxterrain[video])
     compare.write_videos("run/videos", names, policies, s, fitness, key)   # what `evaluate --videos` writes
 
 :func:`record_pairs` walks every policy on every terrain with :func:`jaxterrain.report.render.record_walks` (MJX,
@@ -16,8 +17,9 @@ from the reset pose) and gives the policies on one terrain the same reset key (`
 same start pose, so what differs between the panels is the policy. :func:`pair_frames` draws the walks with
 :func:`jaxterrain.report.render.render_walk` at the same env steps (a walk that ended early holds its last state)
 and puts them side by side under a label bar (the policy, how its walk went, the time); :func:`pair_gif` encodes
-that as a GIF (Pillow). GIF only: no MP4 writer (imageio / ffmpeg / PyAV) is a dependency of the package.
-:func:`write_videos` does all of it for an evaluation (``python -m experiments evaluate --videos``).
+that as a GIF (Pillow), :func:`pair_mp4` as an MP4 (H.264 through ``imageio-ffmpeg``, the optional extra
+``pip install 'jaxterrain[video]'``: :func:`jaxterrain.report.encode.mp4_bytes`). :func:`write_videos` does all of
+it for an evaluation (``python -m experiments evaluate --videos --video-format gif|mp4|both``).
 """
 
 from __future__ import annotations
@@ -39,13 +41,17 @@ from jaxterrain.suite.runs import parse_picks, video_picks
 from jaxterrain.terrain import TerrainScale
 from jaxterrain.walker import resolve_backend
 
-__all__ = ["default_picks", "parse_picks", "terrain_index", "record_pairs", "pair_frames", "pair_gif", "outcome",
-           "pair_frame_count", "write_videos", "evaluation_videos", "VIDEO_COLUMNS", "PANEL_GAP", "LABEL_HEIGHT"]
+__all__ = ["default_picks", "parse_picks", "terrain_index", "record_pairs", "pair_frames", "pair_gif", "pair_mp4",
+           "outcome", "pair_frame_count", "video_files", "write_videos", "evaluation_videos", "VIDEO_COLUMNS",
+           "VIDEO_FORMATS", "PANEL_GAP", "LABEL_HEIGHT"]
 
 PANEL_GAP = 4
 """Pixels of white between two panels."""
 LABEL_HEIGHT = 34
 """Pixels of the label bar above the panels (two lines of text)."""
+VIDEO_FORMATS = {"gif": ("gif",), "mp4": ("mp4",), "both": ("gif", "mp4")}
+"""``format`` of :func:`write_videos` (``EvaluateRun.videos.format``, ``evaluate --video-format``): the files each
+video is written as."""
 
 
 def default_picks(fitness, family, level, threshold: float = THRESHOLD) -> list[tuple[str, int]]:
@@ -176,6 +182,27 @@ def pair_gif(walks: Sequence[R.Walk], labels: Sequence[str], width: int = 320, h
     return R.gif_bytes(pair_frames(walks, labels, width, height, pair_frame_count(walks, frames, fps)), fps=fps)
 
 
+def pair_mp4(walks: Sequence[R.Walk], labels: Sequence[str], width: int = 320, height: int = 240,
+             frames: int = 75, fps: float = 15.0) -> bytes:
+    """:func:`pair_gif`'s video as an MP4 (:func:`jaxterrain.report.encode.mp4_bytes`: H.264, an odd side padded to
+    even): the same frames at the same ``fps``. ``ImportError`` naming ``pip install 'jaxterrain[video]'`` without
+    imageio-ffmpeg (checked before anything is drawn)."""
+    R.mp4_encoder()
+    return R.mp4_bytes(pair_frames(walks, labels, width, height, pair_frame_count(walks, frames, fps)), fps=fps)
+
+
+def video_files(format: str) -> tuple[str, ...]:
+    """The files a video is written as for ``format`` (a key of :data:`VIDEO_FORMATS`): ``("gif",)``, ``("mp4",)``
+    or ``("gif", "mp4")``; ``ValueError`` naming the allowed values; ``ImportError`` naming ``pip install
+    'jaxterrain[video]'`` for an MP4 without imageio-ffmpeg."""
+    if format not in VIDEO_FORMATS:
+        raise ValueError(f"format must be one of {', '.join(VIDEO_FORMATS)}; got {format!r}")
+    kinds = VIDEO_FORMATS[format]
+    if "mp4" in kinds:
+        R.mp4_encoder()
+    return kinds
+
+
 def pair_frame_count(walks: Sequence[R.Walk], frames: int = 75, fps: float = 15.0) -> int:
     """Frames :func:`pair_gif` draws: ``min(frames, 1 + ceil(seconds of the longer walk x fps))``."""
     seconds = max(w.length for w in walks) * walks[0].dt
@@ -189,17 +216,20 @@ def _slug(text: str) -> str:
 
 VIDEO_COLUMNS = ["walker", "policy", "family", "level", "seed", "value", "unit", "file", "walker_level_fitness",
                  "base_level_fitness", "walker_walk", "base_walk", "start", "starts", "walker_distances",
-                 "base_distances", "frames", "fps"]
-"""The columns of ``videos.csv`` (:func:`write_videos`)."""
+                 "base_distances", "frames", "fps", "mp4"]
+"""The columns of ``videos.csv`` (:func:`write_videos`): ``file`` is the video (its GIF, or its MP4 where no GIF was
+written), ``mp4`` its MP4 ("" where none was written; a column that runs before MP4 videos lack)."""
 
 
 def write_videos(folder, names: Sequence[str], policies: Sequence, s, fitness, key,
                  picks: Optional[Sequence[tuple[str, int]]] = None, frames: int = 75, width: int = 320,
                  height: int = 240, fps: float = 15.0, starts: int = 8, steps: int = 1000, backend: str = "jax",
-                 labels: Optional[Sequence[str]] = None, progress: Callable[[str], None] = lambda line: None):
+                 labels: Optional[Sequence[str]] = None, progress: Callable[[str], None] = lambda line: None,
+                 format: str = "gif"):
     """Videos of an evaluation: each walker (``policies[1:]``) beside the base policy (``policies[0]``; alone when
     there is no walker) on each of its terrains, written atomically to ``folder/<walker>/<family>_L<level>.gif``
-    with ``folder/videos.csv`` (:data:`VIDEO_COLUMNS`: the level's mean fitness of both from ``fitness`` and how
+    (``format`` ``gif``), ``.mp4`` (``mp4``: H.264, :func:`pair_mp4`) or both (``both``; the same frames) with
+    ``folder/videos.csv`` (:data:`VIDEO_COLUMNS`: the level's mean fitness of both from ``fitness`` and how
     each video's walks went).
 
     ``names`` [P] / ``policies`` [P] / ``fitness`` [P, N]: the evaluation's (``names[0]`` the base policy's);
@@ -211,14 +241,17 @@ def write_videos(folder, names: Sequence[str], policies: Sequence, s, fitness, k
     the key ``fold_in(key, r * starts + k)`` for every policy) for up to ``steps`` env steps on ``backend``'s
     physics; the video shows the start from which the walker went farthest (the first of equals), the base policy
     from that same start beside it (as the fitness takes the best walks of each heading: the protocol's best 5 of
-    20), drawn by :func:`pair_gif`. ``videos.csv`` gives the start shown and every start's distance for both.
+    20), drawn by :func:`pair_frames` and encoded by :func:`pair_gif` / :func:`pair_mp4`. ``videos.csv`` gives the
+    start shown and every start's distance for both, and the files (:data:`VIDEO_COLUMNS`).
 
     Returns the ``videos.csv`` rows, or a string saying why nothing was made (no OpenGL backend for MuJoCo's
-    renderer: :func:`jaxterrain.report.render.gl_status`); never raises for a GL failure.
+    renderer: :func:`jaxterrain.report.render.gl_status`); never raises for a GL failure. A bad ``format`` or an
+    MP4 without imageio-ffmpeg raises (:func:`video_files`) before anything walks.
     """
     folder = Path(folder)
     if not isinstance(starts, int) or starts < 1:
         raise ValueError(f"starts must be an integer >= 1; got {starts!r}")
+    kinds = video_files(format)
     ok, why = R.gl_status()
     if not ok:
         return why
@@ -255,16 +288,22 @@ def write_videos(folder, names: Sequence[str], policies: Sequence, s, fitness, k
             k = int(np.argmax([x.distance for x in walks[w][row]]))
             pair = [walks[w][row][k]] + ([walks[0][row][k]] if w != 0 else [])
             tags = [labels[w]] + (["base policy"] if w != 0 else [])
-            gif = pair_gif(pair, tags, width=width, height=height, frames=frames, fps=fps)
-            rel = f"{_slug(labels[w])}/{_slug(fam)}_L{lv}.gif"
-            atomic_write_bytes(folder / rel, gif)
             n = pair_frame_count(pair, frames, fps)
+            clip = pair_frames(pair, tags, width, height, n)
+            stem, said = f"{_slug(labels[w])}/{_slug(fam)}_L{lv}", []
+            for kind in kinds:
+                t2 = time.perf_counter()
+                data = R.gif_bytes(clip, fps=fps) if kind == "gif" else R.mp4_bytes(clip, fps=fps)
+                atomic_write_bytes(folder / f"{stem}.{kind}", data)
+                said.append(f"{kind.upper()} {len(data) / 1024:.0f} KiB in {time.perf_counter() - t2:.1f} s")
+            rel = f"{stem}.{kinds[0]}"
             out.append([labels[w], names[w], fam, lv, int(s.seed[row]), f"{float(s.value[row]):.4g}",
                         s.unit.get(fam, "-"), rel, f"{per_level[w][fam][lv]:.4f}", f"{per_level[0][fam][lv]:.4f}",
                         outcome(pair[0]), outcome(walks[0][row][k]), k, starts,
                         " ".join(f"{x.distance:.3f}" for x in walks[w][row]),
-                        " ".join(f"{x.distance:.3f}" for x in walks[0][row]), n, f"{fps:g}"])
-            progress(f"video {rel}: {n} frames, {len(gif) / 1024:.0f} KiB in {time.perf_counter() - t1:.0f} s")
+                        " ".join(f"{x.distance:.3f}" for x in walks[0][row]), n, f"{fps:g}",
+                        f"{stem}.mp4" if "mp4" in kinds else ""])
+            progress(f"video {stem}: {n} frames, {', '.join(said)}; {time.perf_counter() - t1:.1f} s in all")
     atomic_write_csv(folder / "videos.csv", VIDEO_COLUMNS, out)
     return out
 
@@ -283,7 +322,8 @@ def evaluation_videos(ready, folder, names: Sequence[str], s, fitness, say: Call
     made = write_videos(Path(folder) / "videos", [names[i] for i in own], ready.policies, s,
                         np.asarray(fitness)[own], jax.random.fold_in(jax.random.key(int(run.seed)), 5),
                         picks=video_picks(run), frames=int(v.frames), width=int(v.width), height=int(v.height),
-                        starts=int(v.starts), backend=backend, progress=lambda line: note(f"evaluate: {line}"))
+                        starts=int(v.starts), backend=backend, progress=lambda line: note(f"evaluate: {line}"),
+                        format=str(v.format))
     if isinstance(made, str):
         note(f"evaluate: videos skipped: {made}")
     else:

@@ -9,8 +9,8 @@ tables, Markdown rendered), every figure, each archive as a fitness heatmap whos
 thumbnail, fitness and descriptors on hover (click pins a cell; a switch shows all thumbnails in the grid), and
 videos of the policy walking the easiest, the median and the hardest terrain of the archive
 (:mod:`jaxterrain.report.render`), an evaluation's videos of walkers beside the base policy (``videos/videos.csv``
-and its GIFs, :func:`jaxterrain.report.compare.write_videos`) with their terrain and fitness, then small text files
-verbatim and the remaining files by name and size.
+and its GIFs or MP4s, :func:`jaxterrain.report.compare.write_videos`) with their terrain and fitness, then small text
+files verbatim and the remaining files by name and size.
 Nothing on the page refers to a network address.
 
 This module builds the page section by section; :mod:`jaxterrain.report.markdown` renders the tables and Markdown,
@@ -326,9 +326,11 @@ def _tables(h: list[str], md: list[str], run) -> None:
 
 
 def _evaluation_videos(h: list[str], md: list[str], run, assets: _Assets, prefix: str) -> set:
-    """The videos of an evaluation (``evaluate --videos``: a ``videos.csv`` beside ``<walker>/<family>_L<level>.gif``,
-    :func:`jaxterrain.report.compare.write_videos`), each with its terrain and both policies' fitness; returns the
-    GIFs shown, which the figures then leave out."""
+    """The videos of an evaluation (``evaluate --videos``: a ``videos.csv`` beside ``<walker>/<family>_L<level>.gif``
+    and / or ``.mp4``, :func:`jaxterrain.report.compare.write_videos`), each with its terrain and both policies'
+    fitness: a GIF embedded as an image as ever (its MP4, with ``--video-format both``, copied to ``report_files/``
+    and linked), an MP4 alone embedded in a ``<video>`` element (a link in the Markdown twin); returns the files
+    shown, which the figures then leave out."""
     shown: set = set()
     for table in run.tables:
         if table.name != "videos.csv":
@@ -336,7 +338,7 @@ def _evaluation_videos(h: list[str], md: list[str], run, assets: _Assets, prefix
         try:
             with open(table, newline="") as fh:
                 reader = csv.DictReader(fh)
-                rows = list(reader) if set(VIDEO_COLUMNS) <= set(reader.fieldnames or []) else []
+                rows = list(reader) if set(VIDEO_COLUMNS) - {"mp4"} <= set(reader.fieldnames or []) else []
         except (OSError, csv.Error, UnicodeDecodeError):
             continue
         rows = [r for r in rows if (table.parent / r["file"]).is_file()]
@@ -352,18 +354,30 @@ def _evaluation_videos(h: list[str], md: list[str], run, assets: _Assets, prefix
                "the same start (of several tried, the one the walker went farthest from); the fitness is the "
                "level's mean under the evaluation's protocol.", ""]
         for r in rows:
-            gif = table.parent / r["file"]
-            shown.add(gif)
+            video = table.parent / r["file"]
+            mp4 = table.parent / r["mp4"] if r.get("mp4") else None
+            shown.update(p for p in (video, mp4) if p is not None)
             unit = "" if r["unit"] in ("", "-") else f" ({r['value']} {r['unit']})"
             cap = (f"{r['walker']} on {r['family']} level {r['level']}{unit}: level fitness {r['walker_level_fitness']}"
                    f" vs the base policy's {r['base_level_fitness']}; this walk: {r['walker_walk']}"
                    + (f" / {r['base_walk']}" if r["walker"] != "base" else "")
                    + f" (start {r['start']} of {r['starts']}: the walker's farthest)")
-            data = gif.read_bytes()
-            h.append(f'<figure style="max-width:none"><img alt="{escape(r["file"])}" '
-                     f'src="{data_uri(data, "image/gif")}"><figcaption>{escape(cap)}</figcaption></figure>')
+            data = video.read_bytes()
             asset = assets.add(f"{prefix}_video_{r['file']}", data)
-            md += [f"![{r['file']}]({asset})", "", f"*{cap}*", ""]
+            if video.suffix.lower() == ".mp4":  # an MP4 alone: a <video> in the page, a link in the Markdown
+                h.append(f'<figure style="max-width:none"><video controls autoplay loop muted playsinline '
+                         f'title="{escape(r["file"])}" src="{data_uri(data, "video/mp4")}"></video>'
+                         f"<figcaption>{escape(cap)}</figcaption></figure>")
+                md += [f"[{r['file']} (MP4)]({asset})", "", f"*{cap}*", ""]
+                continue
+            link = md_link = ""
+            if mp4 is not None and mp4.is_file():  # both: the GIF as ever, the MP4 beside it as a file
+                extra = assets.add(f"{prefix}_video_{r['mp4']}", mp4.read_bytes())
+                link = f' (<a href="{escape(extra)}">MP4</a>, {_size(mp4.stat().st_size)})'
+                md_link = f" ([MP4]({extra}))"
+            h.append(f'<figure style="max-width:none"><img alt="{escape(r["file"])}" '
+                     f'src="{data_uri(data, "image/gif")}"><figcaption>{escape(cap)}{link}</figcaption></figure>')
+            md += [f"![{r['file']}]({asset})", "", f"*{cap}*{md_link}", ""]
         h.append("</div>")
     return shown
 

@@ -6,6 +6,7 @@
     walks = render.record_walks(maps, jax.random.key(0), steps=400)   # maps [B, H, W] in [0, 1]
     frames = render.render_walk(walks[0], width=320, height=240, frames=60)   # [F, h, w, 3] uint8
     gif = render.gif_bytes(frames, fps=render.fps_of(walks[0], len(frames)))
+    mp4 = render.mp4_bytes(frames, fps=render.fps_of(walks[0], len(frames)))   # needs jaxterrain[video]
 
 Stage 1, :func:`record_walks`: the walker (:class:`jaxterrain.walker.WalkerEnv`, the env
 :func:`jaxterrain.difficulty.evaluate` walks, with the policy's own solver options) steps the policy (default: the
@@ -26,13 +27,15 @@ before that (``osmesa`` on a machine without an NVIDIA device, ``egl`` with one,
 when mujoco was imported earlier under another setting. OSMesa is the Debian package ``libosmesa6``
 (``apt-get install libosmesa6``); it cannot be installed with pip. Without a working backend :func:`gl_status`
 returns ``(False, reason)``, and :func:`make_videos` returns that reason instead of videos.
+
+Encoders (:mod:`jaxterrain.report.encode`, their names importable from here too): :func:`gif_bytes` (Pillow) and
+:func:`mp4_bytes` (H.264 through imageio-ffmpeg: the optional extra ``pip install 'jaxterrain[video]'``).
 """
 
 from __future__ import annotations
 
 import contextlib
 import functools
-import io
 import os
 import sys
 from typing import Any, Callable, NamedTuple, Optional
@@ -40,13 +43,15 @@ from typing import Any, Callable, NamedTuple, Optional
 import numpy as np
 
 from jaxterrain import difficulty
+from jaxterrain.report.encode import MP4_EXTRA, gif_bytes, mp4_bytes, mp4_encoder
 from jaxterrain.rl import policy_fn
 from jaxterrain.terrain import TerrainScale, validate_scale
 from jaxterrain.walker.layout import make_env, sized_env, terrain_batch
 from jaxterrain.walker.model import FLOOR_GEOM, build_spec, metres_to_hfield
 
 __all__ = ["Walk", "Video", "make_videos", "setup_gl", "gl_backend", "gl_status", "backend_available",
-           "record_walks", "render_model", "render_walk", "gif_bytes", "fps_of"]
+           "record_walks", "render_model", "render_walk", "gif_bytes", "mp4_bytes", "mp4_encoder", "MP4_EXTRA",
+           "fps_of"]
 
 _BACKENDS = ("egl", "osmesa", "glfw")
 
@@ -396,24 +401,6 @@ def render_walk(walk: Walk, width: int = 320, height: int = 240, frames: int = 6
     finally:
         renderer.close()
     return np.stack(out)
-
-
-def gif_bytes(frames: np.ndarray, fps: float = 15.0, loop: int = 0, optimize: bool = True) -> bytes:
-    """An animated GIF (Pillow) of ``frames`` [F, h, w, 3] uint8 at ``fps`` (browsers round each frame to 10 ms and
-    slow frames under 20 ms down, so fps is capped at 50). One palette of 255 colours for all frames; ``optimize``
-    lets Pillow drop unused palette entries per frame: lossless (the frames decode to the same pixels), and 37 %
-    smaller on a 67-frame 644 x 274 video of two walkers (579 KB against 924 KB; 2026-11-29, Pillow 13.0)."""
-    from PIL import Image
-
-    frames = np.asarray(frames, np.uint8)
-    duration = int(round(1000.0 / min(max(float(fps), 1.0), 50.0)))
-    images = [Image.fromarray(f) for f in frames]
-    palette = images[0].quantize(colors=255, method=Image.Quantize.MEDIANCUT)
-    images = [im.quantize(palette=palette, dither=Image.Dither.NONE) for im in images]
-    buf = io.BytesIO()
-    images[0].save(buf, format="GIF", save_all=True, append_images=images[1:], duration=duration, loop=loop,
-                   optimize=bool(optimize), disposal=1)
-    return buf.getvalue()
 
 
 # ----------------------------------------------------------------------------------------------------------------

@@ -15,7 +15,7 @@ The shape (each field consumed where ``docs/CONTRIBUTING.md`` says)::
                                 samples, families, generators: what is walked
       walks: Walks              attempts, best, headings: the protocol
       physics: Physics          engine (mjx / mujoco), backend, workers, slots, chunk, randomise
-      videos: Videos            on, terrains, frames, width, height, starts (report.compare.write_videos)
+      videos: Videos            on, terrains, frames, width, height, starts, format (report.compare.write_videos)
       repeat, seed, preset      walk the base policy twice to time the compiled call; the root key; the preset
 
 The serialised form is ``config.json``'s flat dict (:func:`to_flat` / :func:`from_flat` through :data:`FIELDS`,
@@ -31,8 +31,8 @@ from typing import NamedTuple, Optional
 from jaxterrain.runtime.schema import at_least, at_most, from_flat as _from_flat, int_in, one_of, positive
 from jaxterrain.runtime.schema import replace, to_flat as _to_flat, walks
 
-__all__ = ["BaseWalker", "Terrains", "Walks", "Physics", "Videos", "EvaluateRun", "FIELDS", "LEGACY", "RULES",
-           "PRESETS", "FLAT_PRESETS", "CONSUMERS", "from_flat", "to_flat"]
+__all__ = ["BaseWalker", "Terrains", "Walks", "Physics", "Videos", "VIDEO_FORMATS", "EvaluateRun", "FIELDS", "LEGACY",
+           "RULES", "PRESETS", "FLAT_PRESETS", "CONSUMERS", "from_flat", "to_flat"]
 
 
 class BaseWalker(NamedTuple):
@@ -85,9 +85,10 @@ class Physics(NamedTuple):
 
 
 class Videos(NamedTuple):
-    """``on``: GIFs of each walker beside the base policy after the evaluation, on ``terrains`` (``FAMILY:LEVEL,
+    """``on``: videos of each walker beside the base policy after the evaluation, on ``terrains`` (``FAMILY:LEVEL,
     ...``; None: per family the hardest level passed and the first failed), at most ``frames`` frames of ``width``
-    x ``height`` pixels, from the best of ``starts`` reset poses."""
+    x ``height`` pixels, from the best of ``starts`` reset poses, written as ``format``: ``gif`` (Pillow), ``mp4``
+    (H.264; the optional extra ``jaxterrain[video]``) or ``both``."""
 
     on: bool = False
     terrains: Optional[str] = None
@@ -95,6 +96,11 @@ class Videos(NamedTuple):
     width: int = 320
     height: int = 240
     starts: int = 8
+    format: str = "gif"
+
+
+VIDEO_FORMATS = ("gif", "mp4", "both")
+"""The values of ``Videos.format``: the files each video is written as (``both``: a GIF and an MP4)."""
 
 
 class EvaluateRun(NamedTuple):
@@ -124,7 +130,7 @@ FIELDS: dict[str, str] = {
 
 LEGACY = {"terrain_folder": None, "terrain_height": None, "robot": None, "observation": None, "keys": 1,
           "videos": False, "video_terrains": None, "video_frames": 75, "video_width": 320, "video_height": 240,
-          "video_starts": 8, "engine": "mjx", "workers": None, "randomise": None, "seed": 0}
+          "video_starts": 8, "video_format": "gif", "engine": "mjx", "workers": None, "randomise": None, "seed": 0}
 """The value a ``config.json`` key had in the runs made before it was written (what :func:`from_flat` fills in)."""
 
 RULES = {
@@ -135,7 +141,7 @@ RULES = {
     "physics.engine": one_of(("mjx", "mujoco")), "physics.backend": one_of(("auto", "jax", "warp")),
     "physics.workers": at_least(1), "physics.slots": at_least(1), "physics.chunk": at_least(1),
     "videos.frames": int_in(1, 4096), "videos.width": int_in(16, 4096), "videos.height": int_in(16, 4096),
-    "videos.starts": int_in(1, 4096), "repeat": one_of((True, False)),
+    "videos.starts": int_in(1, 4096), "videos.format": one_of(VIDEO_FORMATS), "repeat": one_of((True, False)),
 }
 """The checks of single fields (the rest, against the suite, the policies and the engine:
 ``suite.runs.validate_evaluate``)."""

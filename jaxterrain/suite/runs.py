@@ -17,6 +17,7 @@ from __future__ import annotations
 import json
 import os
 import time
+import warnings
 from pathlib import Path
 from typing import Callable, NamedTuple, Optional
 
@@ -41,7 +42,7 @@ from jaxterrain.walker import (WalkerConfig, min_terrain_side, parse_randomisati
 
 __all__ = ["MUJOCO_STEPS_PER_CORE_S", "MUJOCO_MAX_HOURS", "TerrainError", "Prepared", "EvaluationResult", "base_names",
            "is_base", "parse_picks", "load_policies", "terrains_of", "fit_size", "mujoco_workers", "check_physics",
-           "video_picks", "validate_evaluate", "evaluate_run"]
+           "video_picks", "check_video_format", "validate_evaluate", "evaluate_run"]
 
 MUJOCO_STEPS_PER_CORE_S = 1000
 """MuJoCo C humanoid env steps per second per core, measured (``docs/results/sim2sim.md``)."""
@@ -266,15 +267,40 @@ def video_picks(run: EvaluateRun) -> Optional[list]:
     return picks
 
 
+def check_video_format(run: EvaluateRun) -> None:
+    """``videos.format`` (checked against ``VIDEO_FORMATS`` by ``RULES``) applies: ``mp4`` / ``both`` only with
+    ``videos.on`` (else it would be ignored), and only where ``imageio-ffmpeg`` (the optional extra
+    ``jaxterrain[video]``, the MP4 writer of ``report.encode.mp4_bytes``) imports and finds its ffmpeg binary.
+    ``ValueError`` naming the field, in one line (imageio-ffmpeg runs ``ffmpeg -version`` once to find it)."""
+    v, o = run.videos, _OWNER
+    if v.format == "gif":
+        return
+    if not v.on:
+        raise ValueError(f"{o}.videos.format chooses the files of {o}.videos.on, which is off: give {o}.videos.on "
+                         "too")
+    try:
+        import imageio_ffmpeg
+
+        with warnings.catch_warnings():  # JAX's warning of os.fork(): the child process execs ffmpeg at once
+            warnings.filterwarnings("ignore", message=r"os\.fork\(\) was called", category=RuntimeWarning)
+            imageio_ffmpeg.get_ffmpeg_exe()
+    except (ImportError, RuntimeError) as err:
+        why = "is not installed" if isinstance(err, ImportError) else "finds no ffmpeg binary"
+        raise ValueError(f"{o}.videos.format {v.format} writes MP4 with imageio-ffmpeg, which {why}: "
+                         "pip install 'jaxterrain[video]'") from None
+
+
 def validate_evaluate(run: EvaluateRun, raise_size: bool = False,
                       note: Callable[[str], None] = print) -> Prepared:
     """Check ``run`` once, before anything compiles (module docstring): its fields (``run_config.RULES``), the
-    engine's fields (:func:`check_physics`), the robot, the policies (loaded: :func:`load_policies`; each for the
+    engine's fields (:func:`check_physics`), the video format (:func:`check_video_format`: MP4 needs the
+    extra ``jaxterrain[video]``), the robot, the policies (loaded: :func:`load_policies`; each for the
     robot of a ``v2`` suite, each fitting the walker at the run's size: ``suite.check_policies``), the terrains,
     the video picks and, for ``mujoco``, the walks' cost (at most :data:`MUJOCO_MAX_HOURS`). ``raise_size``: raise a
     size too small for the robots (:func:`fit_size`). ``ValueError`` naming ``EvaluateRun.<path>``."""
     schema.check(run, RULES, _OWNER)
     check_physics(run)
+    check_video_format(run)
     if run.base.robot is not None:
         try:
             robots.get(run.base.robot)

@@ -170,6 +170,8 @@ CASES = [
     (["evaluate", "--videos", "--video-terrains", "flat:1"], "--video-terrains: flat has levels 0 to 0; got 1"),
     (["evaluate", "--videos", "--video-frames", "0"], "--video-frames must be an integer in [1, 4096]; got 0"),
     (["evaluate", "--videos", "--video-width", "8"], "--video-width must be an integer in [16, 4096]; got 8"),
+    (["evaluate", "--video-format", "mp4"], "--video-format chooses the files of --videos, which is off: give "
+                                            "--videos too"),
     (["learn", "--robot", ""], "--robot: robot must be one of humanoid, ant, got ''"),
     (["learn", "--robot", "dog"], "--robot: robot must be one of humanoid, ant, got 'dog'"),  # before the run folder now
     (["learn", "--curriculum", "badmod:factory"], "--curriculum 'badmod:factory': cannot import it (RuntimeError: boom)"),
@@ -220,6 +222,17 @@ def test_bad_flags_name_the_flag(tmp_path, monkeypatch, capsys, argv, message):
     err = _main(argv, capsys)
     assert err.startswith(f"python -m experiments {argv[0]}: error: "), err
     assert message in err, err
+    assert not (tmp_path / "runs").exists()
+
+
+def test_evaluate_refuses_mp4_videos_without_the_video_extra(tmp_path, monkeypatch, capsys):
+    """``--video-format mp4`` where imageio-ffmpeg does not import: one line naming the extra, exit 2, no run folder,
+    before any walk."""
+    monkeypatch.chdir(tmp_path)
+    monkeypatch.setitem(sys.modules, "imageio_ffmpeg", None)  # the import raises ImportError
+    err = _main(["evaluate", "--videos", "--video-format", "mp4"], capsys)
+    assert err == ("python -m experiments evaluate: error: --video-format mp4 writes MP4 with imageio-ffmpeg, which is "
+                   "not installed: pip install 'jaxterrain[video]'")
     assert not (tmp_path / "runs").exists()
 
 

@@ -117,7 +117,9 @@ def test_videos_show_each_walker_beside_the_base_policy(tmp_path, policies, caps
     """``evaluate --videos`` on flat ground (smoke size): without an OpenGL backend one line says why and the
     evaluation is written all the same; with one, the walker without a policy (it fails flat ground: its first
     failed level) walks beside the base policy in one GIF of two panels, listed in ``videos.csv`` with the
-    evaluation's level fitness of both (a few minutes on 2 CPU cores: two compiles)."""
+    evaluation's level fitness of both (a few minutes on 2 CPU cores: two compiles); with the video extra
+    (``--video-format both``) an MP4 of the same frames beside the GIF."""
+    import importlib.util
     import io
 
     from PIL import Image
@@ -137,7 +139,8 @@ def test_videos_show_each_walker_beside_the_base_policy(tmp_path, policies, caps
     if not ok:
         pytest.skip(why)
     out = tmp_path / "run"
-    assert cli(*argv, "--out", str(out)) == 0
+    mp4 = importlib.util.find_spec("imageio_ffmpeg") is not None  # the video extra (in the test extra)
+    assert cli(*argv, *(["--video-format", "both"] if mp4 else []), "--out", str(out)) == 0
     (row,) = read(out / "videos" / "videos.csv")
     assert (row["walker"], row["family"], row["level"], row["file"]) == ("still", "flat", "0", "still/flat_L0.gif")
     levels = {r["policy"]: r for r in read(out / "levels.csv")}
@@ -146,6 +149,17 @@ def test_videos_show_each_walker_beside_the_base_policy(tmp_path, policies, caps
     assert "fell" in row["walker_walk"]  # no policy: it falls
     with Image.open(io.BytesIO((out / "videos" / row["file"]).read_bytes())) as im:
         assert im.size == (2 * 64 + compare.PANEL_GAP, compare.LABEL_HEIGHT + 48) and 2 <= im.n_frames <= 3
+        n = im.n_frames
+    if mp4:
+        import imageio_ffmpeg
+
+        assert row["mp4"] == "still/flat_L0.mp4"
+        count, _ = imageio_ffmpeg.count_frames_and_secs(str(out / "videos" / row["mp4"]))
+        reader = imageio_ffmpeg.read_frames(str(out / "videos" / row["mp4"]))
+        meta = next(reader)
+        reader.close()
+        assert count == n == int(row["frames"]) and meta["size"] == (2 * 64 + compare.PANEL_GAP,
+                                                                      compare.LABEL_HEIGHT + 48)
     assert json.loads((out / "timing.json").read_text())["videos_s"] > 0
 
 

@@ -115,8 +115,8 @@ def test_the_report_shows_an_evaluations_videos_with_their_fitness(tmp_path):
     row = ["trial_0", "/r/trial_0", "slope_up", "5", "0", "0.3", "grade", "trial_0/slope_up_L5.gif", "0.9560",
            "0.1760", "reached the far edge at 9.8 s", "0.18 of the track, fell at 2.0 s", "3", "8",
            "0.5 0.4 0.6 1.0 0.9 0.2 0.3 0.7", "0.1 0.1 0.2 0.2 0.1 0.1 0.1 0.2", "75", "15"]
-    with open(run / "videos" / "videos.csv", "w", newline="") as fh:
-        csv.writer(fh).writerows([compare.VIDEO_COLUMNS, row])
+    with open(run / "videos" / "videos.csv", "w", newline="") as fh:  # a run from before MP4s: no mp4 column
+        csv.writer(fh).writerows([[c for c in compare.VIDEO_COLUMNS if c != "mp4"], row])
     page = write_report([run], tmp_path / "rep", videos=False, progress=lambda s: None).read_text()
     assert "<h3>Videos (videos)</h3>" in page and "<h3>Figures</h3>" not in page
     assert page.count("data:image/gif;base64,") == 1
@@ -124,3 +124,145 @@ def test_the_report_shows_an_evaluations_videos_with_their_fitness(tmp_path):
         or "trial_0 on slope_up level 5 (0.3 grade): level fitness 0.9560 vs the base policy's 0.1760" in page
     md = (tmp_path / "rep" / "report.md").read_text()
     assert "### Videos (videos)" in md and "report_files/r0_video_trial_0_slope_up_L5.gif" in md
+
+
+# ----------------------------------------------------------------------------------------------------------------
+# MP4 (issue 62 item 4: evaluate writes GIF / MP4; the optional extra jaxterrain[video])
+# ----------------------------------------------------------------------------------------------------------------
+def _bar_frames(n=5, h=35, w=47):
+    """[n, h, w, 3] uint8: grey, with a white bar 8 columns wide that moves 8 columns right each frame."""
+    frames = np.full((n, h, w, 3), 60, np.uint8)
+    for k in range(n):
+        frames[k, :, 8 * k:8 * k + 8] = 255
+    return frames
+
+
+def _read_mp4(data: bytes, tmp_path) -> tuple[dict, np.ndarray]:
+    """``(imageio_ffmpeg's metadata, frames [F, h, w, 3] uint8)`` of an MP4's bytes, decoded by ffmpeg."""
+    import warnings
+
+    import imageio_ffmpeg
+
+    path = tmp_path / "back.mp4"
+    path.write_bytes(data)
+    with warnings.catch_warnings():  # JAX's warning of os.fork(): ffmpeg's child process execs at once
+        warnings.filterwarnings("ignore", message=r"os\.fork\(\) was called", category=RuntimeWarning)
+        reader = imageio_ffmpeg.read_frames(str(path))
+        meta = next(reader)
+        w, h = meta["size"]
+        return meta, np.stack([np.frombuffer(b, np.uint8).reshape(h, w, 3) for b in reader])
+
+
+def test_mp4_bytes_is_h264_with_every_frame_and_odd_sides_padded_to_even(tmp_path):
+    """Five synthetic 35 x 47 frames: an H.264 MP4 whose ffmpeg read-back has five 36 x 48 frames (one row and one
+    column repeated), the moving bar where it was in each (lossy: close, not equal), the same bytes when encoded
+    again; bad frames or fps refused by name."""
+    pytest.importorskip("imageio_ffmpeg", reason="needs the video extra: pip install 'jaxterrain[video]'")
+    frames = _bar_frames()
+    mp4 = render.mp4_bytes(frames, fps=10)
+    assert mp4[4:8] == b"ftyp" and render.mp4_bytes(frames, fps=10) == mp4
+    meta, back = _read_mp4(mp4, tmp_path)
+    assert meta["codec"] == "h264" and meta["pix_fmt"].startswith("yuv420p") and meta["fps"] == 10
+    assert back.shape == (5, 36, 48, 3)
+    assert np.abs(back[:, :35, :47].astype(int) - frames.astype(int)).mean() < 8
+    np.testing.assert_array_equal(back[:, :35, 47], back[:, :35, 46])  # the padded column repeats the edge
+    for k in range(5):  # the bar: brightest columns of each frame
+        assert np.argmax(back[k, 10, :47, 0].astype(int).reshape(-1)[::8][:5]) == k
+    with pytest.raises(ValueError, match=r"frames must be \[F >= 1, h, w, 3\] uint8"):
+        render.mp4_bytes(frames[..., 0])
+    with pytest.raises(ValueError, match="fps must be a number > 0"):
+        render.mp4_bytes(frames, fps=0)
+
+
+def test_without_the_video_extra_mp4_is_refused_before_anything_walks(monkeypatch, tmp_path):
+    """imageio-ffmpeg missing (its ``sys.modules`` entry None: the import raises): one line naming the extra, from
+    the encoder and from ``write_videos``, which says it before it looks for OpenGL or walks."""
+    import sys
+
+    monkeypatch.setitem(sys.modules, "imageio_ffmpeg", None)
+    with pytest.raises(ImportError) as err:
+        render.mp4_bytes(_bar_frames())
+    assert str(err.value) == render.MP4_EXTRA and "pip install 'jaxterrain[video]'" in render.MP4_EXTRA
+    monkeypatch.setattr(render, "gl_status", lambda: pytest.fail("looked for OpenGL before the extra"))
+    for fmt in ("mp4", "both"):
+        with pytest.raises(ImportError, match=r"pip install 'jaxterrain\[video\]'"):
+            compare.write_videos(tmp_path / "videos", ["base"], [object()], None, np.zeros((1, 3)), None, format=fmt)
+    with pytest.raises(ValueError, match="format must be one of gif, mp4, both; got 'webm'"):
+        compare.write_videos(tmp_path / "videos", ["base"], [object()], None, np.zeros((1, 3)), None, format="webm")
+    assert not (tmp_path / "videos").exists()
+
+
+def test_write_videos_both_writes_a_gif_and_an_mp4_of_the_same_frames(tmp_path, monkeypatch):
+    """``evaluate --videos --video-format both`` at the smallest size of the evaluate videos test (64 x 48 panels, 3
+    frames, 2 starts), its MJX walks replaced by made-up ones (no compile): ``<walker>/<family>_L<level>.gif`` and
+    ``.mp4`` of the same frames (ffmpeg reads back as many frames of the same size as the GIF holds, close in
+    colour), ``videos.csv``'s ``file`` the GIF and ``mp4`` the MP4; ``mp4`` alone: the MP4 is the file."""
+    from PIL import Image
+
+    from jaxterrain.suite.heldout import Suite
+    from jaxterrain.terrain import TerrainScale
+    from jaxterrain.walker import WalkerConfig
+
+    pytest.importorskip("imageio_ffmpeg", reason="needs the video extra: pip install 'jaxterrain[video]'")
+    _gl_or_skip()
+    config = WalkerConfig(terrain_shape=(48, 48))
+    walks = {0: [_walk(8, 0.4, config), _walk(8, 0.3, config)], 1: [_walk(4, 0.0, config), _walk(6, 0.1, config)]}
+    monkeypatch.setattr(compare, "record_pairs", lambda policies, maps, key, ids, **kw: [walks[0], walks[1]])
+    s = Suite("test", np.zeros((1, 48, 48), np.float32), np.array(["flat"]), np.array([0]), np.array([0]),
+              np.array([0.0]), {"flat": "-"}, TerrainScale(), {})
+    fitness = np.array([[0.95], [0.2]])
+    kw = dict(picks=[("flat", 0)], frames=3, width=64, height=48, starts=2)
+    (row,) = compare.write_videos(tmp_path / "both", ["base", "runs/still"], [None, None], s, fitness, None,
+                                  format="both", **kw)
+    cols = dict(zip(compare.VIDEO_COLUMNS, row))
+    assert (cols["file"], cols["mp4"]) == ("still/flat_L0.gif", "still/flat_L0.mp4")
+    with open(tmp_path / "both" / "videos.csv", newline="") as fh:
+        assert next(csv.DictReader(fh))["mp4"] == "still/flat_L0.mp4"
+    gif = []
+    with Image.open(tmp_path / "both" / "still" / "flat_L0.gif") as im:
+        for k in range(im.n_frames):
+            im.seek(k)
+            gif.append(np.asarray(im.convert("RGB")))
+    meta, mp4 = _read_mp4((tmp_path / "both" / "still" / "flat_L0.mp4").read_bytes(), tmp_path)
+    size = (compare.LABEL_HEIGHT + 48, 2 * 64 + compare.PANEL_GAP)
+    assert mp4.shape == (len(gif), *size, 3) and len(gif) == int(cols["frames"]) >= 2 and meta["fps"] == 15
+    assert np.abs(mp4.astype(int) - np.stack(gif).astype(int)).mean() < 12
+    (row,) = compare.write_videos(tmp_path / "mp4", ["base", "runs/still"], [None, None], s, fitness, None,
+                                  format="mp4", **kw)
+    cols = dict(zip(compare.VIDEO_COLUMNS, row))
+    assert (cols["file"], cols["mp4"]) == ("still/flat_L0.mp4", "still/flat_L0.mp4")
+    assert sorted(p.name for p in (tmp_path / "mp4" / "still").iterdir()) == ["flat_L0.mp4"]
+    assert (tmp_path / "mp4" / "still" / "flat_L0.mp4").read_bytes() == \
+        (tmp_path / "both" / "still" / "flat_L0.mp4").read_bytes()
+
+
+def test_the_report_embeds_an_mp4_in_a_video_element_and_links_the_mp4_beside_a_gif(tmp_path):
+    """``videos.csv`` rows of an MP4 alone (``--video-format mp4``) and of a GIF with its MP4 (``both``): the page
+    embeds the first in a ``<video>`` element and the GIF as an image with a link to its MP4 in ``report_files/``;
+    the Markdown twin links both MP4s; no MP4 is listed again among the figures."""
+    from jaxterrain.report import write_report
+
+    pytest.importorskip("imageio_ffmpeg", reason="needs the video extra: pip install 'jaxterrain[video]'")
+    run = tmp_path / "evaluate-x"
+    (run / "videos" / "trial_0").mkdir(parents=True)
+    mp4 = render.mp4_bytes(_bar_frames(3, 8, 12), fps=10)
+    (run / "videos" / "trial_0" / "slope_up_L5.mp4").write_bytes(mp4)
+    (run / "videos" / "trial_0" / "gaps_L2.mp4").write_bytes(mp4)
+    (run / "videos" / "trial_0" / "gaps_L2.gif").write_bytes(render.gif_bytes(_bar_frames(3, 8, 12), fps=10))
+    tail = ["0.9560", "0.1760", "reached the far edge at 9.8 s", "0.18 of the track, fell at 2.0 s", "3", "8",
+            "0.5 0.4 0.6 1.0 0.9 0.2 0.3 0.7", "0.1 0.1 0.2 0.2 0.1 0.1 0.1 0.2", "3", "10"]
+    rows = [["trial_0", "/r/trial_0", "slope_up", "5", "0", "0.3", "grade", "trial_0/slope_up_L5.mp4", *tail,
+             "trial_0/slope_up_L5.mp4"],
+            ["trial_0", "/r/trial_0", "gaps", "2", "0", "0.4", "m", "trial_0/gaps_L2.gif", *tail,
+             "trial_0/gaps_L2.mp4"]]
+    with open(run / "videos" / "videos.csv", "w", newline="") as fh:
+        csv.writer(fh).writerows([compare.VIDEO_COLUMNS, *rows])
+    page = write_report([run], tmp_path / "rep", videos=False, progress=lambda s: None).read_text()
+    assert page.count("<video ") == 1 and page.count("data:video/mp4;base64,") == 1
+    assert page.count("data:image/gif;base64,") == 1 and "<h3>Figures</h3>" not in page
+    assert '<a href="report_files/r0_video_trial_0_gaps_L2.mp4">MP4</a>' in page
+    assert (tmp_path / "rep" / "report_files" / "r0_video_trial_0_gaps_L2.mp4").read_bytes() == mp4
+    md = (tmp_path / "rep" / "report.md").read_text()
+    assert "[trial_0/slope_up_L5.mp4 (MP4)](report_files/r0_video_trial_0_slope_up_L5.mp4)" in md
+    assert "([MP4](report_files/r0_video_trial_0_gaps_L2.mp4))" in md
+    assert "![trial_0/gaps_L2.gif](report_files/r0_video_trial_0_gaps_L2.gif)" in md

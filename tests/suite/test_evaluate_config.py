@@ -3,6 +3,8 @@
 
 from __future__ import annotations
 
+import sys
+
 import pytest
 
 from jaxterrain.runtime import schema
@@ -36,6 +38,9 @@ def test_validate_loads_the_base_policy_and_keeps_the_run():
     ({"physics.workers": 4}, "EvaluateRun.physics.workers sets the CPU processes of EvaluateRun.physics.engine"),
     ({"videos.terrains": "flat:0"}, "EvaluateRun.videos.terrains chooses the terrains of EvaluateRun.videos.on"),
     ({"videos.on": True, "videos.terrains": "gaps:10"}, "EvaluateRun.videos.terrains: gaps has levels 0 to 9"),
+    ({"videos.format": "mp4"}, "EvaluateRun.videos.format chooses the files of EvaluateRun.videos.on"),
+    ({"videos.on": True, "videos.format": "webm"}, "EvaluateRun.videos.format must be one of gif, mp4, both; got "
+                                                   "'webm'"),
     ({"terrains.families": ("nope",)}, "EvaluateRun.terrains.families: unknown 'nope'"),
     ({"terrains.height": 0.5}, "EvaluateRun.terrains.height applies to EvaluateRun.terrains.folder"),
     ({"physics.randomise": "push=10"}, "EvaluateRun.physics.randomise: item push=10"),
@@ -44,3 +49,16 @@ def test_validate_names_the_field(changes, message):
     with pytest.raises(ValueError) as err:
         runs.validate_evaluate(schema.replace(SMOKE, changes))
     assert str(err.value).startswith(message), err.value
+
+
+def test_mp4_without_the_video_extra_is_refused_in_one_line_before_the_policies_load(monkeypatch):
+    """``videos.format`` ``mp4`` / ``both`` where imageio-ffmpeg does not import (``sys.modules`` entry None: the
+    import raises): one line naming the extra; GIF needs nothing more."""
+    monkeypatch.setitem(sys.modules, "imageio_ffmpeg", None)
+    monkeypatch.setattr(runs, "load_policies", lambda run: pytest.fail("policies loaded before the extra was checked"))
+    for fmt in ("mp4", "both"):
+        with pytest.raises(ValueError) as err:
+            runs.validate_evaluate(schema.replace(SMOKE, {"videos.on": True, "videos.format": fmt}))
+        assert str(err.value) == (f"EvaluateRun.videos.format {fmt} writes MP4 with imageio-ffmpeg, which is not "
+                                  "installed: pip install 'jaxterrain[video]'")
+    runs.check_video_format(schema.replace(SMOKE, {"videos.on": True}))  # gif: no extra needed
