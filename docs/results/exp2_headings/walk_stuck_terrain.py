@@ -1,5 +1,8 @@
 """Base policy's 80 HEADINGS walks on the CPPN terrain the roughness baseline stuck on (cell 152 = bins (2, 3)), with
-the steps of each walk (the difficulty module's compiled program; run from the repository root on a CPU: 34 s)."""
+the steps of each walk (the difficulty module's compiled program; run from the repository root on a CPU: 34 s).
+
+Pinned: it reads private functions of the package as they were at commit 3068652; run it at that commit
+(``git worktree add /tmp/at-3068652 3068652``). Kept as the record of how its figures were made."""
 import time
 import jax, numpy as np
 from jaxterrain import qd as A, difficulty as D

@@ -37,7 +37,8 @@ import numpy as np
 
 sys.path.insert(0, str(pathlib.Path(__file__).resolve().parents[3]))
 
-from experiments import learn  # noqa: E402
+from jaxterrain.curriculum import runner  # noqa: E402
+from jaxterrain.curriculum.run_config import from_flat  # noqa: E402
 from jaxterrain import rl  # noqa: E402
 from jaxterrain.curriculum import walker as W  # noqa: E402
 
@@ -79,8 +80,8 @@ def main() -> None:
     npz = np.load(a.treatment / "checkpoint.npz")
     trials = [int(t) for t in a.trials.split(",")] if a.trials else list(range(int(cfg["trials"])))
     cfg["trials"] = len(trials)
-    config, arch, policy, env = learn.validate(cfg)
-    bank, ppo, harness, start, _, _ = learn.inputs(cfg, config, arch, policy, env)
+    run, config, arch, policy, env = runner.validate(from_flat(cfg))
+    bank, ppo, harness, start, _, _ = runner.inputs(run, config, arch, policy, env)
     params, normaliser = restore_policies(npz, start)
     pick = jnp.asarray(trials)
     params, normaliser = jax.tree.map(lambda x: x[pick], (params, normaliser))

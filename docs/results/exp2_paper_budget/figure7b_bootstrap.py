@@ -11,7 +11,8 @@ import matplotlib
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 
-from experiments import common, learn  # noqa: E402
+from experiments import common  # noqa: E402
+from jaxterrain.curriculum import outputs  # noqa: E402
 
 HERE = pathlib.Path(__file__).resolve().parent
 RUNS = {"cppn map (mask)": HERE.parent / "exp2_paper_cppn_map",
@@ -21,12 +22,12 @@ RUNS = {"cppn map (mask)": HERE.parent / "exp2_paper_cppn_map",
 
 def curve(run: pathlib.Path) -> tuple:
     """(epoch, mean, se) of the run's hardest terrain traversed, each [K]."""
-    return learn.summary_curve(json.loads((run / "summary.json").read_text()))
+    return outputs.summary_curve(json.loads((run / "summary.json").read_text()))
 
 
 if __name__ == "__main__":
     fig, ax = plt.subplots(figsize=(7, 4))
-    learn.plot_curves(ax, {label: curve(run) for label, run in RUNS.items()},
+    outputs.plot_curves(ax, {label: curve(run) for label, run in RUNS.items()},
                       "Figure 7b at 30 000 epochs: CPPN map vs roughness-sorted CL, both truncation modes")
     fig.tight_layout()
     common.save_figure(fig, HERE / "figure7b_bootstrap.png")

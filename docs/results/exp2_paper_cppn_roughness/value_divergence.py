@@ -8,7 +8,10 @@ normalised by the running statistics.
     python docs/results/exp2_paper_cppn_roughness/value_divergence.py CELL HEADINGS UPDATES [TRUNCATION]
     e.g. 152 0,1,3 8 mask   (cell 152 = bank terrain 31, the baseline's second terrain; TRUNCATION: PPOConfig's,
     mask (the default, brax's) or bootstrap)
-"""
+
+
+Pinned: it reads private functions of the package as they were at commit ac5ee06; run it at that commit
+(``git worktree add /tmp/at-ac5ee06 ac5ee06``). Kept as the record of how its figures were made."""
 import sys
 import jax, jax.numpy as jnp, numpy as np
 from jaxterrain import qd as A, rl

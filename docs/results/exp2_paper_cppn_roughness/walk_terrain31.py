@@ -5,7 +5,10 @@ steps on the MJX-JAX walker (a CPU: about 1 min): the step a walk ended at, the 
 it (a fall is outside ``healthy_z_range`` = (1.0, 2.0) m), invalid physics, the largest |observation|, the distance.
 
     python docs/results/exp2_paper_cppn_roughness/walk_terrain31.py [TRIAL]
-"""
+
+
+Pinned: it reads private functions of the package as they were at commit f770ea6; run it at that commit
+(``git worktree add /tmp/at-f770ea6 f770ea6``). Kept as the record of how its figures were made."""
 import sys
 from pathlib import Path
 
