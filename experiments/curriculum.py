@@ -129,19 +129,20 @@ def parse_archives(items) -> dict | None:
 
 
 def check_config(args, cfg: dict) -> None:
-    """Before a run folder: every ``--archives`` file reads as an archive a curriculum can use
+    """Before a run folder: ``--baseline-archive`` names one of ``--archives`` (:func:`check_baseline_archive`), every
+    ``--archives`` file reads as an archive a curriculum can use
     (``runner.load_archive``; read again per treatment), and every curriculum flag given belongs to the map
     curriculum or a ``--baseline`` (``learn.check_selector_flags``); :class:`~experiments.common.UsageError`."""
     from jaxterrain.curriculum import runner
 
+    check_baseline_archive(cfg, given=getattr(args, "baseline_archive", None) is not None,
+                           baseline_given=getattr(args, "baseline", None) is not None)
     for name, path in sorted(cfg["archives"].items()):
         try:
             runner.load_archive(path, cfg["descriptors"])
         except runner.BadInput as err:
             text = str(err).removeprefix(f"LearnConfig.archive {path}: ")
             raise common.UsageError(f"--archives {name}={path}: {text}") from None
-    check_baseline_archive(cfg, given=getattr(args, "baseline_archive", None) is not None,
-                           baseline_given=getattr(args, "baseline", None) is not None)
     learn.check_selector_flags(args, ["map", *baselines(cfg)], "--baseline")
 
 
@@ -165,9 +166,12 @@ def check_baseline_archive(cfg: dict, given: bool = True, baseline_given: bool =
     if not isinstance(name, str) or not name:
         raise common.UsageError(f"--baseline-archive must be one of --archives' names ({', '.join(names)}); got "
                                 f"{name!r}")
-    if name not in names and (given or baseline_given):
+    if name not in names and given:
         raise common.UsageError(f"--baseline-archive must be one of --archives' names ({', '.join(names)}); got "
                                 f"{name!r}")
+    if name not in names and baseline_given:
+        raise common.UsageError(f"--baseline runs on --baseline-archive {name} (the default), which is not among "
+                                f"--archives' names ({', '.join(names)}); give --baseline-archive NAME")
     if not isinstance(cfg.get("combined", True), bool):
         raise common.UsageError(f"--combined must be true or false; got {cfg['combined']!r}")
 

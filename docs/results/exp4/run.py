@@ -124,7 +124,12 @@ def parser() -> argparse.ArgumentParser:
     p.add_argument("--plan", action="store_true", help="print what is done and the predicted device minutes")
     p.add_argument("--robot", choices=ROBOTS, default="humanoid", help="archive: whose archive (default humanoid)")
     p.add_argument("--ant", nargs="+", default=None, metavar="OBS/TREATMENT",
-                   help=f"train ant: the two treatments (OBS: blind, perceptive; TREATMENT: {', '.join(TREATMENTS)})")
+                   help=f"train ant: the two best treatments (one for a check; OBS: blind, perceptive; TREATMENT: "
+                        f"{', '.join(TREATMENTS)})")
+    p.add_argument("--treatments", nargs="+", choices=TREATMENTS, default=None, metavar="TREATMENT",
+                   help=f"train humanoid: a subset of the treatments (default all: {', '.join(TREATMENTS)}; a "
+                        f"mixed-* baseline needs mixed-map, which its curriculum run makes too); saved in "
+                        f"OUT/humanoid.json at the first train")
     p.add_argument("--preset", choices=("gpu-short", "smoke"), default="gpu-short",
                    help="evolve / curriculum / learn preset (default gpu-short; smoke: a CPU check)")
     p.add_argument("--trials", type=int, default=TRIALS, help=f"trials of each treatment (default {TRIALS})")
@@ -174,6 +179,11 @@ def check(p: argparse.ArgumentParser, args) -> None:
     if args.ant is not None and not (words and words[:2] == ("train", "ant")):
         p.error("--ant chooses the ant's treatments of 'train ant' (later stages read OUT/ant.json)")
     args.ant_pairs = None if args.ant is None else parse_ant(p, args.ant)
+    if args.treatments is not None:
+        if not (words and words[:2] == ("train", "humanoid")):
+            p.error("--treatments chooses the humanoid's treatments of 'train humanoid' (later stages read "
+                    "OUT/humanoid.json)")
+        check_treatments(p, args.treatments)
     if args.time_limit is not None and not (math.isfinite(args.time_limit) and args.time_limit > 0):
         p.error(f"--time-limit must be a finite number of minutes > 0; got {args.time_limit}")
     if args.pack is not None and not args.pack.name.endswith((".tar.gz", ".tgz")):
@@ -201,9 +211,26 @@ def parse_ant(p: argparse.ArgumentParser, items: list[str]) -> list[tuple[str, s
             p.error(f"--ant must be OBS/TREATMENT with OBS one of {', '.join(OBSERVATIONS)} and TREATMENT one of "
                     f"{', '.join(TREATMENTS)}; got {item!r}")
         pairs.append((obs, name))
-    if len(pairs) != 2 or len(set(pairs)) != 2:
-        p.error(f"--ant takes the two best treatments, two different OBS/TREATMENT; got {' '.join(items)}")
+    if len(pairs) > 2 or len(set(pairs)) != len(pairs):
+        p.error(f"--ant takes the two best treatments (one for a check), each OBS/TREATMENT once; got "
+                f"{' '.join(items)}")
     return pairs
+
+
+def check_treatments(p: argparse.ArgumentParser, names: list[str]) -> None:
+    """``--treatments``: each once; a baseline on the mixed archive only with ``mixed-map`` (``curriculum`` runs the
+    map curriculum on every archive it is given)."""
+    if len(set(names)) != len(names):
+        p.error(f"--treatments: each treatment once; got {' '.join(names)}")
+    if any(n in ("mixed-dr", "mixed-plr", "mixed-levels") for n in names) and "mixed-map" not in names:
+        p.error("--treatments: a mixed-* baseline needs mixed-map (curriculum runs the map curriculum on every archive "
+                "it is given)")
+
+
+def humanoid_choice(out: Path) -> list[str]:
+    """The humanoid's treatments: ``OUT/humanoid.json``'s (a subset given by ``--treatments``) or all of them."""
+    path = out / "humanoid.json"
+    return list(TREATMENTS) if not path.is_file() else list(json.loads(path.read_text())["treatments"])
 
 
 # ---------------------------------------------------------------------------------------------------------------
@@ -244,7 +271,7 @@ def ant_choice(out: Path) -> list[tuple[str, str]] | None:
 
 def runs(out: Path) -> list[tuple[str, str, Path, list[str]]]:
     """Every train run planned: ``(robot, obs, folder, [treatments])``; the ant's once chosen (``OUT/ant.json``)."""
-    plan = [("humanoid", obs, train_folder(out, "humanoid", obs), list(TREATMENTS)) for obs in OBSERVATIONS]
+    plan = [("humanoid", obs, train_folder(out, "humanoid", obs), humanoid_choice(out)) for obs in OBSERVATIONS]
     for obs in OBSERVATIONS:
         names = [t for o, t in ant_choice(out) or [] if o == obs]
         if names:
@@ -252,14 +279,17 @@ def runs(out: Path) -> list[tuple[str, str, Path, list[str]]]:
     return plan
 
 
-def curriculum_argv(args, obs: str) -> list[str]:
-    """The humanoid's ``curriculum`` command of observation set ``obs`` (a fresh run)."""
+def curriculum_argv(args, obs: str, names: list[str] = TREATMENTS) -> list[str]:
+    """The humanoid's ``curriculum`` command of observation set ``obs`` (a fresh run) for the treatments ``names``
+    (default all: ``--archives steps=.. mixed=.. --baseline dr plr levels --baseline-archive mixed --no-combined``)."""
     out = args.out
+    gens = [g for g in GENERATORS if f"{g}-map" in names]
     argv = ["curriculum", "--preset", args.preset, "--archives",
-            f"steps={archive_path(out, 'humanoid', 'steps', args.preset)}",
-            f"mixed={archive_path(out, 'humanoid', 'mixed', args.preset)}",
-            "--baseline", *BASELINES, "--baseline-archive", "mixed", "--no-combined", "--observation", obs,
-            "--trials", str(args.trials), "--out", str(train_folder(out, "humanoid", obs))]
+            *[f"{g}={archive_path(out, 'humanoid', g, args.preset)}" for g in gens]]
+    baselines = [b for b in BASELINES if f"mixed-{b}" in names]
+    argv += ["--baseline", *baselines, "--baseline-archive", "mixed"] if baselines else []
+    argv += ["--no-combined"] if len(gens) > 1 else []
+    argv += ["--observation", obs, "--trials", str(args.trials), "--out", str(train_folder(out, "humanoid", obs))]
     return argv + (["--backend", args.backend] if args.backend else [])
 
 
@@ -324,17 +354,29 @@ def stage_archive(args, gen: str, robot: str) -> int:
 
 def stage_train(args, robot: str, obs: str | None) -> int:
     if robot == "humanoid":
-        missing = [g for g in GENERATORS if not archive_done(args.out, "humanoid", g, args.preset)]
+        saved = (args.out / "humanoid.json").is_file()
+        names = humanoid_choice(args.out) if saved or args.treatments is None else list(args.treatments)
+        if saved and args.treatments is not None and sorted(args.treatments) != sorted(names):
+            print(f"train humanoid: {args.out}/humanoid.json chose {' '.join(names)}; give the same --treatments or "
+                  f"another --out", file=sys.stderr)
+            return 2
+        missing = [g for g in GENERATORS if f"{g}-map" in names and not archive_done(args.out, "humanoid", g,
+                                                                                      args.preset)]
         if missing:
             print(f"train humanoid: run 'archive {missing[0]}' first (no "
                   f"{archive_path(args.out, 'humanoid', missing[0], args.preset)})", file=sys.stderr)
             return 2
+        if not saved:
+            from jaxterrain.runtime.io import atomic_write_text
+
+            args.out.mkdir(parents=True, exist_ok=True)
+            atomic_write_text(args.out / "humanoid.json", json.dumps({"treatments": names}) + "\n")
         folder = train_folder(args.out, "humanoid", obs)
-        if all(treatment_done(folder / t) for t in TREATMENTS) and (folder / "hardest.csv").is_file():
+        if all(treatment_done(folder / t) for t in names) and (folder / "hardest.csv").is_file():
             print(f"train humanoid {obs}: done ({folder})", flush=True)
             return 0
         code = cli(["curriculum", "--resume", str(folder)] if (folder / "config.json").is_file()
-                   else curriculum_argv(args, obs), args)
+                   else curriculum_argv(args, obs, names), args)
         if code == 0:
             print(f"train humanoid {obs}: done ({folder})", flush=True)
         return code
@@ -541,7 +583,7 @@ def read_state(args) -> dict:
     else ``warp``, what ``auto`` picks where MuJoCo Warp is installed; evaluate: ``--backend``, else ``jax``)."""
     out = args.out
     choice = ant_choice(out)
-    needed = [("humanoid", g) for g in GENERATORS]
+    needed = [("humanoid", g) for g in GENERATORS if f"{g}-map" in humanoid_choice(out)]
     needed += [("ant", g) for g in dict.fromkeys(t.split("-", 1)[0] for _, t in choice or [])]
     state = {"archives_left": [(r, g) for r, g in needed if not archive_done(out, r, g, args.preset)],
              "train_left": {}, "walks_left": {}, "measured": {}, "ant_pending": choice is None,
@@ -603,7 +645,7 @@ def print_plan(args) -> int:
             mark = "left" if (robot, gen) in state["archives_left"] else "done"
             print(f"  archive {gen} --robot {robot}: {mark} ({archive_path(args.out, robot, gen, args.preset)})")
     for name, left in state["train_left"].items():
-        total = len(TREATMENTS) if name.startswith("humanoid") else sum(
+        total = len(humanoid_choice(args.out)) if name.startswith("humanoid") else sum(
             1 for o, _ in ant_choice(args.out) or [] if o == name.split()[1])
         print(f"  train {name}: {total - left}/{total} treatments done")
     if state["ant_pending"]:
