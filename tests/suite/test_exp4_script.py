@@ -97,7 +97,8 @@ def test_the_plan_adds_the_measured_rates(run):
     sums of the module docstring's rule, with made-up rates (so the test pins the arithmetic, not the figures)."""
     rates = {**run.RATES, "archive_mixed_s": (600.0, ""), "archive_ant_factor": (0.5, ""),
              "treatment_s_warp": ((400.0, 500.0), ""), "population_factor": (0.8, ""), "v2_first_s": (70.0, ""),
-             "v2_walker_s_jax": ((20.0, 30.0), ""), "build_s": (60.0, ""), "ant_eval_factor": (2.0, "")}
+             "v2_walker_s_jax": ((20.0, 30.0), ""), "build_s": (60.0, ""), "ant_eval_factor": (2.0, ""),
+             "compile_s": ((10.0, 80.0), "")}
     state = {"archives_left": [("humanoid", "mixed"), ("ant", "mixed")],
              "train_left": {"humanoid blind": 5, "humanoid perceptive": 0, "ant blind": 2},
              "walks_left": {"v2": {("humanoid", "blind"): 12, ("humanoid", "perceptive"): 3, ("ant", "blind"): 0,
@@ -106,12 +107,14 @@ def test_the_plan_adds_the_measured_rates(run):
              "keys": 10}
     got = run.predict(state, rates)
     assert got == {"archive mixed --robot humanoid": (600.0, 600.0), "archive mixed --robot ant": (300.0, 300.0),
-                   "train humanoid blind": (5 * 400 * 0.8, 5 * 500 * 0.8), "train ant blind": (800.0, 1000.0),
+                   # 2 000 s at 400 s a command (480 less the compile): 5 commands, each its compile
+                   "train humanoid blind": (5 * 400 * 0.8 + 5 * 10, 5 * 500 * 0.8 + 5 * 80),
+                   "train ant blind": (800.0 + 3 * 10, 1000.0 + 3 * 80),
                    "evaluate v2": (60 + 2 * 70 + 13 * 20.0, 60 + 2 * 70 + 13 * 30.0)}
     measured = run.predict({**state, "measured": {"v2": (100.0, (10.0, 11.0))}}, rates)["evaluate v2"]
     assert measured == (60 + 2 * 100 + 13 * 10.0, 60 + 2 * 100 + 13 * 11.0)
     pending = run.predict({**state, "ant_pending": True, "archives_left": []}, rates)
-    assert pending["train ant (2 treatments, not chosen yet)"] == (800.0, 1000.0)
+    assert pending["train ant (2 treatments, not chosen yet)"] == (800.0 + 3 * 10, 1000.0 + 3 * 80)
     assert pending["archive steps --robot ant (not chosen yet)"] == (rates["archive_steps_s"][0] * 0.5,) * 2
     ant = 2.0 * (60 + 2 * 70 + (2 * 20 - 2) * 20.0)  # two programs of trials + keys walks each
     assert pending["evaluate v2"][0] == pytest.approx(60 + 2 * 70 + 13 * 20.0 + ant)

@@ -104,6 +104,8 @@ RATES = {
     "v1_walker_s_warp": ((7.0, 7.0), "measured: suite v1, ~7 s a walker, MuJoCo Warp, one H200, 2026-11-29"),
     "v1_walker_s_jax": ((25.0 * 372 / 701, 35.0 * 372 / 701), "assumed: v2's MJX-JAX rate x 372 / 701 terrains; not "
                                                              "measured"),
+    "compile_s": ((30.0, 120.0), "assumed: the compile each train command repeats (curriculum's printed estimate "
+                                 "for a GPU, 30 s-2 min), added once per 8-minute command; not measured"),
     "build_s": (60.0, "assumed: a suite's build (jaxterrain.suite.batch.BUILD_S); not measured here"),
     "ant_eval_factor": (1.0, "assumed: the ant's walks as long as the humanoid's; not measured"),
 }
@@ -530,7 +532,7 @@ def predict(state: dict, rates: dict = RATES) -> dict:
 
     - an archive left: its seconds (the ant's times ``archive_ant_factor``);
     - a train run: its treatments not done x ``treatment_s_<train_backend>`` (the humanoid's population times
-      ``population_factor``);
+      ``population_factor``), plus ``compile_s`` for each command of 480 s less the compile that it needs;
     - a suite: for each robot with walks left, a build, one first walk per program (observation set) with walks
       left, and the other walks at ``<suite>_walker_s_<eval_backend>`` (the ant's times ``ant_eval_factor``); the
       walks a store recorded replace the rates (``state["measured"][suite]``: ``(first_s, (low, high))``);
@@ -541,13 +543,19 @@ def predict(state: dict, rates: dict = RATES) -> dict:
         s = rates[f"archive_{gen}_s"][0] * (rates["archive_ant_factor"][0] if robot == "ant" else 1.0)
         out[f"archive {gen} --robot {robot}"] = (s, s)
     lo_t, hi_t = _mid(rates[f"treatment_s_{state['train_backend']}"][0])
+    lo_c, hi_c = _mid(rates["compile_s"][0])
+
+    def train(seconds: tuple[float, float]) -> tuple[float, float]:  # plus a compile per command
+        n = commands((seconds[0], seconds[1]), 480.0 - hi_c)
+        return seconds[0] + n * lo_c, seconds[1] + n * hi_c
+
     for name, left in state["train_left"].items():
         k = rates["population_factor"][0] if name.startswith("humanoid") else 1.0
         if left:
-            out[f"train {name}"] = (left * lo_t * k, left * hi_t * k)
+            out[f"train {name}"] = train((left * lo_t * k, left * hi_t * k))
     walks_left = {suite: dict(w) for suite, w in state["walks_left"].items()}
     if state["ant_pending"]:
-        out["train ant (2 treatments, not chosen yet)"] = (2 * lo_t, 2 * hi_t)
+        out["train ant (2 treatments, not chosen yet)"] = train((2 * lo_t, 2 * hi_t))
         for gen in GENERATORS:
             s = rates[f"archive_{gen}_s"][0] * rates["archive_ant_factor"][0]
             out[f"archive {gen} --robot ant (not chosen yet)"] = (s, s)

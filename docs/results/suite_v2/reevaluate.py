@@ -11,7 +11,8 @@ robot's walkers on ``suite.load("v2", robot=...)``. The protocol is the shipped 
 (``heldout/config.json``: ``evaluate --preset gpu --no-repeat --backend warp --slots 16384``; HEADINGS, 80 walks a
 terrain, best 5 per heading, 4 headings, seed 0): every walker walks with the key ``evaluate`` gives every policy,
 the base policy with keys 0..9, so each result is the row ``evaluate --suite v2 --robot R --keys 10 --policy ...``
-would write.
+would write. ``--observations blind perceptive`` walks each robot's perceptive base policy too (group
+``base:<robot>:perceptive``; Experiment 4, ``docs/results/exp4/run.py``, which calls this script).
 
 The logic is :mod:`jaxterrain.suite.batch`'s: each walk's fitness is written to ``--work`` (default
 ``runs/v2eval``) the moment it ends, atomically; a rerun skips what is there; under ``--time-limit MIN`` no walk
