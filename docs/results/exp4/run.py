@@ -465,21 +465,21 @@ def stage_evaluate(args) -> int:
         code = module.main(argv)
         if code:
             return code
-        if left_minutes(args) is not None and left_minutes(args) <= 0.5:
+        if plan_walks(args, folders, robots, [suite]):  # the time limit stopped it: the next suite waits
             break
     left = plan_walks(args, folders, robots)
     print("evaluate: done" if not left and not waiting else f"evaluate: {left} walks left; run it again", flush=True)
     return 0
 
 
-def plan_walks(args, folders: list[Path], robots: list[str]) -> int:
-    """Walks not yet in the stores, over every suite."""
+def plan_walks(args, folders: list[Path], robots: list[str], suites: list[str] | None = None) -> int:
+    """Walks not yet in the stores of ``suites`` (default ``--suites``)."""
     from jaxterrain.suite import batch
 
     jobs = [j for r in robots for o in OBSERVATIONS for j in batch.base_jobs(r, args.keys, o)]
     jobs += batch.walker_jobs(folders)
     n = 0
-    for suite in args.suites:
+    for suite in args.suites if suites is None else suites:
         results = args.out / "eval" / suite / "results"
         n += sum(not (results / f"{_file(j.name)}.npz").is_file() for j in jobs)
     return n
