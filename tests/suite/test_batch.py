@@ -204,7 +204,7 @@ def test_a_robots_perceptive_base_policy_walks_as_its_own_group():
     assert [j.name for j in batch.base_jobs("humanoid", 2)] == ["base:humanoid", "base:humanoid:key1"]
     from jaxterrain.difficulty import policy_observation
 
-    assert policy_observation(rl.load_policy(jobs[0].policy)) == "perceptive"
+    assert policy_observation(rl.load_policy(jobs[0].policy))["observation"] == "perceptive"
     assert batch.base_jobs("humanoid", 1, "perceptive")[0].policy == str(rl.base_policy_dir("humanoid", "perceptive"))
     with pytest.raises(ValueError, match="observation must be one of"):
         batch.base_jobs("humanoid", 1, "sonar")
