@@ -42,6 +42,7 @@ def run():
     (["write", "--time-limit", "0"], "--time-limit must be a finite number of minutes > 0; got 0.0"),
     (["evaluate", "--pack", "x.zip"], "--pack must name a .tar.gz or .tgz file; got x.zip"),
     (["evaluate", "--keys", "0"], "--keys must be an integer >= 1; got 0"),
+    (["evaluate", "--pack", "/x.tar.gz"], "--pack stores --out relative to the current folder"),  # --out: tmp_path
     (["evaluate", "--headings", "3"], "--headings must be one of 1, 2, 4; got 3"),
     (["archive", "mixed", "--archive-size", "16"], "--archive-size must be an integer >= 32; got 16"),
 ])

@@ -192,6 +192,8 @@ def check(p: argparse.ArgumentParser, args) -> None:
         p.error(f"--pack must name a .tar.gz or .tgz file; got {args.pack}")
     if args.pack is not None and args.plan:
         p.error("--pack packs after a stage; --plan runs none")
+    if args.pack is not None and not args.out.resolve().is_relative_to(Path.cwd().resolve()):
+        p.error(f"--pack stores --out relative to the current folder (unpack it there); --out {args.out} is outside it")
     for name, lo in (("trials", 1), ("keys", 1), ("archive_size", 32), ("size", 32), ("seeds", 1), ("samples", 1),
                      ("attempts", 1), ("best", 1), ("slots", 0)):
         v = getattr(args, name)
