@@ -650,8 +650,9 @@ def print_plan(args) -> int:
     for robot, gen in [("humanoid", g) for g in GENERATORS] + [("ant", g) for g in GENERATORS]:
         if robot == "ant" and state["ant_pending"]:
             continue
-        if (robot, gen) in state["archives_left"] or robot == "humanoid" or any(
-                t.startswith(gen) for _, t in ant_choice(args.out) or []):
+        needed = f"{gen}-map" in humanoid_choice(args.out) if robot == "humanoid" else any(
+            t.startswith(gen) for _, t in ant_choice(args.out) or [])
+        if needed:
             mark = "left" if (robot, gen) in state["archives_left"] else "done"
             print(f"  archive {gen} --robot {robot}: {mark} ({archive_path(args.out, robot, gen, args.preset)})")
     for name, left in state["train_left"].items():
