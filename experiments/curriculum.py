@@ -14,8 +14,9 @@ roughness-sorted standard CL of Figure 7b; ``--baseline roughness random`` adds 
 treatments). Experiment 4 runs the field's curricula on the mixed archive:
 ``--archives steps=S.npz mixed=M.npz --baseline dr plr levels --baseline-archive mixed --no-combined`` (the map on
 each archive, then ``mixed-dr``, ``mixed-plr``, ``mixed-levels``). Finished treatments are kept, so ``--resume``
-continues where the time limit stopped. ``--shard I/N`` runs only the treatments ``t % N == I`` of that order, so that independent processes (e.g.
-one per GPU: ``CUDA_VISIBLE_DEVICES=I ... --out RUN --shard I/N``) share one run folder; ``--resume RUN`` without
+continues where the time limit stopped. ``--shard I/N`` runs only the treatments ``t % N == I`` of that order, so
+that independent processes (e.g. one per GPU: ``CUDA_VISIBLE_DEVICES=I ... --out RUN --shard I/N``) share one run
+folder; ``--resume RUN`` without
 ``--shard`` then reuses the finished treatments and writes the tables. ``--resume RUN --report`` writes the tables
 and figures from the treatments as they stand, the unfinished ones from their last checkpoint (``learn --report``;
 marked ``[partial: E epochs]``), without training: e.g. before a GPU machine is given back.
