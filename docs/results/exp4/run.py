@@ -97,8 +97,7 @@ RATES = {
     "v2_first_s": (67.0, "measured: the humanoid's first walk of suite v2 (compile included), MJX-JAX, one H200, "
                          "2026-11-29"),
     "v2_walker_s_jax": ((25.0, 35.0), "measured: the humanoid's walk of suite v2 (701 terrains, 80 walks each), "
-                                      "25-35 s "
-                                  "a walker, MJX-JAX, one H200, 2026-11-29"),
+                                      "25-35 s a walker, MJX-JAX, one H200, 2026-11-29"),
     "v1_first_s": (67.0, "assumed: as v2's first walk; not measured"),
     "v2_walker_s_warp": ((7.0 * 701 / 372, 7.0 * 701 / 372), "assumed: v1's Warp rate x 701 / 372 terrains; not "
                                                              "measured"),
