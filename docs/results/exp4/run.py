@@ -44,7 +44,8 @@ archives without their ``checkpoint/`` folders once finished, every train run wi
 finished treatments (an unfinished one keeps ``checkpoint.npz``, needed to resume on another machine; the tar's
 size is printed: the device returns at most 64 MiB a call, so resume a long ``train`` on the same warm machine), the
 evaluation stores. ``--preset smoke`` with the tiny suite flags (``--size --seeds --families --generators
---attempts --best --headings --slots``, as reevaluate.py's) runs every stage on a CPU (``tests/results/test_exp4.py``).
+--attempts --best --headings --slots``, as reevaluate.py's) runs every stage on a CPU
+(``tests/integration/test_exp4_run.py``).
 """
 
 from __future__ import annotations
