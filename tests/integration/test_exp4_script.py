@@ -158,3 +158,24 @@ def test_the_pack_leaves_out_finished_checkpoints(run, tmp_path):
     saved = out / "ant.json"
     saved.write_text(json.dumps({"treatments": [["blind", "steps-map"]]}))
     assert [(r, o, n) for r, o, _, n in run.runs(out)][-1] == ("ant", "blind", ["steps-map"])
+
+
+def test_a_stage_with_no_time_left_starts_nothing_and_says_how_to_go_on(run, tmp_path, capsys, monkeypatch):
+    """Under ``--time-limit`` a stage hands the child command what is left; with nothing left it starts none and
+    exits 3 ("run the same command again"); the humanoid's treatments are saved at its first train, and another
+    ``--treatments`` on the same ``--out`` is refused in one line."""
+    monkeypatch.chdir(tmp_path)
+    out = tmp_path / "exp4"
+    for gen in ("steps", "mixed"):  # archives as the archive stage leaves them when done
+        (out / "archive" / f"humanoid-{gen}").mkdir(parents=True)
+        (out / "archive" / f"humanoid-{gen}" / "archive.npz").write_text("x")
+        (out / "archive" / f"humanoid-{gen}" / "done.json").write_text("{}")
+    monkeypatch.setattr(run, "STARTED", run.time.perf_counter() - 120.0)  # two minutes gone
+    argv = ["train", "humanoid", "blind", "--treatments", "steps-map", "mixed-map", "--preset", "smoke", "--out",
+            str(out), "--time-limit", "1", "--pack", "exp4.tar.gz"]
+    assert run.main(argv) == 3
+    text = capsys.readouterr().out
+    assert "no time left for curriculum" in text and "run the same command again" in text and "packed" in text
+    assert json.loads((out / "humanoid.json").read_text()) == {"treatments": ["steps-map", "mixed-map"]}
+    assert run.main([*argv[:3], "--treatments", "mixed-map", *argv[6:]]) == 2
+    assert "humanoid.json chose steps-map mixed-map" in capsys.readouterr().err
