@@ -8,11 +8,15 @@ Treatments (each one ``learn`` run, ``--trials`` trials together, in ``<run>/<na
 curriculum on every archive given (``NAME=PATH``; names as in the paper's Table 2: cppn, gan, perlin, worley,
 diamond_square; by default :data:`DEFAULT_ARCHIVES`, the five shipped paper-budget roughness x TPI archives reseated
 under ``difficulty.HEADINGS``, docs/results/exp2_paper.md), on their combination (``qd.combine``: the fitter
-elite per cell; ``<run>/combined_archive.npz``; skipped with one archive), and each ``--baseline`` on the ``cppn``
-archive (default the roughness-sorted standard CL of Figure 7b; ``--baseline roughness random`` adds the random
-order, Experiment 3's eight treatments). Finished treatments are kept, so ``--resume`` continues where the time limit
-stopped. ``--shard I/N`` runs only the treatments ``t % N == I`` of that order, so that independent processes (e.g.
-one per GPU: ``CUDA_VISIBLE_DEVICES=I ... --out RUN --shard I/N``) share one run folder; ``--resume RUN`` without
+elite per cell; ``<run>/combined_archive.npz``; skipped with one archive or ``--no-combined``), and each
+``--baseline`` on the ``--baseline-archive`` (one of ``--archives``' names, default ``cppn``; default baseline the
+roughness-sorted standard CL of Figure 7b; ``--baseline roughness random`` adds the random order, Experiment 3's eight
+treatments). Experiment 4 runs the field's curricula on the mixed archive:
+``--archives steps=S.npz mixed=M.npz --baseline dr plr levels --baseline-archive mixed --no-combined`` (the map on
+each archive, then ``mixed-dr``, ``mixed-plr``, ``mixed-levels``). Finished treatments are kept, so ``--resume``
+continues where the time limit stopped. ``--shard I/N`` runs only the treatments ``t % N == I`` of that order, so
+that independent processes (e.g. one per GPU: ``CUDA_VISIBLE_DEVICES=I ... --out RUN --shard I/N``) share one run
+folder; ``--resume RUN`` without
 ``--shard`` then reuses the finished treatments and writes the tables. ``--resume RUN --report`` writes the tables
 and figures from the treatments as they stand, the unfinished ones from their last checkpoint (``learn --report``;
 marked ``[partial: E epochs]``), without training: e.g. before a GPU machine is given back.
@@ -60,8 +64,13 @@ BASELINES = ("roughness", "random", "dr", "levels", "plr", "accel")
 DEFAULT_ENVS = 131_072
 """``--population-envs``' default (``jaxterrain.curriculum.batch.DEFAULT_ENVS``, read here without importing JAX)."""
 PRESETS = {name: {**{k: v for k, v in p.items() if k not in ("archive", "curriculum")},
-                  "archives": dict(DEFAULT_ARCHIVES), "baseline": "roughness"}
+                  "archives": dict(DEFAULT_ARCHIVES), "baseline": "roughness", "baseline_archive": "cppn",
+                  "combined": True}
            for name, p in learn.PRESETS.items()}
+RUN_KEYS = ("archives", "baseline", "baseline_archive", "combined")
+"""The run's own keys (not a treatment's ``learn`` config): a run folder written before ``baseline_archive`` /
+``combined`` existed lacks them and resumes with their defaults, ``cppn`` and True (:func:`baseline_archive`,
+:func:`combined`)."""
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -77,8 +86,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="chunks per jitted call / checkpoint, in every treatment (learn's)")
     learn.add_fine_tuning_arguments(parser, ", in every treatment")
     parser.add_argument("--baseline", nargs="+", type=common.selector_name, default=None, metavar="NAME",
-                        help=f"the baselines run on the cppn archive, in this order: {', '.join(BASELINES)} or "
-                             f"module:object (Figure 7b; default roughness)")
+                        help=f"the baselines run on the --baseline-archive (default cppn), in this order: "
+                             f"{', '.join(BASELINES)} or module:object (Figure 7b; default roughness)")
+    parser.add_argument("--baseline-archive", default=None, metavar="NAME",
+                        help="the archive (one of --archives' names) the --baseline curricula run on (default cppn)")
+    parser.add_argument("--combined", action=argparse.BooleanOptionalAction, default=None,
+                        help="with several archives, the map curriculum on their combination (qd.combine; default "
+                             "on); --no-combined skips that treatment")
     learn.add_selector_arguments(parser)
     common.add_protocol_argument(parser)  # default: each archive's own protocol (learn's)
     parser.add_argument("--report", action="store_true",
@@ -116,11 +130,14 @@ def parse_archives(items) -> dict | None:
 
 
 def check_config(args, cfg: dict) -> None:
-    """Before a run folder: every ``--archives`` file reads as an archive a curriculum can use
+    """Before a run folder: ``--baseline-archive`` names one of ``--archives`` (:func:`check_baseline_archive`), every
+    ``--archives`` file reads as an archive a curriculum can use
     (``runner.load_archive``; read again per treatment), and every curriculum flag given belongs to the map
     curriculum or a ``--baseline`` (``learn.check_selector_flags``); :class:`~experiments.common.UsageError`."""
     from jaxterrain.curriculum import runner
 
+    check_baseline_archive(cfg, given=getattr(args, "baseline_archive", None) is not None,
+                           baseline_given=getattr(args, "baseline", None) is not None)
     for name, path in sorted(cfg["archives"].items()):
         try:
             runner.load_archive(path, cfg["descriptors"])
@@ -128,6 +145,36 @@ def check_config(args, cfg: dict) -> None:
             text = str(err).removeprefix(f"LearnConfig.archive {path}: ")
             raise common.UsageError(f"--archives {name}={path}: {text}") from None
     learn.check_selector_flags(args, ["map", *baselines(cfg)], "--baseline")
+
+
+def baseline_archive(cfg: dict) -> str:
+    """The archive name the baselines run on: ``cfg["baseline_archive"]``, ``cppn`` for a run folder written before
+    the key existed."""
+    return cfg.get("baseline_archive", "cppn")
+
+
+def combined(cfg: dict) -> bool:
+    """Whether the map curriculum runs on the archives' combination (with several archives): ``cfg["combined"]``,
+    True for a run folder written before the key existed."""
+    return bool(cfg.get("combined", True))
+
+
+def check_baseline_archive(cfg: dict, given: bool = True, baseline_given: bool = True) -> None:
+    """``--baseline-archive`` must name one of ``--archives``; :class:`~experiments.common.UsageError` listing them.
+    Where neither it nor ``--baseline`` was given and the default (``cppn``) is not among the archives, the run has no
+    baseline, as before the flag existed (e.g. ``--archives a=A b=B``: the map treatments alone)."""
+    name, names = baseline_archive(cfg), sorted(cfg["archives"])
+    if not isinstance(name, str) or not name:
+        raise common.UsageError(f"--baseline-archive must be one of --archives' names ({', '.join(names)}); got "
+                                f"{name!r}")
+    if name not in names and given:
+        raise common.UsageError(f"--baseline-archive must be one of --archives' names ({', '.join(names)}); got "
+                                f"{name!r}")
+    if name not in names and baseline_given:
+        raise common.UsageError(f"--baseline runs on --baseline-archive {name} (the default), which is not among "
+                                f"--archives' names ({', '.join(names)}); give --baseline-archive NAME")
+    if not isinstance(cfg.get("combined", True), bool):
+        raise common.UsageError(f"--combined must be true or false; got {cfg['combined']!r}")
 
 
 def treatments(cfg: dict, folder: Path) -> list[tuple[str, str, str]]:
@@ -142,16 +189,17 @@ def treatments(cfg: dict, folder: Path) -> list[tuple[str, str, str]]:
 
     archives = dict(sorted(cfg["archives"].items()))
     out = [(name, path, "map") for name, path in archives.items()]
-    if len(archives) > 1:
-        combined = folder / "combined_archive.npz"
-        if not combined.exists():
+    if len(archives) > 1 and combined(cfg):
+        both = folder / "combined_archive.npz"
+        if not both.exists():
             try:
-                A.save(combined, A.combine([runner.load_archive(p, cfg["descriptors"]) for p in archives.values()]))
+                A.save(both, A.combine([runner.load_archive(p, cfg["descriptors"]) for p in archives.values()]))
             except ValueError as err:
                 raise runner.BadInput(f"--archives: cannot combine them: {err}") from None
-        out.append(("combined", str(combined), "map"))
-    if "cppn" in archives:
-        out += [("cppn", archives["cppn"], b) for b in baselines(cfg)]
+        out.append(("combined", str(both), "map"))
+    name = baseline_archive(cfg)
+    if name in archives:
+        out += [(name, archives[name], b) for b in baselines(cfg)]
     return out
 
 
@@ -163,7 +211,7 @@ def baselines(cfg: dict) -> list[str]:
 
 def _treatment_cfg(cfg: dict, path: str, curriculum: str) -> dict:
     """A treatment's flat config (its ``config.json``): the run's, on one archive with one curriculum."""
-    keep = {k: v for k, v in cfg.items() if k not in ("archives", "baseline", "command", "preset")}
+    keep = {k: v for k, v in cfg.items() if k not in (*RUN_KEYS, "command", "preset")}
     return {**keep, "archive": path, "curriculum": curriculum, "command": "learn"}
 
 
@@ -203,7 +251,9 @@ def write_table(folder: Path, rows: list[tuple[str, dict]], trials: int) -> None
     atomic_write_text(folder / "table2.md", "\n".join(md) + "\n")
 
 
-def write_figures(folder: Path, rows: list[tuple[str, dict]], baseline: str | list[str]) -> None:
+def write_figures(folder: Path, rows: list[tuple[str, dict]], baseline: str | list[str], on: str = "cppn") -> None:
+    """Figure 7a (every map treatment) and Figure 7b (the map curriculum against the baselines ``baseline`` on the
+    archive ``on``, the run's ``--baseline-archive``), each only where it has curves to draw."""
     from jaxterrain.curriculum import outputs
 
     import matplotlib
@@ -219,10 +269,11 @@ def write_figures(folder: Path, rows: list[tuple[str, dict]], baseline: str | li
         common.save_figure(fig, folder / "figure7a.png")
     names = [baseline] if isinstance(baseline, str) else list(baseline)
     pair = {shown(label, s): outputs.summary_curve(s) for label, s in rows
-            if label == "cppn map" or label in {f"cppn {b}" for b in names}}
-    if len(pair) >= 2 and any(label == "cppn map" for label, _ in rows):
+            if label == f"{on} map" or label in {f"{on} {b}" for b in names}}
+    if len(pair) >= 2 and any(label == f"{on} map" for label, _ in rows):
         fig, ax = plt.subplots(figsize=(7, 4))
-        outputs.plot_curves(ax, pair, f"Figure 7b: CPPN, map-based vs {' / '.join(names)} curriculum")
+        title = "CPPN" if on == "cppn" else on
+        outputs.plot_curves(ax, pair, f"Figure 7b: {title}, map-based vs {' / '.join(names)} curriculum")
         fig.tight_layout()
         common.save_figure(fig, folder / "figure7b.png")
 
@@ -282,7 +333,7 @@ def write_outputs(folder: Path, cfg: dict, rows: list[tuple[str, dict]], done: l
     ``done`` folders."""
     write_table(folder, rows, int(cfg["trials"]))
     write_hardest(folder, rows)
-    write_figures(folder, rows, cfg["baseline"])
+    write_figures(folder, rows, cfg["baseline"], baseline_archive(cfg))
     write_sequences(folder, done)
 
 
@@ -353,7 +404,8 @@ def main(args) -> int:
     if args.baseline is not None and len(set(args.baseline)) < len(args.baseline):
         raise common.UsageError(f"--baseline: each of {', '.join(BASELINES)} at most once; got {' '.join(args.baseline)}")
     over = dict(archives=parse_archives(args.archives), trials=args.trials, max_epochs=args.max_epochs,
-                chunks_per_call=args.chunks_per_call, baseline=args.baseline, backend=args.backend,
+                chunks_per_call=args.chunks_per_call, baseline=args.baseline, baseline_archive=args.baseline_archive,
+                combined=args.combined, backend=args.backend,
                 **learn.fine_tuning_overrides(args), **learn.selector_overrides(args),
                 **common.protocol_overrides(args))
     mesh = common.device_mesh(args.devices)

@@ -303,6 +303,12 @@ def main(args: argparse.Namespace) -> int:
     return 0
 
 
+def _bars(point: float, low: float, high: float) -> list[list[float]]:
+    """An error bar's ``[[below], [above]]`` for matplotlib, never negative: an interval of one trial (or of equal
+    values) has ``low == point == high`` up to float rounding, which matplotlib refuses."""
+    return [[max(point - low, 0.0)], [max(high - point, 0.0)]]
+
+
 def levels_section(out: Path, gains: dict) -> str:
     """``levels.csv`` (per treatment and family: the trials' mean highest level passed, the base policy's, and the
     gain, each with its interval over trials, base keys and terrains: ``suite.levels_passed_gain``) and the section of
@@ -464,8 +470,8 @@ def beside_section(out: Path, beside: Path, here: str, names, est, pi, test, tri
     for n in common:
         e, r = est["all"][n]["iqm"], iv[n]
         x, y = num(r, "iqm"), e.point
-        ax.errorbar(x, y, xerr=[[x - num(r, "iqm_low")], [num(r, "iqm_high") - x]],
-                    yerr=[[y - e.low], [e.high - y]], fmt="o", capsize=2, color="grey" if n == BASE else None)
+        ax.errorbar(x, y, xerr=_bars(x, num(r, "iqm_low"), num(r, "iqm_high")),
+                    yerr=_bars(y, e.low, e.high), fmt="o", capsize=2, color="grey" if n == BASE else None)
         ax.annotate(n, (x, y), fontsize=6, xytext=(3, 3), textcoords="offset points")
     ax.set_xlabel(f"IQM on {there} (95 % CI over trials)")
     ax.set_ylabel(f"IQM on {here} (95 % CI over trials)")
@@ -575,7 +581,7 @@ def figures(out: Path, names, families, est, strat, pi, ts, scores) -> None:
     for i, n in enumerate(names):
         for iv, dy, style in ((est["all"][n]["iqm"], 0.0, dict(fmt="o", capsize=3)),
                               (strat["all"][n]["iqm"], 0.25, dict(fmt="none", capsize=2, lw=0.8))):
-            ax.errorbar(iv.point, i + dy, xerr=[[iv.point - iv.low], [iv.high - iv.point]],
+            ax.errorbar(iv.point, i + dy, xerr=_bars(iv.point, iv.low, iv.high),
                         color="grey" if n == names[-1] else ("C0" if dy == 0 else "C1"), **style)
     ax.axvline(est["all"][names[-1]]["iqm"].point, color="grey", lw=0.8, ls="--")
     ax.set_yticks(range(len(names)), names, fontsize=8)
@@ -601,7 +607,7 @@ def figures(out: Path, names, families, est, strat, pi, ts, scores) -> None:
     ax = fig.subplots()
     for i, n in enumerate(names[:-1]):
         iv = pi[f"{n} > {names[-1]}"]
-        ax.errorbar(iv.point, i, xerr=[[iv.point - iv.low], [iv.high - iv.point]], fmt="o", capsize=3)
+        ax.errorbar(iv.point, i, xerr=_bars(iv.point, iv.low, iv.high), fmt="o", capsize=3)
     ax.axvline(0.5, color="grey", lw=0.8, ls="--")
     ax.set_yticks(range(len(names) - 1), names[:-1], fontsize=8)
     ax.set_xlabel("P(a trial's walker beats the base policy on a cell) (95 % CI over trials)")

@@ -116,13 +116,20 @@ def walk_key(seed: int, index: int = 0) -> jax.Array:
     return key if index == 0 else jax.random.fold_in(key, int(index))
 
 
-def base_jobs(robot: str, keys: int) -> list[Job]:
+def base_jobs(robot: str, keys: int, observation: str = "blind") -> list[Job]:
     """``keys`` walks of ``robot``'s shipped base policy, keys 0 .. keys - 1 (names ``base:<robot>``,
-    ``base:<robot>:key1``, ...; group ``base:<robot>``). ValueError for keys < 1 or a robot without a base policy."""
+    ``base:<robot>:key1``, ...; group ``base:<robot>``). ``observation="perceptive"``: its shipped perceptive twin
+    (``rl.base_policy_dir(robot, "perceptive")``, walked as a policy folder), names ``base:<robot>:perceptive``,
+    ``base:<robot>:perceptive:key1``, ...; group ``base:<robot>:perceptive``. ValueError for keys < 1, an unknown
+    observation set or a robot without that base policy."""
     if isinstance(keys, bool) or not isinstance(keys, int) or keys < 1:
         raise ValueError(f"keys must be an integer >= 1; got {keys!r}")
-    difficulty.robot_base_policy(robot)  # ValueError naming the robot
-    return [Job(f"base:{robot}" + (f":key{k}" if k else ""), robot, None, k, f"base:{robot}") for k in range(keys)]
+    difficulty.robot_base_policy(robot, observation)  # ValueError naming the robot / observation set
+    if observation == "blind":
+        return [Job(f"base:{robot}" + (f":key{k}" if k else ""), robot, None, k, f"base:{robot}")
+                for k in range(keys)]
+    folder, group = str(rl.base_policy_dir(robot, observation)), f"base:{robot}:{observation}"
+    return [Job(group + (f":key{k}" if k else ""), robot, folder, k, group) for k in range(keys)]
 
 
 def _trial(path: Path) -> int:

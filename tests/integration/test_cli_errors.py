@@ -202,6 +202,13 @@ CASES = [
     (["evaluate", "--randomise", "legged-gym", "--videos"], "--videos draws the walks under the nominal physics"),
     (["perceptive-policy"], "give --out FOLDER or --export-assets"),
     (["perceptive-policy", "--out", "x", "--std-floor", "0"], "--std-floor must be a finite number > 0"),
+    # issue 64 item 4: which archive the baselines run on (checked before any archive is read)
+    (["curriculum", "--baseline-archive", "nope"], "--baseline-archive must be one of --archives' names (cppn, "
+                                                   "diamond_square, gan, perlin, worley); got 'nope'"),
+    (["curriculum", "--archives", "steps=A.npz", "mixed=A.npz", "--baseline-archive", "cppn"],
+     "--baseline-archive must be one of --archives' names (mixed, steps); got 'cppn'"),
+    (["curriculum", "--archives", "steps=A.npz", "mixed=A.npz", "--baseline", "dr"],
+     "--baseline runs on --baseline-archive cppn (the default), which is not among --archives' names (mixed, steps)"),
     (["perceptive-policy", "--out", "x", "--robot", "dog"], "--robot: robot must be one of humanoid, ant, got 'dog'"),
     (["perceptive-policy", "--out", "x", "--from", str(ROOT / "jaxterrain" / "assets" / "base_policy_perceptive")],
      "the policy is already perceptive"),

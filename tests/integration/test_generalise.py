@@ -294,3 +294,16 @@ def test_generalise_reports_the_levels_each_treatment_passes_beyond_the_base_pol
     assert float(rows[("sitter", "gaps")]["gain"]) == 0.0
     md = (run / "generalisation" / "generalisation.md").read_text()
     assert "## Levels passed" in md and "| gaps | -1.0 | **+3.0 [+3.0, +3.0]** | +0.0 [+0.0, +0.0] |" in md
+
+
+
+def test_generalise_draws_a_treatment_of_one_trial(tmp_path):
+    """One trial (Experiment 4's CPU check, ``tests/data/generalise_one_trial``: its smoke walker and the base
+    policy's two keys on a 96 px v2 of flat and boxes, as ``exp4/run.py`` wrote them): an interval over one trial has
+    its ends at the point up to float rounding, which matplotlib's error bars refused as negative lengths."""
+    from pathlib import Path
+
+    data = Path(__file__).resolve().parents[1] / "data" / "generalise_one_trial"
+    assert cli("generalise", f"mixed-map={data / 'mixed-map'}", "--heldout", "heldout_v2", "--base",
+               str(data / "base"), "--reps", "30", "--out", str(tmp_path / "g")) == 0
+    assert (tmp_path / "g" / "iqm.png").stat().st_size > 0 and (tmp_path / "g" / "families.png").stat().st_size > 0

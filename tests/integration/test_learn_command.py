@@ -272,6 +272,26 @@ def test_curriculum_shards_share_one_run_folder_and_resume_writes_the_tables(tmp
     assert not (tmp_path / "twice").exists()
 
 
+def test_curriculum_runs_the_baselines_on_the_baseline_archive_and_skips_the_combined_one(tmp_path):
+    """``--baseline-archive NAME`` puts the baselines on that archive, ``--no-combined`` drops the combined map
+    treatment (Experiment 4's plan: nothing is read or written for it); a config.json written before the keys existed
+    plans what it did (baselines on cppn, the combined archive), so old run folders resume unchanged."""
+    from experiments import curriculum as exp
+
+    new = {"archives": {"steps": "S.npz", "mixed": "M.npz"}, "descriptors": ["roughness", "tpi"],
+           "baseline": ["dr", "plr", "levels"], "baseline_archive": "mixed", "combined": False}
+    assert [(n, p, c) for n, p, c in exp.treatments(new, tmp_path)] == [
+        ("mixed", "M.npz", "map"), ("steps", "S.npz", "map"), ("mixed", "M.npz", "dr"), ("mixed", "M.npz", "plr"),
+        ("mixed", "M.npz", "levels")]
+    assert not (tmp_path / "combined_archive.npz").exists()
+    old = {"archives": {"cppn": "C.npz"}, "descriptors": ["roughness", "tpi"], "baseline": "roughness"}
+    assert exp.baseline_archive(old) == "cppn" and exp.combined(old) is True
+    assert exp.treatments(old, tmp_path) == [("cppn", "C.npz", "map"), ("cppn", "C.npz", "roughness")]
+    assert exp.treatments({**old, "archives": {"a": "A.npz"}}, tmp_path) == [("a", "A.npz", "map")]  # no cppn: as before
+    assert "baseline_archive" not in exp._treatment_cfg({**new, "command": "curriculum"}, "M.npz", "dr")
+    assert exp.PRESETS["gpu-short"]["baseline_archive"] == "cppn" and exp.PRESETS["smoke"]["combined"] is True
+
+
 def test_learn_writes_every_trials_walker_as_a_loadable_policy(tmp_path, learn_smoke):
     """``learn`` ends by writing ``policies/trial_K/``: ``rl.load_policy`` reads each, its parameters and normaliser
     are trial K's in the run's last checkpoint, they moved away from the base policy (PPO trained them), and

@@ -190,3 +190,21 @@ def test_the_shipped_experiments_hold_170_walkers():
         for t in batch.treatment_folders(RESULTS / folder):
             found[str(t.relative_to(RESULTS))] = len(list((t / "policies").glob("trial_*")))
     assert sum(found.values()) == 170 and set(found.values()) == {10} and len(found) == 17
+
+
+def test_a_robots_perceptive_base_policy_walks_as_its_own_group():
+    """``base_jobs(robot, keys, "perceptive")``: the shipped perceptive twin as a policy folder, keys 0 .. keys - 1,
+    in a group of its own beside the blind one's (whose names are unchanged); an unknown set is one ValueError."""
+    from jaxterrain import rl
+
+    jobs = batch.base_jobs("ant", 2, "perceptive")
+    folder = str(rl.base_policy_dir("ant", "perceptive"))
+    assert jobs == [batch.Job("base:ant:perceptive", "ant", folder, 0, "base:ant:perceptive"),
+                    batch.Job("base:ant:perceptive:key1", "ant", folder, 1, "base:ant:perceptive")]
+    assert [j.name for j in batch.base_jobs("humanoid", 2)] == ["base:humanoid", "base:humanoid:key1"]
+    from jaxterrain.difficulty import policy_observation
+
+    assert policy_observation(rl.load_policy(jobs[0].policy))["observation"] == "perceptive"
+    assert batch.base_jobs("humanoid", 1, "perceptive")[0].policy == str(rl.base_policy_dir("humanoid", "perceptive"))
+    with pytest.raises(ValueError, match="observation must be one of"):
+        batch.base_jobs("humanoid", 1, "sonar")

@@ -11,7 +11,8 @@ robot's walkers on ``suite.load("v2", robot=...)``. The protocol is the shipped 
 (``heldout/config.json``: ``evaluate --preset gpu --no-repeat --backend warp --slots 16384``; HEADINGS, 80 walks a
 terrain, best 5 per heading, 4 headings, seed 0): every walker walks with the key ``evaluate`` gives every policy,
 the base policy with keys 0..9, so each result is the row ``evaluate --suite v2 --robot R --keys 10 --policy ...``
-would write.
+would write. ``--observations blind perceptive`` walks each robot's perceptive base policy too (group
+``base:<robot>:perceptive``; Experiment 4, ``docs/results/exp4/run.py``, which calls this script).
 
 The logic is :mod:`jaxterrain.suite.batch`'s: each walk's fitness is written to ``--work`` (default
 ``runs/v2eval``) the moment it ends, atomically; a rerun skips what is there; under ``--time-limit MIN`` no walk
@@ -74,6 +75,9 @@ def parser() -> argparse.ArgumentParser:
     p.add_argument("--robots", nargs="*", default=None,
                    help="robots whose base policy walks with --keys keys first (default: the walkers' robots)")
     p.add_argument("--keys", type=int, default=10, help="evaluation keys of each base policy (default 10)")
+    p.add_argument("--observations", nargs="+", choices=("blind", "perceptive"), default=["blind"],
+                   help="the base policies walked per robot: its blind one (default) and / or its perceptive twin "
+                        "(group base:<robot>:perceptive, written to BASE_OUT/<robot>_perceptive/)")
     p.add_argument("--heldout-name", default="heldout_v2",
                    help="a treatment's evaluation folder, inside it (default heldout_v2)")
     p.add_argument("--base-out", type=Path, default=Path(BASE_OUT),
@@ -133,8 +137,11 @@ def groups(jobs) -> dict[str, list]:
 
 
 def group_folder(group: str, args) -> Path:
-    """Where a group's evaluation goes: ``BASE_OUT/<robot>`` for ``base:<robot>``, else ``<treatment>/<name>``."""
-    return args.base_out / group.split(":", 1)[1] if group.startswith("base:") else Path(group) / args.heldout_name
+    """Where a group's evaluation goes: ``BASE_OUT/<robot>`` for ``base:<robot>`` (``BASE_OUT/<robot>_perceptive``
+    for ``base:<robot>:perceptive``), else ``<treatment>/<name>``."""
+    if group.startswith("base:"):
+        return args.base_out / "_".join(group.split(":")[1:])
+    return Path(group) / args.heldout_name
 
 
 def written(folder: Path, names) -> bool:
@@ -237,7 +244,7 @@ def main(argv=None) -> int:
     robots = args.robots if args.robots is not None else sorted(
         {j.robot for j in walkers}, key=lambda r: (ROBOT_ORDER.index(r) if r in ROBOT_ORDER else 99, r))
     try:
-        bases = [j for r in robots for j in batch.base_jobs(r, args.keys)]
+        bases = [j for r in robots for o in dict.fromkeys(args.observations) for j in batch.base_jobs(r, args.keys, o)]
     except ValueError as err:
         p.error(f"--robots: {err}")
     jobs = bases + walkers

@@ -1,0 +1,745 @@
+"""Experiment 4 (issue 64 item 4): do evolved curricula teach climbing? Every stage resumable, each command <= 10 min.
+
+    PYTHONPATH=. python docs/results/exp4/run.py --plan                                  # CPU: done / predicted minutes
+    PYTHONPATH=. python docs/results/exp4/run.py archive mixed --time-limit 8 --pack $OUT/exp4.tar.gz     # one H200
+    PYTHONPATH=. python docs/results/exp4/run.py train humanoid blind --time-limit 8 --pack $OUT/exp4.tar.gz
+    PYTHONPATH=. python docs/results/exp4/run.py train humanoid perceptive --time-limit 8 --pack $OUT/exp4.tar.gz
+    PYTHONPATH=. python docs/results/exp4/run.py archive steps --robot ant --time-limit 8 ...     # the ant's archives
+    PYTHONPATH=. python docs/results/exp4/run.py train ant --ant perceptive/mixed-map blind/steps-map --time-limit 8 ...
+    PYTHONPATH=. python docs/results/exp4/run.py evaluate --time-limit 8 --pack $OUT/exp4.tar.gz   # v2, then v1
+    PYTHONPATH=. python docs/results/exp4/run.py write                                   # CPU: docs/results/exp4/
+
+Call a stage again (the same command) until it prints ``done``: each resumes what ``--out`` holds (default
+``runs/exp4``). On a fresh machine, unpack the last ``--pack`` tar in the repository root first (``tar xzf FILE``).
+
+Stages (:data:`STAGES`):
+
+- ``archive GEN [--robot R]`` (GEN: ``steps`` or ``mixed``): ``evolve --preset P --generator GEN`` into
+  ``OUT/archive/<robot>-<gen>/`` (``--resume`` when there), with the flags of :data:`ARCHIVE_FLAGS` at ``gpu-short``
+  (those docs/results/mixed_archive.md names for the mixed archive) and ``--robot ant`` for the ant. The
+  humanoid's ``steps`` archive at ``gpu-short`` ships (``docs/results/steps_gpushort/archive.npz``): nothing runs.
+- ``train humanoid OBS`` (OBS: ``blind`` / ``perceptive``): ONE ``curriculum`` run, ``OUT/train/humanoid-OBS/``,
+  its five treatments (:data:`TREATMENTS`) batched in one population: the map curriculum on the steps archive and on
+  the mixed archive, domain randomisation, PLR and terrain levels on the mixed archive (``--archives steps=.. mixed=..
+  --baseline dr plr levels --baseline-archive mixed --no-combined --observation OBS``), ``--trials`` (10) trials each.
+- ``train ant --ant OBS/TREATMENT OBS/TREATMENT``: the two treatments chosen after looking at the humanoid's
+  results, each a ``learn --robot ant`` run on the ant's own archive (``archive GEN --robot ant`` first; an archive's
+  fitness is one robot's), ``OUT/train/ant-OBS/TREATMENT/``. The choice is saved in ``OUT/ant.json``; later stages
+  read it.
+- ``evaluate``: every walker of the train runs and each robot's shipped base policies, blind and perceptive, with
+  ``--keys`` (10) evaluation keys, on suite v2 and then v1 (``suite.load(V, robot=...)``), through
+  ``docs/results/suite_v2/reevaluate.py`` (:mod:`jaxterrain.suite.batch`: one result file per walk, written when it
+  ends; a rerun skips what is there); ``OUT/eval/<suite>/`` are the stores. ``--backend jax|warp`` (default jax:
+  the figures below are MJX-JAX's on v2).
+- ``write`` (CPU): each store's groups as evaluation folders (``reevaluate.py --write``: ``heldout_<suite>/`` in
+  each treatment, the base policies in ``OUT/base_<suite>/<robot>[_perceptive]/``), then ``generalise`` per robot,
+  observation set and suite against that observation set's base policy (``--base``: its 10 keys), with levels passed
+  and trial-level intervals (``levels.csv``, ``intervals.csv``, ``generalisation.md``), into
+  ``--results/<robot>-<obs>/<suite>/`` (default ``docs/results/exp4/``), v1 beside v2 (``--beside``).
+- ``--plan``: what is done and the predicted device minutes of the rest (:func:`predict`), from the measured rates of
+  :data:`RATES` (or the walks a store recorded), each figure marked measured or assumed.
+
+``--pack FILE.tar.gz``: after the stage, ONE gzipped tar of what the next command needs (:func:`pack_members`): the
+archives without their ``checkpoint/`` folders once finished, every train run without the checkpoints of its
+finished treatments (an unfinished one keeps ``checkpoint.npz``, needed to resume on another machine; the tar's
+size is printed: the device returns at most 64 MiB a call, so resume a long ``train`` on the same warm machine), the
+evaluation stores. ``--preset smoke`` with the tiny suite flags (``--size --seeds --families --generators
+--attempts --best --headings --slots``, as reevaluate.py's) runs every stage on a CPU
+(``tests/integration/test_exp4_run.py``).
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib.util
+import json
+import math
+import os
+import re
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+STARTED = time.perf_counter()
+
+ROOT = Path(__file__).resolve().parents[3]
+STAGES = ("archive", "train", "evaluate", "write")
+GENERATORS = ("steps", "mixed")
+ROBOTS = ("humanoid", "ant")
+OBSERVATIONS = ("blind", "perceptive")
+SUITES = ("v2", "v1")
+TREATMENTS = ("steps-map", "mixed-map", "mixed-dr", "mixed-plr", "mixed-levels")
+"""The humanoid's treatments, ``<archive>-<curriculum>`` (their folder names in a ``curriculum`` run)."""
+BASELINES = ("dr", "plr", "levels")
+"""The field's curricula, run on the mixed archive."""
+SHIPPED_STEPS = "docs/results/steps_gpushort/archive.npz"
+"""The humanoid's ``steps`` archive at ``gpu-short`` (evolve --preset gpu-short --generator steps, one H200,
+2026-11-29)."""
+ARCHIVE_FLAGS = {"mixed": ["--initial-population", "600", "--batch-size", "6000", "--fresh", "100",
+                           "--rollout-slots", "16384"], "steps": []}
+"""``evolve``'s flags beyond ``--preset gpu-short --generator GEN`` (docs/results/mixed_archive.md's command); only
+at ``gpu-short``."""
+TRIALS = 10
+KEYS = 10
+
+RATES = {
+    "archive_steps_s": (217.0, "measured: evolve --preset gpu-short --generator steps, one H200, MJX-JAX, 2026-11-29 "
+                               "(docs/results/steps_gpushort)"),
+    "archive_mixed_s": (217.0 * 30_600 / 10_100, "assumed: the steps archive's 217 s scaled by terrains walked "
+                                                 "(30 600 / 10 100); not measured"),
+    "archive_ant_factor": (1.0, "assumed: the ant's archive as long as the humanoid's; not measured"),
+    "treatment_s_warp": ((388.0, 476.0), "measured: a gpu-short treatment alone, 388-476 s, MuJoCo Warp, one H200, "
+                                         "Experiment 3, 2026-11-29"),
+    "treatment_s_jax": (780.0, "measured: learn --preset gpu-short --backend jax, 10.4 s a chunk x 75 chunks, one "
+                               "H200, 2026-11-29 (/work/shared/NOTES.md)"),
+    "population_factor": (1.0, "assumed: a population of k treatments takes k times one alone (no batching gain); "
+                               "not measured"),
+    "v2_first_s": (67.0, "measured: the humanoid's first walk of suite v2 (compile included), MJX-JAX, one H200, "
+                         "2026-11-29"),
+    "v2_walker_s_jax": ((25.0, 35.0), "measured: the humanoid's walk of suite v2 (701 terrains, 80 walks each), "
+                                      "25-35 s a walker, MJX-JAX, one H200, 2026-11-29"),
+    "v1_first_s": (67.0, "assumed: as v2's first walk; not measured"),
+    "v2_walker_s_warp": ((7.0 * 701 / 372, 7.0 * 701 / 372), "assumed: v1's Warp rate x 701 / 372 terrains; not "
+                                                             "measured"),
+    "v1_walker_s_warp": ((7.0, 7.0), "measured: suite v1, ~7 s a walker, MuJoCo Warp, one H200, 2026-11-29"),
+    "v1_walker_s_jax": ((25.0 * 372 / 701, 35.0 * 372 / 701), "assumed: v2's MJX-JAX rate x 372 / 701 terrains; not "
+                                                             "measured"),
+    "compile_s": ((30.0, 120.0), "assumed: the compile each train command repeats (curriculum's printed estimate "
+                                 "for a GPU, 30 s-2 min), added once per 8-minute command; not measured"),
+    "build_s": (60.0, "assumed: a suite's build (jaxterrain.suite.batch.BUILD_S); not measured here"),
+    "ant_eval_factor": (1.0, "assumed: the ant's walks as long as the humanoid's; not measured"),
+}
+"""The figures ``--plan`` predicts from: ``name: (value or (low, high), where it comes from)``."""
+
+
+def parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0], allow_abbrev=False)
+    p.add_argument("stage", nargs="*", metavar="STAGE",
+                   help="archive GEN | train ROBOT [OBS] | evaluate | write (none with --plan)")
+    p.add_argument("--out", type=Path, default=Path("runs/exp4"), help="the resumable results (default runs/exp4)")
+    p.add_argument("--results", type=Path, default=Path("docs/results/exp4"),
+                   help="write: where the generalise folders go (default docs/results/exp4)")
+    p.add_argument("--time-limit", type=float, default=None, metavar="MIN",
+                   help="stop (resumably) so that the command ends within about MIN minutes")
+    p.add_argument("--pack", type=Path, default=None, metavar="FILE",
+                   help="afterwards, one gzipped tar (.tar.gz) of what the next command needs")
+    p.add_argument("--plan", action="store_true", help="print what is done and the predicted device minutes")
+    p.add_argument("--robot", choices=ROBOTS, default="humanoid", help="archive: whose archive (default humanoid)")
+    p.add_argument("--ant", nargs="+", default=None, metavar="OBS/TREATMENT",
+                   help=f"train ant: the two best treatments (one for a check; OBS: blind, perceptive; TREATMENT: "
+                        f"{', '.join(TREATMENTS)})")
+    p.add_argument("--treatments", nargs="+", choices=TREATMENTS, default=None, metavar="TREATMENT",
+                   help=f"train humanoid: a subset of the treatments (default all: {', '.join(TREATMENTS)}; a "
+                        f"mixed-* baseline needs mixed-map, which its curriculum run makes too); saved in "
+                        f"OUT/humanoid.json at the first train")
+    p.add_argument("--preset", choices=("gpu-short", "smoke"), default="gpu-short",
+                   help="evolve / curriculum / learn preset (default gpu-short; smoke: a CPU check)")
+    p.add_argument("--trials", type=int, default=TRIALS, help=f"trials of each treatment (default {TRIALS})")
+    p.add_argument("--backend", choices=("jax", "warp"), default=None,
+                   help="MJX backend of train (default the preset's) and evaluate (default jax)")
+    p.add_argument("--archive-size", type=int, default=None,
+                   help="archive: evolve's --size (a CPU check; default the preset's)")
+    p.add_argument("--keys", type=int, default=KEYS, help=f"evaluation keys of each base policy (default {KEYS})")
+    p.add_argument("--suites", nargs="+", choices=SUITES, default=list(SUITES),
+                   help="evaluate / write: the suites (default v2 v1, in that order)")
+    for flag, kind, what in (("--size", int, "terrain side"), ("--seeds", int, "terrains per level"),
+                             ("--samples", int, "generator samples"), ("--attempts", int, "walks per terrain"),
+                             ("--best", int, "best walks averaged per heading"), ("--headings", int, "headings"),
+                             ("--slots", int, "rollout pool")):
+        p.add_argument(flag, type=kind, default=None, help=f"evaluate: reevaluate.py's {flag} ({what})")
+    p.add_argument("--families", nargs="+", default=None, help="evaluate: reevaluate.py's --families")
+    p.add_argument("--generators", nargs="*", default=None, help="evaluate: reevaluate.py's --generators")
+    return p
+
+
+def check(p: argparse.ArgumentParser, args) -> None:
+    """Every flag and the stage's words, in one line naming the flag (exit 2), before anything runs; sets
+    ``args.what`` (the stage's words as a tuple) and ``args.ant_pairs`` (``[(obs, treatment)]``)."""
+    words = tuple(args.stage)
+    if args.plan and words:
+        p.error(f"--plan runs no stage; got {' '.join(words)}")
+    if not args.plan and not words:
+        p.error(f"give a stage ({', '.join(STAGES)}) or --plan")
+    if words and words[0] not in STAGES:
+        p.error(f"STAGE must be one of {', '.join(STAGES)}; got {words[0]!r}")
+    if words and words[0] == "archive" and (len(words) != 2 or words[1] not in GENERATORS):
+        p.error(f"archive takes one generator: {' or '.join(GENERATORS)}; got {' '.join(words[1:]) or 'none'}")
+    if words and words[0] == "train":
+        if len(words) < 2 or words[1] not in ROBOTS:
+            p.error(f"train takes a robot: {' or '.join(ROBOTS)}; got {' '.join(words[1:]) or 'none'}")
+        if words[1] == "humanoid" and (len(words) != 3 or words[2] not in OBSERVATIONS):
+            p.error(f"train humanoid takes an observation set: {' or '.join(OBSERVATIONS)}; got "
+                    f"{' '.join(words[2:]) or 'none'}")
+        if words[1] == "ant" and len(words) != 2:
+            p.error(f"train ant takes its treatments from --ant OBS/TREATMENT ...; got {' '.join(words[2:])}")
+        if words[1] == "ant" and args.ant is None:
+            p.error("train ant needs --ant OBS/TREATMENT OBS/TREATMENT (the two chosen after the humanoid's results)")
+    if words and words[0] in ("evaluate", "write") and len(words) != 1:
+        p.error(f"{words[0]} takes no further word; got {' '.join(words[1:])}")
+    if args.robot != "humanoid" and not (words and words[0] == "archive"):
+        p.error("--robot chooses whose archive the archive stage evolves; train takes the robot as a word")
+    if args.ant is not None and not (words and words[:2] == ("train", "ant")):
+        p.error("--ant chooses the ant's treatments of 'train ant' (later stages read OUT/ant.json)")
+    args.ant_pairs = None if args.ant is None else parse_ant(p, args.ant)
+    if args.treatments is not None:
+        if not (words and words[:2] == ("train", "humanoid")):
+            p.error("--treatments chooses the humanoid's treatments of 'train humanoid' (later stages read "
+                    "OUT/humanoid.json)")
+        check_treatments(p, args.treatments)
+    if args.time_limit is not None and not (math.isfinite(args.time_limit) and args.time_limit > 0):
+        p.error(f"--time-limit must be a finite number of minutes > 0; got {args.time_limit}")
+    if args.pack is not None and not args.pack.name.endswith((".tar.gz", ".tgz")):
+        p.error(f"--pack must name a .tar.gz or .tgz file; got {args.pack}")
+    if args.pack is not None and args.plan:
+        p.error("--pack packs after a stage; --plan runs none")
+    if args.pack is not None and not args.out.resolve().is_relative_to(Path.cwd().resolve()):
+        p.error(f"--pack stores --out relative to the current folder (unpack it there); --out {args.out} is outside it")
+    for name, lo in (("trials", 1), ("keys", 1), ("archive_size", 32), ("size", 32), ("seeds", 1), ("samples", 1),
+                     ("attempts", 1), ("best", 1), ("slots", 0)):
+        v = getattr(args, name)
+        if v is not None and v < lo:
+            p.error(f"--{name.replace('_', '-')} must be an integer >= {lo}; got {v}")
+    if args.headings is not None and args.headings not in (1, 2, 4):
+        p.error(f"--headings must be one of 1, 2, 4; got {args.headings}")
+    if args.out.exists() and not args.out.is_dir():
+        p.error(f"--out {args.out} is a file")
+    args.what = words
+
+
+def parse_ant(p: argparse.ArgumentParser, items: list[str]) -> list[tuple[str, str]]:
+    """``--ant``'s ``OBS/TREATMENT`` items as ``[(obs, treatment)]``: exactly two, distinct, each known."""
+    pairs = []
+    for item in items:
+        obs, sep, name = item.partition("/")
+        if not sep or obs not in OBSERVATIONS or name not in TREATMENTS:
+            p.error(f"--ant must be OBS/TREATMENT with OBS one of {', '.join(OBSERVATIONS)} and TREATMENT one of "
+                    f"{', '.join(TREATMENTS)}; got {item!r}")
+        pairs.append((obs, name))
+    if len(pairs) > 2 or len(set(pairs)) != len(pairs):
+        p.error(f"--ant takes the two best treatments (one for a check), each OBS/TREATMENT once; got "
+                f"{' '.join(items)}")
+    return pairs
+
+
+def check_treatments(p: argparse.ArgumentParser, names: list[str]) -> None:
+    """``--treatments``: each once; a baseline on the mixed archive only with ``mixed-map`` (``curriculum`` runs the
+    map curriculum on every archive it is given)."""
+    if len(set(names)) != len(names):
+        p.error(f"--treatments: each treatment once; got {' '.join(names)}")
+    if any(n in ("mixed-dr", "mixed-plr", "mixed-levels") for n in names) and "mixed-map" not in names:
+        p.error("--treatments: a mixed-* baseline needs mixed-map (curriculum runs the map curriculum on every archive "
+                "it is given)")
+
+
+def humanoid_choice(out: Path) -> list[str]:
+    """The humanoid's treatments: ``OUT/humanoid.json``'s (a subset given by ``--treatments``) or all of them."""
+    path = out / "humanoid.json"
+    return list(TREATMENTS) if not path.is_file() else list(json.loads(path.read_text())["treatments"])
+
+
+# ---------------------------------------------------------------------------------------------------------------
+# where things are
+# ---------------------------------------------------------------------------------------------------------------
+def archive_folder(out: Path, robot: str, gen: str) -> Path:
+    return out / "archive" / f"{robot}-{gen}"
+
+
+def archive_path(out: Path, robot: str, gen: str, preset: str) -> Path:
+    """The archive a robot's curricula read: the shipped steps archive for the humanoid at gpu-short, else the
+    ``archive`` stage's."""
+    if robot == "humanoid" and gen == "steps" and preset == "gpu-short":
+        return ROOT / SHIPPED_STEPS
+    return archive_folder(out, robot, gen) / "archive.npz"
+
+
+def archive_done(out: Path, robot: str, gen: str, preset: str) -> bool:
+    path = archive_path(out, robot, gen, preset)
+    if path == ROOT / SHIPPED_STEPS:
+        return path.is_file()
+    return path.is_file() and (archive_folder(out, robot, gen) / "done.json").is_file()
+
+
+def train_folder(out: Path, robot: str, obs: str) -> Path:
+    return out / "train" / f"{robot}-{obs}"
+
+
+def treatment_done(folder: Path) -> bool:
+    """A treatment (a learn run, or a curriculum run's subfolder) has finished: its ``summary.json`` and walkers."""
+    return (folder / "summary.json").is_file() and (folder / "policies").is_dir()
+
+
+def ant_choice(out: Path) -> list[tuple[str, str]] | None:
+    path = out / "ant.json"
+    return None if not path.is_file() else [tuple(x) for x in json.loads(path.read_text())["treatments"]]
+
+
+def runs(out: Path) -> list[tuple[str, str, Path, list[str]]]:
+    """Every train run planned: ``(robot, obs, folder, [treatments])``; the ant's once chosen (``OUT/ant.json``)."""
+    plan = [("humanoid", obs, train_folder(out, "humanoid", obs), humanoid_choice(out)) for obs in OBSERVATIONS]
+    for obs in OBSERVATIONS:
+        names = [t for o, t in ant_choice(out) or [] if o == obs]
+        if names:
+            plan.append(("ant", obs, train_folder(out, "ant", obs), names))
+    return plan
+
+
+def curriculum_argv(args, obs: str, names: list[str] = TREATMENTS) -> list[str]:
+    """The humanoid's ``curriculum`` command of observation set ``obs`` (a fresh run) for the treatments ``names``
+    (default all: ``--archives steps=.. mixed=.. --baseline dr plr levels --baseline-archive mixed --no-combined``)."""
+    out = args.out
+    gens = [g for g in GENERATORS if f"{g}-map" in names]
+    argv = ["curriculum", "--preset", args.preset, "--archives",
+            *[f"{g}={archive_path(out, 'humanoid', g, args.preset)}" for g in gens]]
+    baselines = [b for b in BASELINES if f"mixed-{b}" in names]
+    argv += ["--baseline", *baselines, "--baseline-archive", "mixed"] if baselines else []
+    argv += ["--no-combined"] if len(gens) > 1 else []
+    argv += ["--observation", obs, "--trials", str(args.trials), "--out", str(train_folder(out, "humanoid", obs))]
+    return argv + (["--backend", args.backend] if args.backend else [])
+
+
+def learn_argv(args, obs: str, treatment: str) -> list[str]:
+    """The ant's ``learn`` command of one chosen treatment (a fresh run)."""
+    gen, curriculum = treatment.split("-", 1)
+    argv = ["learn", "--robot", "ant", "--preset", args.preset, "--archive",
+            str(archive_path(args.out, "ant", gen, args.preset)), "--curriculum", curriculum, "--observation", obs,
+            "--trials", str(args.trials), "--out", str(train_folder(args.out, "ant", obs) / treatment)]
+    return argv + (["--backend", args.backend] if args.backend else [])
+
+
+def archive_argv(args, gen: str, robot: str) -> list[str]:
+    argv = ["evolve", "--preset", args.preset, "--generator", gen, "--out", str(archive_folder(args.out, robot, gen))]
+    argv += ARCHIVE_FLAGS[gen] if args.preset == "gpu-short" else []
+    if robot != "humanoid":
+        argv += ["--robot", robot] + (["--fitness", "difficulty"] if args.preset != "gpu-short" else [])
+    return argv + (["--size", str(args.archive_size)] if args.archive_size else [])
+
+
+# ---------------------------------------------------------------------------------------------------------------
+# the stages
+# ---------------------------------------------------------------------------------------------------------------
+def left_minutes(args) -> float | None:
+    return None if args.time_limit is None else args.time_limit - (time.perf_counter() - STARTED) / 60.0
+
+
+def cli(argv: list[str], args) -> int:
+    """``python -m experiments ARGV`` (a child process, from the repository root) under what is left of
+    ``--time-limit``; its output goes through. Returns its exit status (3: the time limit stopped it)."""
+    left = left_minutes(args)
+    if left is not None:
+        if left <= 0.05:
+            print(f"time limit: no time left for {' '.join(argv[:1])}", flush=True)
+            return 3
+        argv = [*argv, "--time-limit", f"{left:.3f}"]
+    print("+ python -m experiments " + " ".join(argv), flush=True)
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(ROOT), os.environ.get("PYTHONPATH", "")]).rstrip(
+        os.pathsep), "PYTHONUNBUFFERED": "1"}
+    proc = subprocess.Popen([sys.executable, "-m", "experiments", *argv], cwd=Path.cwd(), env=env,
+                            stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    for line in proc.stdout:
+        sys.stdout.write(line)
+    return proc.wait()
+
+
+def stage_archive(args, gen: str, robot: str) -> int:
+    folder = archive_folder(args.out, robot, gen)
+    if archive_done(args.out, robot, gen, args.preset):
+        print(f"archive {robot} {gen}: done ({archive_path(args.out, robot, gen, args.preset)})", flush=True)
+        return 0
+    resume = (folder / "config.json").is_file()
+    code = cli(["evolve", "--resume", str(folder)] if resume else archive_argv(args, gen, robot), args)
+    if code == 0:
+        from jaxterrain.runtime.io import atomic_write_text
+
+        atomic_write_text(folder / "done.json", json.dumps({"seconds_this_command": round(
+            time.perf_counter() - STARTED, 1)}) + "\n")
+        print(f"archive {robot} {gen}: done ({folder / 'archive.npz'})", flush=True)
+    return code
+
+
+def stage_train(args, robot: str, obs: str | None) -> int:
+    if robot == "humanoid":
+        saved = (args.out / "humanoid.json").is_file()
+        names = humanoid_choice(args.out) if saved or args.treatments is None else list(args.treatments)
+        if saved and args.treatments is not None and sorted(args.treatments) != sorted(names):
+            print(f"train humanoid: {args.out}/humanoid.json chose {' '.join(names)}; give the same --treatments or "
+                  f"another --out", file=sys.stderr)
+            return 2
+        missing = [g for g in GENERATORS if f"{g}-map" in names and not archive_done(args.out, "humanoid", g,
+                                                                                      args.preset)]
+        if missing:
+            print(f"train humanoid: run 'archive {missing[0]}' first (no "
+                  f"{archive_path(args.out, 'humanoid', missing[0], args.preset)})", file=sys.stderr)
+            return 2
+        if not saved:
+            from jaxterrain.runtime.io import atomic_write_text
+
+            args.out.mkdir(parents=True, exist_ok=True)
+            atomic_write_text(args.out / "humanoid.json", json.dumps({"treatments": names}) + "\n")
+        folder = train_folder(args.out, "humanoid", obs)
+        if all(treatment_done(folder / t) for t in names) and (folder / "hardest.csv").is_file():
+            print(f"train humanoid {obs}: done ({folder})", flush=True)
+            return 0
+        code = cli(["curriculum", "--resume", str(folder)] if (folder / "config.json").is_file()
+                   else curriculum_argv(args, obs, names), args)
+        if code == 0:
+            print(f"train humanoid {obs}: done ({folder})", flush=True)
+        return code
+    pairs = args.ant_pairs
+    saved = ant_choice(args.out)
+    if saved is not None and sorted(saved) != sorted(pairs):
+        print(f"train ant: {args.out}/ant.json chose {' '.join('/'.join(x) for x in saved)}; give the same --ant or "
+              f"another --out", file=sys.stderr)
+        return 2
+    missing = sorted({t.split("-", 1)[0] for _, t in pairs if not archive_done(args.out, "ant", t.split("-", 1)[0],
+                                                                               args.preset)})
+    if missing:
+        print(f"train ant: run 'archive {missing[0]} --robot ant' first", file=sys.stderr)
+        return 2
+    if saved is None:
+        from jaxterrain.runtime.io import atomic_write_text
+
+        args.out.mkdir(parents=True, exist_ok=True)
+        atomic_write_text(args.out / "ant.json", json.dumps({"treatments": [list(x) for x in pairs]}) + "\n")
+    for obs, treatment in pairs:
+        folder = train_folder(args.out, "ant", obs) / treatment
+        if treatment_done(folder):
+            print(f"train ant {obs}/{treatment}: done ({folder})", flush=True)
+            continue
+        code = cli(["learn", "--resume", str(folder)] if (folder / "config.json").is_file()
+                   else learn_argv(args, obs, treatment), args)
+        if code != 0:
+            return code
+        print(f"train ant {obs}/{treatment}: done ({folder})", flush=True)
+    return 0
+
+
+def load_reevaluate():
+    """``docs/results/suite_v2/reevaluate.py`` as a module: the resumable many-walker evaluation this stage reuses."""
+    path = ROOT / "docs" / "results" / "suite_v2" / "reevaluate.py"
+    spec = importlib.util.spec_from_file_location("suite_v2_reevaluate", path)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    module.STARTED = STARTED  # its --time-limit counts from this command's start
+    return module
+
+
+def suite_flags(args) -> list[str]:
+    """reevaluate.py's protocol and suite-build flags given here."""
+    out = []
+    for name in ("size", "seeds", "samples", "attempts", "best", "headings", "slots"):
+        v = getattr(args, name)
+        out += [] if v is None else [f"--{name}", str(v)]
+    if args.families is not None:
+        out += ["--families", *args.families]
+    if args.generators is not None:
+        out += ["--generators", *args.generators]
+    return out
+
+
+def reevaluate_argv(args, suite: str, folders: list[Path], robots: list[str]) -> list[str]:
+    return [*map(str, folders), "--work", str(args.out / "eval" / suite), "--suite", suite,
+            "--heldout-name", f"heldout_{suite}", "--base-out", str(args.out / f"base_{suite}"),
+            "--robots", *robots, "--observations", *OBSERVATIONS, "--keys", str(args.keys),
+            "--backend", args.backend or "jax", *suite_flags(args)]
+
+
+def trained(out: Path) -> tuple[list[Path], list[str]]:
+    """The finished train runs' folders to walk (every treatment done) and the unfinished ones' names."""
+    folders, waiting = [], []
+    for _, _, folder, names in runs(out):
+        (folders if all(treatment_done(folder / t) for t in names) else waiting).append(folder)
+    return folders, [f.name for f in waiting]
+
+
+def stage_evaluate(args) -> int:
+    folders, waiting = trained(args.out)
+    if waiting:
+        print(f"evaluate: not trained yet (walked later): {', '.join(waiting)}", flush=True)
+    if not folders:
+        print("evaluate: no train run has finished yet", file=sys.stderr)
+        return 2
+    robots = [r for r in ROBOTS if any(f.name.startswith(r + "-") for f in folders)]
+    module = load_reevaluate()
+    for suite in args.suites:
+        argv = reevaluate_argv(args, suite, folders, robots) + (
+            [] if args.time_limit is None else ["--time-limit", str(args.time_limit)])
+        print(f"+ reevaluate.py {' '.join(argv)}", flush=True)
+        code = module.main(argv)
+        if code:
+            return code
+        if plan_walks(args, folders, robots, [suite]):  # the time limit stopped it: the next suite waits
+            break
+    left = plan_walks(args, folders, robots)
+    print("evaluate: done" if not left and not waiting else f"evaluate: {left} walks left; run it again", flush=True)
+    return 0
+
+
+def plan_walks(args, folders: list[Path], robots: list[str], suites: list[str] | None = None) -> int:
+    """Walks not yet in the stores of ``suites`` (default ``--suites``)."""
+    from jaxterrain.suite import batch
+
+    jobs = [j for r in robots for o in OBSERVATIONS for j in batch.base_jobs(r, args.keys, o)]
+    jobs += batch.walker_jobs(folders)
+    n = 0
+    for suite in args.suites if suites is None else suites:
+        results = args.out / "eval" / suite / "results"
+        n += sum(not (results / f"{_file(j.name)}.npz").is_file() for j in jobs)
+    return n
+
+
+def stage_write(args) -> int:
+    module = load_reevaluate()
+    folders, waiting = trained(args.out)
+    robots = [r for r in ROBOTS if any(f.name.startswith(r + "-") for f in folders)]
+    if waiting or not folders:
+        print(f"write: train runs not finished: {', '.join(waiting) or 'all'}", file=sys.stderr)
+        return 2
+    for suite in args.suites:
+        if not (args.out / "eval" / suite / "settings.json").is_file():
+            print(f"write: suite {suite} not walked yet ({args.out / 'eval' / suite})", file=sys.stderr)
+            return 2
+        code = module.main(reevaluate_argv(args, suite, folders, robots) + ["--write"])
+        if code:
+            return code
+    for robot, obs, folder, names in runs(args.out):
+        base = "_".join([robot] + ([obs] if obs != "blind" else []))
+        previous = None
+        for suite in reversed(args.suites):  # v1 first, so that v2's page shows it beside
+            heldout = f"heldout_{suite}"
+            if not all((folder / t / heldout / "fitness.csv.gz").is_file() for t in names):
+                print(f"write: {folder.name} on {suite} not all walked yet", file=sys.stderr)
+                return 2
+            dest = args.results / f"{robot}-{obs}" / suite
+            argv = ["generalise", *[f"{t}={folder / t}" for t in names], "--heldout", heldout,
+                    "--base", str(args.out / f"base_{suite}" / base), "--out", str(dest)]
+            argv += [] if previous is None else ["--beside", f"{previous[0]}={previous[1]}"]
+            code = cli(argv, argparse.Namespace(time_limit=None))
+            if code:
+                return code
+            previous = (suite, dest)
+    print(f"write: done -> {args.results}", flush=True)
+    return 0
+
+
+# ---------------------------------------------------------------------------------------------------------------
+# --plan
+# ---------------------------------------------------------------------------------------------------------------
+def _mid(v) -> tuple[float, float]:
+    return (float(v[0]), float(v[1])) if isinstance(v, tuple) else (float(v), float(v))
+
+
+def predict(state: dict, rates: dict = RATES) -> dict:
+    """Predicted device seconds ``(low, high)`` of what is left, per item, from ``state`` (:func:`read_state`) and
+    ``rates`` (:data:`RATES`). Pure arithmetic, no files:
+
+    - an archive left: its seconds (the ant's times ``archive_ant_factor``);
+    - a train run: its treatments not done x ``treatment_s_<train_backend>`` (the humanoid's population times
+      ``population_factor``), plus ``compile_s`` for each command of 480 s less the compile that it needs;
+    - a suite: for each robot with walks left, a build, one first walk per program (observation set) with walks
+      left, and the other walks at ``<suite>_walker_s_<eval_backend>`` (the ant's times ``ant_eval_factor``); the
+      walks a store recorded replace the rates (``state["measured"][suite]``: ``(first_s, (low, high))``);
+    - before the ant's treatments are chosen (``state["ant_pending"]``): two ant treatments, both ant archives and
+      the ant's walks (two programs: ``2 x trials`` walkers and ``2 x keys`` base walks per suite)."""
+    out = {}
+    for robot, gen in state["archives_left"]:
+        s = rates[f"archive_{gen}_s"][0] * (rates["archive_ant_factor"][0] if robot == "ant" else 1.0)
+        out[f"archive {gen} --robot {robot}"] = (s, s)
+    lo_t, hi_t = _mid(rates[f"treatment_s_{state['train_backend']}"][0])
+    lo_c, hi_c = _mid(rates["compile_s"][0])
+
+    def train(seconds: tuple[float, float]) -> tuple[float, float]:  # plus a compile per command
+        n = commands((seconds[0], seconds[1]), 480.0 - hi_c)
+        return seconds[0] + n * lo_c, seconds[1] + n * hi_c
+
+    for name, left in state["train_left"].items():
+        k = rates["population_factor"][0] if name.startswith("humanoid") else 1.0
+        if left:
+            out[f"train {name}"] = train((left * lo_t * k, left * hi_t * k))
+    walks_left = {suite: dict(w) for suite, w in state["walks_left"].items()}
+    if state["ant_pending"]:
+        out["train ant (2 treatments, not chosen yet)"] = train((2 * lo_t, 2 * hi_t))
+        for gen in GENERATORS:
+            s = rates[f"archive_{gen}_s"][0] * rates["archive_ant_factor"][0]
+            out[f"archive {gen} --robot ant (not chosen yet)"] = (s, s)
+        for w in walks_left.values():
+            for obs in OBSERVATIONS:
+                w[("ant", obs)] = state["trials"] + state["keys"]
+    for suite, walks in walks_left.items():  # {suite: {(robot, obs): n}}
+        first, per = state["measured"].get(suite) or (rates[f"{suite}_first_s"][0],
+                                                      rates[f"{suite}_walker_s_{state['eval_backend']}"][0])
+        lo_w, hi_w = _mid(per)
+        lo = hi = 0.0
+        for robot in dict.fromkeys(r for r, _ in walks):
+            f = rates["ant_eval_factor"][0] if robot == "ant" else 1.0
+            programs = [n for (r, _), n in walks.items() if r == robot and n > 0]
+            if programs:
+                n, m = sum(programs), len(programs)
+                lo += f * (rates["build_s"][0] + m * first + (n - m) * lo_w)
+                hi += f * (rates["build_s"][0] + m * first + (n - m) * hi_w)
+        if lo or hi:
+            out[f"evaluate {suite}"] = (lo, hi)
+    return out
+
+
+def commands(seconds: tuple[float, float], limit_s: float = 480.0) -> int:
+    """Commands of ``limit_s`` (``--time-limit 8``) needed for ``seconds`` (the high end)."""
+    return max(1, math.ceil(seconds[1] / limit_s))
+
+
+def read_state(args) -> dict:
+    """What ``--out`` holds, for :func:`predict`: archives left, treatments left per train run, walks left per suite
+    and ``(robot, observation set)`` (walkers of the planned runs, and ``--keys`` base walks of both observation sets
+    of each robot that trains), the walk rates recorded in each store, the backends counted (train: ``--backend``,
+    else ``warp``, what ``auto`` picks where MuJoCo Warp is installed; evaluate: ``--backend``, else ``jax``)."""
+    out = args.out
+    choice = ant_choice(out)
+    needed = [("humanoid", g) for g in GENERATORS if f"{g}-map" in humanoid_choice(out)]
+    needed += [("ant", g) for g in dict.fromkeys(t.split("-", 1)[0] for _, t in choice or [])]
+    state = {"archives_left": [(r, g) for r, g in needed if not archive_done(out, r, g, args.preset)],
+             "train_left": {}, "walks_left": {}, "measured": {}, "ant_pending": choice is None,
+             "train_backend": args.backend or "warp", "eval_backend": args.backend or "jax", "trials": args.trials,
+             "keys": args.keys}
+    plan = runs(out)
+    for robot, obs, folder, names in plan:
+        state["train_left"][f"{robot} {obs}"] = sum(not treatment_done(folder / t) for t in names)
+    for suite in args.suites:
+        results = out / "eval" / suite / "results"
+        have = {p.stem for p in results.glob("*.npz")} if results.is_dir() else set()
+        walks = {}
+        for robot, obs, folder, names in plan:
+            walks[(robot, obs)] = sum(_file(str(folder / t / "policies" / f"trial_{k}")) not in have
+                                      for t in names for k in range(args.trials))
+        for robot in dict.fromkeys(r for r, _, _, _ in plan):
+            for obs in OBSERVATIONS:
+                base = f"base:{robot}" + ("" if obs == "blind" else f":{obs}")
+                walks[(robot, obs)] = walks.get((robot, obs), 0) + sum(
+                    _file(base + (f":key{k}" if k else "")) not in have for k in range(args.keys))
+        state["walks_left"][suite] = walks
+        meta = _recorded(out / "eval" / suite)
+        if meta is not None:
+            state["measured"][suite] = meta
+    return state
+
+
+def _file(name: str) -> str:
+    """A job's result file name without ``.npz`` (``jaxterrain.suite.batch``'s rule)."""
+    return re.sub(r"[^A-Za-z0-9._-]+", "+", name).strip("+")
+
+
+def _recorded(folder: Path) -> tuple[float, tuple[float, float]] | None:
+    """``(slowest first walk, (fastest, slowest) later walk)`` recorded in a store, or None when it has none."""
+    results = folder / "results"
+    if not results.is_dir():
+        return None
+    import numpy as np
+
+    first, again = [], []
+    for p in sorted(results.glob("*.npz")):
+        with np.load(p, allow_pickle=False) as z:
+            m = json.loads(str(z["meta"]))
+        (again if m.get("compiled_before") else first).append(float(m["seconds"]))
+    if not first and not again:
+        return None
+    f = max(first) if first else max(again)
+    return f, ((min(again), max(again)) if again else (f, f))
+
+
+def print_plan(args) -> int:
+    state = read_state(args)
+    print(f"Experiment 4 in {args.out} (preset {args.preset}, {args.trials} trials, {args.keys} keys):")
+    for robot, gen in [("humanoid", g) for g in GENERATORS] + [("ant", g) for g in GENERATORS]:
+        if robot == "ant" and state["ant_pending"]:
+            continue
+        needed = f"{gen}-map" in humanoid_choice(args.out) if robot == "humanoid" else any(
+            t.startswith(gen) for _, t in ant_choice(args.out) or [])
+        if needed:
+            mark = "left" if (robot, gen) in state["archives_left"] else "done"
+            print(f"  archive {gen} --robot {robot}: {mark} ({archive_path(args.out, robot, gen, args.preset)})")
+    for name, left in state["train_left"].items():
+        total = len(humanoid_choice(args.out)) if name.startswith("humanoid") else sum(
+            1 for o, _ in ant_choice(args.out) or [] if o == name.split()[1])
+        print(f"  train {name}: {total - left}/{total} treatments done")
+    if state["ant_pending"]:
+        print("  train ant: not chosen yet (train ant --ant OBS/TREATMENT OBS/TREATMENT after the humanoid's "
+              "results): predicted at 2 treatments, with their archives")
+    for suite, walks in state["walks_left"].items():
+        print(f"  evaluate {suite}: " + ", ".join(f"{r} {o} {n} walks left" for (r, o), n in walks.items())
+              + (f" (rates recorded in {args.out}/eval/{suite})" if suite in state["measured"] else ""))
+    pred = predict(state)
+    print(f"predicted device time of the rest (one H200; train on {state['train_backend']}, evaluate on "
+          f"{state['eval_backend']}; commands of --time-limit 8):")
+    for name, (lo, hi) in pred.items():
+        print(f"  {name}: {lo / 60:.1f}-{hi / 60:.1f} min, {commands((lo, hi))} command(s)")
+    lo, hi = sum(v[0] for v in pred.values()), sum(v[1] for v in pred.values())
+    print(f"  total: {lo / 60:.1f}-{hi / 60:.1f} min, {sum(commands(v) for v in pred.values())} commands")
+    print("from (measured / assumed):")
+    for name, (value, source) in RATES.items():
+        print(f"  {name} = {value}: {source}")
+    return 0
+
+
+# ---------------------------------------------------------------------------------------------------------------
+# --pack
+# ---------------------------------------------------------------------------------------------------------------
+def pack_members(out: Path) -> list[Path]:
+    """What the next command needs from ``out``, file by file: every file except the ``checkpoint/`` folder of a
+    finished archive and the checkpoints (``checkpoint*.npz``) of a finished treatment."""
+    members = []
+    if not out.is_dir():
+        return members
+    for path in sorted(out.rglob("*")):
+        if not path.is_file() or path.name.endswith(".tmp"):
+            continue
+        rel = path.relative_to(out).parts
+        if rel[0] == "archive" and "checkpoint" in rel[2:-1] and (out / rel[0] / rel[1] / "done.json").is_file():
+            continue
+        if path.name.startswith("checkpoint") and path.suffix == ".npz" and treatment_done(path.parent):
+            continue
+        members.append(path)
+    return members
+
+
+def pack(args) -> None:
+    import io
+    import tarfile
+
+    from jaxterrain.runtime.io import atomic_write_bytes
+
+    root = Path.cwd().resolve()
+    buf = io.BytesIO()
+    with tarfile.open(fileobj=buf, mode="w:gz") as tar:
+        for path in pack_members(args.out):
+            tar.add(path, arcname=os.path.relpath(path.resolve(), root))
+    atomic_write_bytes(args.pack, buf.getvalue())
+    size = args.pack.stat().st_size
+    checkpoints = sum(p.stat().st_size for p in pack_members(args.out) if p.name.startswith("checkpoint"))
+    over = "; OVER the 64 MiB a device call returns: resume on the same warm machine" if size > 64 * 2**20 else ""
+    print(f"packed {args.out} into {args.pack} ({size / 2**20:.2f} MiB; checkpoints {checkpoints / 2**20:.1f} MiB "
+          f"before compression){over}", flush=True)
+
+
+def main(argv=None) -> int:
+    p = parser()
+    args = p.parse_args(argv)
+    check(p, args)
+    if args.plan:
+        return print_plan(args)
+    stage = args.what[0]
+    if stage == "archive":
+        code = stage_archive(args, args.what[1], args.robot)
+    elif stage == "train":
+        code = stage_train(args, args.what[1], args.what[2] if len(args.what) > 2 else None)
+    elif stage == "evaluate":
+        code = stage_evaluate(args)
+    else:
+        code = stage_write(args)
+    if args.pack is not None and args.out.is_dir():
+        pack(args)
+    if code == 3:
+        print("time limit reached; run the same command again to continue", flush=True)
+    return code
+
+
+if __name__ == "__main__":
+    sys.exit(main())

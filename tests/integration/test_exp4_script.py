@@ -1,0 +1,181 @@
+"""``docs/results/exp4/run.py``, Experiment 4's stages, without running one (the stages end to end at CPU size:
+``tests/integration/test_exp4_run.py``, slow): its arguments are checked in one line, its humanoid run makes
+exactly the five treatments of issue 64 (``curriculum --baseline-archive mixed --no-combined``), ``--plan``'s
+arithmetic, and what ``--pack`` leaves out. Seconds, no JAX work."""
+
+from __future__ import annotations
+
+import argparse
+import importlib.util
+import json
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[2]
+SCRIPT = ROOT / "docs" / "results" / "exp4" / "run.py"
+
+
+@pytest.fixture(scope="module")
+def run():
+    spec = importlib.util.spec_from_file_location("exp4_run", SCRIPT)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+@pytest.mark.parametrize("argv, message", [
+    ([], "give a stage (archive, train, evaluate, write) or --plan"),
+    (["fly"], "STAGE must be one of archive, train, evaluate, write; got 'fly'"),
+    (["archive", "cppn"], "archive takes one generator: steps or mixed; got cppn"),
+    (["train", "dog"], "train takes a robot: humanoid or ant; got dog"),
+    (["train", "humanoid"], "train humanoid takes an observation set: blind or perceptive; got none"),
+    (["train", "ant"], "train ant needs --ant OBS/TREATMENT OBS/TREATMENT"),
+    (["train", "ant", "--ant", "blind/steps-map", "blind/steps-map"], "--ant takes the two best treatments (one for "
+                                                                      "a check), each OBS/TREATMENT once"),
+    (["train", "ant", "--ant", "blind/mixed-accel"], "--ant must be OBS/TREATMENT with OBS one of blind, perceptive"),
+    (["train", "ant", "--ant", "a/mixed-map", "blind/steps-map", "perceptive/mixed-dr"], "--ant must be OBS/TREATMENT"),
+    (["train", "humanoid", "blind", "--treatments", "mixed-dr"], "--treatments: a mixed-* baseline needs mixed-map"),
+    (["evaluate", "--treatments", "mixed-map"], "--treatments chooses the humanoid's treatments of 'train humanoid'"),
+    (["evaluate", "--robot", "ant"], "--robot chooses whose archive the archive stage evolves"),
+    (["--plan", "write"], "--plan runs no stage; got write"),
+    (["write", "--time-limit", "0"], "--time-limit must be a finite number of minutes > 0; got 0.0"),
+    (["evaluate", "--pack", "x.zip"], "--pack must name a .tar.gz or .tgz file; got x.zip"),
+    (["evaluate", "--keys", "0"], "--keys must be an integer >= 1; got 0"),
+    (["evaluate", "--pack", "/x.tar.gz"], "--pack stores --out relative to the current folder"),  # --out: tmp_path
+    (["evaluate", "--headings", "3"], "--headings must be one of 1, 2, 4; got 3"),
+    (["archive", "mixed", "--archive-size", "16"], "--archive-size must be an integer >= 32; got 16"),
+])
+def test_bad_arguments_are_one_line_naming_the_flag(run, argv, message, capsys, tmp_path):
+    with pytest.raises(SystemExit) as err:
+        run.main([*argv, "--out", str(tmp_path / "out")])
+    lines = capsys.readouterr().err.strip().splitlines()
+    assert err.value.code == 2 and message in lines[-1], lines
+    assert not (tmp_path / "out").exists()
+
+
+def test_the_humanoid_run_makes_the_five_treatments(run, tmp_path):
+    """The ``curriculum`` command of ``train humanoid OBS``, parsed by ``curriculum``'s own parser, plans exactly
+    :data:`TREATMENTS` (the folders the later stages read): the map curriculum on each archive, DR / PLR / levels on
+    the mixed one, no combined archive; a subset plans that subset."""
+    from experiments import curriculum as exp
+
+    def planned(argv):
+        parser = argparse.ArgumentParser()
+        exp.add_arguments(parser)
+        a = parser.parse_args(argv[1:])
+        cfg = {"archives": exp.parse_archives(a.archives), "baseline": a.baseline or "roughness",
+               "baseline_archive": a.baseline_archive or "cppn", "combined": a.combined is not False}
+        exp.check_baseline_archive(cfg, a.baseline_archive is not None, a.baseline is not None)
+        return [f"{name}-{c}" for name, _, c in exp.treatments(cfg, tmp_path)], a
+
+    args = argparse.Namespace(out=tmp_path / "exp4", preset="gpu-short", trials=10, backend=None)
+    names, a = planned(run.curriculum_argv(args, "perceptive"))
+    assert names == ["mixed-map", "steps-map", "mixed-dr", "mixed-plr", "mixed-levels"]  # archives by name
+    assert sorted(names) == sorted(run.TREATMENTS)
+    assert a.observation == "perceptive" and a.trials == 10 and a.preset == "gpu-short"
+    assert exp.parse_archives(a.archives)["steps"] == str(ROOT / run.SHIPPED_STEPS)  # the shipped gpu-short archive
+    assert not (tmp_path / "combined_archive.npz").exists()
+    assert planned(run.curriculum_argv(args, "blind", ["mixed-map"]))[0] == ["mixed-map"]
+    assert planned(run.curriculum_argv(args, "blind", ["steps-map", "mixed-map", "mixed-plr"]))[0] == [
+        "mixed-map", "steps-map", "mixed-plr"]
+
+
+def test_an_ant_treatment_is_one_learn_run_on_the_ants_archive(run, tmp_path):
+    args = argparse.Namespace(out=tmp_path, preset="gpu-short", trials=10, backend="warp", archive_size=None)
+    argv = run.learn_argv(args, "perceptive", "mixed-plr")
+    assert argv[:2] == ["learn", "--robot"] and argv[2] == "ant"
+    flags = dict(zip(argv[3::2], argv[4::2]))
+    assert flags == {"--preset": "gpu-short", "--archive": str(tmp_path / "archive" / "ant-mixed" / "archive.npz"),
+                     "--curriculum": "plr", "--observation": "perceptive", "--trials": "10",
+                     "--out": str(tmp_path / "train" / "ant-perceptive" / "mixed-plr"), "--backend": "warp"}
+    assert run.archive_argv(args, "mixed", "humanoid")[-8:] == run.ARCHIVE_FLAGS["mixed"]
+    assert run.archive_argv(args, "steps", "ant")[-2:] == ["--robot", "ant"]
+
+
+def test_the_plan_adds_the_measured_rates(run):
+    """Two train runs of 5 and 2 treatments left, one archive, 12 walks of one program and 3 of another on v2: the
+    sums of the module docstring's rule, with made-up rates (so the test pins the arithmetic, not the figures)."""
+    rates = {**run.RATES, "archive_mixed_s": (600.0, ""), "archive_ant_factor": (0.5, ""),
+             "treatment_s_warp": ((400.0, 500.0), ""), "population_factor": (0.8, ""), "v2_first_s": (70.0, ""),
+             "v2_walker_s_jax": ((20.0, 30.0), ""), "build_s": (60.0, ""), "ant_eval_factor": (2.0, ""),
+             "compile_s": ((10.0, 80.0), "")}
+    state = {"archives_left": [("humanoid", "mixed"), ("ant", "mixed")],
+             "train_left": {"humanoid blind": 5, "humanoid perceptive": 0, "ant blind": 2},
+             "walks_left": {"v2": {("humanoid", "blind"): 12, ("humanoid", "perceptive"): 3, ("ant", "blind"): 0,
+                                   ("ant", "perceptive"): 0}},
+             "measured": {}, "ant_pending": False, "train_backend": "warp", "eval_backend": "jax", "trials": 10,
+             "keys": 10}
+    got = run.predict(state, rates)
+    assert got == {"archive mixed --robot humanoid": (600.0, 600.0), "archive mixed --robot ant": (300.0, 300.0),
+                   # 2 000 s at 400 s a command (480 less the compile): 5 commands, each its compile
+                   "train humanoid blind": (5 * 400 * 0.8 + 5 * 10, 5 * 500 * 0.8 + 5 * 80),
+                   "train ant blind": (800.0 + 3 * 10, 1000.0 + 3 * 80),
+                   "evaluate v2": (60 + 2 * 70 + 13 * 20.0, 60 + 2 * 70 + 13 * 30.0)}
+    measured = run.predict({**state, "measured": {"v2": (100.0, (10.0, 11.0))}}, rates)["evaluate v2"]
+    assert measured == (60 + 2 * 100 + 13 * 10.0, 60 + 2 * 100 + 13 * 11.0)
+    pending = run.predict({**state, "ant_pending": True, "archives_left": []}, rates)
+    assert pending["train ant (2 treatments, not chosen yet)"] == (800.0 + 3 * 10, 1000.0 + 3 * 80)
+    assert pending["archive steps --robot ant (not chosen yet)"] == (rates["archive_steps_s"][0] * 0.5,) * 2
+    ant = 2.0 * (60 + 2 * 70 + (2 * 20 - 2) * 20.0)  # two programs of trials + keys walks each
+    assert pending["evaluate v2"][0] == pytest.approx(60 + 2 * 70 + 13 * 20.0 + ant)
+    assert run.commands((0.0, 480.0)) == 1 and run.commands((0.0, 481.0)) == 2 and run.commands((0.0, 0.0)) == 1
+    for name, (value, source) in run.RATES.items():  # every figure says where it comes from
+        assert source.startswith(("measured: ", "assumed: ")), name
+
+
+def test_the_plan_reads_a_run_folder(run, tmp_path, capsys):
+    """``--plan`` on an empty folder: the humanoid's steps archive ships, the mixed one is left, nothing trained; a
+    finished treatment (summary.json and policies/) counts as done; one recorded walk replaces the rates."""
+    out = tmp_path / "exp4"
+    assert run.main(["--plan", "--out", str(out)]) == 0
+    text = capsys.readouterr().out
+    assert "archive steps --robot humanoid: done" in text and "archive mixed --robot humanoid: left" in text
+    assert "train humanoid blind: 0/5 treatments done" in text and "evaluate v2: humanoid blind 60 walks left" in text
+    done = out / "train" / "humanoid-blind" / "mixed-dr"
+    (done / "policies").mkdir(parents=True)
+    (done / "summary.json").write_text("{}")
+    assert run.main(["--plan", "--out", str(out)]) == 0
+    assert "train humanoid blind: 1/5 treatments done" in capsys.readouterr().out
+
+
+def test_the_pack_leaves_out_finished_checkpoints(run, tmp_path):
+    out = tmp_path / "exp4"
+    files = ["archive/humanoid-mixed/archive.npz", "archive/humanoid-mixed/done.json",
+             "archive/humanoid-mixed/checkpoint/ckpt_1/state.npz", "archive/ant-mixed/checkpoint/ckpt_1/state.npz",
+             "train/humanoid-blind/mixed-map/summary.json", "train/humanoid-blind/mixed-map/policies/trial_0/p.msgpack",
+             "train/humanoid-blind/mixed-map/checkpoint.npz", "train/humanoid-blind/mixed-map/checkpoint.prev.npz",
+             "train/humanoid-blind/mixed-dr/checkpoint.npz", "eval/v2/results/base+humanoid.npz", "eval/v2/x.tmp"]
+    for f in files:
+        (out / f).parent.mkdir(parents=True, exist_ok=True)
+        (out / f).write_text("x")
+    kept = sorted(str(p.relative_to(out)) for p in run.pack_members(out))
+    assert kept == sorted(["archive/humanoid-mixed/archive.npz", "archive/humanoid-mixed/done.json",
+                           "archive/ant-mixed/checkpoint/ckpt_1/state.npz",  # unfinished: needed to resume
+                           "train/humanoid-blind/mixed-map/summary.json",
+                           "train/humanoid-blind/mixed-map/policies/trial_0/p.msgpack",
+                           "train/humanoid-blind/mixed-dr/checkpoint.npz", "eval/v2/results/base+humanoid.npz"])
+    saved = out / "ant.json"
+    saved.write_text(json.dumps({"treatments": [["blind", "steps-map"]]}))
+    assert [(r, o, n) for r, o, _, n in run.runs(out)][-1] == ("ant", "blind", ["steps-map"])
+
+
+def test_a_stage_with_no_time_left_starts_nothing_and_says_how_to_go_on(run, tmp_path, capsys, monkeypatch):
+    """Under ``--time-limit`` a stage hands the child command what is left; with nothing left it starts none and
+    exits 3 ("run the same command again"); the humanoid's treatments are saved at its first train, and another
+    ``--treatments`` on the same ``--out`` is refused in one line."""
+    monkeypatch.chdir(tmp_path)
+    out = tmp_path / "exp4"
+    for gen in ("steps", "mixed"):  # archives as the archive stage leaves them when done
+        (out / "archive" / f"humanoid-{gen}").mkdir(parents=True)
+        (out / "archive" / f"humanoid-{gen}" / "archive.npz").write_text("x")
+        (out / "archive" / f"humanoid-{gen}" / "done.json").write_text("{}")
+    monkeypatch.setattr(run, "STARTED", run.time.perf_counter() - 120.0)  # two minutes gone
+    argv = ["train", "humanoid", "blind", "--treatments", "steps-map", "mixed-map", "--preset", "smoke", "--out",
+            str(out), "--time-limit", "1", "--pack", "exp4.tar.gz"]
+    assert run.main(argv) == 3
+    text = capsys.readouterr().out
+    assert "no time left for curriculum" in text and "run the same command again" in text and "packed" in text
+    assert json.loads((out / "humanoid.json").read_text()) == {"treatments": ["steps-map", "mixed-map"]}
+    assert run.main([*argv[:3], "--treatments", "mixed-map", *argv[6:]]) == 2
+    assert "humanoid.json chose steps-map mixed-map" in capsys.readouterr().err
