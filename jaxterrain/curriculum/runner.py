@@ -249,8 +249,12 @@ def make_env(run: LearnConfig, arch, policy):
     """The walker env of a (resolved) run on ``arch``'s maps, checked against ``policy``: the one place a
     treatment's env is built. :class:`BadInput` when the policy does not fit it."""
     shape = (256, 256) if arch.heightmaps is None else tuple(arch.heightmaps.shape[1:])
-    env = W.walker_env(policy, shape, TerrainScale(), run.walker.episode_length, **walker_layout(run),
-                       healthy_reward=run.walker.healthy_reward, randomisation=run.walker.randomise)
+    try:
+        env = W.walker_env(policy, shape, TerrainScale(), run.walker.episode_length, **walker_layout(run),
+                           healthy_reward=run.walker.healthy_reward, randomisation=run.walker.randomise)
+    except ValueError as err:  # e.g. maps too small for the walker's start and goal margins
+        where = f"LearnConfig.archive {run.archive}" if run.archive else f"LearnConfig.terrains {run.terrains}"
+        raise BadInput(f"{where}: its {shape[0]} x {shape[1]} maps cannot hold the walker: {err}") from None
     try:
         W.check_policy(policy, env)
     except ValueError as err:

@@ -6,6 +6,7 @@ from __future__ import annotations
 import glob
 import json
 
+import numpy as np
 import pytest
 
 from jaxterrain.curriculum import run_config as R
@@ -84,6 +85,16 @@ def test_from_flat_refuses_unknown_keys_and_validation_names_the_field(tmp_path)
         runner.validate(bad)
     with pytest.raises(runner.BadInput, match=r"LearnConfig.archive .*missing.npz"):
         runner.validate(R.PRESETS["smoke"]._replace(archive=str(tmp_path / "missing.npz")))
+
+
+def test_maps_too_small_for_the_walker_are_refused_naming_the_archive():
+    """A 32 x 32 archive (``evolve --preset smoke``'s size) cannot hold the walker's start and goal margins: one
+    line naming the archive and the maps' size, not the env's ValueError from inside the run."""
+    run, _, arch, policy, _ = runner.validate(R.PRESETS["smoke"])
+    small = arch._replace(heightmaps=np.zeros((2, 32, 32), np.float32))
+    with pytest.raises(runner.BadInput, match=r"LearnConfig.archive .*: its 32 x 32 maps cannot hold the walker: "
+                                              r"terrain too small for the margins"):
+        runner.make_env(run, small, policy)
 
 
 def test_resolve_takes_the_protocol_and_accels_generator_from_the_archive():
