@@ -164,6 +164,71 @@ def test_no_retrace_on_tiles_when_the_terrain_changes():
     assert len(seen) >= 3 and TRACES["train"] == 1
 
 
+def placed_harness(env: WalkerEnv, gain: float = 0.05) -> C.Harness:
+    """A tiled fake harness whose "envs" stay where they were spawned, as a walker's do: ``reset`` records the tile
+    its envs stand on (``home``, the Tile's index at the restart), and ``train`` / ``evaluate`` read the chunk's bank
+    at ``home`` (the heightfield under the bodies), whichever tile the chunk's layout gives the trial. ``seen``
+    accumulates the levels trained on, ``wrong`` counts the chunks where ``home`` is not the trial's tile."""
+
+    def level(terrain, home):
+        px, py = jnp.asarray(PROBE[:, 0]), jnp.asarray(PROBE[:, 1])
+        ox, oy = env.tile_origin(home)
+        return jnp.mean(env.terrain_height(Tile(terrain.bank, home), px + ox, py + oy))
+
+    def train(policy, key, terrain):
+        return dict(policy, skill=policy["skill"] + gain, seen=policy["seen"] + level(terrain, policy["home"]),
+                    wrong=policy["wrong"] + (policy["home"] != terrain.index).astype(jnp.int32))
+
+    def evaluate(policy, key, terrain):
+        return jnp.clip(1.0 - level(terrain, policy["home"]) + policy["skill"], 0.0, 1.0)
+
+    def reset(policy, key, terrain):
+        return dict(policy, resets=policy["resets"] + 1, home=jnp.asarray(terrain.index, jnp.int32))
+
+    return C.Harness(train, evaluate, reset, layout=W.tile_layout(env))
+
+
+PLACED_START = {**START, "home": jnp.zeros((), jnp.int32), "wrong": jnp.zeros((), jnp.int32)}
+
+
+def test_compact_blocks_keep_each_running_trial_on_its_own_tile():
+    """The compact-on-tiles bug (docs/results/exp3.md, "Training bug"): 3 trials of the random selector on tiles,
+    trial 0 forced done after 2 chunks; then blocks of the running trials only (``run_live``: rows [1, 2]) must
+    give the states of blocks of all three, and no envs may walk off their tile. Before the fix the compact block
+    laid trials 1 and 2 out on tiles 0 and 1 while their envs stood on tiles 1 and 2 (trial 1 on trial 2's terrain,
+    trial 2 on a flat tile) until their next reset."""
+    bank = toy_bank(3)
+    env, _ = _envs(3)
+    config = small("random", max_evals=3, max_epochs=14)
+    harness = placed_harness(env)
+    run = C.make_runner(config, harness)
+    init = lambda: C.init_trials(jax.random.split(jax.random.key(5), 3), bank, PLACED_START,  # noqa: E731
+                                 config=config, harness=harness)
+    whole, live = run(init(), bank, 2), run(init(), bank, 2)
+    assert tree_equal(whole, live) and np.asarray(whole.policy["home"]).tolist() == [0, 1, 2]
+    stop = lambda s: s._replace(done=s.done.at[0].set(True))  # noqa: E731 - trial 0's map emptied early
+    whole, live = stop(whole), stop(live)
+    assert C.live_rows(live.done).tolist() == [1, 2]
+    while not np.all(np.asarray(whole.done)):
+        whole, live = run(whole, bank, 3), C.run_live(run, live, bank, 3)
+        assert tree_equal(live, whole)
+    assert np.asarray(live.policy["wrong"]).tolist() == [0, 0, 0]
+    terrain = np.asarray(live.history.terrain)
+    assert len({tuple(t[2:]) for t in terrain[1:]}) == 2 and np.all(np.asarray(live.policy["seen"])[1:] > 0)
+
+
+def test_tile_moves_counts_the_trials_the_old_compact_block_moved():
+    """``tile_moves``: the running trials whose row in a compact block (``live_rows``) is not their index: those
+    the runner before the fix laid out on another trial's tile."""
+    done = np.array([True, False, False, True, False, True])
+    assert C.live_rows(done).tolist() == [0, 1, 2, 4]  # 3 running -> 4 rows: finished trial 0 pads
+    assert C.tile_moves(done).tolist() == [False, False, False, False, True, False]  # trial 4 on tile 3
+    assert C.tile_moves(np.array([True, False, False])).tolist() == [False, True, True]
+    assert not C.tile_moves(np.zeros(4, bool)).any()  # every row computed: nothing moves
+    assert not C.tile_moves(np.array([False, False, True])).any()  # 2 running of 3 -> 2 rows [0, 1]: in place
+    assert not C.tile_moves(np.ones(3, bool)).any()
+
+
 # ---------------------------------------------------------------------------------------------------------------
 # The walker harness (PPO + evaluation) on tiles
 # ---------------------------------------------------------------------------------------------------------------
