@@ -324,6 +324,54 @@ def test_overlapped_walker_harness_makes_the_plain_choices(backend):
     assert not np.any(np.asarray(over.pending))
 
 
+@pytest.mark.slow
+def test_jax_walker_compact_blocks_keep_each_running_trial_on_its_own_tile():
+    """The compact-on-tiles bug on the real MJX walker (tiles, ``backend="jax"``): 3 trials of the random selector,
+    one chunk of all three (their envs spawn on tiles 0, 1, 2), trial 0 forced done, then 2 chunks computed on the
+    running trials only (``run_live``: rows [1, 2]) against 2 chunks of all three. No terrain finishes (threshold
+    above every fitness) and episodes are longer than the 3 chunks, so no env restarts after the first chunk: each
+    trial's envs walk where they spawned. Compact must equal the full block (the same choices; PPO parameters,
+    evaluations and env positions up to the last bits of the smaller batch's matrix products). Before the fix the
+    compact block laid trials 1 and 2 out on tiles 0 and 1, so trial 1's envs walked on trial 2's terrain and trial
+    2's on a flat tile: their heights (qpos z) moved by the terrains' height difference. Three MJX programs (all
+    rows, 2 rows): minutes of CPU."""
+    policy = W.load_policy(None)
+    config = small("random", num_envs=2, attempts=2, best=1, max_evals=10, update_epochs=1, threshold=0.99,
+                   max_epochs=40)
+    env = W.walker_env(policy, SHAPE, WALK, 40, backend="jax", tiles=3, worlds=6)
+    ppo = config.ppo_config(policy.config)
+    harness = W.walker_harness(env, ppo, config)
+    grid = toy_bank(3)
+    bank = grid._replace(heightmaps=grid.heightmaps * 0.5)  # 9 flat terrains, 0 to 0.25 m
+    start = W.start_state(env, ppo, policy, SHAPE)
+    init = jax.jit(lambda k, b, s: C.init_trials(k, b, s, config=config, harness=harness))
+    programs = {}
+
+    def run(s, b, n, *rows):  # a runner for run_live, one program per number of rows computed
+        key = (int(s.done.shape[0]),) + tuple(int(r.shape[0]) for r in rows if r is not None)
+        if key not in programs:
+            fn = jax.jit(lambda s, b, n, *r: C.run_trials(s, b, n, *r, config=config, harness=harness))
+            programs[key] = fn.lower(s, b, jnp.int32(n), *rows).compile(FAST_COMPILE)
+        return programs[key](s, b, jnp.int32(n), *rows)
+
+    first = run(init(jax.random.split(jax.random.key(7), 3), bank, start), bank, 1)
+    assert np.all(np.asarray(first.chunk) == 1) and not np.any(np.asarray(first.restart))
+    stopped = first._replace(done=first.done.at[0].set(True))
+    whole = run(stopped, bank, 2)
+    live = C.run_live(run, stopped, bank, 2)
+    terrain = np.asarray(whole.history.terrain)
+    heights = np.asarray(bank.heightmaps)[terrain[1:, 1], 0, 0]  # trials 1 and 2 walk different heights
+    assert terrain[1, 0] == terrain[1, 2] and terrain[2, 0] == terrain[2, 2] and heights[0] != heights[1] > 0
+    for name in ("terrain", "epoch", "hardest"):
+        np.testing.assert_array_equal(np.asarray(getattr(live.history, name)), np.asarray(getattr(whole.history,
+                                                                                                 name)))
+    z_live, z_whole = (np.asarray(s.policy.env_state.data.qpos)[1:, :, 2] for s in (live, whole))
+    np.testing.assert_allclose(z_live, z_whole, atol=1e-3)
+    np.testing.assert_allclose(np.asarray(live.history.evaluation), np.asarray(whole.history.evaluation), atol=1e-3)
+    for a, b in zip(jax.tree.leaves(live.policy.params), jax.tree.leaves(whole.policy.params)):
+        np.testing.assert_allclose(np.asarray(a)[1:], np.asarray(b)[1:], atol=1e-3)
+
+
 # ---------------------------------------------------------------------------------------------------------------
 # The walker of a learn run (the command: tests/integration/test_learn_command.py)
 # ---------------------------------------------------------------------------------------------------------------
