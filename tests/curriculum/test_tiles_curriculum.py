@@ -441,3 +441,22 @@ def test_learn_takes_the_evaluation_protocol_from_the_archive(tmp_path, tiny_arc
         layout = runner.walker_layout(run_config.from_flat({**paper, "backend": "warp", "headings": 4, "attempts": 80,
                                                             "trials": 3}))
         assert layout == {"backend": "warp", "tiles": 12, "worlds": 3 * 500}
+
+
+def test_the_compact_audit_counts_mixed_chunks_from_the_trials_chunk_counts():
+    """``docs/results/compact_tiles_audit.py`` (the exp3.md "Training bug" table): a chunk is mixed when a trial is
+    done (fewer chunks than it + 1) while another runs; the share's bound is the running trials' chunks in mixed
+    chunks over all chunks; trials that all end together have none. And the shipped exp3 CPPN map treatment: 10
+    trials of 75 chunks, nothing mixed."""
+    import importlib.util
+    from pathlib import Path
+
+    path = Path(__file__).resolve().parents[2] / "docs" / "results" / "compact_tiles_audit.py"
+    spec = importlib.util.spec_from_file_location("compact_tiles_audit", path)
+    audit = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(audit)
+    assert audit.mixed_share([75] * 10) == (0, 0.0)
+    mixed, share = audit.mixed_share([2, 4, 4])  # chunks 2 and 3: trial 0 done, trials 1 and 2 running
+    assert mixed == 2 and share == pytest.approx(4 / 10)
+    chunks = audit.chunks_per_trial(path.parent / "exp3_gpushort" / "cppn-map")
+    assert chunks == [75] * 10 and audit.mixed_share(chunks)[0] == 0
