@@ -361,7 +361,7 @@ def test_jax_walker_compact_blocks_keep_each_running_trial_on_its_own_tile():
     live = C.run_live(run, stopped, bank, 2)
     terrain = np.asarray(whole.history.terrain)
     heights = np.asarray(bank.heightmaps)[terrain[1:, 1], 0, 0]  # trials 1 and 2 walk different heights
-    assert terrain[1, 0] == terrain[1, 2] and terrain[2, 0] == terrain[2, 2] and heights[0] != heights[1] > 0
+    assert terrain[1, 0] == terrain[1, 2] and terrain[2, 0] == terrain[2, 2] and heights[0] != heights[1]
     for name in ("terrain", "epoch", "hardest"):
         np.testing.assert_array_equal(np.asarray(getattr(live.history, name)), np.asarray(getattr(whole.history,
                                                                                                  name)))
