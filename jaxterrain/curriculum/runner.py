@@ -353,7 +353,7 @@ def setup(run: LearnConfig, config, arch, policy, env, mesh=None):
 
         def rows_block(s, b, n, rows=None):
             size = None if rows is None else int(rows.shape[0])
-            return program(size)(*place((s, b)), jnp.int32(n), *([] if rows is None else place((rows,))))
+            return program(size)(*place((s, b)), jnp.int32(n), None if rows is None else place(rows))
 
         program(None)  # the block of every trial now: set-up includes its compile
     compact = bool(run.budget.compact)
