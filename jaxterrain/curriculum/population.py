@@ -310,8 +310,9 @@ def run_live(run: Callable[..., State], states: State, bank: TerrainBank, num_ch
     ``rows`` the :func:`live_rows` of ``states.done`` (None when that is every trial): the running trials only are
     computed, each on its own tile.
 
-    The same states as ``run`` on all T rows (a block leaves a finished trial unchanged, and rows are independent),
-    without the cost of the finished ones: under ``vmap`` a finished trial still takes its share of every physics
+    The same states as ``run`` on all T rows (a block leaves a finished trial unchanged, and rows are independent;
+    with real physics on a CPU up to the last bits where XLA compiles the smaller batch's products otherwise:
+    ``tests/integration/test_learn_command.py``), without the cost of the finished ones: under ``vmap`` a finished trial still takes its share of every physics
     step and evaluation walk, so once trials end at different times (the map curriculum empties some maps early)
     a block of 4 rows instead of 10 is faster. Host-side (reads ``states.done``); a jitted ``run`` compiles once
     per block size. Not exact for a mesh runner under ``config.overlap``: fewer rows regroup the trials over the
