@@ -32,7 +32,7 @@ concatenated): the physics computes those trials only (the others are done, thei
 still laid out for all T trials, and a trial's tile is that of its global index whatever R is, so on a tiled walker
 the envs of a trial stay on their tile from block to block. The solo runner computes its running trials the same way
 (:func:`run_trials` and :func:`make_runner` take ``rows``, :func:`run_live` passes :func:`live_rows`): the one home
-of "compute fewer trials". Until the fix (dda13ed, 2026-11-29) it cut the states down to the R rows instead, so the
+of "compute fewer trials". Until the fix (59440af, 2026-11-29) it cut the states down to the R rows instead, so the
 R trials' maps were laid out as tiles ``0..R-1``; since env states ride from block to block (bfe08b4) their envs
 stayed on the tiles of their global indices, and after a compaction the moved trials' envs walked on another
 trial's tile until their next reset (:func:`tile_moves` says which trials moved; ``docs/results/exp3.md``).
@@ -291,7 +291,7 @@ def live_rows(done) -> np.ndarray:
 
 
 def tile_moves(done) -> np.ndarray:
-    """``[T] bool``: the running trials (``~done``) that the solo runner before the fix (dda13ed) moved to another
+    """``[T] bool``: the running trials (``~done``) that the solo runner before the fix (59440af) moved to another
     tile when it computed the :func:`live_rows` only: it cut the states down to those rows, so row r (trial
     ``live_rows(done)[r]``) was laid out on tile r, and a running trial whose index is not its row walked on
     another trial's tile until its envs' next reset (with env states carried across blocks, from bfe08b4). All

@@ -464,7 +464,7 @@ def test_learn_compact_blocks_run_the_same_treatment(tmp_path, learn_smoke):
     and writes the history of the run that keeps every trial in every block: the same terrains, cells, epochs and
     hardest cells exactly, evaluations within 1e-3 (the compact program computes the running rows of all trials'
     states, gathered: XLA's CPU fusions of it may differ from the full block's in the last bits, which the history's
-    4 decimals can show; 0.3833 against 0.3832 at dda13ed); ``--policy-every 4`` adds snapshots of the walkers at
+    4 decimals can show; 0.3833 against 0.3832 at 59440af); ``--policy-every 4`` adds snapshots of the walkers at
     chunks 4 and 8 and changes nothing else. Minutes of CPU."""
     import csv
 
