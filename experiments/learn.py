@@ -27,8 +27,8 @@ choices: ``jaxterrain.curriculum.config``). The trials' env states ride from blo
 checkpoint (about 10 MB per trial at 500 envs on MJX), so a run stopped after any chunk (``--time-limit``, whose first
 block is one chunk that measures the rate) and resumed equals an uninterrupted one.
 Once some trials have finished (the map curriculum can empty a trial's map long before the epoch budget), a block
-computes only the trials still running, padded with finished ones to a power of two (``curriculum.run_live``; the
-same states, one compile per block size); ``--no-compact`` keeps every trial in every block (the smoke preset's
+computes only the trials still running, padded with finished ones to a power of two, each on its own tile
+(``curriculum.run_live``; the same states, one compile per block size); ``--no-compact`` keeps every trial in every block (the smoke preset's
 default, so that the CPU tests compile one block).
 
 ``--backend``: the walker's physics, ``auto`` (the default: ``warp`` on a GPU where MuJoCo Warp imports, else

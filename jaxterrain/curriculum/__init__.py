@@ -60,9 +60,11 @@ from jaxterrain.curriculum.population import (
     live_rows,
     make_population_runner,
     make_runner,
+    mesh_rows,
     run_live,
     run_population,
     run_trials,
+    tile_moves,
 )
 
 __all__ = [
@@ -70,6 +72,6 @@ __all__ = [
     "register_selector", "selector_names", "selectors", "Harness", "History", "MILESTONES", "PAPER_TABLE2", "SELECTORS", "State", "first_epochs",
     "format_milestone", "gp", "gp_params", "outputs", "own_terrains", "presets", "progress", "run_config", "runner", "walker", "hardest_curve", "init", "init_trials", "live_rows", "make_runner",
     "milestone_summary", "removal_mask", "roughness_sequence", "run_live", "run_trials", "select", "step",
-    "run_population", "make_population_runner", "population", "batch", "checkpoints",
+    "run_population", "make_population_runner", "mesh_rows", "tile_moves", "population", "batch", "checkpoints",
     "terrain_hardness", "terrain_runs", "validate_config",
 ]

@@ -160,7 +160,7 @@ class Member:
         self.history = {k: list(v) for k, v in (history or {}).items()}
         self.before, self.meta, self.finish, self.snapshot = float(before), dict(meta or {}), finish, snapshot
         self.policy_every, self.summary, self.log = int(policy_every or 0), None, None
-        self.metrics = ChunkMetrics(self.folder, compact=False)
+        self.metrics = ChunkMetrics(self.folder)
         self.folder.mkdir(parents=True, exist_ok=True)
 
     @property

@@ -30,7 +30,12 @@ others.
 ``rows`` [R] (global trial indices, every running trial among them; :func:`live_rows` of the members' ``done``
 concatenated): the physics computes those trials only (the others are done, their states unchanged). The maps are
 still laid out for all T trials, and a trial's tile is that of its global index whatever R is, so on a tiled walker
-the envs of a trial stay on their tile from block to block.
+the envs of a trial stay on their tile from block to block. The solo runner computes its running trials the same way
+(:func:`run_trials` and :func:`make_runner` take ``rows``, :func:`run_live` passes :func:`live_rows`): the one home
+of "compute fewer trials". Until the fix (59440af, 2026-11-29) it cut the states down to the R rows instead, so the
+R trials' maps were laid out as tiles ``0..R-1``; since env states ride from block to block (bfe08b4) their envs
+stayed on the tiles of their global indices, and after a compaction the moved trials' envs walked on another
+trial's tile until their next reset (:func:`tile_moves` says which trials moved; ``docs/results/exp3.md``).
 """
 
 from __future__ import annotations
@@ -49,7 +54,7 @@ from jaxterrain.curriculum.selectors import get_selector
 from jaxterrain.qd import TerrainBank
 from jaxterrain.runtime import sharding
 
-__all__ = ["init_trials", "run_trials", "make_runner", "live_rows", "run_live", "check_population",
+__all__ = ["init_trials", "run_trials", "make_runner", "mesh_rows", "live_rows", "run_live", "tile_moves", "check_population",
            "population_key", "lay_out", "run_population", "make_population_runner", "population_rows"]
 
 SHARED = ("overlap", "steps_per_chunk", "protocol", "ppo")
@@ -212,7 +217,7 @@ def population_rows(done: Sequence) -> Optional[np.ndarray]:
 # ----------------------------------------------------------------------------------------------------------------
 # The trials of one treatment
 # ----------------------------------------------------------------------------------------------------------------
-def run_trials(states: State, bank: TerrainBank, num_chunks: jax.Array, *, config: CurriculumConfig,
+def run_trials(states: State, bank: TerrainBank, num_chunks: jax.Array, rows=None, *, config: CurriculumConfig,
                harness: Harness, on_chunk: Optional[Callable] = None) -> State:
     """Up to ``num_chunks`` chunks of every trial ([T]-batched ``states``), all trials in one vmapped step per
     chunk; stops early once every trial is done. ``num_chunks`` may be traced (no re-compile per value). Pure.
@@ -223,29 +228,56 @@ def run_trials(states: State, bank: TerrainBank, num_chunks: jax.Array, *, confi
     [states.terrain]`` [T, H, W] -> one terrain pytree, e.g. a bank of T tiles) and trial i trains and is evaluated
     on its slice i.
 
+    ``rows``: None (every trial's physics) or [R] int32 trial indices holding every running trial
+    (:func:`live_rows`): the physics computes those trials only, each still on the tile of its own index (the maps
+    are laid out for all T trials), and the others (done) are returned unchanged. So the result is that of
+    ``rows=None``, at the cost of R trials.
+
     ``on_chunk``: a host function ``(chunk [T] int32, hardest [T] float32, done [T] bool, history) -> None``
     (``history``: the trials' :class:`~jaxterrain.curriculum.core.History`, leaves ``[T, C]``) called after every
     loop step through ``jax.debug.callback`` (progress and metrics inside a compiled block; it changes no result)."""
     listen = None if on_chunk is None else (lambda members: on_chunk(*members[0]))
-    return run_population((states,), (bank,), num_chunks, configs=(config,), harness=harness, on_chunk=listen)[0]
+    return run_population((states,), (bank,), num_chunks, rows, configs=(config,), harness=harness,
+                          on_chunk=listen)[0]
 
 
-def make_runner(config: CurriculumConfig, harness: Harness, mesh=None) -> Callable[[State, TerrainBank, Any], State]:
-    """The jitted ``(states [T], bank, num_chunks) -> states`` of :func:`run_trials` (``states`` donated). Build it
-    once per (config, harness) and call it per block of chunks: neither terrain switches nor the block length
-    re-compile it (a new trial count, a new bank shape does).
+def mesh_rows(fn: Callable, mesh) -> Callable:
+    """``fn(states [T], bank, n, rows [R] or None) -> states [T]`` (:func:`run_trials` of a config and harness) with
+    the rows split over ``mesh``'s devices (``sharding.map_rows``: padded to the devices with copies of the last
+    row, cut off again): each device gets the whole ``states`` and ``bank`` and computes its share of ``rows``
+    (None: every trial), the other trials marked done there (so its loop counts its own trials, as
+    :func:`make_runner` says), and each trial keeps the tile of its own index whatever the split."""
+    def part(rows, states, bank, n):
+        mine = jnp.zeros(states.done.shape, bool).at[rows].set(True)
+        out = fn(states._replace(done=states.done | ~mine), bank, n, rows)
+        return jax.tree.map(lambda x: x[rows], out)
 
-    ``mesh`` (a ``jax.sharding.Mesh``): the trials are split over its devices (``sharding.map_rows``: the trial
-    axis sharded, the bank replicated; a trial count that does not divide is padded with copies of the last trial,
-    cut off again), each device running its own trials' loop (it stops when ITS trials are done). A trial's chunks
-    depend only on its own state and key, so the states are those of the one-device runner, except with
-    ``config.overlap``: there a block runs until the least advanced running trial has done ``num_chunks`` (trials
-    ahead of it step on meanwhile), and each device counts that among its own trials, so a trial's block may end at
-    another chunk than on one device, and its envs restart there (the same curriculum rules, other PPO data)."""
+    split = sharding.map_rows(part, mesh, replicated=(1, 2, 3))
+
+    def run(states, bank, n, rows=None):
+        rows = jnp.arange(states.done.shape[0], dtype=jnp.int32) if rows is None else jnp.asarray(rows, jnp.int32)
+        got = split(rows, states, bank, jnp.asarray(n, jnp.int32))
+        return jax.tree.map(lambda x, y: x.at[rows].set(y), states, got)
+
+    return run
+
+
+def make_runner(config: CurriculumConfig, harness: Harness, mesh=None) -> Callable[..., State]:
+    """The jitted ``(states [T], bank, num_chunks, rows=None) -> states`` of :func:`run_trials` (``states``
+    donated). Build it once per (config, harness) and call it per block of chunks: neither terrain switches nor the
+    block length re-compile it (a new trial count, a new bank shape, a new number of ``rows`` does).
+
+    ``mesh`` (a ``jax.sharding.Mesh``): the trials (or ``rows``) are split over its devices (:func:`mesh_rows`:
+    the states and the bank whole on every device), each device running its own trials' loop (it stops when ITS
+    trials are done). A trial's chunks depend only on its own state and key, so the states are those of the
+    one-device runner, except with ``config.overlap``: there a block runs until the least advanced running trial
+    has done ``num_chunks`` (trials ahead of it step on meanwhile), and each device counts that among its own
+    trials, so a trial's block may end at another chunk than on one device, and its envs restart there (the same
+    curriculum rules, other PPO data)."""
     fn = functools.partial(run_trials, config=config, harness=harness)
     if mesh is not None:
-        return sharding.map_rows(lambda s, b, n: fn(s, b, jnp.asarray(n, jnp.int32)), mesh, replicated=(1, 2))
-    return jax.jit(lambda s, b, n: fn(s, b, jnp.asarray(n, jnp.int32)), donate_argnums=(0,))
+        return mesh_rows(lambda s, b, n, rows: fn(s, b, jnp.asarray(n, jnp.int32), rows), mesh)
+    return jax.jit(lambda s, b, n, rows=None: fn(s, b, jnp.asarray(n, jnp.int32), rows), donate_argnums=(0,))
 
 
 def live_rows(done) -> np.ndarray:
@@ -258,20 +290,34 @@ def live_rows(done) -> np.ndarray:
     return np.sort(np.concatenate([live, np.flatnonzero(done)[:size - live.size]]))
 
 
-def run_live(run: Callable[[State, TerrainBank, Any], State], states: State, bank: TerrainBank,
-             num_chunks) -> State:
-    """``run(states, bank, num_chunks)`` (a :func:`make_runner` runner or any function of that shape that takes any
-    trial count) computed on the rows of :func:`live_rows` only and written back into ``states`` [T].
+def tile_moves(done) -> np.ndarray:
+    """``[T] bool``: the running trials (``~done``) that the solo runner before the fix (59440af) moved to another
+    tile when it computed the :func:`live_rows` only: it cut the states down to those rows, so row r (trial
+    ``live_rows(done)[r]``) was laid out on tile r, and a running trial whose index is not its row walked on
+    another trial's tile until its envs' next reset (with env states carried across blocks, from bfe08b4). All
+    False when every row is computed. Host-side; for the accounting of runs trained with that bug
+    (``docs/results/exp3.md``)."""
+    done = np.asarray(done, bool)
+    rows = live_rows(done)
+    moved = np.zeros(done.size, bool)
+    if rows.size < done.size:
+        moved[rows] = rows != np.arange(rows.size)
+    return moved & ~done
 
-    The same states as ``run`` on all T rows (a block leaves a finished trial unchanged, and rows are independent),
-    without the cost of the finished ones: under ``vmap`` a finished trial still takes its share of every physics
+
+def run_live(run: Callable[..., State], states: State, bank: TerrainBank, num_chunks) -> State:
+    """``run(states, bank, num_chunks, rows)`` (a :func:`make_runner` runner, or any function of that shape) with
+    ``rows`` the :func:`live_rows` of ``states.done`` (None when that is every trial): the running trials only are
+    computed, each on its own tile.
+
+    The same states as ``run`` on all T rows (a block leaves a finished trial unchanged, and rows are independent;
+    with real physics on a CPU up to the last bits where XLA compiles the smaller batch's products otherwise:
+    ``tests/integration/test_learn_command.py``), without the cost of the finished ones: under ``vmap`` a finished trial still takes its share of every physics
     step and evaluation walk, so once trials end at different times (the map curriculum empties some maps early)
     a block of 4 rows instead of 10 is faster. Host-side (reads ``states.done``); a jitted ``run`` compiles once
     per block size. Not exact for a mesh runner under ``config.overlap``: fewer rows regroup the trials over the
     devices, and there each device ends a block by its own trials (:func:`make_runner`)."""
     rows = live_rows(states.done)
     if rows.size == states.done.shape[0]:
-        return run(states, bank, num_chunks)
-    index = jnp.asarray(rows)
-    part = run(jax.tree.map(lambda x: x[index], states), bank, num_chunks)
-    return jax.tree.map(lambda x, y: x.at[index].set(y), states, part)
+        return run(states, bank, num_chunks, None)
+    return run(states, bank, num_chunks, jnp.asarray(rows, jnp.int32))

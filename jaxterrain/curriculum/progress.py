@@ -10,7 +10,6 @@ from pathlib import Path
 
 import numpy as np
 
-from jaxterrain.curriculum.population import live_rows
 from jaxterrain.runtime import driver
 
 __all__ = ["ChunkMetrics", "ChunkProgress", "chunk_metrics", "history_metrics"]
@@ -20,27 +19,24 @@ class ChunkMetrics:
     """A treatment's ``metrics.csv`` inside its compiled blocks: after every chunk, the rows (:func:`chunk_metrics`)
     of the chunks that every trial still running has finished, up to the block's end, from the block's per-chunk
     callback; the driver writes the same rows again at the block's end, with TensorBoard's. Call :meth:`begin`
-    before each block: the trials' history so far and the rows the block computes (``compact``: ``population.live_rows``,
-    else all), so a block of fewer rows updates its own trials. Not for a mesh of several devices (a callback there
-    sees one device's rows): there metrics.csv moves per block."""
+    before each block (the trials' history so far). The callback sees every trial's state, also in a block that
+    computes the running trials only (``compact``: ``population.run_live``). Not for a mesh of several devices (a
+    callback there sees one device's progress): there metrics.csv moves per block."""
 
-    def __init__(self, folder: Path, compact: bool):
-        self.folder, self.compact = Path(folder), bool(compact)
-        self.history = self.rows = None
+    def __init__(self, folder: Path):
+        self.folder = Path(folder)
+        self.history = None
         self.stop = self.written = 0
 
     def begin(self, states, stop: int) -> None:
-        """Before a block that ends at chunk ``stop``: host copies of ``states.history`` and the block's rows."""
+        """Before a block that ends at chunk ``stop``: host copies of ``states.history``."""
         self.history = type(states.history)(*(np.array(x) for x in states.history))  # [T, C] each
-        done = np.asarray(states.done, bool)
-        self.rows = live_rows(done) if self.compact else np.arange(done.size)
         self.stop, self.written = int(stop), int(np.min(np.asarray(states.chunk)))
 
     def __call__(self, chunk, hardest, done, history) -> None:
-        if self.history is None or chunk.shape[0] != self.rows.size:
+        if self.history is None or chunk.shape[0] != self.history.hardest.shape[0]:
             return
-        for full, part in zip(self.history, history):
-            full[self.rows] = np.asarray(part)
+        self.history = type(self.history)(*(np.array(x) for x in history))
         running = ~np.asarray(done, bool)
         upto = min(int(np.min(chunk[running])) if running.any() else int(np.max(chunk)), self.stop)
         if upto <= self.written:

@@ -29,7 +29,7 @@ from jaxterrain.curriculum import walker as W
 from jaxterrain.curriculum.config import RECIPES, CurriculumConfig, validate_config
 from jaxterrain.curriculum.checkpoints import ENV_STATES, restore_states, strip_envs
 from jaxterrain.curriculum.core import CHECKPOINT_COMPAT, init_trials
-from jaxterrain.curriculum.population import run_live, run_trials
+from jaxterrain.curriculum.population import mesh_rows, run_live, run_trials
 from jaxterrain.curriculum.outputs import PARTIAL, export_policies, write_outputs
 from jaxterrain.curriculum.progress import ChunkMetrics, ChunkProgress, chunk_metrics
 from jaxterrain.curriculum.run_config import LearnConfig, to_flat
@@ -288,12 +288,13 @@ def _chunk_done(chunk, hardest, done, history) -> None:
 
 
 def make_block(config, harness):
-    """``(states, bank, n) -> states`` (jit it): up to ``n`` chunks of every trial. The trials' env states ride in
-    ``states`` from block to block (and into every checkpoint), so where the blocks are cut changes nothing: a run
-    stopped after any chunk and resumed equals the uninterrupted run. Envs restart only where the curriculum says
-    (``State.restart``: the start, a terrain switch)."""
-    def block(states, bank, n):
-        return run_trials(states, bank, jnp.asarray(n, jnp.int32), config=config, harness=harness,
+    """``(states, bank, n, rows=None) -> states`` (jit it): up to ``n`` chunks of every trial, the physics of
+    ``rows`` only (``run_trials``: [R] trial indices holding every running trial, each on its own tile; None: all).
+    The trials' env states ride in ``states`` from block to block (and into every checkpoint), so where the blocks
+    are cut changes nothing: a run stopped after any chunk and resumed equals the uninterrupted run. Envs restart
+    only where the curriculum says (``State.restart``: the start, a terrain switch)."""
+    def block(states, bank, n, rows=None):
+        return run_trials(states, bank, jnp.asarray(n, jnp.int32), rows, config=config, harness=harness,
                           on_chunk=_chunk_done)
 
     return block
@@ -324,10 +325,11 @@ def inputs(run: LearnConfig, config, arch, policy, env):
 
 def setup(run: LearnConfig, config, arch, policy, env, mesh=None):
     """Bank, the block ``run(states, bank, n) -> states`` and the initial (stripped) trial states. ``run`` computes
-    the running trials only when ``run.budget.compact`` (``curriculum.run_live``; default on) and compiles the block
-    once per trial count it meets (every trial's here, fewer at the first call that needs them); compiled programs
-    are reused by later treatments with the same settings and bank shape (``experiments curriculum``). ``mesh``:
-    the trials split over its devices (``sharding.map_rows``: padded, the bank replicated)."""
+    the running trials only when ``run.budget.compact`` (``curriculum.run_live``; default on), each on the tile of
+    its own index as in a block of every trial, and compiles the block once per number of rows it meets (every
+    trial's here, fewer at the first call that needs them); compiled programs are reused by later treatments with
+    the same settings and bank shape (``experiments curriculum``). ``mesh``: the rows split over its devices
+    (``population.mesh_rows``: padded, the states and bank whole on each device)."""
     bank, ppo, harness, start, keys, init_fn = inputs(run, config, arch, policy, env)
     fast = bool(run.budget.fast_compile)
     sig = (config, ppo, env.config, int(run.trials), tuple(bank.heightmaps.shape), fast, mesh)
@@ -338,25 +340,26 @@ def setup(run: LearnConfig, config, arch, policy, env, mesh=None):
         if fresh:
             PROGRAMS[sig] = (compiled(init_fn, fast, keys, bank, start),
                              make_block(config, harness), {})
-        init, block, blocks = PROGRAMS[sig]  # blocks: trial count -> the block compiled for it
+        init, block, blocks = PROGRAMS[sig]  # blocks: number of rows (None: all) -> the block compiled for it
         states = init(keys, bank, start)
-        if mesh is not None:  # the trials split over the devices; inputs whole on the mesh (whence the init's)
-            block = sharding.map_rows(block, mesh, replicated=(1, 2))
+        if mesh is not None:  # the rows split over the devices; inputs whole on the mesh (whence the init's)
+            block = mesh_rows(block, mesh)
             bank, states = sharding.replicate((bank, states), mesh)
             place = functools.partial(sharding.replicate, mesh=mesh)
         else:
             place = lambda tree: tree  # noqa: E731
 
-        def program(rows: int):
-            if rows not in blocks:
-                like = jax.tree.map(lambda x: x[:rows], states)
-                blocks[rows] = compiled(block, fast, like, bank, jax.numpy.int32(1))
-            return blocks[rows]
+        def program(size):
+            if size not in blocks:
+                rows = None if size is None else jnp.zeros((size,), jnp.int32)
+                blocks[size] = compiled(block, fast, states, bank, jnp.int32(1), rows)
+            return blocks[size]
 
-        def rows_block(s, b, n):
-            return program(int(s.done.shape[0]))(*place((s, b)), jax.numpy.int32(n))
+        def rows_block(s, b, n, rows=None):
+            size = None if rows is None else int(rows.shape[0])
+            return program(size)(*place((s, b)), jnp.int32(n), None if rows is None else place(rows))
 
-        program(int(states.done.shape[0]))  # the block of every trial now: set-up includes its compile
+        program(None)  # the block of every trial now: set-up includes its compile
     compact = bool(run.budget.compact)
     return bank, (functools.partial(run_live, rows_block) if compact else rows_block), states
 
@@ -390,7 +393,7 @@ def run_treatment(run: LearnConfig, folder: Path, time_limit_s: float | None = N
     ppo = config.ppo_config(policy.config)
 
     one_device = mesh is None or mesh.size == 1  # several: each callback sees its device's rows only
-    metrics_csv = ChunkMetrics(folder, run.budget.compact) if one_device else None
+    metrics_csv = ChunkMetrics(folder) if one_device else None
 
     def chunk_fn(s, a, b):
         if not bool(np.all(np.asarray(s.done))):

@@ -164,6 +164,71 @@ def test_no_retrace_on_tiles_when_the_terrain_changes():
     assert len(seen) >= 3 and TRACES["train"] == 1
 
 
+def placed_harness(env: WalkerEnv, gain: float = 0.05) -> C.Harness:
+    """A tiled fake harness whose "envs" stay where they were spawned, as a walker's do: ``reset`` records the tile
+    its envs stand on (``home``, the Tile's index at the restart), and ``train`` / ``evaluate`` read the chunk's bank
+    at ``home`` (the heightfield under the bodies), whichever tile the chunk's layout gives the trial. ``seen``
+    accumulates the levels trained on, ``wrong`` counts the chunks where ``home`` is not the trial's tile."""
+
+    def level(terrain, home):
+        px, py = jnp.asarray(PROBE[:, 0]), jnp.asarray(PROBE[:, 1])
+        ox, oy = env.tile_origin(home)
+        return jnp.mean(env.terrain_height(Tile(terrain.bank, home), px + ox, py + oy))
+
+    def train(policy, key, terrain):
+        return dict(policy, skill=policy["skill"] + gain, seen=policy["seen"] + level(terrain, policy["home"]),
+                    wrong=policy["wrong"] + (policy["home"] != terrain.index).astype(jnp.int32))
+
+    def evaluate(policy, key, terrain):
+        return jnp.clip(1.0 - level(terrain, policy["home"]) + policy["skill"], 0.0, 1.0)
+
+    def reset(policy, key, terrain):
+        return dict(policy, resets=policy["resets"] + 1, home=jnp.asarray(terrain.index, jnp.int32))
+
+    return C.Harness(train, evaluate, reset, layout=W.tile_layout(env))
+
+
+PLACED_START = {**START, "home": jnp.zeros((), jnp.int32), "wrong": jnp.zeros((), jnp.int32)}
+
+
+def test_compact_blocks_keep_each_running_trial_on_its_own_tile():
+    """The compact-on-tiles bug (docs/results/exp3.md, "Training bug"): 3 trials of the random selector on tiles,
+    trial 0 forced done after 2 chunks; then blocks of the running trials only (``run_live``: rows [1, 2]) must
+    give the states of blocks of all three, and no envs may walk off their tile. Before the fix the compact block
+    laid trials 1 and 2 out on tiles 0 and 1 while their envs stood on tiles 1 and 2 (trial 1 on trial 2's terrain,
+    trial 2 on a flat tile) until their next reset."""
+    bank = toy_bank(3)
+    env, _ = _envs(3)
+    config = small("random", max_evals=3, max_epochs=14)
+    harness = placed_harness(env)
+    run = C.make_runner(config, harness)
+    init = lambda: C.init_trials(jax.random.split(jax.random.key(5), 3), bank, PLACED_START,  # noqa: E731
+                                 config=config, harness=harness)
+    whole, live = run(init(), bank, 2), run(init(), bank, 2)
+    assert tree_equal(whole, live) and np.asarray(whole.policy["home"]).tolist() == [0, 1, 2]
+    stop = lambda s: s._replace(done=s.done.at[0].set(True))  # noqa: E731 - trial 0's map emptied early
+    whole, live = stop(whole), stop(live)
+    assert C.live_rows(live.done).tolist() == [1, 2]
+    while not np.all(np.asarray(whole.done)):
+        whole, live = run(whole, bank, 3), C.run_live(run, live, bank, 3)
+        assert tree_equal(live, whole)
+    assert np.asarray(live.policy["wrong"]).tolist() == [0, 0, 0]
+    terrain = np.asarray(live.history.terrain)
+    assert len({tuple(t[2:]) for t in terrain[1:]}) == 2 and np.all(np.asarray(live.policy["seen"])[1:] > 0)
+
+
+def test_tile_moves_counts_the_trials_the_old_compact_block_moved():
+    """``tile_moves``: the running trials whose row in a compact block (``live_rows``) is not their index: those
+    the runner before the fix laid out on another trial's tile."""
+    done = np.array([True, False, False, True, False, True])
+    assert C.live_rows(done).tolist() == [0, 1, 2, 4]  # 3 running -> 4 rows: finished trial 0 pads
+    assert C.tile_moves(done).tolist() == [False, False, False, False, True, False]  # trial 4 on tile 3
+    assert C.tile_moves(np.array([True, False, False])).tolist() == [False, True, True]
+    assert not C.tile_moves(np.zeros(4, bool)).any()  # every row computed: nothing moves
+    assert not C.tile_moves(np.array([False, False, True])).any()  # 2 running of 3 -> 2 rows [0, 1]: in place
+    assert not C.tile_moves(np.ones(3, bool)).any()
+
+
 # ---------------------------------------------------------------------------------------------------------------
 # The walker harness (PPO + evaluation) on tiles
 # ---------------------------------------------------------------------------------------------------------------
@@ -259,6 +324,54 @@ def test_overlapped_walker_harness_makes_the_plain_choices(backend):
     assert not np.any(np.asarray(over.pending))
 
 
+@pytest.mark.slow
+def test_jax_walker_compact_blocks_keep_each_running_trial_on_its_own_tile():
+    """The compact-on-tiles bug on the real MJX walker (tiles, ``backend="jax"``): 3 trials of the random selector,
+    one chunk of all three (their envs spawn on tiles 0, 1, 2), trial 0 forced done, then 2 chunks computed on the
+    running trials only (``run_live``: rows [1, 2]) against 2 chunks of all three. No terrain finishes (threshold
+    above every fitness) and episodes are longer than the 3 chunks, so no env restarts after the first chunk: each
+    trial's envs walk where they spawned. Compact must equal the full block (the same choices; PPO parameters,
+    evaluations and env positions up to the last bits of the smaller batch's matrix products). Before the fix the
+    compact block laid trials 1 and 2 out on tiles 0 and 1, so trial 1's envs walked on trial 2's terrain and trial
+    2's on a flat tile: their heights (qpos z) moved by the terrains' height difference. Three MJX programs (all
+    rows, 2 rows): minutes of CPU."""
+    policy = W.load_policy(None)
+    config = small("random", num_envs=2, attempts=2, best=1, max_evals=10, update_epochs=1, threshold=0.99,
+                   max_epochs=40)
+    env = W.walker_env(policy, SHAPE, WALK, 40, backend="jax", tiles=3, worlds=6)
+    ppo = config.ppo_config(policy.config)
+    harness = W.walker_harness(env, ppo, config)
+    grid = toy_bank(3)
+    bank = grid._replace(heightmaps=grid.heightmaps * 0.5)  # 9 flat terrains, 0 to 0.25 m
+    start = W.start_state(env, ppo, policy, SHAPE)
+    init = jax.jit(lambda k, b, s: C.init_trials(k, b, s, config=config, harness=harness))
+    programs = {}
+
+    def run(s, b, n, *rows):  # a runner for run_live, one program per number of rows computed
+        key = (int(s.done.shape[0]),) + tuple(int(r.shape[0]) for r in rows if r is not None)
+        if key not in programs:
+            fn = jax.jit(lambda s, b, n, *r: C.run_trials(s, b, n, *r, config=config, harness=harness))
+            programs[key] = fn.lower(s, b, jnp.int32(n), *rows).compile(FAST_COMPILE)
+        return programs[key](s, b, jnp.int32(n), *rows)
+
+    first = run(init(jax.random.split(jax.random.key(7), 3), bank, start), bank, 1)
+    assert np.all(np.asarray(first.chunk) == 1) and not np.any(np.asarray(first.restart))
+    stopped = first._replace(done=first.done.at[0].set(True))
+    whole = run(stopped, bank, 2)
+    live = C.run_live(run, stopped, bank, 2)
+    terrain = np.asarray(whole.history.terrain)
+    heights = np.asarray(bank.heightmaps)[terrain[1:, 1], 0, 0]  # trials 1 and 2 walk different heights
+    assert terrain[1, 0] == terrain[1, 2] and terrain[2, 0] == terrain[2, 2] and heights[0] != heights[1]
+    for name in ("terrain", "epoch", "hardest"):
+        np.testing.assert_array_equal(np.asarray(getattr(live.history, name)), np.asarray(getattr(whole.history,
+                                                                                                 name)))
+    z_live, z_whole = (np.asarray(s.policy.env_state.data.qpos)[1:, :, 2] for s in (live, whole))
+    np.testing.assert_allclose(z_live, z_whole, atol=1e-3)
+    np.testing.assert_allclose(np.asarray(live.history.evaluation), np.asarray(whole.history.evaluation), atol=1e-3)
+    for a, b in zip(jax.tree.leaves(live.policy.params), jax.tree.leaves(whole.policy.params)):
+        np.testing.assert_allclose(np.asarray(a)[1:], np.asarray(b)[1:], atol=1e-3)
+
+
 # ---------------------------------------------------------------------------------------------------------------
 # The walker of a learn run (the command: tests/integration/test_learn_command.py)
 # ---------------------------------------------------------------------------------------------------------------
@@ -328,3 +441,22 @@ def test_learn_takes_the_evaluation_protocol_from_the_archive(tmp_path, tiny_arc
         layout = runner.walker_layout(run_config.from_flat({**paper, "backend": "warp", "headings": 4, "attempts": 80,
                                                             "trials": 3}))
         assert layout == {"backend": "warp", "tiles": 12, "worlds": 3 * 500}
+
+
+def test_the_compact_audit_counts_mixed_chunks_from_the_trials_chunk_counts():
+    """``docs/results/compact_tiles_audit.py`` (the exp3.md "Training bug" table): a chunk is mixed when a trial is
+    done (fewer chunks than it + 1) while another runs; the share's bound is the running trials' chunks in mixed
+    chunks over all chunks; trials that all end together have none. And the shipped exp3 CPPN map treatment: 10
+    trials of 75 chunks, nothing mixed."""
+    import importlib.util
+    from pathlib import Path
+
+    path = Path(__file__).resolve().parents[2] / "docs" / "results" / "compact_tiles_audit.py"
+    spec = importlib.util.spec_from_file_location("compact_tiles_audit", path)
+    audit = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(audit)
+    assert audit.mixed_share([75] * 10) == (0, 0.0)
+    mixed, share = audit.mixed_share([2, 4, 4])  # chunks 2 and 3: trial 0 done, trials 1 and 2 running
+    assert mixed == 2 and share == pytest.approx(4 / 10)
+    chunks = audit.chunks_per_trial(path.parent / "exp3_gpushort" / "cppn-map")
+    assert chunks == [75] * 10 and audit.mixed_share(chunks)[0] == 0

@@ -482,8 +482,12 @@ def test_learn_overlap_smoke_makes_the_plain_choices_and_resumes(tmp_path, learn
 def test_learn_compact_blocks_run_the_same_treatment(tmp_path, learn_smoke):
     """``learn --compact`` (on in the GPU presets): a 3-trial smoke run whose trials end at different chunks (a
     threshold the smoke walker passes on some evaluations only) runs its later blocks on the running trials only
-    and writes the history of the run that keeps every trial in every block (CPU: exactly); ``--policy-every 4``
-    adds snapshots of the walkers at chunks 4 and 8 and changes nothing else. Minutes of CPU."""
+    and writes the history of the run that keeps every trial in every block: the same terrains, cells, epochs and
+    hardest cells exactly, evaluations within 1e-3 (the compact program computes the running rows of all trials'
+    states, gathered: XLA's CPU fusions of it may differ from the full block's in the last bits, which the history's
+    4 decimals can show; 0.3833 against 0.3832 at 59440af); ``--policy-every 4`` adds snapshots of the walkers at
+    chunks 4 and 8 and changes nothing else. Minutes of CPU."""
+    import csv
 
     archive, _ = learn_smoke
     runs = {}
@@ -497,7 +501,14 @@ def test_learn_compact_blocks_run_the_same_treatment(tmp_path, learn_smoke):
         sizes = set().union(*(set(b) - before.get(sig, set()) for sig, (_, _, b) in runner.PROGRAMS.items()))
     epochs = json.loads((runs["--compact"] / "summary.json").read_text())["epochs"]
     assert min(epochs) < max(epochs) and min(sizes, default=3) < 3, (epochs, sizes)  # smaller blocks compiled, ran
-    assert (runs["--compact"] / "history.csv").read_text() == (runs["--no-compact"] / "history.csv").read_text()
+    def rows(folder):
+        with open(folder / "history.csv") as f:
+            return list(csv.DictReader(f))
+
+    a, b = rows(runs["--no-compact"]), rows(runs["--compact"])
+    exact = ("trial", "chunk", "epoch", "env_steps", "terrain", "cell", "bin0", "bin1", "distance", "hardest")
+    assert [[r[k] for k in exact] for r in b] == [[r[k] for k in exact] for r in a]
+    np.testing.assert_allclose([float(r["evaluation"]) for r in b], [float(r["evaluation"]) for r in a], atol=1e-3)
     pol = runs["--compact"] / "policies"
     assert sorted(p.name for p in pol.iterdir()) == ["chunk_00004", "chunk_00008", "trial_0", "trial_1", "trial_2"]
     assert sorted(p.name for p in (pol / "chunk_00004").iterdir()) == ["trial_0", "trial_1", "trial_2"]
