@@ -27,6 +27,7 @@ def setup():
     return pol, cfg, WalkerEnv(cfg)
 
 
+@pytest.mark.slow  # 10-70 s on 2 CPU cores; the default suite keeps under 15 min (2026-11-29)
 def test_mujoco_c_starts_where_mjx_starts_and_keeps_close_on_flat_ground(setup):
     pol, cfg, env = setup
     engine = CEngine(env)

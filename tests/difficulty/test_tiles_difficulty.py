@@ -134,6 +134,7 @@ def test_warp_envs_are_sized_to_the_call(policy):
 
 
 # --- MJX-JAX: tiled = classic -----------------------------------------------------------------------------------
+@pytest.mark.slow  # 10-70 s on 2 CPU cores; the default suite keeps under 15 min (2026-11-29)
 def test_tiled_pool_walks_as_the_classic_layout(jax_runs):
     """The pool on tiles (each slot's tile index refilled with its job, states merged by env.select) gives every
     walk the classic layout's length and, within float32 rounding, its distance."""
@@ -143,6 +144,7 @@ def test_tiled_pool_walks_as_the_classic_layout(jax_runs):
     np.testing.assert_allclose(d_pool, d_classic, atol=TILED_ATOL)
 
 
+@pytest.mark.slow  # 10-70 s on 2 CPU cores; the default suite keeps under 15 min (2026-11-29)
 def test_each_env_walks_its_own_terrain(jax_runs):
     """Three terrains with three different outcomes: row b of the tiled pool walked tile b = terrain b (not tile 0,
     not a neighbour's)."""

@@ -191,6 +191,7 @@ def sample_tiles():
     return dem.stack_tiles([z for _, z in dem.load_dems(None, min(dem.DEFAULT_SCALES))])
 
 
+@pytest.mark.slow  # 10-70 s on 2 CPU cores; the default suite keeps under 15 min (2026-11-29)
 def test_train_checkpoint_resume_bit_equal(tmp_path, sample_tiles):
     """``train_gan`` stopped after 1 step and resumed (to 2, then 3 steps) ends with the generator bytes, the
     discriminator, optimiser states, step, key and metric history of an uninterrupted 3-step run."""

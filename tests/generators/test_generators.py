@@ -446,6 +446,7 @@ def test_worley_tiled_equals_bracket_and_falls_back_on_overflow(monkeypatch):
     np.testing.assert_array_equal(run("tiled"), bracket)
 
 
+@pytest.mark.slow  # 10-70 s on 2 CPU cores; the default suite keeps under 15 min (2026-11-29)
 def testworley_pallas_equals_sort_bit_for_bit(monkeypatch):
     """"pallas" (Pallas's interpreter on CPU) returns the D-th squared distance itself: equal to "sort" bit for bit,
     over random genomes, D = 0, D = N / 4, N = 2 and N = 400, in a batch whose dense maps overflow their tile lists

@@ -59,6 +59,7 @@ def test_device_put_replicated_patch_is_local():
     assert hasattr(jax, "device_put_replicated") == had  # nothing left behind
 
 
+@pytest.mark.slow  # 10-70 s on 2 CPU cores; the default suite keeps under 15 min (2026-11-29)
 def test_brax_walker_wraps_the_same_env():
     from brax.envs.base import Env, State
 

@@ -50,6 +50,7 @@ SCRIPT = textwrap.dedent("""
 """).replace("TESTS", repr(TESTS))
 
 
+@pytest.mark.slow  # 10-70 s on 2 CPU cores; the default suite keeps under 15 min (2026-11-29)
 def test_sharded_trials_equal_the_one_device_runner():
     assert run_on_devices(SCRIPT).strip().endswith("ok")
 

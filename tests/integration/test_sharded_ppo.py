@@ -48,6 +48,7 @@ SCRIPT = textwrap.dedent("""
 """).replace("TESTS", repr(TESTS))
 
 
+@pytest.mark.slow  # 10-70 s on 2 CPU cores; the default suite keeps under 15 min (2026-11-29)
 def test_data_parallel_ppo_update_equals_one_device():
     assert run_on_devices(SCRIPT).strip().endswith("ok")
 

@@ -344,6 +344,7 @@ def test_combined_generators_step_equals_separate_steps():
         ME.multi_step(states, keys[:1], jax.random.key(0), scorings, emitters, smooth)
 
 
+@pytest.mark.slow  # 10-70 s on 2 CPU cores; the default suite keeps under 15 min (2026-11-29)
 def test_evolve_many_resumes_to_the_same_archives(tmp_path):
     """evolve_many: one archive per treatment, each elite in its own cell; a killed run resumes to the same
     archives (two generators, 32 x 32, a slope fitness: no walker)."""

@@ -103,6 +103,7 @@ def test_every_command_that_walks_a_policy_takes_the_observation_set():
         qd.config.resolve_config(qd.EvolveConfig(observation="eyes"))
 
 
+@pytest.mark.slow  # 10-70 s on 2 CPU cores; the default suite keeps under 15 min (2026-11-29)
 def test_the_perceptive_twin_walks_flat_ground_with_the_blind_actions():
     """On the states of its own flat-ground walk (4 walks x 30 env steps, one jitted program) the twin's actions are
     the blind policy's on the blind part of the observation, to 1e-6."""

@@ -161,6 +161,7 @@ def test_the_ant_ships_a_base_policy_that_records_its_robot_and_passed_the_bar()
     assert "train-base-policy --robot ant --preset gpu" in (folder / "PROVENANCE.md").read_text()
 
 
+@pytest.mark.slow  # 10-70 s on 2 CPU cores; the default suite keeps under 15 min (2026-11-29)
 def test_the_ants_walk_on_a_tile_does_not_touch_its_neighbour_tile():
     """The ant's feet reach 1.2 m from its torso, so its goal and side margins are its reach (1.3 m): walking a flat
     tile whose +x neighbour is a tall Perlin tile, it reaches the goal as on the classic layout (with the humanoid's
