@@ -1,9 +1,10 @@
 """Shared by the tests of ``docs/results/suite_v2/reevaluate.py`` (the fast ones in ``tests/suite`` and the real
 walks in ``tests/integration``): the script as a module, its tiny flags and two shipped walkers to walk."""
 
-import importlib.util
 import shutil
 from pathlib import Path
+
+import scripts
 
 ROOT = Path(__file__).resolve().parents[1]
 SCRIPT = ROOT / "docs" / "results" / "suite_v2" / "reevaluate.py"
@@ -15,9 +16,7 @@ WALKERS = (("a", "exp3_gpushort/cppn-map/policies/trial_0"), ("b", "wide_gpushor
 
 def load_script():
     """The module of ``reevaluate.py``."""
-    spec = importlib.util.spec_from_file_location("suite_v2_reevaluate", SCRIPT)
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
+    module = scripts.load_script(SCRIPT, "suite_v2_reevaluate")
     return module
 
 

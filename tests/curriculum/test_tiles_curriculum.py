@@ -25,6 +25,7 @@ from jaxterrain.walker import Tile, WalkerConfig, WalkerEnv, warp_available
 from jaxterrain.curriculum import run_config, runner
 from jaxterrain.walker import layout
 from jaxterrain.runtime import xla
+from scripts import ROOT, load_script
 
 
 def validated(cfg: dict):
@@ -448,15 +449,9 @@ def test_the_compact_audit_counts_mixed_chunks_from_the_trials_chunk_counts():
     done (fewer chunks than it + 1) while another runs; the share's bound is the running trials' chunks in mixed
     chunks over all chunks; trials that all end together have none. And the shipped exp3 CPPN map treatment: 10
     trials of 75 chunks, nothing mixed."""
-    import importlib.util
-    from pathlib import Path
-
-    path = Path(__file__).resolve().parents[2] / "docs" / "results" / "compact_tiles_audit.py"
-    spec = importlib.util.spec_from_file_location("compact_tiles_audit", path)
-    audit = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(audit)
+    audit = load_script("docs/results/compact_tiles_audit.py", "compact_tiles_audit")
     assert audit.mixed_share([75] * 10) == (0, 0.0)
     mixed, share = audit.mixed_share([2, 4, 4])  # chunks 2 and 3: trial 0 done, trials 1 and 2 running
     assert mixed == 2 and share == pytest.approx(4 / 10)
-    chunks = audit.chunks_per_trial(path.parent / "exp3_gpushort" / "cppn-map")
+    chunks = audit.chunks_per_trial(ROOT / "docs" / "results" / "exp3_gpushort" / "cppn-map")
     assert chunks == [75] * 10 and audit.mixed_share(chunks)[0] == 0

@@ -3,13 +3,13 @@ comes from the parsers (``mkdocs build --strict`` itself runs in ``.ci/run``).""
 
 from __future__ import annotations
 
-import importlib.util
 import re
 import subprocess
 import sys
 from pathlib import Path
 
 import yaml
+from scripts import load_script
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -42,9 +42,7 @@ def test_every_page_of_the_site_exists_and_every_readme_link_resolves():
 
 
 def test_the_cli_reference_has_every_commands_help():
-    spec = importlib.util.spec_from_file_location("cli_hook", ROOT / "docs" / "hooks" / "cli.py")
-    hook = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(hook)
+    hook = load_script(ROOT / "docs" / "hooks" / "cli.py", "cli_hook")
     from experiments.__main__ import COMMANDS
 
     page = hook.on_page_markdown("# Command line\n\n<!-- cli-reference -->\n", None, None, None)
@@ -54,9 +52,7 @@ def test_the_cli_reference_has_every_commands_help():
 
 
 def _cli_page() -> str:
-    spec = importlib.util.spec_from_file_location("cli_hook", ROOT / "docs" / "hooks" / "cli.py")
-    hook = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(hook)
+    hook = load_script(ROOT / "docs" / "hooks" / "cli.py", "cli_hook")
     return hook, hook.on_page_markdown((ROOT / "docs" / "cli.md").read_text(), None, None, None)
 
 

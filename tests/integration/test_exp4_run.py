@@ -6,11 +6,11 @@ per robot, observation set and suite). Each stage run again says ``done`` withou
 
 from __future__ import annotations
 
-import importlib.util
 import tarfile
 from pathlib import Path
 
 import pytest
+from scripts import load_script
 
 ROOT = Path(__file__).resolve().parents[2]
 SCRIPT = ROOT / "docs" / "results" / "exp4" / "run.py"
@@ -19,9 +19,7 @@ TINY = ["--size", "96", "--seeds", "1", "--families", "flat", "boxes", "--genera
 
 
 def load():
-    spec = importlib.util.spec_from_file_location("exp4_run_e2e", SCRIPT)
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
+    module = load_script(SCRIPT, "exp4_run_e2e")
     return module
 
 

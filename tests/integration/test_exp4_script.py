@@ -6,11 +6,11 @@ arithmetic, and what ``--pack`` leaves out. Seconds, no JAX work."""
 from __future__ import annotations
 
 import argparse
-import importlib.util
 import json
 from pathlib import Path
 
 import pytest
+from scripts import load_script
 
 ROOT = Path(__file__).resolve().parents[2]
 SCRIPT = ROOT / "docs" / "results" / "exp4" / "run.py"
@@ -18,9 +18,7 @@ SCRIPT = ROOT / "docs" / "results" / "exp4" / "run.py"
 
 @pytest.fixture(scope="module")
 def run():
-    spec = importlib.util.spec_from_file_location("exp4_run", SCRIPT)
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
+    module = load_script(SCRIPT, "exp4_run")
     return module
 
 

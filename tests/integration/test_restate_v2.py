@@ -5,7 +5,6 @@ without the v2 evaluations it refuses, naming what is missing."""
 
 from __future__ import annotations
 
-import importlib.util
 import json
 from pathlib import Path
 
@@ -13,15 +12,14 @@ import numpy as np
 import pytest
 
 from jaxterrain import suite
+from scripts import load_script
 
 SCRIPT = Path(__file__).resolve().parents[2] / "docs" / "results" / "suite_v2" / "restate.py"
 
 
 @pytest.fixture(scope="module")
 def restate():
-    spec = importlib.util.spec_from_file_location("suite_v2_restate", SCRIPT)
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
+    module = load_script(SCRIPT, "suite_v2_restate")
     return module
 
 

@@ -6,7 +6,6 @@ at the robot's 10-key evaluation, so its base-policy row is those 10 runs, recom
 from __future__ import annotations
 
 import csv
-import importlib.util
 from pathlib import Path
 
 import numpy as np
@@ -15,6 +14,7 @@ import pytest
 from experiments.generalise import load_base, load_treatment
 from jaxterrain import suite
 from jaxterrain.runtime import statistics
+from scripts import load_script
 
 RESULTS = Path(__file__).resolve().parents[2] / "docs" / "results"
 KEYS = RESULTS / "base_v1_keys_h200_2026-11-29"
@@ -44,9 +44,7 @@ def test_every_shipped_aggregate_compares_with_its_robots_10_key_base_evaluation
 
 
 def test_trial_unit_ant_gain_trims_each_run_over_its_own_cells():
-    spec = importlib.util.spec_from_file_location("trial_unit", RESULTS / "trial_unit.py")
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
+    module = load_script(RESULTS / "trial_unit.py", "trial_unit")
     cells = np.linspace(0.0, 1.0, 8)                       # a run's IQM over these 8 cells: the middle 4's mean
     walkers = np.stack([cells + 0.1, cells + 0.3])         # [2 trials, 8 cells]
     base = np.stack([cells, cells, cells])                 # [3 runs, 8 cells]

@@ -6,7 +6,6 @@ again."""
 from __future__ import annotations
 
 import csv
-import importlib.util
 import json
 from pathlib import Path
 
@@ -15,15 +14,14 @@ import pytest
 
 from jaxterrain import suite
 from jaxterrain.suite import calibration
+from scripts import load_script
 
 SCRIPT = Path(__file__).resolve().parents[2] / "docs" / "results" / "suite_v2" / "calibrate.py"
 
 
 @pytest.fixture(scope="module")
 def cal():
-    spec = importlib.util.spec_from_file_location("suite_v2_calibrate", SCRIPT)
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
+    module = load_script(SCRIPT, "suite_v2_calibrate")
     return module
 
 

@@ -5,7 +5,6 @@ to end at CPU size with ``all --tiny``: the report of the session that wrote it)
 from __future__ import annotations
 
 import csv
-import importlib.util
 import json
 from pathlib import Path
 
@@ -13,15 +12,14 @@ import pytest
 
 from jaxterrain.rl.checkpoint import BASE_POLICY_DIR
 from jaxterrain.walker import parse_randomisation
+from scripts import load_script
 
 SCRIPT = Path(__file__).resolve().parents[2] / "docs" / "results" / "randomisation" / "run.py"
 
 
 @pytest.fixture(scope="module")
 def run():
-    spec = importlib.util.spec_from_file_location("randomisation_run", SCRIPT)
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
+    module = load_script(SCRIPT, "randomisation_run")
     return module
 
 

@@ -3,7 +3,6 @@ that does not match its MJCF is refused naming what is missing."""
 
 from __future__ import annotations
 
-import importlib.util
 from pathlib import Path
 
 import jax
@@ -16,14 +15,13 @@ from jaxterrain.terrain import TerrainScale
 from jaxterrain.walker import WalkerConfig, WalkerEnv
 from jaxterrain.walker import robots
 from jaxterrain.walker.model import build_model, build_spec, standing_offset
+from scripts import load_script
 
 DATA = Path(__file__).resolve().parents[1] / "data"
 
 
 def _reference_module():
-    spec = importlib.util.spec_from_file_location("make_walker_reference", DATA / "make_walker_reference.py")
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
+    module = load_script(DATA / "make_walker_reference.py", "make_walker_reference")
     return module
 
 
