@@ -4,6 +4,8 @@ walks in ``tests/integration``): the script as a module, its tiny flags and two 
 import shutil
 from pathlib import Path
 
+import pytest
+
 import scripts
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -30,3 +32,10 @@ def make_experiment(root: Path) -> Path:
 def args(*extra):
     """The script's arguments for ``exp`` at the tiny size, plus ``extra``."""
     return ["exp", "--work", "work", "--base-out", "base", *TINY, *extra]
+
+
+@pytest.fixture
+def exp(tmp_path, monkeypatch):
+    """``tmp_path/exp``: treatments ``a`` (a paper-recipe walker) and ``b`` (a wide-recipe walker); cwd tmp_path."""
+    monkeypatch.chdir(tmp_path)
+    return make_experiment(tmp_path)

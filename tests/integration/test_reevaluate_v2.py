@@ -10,19 +10,12 @@ import numpy as np
 import pytest
 
 from jaxterrain import suite
-from reevaluate_v2 import ROOT, SCRIPT, args, load_script, make_experiment
+from reevaluate_v2 import args, exp, load_script, ROOT, SCRIPT  # exp: a fixture
 
 
 @pytest.fixture
 def script():
     return load_script()
-
-
-@pytest.fixture
-def exp(tmp_path, monkeypatch):
-    """``tmp_path/exp``: treatments ``a`` (a paper-recipe walker) and ``b`` (a wide-recipe walker); cwd tmp_path."""
-    monkeypatch.chdir(tmp_path)
-    return make_experiment(tmp_path)
 
 
 @pytest.mark.slow

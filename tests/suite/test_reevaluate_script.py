@@ -16,19 +16,12 @@ import pytest
 
 from jaxterrain import suite
 from jaxterrain.suite import batch
-from reevaluate_v2 import RESULTS, ROOT, args, load_script, make_experiment
+from reevaluate_v2 import args, exp, load_script, RESULTS, ROOT  # exp: a fixture
 
 
 @pytest.fixture(scope="module")
 def script():
     return load_script()
-
-
-@pytest.fixture
-def exp(tmp_path, monkeypatch):
-    """``tmp_path/exp``: treatments ``a`` (a paper-recipe walker) and ``b`` (a wide-recipe walker); cwd tmp_path."""
-    monkeypatch.chdir(tmp_path)
-    return make_experiment(tmp_path)
 
 
 def test_bad_flags_are_one_line_naming_them(script, exp, capsys):
