@@ -138,7 +138,8 @@ def summarise(rows: list[dict], timing: dict) -> tuple[dict, str]:
 
     table: dict = {}
     for r in rows:
-        table.setdefault((r["group"], r["policy"], r["family"], r["level"], r["terrain"]), {})[r["engine"]] = \
+        # str(): rows read back from fitness.csv (a resumed run) hold strings, this run's rows ints
+        table.setdefault((r["group"], r["policy"], r["family"], str(r["level"]), str(r["terrain"])), {})[r["engine"]] = \
             (float(r["fitness"]), float(r["mean_steps"]))
     engines = sorted({r["engine"] for r in rows})
     pairs = [(a, b) for a, b in (("mujoco", "mjx"), ("warp", "mjx"), ("mujoco", "warp")) if a in engines and b in
