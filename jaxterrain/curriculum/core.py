@@ -339,7 +339,13 @@ def chunk_update(state: State, fitness: jax.Array, progress: Any, keys: jax.Arra
         return new, None
     stays = ~new.done & ~new.restart  # the chunk just trained was trained on the right terrain
     started = bare._replace(restart=jnp.zeros((), bool), pending=jnp.ones((), bool))
-    return _where_tree(state.pending, new._replace(pending=stays), started), ~state.pending | stays
+    if not config.eval_lag:
+        return _where_tree(state.pending, new._replace(pending=stays), started), ~state.pending | stays
+    # eval_lag: on a switch the chunk trained meanwhile (on the old terrain) is kept, recorded unevaluated
+    switched = ~new.done & new.restart
+    after = _where_tree(switched, _unevaluated(new, state.terrain, config)._replace(pending=jnp.zeros((), bool)),
+                        new._replace(pending=stays))
+    return _where_tree(state.pending, after, started), ~state.pending | ~new.done
 
 
 def chunk_result(state: State, new: State, physics: Physics, use_trained, hold, harness: Harness) -> State:
@@ -381,6 +387,19 @@ def _evaluated(state: State, policy, fitness, bank: TerrainBank, select_key, con
     return state._replace(policy=policy, selector=chosen, terrain=_evaluated_terrain(selector, chosen), chunk=c + 1,
                           epoch=epoch, env_steps=state.env_steps + config.steps_per_chunk, hardest=hardest, done=done,
                           restart=decision.restart, history=history)
+
+
+def _unevaluated(state: State, terrain, config: CurriculumConfig) -> State:
+    """``state`` after one more chunk trained on ``terrain`` and not evaluated (``CurriculumConfig.eval_lag``: the
+    chunk trained while the evaluation that finished ``terrain`` was walked): counters on, its history row with
+    ``evaluation`` NaN and the hardest record unchanged, done when the epochs are spent."""
+    c, h = state.chunk, state.history
+    epoch = state.epoch + config.epochs_per_chunk
+    history = History(epoch=h.epoch.at[c].set(epoch, mode="drop"), terrain=h.terrain.at[c].set(terrain, mode="drop"),
+                      evaluation=h.evaluation.at[c].set(jnp.nan, mode="drop"),
+                      hardest=h.hardest.at[c].set(state.hardest, mode="drop"))
+    return state._replace(chunk=c + 1, epoch=epoch, env_steps=state.env_steps + config.steps_per_chunk,
+                          done=state.done | (epoch >= config.max_epochs), history=history)
 
 
 def _chunk_keys(state: State, chunk):
