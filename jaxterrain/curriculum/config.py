@@ -299,8 +299,8 @@ def validate_config(config: CurriculumConfig) -> CurriculumConfig:
     if not isinstance(config.eval_lag, bool):
         raise ValueError(f"CurriculumConfig.eval_lag must be True or False, got {config.eval_lag!r}")
     if config.eval_lag and not config.overlap:
-        raise ValueError("CurriculumConfig.eval_lag needs overlap=True (the evaluation rides along the next chunk's "
-                         "training), got overlap=False")
+        raise ValueError("CurriculumConfig.eval_lag needs CurriculumConfig.overlap (each evaluation riding along the "
+                         "next chunk's training); overlap is False")
     _check_ppo(config.ppo)
     if config.steps_per_chunk % config.steps_per_update:
         raise ValueError(

@@ -516,7 +516,7 @@ def test_eval_lag_resumes_to_the_uninterrupted_run(tmp_path):
 
 
 def test_eval_lag_is_refused_without_overlap_or_as_a_non_bool():
-    with pytest.raises(ValueError, match=r"^CurriculumConfig.eval_lag needs overlap=True"):
+    with pytest.raises(ValueError, match=r"^CurriculumConfig.eval_lag needs CurriculumConfig.overlap "):
         C.validate_config(C.CurriculumConfig(eval_lag=True))
     with pytest.raises(ValueError, match=r"^CurriculumConfig.eval_lag must be True or False"):
         C.validate_config(C.CurriculumConfig(overlap=True, eval_lag="yes"))
