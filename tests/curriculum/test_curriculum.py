@@ -515,6 +515,26 @@ def test_eval_lag_resumes_to_the_uninterrupted_run(tmp_path):
     assert np.any(np.isnan(np.asarray(whole.history.evaluation)[np.asarray(whole.history.epoch) > 0]))
 
 
+def test_unevaluated_chunks_stay_out_of_the_evaluations_of_metrics_sequences_and_history_csv():
+    """A lagged history (chunk 2 of trial 0 trained, not evaluated): the metrics' mean evaluation of that chunk is
+    trial 1's alone, the terrain's final evaluation is its last one, and ``seen_epoch`` is one chunk on (-1 there)."""
+    h = C.History(epoch=np.array([[1, 2, 3, 4], [1, 2, 3, -1]]), terrain=np.array([[5, 5, 5, 7], [5, 6, 6, -1]]),
+                  evaluation=np.array([[0.5, 0.95, np.nan, 0.2], [0.4, 0.6, 0.7, np.nan]], np.float32),
+                  hardest=np.zeros((2, 4), np.float32))
+    from jaxterrain.curriculum import progress
+
+    m = progress.history_metrics(h, 0, 4)
+    np.testing.assert_allclose(m["evaluation"], [0.45, 0.775, 0.7, 0.2], rtol=1e-6)
+    assert m["trials_running"].tolist() == [2, 2, 2, 1]
+    runs = C.terrain_runs(h.terrain[0], h.evaluation[0], h.epoch[0])
+    assert [(r["terrain"], r["chunks"], r["end_epoch"]) for r in runs] == [(5, 3, 3), (7, 1, 4)]
+    assert runs[0]["final_evaluation"] == pytest.approx(0.95) and runs[0]["best_evaluation"] == pytest.approx(0.95)
+    hist = outputs.histories(C.State(*([None] * 10), history=h))
+    lagged = small("map", overlap=True, eval_lag=True)
+    assert outputs.seen_epochs(hist, lagged).tolist() == [[2, 3, -1, 5], [2, 3, 4, -1]]
+    assert outputs.seen_epochs(hist, small("map")).tolist() == [[1, 2, -1, 4], [1, 2, 3, -1]]
+
+
 def test_eval_lag_is_refused_without_overlap_or_as_a_non_bool():
     with pytest.raises(ValueError, match=r"^CurriculumConfig.eval_lag needs CurriculumConfig.overlap "):
         C.validate_config(C.CurriculumConfig(eval_lag=True))
