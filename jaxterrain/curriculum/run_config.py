@@ -30,8 +30,8 @@ ones there too; the others hold ``CurriculumConfig``'s defaults until resolved).
 The serialised form is the flat dict of ``config.json`` (:func:`to_flat`; every key a command-line flag's name, so
 the one field -> flag table is :data:`FLAT_FIELDS` with ``--`` + dashes); :func:`from_flat` reads it, and every
 ``config.json`` written before (a key it lacks takes the value that version ran with: ``truncation`` ``mask``,
-``backend`` ``jax``, ``overlap`` / ``eval_lag`` / ``fast_compile`` off, ``compact`` on; the keys of other selectors' params are
-dropped). The presets' flat forms live in :mod:`.presets` (no JAX: ``--help`` reads them).
+``backend`` ``jax``, ``overlap`` / ``eval_lag`` / ``fast_compile`` off, ``compact`` on; the keys of other
+selectors' params are dropped). The presets' flat forms live in :mod:`.presets` (no JAX: ``--help`` reads them).
 """
 
 from __future__ import annotations

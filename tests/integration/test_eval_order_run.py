@@ -23,10 +23,10 @@ TINY = ["--size", "96", "--seeds", "1", "--families", "flat", "boxes", "--genera
 
 @pytest.mark.slow
 def test_eval_order_stages_at_the_tiniest_size(tmp_path, monkeypatch, capsys):
+    archive = tiny_archive_file(tmp_path, 4, "a.npz")  # from the repository root (the stored archive's path)
     monkeypatch.chdir(tmp_path)
     run = load_script(SCRIPT, "eval_order_run")
     out = tmp_path / "runs"
-    archive = tiny_archive_file(tmp_path, 4, "a.npz")
     base = ["--out", str(out), "--preset", "smoke", "--eval-preset", "smoke", "--trials", "2", "--archive", archive]
 
     def stage(*argv):
