@@ -1,8 +1,8 @@
 """Seconds per curriculum chunk under each evaluation order (issue 63 item 3), interleaved in one command.
 
-    python benchmarks/eval_order.py --preset gpu-short --time-limit 9 --out runs/eval_order            # one H200
+    python benchmarks/eval_order.py --preset gpu-short --time-limit 9 --out runs/eval_order --work /tmp/eo  # one H200
     python benchmarks/eval_order.py --preset gpu-short --archives cppn=jaxterrain/assets/archives/cppn_headings.npz \\
-        --time-limit 9 --out runs/eval_order_alone                                                     # one treatment
+        --time-limit 9 --out runs/eval_order_alone --work /tmp/eo_alone                               # one treatment
 
 The orders (``--orders``, each a ``CurriculumConfig`` setting; ``sequential`` first, the peer):
 
@@ -17,12 +17,13 @@ treatments of ``curriculum --preset P``, by default the five shipped archives an
 ``--archives``; ``--trials`` each; one program of all their trials, compiled, every trial at its first chunk) and
 stepped one untimed chunk; then ``--rounds`` rounds, each timing ``--chunks`` chunks of every order in turn (the
 order of the orders alternates from round to round), so drifts of the machine hit every order alike. Per round and
-order: seconds per chunk (wall time of a block of n chunks / n: every running trial advances at least n chunks), loop
-steps are not counted; the terrain switches and unevaluated chunks (``lag``) in the block are. The ratios are each
+order: seconds per chunk (wall time of a block of n chunks / n: every running trial advances at least n chunks; loop
+steps are not counted), and the terrain switches and unevaluated chunks (``lag``) in the block. The ratios are each
 order's median seconds per chunk over ``sequential``'s, and per round (paired).
 
 Writes ``<out>/eval_order.json`` after every round (``done`` once all rounds ran; a command that finds it done only
-prints it) and a Markdown table. ``--time-limit MIN``: rounds stop when the next would not fit. On a CPU, test it at
+prints it) and a Markdown table. ``--time-limit MIN``: rounds stop when the next would not fit (estimated from the
+round before, or from the untimed first chunks; the set-ups are not cut short). On a CPU, test it at
 tiny size: ``--preset smoke --archives a=A.npz b=B.npz --trials 1 --chunks 1 --rounds 2 --backend jax``.
 """
 
@@ -53,7 +54,9 @@ def log(*a) -> None:
 
 def parse_args(argv=None) -> argparse.Namespace:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("--out", required=True, type=Path, help="result folder (eval_order.json, the set-up folders)")
+    p.add_argument("--out", required=True, type=Path, help="result folder (eval_order.json and .md)")
+    p.add_argument("--work", type=Path, default=None,
+                   help="the treatments' set-up folders (their combined archive; default OUT/setup)")
     p.add_argument("--orders", default="sequential,overlap,lag",
                    help=f"comma list of {', '.join(ORDERS)}; sequential first (the peer)")
     p.add_argument("--preset", default="gpu-short", help="curriculum preset of the treatments (smoke, gpu-short, ...)")
@@ -127,7 +130,7 @@ def main(argv=None) -> int:
     pops, row = {}, {"preset": args.preset, "orders": args.orders, "chunks_per_block": args.chunks, "setup": {},
                      "rounds": []}
     for order in args.orders:
-        folder = args.out / "setup" / order
+        folder = (args.work or args.out / "setup") / order
         plan = treatments(args, folder, order)
         t0 = time.perf_counter()
         members, block, _, trials = batch.population(
@@ -144,8 +147,10 @@ def main(argv=None) -> int:
         log(order, row["setup"][order])
     for r in range(args.rounds):
         turn = args.orders if r % 2 == 0 else args.orders[:1] + args.orders[1:][::-1]
-        guess = sum(row["rounds"][-1][o]["s_per_chunk"] * args.chunks for o in args.orders) if row["rounds"] else 0
-        if row["rounds"] and left() is not None and left() < 1.2 * guess:
+        last = row["rounds"][-1] if row["rounds"] else {o: {"s_per_chunk": row["setup"][o]["first_chunk_s"]}
+                                                         for o in args.orders}
+        guess = sum(last[o]["s_per_chunk"] * args.chunks for o in args.orders)
+        if left() is not None and left() < 1.2 * guess:
             log(f"round {r}: no time left for another round ({left():.0f} s left, a round takes ~{guess:.0f} s)")
             break
         got = {}

@@ -35,7 +35,7 @@ def test_eval_order_stages_at_the_tiniest_size(tmp_path, monkeypatch, capsys):
 
     assert stage("write")[0] == 2  # nothing trained yet: one line
     assert stage("train", "sequential")[0] == 0
-    assert stage("train", "lag", "--time-limit", "1e-6")[0] == 3  # stopped, resumable
+    assert stage("train", "lag", "--time-limit", "0.1")[0] == 3  # stopped after its probe chunk, resumable
     code, text = stage("train", "lag", "--pack", str(tmp_path / "eo.tar.gz"))
     assert code == 0 and "learn --resume" in text
     assert json.loads((out / "lag" / "config.json").read_text())["eval_lag"] is True
