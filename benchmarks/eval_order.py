@@ -123,7 +123,7 @@ def main(argv=None) -> int:
         log(f"done before: {path}")
         print(path.read_text())
         return 0
-    from jaxterrain.curriculum import batch
+    from jaxterrain.curriculum import batch, runner
     from jaxterrain.runtime.io import atomic_write_text
 
     log("environment", environment())
@@ -143,7 +143,7 @@ def main(argv=None) -> int:
         first = time.perf_counter() - t0
         pops[order] = [block, states, m]
         row["setup"][order] = {"treatments": [n for n, _ in plan], "trials": trials, "setup_compile_s": setup_s,
-                               "first_chunk_s": first}
+                               "first_chunk_s": first, "backend": runner.physics_of(plan[0][1])}
         log(order, row["setup"][order])
     for r in range(args.rounds):
         turn = args.orders if r % 2 == 0 else args.orders[:1] + args.orders[1:][::-1]
