@@ -272,6 +272,8 @@ def pack(args) -> None:
 
 
 def main(argv=None) -> int:
+    global STARTED
+    STARTED = time.perf_counter()  # --time-limit counts from here (also when main is called again in one process)
     p = parser()
     args = p.parse_args(argv)
     check(p, args)
