@@ -52,16 +52,22 @@ HISTORY_COLUMNS = ("trial", "chunk", "epoch", "env_steps", "terrain", "cell", "b
 """The columns of ``history.csv``: one row per trial and chunk, ``terrain`` the terrain chunk ``chunk`` trained
 on, ``evaluation`` the policy after that chunk (at ``epoch``) evaluated on it with the chunk's keys (``nan``: not
 evaluated, ``CurriculumConfig.eval_lag``), ``seen_epoch`` the epochs of the policy the selector chose the next
-terrain for when it saw that evaluation (:func:`seen_epochs`: ``epoch``, or one chunk later under ``eval_lag``;
--1 where not evaluated)."""
+terrain for when it saw that evaluation (:func:`seen_epochs`: ``epoch``, or one chunk later under ``eval_lag``
+but at a finished trial's last evaluation; -1 where not evaluated)."""
 
 
-def seen_epochs(hist: dict, config) -> np.ndarray:
-    """``[T, C]`` int: per history row, the epochs of the policy the selector decided for when it saw the row's
+def seen_epochs(hist: dict, config, done=None) -> np.ndarray:
+    """``[T, C]`` int: per history row, the epochs the trial had trained (and kept) when the selector read the row's
     evaluation: the row's ``epoch`` (the plain and the overlapped order), ``epoch + epochs_per_chunk`` under
-    ``config.eval_lag`` (the next chunk had trained meanwhile); -1 where the row holds no evaluation."""
+    ``config.eval_lag`` (the next chunk had trained meanwhile), except for the last row of a trial that is done
+    (``done`` [T] bool, None: none is): the training that rode along its evaluation was dropped; -1 where the row
+    holds no evaluation."""
     epoch = np.asarray(hist["epoch"])
-    lag = config.epochs_per_chunk if getattr(config, "eval_lag", False) else 0
+    lag = np.full(epoch.shape, config.epochs_per_chunk if getattr(config, "eval_lag", False) else 0)
+    if done is not None:
+        last = np.sum(epoch >= 0, axis=1) - 1  # [T]
+        ended = np.asarray(done, bool) & (last >= 0)
+        lag[np.flatnonzero(ended), last[ended]] = 0
     return np.where((epoch >= 0) & ~np.isnan(np.asarray(hist["evaluation"], np.float64)), epoch + lag, -1)
 
 
@@ -144,7 +150,7 @@ def write_outputs(folder: Path, run, config, bank, states, seconds: float | None
     treatment's :class:`~jaxterrain.curriculum.run_config.LearnConfig` (its archive and selector name it)."""
     hist = histories(states)
     cell, bins, dist = np.asarray(bank.cell), np.asarray(bank.bins), np.asarray(bank.distance)
-    seen = seen_epochs(hist, config)
+    seen = seen_epochs(hist, config, np.asarray(states.done))
     rows = []
     for t in range(hist["epoch"].shape[0]):
         for c in np.flatnonzero(hist["epoch"][t] >= 0):

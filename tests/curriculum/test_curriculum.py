@@ -532,6 +532,8 @@ def test_unevaluated_chunks_stay_out_of_the_evaluations_of_metrics_sequences_and
     hist = outputs.histories(C.State(*([None] * 10), history=h))
     lagged = small("map", overlap=True, eval_lag=True)
     assert outputs.seen_epochs(hist, lagged).tolist() == [[2, 3, -1, 5], [2, 3, 4, -1]]
+    # a finished trial's last evaluation: the chunk that rode along it was dropped
+    assert outputs.seen_epochs(hist, lagged, np.array([True, False])).tolist() == [[2, 3, -1, 4], [2, 3, 4, -1]]
     assert outputs.seen_epochs(hist, small("map")).tolist() == [[1, 2, -1, 4], [1, 2, 3, -1]]
 
 
