@@ -232,9 +232,9 @@ def check_selector_flags(args, curricula, option: str = "--curriculum") -> None:
 
 def add_fine_tuning_arguments(parser: argparse.ArgumentParser, scope: str = "") -> None:
     """``--observation``, ``--recipe``, ``--update-normaliser``, ``--healthy-reward``, ``--learning-rate``, ``--truncation``,
-    ``--max-evals``, ``--overlap`` and ``--compact`` (the switches also as ``--no-...``; config ``recipe`` and the update's shape /
-    ``update_normaliser`` / ``healthy_reward`` / ``learning_rate`` / ``truncation`` / ``max_evals`` / ``overlap`` /
-    ``compact``, read back by :func:`fine_tuning_overrides`), shared with ``curriculum`` (``scope`` is added to the
+    ``--max-evals``, ``--overlap``, ``--eval-lag`` and ``--compact`` (the switches also as ``--no-...``; config ``recipe`` and the
+    update's shape / ``update_normaliser`` / ``healthy_reward`` / ``learning_rate`` / ``truncation`` / ``max_evals`` /
+    ``overlap`` / ``eval_lag`` / ``compact``, read back by :func:`fine_tuning_overrides`), shared with ``curriculum`` (``scope`` is added to the
     help, e.g. ", in every treatment")."""
     parser.add_argument("--observation", choices=("blind", "perceptive"), default=None,
                         help=f"start from the robot's blind base policy (the default, the paper's) or its perceptive "
@@ -271,6 +271,11 @@ def add_fine_tuning_arguments(parser: argparse.ArgumentParser, scope: str = "") 
                         help=f"evaluate each chunk's policy while the next chunk trains, in the same physics calls"
                              f"{scope} (the same curriculum; the walker on one tile per trial, on either backend; "
                              f"CurriculumConfig.overlap)")
+    parser.add_argument("--eval-lag", action=argparse.BooleanOptionalAction, default=None,
+                        help=f"with --overlap: keep the chunk trained while a terrain's last evaluation was walked "
+                             f"instead of training it again on the next terrain{scope} (no loop step more per "
+                             f"switch; the selector sees each evaluation one chunk late, the kept chunk is not "
+                             f"evaluated: NaN in history.csv; CurriculumConfig.eval_lag)")
     parser.add_argument("--compact", action=argparse.BooleanOptionalAction, default=None,
                         help=f"once some trials have finished, compute only the running ones in each block (the "
                              f"same results; one compile per block size){scope} (default: on, off in smoke)")
@@ -288,7 +293,7 @@ def fine_tuning_overrides(args) -> dict:
     return dict(observation=args.observation, healthy_reward=args.healthy_reward, randomise=args.randomise,
                 update_normaliser=args.update_normaliser,
                 learning_rate=args.learning_rate, truncation=args.truncation, max_evals=args.max_evals,
-                overlap=args.overlap, compact=args.compact, **shape)
+                overlap=args.overlap, eval_lag=args.eval_lag, compact=args.compact, **shape)
 
 
 def overrides(args) -> dict:

@@ -98,19 +98,23 @@ def hardest_curve(epoch, hardest) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
 def terrain_runs(terrain, evaluation, epoch: Optional[np.ndarray] = None) -> list[dict]:
     """One trial's terrain sequence from its history ``terrain`` [C], ``evaluation`` [C] (and ``epoch`` [C]):
     a list of ``{"terrain", "chunks", "final_evaluation", "best_evaluation", "end_epoch"}``, one per consecutive
-    run of the same terrain (a terrain is never trained twice in a row unless it was not finished)."""
+    run of the same terrain (a terrain is never trained twice in a row unless it was not finished). A chunk trained
+    but not evaluated (evaluation NaN: ``CurriculumConfig.eval_lag``'s chunk after a terrain's last evaluation)
+    counts in ``chunks`` and ``end_epoch`` but not in the evaluations (NaN only for a run with none)."""
     terrain = np.asarray(terrain)
     evaluation = np.asarray(evaluation, np.float64)
     n = int(np.sum(terrain >= 0))
     runs: list[dict] = []
     for c in range(n):
+        e = float(evaluation[c])
         if runs and runs[-1]["terrain"] == int(terrain[c]):
             r = runs[-1]
             r["chunks"] += 1
-            r["best_evaluation"] = max(r["best_evaluation"], float(evaluation[c]))
+            r["best_evaluation"] = float(np.fmax(r["best_evaluation"], e))
         else:
-            r = {"terrain": int(terrain[c]), "chunks": 1, "best_evaluation": float(evaluation[c])}
+            r = {"terrain": int(terrain[c]), "chunks": 1, "best_evaluation": e, "final_evaluation": e}
             runs.append(r)
-        r["final_evaluation"] = float(evaluation[c])
+        if not np.isnan(e):
+            r["final_evaluation"] = e
         r["end_epoch"] = None if epoch is None else int(np.asarray(epoch)[c])
     return runs

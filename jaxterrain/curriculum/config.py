@@ -167,6 +167,14 @@ class CurriculumConfig(NamedTuple):
         keys, policies, evaluations and choices, given the same env states) in
         fewer physics calls: see :func:`jaxterrain.curriculum.core.step`. Needs a harness with ``train_evaluate``
         (the walker's on tiles). One-terrain selectors only (``map``, ``roughness``, ``random``).
+      eval_lag: with ``overlap``, what a terrain switch does to the chunk trained while the evaluation that ended
+        the terrain was walked: False (the default) drops it and trains that chunk again on the new terrain (one
+        step more per switch; the plain loop's curriculum); True keeps it (no step more): the trial trains one chunk
+        more on the terrain it just finished, that chunk is never evaluated (``History.evaluation`` NaN in its row)
+        and the selector sees every evaluation one chunk late (it decides for a policy trained one chunk past the
+        one it evaluated). Each row of the history still holds its own chunk's terrain and that chunk's policy's
+        evaluation there (with its keys); ``history.csv``'s ``seen_epoch`` says when the selector saw it. Needs
+        ``overlap``.
       params: the selector's own parameters, a NamedTuple its module defines (:mod:`.selectors`:
         ``MapParams`` for ``map`` (the GP's kappa, rho, sigma_f, noise, gp_evaluation, the removal rule's margin and
         ties, max_observations), ``RoughnessParams``, ``DRParams``, ``LevelsParams``, ``PLRParams``,
@@ -189,6 +197,7 @@ class CurriculumConfig(NamedTuple):
     distance_origin: str = "origin"
     ppo: PPOConfig = FINE_TUNING
     overlap: bool = False
+    eval_lag: bool = False
     params: Any = None
 
     @property
@@ -287,6 +296,11 @@ def validate_config(config: CurriculumConfig) -> CurriculumConfig:
                          f"selector={config.selector!r}")
     if not isinstance(config.overlap, bool):
         raise ValueError(f"CurriculumConfig.overlap must be True or False, got {config.overlap!r}")
+    if not isinstance(config.eval_lag, bool):
+        raise ValueError(f"CurriculumConfig.eval_lag must be True or False, got {config.eval_lag!r}")
+    if config.eval_lag and not config.overlap:
+        raise ValueError("CurriculumConfig.eval_lag needs CurriculumConfig.overlap (each evaluation riding along the "
+                         "next chunk's training); overlap is False")
     _check_ppo(config.ppo)
     if config.steps_per_chunk % config.steps_per_update:
         raise ValueError(

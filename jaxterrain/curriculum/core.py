@@ -33,7 +33,9 @@ walker's env states under MuJoCo Warp).
 
 Overlap (``config.overlap``, a harness with ``train_evaluate``): a step trains the next chunk while the pending
 chunk's evaluation runs in the same physics calls; the curriculum is the plain one, a terrain switch costing one
-step more (:func:`step`). ``State.pending`` marks a trained chunk whose evaluation is still to come.
+step more (:func:`step`). ``State.pending`` marks a trained chunk whose evaluation is still to come. With
+``config.eval_lag`` too, a switch keeps the chunk trained meanwhile (recorded with evaluation NaN) instead of
+training it again: no step more, the selector a chunk late (:func:`chunk_update`).
 """
 
 from __future__ import annotations
@@ -253,7 +255,7 @@ def step(state: State, key: jax.Array, bank: TerrainBank, *, config: CurriculumC
     its terrain, else drop it (the next step trains chunk ``chunk + 1`` again, on the new terrain, after the
     restart). Every chunk has the keys, starting policy, terrain and evaluation of the plain loop, so the records,
     the GP and the choices are the plain loop's (given the same env states at block starts); a terrain switch costs
-    one step more."""
+    one step more. With ``config.eval_lag`` as well, that training is kept on a switch (:func:`chunk_update`)."""
     selector = get_selector(config)
     keys = chunk_keys(state, config, key)
     if terrain is None:
@@ -330,7 +332,14 @@ def chunk_update(state: State, fitness: jax.Array, progress: Any, keys: jax.Arra
     :func:`chunk_keys`): ``(new, use_trained)``. ``new``: the state's counters, history, selector (its next
     terrains) and done, ``policy`` None (``state.policy`` is not read). ``use_trained``: None (plain: the policy
     after the chunk is the trained one), or with ``config.overlap`` [] bool: the trained policy (True) or the
-    starting one (the training dropped on a terrain switch). Pure; vmap it over trials."""
+    starting one (the training dropped on a terrain switch). Pure; vmap it over trials.
+
+    ``config.eval_lag`` (with overlap): on a terrain switch the chunk trained while the evaluation ran (chunk
+    ``state.chunk + 1``, on the terrain just finished) is kept: it is recorded with evaluation NaN and the hardest
+    record unchanged, its epochs counted, and the next step trains the chunk after it on the new terrain (nothing
+    pending). The training is dropped only when the trial is done. So every history row holds its own chunk's
+    terrain and, where evaluated, the evaluation of the policy after that chunk with that chunk's keys; the selector
+    decides for a policy one chunk further on than the one it read."""
     selector = get_selector(config)
     bare = state._replace(policy=None)
     new = _evaluated(bare, None, fitness, bank, _typed(keys[2]), config, selector,
@@ -339,7 +348,13 @@ def chunk_update(state: State, fitness: jax.Array, progress: Any, keys: jax.Arra
         return new, None
     stays = ~new.done & ~new.restart  # the chunk just trained was trained on the right terrain
     started = bare._replace(restart=jnp.zeros((), bool), pending=jnp.ones((), bool))
-    return _where_tree(state.pending, new._replace(pending=stays), started), ~state.pending | stays
+    if not config.eval_lag:
+        return _where_tree(state.pending, new._replace(pending=stays), started), ~state.pending | stays
+    # eval_lag: on a switch the chunk trained meanwhile (on the old terrain) is kept, recorded unevaluated
+    switched = ~new.done & new.restart
+    after = _where_tree(switched, _unevaluated(new, state.terrain, config)._replace(pending=jnp.zeros((), bool)),
+                        new._replace(pending=stays))
+    return _where_tree(state.pending, after, started), ~state.pending | ~new.done
 
 
 def chunk_result(state: State, new: State, physics: Physics, use_trained, hold, harness: Harness) -> State:
@@ -381,6 +396,19 @@ def _evaluated(state: State, policy, fitness, bank: TerrainBank, select_key, con
     return state._replace(policy=policy, selector=chosen, terrain=_evaluated_terrain(selector, chosen), chunk=c + 1,
                           epoch=epoch, env_steps=state.env_steps + config.steps_per_chunk, hardest=hardest, done=done,
                           restart=decision.restart, history=history)
+
+
+def _unevaluated(state: State, terrain, config: CurriculumConfig) -> State:
+    """``state`` after one more chunk trained on ``terrain`` and not evaluated (``CurriculumConfig.eval_lag``: the
+    chunk trained while the evaluation that finished ``terrain`` was walked): counters on, its history row with
+    ``evaluation`` NaN and the hardest record unchanged, done when the epochs are spent."""
+    c, h = state.chunk, state.history
+    epoch = state.epoch + config.epochs_per_chunk
+    history = History(epoch=h.epoch.at[c].set(epoch, mode="drop"), terrain=h.terrain.at[c].set(terrain, mode="drop"),
+                      evaluation=h.evaluation.at[c].set(jnp.nan, mode="drop"),
+                      hardest=h.hardest.at[c].set(state.hardest, mode="drop"))
+    return state._replace(chunk=c + 1, epoch=epoch, env_steps=state.env_steps + config.steps_per_chunk,
+                          done=state.done | (epoch >= config.max_epochs), history=history)
 
 
 def _chunk_keys(state: State, chunk):

@@ -28,8 +28,9 @@ from jaxterrain.runtime import provenance, statistics
 from jaxterrain.runtime.io import atomic_write_csv, atomic_write_text, save_figure
 from jaxterrain.walker import randomisation_json
 
-__all__ = ["BOOTSTRAP_REPS", "PARTIAL", "POLICIES", "SEQUENCE_COLUMNS", "histories", "sequence_rows", "generator_counts",
-           "milestone_rows", "summary_curve", "plot_curves", "write_outputs", "trial_policy", "export_policies"]
+__all__ = ["BOOTSTRAP_REPS", "PARTIAL", "POLICIES", "HISTORY_COLUMNS", "SEQUENCE_COLUMNS", "histories", "seen_epochs",
+           "sequence_rows", "generator_counts", "milestone_rows", "summary_curve", "plot_curves", "write_outputs",
+           "trial_policy", "export_policies"]
 
 BOOTSTRAP_REPS = 2000
 """Resamples of the trials for ``summary.json``'s ``hardest_mean_ci`` and ``hardest_iqm`` (rliable, seed 0)."""
@@ -44,6 +45,30 @@ def histories(states) -> dict:
     h = states.history
     return {"epoch": np.asarray(h.epoch), "terrain": np.asarray(h.terrain),
             "evaluation": np.asarray(h.evaluation, np.float64), "hardest": np.asarray(h.hardest, np.float64)}
+
+
+HISTORY_COLUMNS = ("trial", "chunk", "epoch", "env_steps", "terrain", "cell", "bin0", "bin1", "distance", "evaluation",
+                   "hardest", "seen_epoch")
+"""The columns of ``history.csv``: one row per trial and chunk, ``terrain`` the terrain chunk ``chunk`` trained
+on, ``evaluation`` the policy after that chunk (at ``epoch``) evaluated on it with the chunk's keys (``nan``: not
+evaluated, ``CurriculumConfig.eval_lag``), ``seen_epoch`` the epochs of the policy the selector chose the next
+terrain for when it saw that evaluation (:func:`seen_epochs`: ``epoch``, or one chunk later under ``eval_lag``
+but at a finished trial's last evaluation; -1 where not evaluated)."""
+
+
+def seen_epochs(hist: dict, config, done=None) -> np.ndarray:
+    """``[T, C]`` int: per history row, the epochs the trial had trained (and kept) when the selector read the row's
+    evaluation: the row's ``epoch`` (the plain and the overlapped order), ``epoch + epochs_per_chunk`` under
+    ``config.eval_lag`` (the next chunk had trained meanwhile), except for the last row of a trial that is done
+    (``done`` [T] bool, None: none is): the training that rode along its evaluation was dropped; -1 where the row
+    holds no evaluation."""
+    epoch = np.asarray(hist["epoch"])
+    lag = np.full(epoch.shape, config.epochs_per_chunk if getattr(config, "eval_lag", False) else 0)
+    if done is not None:
+        last = np.sum(epoch >= 0, axis=1) - 1  # [T]
+        ended = np.asarray(done, bool) & (last >= 0)
+        lag[np.flatnonzero(ended), last[ended]] = 0
+    return np.where((epoch >= 0) & ~np.isnan(np.asarray(hist["evaluation"], np.float64)), epoch + lag, -1)
 
 
 SEQUENCE_COLUMNS = ("trial", "order", "terrain", "cell", "bin0", "bin1", "distance", "prior", "chunks",
@@ -125,15 +150,16 @@ def write_outputs(folder: Path, run, config, bank, states, seconds: float | None
     treatment's :class:`~jaxterrain.curriculum.run_config.LearnConfig` (its archive and selector name it)."""
     hist = histories(states)
     cell, bins, dist = np.asarray(bank.cell), np.asarray(bank.bins), np.asarray(bank.distance)
+    seen = seen_epochs(hist, config, np.asarray(states.done))
     rows = []
     for t in range(hist["epoch"].shape[0]):
         for c in np.flatnonzero(hist["epoch"][t] >= 0):
             k = int(hist["terrain"][t, c])
             rows.append([t, c, int(hist["epoch"][t, c]), int(hist["epoch"][t, c]) * config.steps_per_epoch, k,
                          int(cell[k]), int(bins[k, 0]), int(bins[k, 1]), f"{dist[k]:.3f}",
-                         f"{hist['evaluation'][t, c]:.4f}", f"{hist['hardest'][t, c]:.3f}"])
-    atomic_write_csv(folder / "history.csv", ["trial", "chunk", "epoch", "env_steps", "terrain", "cell", "bin0", "bin1",
-                                  "distance", "evaluation", "hardest"], rows)
+                         f"{hist['evaluation'][t, c]:.4f}", f"{hist['hardest'][t, c]:.3f}",
+                         int(seen[t, c])])
+    atomic_write_csv(folder / "history.csv", list(HISTORY_COLUMNS), rows)
     sequences = sequence_rows(hist, bank, config, names)
     atomic_write_csv(folder / "sequences.csv", list(SEQUENCE_COLUMNS), sequences)
     label = f"{Path(getattr(run, 'terrains', None) or run.archive).stem} {run.curriculum.selector}"

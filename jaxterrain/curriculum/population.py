@@ -22,10 +22,10 @@ in the last bits wherever the physics' matrix products sum in blocks that depend
 matmuls; a fake harness without them: bit for bit, ``tests/curriculum/test_population.py``).
 
 The members must agree on what the harness runs (:func:`check_population`): the same ``Selector.slots``, overlap,
-env steps per chunk, evaluation protocol and PPO config; their selectors, banks, budgets and trial counts may
-differ. Each member runs its own block: ``n[m]`` chunks counted as :func:`run_trials` counts them (its trials stop
-stepping once it has done its block, while other members go on), so where its blocks end does not depend on the
-others.
+env steps per chunk, evaluation protocol and PPO config; their selectors, banks, budgets, trial counts and
+``eval_lag`` (a rule of the update, not of the physics) may differ. Each member runs its own block: ``n[m]``
+chunks counted as :func:`run_trials` counts them (its trials stop stepping once it has done its block, while other
+members go on), so where its blocks end does not depend on the others.
 
 ``rows`` [R] (global trial indices, every running trial among them; :func:`live_rows` of the members' ``done``
 concatenated): the physics computes those trials only (the others are done, their states unchanged). The maps are

@@ -31,9 +31,9 @@ _PAPER = dict(archive=CPPN_ARCHIVE, curriculum="map", trials=10, descriptors=["r
               distance_origin="origin", roughness_stride=5, max_observations=None, num_envs=500, unroll_length=10,
               num_unrolls=8, num_minibatches=8, update_epochs=8, learning_rate=3e-4, episode_length=1000,
               chunks_per_call=25, fast_compile=False, backend="auto", healthy_reward=None, update_normaliser=True,
-              truncation="bootstrap", overlap=False, compact=True, policy_every=None, terrains_per_chunk=8, levels=10,
-              levels_init=None, levels_promote=None, levels_demote=0.5, plr_capacity=None, plr_replay_prob=0.8,
-              plr_staleness=0.3, plr_temperature=0.3, plr_min_fill=0.5, accel_generator=None, accel_edits=1,
+              truncation="bootstrap", overlap=False, eval_lag=False, compact=True, policy_every=None,
+              terrains_per_chunk=8, levels=10, levels_init=None, levels_promote=None, levels_demote=0.5,
+              plr_capacity=None, plr_replay_prob=0.8, plr_staleness=0.3, plr_temperature=0.3, plr_min_fill=0.5, accel_generator=None, accel_edits=1,
               robot=None, recipe="paper", observation=None, randomise=None, terrains=None, terrain_height=None,
               terrain_order="name")
 

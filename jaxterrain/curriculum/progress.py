@@ -81,7 +81,8 @@ class ChunkProgress:
 
 def chunk_metrics(states, start: int, stop: int) -> dict:
     """Per-chunk ``[stop - start]`` metrics over trials: hardest (mean, a finished trial keeps its last value),
-    evaluation (mean of the trials still running), trials still running."""
+    evaluation (mean of the trials still running that were evaluated in that chunk: under ``eval_lag`` a chunk
+    after a terrain's last evaluation is not), trials still running."""
     return history_metrics(states.history, start, stop)
 
 
@@ -96,6 +97,7 @@ def history_metrics(h, start: int, stop: int) -> dict:
         carried[t, n:] = hardest[t, n - 1] if n else 0.0
     ev = np.asarray(h.evaluation, np.float64)[:, start:stop]
     running = np.sum(epoch[:, start:stop] >= 0, axis=0)
-    evaluation = np.where(running > 0, np.nansum(ev, axis=0) / np.maximum(running, 1), np.nan)
+    scored = np.sum(~np.isnan(ev), axis=0)  # a chunk trained but not evaluated (eval_lag) holds NaN
+    evaluation = np.where(scored > 0, np.nansum(ev, axis=0) / np.maximum(scored, 1), np.nan)
     return {"hardest": carried[:, start:stop].mean(axis=0), "evaluation": evaluation,
             "trials_running": running.astype(np.float64)}

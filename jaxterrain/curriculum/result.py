@@ -28,8 +28,9 @@ class TreatmentResult(NamedTuple):
     """A finished treatment. folder: its run folder. summary: ``summary.json`` (epochs, milestones, the selector's
     own counts). policies: ``policies/trial_K`` for K = 0 .. trials - 1, each a walker ``rl.load_policy`` reads.
     history: ``history.csv`` as columns (``trial``, ``chunk``, ``epoch``, ``env_steps``, ``terrain``, ``cell``,
-    ``bin0``, ``bin1``, ``distance``, ``evaluation``, ``hardest``), each [rows] (int64 where every value is an
-    integer, else float64), one row per trial and chunk it ran."""
+    ``bin0``, ``bin1``, ``distance``, ``evaluation``, ``hardest``, ``seen_epoch``: ``outputs.HISTORY_COLUMNS``;
+    runs written before 2026-11-29 lack ``seen_epoch``), each [rows] (int64 where every value is an integer, else
+    float64), one row per trial and chunk it ran."""
 
     folder: Path
     summary: dict

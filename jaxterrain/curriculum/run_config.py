@@ -30,8 +30,8 @@ ones there too; the others hold ``CurriculumConfig``'s defaults until resolved).
 The serialised form is the flat dict of ``config.json`` (:func:`to_flat`; every key a command-line flag's name, so
 the one field -> flag table is :data:`FLAT_FIELDS` with ``--`` + dashes); :func:`from_flat` reads it, and every
 ``config.json`` written before (a key it lacks takes the value that version ran with: ``truncation`` ``mask``,
-``backend`` ``jax``, ``overlap`` / ``fast_compile`` off, ``compact`` on; the keys of other selectors' params are
-dropped). The presets' flat forms live in :mod:`.presets` (no JAX: ``--help`` reads them).
+``backend`` ``jax``, ``overlap`` / ``eval_lag`` / ``fast_compile`` off, ``compact`` on; the keys of other
+selectors' params are dropped). The presets' flat forms live in :mod:`.presets` (no JAX: ``--help`` reads them).
 """
 
 from __future__ import annotations
@@ -108,8 +108,9 @@ class LearnConfig(NamedTuple):
 
 _TOP = ("archive", "descriptors", "terrains", "terrain_height", "terrain_order", "trials", "seed", "recipe", "preset")
 _CURRICULUM = ("epochs_per_chunk", "steps_per_epoch", "max_epochs", "threshold", "max_fitness", "max_evals",
-               "credit", "distance_origin", "overlap")
-LEGACY = {"truncation": "mask", "backend": "jax", "overlap": False, "fast_compile": False, "compact": True,
+               "credit", "distance_origin", "overlap", "eval_lag")
+LEGACY = {"truncation": "mask", "backend": "jax", "overlap": False, "eval_lag": False, "fast_compile": False,
+          "compact": True,
           "seed": 0, "terrains": None, "terrain_height": None, "terrain_order": "name"}
 """The value a ``config.json`` key had in the runs made before it was written (what :func:`from_flat` fills in)."""
 
@@ -157,6 +158,7 @@ def from_flat(flat: dict) -> LearnConfig:
                   **{k: d[k] for k in FINE_TUNED if k in d}, **{k: v for k, v in d.items() if k in own}}
     curriculum.setdefault("truncation", LEGACY["truncation"])
     curriculum.setdefault("overlap", LEGACY["overlap"])
+    curriculum.setdefault("eval_lag", LEGACY["eval_lag"])
     base = LearnConfig()
     return LearnConfig(
         archive=d.get("archive", base.archive), descriptors=tuple(d.get("descriptors", base.descriptors)),
@@ -214,6 +216,7 @@ CONSUMERS = {
     "curriculum.best": "curriculum.walker.walker_harness", "curriculum.headings": "curriculum.walker.walker_harness",
     "curriculum.ppo": "curriculum.walker.walker_harness (rl.ppo)",
     "curriculum.overlap": "curriculum.core.step, runner.walker_layout",
+    "curriculum.eval_lag": "curriculum.core.chunk_update",
     "protocol": "curriculum.runner.resolve",
     "walker": "curriculum.runner.make_env", "walker.backend": "curriculum.runner.walker_layout",
     "walker.robot": "curriculum.runner.start_policy", "walker.policy": "curriculum.runner.start_policy",

@@ -422,6 +422,132 @@ def test_overlap_resumes_to_the_uninterrupted_run(tmp_path):
 
 
 # ---------------------------------------------------------------------------------------------------------------
+# eval_lag: the overlapped order without the step more per switch (the selector sees each evaluation a chunk late)
+# ---------------------------------------------------------------------------------------------------------------
+LAG_KEYS, LAG_GAIN = 5, 0.01  # slow learning: terrains take 1-4 chunks, blocks of 3 end with evaluations pending
+
+
+@pytest.fixture(scope="module")
+def lagged():
+    """One compiled lagged runner (``overlap`` and ``eval_lag``, the keyed harness, 3 trials) shared by the tests
+    below: ``(bank, config, harness, run, steps, states)``: ``run(states, n)`` (jitted; donates ``states``) appends
+    one entry to ``steps`` per loop step; ``states`` the 3 trials run to the end from ``init()``."""
+    bank = toy_bank(toy_grid(4))
+    config = small("map", max_evals=3, max_epochs=30, overlap=True, eval_lag=True)
+    harness, steps = keyed_harness(LAG_GAIN), []
+    run = jax.jit(lambda s, n: C.run_trials(s, bank, n, config=config, harness=harness,
+                                            on_chunk=lambda *a: steps.append(1)), donate_argnums=(0,))
+    init = lambda: C.init_trials(jax.random.split(jax.random.key(LAG_KEYS), 3), bank, KEYED_START,  # noqa: E731
+                                 config=config, harness=harness)
+    states = run(init(), 100)
+    total = len(steps)
+    steps.clear()
+    return bank, config, harness, run, init, states, total
+
+
+def test_eval_lag_scores_each_chunks_terrain_with_its_own_policy_and_keys(lagged):
+    """Each evaluated row c of a lagged run equals a direct evaluation of chunk c's policy (every chunk's training
+    kept: the sum of the trainings of chunks 0..c with their keys) on chunk c's terrain with chunk c's evaluation key
+    (within 1e-6: float32 sums against float64); after every terrain the trial trained one chunk more on it,
+    unevaluated (NaN), and the next terrain's first chunk follows it; no loop step more per switch."""
+    bank, config, _, _, _, states, steps = lagged
+    h, gain = states.history, LAG_GAIN
+    assert np.all(np.asarray(states.done)) and not np.any(np.asarray(states.pending))
+    @jax.jit
+    def draws(key):  # chunk c's training gain and evaluation noise, from its (train, eval, select, reset) keys
+        keys = jax.vmap(lambda c: jax.random.split(jax.random.fold_in(jax.random.wrap_key_data(key), c), 4))(
+            jnp.arange(config.max_chunks))
+        return (jax.vmap(lambda k: jax.random.uniform(k, (), minval=0.5, maxval=1.5))(keys[:, 0]),
+                jax.vmap(lambda k: jax.random.normal(k, ()))(keys[:, 1]))
+
+    gains, noise = (np.asarray(x, np.float64) for x in jax.vmap(draws)(states.key))  # [3, C] each
+    maps = np.asarray(bank.heightmaps, np.float64).mean((1, 2))
+    switches_total = 0
+    for t in range(3):
+        n = int(states.chunk[t])
+        terrain, ev = np.asarray(h.terrain[t, :n]), np.asarray(h.evaluation[t, :n])
+        np.testing.assert_array_equal(np.asarray(h.epoch[t, :n]), np.arange(1, n + 1))
+        skill = np.cumsum(gain * gains[t, :n])  # chunk c's policy: the trainings of chunks 0..c
+        want = np.clip(1.0 - maps[terrain] + skill + 0.02 * noise[t, :n], 0, 1)
+        scored = ~np.isnan(ev)
+        np.testing.assert_allclose(ev[scored], want[scored], atol=1e-6)
+        runs = C.terrain_runs(terrain, ev)
+        unevaluated = np.flatnonzero(np.isnan(ev))
+        ends = np.cumsum([r["chunks"] for r in runs]) - 1  # the last chunk of each terrain run
+        # every switch leaves exactly one unevaluated chunk, the last one on the terrain left (also when the switch
+        # came with the last epoch, the run's last row)
+        assert unevaluated.tolist() == (ends if n == config.max_chunks and np.isnan(ev[-1]) else ends[:-1]).tolist()
+        assert all(np.isfinite(r["final_evaluation"]) for r in runs)
+        switches_total += len(runs) - 1
+        assert int(states.policy["steps"][t]) == n  # every chunk's training kept (none trained twice)
+    assert switches_total >= 6
+    assert steps <= config.max_chunks + 1  # one step per chunk (and one more for the last evaluation)
+
+
+def test_eval_lag_differs_from_the_plain_order_only_after_a_switch(lagged):
+    """Up to each trial's first terrain switch a lagged run's records are the plain loop's (the same keys, policies
+    and evaluations); at the switch the plain loop moves on, the lagged one trains a chunk more on the old terrain."""
+    bank, _, _, _, _, lag_states, _ = lagged
+    config, harness = small("map", max_evals=3, max_epochs=30), keyed_harness(LAG_GAIN, False)
+    plain_states = C.make_runner(config, harness)(C.init_trials(jax.random.split(jax.random.key(LAG_KEYS), 3), bank,
+                                                                KEYED_START, config=config, harness=harness), bank, 100)
+    for t in range(3):
+        plain, lag = (np.asarray(x.history.terrain[t]) for x in (plain_states, lag_states))
+        first = int(np.flatnonzero(np.diff(plain) != 0)[0])  # the last chunk on the first terrain
+        np.testing.assert_array_equal(lag[:first + 1], plain[:first + 1])
+        np.testing.assert_array_equal(np.asarray(lag_states.history.evaluation[t, :first + 1]),
+                                      np.asarray(plain_states.history.evaluation[t, :first + 1]))
+        assert lag[first + 1] == lag[first] != plain[first + 1]
+        assert np.isnan(float(lag_states.history.evaluation[t, first + 1]))
+
+
+def test_eval_lag_resumes_to_the_uninterrupted_run(lagged, tmp_path):
+    """Stopped by the time limit with evaluations pending, a lagged run resumes to the uninterrupted one."""
+    _, _, _, run, init, whole, _ = lagged
+
+    def chunk(s, a, b):
+        s = run(s, b - a)
+        return s, {"hardest": jnp.full((b - a,), jnp.mean(s.hardest))}
+
+    driver.run_chunks(chunk, init(), total=30, every=3, run_dir=tmp_path, progress=False, time_limit_s=1e-9)
+    restored, done, history, _ = driver.restore(tmp_path, like=init())
+    assert done == 3 and np.all(np.asarray(restored.pending))
+    state, done, _ = driver.run_chunks(chunk, restored, total=30, every=3, start=done, history=history,
+                                       run_dir=tmp_path, progress=False)
+    assert tree_equal(state, whole)
+
+
+def test_unevaluated_chunks_stay_out_of_the_evaluations_of_metrics_sequences_and_history_csv():
+    """A lagged history (chunk 2 of trial 0 trained, not evaluated): the metrics' mean evaluation of that chunk is
+    trial 1's alone, the terrain's final evaluation is its last one, and ``seen_epoch`` is one chunk on (-1 there)."""
+    h = C.History(epoch=np.array([[1, 2, 3, 4], [1, 2, 3, -1]]), terrain=np.array([[5, 5, 5, 7], [5, 6, 6, -1]]),
+                  evaluation=np.array([[0.5, 0.95, np.nan, 0.2], [0.4, 0.6, 0.7, np.nan]], np.float32),
+                  hardest=np.zeros((2, 4), np.float32))
+    from jaxterrain.curriculum import progress
+
+    m = progress.history_metrics(h, 0, 4)
+    np.testing.assert_allclose(m["evaluation"], [0.45, 0.775, 0.7, 0.2], rtol=1e-6)
+    assert m["trials_running"].tolist() == [2, 2, 2, 1]
+    runs = C.terrain_runs(h.terrain[0], h.evaluation[0], h.epoch[0])
+    assert [(r["terrain"], r["chunks"], r["end_epoch"]) for r in runs] == [(5, 3, 3), (7, 1, 4)]
+    assert runs[0]["final_evaluation"] == pytest.approx(0.95) and runs[0]["best_evaluation"] == pytest.approx(0.95)
+    hist = outputs.histories(C.State(*([None] * 10), history=h))
+    lagged = small("map", overlap=True, eval_lag=True)
+    assert outputs.seen_epochs(hist, lagged).tolist() == [[2, 3, -1, 5], [2, 3, 4, -1]]
+    # a finished trial's last evaluation: the chunk that rode along it was dropped
+    assert outputs.seen_epochs(hist, lagged, np.array([True, False])).tolist() == [[2, 3, -1, 4], [2, 3, 4, -1]]
+    assert outputs.seen_epochs(hist, small("map")).tolist() == [[1, 2, -1, 4], [1, 2, 3, -1]]
+
+
+def test_eval_lag_is_refused_without_overlap_or_as_a_non_bool():
+    with pytest.raises(ValueError, match=r"^CurriculumConfig.eval_lag needs CurriculumConfig.overlap "):
+        C.validate_config(C.CurriculumConfig(eval_lag=True))
+    with pytest.raises(ValueError, match=r"^CurriculumConfig.eval_lag must be True or False"):
+        C.validate_config(C.CurriculumConfig(overlap=True, eval_lag="yes"))
+    assert C.validate_config(C.CurriculumConfig(overlap=True, eval_lag=True)).eval_lag
+
+
+# ---------------------------------------------------------------------------------------------------------------
 # Table 2 / Figure 7
 # ---------------------------------------------------------------------------------------------------------------
 def test_milestones_and_curves_from_hand_made_histories():

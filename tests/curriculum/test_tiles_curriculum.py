@@ -326,6 +326,46 @@ def test_overlapped_walker_harness_makes_the_plain_choices(backend):
 
 
 @pytest.mark.slow
+def test_lagged_walker_records_each_chunks_own_evaluation():
+    """``eval_lag`` on the MJX walker (tiles; two trials, 2 headings, the random selector on a 3 x 3 bank, a terrain
+    left at fitness 0.085): stepped one chunk at a time, each evaluation recorded for chunk c equals a direct
+    ``harness.evaluate`` of the policy chunk c ended with, on chunk c's terrain, with chunk c's evaluation key, within
+    2e-4 (the riding walks step in a larger batch than the direct ones, so XLA's CPU products round otherwise); each
+    terrain switch leaves one unevaluated chunk on the terrain left. Two MJX programs: minutes of CPU."""
+    policy = W.load_policy(None)
+    config = small("random", num_envs=2, attempts=2, best=1, headings=2, max_evals=2, update_epochs=1,
+                   threshold=0.085, max_epochs=6, overlap=True, eval_lag=True)
+    env = W.walker_env(policy, SHAPE, WALK, 20, backend="jax", tiles=4, worlds=2 * 4)
+    harness = W.walker_harness(env, config.ppo_config(policy.config), config)
+    bank = toy_bank(3)._replace(heightmaps=toy_bank(3).heightmaps * 0.3)
+    start = W.start_state(env, config.ppo_config(policy.config), policy, SHAPE)
+    states = jax.jit(lambda k, b, s: C.init_trials(k, b, s, config=config, harness=harness))(
+        jax.random.split(jax.random.key(3), 2), bank, start)
+    step = jax.jit(lambda s, b: C.run_trials(s, b, jnp.int32(1), config=config, harness=harness))
+    evaluate = jax.jit(lambda p, k, t: harness.evaluate(p, k, C.core._current_terrain(bank, t, harness)))
+    checked = 0
+    for _ in range(20):
+        before = jax.tree.map(np.array, states)
+        states = step(states, bank)
+        for t in range(2):
+            c = int(before.chunk[t])
+            if before.done[t] or not before.pending[t]:
+                continue  # nothing evaluated in this step (the start, or the chunk after a switch trained)
+            mine = jax.tree.map(lambda x: x[t], before)
+            eval_key = jax.random.split(jax.random.fold_in(jax.random.wrap_key_data(mine.key), c), 4)[1]
+            want = float(evaluate(mine.policy, eval_key, mine.terrain))
+            assert int(states.history.terrain[t, c]) == int(mine.terrain)
+            assert abs(float(states.history.evaluation[t, c]) - want) <= 2e-4, (t, c)
+            checked += 1
+        if np.all(np.asarray(states.done)):
+            break
+    assert np.all(np.asarray(states.done)) and checked >= 6
+    ev, terrain = np.asarray(states.history.evaluation), np.asarray(states.history.terrain)
+    switched = (terrain[:, 1:] != terrain[:, :-1]) & (terrain[:, 1:] >= 0)
+    assert switched.sum() >= 2 and np.all(np.isnan(ev[:, :-1][switched]))  # the chunk before each switch
+
+
+@pytest.mark.slow
 def test_jax_walker_compact_blocks_keep_each_running_trial_on_its_own_tile():
     """The compact-on-tiles bug on the real MJX walker (tiles, ``backend="jax"``): 3 trials of the random selector,
     one chunk of all three (their envs spawn on tiles 0, 1, 2), trial 0 forced done, then 2 chunks computed on the

@@ -196,3 +196,37 @@ def test_population_benchmark_at_cpu_size(tmp_path):
                                                          / got["peak"]["peak_physics_steps_per_s"])
     assert bench.main(["--parts", "chunk", *tiny]) == 0  # done before: skipped
     assert json.loads((out / "chunk.json").read_text()) == chunk
+
+
+@pytest.mark.slow
+def test_eval_order_benchmark_at_cpu_size(tmp_path, capsys):
+    """``benchmarks/eval_order.py`` at CPU size (the smoke preset on one 4-terrain archive, one trial, the sequential
+    and the lagged order): two interleaved rounds of one chunk each, the ratios the measured figures' quotients, the
+    lag's unevaluated chunks counted; a command that finds it done only prints it; bad orders in one line (exit 2).
+    Two programs compile: minutes of CPU."""
+    import json
+
+    from curriculum_archives import tiny_archive_file
+
+    bench = load_benchmark("eval_order")
+    a = tiny_archive_file(tmp_path, 4, "a.npz")
+    out = tmp_path / "bench"
+    tiny = ["--preset", "smoke", "--archives", f"a={a}", "--trials", "1", "--backend", "jax", "--chunks", "1",
+            "--rounds", "2", "--out", str(out)]
+    for bad in ("lag,sequential", "sequential,sequential", "sequential,fast"):
+        with pytest.raises(SystemExit) as err:
+            bench.parse_args(["--orders", bad, *tiny])
+        assert err.value.code == 2 and "--orders must list distinct orders" in capsys.readouterr().err
+    assert bench.main(["--orders", "sequential,lag", *tiny]) == 0
+    r = json.loads((out / "eval_order.json").read_text())
+    assert r["done"] and r["orders"] == ["sequential", "lag"] and len(r["rounds"]) == 2
+    assert r["setup"]["lag"]["treatments"] == ["a map"] and r["setup"]["lag"]["trials"] == 1
+    for got in r["rounds"]:
+        lag, seq = got["lag"], got["sequential"]
+        assert lag["vs_sequential"] == pytest.approx(lag["s_per_chunk"] / seq["s_per_chunk"])
+        assert got["sequential"]["unevaluated"] == 0
+    assert r["median_vs_sequential"]["lag"] == pytest.approx(r["median_s_per_chunk"]["lag"]
+                                                             / r["median_s_per_chunk"]["sequential"])
+    assert "| lag |" in (out / "eval_order.md").read_text()
+    assert bench.main(["--orders", "sequential,lag", *tiny]) == 0
+    assert "done before" in capsys.readouterr().out

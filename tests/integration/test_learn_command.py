@@ -56,6 +56,7 @@ def test_learn_rejects_bad_input_with_one_line_naming_it(tmp_path, tiny_archive,
         (["--archive", tiny_archive(1, "one.npz")], "one.npz: 1 filled cell"),
         (["--archive", tiny_archive(0, "empty.npz")], "empty.npz: 0 filled cell"),
         (["--archive", tiny_archive(4, "tri.npz", descriptors=("tri", "tpi"))], "tri.npz: descriptors"),
+        (["--archive", good, "--eval-lag"], "--eval-lag needs --overlap"),
         (["--archive", good, "--policy", str(policy_dir)], "policy"),
     ]
     for i, (argv, needle) in enumerate(cases):
