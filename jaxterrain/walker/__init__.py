@@ -26,7 +26,7 @@ from jaxterrain.walker.robots import RobotSpec, register_robot
 from jaxterrain.walker.config import (BACKENDS, OBSERVATIONS, SCAN_FIELDS, WalkerConfig, flat_terrain,
                                       min_terrain_side, observation_fields, observation_label, resolve_config,
                                       with_observation)
-from jaxterrain.walker.env import WalkerEnv, WalkerState
+from jaxterrain.walker.env import WalkerEnv, WalkerState, carry_rows
 from jaxterrain.walker.surface import sample_heights
 from jaxterrain.walker.model import (
     NAMED_SOLVERS,
@@ -92,6 +92,7 @@ __all__ = [
     "WalkerConfig",
     "WalkerEnv",
     "WalkerState",
+    "carry_rows",
     "flat_terrain",
     "sample_heights",
     "NAMED_SOLVERS",
