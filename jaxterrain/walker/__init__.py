@@ -26,7 +26,7 @@ from jaxterrain.walker.robots import RobotSpec, register_robot
 from jaxterrain.walker.config import (BACKENDS, OBSERVATIONS, SCAN_FIELDS, WalkerConfig, flat_terrain,
                                       min_terrain_side, observation_fields, observation_label, resolve_config,
                                       with_observation)
-from jaxterrain.walker.env import WalkerEnv, WalkerState, carry_rows
+from jaxterrain.walker.env import WalkerEnv, WalkerState
 from jaxterrain.walker.surface import sample_heights
 from jaxterrain.walker.model import (
     NAMED_SOLVERS,
@@ -48,7 +48,8 @@ from jaxterrain.walker import randomisation
 from jaxterrain.walker.randomisation import (PRESETS as RANDOMISATION_PRESETS, Randomisation, parse_randomisation,
                                              randomisation_from_json, randomisation_json, randomisation_label)
 from jaxterrain.walker import layout, rollout  # noqa: E402  (after env / tiles, which they import)
-from jaxterrain.walker.layout import BACKEND_CHOICES, env_for, is_tiled, make_env, resolve_backend, sized_env, terrain_batch
+from jaxterrain.walker.layout import (BACKEND_CHOICES, carry_rows, env_for, is_tiled, make_env, resolve_backend,
+                                      sized_env, terrain_batch)
 from jaxterrain.walker.rollout import batched_distances, job_queue, smoothness_priority
 from jaxterrain.walker import mujoco_c  # noqa: E402  (after env, which it imports)
 from jaxterrain.walker.mujoco_c import CEngine

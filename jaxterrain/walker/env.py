@@ -34,7 +34,8 @@ Backends and tiled terrains (``WalkerConfig.backend``, ``WalkerConfig.tiles``):
   over ``state.data``. A step whose contacts or constraints overflowed those buffers is invalid (``failed = 1``).
   ``jax.vmap`` of ``reset`` / ``step`` (nested too) works unchanged; MJX-Warp batches the physics itself. States a
   program carries row by row from one compiled call to the next (a curriculum block's trials) take the form of
-  :func:`carry_rows` (the shared buffers empty on the row axis) and step again once merged into a reset state.
+  :func:`~jaxterrain.walker.layout.carry_rows` (the shared buffers empty on the row axis) and step again once
+  merged into a reset state.
 
 See :mod:`jaxterrain.walker.config` for the physical choices (scale, spawn, termination, reward, distance,
 time step, randomisation, solver): every one is a :class:`~jaxterrain.walker.config.WalkerConfig` field.
@@ -71,36 +72,11 @@ from jaxterrain.walker.config import (BACKENDS, OBSERVATIONS, SCAN_FIELDS, Walke
                                      with_observation)
 from jaxterrain.walker.surface import sample_heights, state_key, yaw
 
-__all__ = ["PARK_HEIGHT", "WalkerState", "WalkerEnv", "carry_rows"]
+__all__ = ["PARK_HEIGHT", "WalkerState", "WalkerEnv"]
 
 PARK_HEIGHT = 100.0  # m above the terrain's top where WalkerEnv.park puts walkers whose outcome is recorded
 # MuJoCo Warp overflow bits (mujoco_warp OverflowType) that mean dropped contacts or constraints: the step is invalid.
 _WARP_DROPPED = (1 << 0) | (1 << 1) | (1 << 2) | (1 << 3)  # NEFC, NJMAX_NNZ, BROADPHASE, NARROWPHASE
-
-
-def carry_rows(state, rows: int):
-    """``rows`` copies of ``state`` (one env's state, or a batch of them: any pytree) on a new leading axis, in the
-    form a state carried from one compiled call to the next keeps: ``jax.vmap``'s broadcast of it, except that every
-    leaf the broadcast leaves unbatched becomes an empty ``[rows, 0, *shape[1:]]`` (zero bytes, the leaf's dtype).
-
-    Those leaves are MuJoCo Warp's buffers shared by every env of a physics call (``mjx.Data._impl``'s contacts
-    ``[naconmax, ...]``, ``nacon``, ``ncollision``, ``cdof_tri_*``; MJX-JAX states have none, so there this is exactly
-    the broadcast). Left whole, they would not follow the rows: a program that concatenates, gathers or slices its
-    carried states row by row (a curriculum block: ``run_population``) returns them cut to ``[rows, ...]`` and the
-    next call of the same compiled program is refused. In this form every leaf has the row axis, so the state keeps
-    one structure and shape in and out. The empty leaves are no physics: such a state enters the physics only merged
-    into a fresh ``reset`` state by :meth:`WalkerEnv.select` (``mjx.Data.where`` keeps the reset's shared buffers,
-    and every step's collision rebuilds the contacts), as every curriculum chunk does (``core.chunk_physics``'s
-    restart); :meth:`WalkerEnv.step` refuses it as it is (``ValueError`` while tracing). Pure; jit / eval_shape
-    it."""
-    stacked = jax.vmap(lambda _: state)(jnp.arange(rows))
-
-    def row(out, one):
-        if jnp.ndim(out) > jnp.ndim(one):
-            return out
-        return jnp.zeros((rows, 0) + tuple(jnp.shape(one))[1:], jnp.result_type(one))
-
-    return jax.tree.map(row, stacked, state)
 
 
 class WalkerState(NamedTuple):
@@ -419,9 +395,9 @@ class WalkerEnv:
         d = d0.replace(ctrl=ctrl)
         warp = self._data0 is not None
         if warp and d0._impl.contact__dist.shape[:1] != (d0._impl.naconmax,):  # static: refused while tracing
-            raise ValueError(f"this MuJoCo Warp state's contact buffers are {d0._impl.contact__dist.shape[:1]}, not "
-                             f"[naconmax={d0._impl.naconmax}]: a carried state (walker.carry_rows) steps only once "
-                             f"merged into a reset state with env.select")
+            raise ValueError(f"MuJoCo Warp contact buffers {d0._impl.contact__dist.shape[:1]}, not [naconmax="
+                             f"{d0._impl.naconmax}]: a carried state (walker.carry_rows) steps once env.select merged "
+                             f"it into a reset state")
         if warp:  # overflow bits of this env step only
             d = d.replace(_impl=d._impl.replace(overflow=jnp.zeros_like(d._impl.overflow)))
         d = jax.lax.fori_loop(0, c.n_frames, lambda _, d: mjx.step(m, d), d)
