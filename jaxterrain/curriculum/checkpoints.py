@@ -8,6 +8,14 @@ envs where they were. On a tiled walker (MuJoCo Warp, or ``overlap``) an env liv
 in the heightfield follows the trial's index among all trials the program steps (and Warp's contact buffers their
 count): a checkpoint records that placement (``meta["population"]``; a run alone: its own trials, at 0), and one
 restored elsewhere restarts its envs on the trials' current terrains instead.
+
+On MuJoCo Warp the env states are stored in the form the blocks carry them (``walker.carry_rows``): every env's own
+physics (``qpos``, ``qvel``, warm starts, constraint rows, ...) with the trial axis, and the buffers Warp shares
+between all envs of a physics call (contacts, ``nacon``, ...) as empty ``[trials, 0, ...]`` leaves. Those buffers
+are scratch that every step's collision rebuilds and every chunk takes from a fresh ``reset`` (``env.select``), so
+a restored Warp run continues its envs exactly as an uninterrupted one. Warp checkpoints written before that form
+(2026-11-29, when a block returned those buffers cut to ``[trials, ...]`` and the next block was refused) restart
+their envs on the trials' current terrains (one line); MJX-JAX checkpoints (no shared buffers) read as before.
 """
 
 from __future__ import annotations
@@ -39,17 +47,30 @@ def restore_states(folder: Path, states, placement: dict, tiled: bool, say: Call
     """``driver.restore`` of ``folder``'s checkpoint into the structure of ``states`` (the run's fresh trial
     states): ``(states, done, history, meta)``, or None without a checkpoint. The env states come back too, except
     on a tiled walker (``tiled``) when the checkpoint's placement (``meta["population"]``, where its trials sat:
-    ``{"trials": T, "offset": o}``; written alone: its own trials at 0) is not ``placement``: then the envs restart
-    on the trials' current terrains (``restart`` True; one line to ``say``)."""
+    ``{"trials": T, "offset": o}``; written alone: its own trials at 0) is not ``placement``, or when its env states
+    have other shapes than ``states``' (a MuJoCo Warp checkpoint written before the carried form, see the module
+    docstring; everything else must fit): then the envs restart on the trials' current terrains (``restart`` True;
+    one line to ``say``)."""
     folder = Path(folder)
     meta = driver.read_meta(folder)
     if meta is None:
         return None
     before = meta.get("population") or {"trials": int(np.asarray(states.done).shape[0]), "offset": 0}
-    if not tiled or before == placement:
+    if not tiled:
         return driver.restore(folder, like=states, **CHECKPOINT_COMPAT, optional=(ENV_STATES,))
-    say(f"{folder.name}: its envs walked on other tiles (trials {before}, now {placement}): they restart on the "
-        f"current terrains")
-    s, done, history, saved = driver.restore(folder, like=strip_envs(states), **CHECKPOINT_COMPAT)
+    if before == placement:
+        try:
+            return driver.restore(folder, like=states, **CHECKPOINT_COMPAT, optional=(ENV_STATES,))
+        except ValueError as err:  # the env states only (else the stripped restore below raises too)
+            try:
+                s, done, history, saved = driver.restore(folder, like=strip_envs(states), **CHECKPOINT_COMPAT)
+            except ValueError:
+                raise err from None
+        say(f"{folder.name}: its env states were stored in another form (a MuJoCo Warp checkpoint written before "
+            f"2026-11-29's fix): they restart on the current terrains")
+    else:
+        say(f"{folder.name}: its envs walked on other tiles (trials {before}, now {placement}): they restart on the "
+            f"current terrains")
+        s, done, history, saved = driver.restore(folder, like=strip_envs(states), **CHECKPOINT_COMPAT)
     s = s._replace(policy=s.policy._replace(env_state=states.policy.env_state), restart=jnp.ones_like(s.restart))
     return s, done, history, saved

@@ -39,7 +39,7 @@ from jaxterrain.runtime import driver, estimates, sharding, xla
 from jaxterrain.curriculum.own_terrains import OwnTerrains, bank_of, check_terrains, rank_terrains
 from jaxterrain.terrain import TerrainScale
 from jaxterrain.difficulty import policy_observation, policy_robot, robot_base_policy
-from jaxterrain.walker import robots, tiles
+from jaxterrain.walker import carry_rows, robots, tiles
 from jaxterrain.walker.layout import resolve_backend
 
 __all__ = ["BadInput", "ChunkMetrics", "ChunkProgress", "PARTIAL", "FAST_COMPILE", "PROGRAMS", "curriculum_config",
@@ -307,7 +307,9 @@ def inputs(run: LearnConfig, config, arch, policy, env):
     """What a treatment's programs start from: ``(bank, ppo, harness, start, keys, init)``: the archive's terrain
     bank, the fine-tuning PPOConfig, the walker harness, the starting policy state, the trials' keys [trials] and
     ``init(keys, bank, start)`` -> the initial trial states, their env states zeros due for a restart on the first
-    terrains (pure: jit or ``eval_shape`` it)."""
+    terrains (pure: jit or ``eval_shape`` it). The env states are in the form a block carries
+    (``walker.carry_rows``: MuJoCo Warp's buffers shared by every env empty, ``[trials, 0, ...]``), so a block
+    returns them with the shapes it was compiled for, on either backend."""
     bank = bank_of(arch)
     ppo = config.ppo_config(policy.config)
     harness = W.walker_harness(env, ppo, config)
@@ -316,8 +318,7 @@ def inputs(run: LearnConfig, config, arch, policy, env):
 
     def init(k, b, s):
         states = init_trials(k, b, s, config=config, harness=harness)  # restart: True (the first chunk resets)
-        zeros = jax.tree.map(jnp.zeros_like, s.env_state)  # vmap broadcasts (MuJoCo Warp's shared buffers too)
-        envs = jax.vmap(lambda _: zeros)(jnp.arange(states.done.shape[0]))
+        envs = carry_rows(jax.tree.map(jnp.zeros_like, s.env_state), states.done.shape[0])
         return states._replace(policy=states.policy._replace(env_state=envs))
 
     return bank, ppo, harness, start, keys, init

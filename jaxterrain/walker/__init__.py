@@ -48,7 +48,8 @@ from jaxterrain.walker import randomisation
 from jaxterrain.walker.randomisation import (PRESETS as RANDOMISATION_PRESETS, Randomisation, parse_randomisation,
                                              randomisation_from_json, randomisation_json, randomisation_label)
 from jaxterrain.walker import layout, rollout  # noqa: E402  (after env / tiles, which they import)
-from jaxterrain.walker.layout import BACKEND_CHOICES, env_for, is_tiled, make_env, resolve_backend, sized_env, terrain_batch
+from jaxterrain.walker.layout import (BACKEND_CHOICES, carry_rows, env_for, is_tiled, make_env, resolve_backend,
+                                      sized_env, terrain_batch)
 from jaxterrain.walker.rollout import batched_distances, job_queue, smoothness_priority
 from jaxterrain.walker import mujoco_c  # noqa: E402  (after env, which it imports)
 from jaxterrain.walker.mujoco_c import CEngine
@@ -92,6 +93,7 @@ __all__ = [
     "WalkerConfig",
     "WalkerEnv",
     "WalkerState",
+    "carry_rows",
     "flat_terrain",
     "sample_heights",
     "NAMED_SOLVERS",

@@ -32,7 +32,10 @@ Backends and tiled terrains (``WalkerConfig.backend``, ``WalkerConfig.tiles``):
   (``naconmax = warp_contacts * warp_worlds``; set ``warp_worlds`` >= the number of envs stepped together, over all
   vmap axes): merge states with ``env.select`` or ``mjx.Data.where``, never with ``jax.tree.map(jnp.where, ...)``
   over ``state.data``. A step whose contacts or constraints overflowed those buffers is invalid (``failed = 1``).
-  ``jax.vmap`` of ``reset`` / ``step`` (nested too) works unchanged; MJX-Warp batches the physics itself.
+  ``jax.vmap`` of ``reset`` / ``step`` (nested too) works unchanged; MJX-Warp batches the physics itself. States a
+  program carries row by row from one compiled call to the next (a curriculum block's trials) take the form of
+  :func:`~jaxterrain.walker.layout.carry_rows` (the shared buffers empty on the row axis) and step again once
+  merged into a reset state.
 
 See :mod:`jaxterrain.walker.config` for the physical choices (scale, spawn, termination, reward, distance,
 time step, randomisation, solver): every one is a :class:`~jaxterrain.walker.config.WalkerConfig` field.
@@ -391,6 +394,10 @@ class WalkerEnv:
         d0 = state.data
         d = d0.replace(ctrl=ctrl)
         warp = self._data0 is not None
+        if warp and d0._impl.contact__dist.shape[:1] != (d0._impl.naconmax,):  # static: refused while tracing
+            raise ValueError(f"MuJoCo Warp contact buffers {d0._impl.contact__dist.shape[:1]}, not [naconmax="
+                             f"{d0._impl.naconmax}]: a carried state (walker.carry_rows) steps once env.select merged "
+                             f"it into a reset state")
         if warp:  # overflow bits of this env step only
             d = d.replace(_impl=d._impl.replace(overflow=jnp.zeros_like(d._impl.overflow)))
         d = jax.lax.fori_loop(0, c.n_frames, lambda _, d: mjx.step(m, d), d)

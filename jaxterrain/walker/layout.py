@@ -7,7 +7,8 @@ arguments of a batch of envs and their ``vmap`` axes, and the physics backend ``
   (:class:`~jaxterrain.walker.TileBank`), each env walks on ``bank.at(index)`` (vmap ``in_axes=TILE_AXES``).
 
 A tiled env's ``tiles`` and ``warp_worlds`` are sized to each call by :func:`sized_env` (:mod:`jaxterrain.walker.rollout`
-says why).
+says why). States carried row by row from one compiled call to the next take the form of :func:`carry_rows` (MuJoCo
+Warp's buffers shared by every env empty on the row axis).
 """
 
 from __future__ import annotations
@@ -23,7 +24,7 @@ from jaxterrain.walker.env import WalkerEnv
 from jaxterrain.walker.tiles import TILE_AXES, Tile
 
 __all__ = ["BACKEND_CHOICES", "make_env", "is_tiled", "env_for", "sized_env", "world", "terrain_batch",
-           "check_worlds", "terrain_axis", "resolve_backend"]
+           "check_worlds", "terrain_axis", "resolve_backend", "carry_rows"]
 
 BACKEND_CHOICES = ("auto", "jax", "warp")
 """Physics backends a user may name: ``auto`` (:func:`resolve_backend`), ``jax`` (MJX) or ``warp`` (MuJoCo Warp)."""
@@ -124,3 +125,28 @@ def resolve_backend(backend: str) -> str:
     if backend != "auto":
         return backend
     return "warp" if jax.default_backend() == "gpu" and tiles.warp_available()[0] else "jax"
+
+
+def carry_rows(state, rows: int):
+    """``rows`` copies of ``state`` (one env's state, or a batch of them: any pytree) on a new leading axis, in the
+    form a state carried from one compiled call to the next keeps: ``jax.vmap``'s broadcast of it, except that every
+    leaf the broadcast leaves unbatched becomes an empty ``[rows, 0, *shape[1:]]`` (zero bytes, the leaf's dtype).
+
+    Those leaves are MuJoCo Warp's buffers shared by every env of a physics call (``mjx.Data._impl``'s contacts
+    ``[naconmax, ...]``, ``nacon``, ``ncollision``, ``cdof_tri_*``; MJX-JAX states have none, so there this is exactly
+    the broadcast). Left whole, they would not follow the rows: a program that concatenates, gathers or slices its
+    carried states row by row (a curriculum block: ``run_population``) returns them cut to ``[rows, ...]`` and the
+    next call of the same compiled program is refused. In this form every leaf has the row axis, so the state keeps
+    one structure and shape in and out. The empty leaves are no physics: such a state enters the physics only merged
+    into a fresh ``reset`` state by :meth:`WalkerEnv.select` (``mjx.Data.where`` keeps the reset's shared buffers,
+    and every step's collision rebuilds the contacts), as every curriculum chunk does (``core.chunk_physics``'s
+    restart); :meth:`WalkerEnv.step` refuses it as it is (``ValueError`` while tracing). Pure; jit / eval_shape
+    it."""
+    stacked = jax.vmap(lambda _: state)(jnp.arange(rows))
+
+    def row(out, one):
+        if jnp.ndim(out) > jnp.ndim(one):
+            return out
+        return jnp.zeros((rows, 0) + tuple(jnp.shape(one))[1:], jnp.result_type(one))
+
+    return jax.tree.map(row, stacked, state)
