@@ -50,6 +50,7 @@ from jaxterrain.curriculum.config import CurriculumConfig
 from jaxterrain.curriculum.selectors import (Outcome, Selector, get_selector, gp_params, removal_mask,
                                              roughness_sequence, select, terrain_hardness)
 from jaxterrain.qd import TerrainBank
+from jaxterrain.walker import carry_rows
 
 __all__ = ["Harness", "History", "State", "Physics", "init", "step", "chunk_keys", "terrain_maps", "chunk_physics",
            "chunk_update", "chunk_result", "init_trials", "terrain_hardness", "roughness_sequence", "select",
@@ -421,6 +422,13 @@ def _chunk_keys(state: State, chunk):
 # ----------------------------------------------------------------------------------------------------------------
 def init_trials(keys: jax.Array, bank: TerrainBank, policy: Any, *, config: CurriculumConfig,
                 harness: Harness) -> State:
-    """:func:`init` vmapped over ``keys`` [T] (typed or raw [T, 2]); the bank and starting policy are shared."""
+    """:func:`init` vmapped over ``keys`` [T] (typed or raw [T, 2]); the bank and starting policy are shared. The
+    starting policy's env state (``policy.env_state``, where it has one) is carried in the form of
+    :func:`~jaxterrain.walker.carry_rows`, so a block that gathers or slices trials returns the shapes it takes on
+    MuJoCo Warp too (its envs restart at the first chunk anyway)."""
     fn = functools.partial(init, config=config, harness=harness)
-    return jax.vmap(fn, in_axes=(0, None, None))(keys, bank, policy)
+    states = jax.vmap(fn, in_axes=(0, None, None))(keys, bank, policy)
+    env_state = getattr(policy, "env_state", None)
+    if env_state is None or getattr(states.policy, "env_state", None) is None:
+        return states
+    return states._replace(policy=states.policy._replace(env_state=carry_rows(env_state, states.done.shape[0])))
