@@ -264,13 +264,16 @@ def add_terrains_argument(parser: argparse.ArgumentParser, dest: str, what: str,
         add_deprecated_alias(parser, old, "--terrains", dest, type=int, metavar="N")
 
 
+def slots_help(what: str) -> str:
+    """``--rollout-slots``' help, the same words in every command that walks many terrains."""
+    return f"env slots of the walker's rollout pool (speed and device memory only; results do not change): {what}"
+
+
 def add_slots_argument(parser: argparse.ArgumentParser, dest: str, what: str, type: Callable = int,
                        aliases: tuple[str, ...] = ()) -> None:
     """``--rollout-slots``: the env slots of the walker's rollout pool (speed and memory only), one flag in every
     command that walks many terrains (``dest``: the config key, ``slots`` in ``evaluate`` / ``gradient``)."""
-    parser.add_argument("--rollout-slots", dest=dest, type=type, default=None, metavar="SLOTS",
-                        help=f"env slots of the walker's rollout pool (speed and device memory only; results do not "
-                             f"change): {what}")
+    parser.add_argument("--rollout-slots", dest=dest, type=type, default=None, metavar="SLOTS", help=slots_help(what))
     for old in aliases:
         add_deprecated_alias(parser, old, "--rollout-slots", dest, type=type, metavar="SLOTS")
 
@@ -280,13 +283,17 @@ BACKEND_NAMES = ("auto", "jax", "warp")
 ``--help`` imports no JAX; a test keeps the two equal)."""
 
 
+def backend_help(what: str = "walker physics", warp: str = "") -> str:
+    """``--backend``'s help, the same words in every command that walks."""
+    return (f"{what}: auto (warp on a GPU where MuJoCo Warp imports, else jax), jax (MJX) or warp "
+            f"(MuJoCo Warp{', ' + warp if warp else ''})")
+
+
 def add_backend_argument(parser: argparse.ArgumentParser, what: str = "walker physics", warp: str = "",
                          dest: str = "backend") -> None:
     """``--backend auto|jax|warp``, one flag and one set of choices in every command that walks (``dest``: the config
     key, ``rollout_backend`` in ``evolve``); ``auto`` is ``jaxterrain.walker.resolve_backend``'s."""
-    parser.add_argument("--backend", dest=dest, choices=BACKEND_NAMES, default=None,
-                        help=f"{what}: auto (warp on a GPU where MuJoCo Warp imports, else jax), jax (MJX) or warp "
-                             f"(MuJoCo Warp{', ' + warp if warp else ''})")
+    parser.add_argument("--backend", dest=dest, choices=BACKEND_NAMES, default=None, help=backend_help(what, warp))
 
 
 RANDOMISATION_PRESET_NAMES = ("legged-gym",)
@@ -841,13 +848,16 @@ class Typed(NamedTuple):
     """A command's run as a typed config of the library (``jaxterrain.qd.run_config.EvolveRun``, ...): ``owner``,
     the config's name in the library's messages (``EvolveRun.map_elites.bins must be ...``); ``fields``, its
     ``{flat key: field path}`` table (the flat keys are ``config.json``'s and the flags' names: :func:`flag`);
-    ``from_flat`` / ``to_flat``, its serialised form. The one place where a field becomes a flag is
-    :func:`flags_in` over ``fields``."""
+    ``from_flat`` / ``to_flat``, its serialised form; ``rules``, its declared checks of single fields (``{field path:
+    rule}``, ``jaxterrain.runtime.schema``), from which ``experiments.cli_gen`` makes each flag's type, choices and
+    range. A field becomes a flag in one place: its flat key through :func:`flag` (``cli_gen`` makes the options,
+    :func:`flags_in` names the fields in messages)."""
 
     owner: str
     fields: dict
     from_flat: Callable[[dict], Any]
     to_flat: Callable[..., dict]
+    rules: dict = {}
 
 
 def flags_in(text: str, typed: Typed, where: Callable[[str], str] = flag) -> str:
