@@ -14,8 +14,9 @@ argparse option of each key a command exposes from what the library declares:
   (``common.show_preset_values``).
 
 The default of every generated option is None (not given): the preset's value, a ``--config`` file's or a resumed
-run's stands (``common.prepare_run``). :func:`given` reads the parsed values back as ``{flat key: value}``, and
-:func:`check` runs the declared rules on a resolved flat config, each message naming the flag (or the preset / file
+run's stands (``common.prepare_run``). :func:`given` reads the parsed values back as ``{flat key: value}``; a command whose config is
+no typed config of the library at ``--help`` time (``learn``: ``jaxterrain.curriculum.presets.RULES``) has the same
+rules run on its resolved flat config by ``common.check_rules``, each message naming the flag (or the preset / file
 the value came from). Standard library only: ``--help`` stays fast.
 """
 
@@ -26,7 +27,7 @@ from typing import Any, Callable, Mapping, NamedTuple, Optional
 
 from experiments import common
 
-__all__ = ["Flag", "rules_by_key", "annotations_of", "derive", "add_flags", "add_typed_flags", "given", "check"]
+__all__ = ["Flag", "rules_by_key", "annotations_of", "derive", "add_flags", "add_typed_flags", "given"]
 
 
 class Flag(NamedTuple):
@@ -142,21 +143,3 @@ def add_typed_flags(parser: argparse.ArgumentParser, typed, presets: Mapping[str
 def given(args: argparse.Namespace, keys) -> dict:
     """``{flat key: value}`` of the options ``keys`` as parsed (None: not given)."""
     return {key: getattr(args, key, None) for key in keys}
-
-
-def check(values: Mapping[str, Any], rules: Mapping[str, tuple], where: Callable[[str], str] = common.flag) -> None:
-    """Run the declared ``rules`` (``{flat key: (rule, ...)}``) on a flat config ``values`` (a None value passes);
-    :class:`~experiments.common.UsageError` whose message names the key by ``where(key)`` (its flag, or the preset
-    or file it came from)."""
-    view = argparse.Namespace(**values)
-    for key, rule in rules.items():
-        value = values.get(key)
-        if value is None:
-            continue
-        for one in rule:
-            try:
-                one(value, key, view, where)
-            except AttributeError:  # a bound the flat config does not hold
-                continue
-            except ValueError as err:
-                raise common.UsageError(str(err)) from None

@@ -17,7 +17,9 @@ from __future__ import annotations
 
 from pathlib import Path
 
-__all__ = ["CPPN_ARCHIVE", "FLAT_PRESETS", "PRESET_NAMES"]
+from jaxterrain.runtime.schema import at_least, at_most, fraction, non_negative, one_of, positive, unit, walks
+
+__all__ = ["CPPN_ARCHIVE", "FLAT_PRESETS", "PRESET_NAMES", "RECIPE_NAMES", "BACKENDS", "RULES"]
 
 CPPN_ARCHIVE = str(Path(__file__).parents[1] / "assets" / "archives" / "cppn_headings.npz")
 """The default archive: the CPPN's paper-budget roughness x TPI archive (evolved after the fix of tied insertion),
@@ -48,3 +50,26 @@ FLAT_PRESETS: dict[str, dict] = {
 }
 """Every preset's flat config (a fresh run's ``config.json`` adds ``preset``, ``seed`` and ``command``)."""
 PRESET_NAMES = tuple(FLAT_PRESETS)
+
+RECIPE_NAMES = ("paper", "wide")
+"""The fine-tuning recipes' names (``jaxterrain.curriculum.RECIPES``; a literal here, a test keeps them equal)."""
+BACKENDS = ("auto", "jax", "warp")
+"""The walker's physics (``jaxterrain.walker.layout.BACKEND_CHOICES``; a literal, a test keeps them equal)."""
+
+RULES = {
+    **{k: at_least(1) for k in ("trials", "max_epochs", "epochs_per_chunk", "steps_per_epoch", "chunks_per_call",
+                                "num_envs", "max_evals", "policy_every", "episode_length", "attempts",
+                                "terrains_per_chunk", "levels", "plr_capacity", "accel_edits")},
+    "best": (at_least(1), at_most("attempts")), "headings": walks("attempts", "best"),
+    "threshold": unit(), "levels_init": at_least(0), "levels_promote": unit(), "levels_demote": fraction(),
+    "plr_replay_prob": fraction(), "plr_staleness": fraction(), "plr_temperature": positive(),
+    "plr_min_fill": fraction(), "healthy_reward": non_negative(), "learning_rate": positive(),
+    "terrain_order": one_of(("name", "difficulty")), "observation": one_of(("blind", "perceptive")),
+    "recipe": one_of(RECIPE_NAMES), "truncation": one_of(("mask", "bootstrap")), "backend": one_of(BACKENDS),
+    **{k: one_of((True, False)) for k in ("update_normaliser", "overlap", "compact", "fast_compile")},
+}
+"""The checks of single keys of a flat curriculum run, by flat key (``schema`` rules; the command line checks a
+resolved config with them before any run folder is made, and makes each flag's type, choices and range from them:
+``experiments.cli_gen``). ``jaxterrain.curriculum.runner.validate`` checks the typed run again, deeper (the
+archive, the selector's params against it, the PPO shape); a test checks that every value these rules refuse the
+library refuses too."""
