@@ -67,6 +67,8 @@ PRESETS = {name: {**{k: v for k, v in p.items() if k not in ("archive", "curricu
                   "archives": dict(DEFAULT_ARCHIVES), "baseline": "roughness", "baseline_archive": "cppn",
                   "combined": True}
            for name, p in learn.PRESETS.items()}
+RULES = learn.RULES
+"""The declared checks of a treatment's flat keys (``learn``'s), from which the flags are made."""
 RUN_KEYS = ("archives", "baseline", "baseline_archive", "combined")
 """The run's own keys (not a treatment's ``learn`` config): a run folder written before ``baseline_archive`` /
 ``combined`` existed lacks them and resumes with their defaults, ``cppn`` and True (:func:`baseline_archive`,
@@ -95,7 +97,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--archives", nargs="+", default=None, metavar="NAME=PATH",
                         help="archives of the map treatments (default: the five generators' archives shipped in "
                              "jaxterrain/assets/archives, G_headings.npz)")
-    cli_gen.add_flags(parser, PRESETS, learn.RULES, HELP, {
+    cli_gen.add_flags(parser, PRESETS, RULES, HELP, {
         **learn.ARGPARSE, "baseline": {"nargs": "+", "type": common.selector_name, "metavar": "NAME"},
         "baseline_archive": {"metavar": "NAME"}})
     common.add_deprecated_alias(parser, "--freeze-normaliser", "--no-update-normaliser", "update_normaliser",
@@ -412,7 +414,7 @@ def main(args) -> int:
             **learn.fine_tuning_overrides(args), **common.protocol_overrides(args)}
     mesh = common.device_mesh(args.devices)
     folder, cfg = common.setup_run("curriculum", args, PRESETS, "smoke", over, check=lambda c: check_config(args, c),
-                                   rules=learn.RULES)
+                                   rules=RULES)
     start = time.perf_counter()
     limit = None if args.time_limit is None else 60.0 * args.time_limit
     curriculum = "map"  # the curriculum whose flags an error names (its own, once the plan is read)
