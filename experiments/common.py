@@ -284,32 +284,18 @@ def backend_help(what: str = "walker physics", warp: str = "") -> str:
             f"(MuJoCo Warp{', ' + warp if warp else ''})")
 
 
-def add_backend_argument(parser: argparse.ArgumentParser, what: str = "walker physics", warp: str = "",
-                         dest: str = "backend") -> None:
-    """``--backend auto|jax|warp``, one flag and one set of choices in every command that walks (``dest``: the config
-    key, ``rollout_backend`` in ``evolve``); ``auto`` is ``jaxterrain.walker.resolve_backend``'s."""
-    parser.add_argument("--backend", dest=dest, choices=BACKEND_NAMES, default=None, help=backend_help(what, warp))
-
-
 RANDOMISATION_PRESET_NAMES = ("legged-gym",)
 """``--randomise`` preset names: ``jaxterrain.walker.RANDOMISATION_PRESETS`` (a literal, so that ``--help`` imports no
 JAX; a test keeps the two equal)."""
 
 
-def add_randomise_argument(parser: argparse.ArgumentParser, what: str) -> None:
-    """``--randomise SPEC``: physics randomisation of ``what`` (``jaxterrain.walker.parse_randomisation``: a preset or
-    ``KEY=VALUE`` items; off by default). The config key ``randomise`` holds the spec as given."""
-    parser.add_argument("--randomise", default=None, metavar="SPEC", help=randomise_help(what))
-
-
 def randomise_help(what: str) -> str:
     """``--randomise``' help, the same words in every command that takes it."""
-    return (f"physics randomisation of {what} (default off): a preset "
-                             f"({', '.join(RANDOMISATION_PRESET_NAMES)}) and/or comma-separated KEY=VALUE items, "
-                             f"friction=LOW:HIGH (scale of the friction coefficient, 1.0 here), mass=LOW:HIGH (scale of "
-                             f"each body's mass), added-mass=LOW:HIGH (kg on the torso), motor=LOW:HIGH (scale of the "
-                             f"motors' force), obs-noise=STD, delay=STEPS or LOW:HIGH (env steps), push=EVERY:VELOCITY "
-                             f"(env steps, m/s), drawn per env at reset; e.g. friction=0.5:1.25,push=200:0.5 or "
+    return (f"physics randomisation of {what} (default off): a preset ({', '.join(RANDOMISATION_PRESET_NAMES)}) "
+            f"and/or comma-separated KEY=VALUE items, friction=LOW:HIGH (scale of the friction coefficient, 1.0 "
+            f"here), mass=LOW:HIGH (scale of each body's mass), added-mass=LOW:HIGH (kg on the torso), motor=LOW:HIGH "
+            f"(scale of the motors' force), obs-noise=STD, delay=STEPS or LOW:HIGH (env steps), push=EVERY:VELOCITY "
+            f"(env steps, m/s), drawn per env at reset; e.g. friction=0.5:1.25,push=200:0.5 or "
             f"legged-gym,obs-noise=0.01 (jaxterrain.walker.randomisation)")
 
 
