@@ -59,7 +59,7 @@ DEFAULT_ARCHIVES = {g: common.shipped(f"archives/{g}_headings.npz")
 """The archives of Experiment 2 when ``--archives`` is not given: each generator's paper-budget roughness x TPI
 archive (evolved after the fix of tied insertion), reseated under ``difficulty.HEADINGS``; package data
 (``jaxterrain/assets/archives/G_headings.npz``, copies of ``docs/results/exp2_G_headings_archive.npz``)."""
-BASELINES = ("roughness", "random", "dr", "levels", "plr", "accel")
+BASELINES = tuple(name for name in common.SELECTOR_NAMES if name != "map")
 """The curricula of ``--baseline`` (``jaxterrain.curriculum.CurriculumConfig.selector``'s other than ``map``)."""
 DEFAULT_ENVS = 131_072
 """``--population-envs``' default (``jaxterrain.curriculum.batch.DEFAULT_ENVS``, read here without importing JAX)."""
@@ -76,7 +76,7 @@ RUN_KEYS = ("archives", "baseline", "baseline_archive", "combined")
 
 
 HELP = {
-    "trials": "trials of each treatment, run together (paper: 10)",
+    "trials": "trials of each treatment, run together",
     "max_epochs": "each trial's epoch budget (an epoch: 4 000 env steps; the paper: 30 000)",
     "chunks_per_call": "chunks per jitted call / checkpoint, in every treatment (learn's)",
     **learn.fine_tuning_help(", in every treatment"),

@@ -89,8 +89,7 @@ MORE_HELP = {
                       "is rescaled to (default: its own metres)",
     "families": "suite families to build (default: all of the version's; smoke: flat stairs_up gaps)",
     "generators": "generators to sample (default: the version's five; smoke: perlin)",
-    "repeat": "walk the base policy twice and time the second, compiled call (timing.json; default: on in gpu, off "
-              "in smoke)",
+    "repeat": "walk the base policy twice and time the second, compiled call (timing.json)",
     "attempts": "walks per terrain in total",
     "best": "best walks averaged per heading",
     "headings": "walking headings",

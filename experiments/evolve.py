@@ -58,11 +58,11 @@ TYPED = common.Typed("EvolveRun", _CONFIG.EVOLVE_FIELDS, _CONFIG.from_flat, _CON
 
 
 HELP = {
-    "generator": "registered generator name (default perlin), or mixed: one archive whose offspring of every --mix "
+    "generator": "registered generator name, or mixed: one archive whose offspring of every --mix "
                  "generator compete for the cells, each elite recording its generator",
     "mix": f"with --generator mixed: the generators of the mixture (default: all six, {' '.join(MIX_DEFAULT)})",
     "fresh": "with --generator mixed: fresh random genomes of EACH generator among every generation's offspring, so "
-             "that a generator holding no cell keeps competing (presets: 1, gpu-short 32, gpu 64)",
+             "that a generator holding no cell keeps competing",
     "descriptors": "descriptor pair, e.g. roughness tpi",
     "generations": "MAP-Elites generations after the initial population",
     "batch_size": "offspring per generation",

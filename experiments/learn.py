@@ -91,8 +91,8 @@ UPDATE_SHAPE = "--recipe / --num-envs (the update's shape)"
 """How a message names ``LearnConfig.curriculum.ppo``: the flags that shape an update."""
 
 SELECTOR_HELP = {
-    "terrains_per_chunk": "dr, plr: terrains per trial and chunk, the envs dealt round-robin over them, {range} (default 8)",
-    "levels": "levels: difficulty levels (bands of the archive by distance from (0, 0)), {range} (default: legged_gym's 10)",
+    "terrains_per_chunk": "dr, plr: terrains per trial and chunk, the envs dealt round-robin over them, {range}",
+    "levels": "levels: difficulty levels (bands of the archive by distance from (0, 0)), {range} (legged_gym's 10)",
     "levels_init": "levels: envs start at random levels 0 .. N, {range} and at most levels - 1 (default levels // 2)",
     "levels_promote": "levels: an env moves up when its furthest normalised distance in a chunk is at least this, "
                       "{range} (default: the threshold)",
@@ -109,7 +109,7 @@ SELECTOR_HELP = {
                     "brackets",
     "accel_generator": "accel: the generator whose genomes are the levels (its sample and mutate); default: the "
                        "archive's generator",
-    "accel_edits": "accel: the generator's mutations per edit of a replayed level, {range} (default 1)",
+    "accel_edits": "accel: the generator's mutations per edit of a replayed level, {range}",
 }
 """The per-env curricula's flags (``dr``, ``levels``, ``plr``, ``accel``: each selector's params,
 ``CurriculumConfig.SELECTOR_FIELDS``); one given with a built-in curriculum that does not read it is refused
@@ -132,19 +132,19 @@ def fine_tuning_help(scope: str = "") -> dict:
         "randomise": common.randomise_help(f"fine-tuning's walker{scope} (its curriculum's evaluations too)"),
         "healthy_reward": f"fine-tuning reward per step for staying up, {{range}}{scope} (default: the walker's 5.0, "
                           f"the base policy's; evaluations measure distance and do not use it)",
-        "learning_rate": f"fine-tuning PPO's Adam learning rate, {{range}}{scope} (default: every preset's 3e-4)",
+        "learning_rate": f"fine-tuning PPO's Adam learning rate, {{range}}{scope}",
         "truncation": f"what fine-tuning PPO learns from a walk that ends at the goal or the time limit{scope}: "
                       f"bootstrap (default: r + gamma V(final observation); keeps the value net from diverging and "
                       f"standard CL learning, docs/results/exp2_paper.md) or mask (brax's: nothing; the runs before "
                       f"2026-11-27)",
-        "max_evals": f"evaluations (chunks) spent on one terrain before it is left anyway, {{range}}{scope} "
-                     f"(default: the paper's 100 in every preset; gpu-short keeps it, so one terrain that never "
-                     f"reaches the threshold can take all 75 of its chunks)",
+        "max_evals": f"evaluations (chunks) spent on one terrain before it is left anyway, {{range}}{scope} (the "
+                     f"paper's 100; gpu-short keeps it, so one terrain that never reaches the threshold can take all "
+                     f"75 of its chunks)",
         "overlap": f"evaluate each chunk's policy while the next chunk trains, in the same physics calls{scope} (the "
                    f"same curriculum; the walker on one tile per trial, on either backend; "
                    f"CurriculumConfig.overlap)",
         "compact": f"once some trials have finished, compute only the running ones in each block (the same results; "
-                   f"one compile per block size){scope} (default: on, off in smoke)",
+                   f"one compile per block size){scope}",
     }
 
 
@@ -167,7 +167,7 @@ HELP = {
     "curriculum": f"{', '.join(common.SELECTOR_NAMES)} or module:object (a factory config -> "
                   f"jaxterrain.curriculum.Selector); jaxterrain.curriculum.selectors",
     **SELECTOR_HELP,
-    "trials": "trials run together (paper: 10)",
+    "trials": "trials run together",
     "threshold": "fraction of the maximum fitness",
     "max_epochs": "each trial's epoch budget (an epoch: 4 000 env steps; the paper: 30 000)",
     "policy": "policy folder to start from (default: the base policy)",

@@ -58,7 +58,7 @@ HELP = {
     "env_steps": "total env steps to train (default: smoke 4 updates, gpu 410 updates = 50.4e6)",
     "time_budget": "seconds: --time-limit's predecessor, kept so that older command lines (the base policy's "
                    "PROVENANCE.md) still run",
-    "updates_per_chunk": "PPO updates per jitted chunk = per checkpoint (default: smoke 2, gpu 10)",
+    "updates_per_chunk": "PPO updates per jitted chunk = per checkpoint",
     "num_envs": "override PPOConfig.num_envs",
     "solver": "walker contact solver: sound (default: Newton 4 iterations / 16 line-search), fast, xml, or "
               "ITERATIONS,LS_ITERATIONS,EULERDAMP such as 4,16,0; recorded with the policy, and difficulty.evaluate "
@@ -71,8 +71,8 @@ HELP = {
     "scan_noise": "perceptive: std of Gaussian noise on each scanned height, in metres",
     "randomise": common.randomise_help("the training walker (recorded with the policy; the flat-ground evaluation "
                                        "walks the nominal physics)"),
-    "eval_attempts": "flat-ground evaluation walks (default 20)",
-    "eval_best": "of which the best are averaged (default 5)",
+    "eval_attempts": "flat-ground evaluation walks",
+    "eval_best": "of which the best are averaged",
 }
 """Each flag's help: the field's documentation (``experiments.cli_gen`` adds the rest from
 ``jaxterrain.difficulty.run_config.RULES``)."""
