@@ -81,10 +81,9 @@ HELP = {
     "archive": "walk an archive's elites instead of the suite",
     "size": "suite heightmap side in pixels (v1: 256)",
     "seeds": "suite terrains per family level (v1: 3)",
-}
-"""Each flag's help: the field's documentation (``experiments.cli_gen`` adds the rest from
-``jaxterrain.suite.run_config.RULES``)."""
-MORE_HELP = {
+    "samples": "terrains sampled per generator, {range}: the suite's generator terrains (v1: 96); or DIR, a folder of "
+               "heightmaps: walk your own terrains instead of the suite (.png, .tif/.tiff, .npy, .npz; "
+               "jaxterrain.suite.folder), one family per file",
     "terrain_height": "--terrains DIR: metres of an image's full grey (default 1.0), and the relief every metre file "
                       "is rescaled to (default: its own metres)",
     "families": "suite families to build (default: all of the version's; smoke: flat stairs_up gaps)",
@@ -117,21 +116,20 @@ MORE_HELP = {
     "video_format": "files of each video: gif (Pillow), mp4 (H.264, 12 times smaller than the GIF on a 47-frame video "
                     "of two walkers; needs pip install 'jaxterrain[video]') or both",
 }
-"""The help of the flags after ``--terrains`` (in ``--help``'s order)."""
+"""Each flag's help: the field's documentation (``experiments.cli_gen`` adds the rest from
+``jaxterrain.suite.run_config.RULES``)."""
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     common.add_run_arguments(parser, PRESETS, "smoke")
     cli_gen.add_typed_flags(parser, TYPED, PRESETS, HELP, {
-        "policy": {"metavar": "DIR"}, "keys": {"metavar": "K"}, "robot": {"metavar": "NAME"}})
-    common.add_terrains_argument(parser, "samples", "the suite's generator terrains (v1: 96)", aliases=("--samples",),
-                                 folder="walk your own terrains instead of the suite (.png, .tif/.tiff, .npy, .npz; "
-                                        "jaxterrain.suite.folder), one family per file")
-    cli_gen.add_typed_flags(parser, TYPED, PRESETS, MORE_HELP, {
-        "terrain_height": {"metavar": "M"}, "generators": {"nargs": "*"}, "slots": {"metavar": "SLOTS"},
-        "randomise": {"metavar": "SPEC"}, "video_terrains": {"metavar": "FAMILY:LEVEL,..."}})
+        "policy": {"metavar": "DIR"}, "keys": {"metavar": "K"}, "robot": {"metavar": "NAME"},
+        "samples": {"type": common.count_or_folder, "metavar": "N|DIR"}, "terrain_height": {"metavar": "M"},
+        "generators": {"nargs": "*"}, "slots": {"metavar": "SLOTS"}, "randomise": {"metavar": "SPEC"},
+        "video_terrains": {"metavar": "FAMILY:LEVEL,..."}})
     common.add_protocol_argument(parser)
     common.add_deprecated_alias(parser, "--slots", "--rollout-slots", "slots", type=int, metavar="SLOTS")
+    common.add_deprecated_alias(parser, "--samples", "--terrains", "samples", type=int, metavar="N")
     parser.add_argument("--gl", choices=("osmesa", "egl", "glfw"), default=None,
                         help="MuJoCo OpenGL backend of the videos (default: $MUJOCO_GL, else egl with an NVIDIA "
                              "GPU, else osmesa)")
