@@ -10,8 +10,9 @@ argparse option of each key a command exposes from what the library declares:
 - its choices, from a ``schema.one_of`` rule (``--headings``: ``schema.walks``' 1, 2, 4);
 - its allowed range in the help (``", >= 1"``, or where the help text says ``{range}``), in the words the rule's
   error uses, so ``--help`` and the error cannot drift apart;
-- the help text, the field's documentation (``help``), to which ``--help`` adds every preset's value
-  (``common.show_preset_values``).
+- the help text, the field's documentation (the config module's ``HELP``: ``{flat key: text}``; the phrases every
+  command shares written ``{backend}``, ``{randomise}``, ``{slots}``: ``common.PHRASES``), to which ``--help`` adds
+  every preset's value (``common.show_preset_values``).
 
 The default of every generated option is None (not given): the preset's value, a ``--config`` file's or a resumed
 run's stands (``common.prepare_run``). :func:`given` reads the parsed values back as ``{flat key: value}``; a command whose config is
@@ -82,11 +83,14 @@ def _range_text(rules: tuple, flag_of: Callable[[str], str]) -> str:
 
 
 def derive(key: str, presets: Mapping[str, Mapping], rules: tuple = (), help: str = "",
-           flag_of: Callable[[str], str] = common.flag, annotation: str = "") -> Flag:
+           flag_of: Callable[[str], str] = common.flag, annotation: str = "",
+           phrases: Optional[Mapping[str, str]] = None) -> Flag:
     """The option of flat key ``key``: its type and choices from ``rules`` (the field's declared checks; their
     ``kind`` / ``choices``), else from the field's ``annotation`` (``"Optional[int]"``), else from the presets'
     values (a list or tuple: ``nargs="+"``); its help ``help`` with the allowed range (``{range}`` in ``help``
-    places it, else it is appended after a comma). ``flag_of(key)``: a key's flag (a bound's too)."""
+    places it, else it is appended after a comma; ``{backend}`` and the other ``common.PHRASES``, and the
+    command's own ``phrases``, are filled in).
+    ``flag_of(key)``: a key's flag (a bound's too)."""
     choices = next((r.choices for r in rules if getattr(r, "choices", None) is not None), None)
     kinds = [r.kind for r in rules if getattr(r, "kind", None) is not None]
     annotated, listed = _annotated(annotation)
@@ -96,6 +100,8 @@ def derive(key: str, presets: Mapping[str, Mapping], rules: tuple = (), help: st
     kind = kinds[0] if kinds else annotated or (type(items[0]) if items else str)
     boolean = kind is bool
     text = _range_text(rules, flag_of)
+    for name, phrase in {**common.PHRASES, **(phrases or {})}.items():
+        help = help.replace(f"{{{name}}}", phrase)
     if "{range}" in help:
         help = help.replace("{range}", text)
     elif text:
@@ -106,19 +112,19 @@ def derive(key: str, presets: Mapping[str, Mapping], rules: tuple = (), help: st
 
 def add_flags(parser: argparse.ArgumentParser, presets: Mapping[str, Mapping], rules: Mapping[str, tuple],
               help: Mapping[str, str], argparse_kwargs: Optional[Mapping[str, dict]] = None,
-              fields: Optional[Mapping[str, str]] = None, annotations: Optional[Mapping[str, str]] = None
-              ) -> list[Flag]:
+              fields: Optional[Mapping[str, str]] = None, annotations: Optional[Mapping[str, str]] = None,
+              phrases: Optional[Mapping[str, str]] = None) -> list[Flag]:
     """Add one option per key of ``help`` (``{flat key: the field's help}``, in that order), each :func:`derive`'d
     from ``presets`` and ``rules`` (``{flat key: (rule, ...)}``, :func:`rules_by_key`), default None;
     ``argparse_kwargs[key]`` replaces what argparse is given (``metavar``, ``nargs``, ``type``) where a flag needs
     more than its field says (``--terrains N|DIR``). ``fields`` (``{flat key: field path}``) names a rule's bound
     (a field path) by its flag; ``annotations`` (:func:`annotations_of`) gives the fields' types. Returns the
-    flags made."""
+    flags made. ``phrases``: the command's own ``{name}`` fill-ins of the help texts (:func:`derive`)."""
     inverse = {path: key for key, path in (fields or {}).items()}
     flag_of = lambda name: common.flag(inverse.get(name, name))  # noqa: E731
     made = []
     for key, text in help.items():
-        flag = derive(key, presets, rules.get(key, ()), text, flag_of, (annotations or {}).get(key, ""))
+        flag = derive(key, presets, rules.get(key, ()), text, flag_of, (annotations or {}).get(key, ""), phrases)
         kwargs = {"dest": key, "default": None, "help": flag.help}
         if flag.boolean:
             kwargs["action"] = argparse.BooleanOptionalAction

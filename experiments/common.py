@@ -261,7 +261,7 @@ def add_terrains_argument(parser: argparse.ArgumentParser, dest: str, what: str,
 
 def slots_help(what: str) -> str:
     """``--rollout-slots``' help, the same words in every command that walks many terrains."""
-    return f"env slots of the walker's rollout pool (speed and device memory only; results do not change): {what}"
+    return f"{PHRASES['slots']}: {what}"
 
 
 def add_slots_argument(parser: argparse.ArgumentParser, dest: str, what: str, type: Callable = int,
@@ -278,25 +278,22 @@ BACKEND_NAMES = ("auto", "jax", "warp")
 ``--help`` imports no JAX; a test keeps the two equal)."""
 
 
-def backend_help(what: str = "walker physics", warp: str = "") -> str:
-    """``--backend``'s help, the same words in every command that walks."""
-    return (f"{what}: auto (warp on a GPU where MuJoCo Warp imports, else jax), jax (MJX) or warp "
-            f"(MuJoCo Warp{', ' + warp if warp else ''})")
-
-
 RANDOMISATION_PRESET_NAMES = ("legged-gym",)
 """``--randomise`` preset names: ``jaxterrain.walker.RANDOMISATION_PRESETS`` (a literal, so that ``--help`` imports no
 JAX; a test keeps the two equal)."""
 
-
-def randomise_help(what: str) -> str:
-    """``--randomise``' help, the same words in every command that takes it."""
-    return (f"physics randomisation of {what} (default off): a preset ({', '.join(RANDOMISATION_PRESET_NAMES)}) "
-            f"and/or comma-separated KEY=VALUE items, friction=LOW:HIGH (scale of the friction coefficient, 1.0 "
-            f"here), mass=LOW:HIGH (scale of each body's mass), added-mass=LOW:HIGH (kg on the torso), motor=LOW:HIGH "
-            f"(scale of the motors' force), obs-noise=STD, delay=STEPS or LOW:HIGH (env steps), push=EVERY:VELOCITY "
-            f"(env steps, m/s), drawn per env at reset; e.g. friction=0.5:1.25,push=200:0.5 or "
-            f"legged-gym,obs-noise=0.01 (jaxterrain.walker.randomisation)")
+PHRASES = {
+    "backend": "auto (warp on a GPU where MuJoCo Warp imports, else jax), jax (MJX) or warp (MuJoCo Warp)",
+    "randomise": f"(default off): a preset ({', '.join(RANDOMISATION_PRESET_NAMES)}) and/or comma-separated "
+                 f"KEY=VALUE items, friction=LOW:HIGH (scale of the friction coefficient, 1.0 here), mass=LOW:HIGH "
+                 f"(scale of each body's mass), added-mass=LOW:HIGH (kg on the torso), motor=LOW:HIGH (scale of the "
+                 f"motors' force), obs-noise=STD, delay=STEPS or LOW:HIGH (env steps), push=EVERY:VELOCITY (env "
+                 f"steps, m/s), drawn per env at reset; e.g. friction=0.5:1.25,push=200:0.5 or "
+                 f"legged-gym,obs-noise=0.01 (jaxterrain.walker.randomisation)",
+    "slots": "env slots of the walker's rollout pool (speed and device memory only; results do not change)",
+}
+"""Phrases every command's help shares, written ``{name}`` in a field's help (the config modules' ``HELP``) and
+filled in by ``experiments.cli_gen``: ``--backend``'s choices, ``--randomise``'s spec, ``--rollout-slots``."""
 
 
 def add_progress_argument(parser: argparse.ArgumentParser) -> None:

@@ -50,27 +50,13 @@ TYPED = common.Typed("CoverageRun", _CONFIG.COVERAGE_FIELDS, _CONFIG.coverage_fr
                      _CONFIG.COVERAGE_RULES)
 
 
-HELP = {
-    "generators": f"generator names (default: {' '.join(GENERATORS)})",
-    "generations": "MAP-Elites generations of each treatment after its initial population",
-    "batch_size": "offspring per generation",
-    "size": "heightmap side in pixels",
-    "bins": "cells per descriptor",
-    "fitness": "what an elite's fitness measures: difficulty (the base policy walks it) or slope (a cheap stand-in, "
-               "no walking)",
-    "batched": "evolve every treatment at once (one jitted generation, one fitness call on all treatments' offspring; "
-               "jaxterrain.qd.evolve_many); not with --shard",
-}
-"""Each flag's help: the field's documentation (``experiments.cli_gen`` adds the rest from
-``jaxterrain.qd.run_config.COVERAGE_RULES``)."""
-
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     common.add_run_arguments(parser, PRESETS, "smoke", {"paper-batched": "the paper's 5 000 generations of 20 per "
                                                                          "treatment, every treatment at once "
                                                                          "(--batched)"})
     common.add_devices_argument(parser)
-    cli_gen.add_typed_flags(parser, TYPED, PRESETS, HELP)
+    cli_gen.add_typed_flags(parser, TYPED, PRESETS, _CONFIG.COVERAGE_HELP)
     common.add_protocol_argument(parser)
     parser.add_argument("--shard", type=common.parse_shard, default=None, metavar="I/N",
                         help="run only the treatments t with t %% N == I (independent jobs sharing one --out; see "

@@ -79,14 +79,14 @@ HELP = {
     "trials": "trials of each treatment, run together",
     "max_epochs": "each trial's epoch budget (an epoch: 4 000 env steps; the paper: 30 000)",
     "chunks_per_call": "chunks per jitted call / checkpoint, in every treatment (learn's)",
-    **learn.fine_tuning_help(", in every treatment"),
+    **learn.FINE_TUNING_HELP,
     "baseline": f"the baselines run on the --baseline-archive (default cppn), in this order: {', '.join(BASELINES)} "
                 f"or module:object (Figure 7b; default roughness)",
     "baseline_archive": "the archive (one of --archives' names) the --baseline curricula run on (default cppn)",
     "combined": "with several archives, the map curriculum on their combination (qd.combine; default on); "
                 "--no-combined skips that treatment",
     **learn.SELECTOR_HELP,
-    "backend": common.backend_help("walker physics of every treatment", "on one tile per trial"),
+    "backend": "walker physics of every treatment: {backend}; warp holds one tile per trial",
 }
 """Each flag's help (``experiments.cli_gen`` adds type, choices and range from ``learn.RULES``)."""
 
@@ -97,7 +97,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--archives", nargs="+", default=None, metavar="NAME=PATH",
                         help="archives of the map treatments (default: the five generators' archives shipped in "
                              "jaxterrain/assets/archives, G_headings.npz)")
-    cli_gen.add_flags(parser, PRESETS, RULES, HELP, {
+    cli_gen.add_flags(parser, PRESETS, RULES, HELP, phrases={**learn.PHRASES, "scope": ", in every treatment"},
+                      argparse_kwargs={
         **learn.ARGPARSE, "baseline": {"nargs": "+", "type": common.selector_name, "metavar": "NAME"},
         "baseline_archive": {"metavar": "NAME"}})
     common.add_deprecated_alias(parser, "--freeze-normaliser", "--no-update-normaliser", "update_normaliser",

@@ -57,41 +57,11 @@ MIX_DEFAULT = _CONFIG.MIX_DEFAULT
 TYPED = common.Typed("EvolveRun", _CONFIG.EVOLVE_FIELDS, _CONFIG.from_flat, _CONFIG.to_flat, _CONFIG.EVOLVE_RULES)
 
 
-HELP = {
-    "generator": "registered generator name, or mixed: one archive whose offspring of every --mix "
-                 "generator compete for the cells, each elite recording its generator",
-    "mix": f"with --generator mixed: the generators of the mixture (default: all six, {' '.join(MIX_DEFAULT)})",
-    "fresh": "with --generator mixed: fresh random genomes of EACH generator among every generation's offspring, so "
-             "that a generator holding no cell keeps competing",
-    "descriptors": "descriptor pair, e.g. roughness tpi",
-    "generations": "MAP-Elites generations after the initial population",
-    "batch_size": "offspring per generation",
-    "initial_population": "random genomes evaluated first",
-    "bins": "cells per descriptor",
-    "size": "heightmap side in pixels",
-    "checkpoint_every": "generations between checkpoints",
-    "fitness": "what an elite's fitness measures: difficulty (the base policy walks it) or slope (a cheap stand-in, "
-               "no walking)",
-    "attempts": "walks per terrain in total",
-    "best": "best walks averaged per heading",
-    "headings": "headings of the walks (1: the paper's +x; 4: +x, +y, -x, -y; mean over headings)",
-    "rollout_slots": common.slots_help("per device (default: all walks of a generation at once)"),
-    "rollout_backend": common.backend_help("walker physics of the difficulty rollouts"),
-    "robot": "whose shipped base policy the walker fitness walks (default humanoid; jaxterrain.walker.robots, or a "
-             "--plugin's); the archive records it",
-    "observation": "which of the robot's shipped base policies the walker fitness walks: blind (default, the "
-                   "paper's) or perceptive (with a height scan); the archive records it",
-    "store_heightmaps": "store the elites' heightmaps in archive.npz (--no-store-heightmaps: leave them out, they can "
-                        "be re-rendered from the genomes)",
-}
-"""Each flag's help: the field's documentation (``experiments.cli_gen`` adds its type, choices and range from
-``jaxterrain.qd.run_config.EVOLVE_RULES``)."""
-
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     common.add_run_arguments(parser, PRESETS, "smoke")
     common.add_devices_argument(parser)
-    cli_gen.add_typed_flags(parser, TYPED, PRESETS, HELP, {
+    cli_gen.add_typed_flags(parser, TYPED, PRESETS, _CONFIG.EVOLVE_HELP, {
         "mix": {"metavar": "NAME"}, "descriptors": {"nargs": 2, "metavar": ("D0", "D1")},
         "rollout_slots": {"metavar": "SLOTS"}, "robot": {"metavar": "NAME"}})
     common.add_protocol_argument(parser)

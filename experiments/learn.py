@@ -90,107 +90,25 @@ RULES = cli_gen.rules_by_key(_PRESETS.RULES, {})
 UPDATE_SHAPE = "--recipe / --num-envs (the update's shape)"
 """How a message names ``LearnConfig.curriculum.ppo``: the flags that shape an update."""
 
-SELECTOR_HELP = {
-    "terrains_per_chunk": "dr, plr: terrains per trial and chunk, the envs dealt round-robin over them, {range}",
-    "levels": "levels: difficulty levels (bands of the archive by distance from (0, 0)), {range} (legged_gym's 10)",
-    "levels_init": "levels: envs start at random levels 0 .. N, {range} and at most levels - 1 (default levels // 2)",
-    "levels_promote": "levels: an env moves up when its furthest normalised distance in a chunk is at least this, "
-                      "{range} (default: the threshold)",
-    "levels_demote": "levels: ... and down when it is below this, {range} (default 0.5: half the course)",
-    "plr_capacity": "plr, accel: level buffer entries, {range} (plr: at most the archive's terrains; default: sized to "
-                    "fill to --plr-min-fill in the run's first tenth of chunks; 4000); JaxUED's maze_plr.py default "
-                    "in brackets",
-    "plr_replay_prob": "plr, accel: the chance a chunk replays buffer terrains, {range} (0.8); JaxUED's maze_plr.py "
-                       "default in brackets",
-    "plr_staleness": "plr, accel: staleness coefficient, {range} (0.3); JaxUED's maze_plr.py default in brackets",
-    "plr_temperature": "plr, accel: rank prioritisation temperature, {range} (0.3); JaxUED's maze_plr.py default in "
-                       "brackets",
-    "plr_min_fill": "plr, accel: buffer fill before any replay, {range} (0.5); JaxUED's maze_plr.py default in "
-                    "brackets",
-    "accel_generator": "accel: the generator whose genomes are the levels (its sample and mutate); default: the "
-                       "archive's generator",
-    "accel_edits": "accel: the generator's mutations per edit of a replayed level, {range}",
-}
+SELECTOR_HELP = _PRESETS.SELECTOR_HELP
 """The per-env curricula's flags (``dr``, ``levels``, ``plr``, ``accel``: each selector's params,
 ``CurriculumConfig.SELECTOR_FIELDS``); one given with a built-in curriculum that does not read it is refused
 (:func:`check_selector_flags`)."""
-
-
-def fine_tuning_help(scope: str = "") -> dict:
-    """The fine-tuning flags' help, shared with ``curriculum`` (``scope`` is added, e.g. ", in every treatment")."""
-    return {
-        "observation": f"start from the robot's blind base policy (the default, the paper's) or its perceptive "
-                       f"twin{scope}; the walker observes what the start policy records (a --policy of another set "
-                       f"is refused)",
-        "recipe": f"how fine-tuning PPO collects each 40 000-step update{scope}: paper (500 envs per trial x 8 x 10 "
-                  f"steps; every preset but smoke) or wide (4 000 envs x 10 steps: 8x fewer sequential steps, 8x "
-                  f"the envs; 1.35x faster on an H200 but lower held-out scores: docs/results/wide_recipe.md); "
-                  f"jaxterrain.curriculum.RECIPES (--num-envs overrides its envs)",
-        "update_normaliser": f"fine-tuning keeps merging its data into the observation normaliser's statistics, as "
-                             f"brax's PPO does{scope}; --no-update-normaliser keeps the base policy's statistics "
-                             f"fixed",
-        "randomise": common.randomise_help(f"fine-tuning's walker{scope} (its curriculum's evaluations too)"),
-        "healthy_reward": f"fine-tuning reward per step for staying up, {{range}}{scope} (default: the walker's 5.0, "
-                          f"the base policy's; evaluations measure distance and do not use it)",
-        "learning_rate": f"fine-tuning PPO's Adam learning rate, {{range}}{scope}",
-        "truncation": f"what fine-tuning PPO learns from a walk that ends at the goal or the time limit{scope}: "
-                      f"bootstrap (default: r + gamma V(final observation); keeps the value net from diverging and "
-                      f"standard CL learning, docs/results/exp2_paper.md) or mask (brax's: nothing; the runs before "
-                      f"2026-11-27)",
-        "max_evals": f"evaluations (chunks) spent on one terrain before it is left anyway, {{range}}{scope} (the "
-                     f"paper's 100; gpu-short keeps it, so one terrain that never reaches the threshold can take all "
-                     f"75 of its chunks)",
-        "overlap": f"evaluate each chunk's policy while the next chunk trains, in the same physics calls{scope} (the "
-                   f"same curriculum; the walker on one tile per trial, on either backend; "
-                   f"CurriculumConfig.overlap)",
-        "compact": f"once some trials have finished, compute only the running ones in each block (the same results; "
-                   f"one compile per block size){scope}",
-    }
-
+FINE_TUNING_HELP = _PRESETS.FINE_TUNING_HELP
+"""The fine-tuning flags, shared with ``curriculum``."""
+PHRASES = {"selectors": ", ".join(common.SELECTOR_NAMES), "scope": ""}
+"""What ``learn``'s help texts (``jaxterrain.curriculum.presets.HELP``) leave to the command line."""
 
 ARGPARSE = {"curriculum": {"type": common.selector_name, "metavar": "NAME"}, "robot": {"metavar": "NAME"},
             "terrains": {"metavar": "DIR"}, "terrain_height": {"type": float, "metavar": "M"},
             "randomise": {"metavar": "SPEC"}, "accel_generator": {"metavar": "NAME"}}
 """What argparse is given beyond what the declaration says (``cli_gen.add_flags``' ``argparse_kwargs``)."""
 
-HELP = {
-    "archive": "archive .npz (default: the shipped CPPN archive, jaxterrain/assets/archives/cppn_headings.npz)",
-    "terrains": "DIR, a folder of your own heightmaps, trained on instead of an archive: .png (8/16-bit grey), "
-                ".tif/.tiff (GeoTIFF, metres), .npy/.npz (metres), one terrain each, cropped to a centred square, "
-                "resized to 256 x 256 cells of 4 cm, flat 1 m start strips (jaxterrain.suite.folder); curricula dr "
-                "(the default with it), plr, levels, random",
-    "terrain_height": "--terrains: metres of an image's full grey (default 1.0), and the relief every metre file is "
-                      "rescaled to (default: its own metres), in (0, 1]",
-    "terrain_order": "--terrains: how the terrains rank by hardness (levels' bands, the hardest traversed): name "
-                     "(file-name order, the default; free) or difficulty (the start policy walked on each before "
-                     "the run under its protocol, hardest last; one more compile)",
-    "curriculum": f"{', '.join(common.SELECTOR_NAMES)} or module:object (a factory config -> "
-                  f"jaxterrain.curriculum.Selector); jaxterrain.curriculum.selectors",
-    **SELECTOR_HELP,
-    "trials": "trials run together",
-    "threshold": "fraction of the maximum fitness",
-    "max_epochs": "each trial's epoch budget (an epoch: 4 000 env steps; the paper: 30 000)",
-    "policy": "policy folder to start from (default: the base policy)",
-    "robot": "start from this robot's shipped base policy (humanoid, the default, or one a --plugin registered; "
-             "jaxterrain.walker.robots); a --policy walks the robot it was trained on",
-    "chunks_per_call": "chunks per jitted call / checkpoint",
-    "num_envs": "PPO envs per trial (all on its terrain)",
-    **fine_tuning_help(),
-    "policy_every": "also write every trial's walker every N chunks, policies/chunk_CCCCC/trial_K/ (at the end of "
-                    "the first block at or after each multiple of N; default: only the final policies/trial_K/)",
-    "attempts": "evaluation walks in total (default: the archive's protocol, e.g. 20)",
-    "best": "best walks averaged per heading (default: archive's)",
-    "headings": "evaluation headings (default: the archive's protocol: 1 = the paper's +x)",
-    "backend": common.backend_help("walker physics", "on one tile per trial"),
-}
-"""Each flag's help: the field's documentation (``experiments.cli_gen`` adds its type, choices and range from
-:data:`RULES`)."""
-
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     common.add_run_arguments(parser, PRESETS, "smoke")
     common.add_devices_argument(parser)  # the trials are split over the devices (curriculum.make_runner)
-    cli_gen.add_flags(parser, PRESETS, RULES, HELP, ARGPARSE)
+    cli_gen.add_flags(parser, PRESETS, RULES, _PRESETS.HELP, ARGPARSE, phrases=PHRASES)
     common.add_deprecated_alias(parser, "--freeze-normaliser", "--no-update-normaliser", "update_normaliser",
                                 const=False)
     parser.add_argument("--export-policies", action="store_true",
@@ -258,7 +176,7 @@ def fine_tuning_overrides(args) -> dict:
     """The config values of the fine-tuning flags (None = not given); ``--recipe NAME`` sets ``recipe`` and the
     update's shape (``num_envs``, ``unroll_length``, ``num_unrolls``, ``num_minibatches``, ``update_epochs``:
     ``jaxterrain.curriculum.RECIPES[NAME]``)."""
-    out = cli_gen.given(args, fine_tuning_help())
+    out = cli_gen.given(args, FINE_TUNING_HELP)
     if args.recipe is not None:
         from jaxterrain.curriculum.config import recipe
 
@@ -270,7 +188,7 @@ def overrides(args) -> dict:
     """The config values given on the command line (None: not given): every generated flag's, ``--recipe``'s
     update shape (``--num-envs`` over its envs), ``--protocol``'s walks, and the curriculum ``dr`` by default with
     ``--terrains``."""
-    out = {**cli_gen.given(args, HELP), **fine_tuning_overrides(args), **common.protocol_overrides(args)}
+    out = {**cli_gen.given(args, _PRESETS.HELP), **fine_tuning_overrides(args), **common.protocol_overrides(args)}
     if args.num_envs is not None:  # --num-envs over --recipe's envs
         out["num_envs"] = args.num_envs
     out["curriculum"] = args.curriculum or ("dr" if args.terrains is not None else None)

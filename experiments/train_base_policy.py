@@ -54,34 +54,11 @@ EXTENDABLE = _CONFIG.EXTENDABLE
 TYPED = common.Typed("BasePolicyRun", _CONFIG.FIELDS, _CONFIG.from_flat, _CONFIG.to_flat, _CONFIG.RULES)
 
 
-HELP = {
-    "env_steps": "total env steps to train (default: smoke 4 updates, gpu 410 updates = 50.4e6)",
-    "time_budget": "seconds: --time-limit's predecessor, kept so that older command lines (the base policy's "
-                   "PROVENANCE.md) still run",
-    "updates_per_chunk": "PPO updates per jitted chunk = per checkpoint",
-    "num_envs": "override PPOConfig.num_envs",
-    "solver": "walker contact solver: sound (default: Newton 4 iterations / 16 line-search), fast, xml, or "
-              "ITERATIONS,LS_ITERATIONS,EULERDAMP such as 4,16,0; recorded with the policy, and difficulty.evaluate "
-              "then walks it under the same options",
-    "robot": "the body to train: humanoid (default, the paper's), ant (brax's quadruped) or a robot a --plugin "
-             "registered (jaxterrain.walker.robots); recorded with the policy",
-    "observation": "what the walker observes: blind (the paper's: torso height, orientation, joints) or perceptive "
-                   "(plus a height scan around and ahead of the torso, the robot's default grid); recorded with the "
-                   "policy, and every command walks it with the same set",
-    "scan_noise": "perceptive: std of Gaussian noise on each scanned height, in metres",
-    "randomise": common.randomise_help("the training walker (recorded with the policy; the flat-ground evaluation "
-                                       "walks the nominal physics)"),
-    "eval_attempts": "flat-ground evaluation walks",
-    "eval_best": "of which the best are averaged",
-}
-"""Each flag's help: the field's documentation (``experiments.cli_gen`` adds the rest from
-``jaxterrain.difficulty.run_config.RULES``)."""
-
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     common.add_run_arguments(parser, PRESETS, "smoke")
     common.add_devices_argument(parser)  # data parallel: envs split over the devices, gradients summed
-    cli_gen.add_typed_flags(parser, TYPED, PRESETS, HELP, {
+    cli_gen.add_typed_flags(parser, TYPED, PRESETS, _CONFIG.HELP, {
         "time_budget": {"help": argparse.SUPPRESS}, "robot": {"metavar": "NAME"}, "scan_noise": {"metavar": "M"},
         "randomise": {"metavar": "SPEC"}})
     common.add_progress_argument(parser)

@@ -528,7 +528,7 @@ def test_the_fine_tuning_flags_and_the_default_archives():
     from experiments import cli_gen
 
     parser = argparse.ArgumentParser()
-    cli_gen.add_flags(parser, learn.PRESETS, learn.RULES, learn.fine_tuning_help())
+    cli_gen.add_flags(parser, learn.PRESETS, learn.RULES, learn.FINE_TUNING_HELP)
     assert learn.fine_tuning_overrides(parser.parse_args(["--learning-rate", "1e-4"]))["learning_rate"] == 1e-4
     assert learn.fine_tuning_overrides(parser.parse_args(["--truncation", "mask"]))["truncation"] == "mask"
     assert sorted(exp.DEFAULT_ARCHIVES) == ["cppn", "diamond_square", "gan", "perlin", "worley"]
