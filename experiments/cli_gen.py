@@ -6,7 +6,8 @@ serialised form is a flat dict (``config.json``); its keys are the flags' names 
 argparse option of each key a command exposes from what the library declares:
 
 - the value's type, from the field's declared rule (``schema.at_least(1)``: an integer; ``schema.unit()``: a number;
-  ``schema.one_of((True, False))``: a ``--x / --no-x`` switch), else from the presets' values (a list: ``nargs="+"``);
+  ``schema.one_of((True, False))``: a ``--x / --no-x`` switch), else from the field's annotation (``Optional[int]``;
+  ``tuple``: ``nargs="+"``), else from the presets' values;
 - its choices, from a ``schema.one_of`` rule (``--headings``: ``schema.walks``' 1, 2, 4);
 - its allowed range in the help (``", >= 1"``, or where the help text says ``{range}``), in the words the rule's
   error uses, so ``--help`` and the error cannot drift apart;
@@ -15,10 +16,11 @@ argparse option of each key a command exposes from what the library declares:
   every preset's value (``common.show_preset_values``).
 
 The default of every generated option is None (not given): the preset's value, a ``--config`` file's or a resumed
-run's stands (``common.prepare_run``). :func:`given` reads the parsed values back as ``{flat key: value}``; a command whose config is
-no typed config of the library at ``--help`` time (``learn``: ``jaxterrain.curriculum.presets.RULES``) has the same
-rules run on its resolved flat config by ``common.check_rules``, each message naming the flag (or the preset / file
-the value came from). Standard library only: ``--help`` stays fast.
+run's stands (``common.prepare_run``). :func:`given` reads the parsed values back as ``{flat key: value}``. The
+library validates the resolved typed config once (``common.setup_typed``); ``learn`` / ``curriculum``, whose typed
+config imports JAX, declare their rules by flat key (``jaxterrain.curriculum.presets.RULES``), run on the resolved
+flat config by ``common.check_rules``; either way each message names the flag (or the preset / file the value came
+from). Standard library only: ``--help`` stays fast.
 """
 
 from __future__ import annotations
