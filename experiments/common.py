@@ -35,25 +35,20 @@ class UsageError(ValueError):
     line ``... <command>: error: <message>`` and exits with status 2 (as argparse does)."""
 
 
-# Option values every command shares by name (argparse dest = config key): the smallest value, and the kind.
-# Any command (also a new one) that names an option like this gets the check for free, before ``main`` runs.
+# Option values of the commands whose settings are no typed config of the library yet, checked by name (argparse
+# dest = config key): the smallest value, and the kind. The long commands' flags are checked by their config's
+# declared rules instead (``experiments.cli_gen``: evolve, coverage, train-base-policy, evaluate, learn, curriculum).
 _INT_MIN = {
-    **dict.fromkeys(("n", "size", "samples", "generations", "batch_size", "initial_population", "bins", "attempts",
-                     "best", "checkpoint_every", "rollout_slots", "steps", "sample_every", "ckpt_every", "log_every",
-                     "updates_per_chunk", "num_envs", "eval_attempts", "eval_best", "batch", "stride",
-                     "calibrate_window", "devices", "max_evals", "chunks_per_call", "policy_every", "terrains",
-                     "chunk", "sample", "seeds", "walk_batch", "horizon", "trials", "epochs_per_chunk",
-                     "steps_per_epoch", "max_epochs", "terrains_per_chunk", "levels", "plr_capacity", "accel_edits"), 1),
-    **dict.fromkeys(("window", "windows"), 2),
-    **dict.fromkeys(("mutation_steps", "walk", "quality_samples", "levels_init", "fresh"), 0),
+    **dict.fromkeys(("n", "size", "samples", "batch_size", "attempts", "best", "steps", "sample_every", "ckpt_every",
+                     "log_every", "batch", "stride", "calibrate_window", "devices", "chunk", "sample", "walk_batch",
+                     "horizon", "eval_attempts", "eval_best", "terrains"), 1),
+    "windows": 2,
+    **dict.fromkeys(("mutation_steps", "walk", "quality_samples"), 0),
 }
-_FLOAT_POSITIVE = ("plr_temperature", "time_limit", "time_budget", "env_steps", "lr", "learning_rate", "heights", "robot_height",
-                   "band_width")
-_FLOAT_NONNEGATIVE = ("r1", "healthy_reward", "scan_noise")
-_FLOAT_UNIT = ("threshold", "levels_promote")  # in (0, 1]
-_FLOAT_FRACTION = ("levels_demote", "plr_replay_prob", "plr_staleness", "plr_min_fill")  # in [0, 1]
-_AT_MOST = (("best", "attempts"), ("eval_best", "eval_attempts"), ("window", "size"),
-            ("windows", "size"))  # (key, bound): key (each of a list) <= bound
+_FLOAT_POSITIVE = ("time_limit", "lr", "learning_rate", "heights", "band_width")
+_FLOAT_NONNEGATIVE = ("r1", "scan_noise")
+_FLOAT_UNIT = ("threshold",)  # in (0, 1]
+_AT_MOST = (("best", "attempts"), ("eval_best", "eval_attempts"), ("windows", "size"))  # key (each of a list) <= bound
 
 
 SELECTOR_NAMES = ("map", "roughness", "random", "dr", "levels", "plr", "accel")
@@ -264,13 +259,16 @@ def add_terrains_argument(parser: argparse.ArgumentParser, dest: str, what: str,
         add_deprecated_alias(parser, old, "--terrains", dest, type=int, metavar="N")
 
 
+def slots_help(what: str) -> str:
+    """``--rollout-slots``' help, the same words in every command that walks many terrains."""
+    return f"{PHRASES['slots']}: {what}"
+
+
 def add_slots_argument(parser: argparse.ArgumentParser, dest: str, what: str, type: Callable = int,
                        aliases: tuple[str, ...] = ()) -> None:
     """``--rollout-slots``: the env slots of the walker's rollout pool (speed and memory only), one flag in every
     command that walks many terrains (``dest``: the config key, ``slots`` in ``evaluate`` / ``gradient``)."""
-    parser.add_argument("--rollout-slots", dest=dest, type=type, default=None, metavar="SLOTS",
-                        help=f"env slots of the walker's rollout pool (speed and device memory only; results do not "
-                             f"change): {what}")
+    parser.add_argument("--rollout-slots", dest=dest, type=type, default=None, metavar="SLOTS", help=slots_help(what))
     for old in aliases:
         add_deprecated_alias(parser, old, "--rollout-slots", dest, type=type, metavar="SLOTS")
 
@@ -280,31 +278,22 @@ BACKEND_NAMES = ("auto", "jax", "warp")
 ``--help`` imports no JAX; a test keeps the two equal)."""
 
 
-def add_backend_argument(parser: argparse.ArgumentParser, what: str = "walker physics", warp: str = "",
-                         dest: str = "backend") -> None:
-    """``--backend auto|jax|warp``, one flag and one set of choices in every command that walks (``dest``: the config
-    key, ``rollout_backend`` in ``evolve``); ``auto`` is ``jaxterrain.walker.resolve_backend``'s."""
-    parser.add_argument("--backend", dest=dest, choices=BACKEND_NAMES, default=None,
-                        help=f"{what}: auto (warp on a GPU where MuJoCo Warp imports, else jax), jax (MJX) or warp "
-                             f"(MuJoCo Warp{', ' + warp if warp else ''})")
-
-
 RANDOMISATION_PRESET_NAMES = ("legged-gym",)
 """``--randomise`` preset names: ``jaxterrain.walker.RANDOMISATION_PRESETS`` (a literal, so that ``--help`` imports no
 JAX; a test keeps the two equal)."""
 
-
-def add_randomise_argument(parser: argparse.ArgumentParser, what: str) -> None:
-    """``--randomise SPEC``: physics randomisation of ``what`` (``jaxterrain.walker.parse_randomisation``: a preset or
-    ``KEY=VALUE`` items; off by default). The config key ``randomise`` holds the spec as given."""
-    parser.add_argument("--randomise", default=None, metavar="SPEC",
-                        help=f"physics randomisation of {what} (default off): a preset "
-                             f"({', '.join(RANDOMISATION_PRESET_NAMES)}) and/or comma-separated KEY=VALUE items, "
-                             f"friction=LOW:HIGH (scale of the friction coefficient, 1.0 here), mass=LOW:HIGH (scale of "
-                             f"each body's mass), added-mass=LOW:HIGH (kg on the torso), motor=LOW:HIGH (scale of the "
-                             f"motors' force), obs-noise=STD, delay=STEPS or LOW:HIGH (env steps), push=EVERY:VELOCITY "
-                             f"(env steps, m/s), drawn per env at reset; e.g. friction=0.5:1.25,push=200:0.5 or "
-                             f"legged-gym,obs-noise=0.01 (jaxterrain.walker.randomisation)")
+PHRASES = {
+    "backend": "auto (warp on a GPU where MuJoCo Warp imports, else jax), jax (MJX) or warp (MuJoCo Warp)",
+    "randomise": f"(default off): a preset ({', '.join(RANDOMISATION_PRESET_NAMES)}) and/or comma-separated "
+                 f"KEY=VALUE items, friction=LOW:HIGH (scale of the friction coefficient, 1.0 here), mass=LOW:HIGH "
+                 f"(scale of each body's mass), added-mass=LOW:HIGH (kg on the torso), motor=LOW:HIGH (scale of the "
+                 f"motors' force), obs-noise=STD, delay=STEPS or LOW:HIGH (env steps), push=EVERY:VELOCITY (env "
+                 f"steps, m/s), drawn per env at reset; e.g. friction=0.5:1.25,push=200:0.5 or "
+                 f"legged-gym,obs-noise=0.01 (jaxterrain.walker.randomisation)",
+    "slots": "env slots of the walker's rollout pool (speed and device memory only; results do not change)",
+}
+"""Phrases every command's help shares, written ``{name}`` in a field's help (the config modules' ``HELP``) and
+filled in by ``experiments.cli_gen``: ``--backend``'s choices, ``--randomise``'s spec, ``--rollout-slots``."""
 
 
 def add_progress_argument(parser: argparse.ArgumentParser) -> None:
@@ -361,10 +350,6 @@ def check_values(values: dict, where=flag) -> None:
             for v in numbers:
                 if not (math.isfinite(v) and 0.0 < v <= 1.0):
                     raise _bad(where(key), "a number in (0, 1]", value)
-        elif key in _FLOAT_FRACTION:
-            for v in numbers:
-                if not (math.isfinite(v) and 0.0 <= v <= 1.0):
-                    raise _bad(where(key), "a number in [0, 1]", value)
         elif key in ("descriptors", "extra_descriptors") and items:
             import jaxterrain  # noqa: F401 - registers the learned descriptor (features.learned)
             from jaxterrain import features
@@ -431,6 +416,21 @@ def check_values(values: dict, where=flag) -> None:
         if isinstance(attempts, int) and isinstance(best, int) and best > attempts // heads:
             raise UsageError(f"{where('best')} must be <= {where('attempts')} / {where('headings')} "
                              f"({attempts // heads}); got {best}")
+
+
+def check_rules(values: dict, rules: dict, where: Callable[[str], str] = flag) -> None:
+    """Run the declared ``rules`` (``{flat key: (rule, ...)}``: ``jaxterrain.runtime.schema``'s, the ones the
+    command's flags are made from, ``experiments.cli_gen``) on a flat config ``values`` (a None value passes);
+    :class:`UsageError` whose message names the key by ``where(key)`` (its flag, or the preset or file it came
+    from)."""
+    view = argparse.Namespace(**values)
+    for key, rule in rules.items():
+        if values.get(key) is not None:
+            for one in rule:
+                try:
+                    one(values[key], key, view, where)
+                except ValueError as err:
+                    raise UsageError(str(err)) from None
 
 
 def check_out(out: Any, where: str = "--out") -> None:
@@ -608,7 +608,7 @@ def save_figure(fig, path: str | Path, dpi: int = 120) -> Path:
 
 def setup_run(command: str, args: argparse.Namespace, presets: dict[str, dict], default_preset: str,
               overrides: dict[str, Any], extendable: tuple[str, ...] = (),
-              check: Callable[[dict], None] | None = None) -> tuple[Path, dict]:
+              check: Callable[[dict], None] | None = None, rules: dict | None = None) -> tuple[Path, dict]:
     """Resolve the settings and the run folder; write the config there. Returns ``(folder, config)``.
 
     ``overrides`` maps config keys to the values given on the command line (``None`` = not given). ``--resume``
@@ -617,8 +617,9 @@ def setup_run(command: str, args: argparse.Namespace, presets: dict[str, dict], 
     except the keys of ``extendable`` (how long the run lasts and how often it logs, e.g. ``steps``): those replace
     the saved values, are checked as a fresh config is, and are written back to the run's ``config.json``.
     ``check(config)``: the command's own checks of the resolved config (raise :class:`UsageError`), run before any
-    folder is made. Values are checked by name (:func:`check_values`); a command whose run is a typed config of the
-    library uses :func:`setup_typed`.
+    folder is made. Values are checked by the declared ``rules`` (``{flat key: (rule, ...)}``,
+    :func:`check_rules`; those the command's flags are made from), then by name (:func:`check_values`: the names
+    against the registries); a command whose run is a typed config of the library uses :func:`setup_typed`.
     """
 
     def settle(config: dict, where, resumed: bool, changed: bool) -> dict:
@@ -627,6 +628,7 @@ def setup_run(command: str, args: argparse.Namespace, presets: dict[str, dict], 
             if unknown:
                 raise SystemExit(f"unknown config key(s) {sorted(unknown)}; known: {sorted(presets[default_preset])}")
         if not resumed or changed:
+            check_rules(config, rules or {}, where)
             check_values(config, where)
         if not resumed and check is not None:
             check(config)
@@ -841,13 +843,16 @@ class Typed(NamedTuple):
     """A command's run as a typed config of the library (``jaxterrain.qd.run_config.EvolveRun``, ...): ``owner``,
     the config's name in the library's messages (``EvolveRun.map_elites.bins must be ...``); ``fields``, its
     ``{flat key: field path}`` table (the flat keys are ``config.json``'s and the flags' names: :func:`flag`);
-    ``from_flat`` / ``to_flat``, its serialised form. The one place where a field becomes a flag is
-    :func:`flags_in` over ``fields``."""
+    ``from_flat`` / ``to_flat``, its serialised form; ``rules``, its declared checks of single fields (``{field path:
+    rule}``, ``jaxterrain.runtime.schema``), from which ``experiments.cli_gen`` makes each flag's type, choices and
+    range. A field becomes a flag in one place: its flat key through :func:`flag` (``cli_gen`` makes the options,
+    :func:`flags_in` names the fields in messages)."""
 
     owner: str
     fields: dict
     from_flat: Callable[[dict], Any]
     to_flat: Callable[..., dict]
+    rules: dict = {}
 
 
 def flags_in(text: str, typed: Typed, where: Callable[[str], str] = flag) -> str:

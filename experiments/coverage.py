@@ -39,14 +39,16 @@ from __future__ import annotations
 
 import argparse
 
-from experiments import common
+from experiments import cli_gen, common
 
 _CONFIG = common.library_file("qd.run_config")  # jaxterrain.qd.run_config, read without JAX
 PRESETS: dict[str, dict] = _CONFIG.COVERAGE_FLAT_PRESETS
 """The presets in their flat (``config.json``) form, defined in the library:
 ``jaxterrain.qd.run_config.COVERAGE_PRESETS``."""
 GENERATORS = list(_CONFIG.GENERATORS)
-TYPED = common.Typed("CoverageRun", _CONFIG.COVERAGE_FIELDS, _CONFIG.coverage_from_flat, _CONFIG.coverage_to_flat)
+TYPED = common.Typed("CoverageRun", _CONFIG.COVERAGE_FIELDS, _CONFIG.coverage_from_flat, _CONFIG.coverage_to_flat,
+                     _CONFIG.COVERAGE_RULES)
+
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -54,20 +56,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                                                                          "treatment, every treatment at once "
                                                                          "(--batched)"})
     common.add_devices_argument(parser)
-    parser.add_argument("--generators", nargs="+", default=None,
-                        help=f"generator names (default: {' '.join(GENERATORS)})")
-    parser.add_argument("--generations", type=int, default=None,
-                        help="MAP-Elites generations of each treatment after its initial population")
-    parser.add_argument("--batch-size", type=int, default=None, help="offspring per generation")
-    parser.add_argument("--size", type=int, default=None, help="heightmap side in pixels")
-    parser.add_argument("--bins", type=int, default=None, help="cells per descriptor")
-    parser.add_argument("--fitness", choices=common.FITNESS_NAMES, default=None,
-                        help="what an elite's fitness measures: difficulty (the base policy walks it) or slope (a "
-                             "cheap stand-in, no walking)")
+    cli_gen.add_typed_flags(parser, TYPED, PRESETS, _CONFIG.COVERAGE_HELP)
     common.add_protocol_argument(parser)
-    parser.add_argument("--batched", action=argparse.BooleanOptionalAction, default=None,
-                        help="evolve every treatment at once (one jitted generation, one fitness call on all "
-                             "treatments' offspring; jaxterrain.qd.evolve_many); not with --shard")
     parser.add_argument("--shard", type=common.parse_shard, default=None, metavar="I/N",
                         help="run only the treatments t with t %% N == I (independent jobs sharing one --out; see "
                              "the module docstring); then --resume without --shard writes the tables")

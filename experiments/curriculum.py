@@ -51,7 +51,7 @@ import sys
 import time
 from pathlib import Path
 
-from experiments import common
+from experiments import cli_gen, common
 from experiments import learn
 
 DEFAULT_ARCHIVES = {g: common.shipped(f"archives/{g}_headings.npz")
@@ -59,7 +59,7 @@ DEFAULT_ARCHIVES = {g: common.shipped(f"archives/{g}_headings.npz")
 """The archives of Experiment 2 when ``--archives`` is not given: each generator's paper-budget roughness x TPI
 archive (evolved after the fix of tied insertion), reseated under ``difficulty.HEADINGS``; package data
 (``jaxterrain/assets/archives/G_headings.npz``, copies of ``docs/results/exp2_G_headings_archive.npz``)."""
-BASELINES = ("roughness", "random", "dr", "levels", "plr", "accel")
+BASELINES = tuple(name for name in common.SELECTOR_NAMES if name != "map")
 """The curricula of ``--baseline`` (``jaxterrain.curriculum.CurriculumConfig.selector``'s other than ``map``)."""
 DEFAULT_ENVS = 131_072
 """``--population-envs``' default (``jaxterrain.curriculum.batch.DEFAULT_ENVS``, read here without importing JAX)."""
@@ -67,10 +67,28 @@ PRESETS = {name: {**{k: v for k, v in p.items() if k not in ("archive", "curricu
                   "archives": dict(DEFAULT_ARCHIVES), "baseline": "roughness", "baseline_archive": "cppn",
                   "combined": True}
            for name, p in learn.PRESETS.items()}
+RULES = learn.RULES
+"""The declared checks of a treatment's flat keys (``learn``'s), from which the flags are made."""
 RUN_KEYS = ("archives", "baseline", "baseline_archive", "combined")
 """The run's own keys (not a treatment's ``learn`` config): a run folder written before ``baseline_archive`` /
 ``combined`` existed lacks them and resumes with their defaults, ``cppn`` and True (:func:`baseline_archive`,
 :func:`combined`)."""
+
+
+HELP = {
+    "trials": "trials of each treatment, run together",
+    "max_epochs": "each trial's epoch budget (an epoch: 4 000 env steps; the paper: 30 000)",
+    "chunks_per_call": "chunks per jitted call / checkpoint, in every treatment (learn's)",
+    **learn.FINE_TUNING_HELP,
+    "baseline": f"the baselines run on the --baseline-archive (default cppn), in this order: {', '.join(BASELINES)} "
+                f"or module:object (Figure 7b; default roughness)",
+    "baseline_archive": "the archive (one of --archives' names) the --baseline curricula run on (default cppn)",
+    "combined": "with several archives, the map curriculum on their combination (qd.combine; default on); "
+                "--no-combined skips that treatment",
+    **learn.SELECTOR_HELP,
+    "backend": "walker physics of every treatment: {backend}; warp holds one tile per trial",
+}
+"""Each flag's help (``experiments.cli_gen`` adds type, choices and range from ``learn.RULES``)."""
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -79,21 +97,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--archives", nargs="+", default=None, metavar="NAME=PATH",
                         help="archives of the map treatments (default: the five generators' archives shipped in "
                              "jaxterrain/assets/archives, G_headings.npz)")
-    parser.add_argument("--trials", type=int, default=None, help="trials of each treatment, run together (paper: 10)")
-    parser.add_argument("--max-epochs", type=int, default=None,
-                        help="each trial's epoch budget (an epoch: 4 000 env steps; the paper: 30 000)")
-    parser.add_argument("--chunks-per-call", type=int, default=None,
-                        help="chunks per jitted call / checkpoint, in every treatment (learn's)")
-    learn.add_fine_tuning_arguments(parser, ", in every treatment")
-    parser.add_argument("--baseline", nargs="+", type=common.selector_name, default=None, metavar="NAME",
-                        help=f"the baselines run on the --baseline-archive (default cppn), in this order: "
-                             f"{', '.join(BASELINES)} or module:object (Figure 7b; default roughness)")
-    parser.add_argument("--baseline-archive", default=None, metavar="NAME",
-                        help="the archive (one of --archives' names) the --baseline curricula run on (default cppn)")
-    parser.add_argument("--combined", action=argparse.BooleanOptionalAction, default=None,
-                        help="with several archives, the map curriculum on their combination (qd.combine; default "
-                             "on); --no-combined skips that treatment")
-    learn.add_selector_arguments(parser)
+    cli_gen.add_flags(parser, PRESETS, RULES, HELP, phrases={**learn.PHRASES, "scope": ", in every treatment"},
+                      argparse_kwargs={
+        **learn.ARGPARSE, "baseline": {"nargs": "+", "type": common.selector_name, "metavar": "NAME"},
+        "baseline_archive": {"metavar": "NAME"}})
+    common.add_deprecated_alias(parser, "--freeze-normaliser", "--no-update-normaliser", "update_normaliser",
+                                const=False)
     common.add_protocol_argument(parser)  # default: each archive's own protocol (learn's)
     parser.add_argument("--report", action="store_true",
                         help="with --resume: Table 2 and the figures from the treatments as they stand (unfinished "
@@ -101,7 +110,6 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--shard", type=common.parse_shard, default=None, metavar="I/N",
                         help="run only the treatments t %% N == I of the fixed order (independent processes, e.g. one "
                              "per GPU, on one run folder); then --resume without --shard writes the tables")
-    common.add_backend_argument(parser, "walker physics of every treatment", "on one tile per trial")
     parser.add_argument("--batch-treatments", action=argparse.BooleanOptionalAction, default=True,
                         help="run the treatments that share a walker and the harness's work (e.g. the map "
                              "curriculum on every archive) as one population in one compiled program, each "
@@ -403,13 +411,11 @@ def main(args) -> int:
         raise common.UsageError("--report needs --resume RUN (the run to report on)")
     if args.baseline is not None and len(set(args.baseline)) < len(args.baseline):
         raise common.UsageError(f"--baseline: each of {', '.join(BASELINES)} at most once; got {' '.join(args.baseline)}")
-    over = dict(archives=parse_archives(args.archives), trials=args.trials, max_epochs=args.max_epochs,
-                chunks_per_call=args.chunks_per_call, baseline=args.baseline, baseline_archive=args.baseline_archive,
-                combined=args.combined, backend=args.backend,
-                **learn.fine_tuning_overrides(args), **learn.selector_overrides(args),
-                **common.protocol_overrides(args))
+    over = {"archives": parse_archives(args.archives), **cli_gen.given(args, HELP),
+            **learn.fine_tuning_overrides(args), **common.protocol_overrides(args)}
     mesh = common.device_mesh(args.devices)
-    folder, cfg = common.setup_run("curriculum", args, PRESETS, "smoke", over, check=lambda c: check_config(args, c))
+    folder, cfg = common.setup_run("curriculum", args, PRESETS, "smoke", over, check=lambda c: check_config(args, c),
+                                   rules=RULES)
     start = time.perf_counter()
     limit = None if args.time_limit is None else 60.0 * args.time_limit
     curriculum = "map"  # the curriculum whose flags an error names (its own, once the plan is read)

@@ -60,83 +60,25 @@ from __future__ import annotations
 import argparse
 import sys
 
-from experiments import common
+from experiments import cli_gen, common
 
 _CONFIG = common.library_file("suite.run_config")  # jaxterrain.suite.run_config, read without JAX
 PRESETS: dict[str, dict] = _CONFIG.FLAT_PRESETS
 """The presets in their flat (``config.json``) form, defined in the library: ``jaxterrain.suite.run_config.PRESETS``."""
-BACKENDS = common.BACKEND_NAMES  # jaxterrain.walker.layout.BACKEND_CHOICES (literal: --help imports no JAX)
-ENGINES = ("mjx", "mujoco")  # jaxterrain.difficulty.replay.ENGINES (literal: --help imports no JAX)
-VIDEO_FORMATS = _CONFIG.VIDEO_FORMATS  # jaxterrain.suite.run_config.VIDEO_FORMATS
-TYPED = common.Typed("EvaluateRun", _CONFIG.FIELDS, _CONFIG.from_flat, _CONFIG.to_flat)
+TYPED = common.Typed("EvaluateRun", _CONFIG.FIELDS, _CONFIG.from_flat, _CONFIG.to_flat, _CONFIG.RULES)
+
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     common.add_run_arguments(parser, PRESETS, "smoke")
-    parser.add_argument("--policy", nargs="+", default=None, metavar="DIR",
-                        help="policy folders to evaluate beside the base policy (e.g. RUN/policies/trial_0)")
-    parser.add_argument("--keys", type=int, default=None, metavar="K",
-                        help="walk the base policy with K independent evaluation keys (rows base, base:key1, ..., "
-                             "base:key{K-1}; key 0 is the one every --policy walks with): generalise reads them as "
-                             "K runs of the comparator (give K = the treatments' trials)")
-    parser.add_argument("--robot", default=None, metavar="NAME",
-                        help="the base policy walked beside is this robot's shipped one (default humanoid); each "
-                             "--policy walks the robot it was trained on")
-    parser.add_argument("--observation", choices=("blind", "perceptive"), default=None,
-                        help="the base policy walked beside: the robot's blind one (default, the paper's) or its "
-                             "perceptive twin; each --policy walks with the observation set it records")
-    parser.add_argument("--suite", default=None, help="held-out suite version (default v1; v2: levels calibrated "
-                        "for the robot of --robot)")
-    parser.add_argument("--archive", default=None, help="walk an archive's elites instead of the suite")
-    parser.add_argument("--size", type=int, default=None, help="suite heightmap side in pixels (v1: 256)")
-    parser.add_argument("--seeds", type=int, default=None, help="suite terrains per family level (v1: 3)")
-    common.add_terrains_argument(parser, "samples", "the suite's generator terrains (v1: 96)", aliases=("--samples",),
-                                 folder="walk your own terrains instead of the suite (.png, .tif/.tiff, .npy, .npz; "
-                                        "jaxterrain.suite.folder), one family per file")
-    parser.add_argument("--terrain-height", type=float, default=None, metavar="M",
-                        help="--terrains DIR: metres of an image's full grey (default 1.0), and the relief every "
-                             "metre file is rescaled to (default: its own metres), in (0, 1]")
-    parser.add_argument("--families", nargs="+", default=None, help="suite families to build (default: all of the "
-                        "version's; smoke: flat stairs_up gaps)")
-    parser.add_argument("--generators", nargs="*", default=None, help="generators to sample (default: the version's "
-                        "five; smoke: perlin)")
-    parser.add_argument("--repeat", action=argparse.BooleanOptionalAction, default=None,
-                        help="walk the base policy twice and time the second, compiled call (timing.json; default: "
-                             "on in gpu, off in smoke)")
-    parser.add_argument("--attempts", type=int, default=None, help="walks per terrain in total")
-    parser.add_argument("--best", type=int, default=None, help="best walks averaged per heading")
-    parser.add_argument("--headings", type=int, choices=(1, 2, 4), default=None, help="walking headings")
+    cli_gen.add_typed_flags(parser, TYPED, PRESETS, _CONFIG.HELP, {
+        "policy": {"metavar": "DIR"}, "keys": {"metavar": "K"}, "robot": {"metavar": "NAME"},
+        "samples": {"type": common.count_or_folder, "metavar": "N|DIR"}, "terrain_height": {"metavar": "M"},
+        "generators": {"nargs": "*"}, "slots": {"metavar": "SLOTS"}, "randomise": {"metavar": "SPEC"},
+        "video_terrains": {"metavar": "FAMILY:LEVEL,..."}})
     common.add_protocol_argument(parser)
-    common.add_backend_argument(parser)
-    parser.add_argument("--engine", choices=ENGINES, default=None,
-                        help="physics engine: mjx (default; MJX on the accelerator, --backend picks jax or warp) or "
-                             "mujoco (MuJoCo's C engine on the CPU cores, the same starts and protocol: sim2sim)")
-    parser.add_argument("--workers", type=int, default=None,
-                        help="--engine mujoco: CPU processes walking (default: every core)")
-    common.add_slots_argument(parser, "slots", "an int (default: all walks at once)", aliases=("--slots",))
-    common.add_randomise_argument(parser, "every walk (a randomised protocol: every policy, the base policy "
-                                          "included, meets the same draws; default: the nominal physics; MJX only)")
-    parser.add_argument("--chunk", type=int, default=None, help="terrains per call (bounds device memory)")
-    parser.add_argument("--videos", action=argparse.BooleanOptionalAction, default=None,
-                        help="after the evaluation, videos of each --policy walker beside the base policy (the "
-                             "base policy alone without --policy) on chosen terrains, one walk along +x each from the "
-                             "same start (of --video-starts), into videos/<walker>/<family>_L<level>.gif (or .mp4: "
-                             "--video-format) with videos/videos.csv; needs an OpenGL backend for MuJoCo's renderer "
-                             "(without one: a line saying why, the evaluation is still written)")
-    parser.add_argument("--video-terrains", default=None, metavar="FAMILY:LEVEL,...",
-                        help="terrains of the videos, e.g. slope_up:5,gen:perlin:3 (each level's seed-0 terrain); "
-                             "default: per family the hardest level the walker passes and the first it fails")
-    parser.add_argument("--video-frames", type=int, default=None,
-                        help="most frames per video, evenly spaced over the longer walk, played at 15 a second "
-                             "(a walk shorter than frames / 15 s gets fewer and plays in real time)")
-    parser.add_argument("--video-starts", type=int, default=None,
-                        help="reset poses each policy walks every video terrain from; the video shows the one the "
-                             "walker went farthest from, the base policy from the same one")
-    parser.add_argument("--video-width", type=int, default=None, help="pixels of each panel's width")
-    parser.add_argument("--video-height", type=int, default=None, help="pixels of each panel's height")
-    parser.add_argument("--video-format", choices=VIDEO_FORMATS, default=None,
-                        help="files of each video: gif (Pillow), mp4 (H.264, 12 times smaller than the GIF on a "
-                             "47-frame video of two walkers; needs pip install 'jaxterrain[video]') or both")
+    common.add_deprecated_alias(parser, "--slots", "--rollout-slots", "slots", type=int, metavar="SLOTS")
+    common.add_deprecated_alias(parser, "--samples", "--terrains", "samples", type=int, metavar="N")
     parser.add_argument("--gl", choices=("osmesa", "egl", "glfw"), default=None,
                         help="MuJoCo OpenGL backend of the videos (default: $MUJOCO_GL, else egl with an NVIDIA "
                              "GPU, else osmesa)")

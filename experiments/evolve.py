@@ -48,58 +48,25 @@ from __future__ import annotations
 
 import argparse
 
-from experiments import common
+from experiments import cli_gen, common
 
 _CONFIG = common.library_file("qd.run_config")  # jaxterrain.qd.run_config, read without JAX
 PRESETS: dict[str, dict] = _CONFIG.FLAT_PRESETS
 """The presets in their flat (``config.json``) form, defined in the library: ``jaxterrain.qd.run_config.PRESETS``."""
 MIX_DEFAULT = _CONFIG.MIX_DEFAULT
-TYPED = common.Typed("EvolveRun", _CONFIG.EVOLVE_FIELDS, _CONFIG.from_flat, _CONFIG.to_flat)
+TYPED = common.Typed("EvolveRun", _CONFIG.EVOLVE_FIELDS, _CONFIG.from_flat, _CONFIG.to_flat, _CONFIG.EVOLVE_RULES)
+
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     common.add_run_arguments(parser, PRESETS, "smoke")
     common.add_devices_argument(parser)
-    parser.add_argument("--generator", default=None,
-                        help="registered generator name (default perlin), or mixed: one archive whose offspring of "
-                             "every --mix generator compete for the cells, each elite recording its generator")
-    parser.add_argument("--mix", nargs="+", default=None, metavar="NAME",
-                        help=f"with --generator mixed: the generators of the mixture (default: all six, "
-                             f"{' '.join(MIX_DEFAULT)})")
-    parser.add_argument("--fresh", type=int, default=None,
-                        help="with --generator mixed: fresh random genomes of EACH generator among every "
-                             "generation's offspring, so that a generator holding no cell keeps competing (presets: "
-                             "1, gpu-short 32, gpu 64)")
-    parser.add_argument("--descriptors", nargs=2, default=None, metavar=("D0", "D1"),
-                        help="descriptor pair, e.g. roughness tpi")
-    parser.add_argument("--generations", type=int, default=None,
-                        help="MAP-Elites generations after the initial population")
-    parser.add_argument("--batch-size", type=int, default=None, help="offspring per generation")
-    parser.add_argument("--initial-population", type=int, default=None, help="random genomes evaluated first")
-    parser.add_argument("--bins", type=int, default=None, help="cells per descriptor")
-    parser.add_argument("--size", type=int, default=None, help="heightmap side in pixels")
-    parser.add_argument("--checkpoint-every", type=int, default=None, help="generations between checkpoints")
-    parser.add_argument("--fitness", choices=common.FITNESS_NAMES, default=None,
-                        help="what an elite's fitness measures: difficulty (the base policy walks it) or slope (a "
-                             "cheap stand-in, no walking)")
-    parser.add_argument("--attempts", type=int, default=None, help="walks per terrain in total")
-    parser.add_argument("--best", type=int, default=None, help="best walks averaged per heading")
-    parser.add_argument("--headings", type=int, choices=(1, 2, 4), default=None,
-                        help="headings of the walks (1: the paper's +x; 4: +x, +y, -x, -y; mean over headings)")
+    cli_gen.add_typed_flags(parser, TYPED, PRESETS, _CONFIG.EVOLVE_HELP, {
+        "mix": {"metavar": "NAME"}, "descriptors": {"nargs": 2, "metavar": ("D0", "D1")},
+        "rollout_slots": {"metavar": "SLOTS"}, "robot": {"metavar": "NAME"}})
     common.add_protocol_argument(parser)
-    common.add_slots_argument(parser, "rollout_slots", "per device (default: all walks of a generation at once)")
-    common.add_backend_argument(parser, "walker physics of the difficulty rollouts", dest="rollout_backend")
     common.add_deprecated_alias(parser, "--rollout-backend", "--backend", "rollout_backend",
                                 choices=common.BACKEND_NAMES)
-    parser.add_argument("--robot", default=None, metavar="NAME",
-                        help="whose shipped base policy the walker fitness walks (default humanoid; "
-                             "jaxterrain.walker.robots, or a --plugin's); the archive records it")
-    parser.add_argument("--observation", choices=("blind", "perceptive"), default=None,
-                        help="which of the robot's shipped base policies the walker fitness walks: blind (default, "
-                             "the paper's) or perceptive (with a height scan); the archive records it")
-    parser.add_argument("--store-heightmaps", action=argparse.BooleanOptionalAction, default=None,
-                        help="store the elites' heightmaps in archive.npz (--no-store-heightmaps: leave them out, "
-                             "they can be re-rendered from the genomes)")
     common.add_deprecated_alias(parser, "--no-heightmaps", "--no-store-heightmaps", "store_heightmaps", const=False)
 
 

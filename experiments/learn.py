@@ -77,38 +77,65 @@ import argparse
 import shutil
 import sys
 
-from experiments import common
+from experiments import cli_gen, common
 
 _PRESETS = common.library_file("curriculum.presets")  # jaxterrain.curriculum.presets, read without JAX
 CPPN_ARCHIVE = _PRESETS.CPPN_ARCHIVE
 """The default archive (``jaxterrain.curriculum.presets.CPPN_ARCHIVE``): the CPPN's shipped paper-budget archive."""
-BACKENDS = common.BACKEND_NAMES  # jaxterrain.walker.layout.BACKEND_CHOICES (literal: --help imports no JAX)
-RECIPE_NAMES = ("paper", "wide")  # jaxterrain.curriculum.RECIPES (literal, as BACKENDS; a test keeps them equal)
 PRESETS: dict[str, dict] = common.with_preset_names({n: dict(p) for n, p in _PRESETS.FLAT_PRESETS.items()})
 """The presets in their flat (``config.json``) form, defined in the library: ``jaxterrain.curriculum.presets``
 (typed: ``jaxterrain.curriculum.run_config.PRESETS``)."""
+RULES = cli_gen.rules_by_key(_PRESETS.RULES, {})
+"""The declared checks of the flat keys (``jaxterrain.curriculum.presets.RULES``), from which the flags are made."""
+UPDATE_SHAPE = "--recipe / --num-envs (the update's shape)"
+"""How a message names ``LearnConfig.curriculum.ppo``: the flags that shape an update."""
+
+SELECTOR_HELP = _PRESETS.SELECTOR_HELP
+"""The per-env curricula's flags (``dr``, ``levels``, ``plr``, ``accel``: each selector's params,
+``CurriculumConfig.SELECTOR_FIELDS``); one given with a built-in curriculum that does not read it is refused
+(:func:`check_selector_flags`)."""
+FINE_TUNING_HELP = _PRESETS.FINE_TUNING_HELP
+"""The fine-tuning flags, shared with ``curriculum``."""
+PHRASES = {"selectors": ", ".join(common.SELECTOR_NAMES), "scope": ""}
+"""What ``learn``'s help texts (``jaxterrain.curriculum.presets.HELP``) leave to the command line."""
+
+ARGPARSE = {"curriculum": {"type": common.selector_name, "metavar": "NAME"}, "robot": {"metavar": "NAME"},
+            "terrains": {"metavar": "DIR"}, "terrain_height": {"type": float, "metavar": "M"},
+            "randomise": {"metavar": "SPEC"}, "accel_generator": {"metavar": "NAME"}}
+"""What argparse is given beyond what the declaration says (``cli_gen.add_flags``' ``argparse_kwargs``)."""
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    common.add_run_arguments(parser, PRESETS, "smoke")
+    common.add_devices_argument(parser)  # the trials are split over the devices (curriculum.make_runner)
+    cli_gen.add_flags(parser, PRESETS, RULES, _PRESETS.HELP, ARGPARSE, phrases=PHRASES)
+    common.add_deprecated_alias(parser, "--freeze-normaliser", "--no-update-normaliser", "update_normaliser",
+                                const=False)
+    parser.add_argument("--export-policies", action="store_true",
+                        help="with --resume: write every trial's walker of the last checkpoint as policies/trial_K/ "
+                             "(for runs made before learn wrote them, or stopped by a time limit), and stop")
+    parser.add_argument("--report", action="store_true",
+                        help="with --resume: write the outputs of the last checkpoint (history, sequences, "
+                             "milestones, curve, summary_partial.json) without training, and stop")
+    common.add_protocol_argument(parser)
+    common.add_progress_argument(parser)
 
 
 def flags_in(text: str, selector: str) -> str:
     """A library message with its fields (``LearnConfig.<path>``: ``jaxterrain.curriculum.run_config``) named as
-    this command's flags: ``LearnConfig.curriculum.threshold`` -> ``--threshold``, ``LearnConfig.walker.backend``
-    -> ``--backend``, a selector's ``LearnConfig.curriculum.params.capacity`` -> ``--plr-capacity`` (its flat key,
-    ``selectors.SelectorSpec.flat``). The field -> flag naming is ``run_config.FLAT_FIELDS`` and ``common.flag``."""
-    import re
-
+    this command's flags (``common.flags_in`` over ``run_config.FLAT_FIELDS`` and the selector's params' flat keys):
+    ``LearnConfig.curriculum.threshold`` -> ``--threshold``, ``LearnConfig.walker.backend`` -> ``--backend``, a
+    selector's ``LearnConfig.curriculum.params.capacity`` -> ``--plr-capacity``, ``LearnConfig.curriculum.ppo`` ->
+    :data:`UPDATE_SHAPE`."""
     from jaxterrain.curriculum import run_config, selectors
 
-    inverse = {path: key for key, path in run_config.FLAT_FIELDS.items()}
-
-    def one(m) -> str:
-        path = m.group(1)
-        if path == "curriculum.ppo":
-            return "--recipe / --num-envs (the update's shape)"
-        if path.startswith("curriculum.params."):
-            return common.flag(selectors.flat_name(selector, path.rsplit(".", 1)[1]))
-        return common.flag(inverse.get(path, path.rsplit(".", 1)[-1]))
-
-    return re.sub(r"\bLearnConfig\.([a-z_]+(?:\.[a-z_]+)*)", one, text)
+    try:
+        params = selectors.selector_spec(selector).flat
+    except ValueError:
+        params = {}
+    fields = {**run_config.FLAT_FIELDS, **{k: f"curriculum.params.{f}" for k, f in params.items()}}
+    typed = common.Typed("LearnConfig", fields, run_config.from_flat, run_config.to_flat)
+    return common.flags_in(text, typed, lambda key: UPDATE_SHAPE if key == "ppo" else common.flag(key))
 
 
 def run_of(cfg: dict):
@@ -122,94 +149,9 @@ def run_of(cfg: dict):
         raise common.UsageError(str(err)) from None
 
 
-def add_arguments(parser: argparse.ArgumentParser) -> None:
-    common.add_run_arguments(parser, PRESETS, "smoke")
-    common.add_devices_argument(parser)  # the trials are split over the devices (curriculum.make_runner)
-    parser.add_argument("--archive", default=None, help="archive .npz (default: the shipped CPPN archive, jaxterrain/assets/archives/cppn_headings.npz)")
-    parser.add_argument("--terrains", default=None, metavar="DIR",
-                        help="DIR, a folder of your own heightmaps, trained on instead of an archive: .png "
-                             "(8/16-bit grey), .tif/.tiff (GeoTIFF, metres), .npy/.npz (metres), one terrain each, "
-                             "cropped to a centred square, resized to 256 x 256 cells of 4 cm, flat 1 m start strips "
-                             "(jaxterrain.suite.folder); curricula dr (the default with it), plr, levels, random")
-    parser.add_argument("--terrain-height", type=float, default=None, metavar="M",
-                        help="--terrains: metres of an image's full grey (default 1.0), and the relief every metre "
-                             "file is rescaled to (default: its own metres), in (0, 1]")
-    parser.add_argument("--terrain-order", choices=("name", "difficulty"), default=None,
-                        help="--terrains: how the terrains rank by hardness (levels' bands, the hardest traversed): "
-                             "name (file-name order, the default; free) or difficulty (the start policy walked on "
-                             "each before the run under its protocol, hardest last; one more compile)")
-    parser.add_argument("--curriculum", type=common.selector_name, default=None, metavar="NAME",
-                        help=f"{', '.join(common.SELECTOR_NAMES)} or module:object (a factory config -> "
-                             f"jaxterrain.curriculum.Selector); jaxterrain.curriculum.selectors")
-    add_selector_arguments(parser)
-    parser.add_argument("--trials", type=int, default=None, help="trials run together (paper: 10)")
-    parser.add_argument("--threshold", type=float, default=None, help="fraction of the maximum fitness, in (0, 1]")
-    parser.add_argument("--max-epochs", type=int, default=None,
-                        help="each trial's epoch budget (an epoch: 4 000 env steps; the paper: 30 000)")
-    parser.add_argument("--policy", default=None, help="policy folder to start from (default: the base policy)")
-    parser.add_argument("--robot", default=None, metavar="NAME",
-                        help="start from this robot's shipped base policy (humanoid, the default, or one a --plugin "
-                             "registered; jaxterrain.walker.robots); a --policy walks the robot it was trained on")
-    parser.add_argument("--chunks-per-call", type=int, default=None, help="chunks per jitted call / checkpoint")
-    parser.add_argument("--num-envs", type=int, default=None, help="PPO envs per trial (all on its terrain)")
-    add_fine_tuning_arguments(parser)
-    parser.add_argument("--policy-every", type=int, default=None,
-                        help="also write every trial's walker every N chunks, policies/chunk_CCCCC/trial_K/ (at the end "
-                             "of the first block at or after each multiple of N; default: only the final "
-                             "policies/trial_K/)")
-    parser.add_argument("--export-policies", action="store_true",
-                        help="with --resume: write every trial's walker of the last checkpoint as policies/trial_K/ "
-                             "(for runs made before learn wrote them, or stopped by a time limit), and stop")
-    parser.add_argument("--report", action="store_true",
-                        help="with --resume: write the outputs of the last checkpoint (history, sequences, "
-                             "milestones, curve, summary_partial.json) without training, and stop")
-    parser.add_argument("--attempts", type=int, default=None,
-                        help="evaluation walks in total (default: the archive's protocol, e.g. 20)")
-    parser.add_argument("--best", type=int, default=None, help="best walks averaged per heading (default: archive's)")
-    parser.add_argument("--headings", type=int, choices=(1, 2, 4), default=None,
-                        help="evaluation headings (default: the archive's protocol: 1 = the paper's +x)")
-    common.add_protocol_argument(parser)
-    common.add_backend_argument(parser, "walker physics", "on one tile per trial")
-    common.add_progress_argument(parser)
-
-
-def add_selector_arguments(parser: argparse.ArgumentParser) -> None:
-    """The per-env curricula's settings (``dr``, ``levels``, ``plr``, ``accel``; CurriculumConfig's fields of the
-    same names). One given with a built-in curriculum that does not read it is refused (:func:`check_selector_flags`)."""
-    parser.add_argument("--terrains-per-chunk", type=int, default=None,
-                        help="dr, plr: terrains per trial and chunk, the envs dealt round-robin over them, >= 1 "
-                             "(default 8)")
-    parser.add_argument("--levels", type=int, default=None,
-                        help="levels: difficulty levels (bands of the archive by distance from (0, 0)), >= 1 "
-                             "(default: legged_gym's 10)")
-    parser.add_argument("--levels-init", type=int, default=None,
-                        help="levels: envs start at random levels 0 .. N, in [0, levels - 1] (default levels // 2)")
-    parser.add_argument("--levels-promote", type=float, default=None,
-                        help="levels: an env moves up when its furthest normalised distance in a chunk is at least "
-                             "this, in (0, 1] (default: the threshold)")
-    parser.add_argument("--levels-demote", type=float, default=None,
-                        help="levels: ... and down when it is below this, in [0, 1] (default 0.5: half the course)")
-    for name, kind, what in (("capacity", int, "level buffer entries, >= 1 (plr: at most the archive's terrains; default: sized to "
-                                              "fill to --plr-min-fill in the run's first tenth of chunks; 4000)"),
-                             ("replay-prob", float, "the chance a chunk replays buffer terrains, in [0, 1] (0.8)"),
-                             ("staleness", float, "staleness coefficient, in [0, 1] (0.3)"),
-                             ("temperature", float, "rank prioritisation temperature, > 0 (0.3)"),
-                             ("min-fill", float, "buffer fill before any replay, in [0, 1] (0.5)")):
-        parser.add_argument(f"--plr-{name}", type=kind, default=None,
-                            help=f"plr, accel: {what}; JaxUED's maze_plr.py default in brackets")
-    parser.add_argument("--accel-generator", default=None, metavar="NAME",
-                        help="accel: the generator whose genomes are the levels (its sample and mutate); default: "
-                             "the archive's generator")
-    parser.add_argument("--accel-edits", type=int, default=None,
-                        help="accel: the generator's mutations per edit of a replayed level, >= 1 (default 1)")
-
-
 def selector_overrides(args) -> dict:
-    return dict(terrains_per_chunk=args.terrains_per_chunk, levels=args.levels, levels_init=args.levels_init,
-                levels_promote=args.levels_promote, levels_demote=args.levels_demote, plr_capacity=args.plr_capacity,
-                plr_replay_prob=args.plr_replay_prob, plr_staleness=args.plr_staleness,
-                plr_temperature=args.plr_temperature, plr_min_fill=args.plr_min_fill,
-                accel_generator=args.accel_generator, accel_edits=args.accel_edits)
+    """The per-env curricula's flags as given (None: not given)."""
+    return cli_gen.given(args, SELECTOR_HELP)
 
 
 def check_selector_flags(args, curricula, option: str = "--curriculum") -> None:
@@ -230,81 +172,26 @@ def check_selector_flags(args, curricula, option: str = "--curriculum") -> None:
                                     f"{', '.join(curricula)}")
 
 
-def add_fine_tuning_arguments(parser: argparse.ArgumentParser, scope: str = "") -> None:
-    """``--observation``, ``--recipe``, ``--update-normaliser``, ``--healthy-reward``, ``--learning-rate``, ``--truncation``,
-    ``--max-evals``, ``--overlap``, ``--eval-lag`` and ``--compact`` (the switches also as ``--no-...``; config ``recipe`` and the
-    update's shape / ``update_normaliser`` / ``healthy_reward`` / ``learning_rate`` / ``truncation`` / ``max_evals`` /
-    ``overlap`` / ``eval_lag`` / ``compact``, read back by :func:`fine_tuning_overrides`), shared with ``curriculum`` (``scope`` is added to the
-    help, e.g. ", in every treatment")."""
-    parser.add_argument("--observation", choices=("blind", "perceptive"), default=None,
-                        help=f"start from the robot's blind base policy (the default, the paper's) or its perceptive "
-                             f"twin{scope}; the walker observes what the start policy records (a --policy of another "
-                             f"set is refused)")
-    parser.add_argument("--recipe", choices=RECIPE_NAMES, default=None,
-                        help=f"how fine-tuning PPO collects each 40 000-step update{scope}: paper (500 envs per trial "
-                             f"x 8 x 10 steps; every preset but smoke) or wide (4 000 envs x 10 steps: 8x fewer "
-                             f"sequential steps, 8x the envs; 1.35x faster on an H200 but lower held-out scores: "
-                             f"docs/results/wide_recipe.md); jaxterrain.curriculum.RECIPES (--num-envs overrides its "
-                             f"envs)")
-    parser.add_argument("--update-normaliser", action=argparse.BooleanOptionalAction, default=None,
-                        help=f"fine-tuning keeps merging its data into the observation normaliser's statistics, as "
-                             f"brax's PPO does{scope}; --no-update-normaliser keeps the base policy's statistics "
-                             f"fixed")
-    common.add_deprecated_alias(parser, "--freeze-normaliser", "--no-update-normaliser", "update_normaliser",
-                                const=False)
-    common.add_randomise_argument(parser, f"fine-tuning's walker{scope} (its curriculum's evaluations too)")
-    parser.add_argument("--healthy-reward", type=float, default=None,
-                        help=f"fine-tuning reward per step for staying up, >= 0{scope} (default: the walker's 5.0, the "
-                             f"base policy's; evaluations measure distance and do not use it)")
-    parser.add_argument("--learning-rate", type=float, default=None,
-                        help=f"fine-tuning PPO's Adam learning rate, > 0{scope} (default: every preset's 3e-4)")
-    parser.add_argument("--truncation", choices=("mask", "bootstrap"), default=None,
-                        help=f"what fine-tuning PPO learns from a walk that ends at the goal or the time limit{scope}: "
-                             f"bootstrap (default: r + gamma V(final observation); keeps the value net from diverging "
-                             f"and standard CL learning, docs/results/exp2_paper.md) or mask (brax's: nothing; the "
-                             f"runs before 2026-11-27)")
-    parser.add_argument("--max-evals", type=int, default=None,
-                        help=f"evaluations (chunks) spent on one terrain before it is left anyway, >= 1{scope} "
-                             f"(default: the paper's 100 in every preset; gpu-short keeps it, so one terrain that "
-                             f"never reaches the threshold can take all 75 of its chunks)")
-    parser.add_argument("--overlap", action=argparse.BooleanOptionalAction, default=None,
-                        help=f"evaluate each chunk's policy while the next chunk trains, in the same physics calls"
-                             f"{scope} (the same curriculum; the walker on one tile per trial, on either backend; "
-                             f"CurriculumConfig.overlap)")
-    parser.add_argument("--eval-lag", action=argparse.BooleanOptionalAction, default=None,
-                        help=f"with --overlap: keep the chunk trained while a terrain's last evaluation was walked "
-                             f"instead of training it again on the next terrain{scope} (no loop step more per "
-                             f"switch; the selector sees each evaluation one chunk late, the kept chunk is not "
-                             f"evaluated: NaN in history.csv; CurriculumConfig.eval_lag)")
-    parser.add_argument("--compact", action=argparse.BooleanOptionalAction, default=None,
-                        help=f"once some trials have finished, compute only the running ones in each block (the "
-                             f"same results; one compile per block size){scope} (default: on, off in smoke)")
-
-
 def fine_tuning_overrides(args) -> dict:
-    """The config values of :func:`add_fine_tuning_arguments`' flags (None = not given); ``--recipe NAME`` sets
-    ``recipe`` and the update's shape (``num_envs``, ``unroll_length``, ``num_unrolls``, ``num_minibatches``,
-    ``update_epochs``: ``jaxterrain.curriculum.RECIPES[NAME]``)."""
-    shape = {}
+    """The config values of the fine-tuning flags (None = not given); ``--recipe NAME`` sets ``recipe`` and the
+    update's shape (``num_envs``, ``unroll_length``, ``num_unrolls``, ``num_minibatches``, ``update_epochs``:
+    ``jaxterrain.curriculum.RECIPES[NAME]``)."""
+    out = cli_gen.given(args, FINE_TUNING_HELP)
     if args.recipe is not None:
         from jaxterrain.curriculum.config import recipe
 
-        shape = {"recipe": args.recipe, **recipe(args.recipe)}
-    return dict(observation=args.observation, healthy_reward=args.healthy_reward, randomise=args.randomise,
-                update_normaliser=args.update_normaliser,
-                learning_rate=args.learning_rate, truncation=args.truncation, max_evals=args.max_evals,
-                overlap=args.overlap, eval_lag=args.eval_lag, compact=args.compact, **shape)
+        out.update(recipe(args.recipe))
+    return out
 
 
 def overrides(args) -> dict:
-    out = dict(archive=args.archive, terrains=args.terrains, terrain_height=args.terrain_height,
-               terrain_order=args.terrain_order,
-               curriculum=args.curriculum or ("dr" if args.terrains is not None else None), trials=args.trials, threshold=args.threshold,
-               max_epochs=args.max_epochs, policy=args.policy, robot=args.robot, chunks_per_call=args.chunks_per_call,
-               backend=args.backend, policy_every=args.policy_every, **fine_tuning_overrides(args),
-               **selector_overrides(args), **common.protocol_overrides(args))
-    if args.num_envs is not None or "num_envs" not in out:  # --num-envs over --recipe's envs
+    """The config values given on the command line (None: not given): every generated flag's, ``--recipe``'s
+    update shape (``--num-envs`` over its envs), ``--protocol``'s walks, and the curriculum ``dr`` by default with
+    ``--terrains``."""
+    out = {**cli_gen.given(args, _PRESETS.HELP), **fine_tuning_overrides(args), **common.protocol_overrides(args)}
+    if args.num_envs is not None:  # --num-envs over --recipe's envs
         out["num_envs"] = args.num_envs
+    out["curriculum"] = args.curriculum or ("dr" if args.terrains is not None else None)
     return out
 
 
@@ -341,7 +228,7 @@ def main(args) -> int:
     if args.export_policies and args.resume is None:
         raise common.UsageError("--export-policies needs --resume RUN (the run whose walkers to write)")
     mesh = common.device_mesh(args.devices)
-    folder, cfg = common.setup_run("learn", args, PRESETS, "smoke", overrides(args),
+    folder, cfg = common.setup_run("learn", args, PRESETS, "smoke", overrides(args), rules=RULES,
                                    check=lambda c: (check_selector_flags(args, [c["curriculum"]]), run_of(c),
                                                     check_terrain_flags(args, c)))
     run = run_of(cfg)

@@ -44,44 +44,24 @@ import sys
 import time
 from pathlib import Path
 
-from experiments import common
+from experiments import cli_gen, common
 
 _CONFIG = common.library_file("difficulty.run_config")  # jaxterrain.difficulty.run_config, read without JAX
 PRESETS: dict[str, dict] = _CONFIG.FLAT_PRESETS
 """The presets in their flat (``config.json``) form, defined in the library:
 ``jaxterrain.difficulty.run_config.PRESETS``."""
 EXTENDABLE = _CONFIG.EXTENDABLE
-TYPED = common.Typed("BasePolicyRun", _CONFIG.FIELDS, _CONFIG.from_flat, _CONFIG.to_flat)
+TYPED = common.Typed("BasePolicyRun", _CONFIG.FIELDS, _CONFIG.from_flat, _CONFIG.to_flat, _CONFIG.RULES)
+
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     common.add_run_arguments(parser, PRESETS, "smoke")
     common.add_devices_argument(parser)  # data parallel: envs split over the devices, gradients summed
-    parser.add_argument("--env-steps", type=float, default=None,
-                        help="total env steps to train (default: smoke 4 updates, gpu 410 updates = 50.4e6)")
-    parser.add_argument("--time-budget", type=float, default=None, help=argparse.SUPPRESS)  # seconds: --time-limit's
-    # predecessor, kept so that older command lines (the base policy's PROVENANCE.md) still run
-    parser.add_argument("--updates-per-chunk", type=int, default=None,
-                        help="PPO updates per jitted chunk = per checkpoint (default: smoke 2, gpu 10)")
-    parser.add_argument("--num-envs", type=int, default=None, help="override PPOConfig.num_envs")
-    parser.add_argument("--solver", default=None,
-                        help="walker contact solver: sound (default: Newton 4 iterations / 16 line-search), fast, "
-                             "xml, or ITERATIONS,LS_ITERATIONS,EULERDAMP such as 4,16,0; recorded with the policy, and "
-                             "difficulty.evaluate then walks it under the same options")
-    parser.add_argument("--robot", default=None, metavar="NAME",
-                        help="the body to train: humanoid (default, the paper's), ant (brax's quadruped) or a robot a "
-                             "--plugin registered (jaxterrain.walker.robots); recorded with the policy")
-    parser.add_argument("--observation", choices=("blind", "perceptive"), default=None,
-                        help="what the walker observes: blind (the paper's: torso height, orientation, joints) or "
-                             "perceptive (plus a height scan around and ahead of the torso, the robot's default "
-                             "grid); recorded with the policy, and every command walks it with the same set")
-    parser.add_argument("--scan-noise", type=float, default=None, metavar="M",
-                        help="perceptive: std of Gaussian noise on each scanned height, in metres")
-    common.add_randomise_argument(parser, "the training walker (recorded with the policy; the flat-ground "
-                                          "evaluation walks the nominal physics)")
+    cli_gen.add_typed_flags(parser, TYPED, PRESETS, _CONFIG.HELP, {
+        "time_budget": {"help": argparse.SUPPRESS}, "robot": {"metavar": "NAME"}, "scan_noise": {"metavar": "M"},
+        "randomise": {"metavar": "SPEC"}})
     common.add_progress_argument(parser)
-    parser.add_argument("--eval-attempts", type=int, default=None, help="flat-ground evaluation walks (default 20)")
-    parser.add_argument("--eval-best", type=int, default=None, help="of which the best are averaged (default 5)")
     parser.add_argument("--skip-eval", action="store_true",
                         help="skip the flat-ground evaluation of the trained walker at the end")
     parser.add_argument("--export-assets", action="store_true",

@@ -28,7 +28,7 @@ from typing import NamedTuple, Optional
 from jaxterrain.runtime.schema import at_least, at_most, from_flat as _from_flat, non_negative, one_of, positive
 from jaxterrain.runtime.schema import replace, to_flat as _to_flat
 
-__all__ = ["BaseWalker", "PPOSettings", "Schedule", "FlatEvaluation", "BasePolicyRun", "FIELDS", "LEGACY", "RULES",
+__all__ = ["HELP", "BaseWalker", "PPOSettings", "Schedule", "FlatEvaluation", "BasePolicyRun", "FIELDS", "LEGACY", "RULES",
            "EXTENDABLE", "PRESETS", "FLAT_PRESETS", "CONSUMERS", "from_flat", "to_flat"]
 
 
@@ -143,3 +143,29 @@ CONSUMERS = {
     "preset": "difficulty.base_policy.shapes",
 }
 """Where each field of :class:`BasePolicyRun` is consumed (``docs/CONTRIBUTING.md``; a test checks the functions)."""
+
+HELP = {
+    "env_steps": "total env steps to train (default: smoke 4 updates, gpu 410 updates = 50.4e6)",
+    "time_budget": "seconds: --time-limit's predecessor, kept so that older command lines (the base policy's "
+                   "PROVENANCE.md) still run",
+    "updates_per_chunk": "PPO updates per jitted chunk = per checkpoint",
+    "num_envs": "override PPOConfig.num_envs",
+    "solver": "walker contact solver: sound (default: Newton 4 iterations / 16 line-search), fast, xml, or "
+              "ITERATIONS,LS_ITERATIONS,EULERDAMP such as 4,16,0; recorded with the policy, and difficulty.evaluate "
+              "then walks it under the same options",
+    "robot": "the body to train: humanoid (default, the paper's), ant (brax's quadruped) or a robot a --plugin "
+             "registered (jaxterrain.walker.robots); recorded with the policy",
+    "observation": "what the walker observes: blind (the paper's: torso height, orientation, joints) or perceptive "
+                   "(plus a height scan around and ahead of the torso, the robot's default grid); recorded with the "
+                   "policy, and every command walks it with the same set",
+    "scan_noise": "perceptive: std of Gaussian noise on each scanned height, in metres",
+    "randomise": "physics randomisation of the training walker (recorded with the policy; the flat-ground evaluation "
+                 "walks the nominal physics) {randomise}",
+    "eval_attempts": "flat-ground evaluation walks",
+    "eval_best": "of which the best are averaged",
+}
+"""``train-base-policy``'s flags: each flat key's help, the field's documentation as the command line's ``--help`` shows it
+(``experiments.cli_gen`` adds the type, the choices, the allowed range of the field's rule where the text says
+``{range}`` or at its end, and every preset's value; ``{backend}``, ``{randomise}`` and ``{slots}`` are
+phrases every command shares, ``experiments.common.PHRASES``). The keys are the flags the command exposes, in
+``--help``'s order."""

@@ -36,7 +36,7 @@ from jaxterrain.runtime.schema import replace, to_flat as _to_flat, walks
 __all__ = ["MapElites", "Walks", "Mixture", "EvolveRun", "CoverageRun", "EVOLVE_FIELDS", "COVERAGE_FIELDS",
            "LEGACY", "EVOLVE_RULES", "COVERAGE_RULES", "MIX_DEFAULT", "GENERATORS", "PAIRS", "PRESETS",
            "COVERAGE_PRESETS", "FLAT_PRESETS", "COVERAGE_FLAT_PRESETS", "EVOLVE_CONSUMERS", "COVERAGE_CONSUMERS",
-           "from_flat", "to_flat", "coverage_from_flat", "coverage_to_flat"]
+           "from_flat", "to_flat", "coverage_from_flat", "coverage_to_flat", "EVOLVE_HELP", "COVERAGE_HELP"]
 
 
 class MapElites(NamedTuple):
@@ -267,3 +267,53 @@ COVERAGE_CONSUMERS = {**_COMMON_CONSUMERS, "": "qd.table1.coverage_run",
                       "generators": "qd.table1.treatments", "pairs": "qd.table1.treatments",
                       "ranges": "qd.table1.treatment_run", "batched": "qd.table1.coverage_run"}
 """Where each field of :class:`CoverageRun` is consumed."""
+
+EVOLVE_HELP: dict[str, str] = {
+    "generator": "registered generator name, or mixed: one archive whose offspring of every --mix "
+                 "generator compete for the cells, each elite recording its generator",
+    "mix": f"with --generator mixed: the generators of the mixture (default: all six, {' '.join(MIX_DEFAULT)})",
+    "fresh": "with --generator mixed: fresh random genomes of EACH generator among every generation's offspring, so "
+             "that a generator holding no cell keeps competing",
+    "descriptors": "descriptor pair, e.g. roughness tpi",
+    "generations": "MAP-Elites generations after the initial population",
+    "batch_size": "offspring per generation",
+    "initial_population": "random genomes evaluated first",
+    "bins": "cells per descriptor",
+    "size": "heightmap side in pixels",
+    "checkpoint_every": "generations between checkpoints",
+    "fitness": "what an elite's fitness measures: difficulty (the base policy walks it) or slope (a cheap stand-in, "
+               "no walking)",
+    "attempts": "walks per terrain in total",
+    "best": "best walks averaged per heading",
+    "headings": "headings of the walks (1: the paper's +x; 4: +x, +y, -x, -y; mean over headings)",
+    "rollout_slots": "{slots}: per device (default: all walks of a generation at once)",
+    "rollout_backend": "walker physics of the difficulty rollouts: {backend}",
+    "robot": "whose shipped base policy the walker fitness walks (default humanoid; jaxterrain.walker.robots, or a "
+             "--plugin's); the archive records it",
+    "observation": "which of the robot's shipped base policies the walker fitness walks: blind (default, the "
+                   "paper's) or perceptive (with a height scan); the archive records it",
+    "store_heightmaps": "store the elites' heightmaps in archive.npz (--no-store-heightmaps: leave them out, they can "
+                        "be re-rendered from the genomes)",
+}
+"""``evolve``'s flags: each flat key's help, the field's documentation as the command line's ``--help`` shows it
+(``experiments.cli_gen`` adds the type, the choices, the allowed range of the field's rule where the text says
+``{range}`` or at its end, and every preset's value; ``{backend}``, ``{randomise}`` and ``{slots}`` are
+phrases every command shares, ``experiments.common.PHRASES``). The keys are the flags the command exposes, in
+``--help``'s order."""
+
+COVERAGE_HELP: dict[str, str] = {
+    "generators": f"generator names (default: {' '.join(GENERATORS)})",
+    "generations": "MAP-Elites generations of each treatment after its initial population",
+    "batch_size": "offspring per generation",
+    "size": "heightmap side in pixels",
+    "bins": "cells per descriptor",
+    "fitness": "what an elite's fitness measures: difficulty (the base policy walks it) or slope (a cheap stand-in, "
+               "no walking)",
+    "batched": "evolve every treatment at once (one jitted generation, one fitness call on all treatments' offspring; "
+               "jaxterrain.qd.evolve_many); not with --shard",
+}
+"""``coverage``'s flags: each flat key's help, the field's documentation as the command line's ``--help`` shows it
+(``experiments.cli_gen`` adds the type, the choices, the allowed range of the field's rule where the text says
+``{range}`` or at its end, and every preset's value; ``{backend}``, ``{randomise}`` and ``{slots}`` are
+phrases every command shares, ``experiments.common.PHRASES``). The keys are the flags the command exposes, in
+``--help``'s order."""

@@ -150,6 +150,16 @@ def from_flat(cls, flat: Mapping[str, Any], table: Mapping[str, str], legacy: Op
 Rule = Callable[[Any, str, Any, Callable[[str], str]], None]
 
 
+def _declared(rule: Rule, kind: Optional[type] = None, text: str = "", choices: Optional[tuple] = None,
+              bound: Optional[str] = None) -> Rule:
+    """``rule`` with what it allows as attributes, so that a command line can be generated from the declaration
+    (``experiments.cli_gen``): ``kind`` (the value's type: int, float, bool, str), ``text`` (the allowed range in
+    words, as its message says it: ``">= 1"``, ``"in (0, 1]"``), ``choices`` (the allowed values), ``bound`` (the
+    path of the field it is at most)."""
+    rule.kind, rule.text, rule.choices, rule.bound = kind, text, choices, bound
+    return rule
+
+
 def _numbers(value) -> list:
     return list(value) if isinstance(value, (list, tuple)) else [value]
 
@@ -167,7 +177,7 @@ def at_least(low: int) -> Rule:
                 raise ValueError(f"{name(path)} must be {'integers' if _many(value) else 'an integer'} >= {low}; "
                                  f"got {value!r}")
 
-    return rule
+    return _declared(rule, int, f">= {low}")
 
 
 def int_in(low: int, high: int) -> Rule:
@@ -177,17 +187,19 @@ def int_in(low: int, high: int) -> Rule:
         if isinstance(value, bool) or not isinstance(value, int) or not low <= value <= high:
             raise ValueError(f"{name(path)} must be an integer in [{low}, {high}]; got {value!r}")
 
-    return rule
+    return _declared(rule, int, f"in [{low}, {high}]")
 
 
 def _real(bound: str, ok: Callable[[float], bool]) -> Rule:
+    """A finite number (or a sequence of them) ``bound`` (``"> 0"``) where ``ok``."""
+
     def rule(value, path, config, name):
         for v in _numbers(value):
             if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) or not ok(v):
                 what = "finite numbers" if _many(value) else "a finite number"
                 raise ValueError(f"{name(path)} must be {what} {bound}; got {value!r}")
 
-    return rule
+    return _declared(rule, float, bound)
 
 
 def positive() -> Rule:
@@ -206,7 +218,7 @@ def _interval(text: str, ok: Callable[[float], bool]) -> Rule:
             if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) or not ok(v):
                 raise ValueError(f"{name(path)} must be a number in {text}; got {value!r}")
 
-    return rule
+    return _declared(rule, float, f"in {text}")
 
 
 def unit() -> Rule:
@@ -227,7 +239,8 @@ def one_of(options: Iterable[Any]) -> Rule:
         if isinstance(value, bool) != any(isinstance(o, bool) for o in options) or value not in options:
             raise ValueError(f"{name(path)} must be one of {', '.join(map(str, options))}; got {value!r}")
 
-    return rule
+    kinds = {type(o) for o in options}
+    return _declared(rule, kinds.pop() if len(kinds) == 1 else None, choices=options)
 
 
 def at_most(bound: str) -> Rule:
@@ -239,7 +252,7 @@ def at_most(bound: str) -> Rule:
             if isinstance(v, int) and isinstance(b, int) and not isinstance(v, bool) and v > b:
                 raise ValueError(f"{name(path)} must be <= {name(bound)} ({b}); got {value}")
 
-    return rule
+    return _declared(rule, int, bound=bound)
 
 
 def walks(attempts: str, best: str) -> Rule:
@@ -255,7 +268,7 @@ def walks(attempts: str, best: str) -> Rule:
         if isinstance(n, int) and isinstance(b, int) and b > n // heads:
             raise ValueError(f"{name(best)} must be <= {name(attempts)} / {name(path)} ({n // heads}); got {b}")
 
-    return rule
+    return _declared(rule, int, choices=(1, 2, 4))
 
 
 def check(config, rules: Mapping[str, Rule | tuple], owner: str) -> None:

@@ -31,7 +31,7 @@ from typing import NamedTuple, Optional
 from jaxterrain.runtime.schema import at_least, at_most, from_flat as _from_flat, int_in, one_of, positive
 from jaxterrain.runtime.schema import replace, to_flat as _to_flat, walks
 
-__all__ = ["BaseWalker", "Terrains", "Walks", "Physics", "Videos", "VIDEO_FORMATS", "EvaluateRun", "FIELDS", "LEGACY",
+__all__ = ["HELP", "BaseWalker", "Terrains", "Walks", "Physics", "Videos", "VIDEO_FORMATS", "EvaluateRun", "FIELDS", "LEGACY",
            "RULES", "PRESETS", "FLAT_PRESETS", "CONSUMERS", "from_flat", "to_flat"]
 
 
@@ -189,3 +189,57 @@ CONSUMERS = {
     "preset": "recorded",
 }
 """Where each field of :class:`EvaluateRun` is consumed (``docs/CONTRIBUTING.md``; a test checks the functions)."""
+
+HELP = {
+    "policy": "policy folders to evaluate beside the base policy (e.g. RUN/policies/trial_0)",
+    "keys": "walk the base policy with K independent evaluation keys (rows base, base:key1, ..., base:key{K-1}; key "
+            "0 is the one every --policy walks with): generalise reads them as K runs of the comparator (give K = "
+            "the treatments' trials)",
+    "robot": "the base policy walked beside is this robot's shipped one (default humanoid); each --policy walks the "
+             "robot it was trained on",
+    "observation": "the base policy walked beside: the robot's blind one (default, the paper's) or its perceptive "
+                   "twin; each --policy walks with the observation set it records",
+    "suite": "held-out suite version (default v1; v2: levels calibrated for the robot of --robot)",
+    "archive": "walk an archive's elites instead of the suite",
+    "size": "suite heightmap side in pixels (v1: 256)",
+    "seeds": "suite terrains per family level (v1: 3)",
+    "samples": "terrains sampled per generator, {range}: the suite's generator terrains (v1: 96); or DIR, a folder of "
+               "heightmaps: walk your own terrains instead of the suite (.png, .tif/.tiff, .npy, .npz; "
+               "jaxterrain.suite.folder), one family per file",
+    "terrain_height": "--terrains DIR: metres of an image's full grey (default 1.0), and the relief every metre file "
+                      "is rescaled to (default: its own metres)",
+    "families": "suite families to build (default: all of the version's; smoke: flat stairs_up gaps)",
+    "generators": "generators to sample (default: the version's five; smoke: perlin)",
+    "repeat": "walk the base policy twice and time the second, compiled call (timing.json)",
+    "attempts": "walks per terrain in total",
+    "best": "best walks averaged per heading",
+    "headings": "walking headings",
+    "backend": "walker physics: {backend}",
+    "engine": "physics engine: mjx (default; MJX on the accelerator, --backend picks jax or warp) or mujoco (MuJoCo's "
+              "C engine on the CPU cores, the same starts and protocol: sim2sim)",
+    "workers": "--engine mujoco: CPU processes walking (default: every core)",
+    "slots": "{slots}: an int (default: all walks at once)",
+    "randomise": "physics randomisation of every walk (a randomised protocol: every policy, the base policy included, "
+                 "meets the same draws; default: the nominal physics; MJX only) {randomise}",
+    "chunk": "terrains per call (bounds device memory)",
+    "videos": "after the evaluation, videos of each --policy walker beside the base policy (the base policy alone "
+              "without --policy) on chosen terrains, one walk along +x each from the same start (of --video-starts), "
+              "into videos/<walker>/<family>_L<level>.gif (or .mp4: --video-format) with videos/videos.csv; needs an "
+              "OpenGL backend for MuJoCo's renderer (without one: a line saying why, the evaluation is still "
+              "written)",
+    "video_terrains": "terrains of the videos, e.g. slope_up:5,gen:perlin:3 (each level's seed-0 terrain); default: "
+                      "per family the hardest level the walker passes and the first it fails",
+    "video_frames": "most frames per video, evenly spaced over the longer walk, played at 15 a second (a walk "
+                    "shorter than frames / 15 s gets fewer and plays in real time)",
+    "video_starts": "reset poses each policy walks every video terrain from; the video shows the one the walker went "
+                    "farthest from, the base policy from the same one",
+    "video_width": "pixels of each panel's width",
+    "video_height": "pixels of each panel's height",
+    "video_format": "files of each video: gif (Pillow), mp4 (H.264, 12 times smaller than the GIF on a 47-frame video "
+                    "of two walkers; needs pip install 'jaxterrain[video]') or both",
+}
+"""``evaluate``'s flags: each flat key's help, the field's documentation as the command line's ``--help`` shows it
+(``experiments.cli_gen`` adds the type, the choices, the allowed range of the field's rule where the text says
+``{range}`` or at its end, and every preset's value; ``{backend}``, ``{randomise}`` and ``{slots}`` are
+phrases every command shares, ``experiments.common.PHRASES``). The keys are the flags the command exposes, in
+``--help``'s order."""

@@ -294,7 +294,9 @@ def test_every_preset_passes_the_checks():
         presets = getattr(module, "PRESETS", None)
         for preset, values in (presets.items() if isinstance(presets, dict) else ()):
             if isinstance(values, dict):
-                common.check_values(values, lambda k, name=name, preset=preset: f"{name} {preset} {k}")
+                where = lambda k, name=name, preset=preset: f"{name} {preset} {k}"  # noqa: E731
+                common.check_rules(values, getattr(module, "RULES", {}), where)
+                common.check_values(values, where)
 
 
 NEEDS = {"gradient": [str(ROOT / "docs" / "results" / "exp2_perlin_headings_archive.npz")]}  # required inputs
@@ -341,9 +343,10 @@ def test_recipes_shape_the_update_and_num_envs_overrides_theirs(capsys):
     500 x 10 x 8; ``wide``: 4 000 x 10 x 1, the same 40 000 env steps per update), in ``learn`` and ``curriculum``;
     ``--num-envs`` still wins; the curriculum built from it trains with that PPO shape."""
     from experiments import learn
-    from jaxterrain.curriculum import FINE_TUNING, RECIPES, recipe, run_config, runner
+    from jaxterrain.curriculum import FINE_TUNING, RECIPES, presets, recipe, run_config, runner
+    from jaxterrain.walker.layout import BACKEND_CHOICES
 
-    assert learn.RECIPE_NAMES == tuple(RECIPES)
+    assert presets.RECIPE_NAMES == tuple(RECIPES) and presets.BACKENDS == BACKEND_CHOICES
     assert RECIPES["paper"] == {k: getattr(FINE_TUNING, k) for k in RECIPES["paper"]}
     assert {k: v for k, v in learn.PRESETS["gpu-short"].items() if k in RECIPES["paper"]} == RECIPES["paper"]
     steps = lambda r: r["num_envs"] * r["unroll_length"] * r["num_unrolls"]  # noqa: E731

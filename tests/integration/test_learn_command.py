@@ -526,8 +526,10 @@ def test_the_fine_tuning_flags_and_the_default_archives():
     from experiments import learn
     from jaxterrain.curriculum import presets
 
+    from experiments import cli_gen
+
     parser = argparse.ArgumentParser()
-    learn.add_fine_tuning_arguments(parser)
+    cli_gen.add_flags(parser, learn.PRESETS, learn.RULES, learn.FINE_TUNING_HELP)
     assert learn.fine_tuning_overrides(parser.parse_args(["--learning-rate", "1e-4"]))["learning_rate"] == 1e-4
     assert learn.fine_tuning_overrides(parser.parse_args(["--truncation", "mask"]))["truncation"] == "mask"
     assert sorted(exp.DEFAULT_ARCHIVES) == ["cppn", "diamond_square", "gan", "perlin", "worley"]
