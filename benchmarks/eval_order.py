@@ -42,14 +42,12 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from common import environment, markdown_table, write_json  # noqa: E402
+import population  # noqa: E402
+from population import log  # noqa: E402
 
 ORDERS = {"sequential": dict(overlap=False, eval_lag=False), "overlap": dict(overlap=True, eval_lag=False),
           "lag": dict(overlap=True, eval_lag=True)}
 """Each order's ``CurriculumConfig`` fields."""
-
-
-def log(*a) -> None:
-    print(f"[{time.strftime('%H:%M:%S')}]", *a, flush=True)
 
 
 def parse_args(argv=None) -> argparse.Namespace:
@@ -86,17 +84,7 @@ def parse_args(argv=None) -> argparse.Namespace:
 
 def treatments(args, folder: Path, order: str):
     """The map treatments ``[(name, LearnConfig)]`` of ``curriculum --preset P`` under ``order``."""
-    from experiments import curriculum as exp
-
-    cfg = {**exp.PRESETS[args.preset], "seed": 0, "command": "curriculum", "backend": args.backend,
-           **ORDERS[order]}
-    if args.archives:
-        cfg["archives"] = exp.parse_archives(args.archives)
-    if args.trials:
-        cfg["trials"] = args.trials
-    folder.mkdir(parents=True, exist_ok=True)
-    return [(f"{name} map", exp.treatment_run(cfg, path, c)) for name, path, c in exp.treatments(cfg, folder)
-            if c == "map"]
+    return population.treatments(args, folder, **ORDERS[order])
 
 
 def block_counts(before, after) -> dict:

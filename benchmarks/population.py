@@ -102,11 +102,12 @@ def done(out: Path, part: str) -> dict | None:
     return None
 
 
-def treatments(args, folder: Path):
-    """The map treatments ``[(name, LearnConfig)]`` of ``curriculum --preset P`` (its plan without baselines)."""
+def treatments(args, folder: Path, **fields):
+    """The map treatments ``[(name, LearnConfig)]`` of ``curriculum --preset P`` (its plan without baselines), with
+    ``fields`` (flat config keys, e.g. ``overlap=True``) over the preset's."""
     from experiments import curriculum as exp
 
-    cfg = {**exp.PRESETS[args.preset], "seed": 0, "command": "curriculum", "backend": args.backend}
+    cfg = {**exp.PRESETS[args.preset], "seed": 0, "command": "curriculum", "backend": args.backend, **fields}
     if args.archives:
         cfg["archives"] = exp.parse_archives(args.archives)
     if args.trials:
