@@ -6,6 +6,7 @@ facts; this module is the one place that finds them.
     provenance.git_commit()                 # "3f2a...e1" or "3f2a...e1 (working tree has uncommitted changes)"
     provenance.git_commit(short=True, mark_dirty=False)   # "3f2a9c1" (benchmark tables)
     provenance.device()                     # "1 x NVIDIA H100 80GB HBM3 (gpu)", "1 x cpu (cpu, 2 CPU cores)"
+    provenance.warp_hfield()                # "stock", "local-origin patch" or "absent" (MJX's MuJoCo Warp)
 
 A copy of the tree without its ``.git`` folder (e.g. on a GPU machine that receives the working tree only) names its
 commit through the environment variable ``JAXTERRAIN_COMMIT``, which wins over git; an installed wheel (no checkout)
@@ -23,7 +24,7 @@ import subprocess
 from pathlib import Path
 
 __all__ = ["COMMIT_ENV", "PACKAGE_TOKEN", "git_commit", "package_version", "device", "portable_path",
-           "resolve_recorded", "file_sha256"]
+           "resolve_recorded", "file_sha256", "warp_hfield", "WARP_HFIELD_MARKER"]
 
 COMMIT_ENV = "JAXTERRAIN_COMMIT"
 DIRTY_NOTE = " (working tree has uncommitted changes)"
@@ -73,6 +74,33 @@ def device() -> str:
     kind = getattr(d, "device_kind", d.platform)
     cores = f", {os.cpu_count()} CPU cores" if d.platform == "cpu" else ""
     return f"{jax.device_count()} x {kind} ({d.platform}{cores})"
+
+
+WARP_HFIELD_MARKER = "sub_o = wp.vec3("
+"""A line of the local-origin patch of MuJoCo Warp's heightfield collision
+(``docs/results/sim2sim/warp_hfield/mjx_vendored_hfield_local_origin.patch``): its presence in the source marks a
+patched engine."""
+
+
+def warp_hfield() -> str:
+    """Which heightfield collision MJX's vendored MuJoCo Warp runs (``impl="warp"``), read from its source file
+    without importing Warp: ``"local-origin patch"`` (GJK / EPA on coordinates local to the heightfield's subgrid,
+    the fix of ``docs/results/sim2sim/warp_hfield/REPORT.md``), ``"stock"`` (float32 at absolute coordinates: a
+    buried foot far from the heightfield's centre gets contacts metres deep), or ``"absent"`` (no vendored MuJoCo
+    Warp in this mujoco-mjx). Recorded with every Warp walk whose figures it can change."""
+    from importlib import util
+
+    try:
+        spec = util.find_spec("mujoco.mjx")
+    except (ImportError, ValueError):
+        return "absent"
+    if spec is None or not spec.submodule_search_locations:
+        return "absent"
+    for root in spec.submodule_search_locations:
+        src = Path(root) / "third_party" / "mujoco_warp" / "_src" / "collision_convex.py"
+        if src.is_file():
+            return "local-origin patch" if WARP_HFIELD_MARKER in src.read_text() else "stock"
+    return "absent"
 
 
 def package_version() -> str:

@@ -22,7 +22,8 @@ The :class:`Store` (a folder) holds:
   family, level, seed, value, and its mean height, unit per family), recorded at its first build; a later build
   must have the same terrains (same rows, mean heights within 1e-6 m) or the run is refused;
 - ``results/<job>.npz``: ``fitness`` [N] float32 in [0, 1] and ``meta`` (JSON: the job, its seconds, whether its
-  program was compiled in that process before, the device and commit), written atomically
+  program was compiled in that process before, the device and commit; under Warp also ``warp_hfield``, which
+  heightfield collision the engine ran, :func:`jaxterrain.runtime.provenance.warp_hfield`), written atomically
   (:func:`jaxterrain.runtime.io.atomic_save_npz`) when the walk ends;
 - ``builds.jsonl``: one line per suite build (robot, seconds), for the time estimates.
 
@@ -359,6 +360,7 @@ def run(jobs: Sequence[Job], store: Store, suites: Callable[[str], Suite], *, ti
     compiled: set = set()
     walked, stopped = [], None
     device, commit = provenance.device(), provenance.git_commit()
+    engine = {"warp_hfield": provenance.warp_hfield()} if backend == "warp" else {}
     for i, job in enumerate(pending):
         p = policies[job.name]
         need = 0.0
@@ -390,7 +392,7 @@ def run(jobs: Sequence[Job], store: Store, suites: Callable[[str], Suite], *, ti
         compiled.add(program)
         (again_s if before else first_s)[job.robot].append(seconds)
         store.write(job, fitness, seconds=round(seconds, 3), compiled_before=before, suite=s.name, device=device,
-                    commit=commit, finished=time.strftime("%Y-%m-%dT%H:%M:%S%z"))
+                    commit=commit, finished=time.strftime("%Y-%m-%dT%H:%M:%S%z"), **engine)
         walked.append(job.name)
         log(f"[{len(skipped) + len(walked)}/{len(jobs)}] {job.name}: mean fitness {float(fitness.mean()):.4f}, "
             f"{seconds:.1f} s{'' if before else ' (first walk of its program: compile included)'}")

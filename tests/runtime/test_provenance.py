@@ -75,3 +75,23 @@ def test_device_names_count_kind_and_platform():
     d = jax.devices()[0]
     assert text.startswith(f"{jax.device_count()} x ") and f"({d.platform}" in text
     assert ("CPU cores" in text) == (d.platform == "cpu")
+
+
+def test_warp_hfield_reads_the_vendored_source_for_the_local_origin_patch(monkeypatch, tmp_path):
+    """``warp_hfield`` names the engine's heightfield collision from MJX's vendored MuJoCo Warp source: the patch's
+    line marks it patched, its absence stock, no vendored file absent."""
+    from importlib import util
+    from types import SimpleNamespace
+
+    src = tmp_path / "mjx" / "third_party" / "mujoco_warp" / "_src"
+    src.mkdir(parents=True)
+    spec = SimpleNamespace(submodule_search_locations=[str(tmp_path / "mjx")])
+    monkeypatch.setattr(util, "find_spec", lambda name: spec)
+    assert provenance.warp_hfield() == "absent"
+    (src / "collision_convex.py").write_text("    x = dx * float(cmin) - size[0]\n")
+    assert provenance.warp_hfield() == "stock"
+    (src / "collision_convex.py").write_text(f"    {provenance.WARP_HFIELD_MARKER}dx * float(cmin) - size[0])\n")
+    assert provenance.warp_hfield() == "local-origin patch"
+    patch = Path(__file__).resolve().parents[2] / "docs/results/sim2sim/warp_hfield/mjx_vendored_hfield_local_origin.patch"
+    added = [line[1:] for line in patch.read_text().splitlines() if line.startswith("+") and not line.startswith("++")]
+    assert any(provenance.WARP_HFIELD_MARKER in line for line in added)
