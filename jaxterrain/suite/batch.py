@@ -29,8 +29,9 @@ The :class:`Store` (a folder) holds:
 
 :func:`run` walks the jobs in order, skipping those with a result; under ``time_limit_s`` it starts a job only when
 the time it predicts for it (and for building its robot's suite first) still fits: the slowest walk of that robot
-through an already compiled program, or, for the first walk of a program in this process, the slowest such first walk
-recorded in the store (compile included), else :data:`FIRST_WALK_S`. The first pending job of a process always
+through an already compiled program in this process (before there is one, the slowest recorded in the store: another
+machine, or several processes sharing one, can be much slower), or, for the first walk of a program in this process,
+the slowest such first walk recorded in the store (compile included), else :data:`FIRST_WALK_S`. The first pending job of a process always
 runs. Walks of one policy network and walker config share one compiled program
 (:func:`jaxterrain.suite.evaluate_policies`), so a robot's base policy and all its walkers compile once per process.
 :func:`part` splits the jobs over processes (one per GPU) walking into one store.
@@ -356,6 +357,7 @@ def run(jobs: Sequence[Job], store: Store, suites: Callable[[str], Suite], *, ti
                for r in {j.robot for j in jobs}}
     again_s = {r: [m["seconds"] for m in metas if m.get("robot") == r and m.get("compiled_before")]
                for r in {j.robot for j in jobs}}
+    here_s: dict[str, list[float]] = {r: [] for r in first_s}  # compiled walks of this process
     built: dict[str, Suite] = {}
     compiled: set = set()
     walked, stopped = [], None
@@ -368,7 +370,7 @@ def run(jobs: Sequence[Job], store: Store, suites: Callable[[str], Suite], *, ti
             need += max(store.build_seconds(job.robot) or [BUILD_S])
         program = _program(p, built[job.robot], backend) if job.robot in built else None
         if program is not None and program in compiled:
-            need += max(again_s[job.robot] or first_s[job.robot] or [FIRST_WALK_S])
+            need += max(here_s[job.robot] or again_s[job.robot] or first_s[job.robot] or [FIRST_WALK_S])
         else:
             need += max(first_s[job.robot] or [FIRST_WALK_S])
         elapsed = clock() - t0
@@ -391,6 +393,8 @@ def run(jobs: Sequence[Job], store: Store, suites: Callable[[str], Suite], *, ti
         seconds = clock() - tw
         compiled.add(program)
         (again_s if before else first_s)[job.robot].append(seconds)
+        if before:
+            here_s[job.robot].append(seconds)
         store.write(job, fitness, seconds=round(seconds, 3), compiled_before=before, suite=s.name, device=device,
                     commit=commit, finished=time.strftime("%Y-%m-%dT%H:%M:%S%z"), **engine)
         walked.append(job.name)

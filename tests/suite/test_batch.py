@@ -99,6 +99,21 @@ def test_a_run_cut_short_resumes_and_walks_every_job_once_with_evaluates_keys(tm
     assert record["terrains"] == tiny.size and record["family"] == tiny.family.tolist()
 
 
+def test_a_process_predicts_from_its_own_walks_once_it_has_them(tmp_path, tiny):
+    """A walk recorded at 40 s by another process (two processes sharing a host walked that slowly) predicts only
+    this process's first compiled walk: after that its own 10 s walks do, so a 60 s limit walks 5 jobs, not 2."""
+    jobs = batch.base_jobs("humanoid", 6)
+    settings = batch.settings("v2", difficulty.Protocol(2, 1, 1), "jax", None, None, seed=0)
+    store = batch.Store(tmp_path / "work", settings)
+    slow = batch.base_jobs("humanoid", 8)[7]
+    store.write(slow, np.zeros(tiny.size, np.float32), seconds=40.0, compiled_before=True)
+    walks = FakeWalks(seconds=10.0)
+    out = batch.run(jobs, store, lambda robot: tiny, time_limit_s=60.0, walk=walks, clock=walks.clock,
+                    log=lambda _: None)
+    # t=10: next predicted from the store, 40 x MARGIN, fits; t=20 on: 10 x MARGIN; t=50: 61.5 > 60
+    assert out["walked"] == [j.name for j in jobs[:5]] and out["left"] == [jobs[5].name]
+
+
 def test_a_store_refuses_other_settings_and_other_terrains(tmp_path, tiny):
     protocol = difficulty.Protocol(2, 1, 1)
     store = batch.Store(tmp_path, batch.settings("v2", protocol, "jax", seed=0))
