@@ -51,7 +51,7 @@ def test_every_stage_runs_at_the_tiniest_size(tmp_path, monkeypatch, capsys):
     assert stage("train", "ant", "--ant", "blind/steps-map")[0] == 0
     assert (out / "train" / "ant-blind" / "steps-map" / "summary.json").is_file()
 
-    code, text = stage("evaluate", *TINY, "--pack", str(tmp_path / "exp4.tar.gz"))
+    code, text = stage("evaluate", *TINY, "--eval-backend", "jax", "--pack", str(tmp_path / "exp4.tar.gz"))
     assert code == 0 and "evaluate: done" in text, text
     from jaxterrain.suite import batch
 

@@ -52,6 +52,27 @@ def test_bad_arguments_are_one_line_naming_the_flag(run, argv, message, capsys, 
     assert not (tmp_path / "out").exists()
 
 
+def test_a_warp_stage_refuses_the_stock_heightfield_collision_in_one_line(run, monkeypatch, capsys, tmp_path):
+    """evaluate (default --eval-backend warp) and train --backend warp refuse MuJoCo Warp's stock heightfield
+    collision before anything runs, naming the patch and the way out; jax, and the patched kernel, pass the check."""
+    monkeypatch.setattr(run, "_warp_hfield", lambda: "stock")
+    for argv, way_out in ((["evaluate"], "--eval-backend jax"), (["train", "humanoid", "blind", "--backend", "warp"],
+                                                                  "--backend jax")):
+        with pytest.raises(SystemExit) as err:
+            run.main([*argv, "--out", str(tmp_path / "out")])
+        line = capsys.readouterr().err.strip().splitlines()[-1]
+        assert err.value.code == 2 and "stock heightfield collision" in line and line.endswith(way_out), line
+        assert "mjx_vendored_hfield_local_origin.patch" in line and not (tmp_path / "out").exists()
+    p = run.parser()
+    args = p.parse_args(["evaluate", "--eval-backend", "jax", "--out", str(tmp_path / "out")])
+    run.check(p, args)  # no Warp: no refusal
+    monkeypatch.setattr(run, "_warp_hfield", lambda: "local-origin patch")
+    args = p.parse_args(["evaluate", "--out", str(tmp_path / "out")])
+    run.check(p, args)
+    argv = run.reevaluate_argv(args, "v2", [], ["humanoid"])
+    assert argv[argv.index("--backend") + 1] == "warp"
+
+
 def test_the_humanoid_run_makes_the_five_treatments(run, tmp_path):
     """The ``curriculum`` command of ``train humanoid OBS``, parsed by ``curriculum``'s own parser, plans exactly
     :data:`TREATMENTS` (the folders the later stages read): the map curriculum on each archive, DR / PLR / levels on

@@ -29,8 +29,9 @@ Stages (:data:`STAGES`):
 - ``evaluate``: every walker of the train runs and each robot's shipped base policies, blind and perceptive, with
   ``--keys`` (10) evaluation keys, on suite v2 and then v1 (``suite.load(V, robot=...)``), through
   ``docs/results/suite_v2/reevaluate.py`` (:mod:`jaxterrain.suite.batch`: one result file per walk, written when it
-  ends; a rerun skips what is there); ``OUT/eval/<suite>/`` are the stores. ``--backend jax|warp`` (default jax:
-  the figures below are MJX-JAX's on v2).
+  ends; a rerun skips what is there); ``OUT/eval/<suite>/`` are the stores. ``--eval-backend jax|warp`` (default
+  warp, 2-3 times faster on v2). A stage that would run MuJoCo Warp with its stock heightfield collision
+  (``provenance.warp_hfield()``) is refused in one line: apply the local-origin patch first.
 - ``write`` (CPU): each store's groups as evaluation folders (``reevaluate.py --write``: ``heldout_<suite>/`` in
   each treatment, the base policies in ``OUT/base_<suite>/<robot>[_perceptive]/``), then ``generalise`` per robot,
   observation set and suite against that observation set's base policy (``--base``: its 10 keys), with levels passed
@@ -100,15 +101,18 @@ RATES = {
     "v2_walker_s_jax": ((25.0, 35.0), "measured: the humanoid's walk of suite v2 (701 terrains, 80 walks each), "
                                       "25-35 s a walker, MJX-JAX, one H200, 2026-11-29"),
     "v1_first_s": (67.0, "assumed: as v2's first walk; not measured"),
-    "v2_walker_s_warp": ((7.0 * 701 / 372, 7.0 * 701 / 372), "assumed: v1's Warp rate x 701 / 372 terrains; not "
-                                                             "measured"),
+    "v2_walker_s_warp": ((10.9, 14.1), "measured: 106 humanoid walks of suite v2 under MuJoCo Warp (stock kernel), "
+                                       "one process, compiled: median 10.9 s, 90th percentile 14.1 s (8.9-18.0 s), "
+                                       "one H200 and one 2 x H200 host, 2026-11-29 (suite_v2/warp_progress)"),
     "v1_walker_s_warp": ((7.0, 7.0), "measured: suite v1, ~7 s a walker, MuJoCo Warp, one H200, 2026-11-29"),
     "v1_walker_s_jax": ((25.0 * 372 / 701, 35.0 * 372 / 701), "assumed: v2's MJX-JAX rate x 372 / 701 terrains; not "
                                                              "measured"),
     "compile_s": ((30.0, 120.0), "assumed: the compile each train command repeats (curriculum's printed estimate "
                                  "for a GPU, 30 s-2 min), added once per 8-minute command; not measured"),
-    "build_s": (60.0, "assumed: a suite's build (jaxterrain.suite.batch.BUILD_S); not measured here"),
-    "ant_eval_factor": (1.0, "assumed: the ant's walks as long as the humanoid's; not measured"),
+    "build_s": (31.0, "measured: suite v2's build, the humanoid's 25.2-31.0 s, the ant's 2.8-29.1 s, on the GPU "
+                      "machines, 2026-11-29 (suite_v2/warp_progress, builds.jsonl)"),
+    "ant_eval_factor": (1.4, "measured: the ant's base-policy walks of suite v2 under Warp (stock kernel), one "
+                             "process, 15.0-15.8 s against the humanoid's median 10.9 s, one H200, 2026-11-29"),
 }
 """The figures ``--plan`` predicts from: ``name: (value or (low, high), where it comes from)``."""
 
@@ -137,7 +141,10 @@ def parser() -> argparse.ArgumentParser:
                    help="evolve / curriculum / learn preset (default gpu-short; smoke: a CPU check)")
     p.add_argument("--trials", type=int, default=TRIALS, help=f"trials of each treatment (default {TRIALS})")
     p.add_argument("--backend", choices=("jax", "warp"), default=None,
-                   help="MJX backend of train (default the preset's) and evaluate (default jax)")
+                   help="MJX backend of train (default the preset's: MuJoCo Warp where it is installed)")
+    p.add_argument("--eval-backend", choices=("jax", "warp"), default="warp",
+                   help="MJX backend of evaluate (default warp: a humanoid walk of suite v2 in 10.9 s median "
+                        "against 25-35 s under jax, one H200, 2026-11-29)")
     p.add_argument("--archive-size", type=int, default=None,
                    help="archive: evolve's --size (a CPU check; default the preset's)")
     p.add_argument("--keys", type=int, default=KEYS, help=f"evaluation keys of each base policy (default {KEYS})")
@@ -204,7 +211,25 @@ def check(p: argparse.ArgumentParser, args) -> None:
         p.error(f"--headings must be one of 1, 2, 4; got {args.headings}")
     if args.out.exists() and not args.out.is_dir():
         p.error(f"--out {args.out} is a file")
+    warp = (words[:1] == ("evaluate",) and args.eval_backend == "warp") or (
+        words[:1] == ("train",) and (args.backend == "warp" or (args.backend is None and warp_installed())))
+    if warp and _warp_hfield() == "stock":
+        p.error("MuJoCo Warp here runs its stock heightfield collision (contacts metres deep for a foot buried far "
+                "from the heightfield's centre: the ant's suite-v2 mean 0.686 against 0.777 patched); apply "
+                "docs/results/sim2sim/warp_hfield/mjx_vendored_hfield_local_origin.patch first, or pass "
+                + ("--eval-backend jax" if words[:1] == ("evaluate",) else "--backend jax"))
     args.what = words
+
+
+def _warp_hfield() -> str:
+    from jaxterrain.runtime import provenance  # imports JAX: only where a stage will run MuJoCo Warp
+
+    return provenance.warp_hfield()
+
+
+def warp_installed() -> bool:
+    """Whether warp-lang is importable here (what the presets' ``auto`` backend picks MuJoCo Warp by)."""
+    return importlib.util.find_spec("warp") is not None
 
 
 def parse_ant(p: argparse.ArgumentParser, items: list[str]) -> list[tuple[str, str]]:
@@ -441,7 +466,7 @@ def reevaluate_argv(args, suite: str, folders: list[Path], robots: list[str]) ->
     return [*map(str, folders), "--work", str(args.out / "eval" / suite), "--suite", suite,
             "--heldout-name", f"heldout_{suite}", "--base-out", str(args.out / f"base_{suite}"),
             "--robots", *robots, "--observations", *OBSERVATIONS, "--keys", str(args.keys),
-            "--backend", args.backend or "jax", *suite_flags(args)]
+            "--backend", args.eval_backend, *suite_flags(args)]
 
 
 def trained(out: Path) -> tuple[list[Path], list[str]]:
@@ -598,7 +623,7 @@ def read_state(args) -> dict:
     needed += [("ant", g) for g in dict.fromkeys(t.split("-", 1)[0] for _, t in choice or [])]
     state = {"archives_left": [(r, g) for r, g in needed if not archive_done(out, r, g, args.preset)],
              "train_left": {}, "walks_left": {}, "measured": {}, "ant_pending": choice is None,
-             "train_backend": args.backend or "warp", "eval_backend": args.backend or "jax", "trials": args.trials,
+             "train_backend": args.backend or "warp", "eval_backend": args.eval_backend, "trials": args.trials,
              "keys": args.keys}
     plan = runs(out)
     for robot, obs, folder, names in plan:
