@@ -40,7 +40,8 @@ def test_check_apply_revert_and_their_exit_status(copy, capsys):
     assert capsys.readouterr().out == f"local-origin patch: {copy}\n"
     assert main(["warp-patch", "--file", str(copy), "--revert"]) == 0 and copy.read_bytes() == stock
     assert main(["warp-patch", "--file", str(copy), "--revert"]) == 0 and copy.read_bytes() == stock
-    assert capsys.readouterr().out.splitlines() == [f"stock: {copy} (was local-origin patch)", f"stock: {copy} (unchanged)"]
+    assert capsys.readouterr().out.splitlines() == [f"stock: {copy} (was local-origin patch)",
+                                                    f"stock: {copy} (unchanged)"]
 
 
 def test_a_file_it_does_not_fit_or_a_missing_one_is_one_line(copy, capsys):
