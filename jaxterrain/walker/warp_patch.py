@@ -64,11 +64,18 @@ class WarpHfieldWarning(RuntimeWarning):
     """MJX's vendored MuJoCo Warp runs the stock heightfield collision (see :func:`stock_warning`)."""
 
 
+def _lines(text: str) -> list[str]:
+    """``text`` cut after every ``\n`` only (as ``patch`` reads a file; ``str.splitlines`` also cuts at form feeds and
+    other separators), each line with its ending; a last line without one as it is."""
+    parts = text.split("\n")
+    return [p + "\n" for p in parts[:-1]] + ([parts[-1]] if parts[-1] else [])
+
+
 def hunks(diff: str) -> list[Hunk]:
-    """The hunks of a unified diff (``diff -u`` text: ``@@ -a,b +c,d @@`` headers, lines starting with ``' '``,
+    """The hunks of a one-file unified diff (``diff -u`` text: ``@@ -a,b +c,d @@`` headers, lines starting with ``' '``,
     ``'-'``, ``'+'``, ``'\\ No newline at end of file'``; an empty line as an empty context line, as GNU ``patch``
     reads it). ValueError for a hunk whose line counts disagree with its header."""
-    lines = diff.splitlines(keepends=True)
+    lines = _lines(diff)
     out, i = [], 0
     while i < len(lines):
         head = lines[i]
@@ -162,7 +169,7 @@ def apply(revert: bool = False, path: str | os.PathLike | None = None) -> str:
         return before
     diff = hunks(PATCH.read_text(encoding="utf-8"))
     pairs = [(h.new, h.old, h.header) if revert else (h.old, h.new, h.header) for h in diff]
-    lines = _replace(target.read_bytes().decode("utf-8").splitlines(keepends=True), pairs, target)
+    lines = _replace(_lines(target.read_bytes().decode("utf-8")), pairs, target)
     atomic_write_bytes(target, "".join(lines).encode("utf-8"))
     return status(target)
 

@@ -104,12 +104,14 @@ def test_a_file_the_patch_does_not_fit_is_refused_in_one_line_and_left_as_it_is(
         warp_patch.apply(revert=True, path=stock)
 
 
-def test_hunks_reads_empty_context_lines_and_a_missing_final_newline():
+def test_hunks_reads_empty_context_lines_a_missing_final_newline_and_cuts_at_newlines_only():
     diff = "--- a\n+++ b\n@@ -1,3 +1,3 @@\n a\n\n-b\n\\ No newline at end of file\n+c\n\\ No newline at end of file\n"
     (h,) = warp_patch.hunks(diff)
     assert h.old == ("a\n", "\n", "b") and h.new == ("a\n", "\n", "c") and h.header == "@@ -1,3 +1,3 @@"
     with pytest.raises(ValueError, match="ends before"):
         warp_patch.hunks("@@ -1,3 +1,3 @@\n a\n")
+    (h,) = warp_patch.hunks("@@ -1 +1 @@\n-a\x0cb\n+c\n")  # lines end at \n only, as patch reads them
+    assert h.old == ("a\x0cb\n",) and h.new == ("c\n",)
 
 
 @pytest.fixture
