@@ -65,8 +65,8 @@ class WarpHfieldWarning(RuntimeWarning):
 
 
 def _lines(text: str) -> list[str]:
-    """``text`` cut after every ``\n`` only (as ``patch`` reads a file; ``str.splitlines`` also cuts at form feeds and
-    other separators), each line with its ending; a last line without one as it is."""
+    """``text`` cut after every line feed only (as ``patch`` reads a file; ``str.splitlines`` also cuts at form feeds
+    and other separators), each line with its ending; a last line without one as it is."""
     parts = text.split("\n")
     return [p + "\n" for p in parts[:-1]] + ([parts[-1]] if parts[-1] else [])
 
