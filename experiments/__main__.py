@@ -38,6 +38,8 @@ COMMANDS = {
     "report": ("experiments.report", "one self-contained HTML page (and Markdown) of run folders, with walker videos"),
     "export": ("experiments.export", "terrains of an archive as OBJ / STL meshes, PNG, .npy or MJCF"),
     "export-policy": ("experiments.export_policy", "a walker as one ONNX file: normaliser and network, with its metadata"),
+    "warp-patch": ("experiments.warp_patch", "patch MJX's vendored MuJoCo Warp heightfield collision (the "
+                                             "local-origin fix every --backend warp run needs); --check, --revert"),
 }
 
 

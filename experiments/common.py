@@ -8,7 +8,8 @@ Every command works the same way:
 * it writes them to ``<run folder>/config.json`` before doing any work, so ``--config <run folder>/config.json``
   re-runs it exactly;
 * every start and every ``--resume`` appends one line to ``<run folder>/provenance.jsonl`` (:func:`record_provenance`:
-  when, the code's commit, the devices, jax's version), so a run continued on other machines names each of them;
+  when, the code's commit, the devices, jax's version; a run on MuJoCo Warp also its heightfield collision,
+  ``warp_hfield``), so a run continued on other machines names each of them;
 * ``--resume [FOLDER]`` continues the run in FOLDER with the config saved there; finished pieces (archives,
   checkpoints) are reused. The folder is FOLDER, else ``--out`` (``--out RUN --resume`` continues RUN), else the
   newest ``runs/<command>-*``; ``--resume A --out B`` (two runs), a folder without ``config.json`` (no run to
@@ -675,34 +676,50 @@ def prepare_run(command: str, args: argparse.Namespace, presets: dict[str, dict]
     if resumed:
         if given:
             write_config(folder, flat)
-        record_provenance(folder, command, vars(args), resumed=True)
+        record_provenance(folder, command, vars(args), resumed=True, backend=physics(flat))
         print(f"resuming {folder}", flush=True)
         return folder, flat
     check_out(args.out)
     folder = run_folder(command, args.out)
     folder.mkdir(parents=True, exist_ok=True)
     write_config(folder, flat)
-    record_provenance(folder, command, vars(args))
+    record_provenance(folder, command, vars(args), backend=physics(flat))
     print(f"run folder {folder}", flush=True)
     return folder, flat
 
 
-def record_provenance(folder: Path, command: str, options: dict | None = None, resumed: bool = False) -> dict:
+def physics(flat: dict) -> str | None:
+    """The walker backend a run's flat config names (``backend``, evolve's ``rollout_backend``; None for MuJoCo C
+    walks, ``engine: mujoco``, and for commands without one)."""
+    if flat.get("engine", "mjx") != "mjx":
+        return None
+    backend = flat.get("backend", flat.get("rollout_backend"))
+    return backend if isinstance(backend, str) else None
+
+
+def record_provenance(folder: Path, command: str, options: dict | None = None, resumed: bool = False,
+                      backend: str | None = None) -> dict:
     """Append one JSON line to ``folder/provenance.jsonl`` and return it: the UTC time, the command, the options
     given (those not None), whether it resumed the run, the code's commit (``jaxterrain.runtime.provenance.git_commit``:
     ``git`` of the checkout, or ``$JAXTERRAIN_COMMIT`` on a machine that received the tree without ``.git``), the
-    JAX devices, the process count and jax's version. One ``write`` of a line opened for appending, so processes
-    that share a run folder (``--shard``) each add theirs; in a multi-process JAX run only process 0 writes."""
+    JAX devices, the process count and jax's version; where the run's walker ``backend`` (its config's, ``auto``
+    resolved here by ``jaxterrain.walker.resolve_backend``) is ``warp``, also ``warp_hfield``: which heightfield
+    collision MuJoCo Warp runs (``provenance.warp_hfield``: ``"local-origin patch"`` after ``warp-patch``, or
+    ``"stock"``). One ``write`` of a line opened for appending, so processes that share a run folder (``--shard``)
+    each add theirs; in a multi-process JAX run only process 0 writes."""
     import os
 
     import jax
 
     from jaxterrain.runtime import provenance
+    from jaxterrain.walker import resolve_backend
 
     given = {k: v for k, v in (options or {}).items() if v is not None}
     line = {"time": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"), "command": command,
             "options": given, "resumed": bool(resumed), "commit": provenance.git_commit(),
             "devices": provenance.device(), "processes": jax.process_count(), "jax": jax.__version__}
+    if isinstance(backend, str) and resolve_backend(backend) == "warp":
+        line["warp_hfield"] = provenance.warp_hfield()
     if jax.process_index() == 0:
         fd = os.open(Path(folder) / PROVENANCE_NAME, os.O_WRONLY | os.O_CREAT | os.O_APPEND, 0o644)
         try:

@@ -24,7 +24,7 @@ import subprocess
 from pathlib import Path
 
 __all__ = ["COMMIT_ENV", "PACKAGE_TOKEN", "git_commit", "package_version", "device", "portable_path",
-           "resolve_recorded", "file_sha256", "warp_hfield", "WARP_HFIELD_MARKER"]
+           "resolve_recorded", "file_sha256", "warp_hfield", "warp_hfield_source", "WARP_HFIELD_MARKER"]
 
 COMMIT_ENV = "JAXTERRAIN_COMMIT"
 DIRTY_NOTE = " (working tree has uncommitted changes)"
@@ -78,29 +78,40 @@ def device() -> str:
 
 WARP_HFIELD_MARKER = "sub_o = wp.vec3("
 """A line of the local-origin patch of MuJoCo Warp's heightfield collision
-(``docs/results/sim2sim/warp_hfield/mjx_vendored_hfield_local_origin.patch``): its presence in the source marks a
-patched engine."""
+(``jaxterrain/assets/patches/mjx_vendored_hfield_local_origin.patch``, applied by :mod:`jaxterrain.walker.warp_patch`):
+its presence in the source marks a patched engine."""
 
 
-def warp_hfield() -> str:
-    """Which heightfield collision MJX's vendored MuJoCo Warp runs (``impl="warp"``), read from its source file
-    without importing Warp: ``"local-origin patch"`` (GJK / EPA on coordinates local to the heightfield's subgrid,
-    the fix of ``docs/results/sim2sim/warp_hfield/REPORT.md``), ``"stock"`` (float32 at absolute coordinates: a
-    buried foot far from the heightfield's centre gets contacts metres deep), or ``"absent"`` (no vendored MuJoCo
-    Warp in this mujoco-mjx). Recorded with every Warp walk whose figures it can change."""
+def warp_hfield_source() -> Path | None:
+    """The source file of the heightfield collision of MJX's vendored MuJoCo Warp,
+    ``mujoco/mjx/third_party/mujoco_warp/_src/collision_convex.py`` of the installed mujoco-mjx, found without
+    importing MJX or Warp; None where this mujoco-mjx has none (or none is installed)."""
     from importlib import util
 
     try:
         spec = util.find_spec("mujoco.mjx")
     except (ImportError, ValueError):
-        return "absent"
+        return None
     if spec is None or not spec.submodule_search_locations:
-        return "absent"
+        return None
     for root in spec.submodule_search_locations:
         src = Path(root) / "third_party" / "mujoco_warp" / "_src" / "collision_convex.py"
         if src.is_file():
-            return "local-origin patch" if WARP_HFIELD_MARKER in src.read_text() else "stock"
-    return "absent"
+            return src
+    return None
+
+
+def warp_hfield(path: str | os.PathLike | None = None) -> str:
+    """Which heightfield collision MJX's vendored MuJoCo Warp runs (``impl="warp"``), read from its source file
+    (:func:`warp_hfield_source`, or ``path``) without importing Warp: ``"local-origin patch"`` (GJK / EPA on
+    coordinates local to the heightfield's subgrid, the fix of ``docs/results/sim2sim/warp_hfield/REPORT.md``,
+    applied by ``python -m experiments warp-patch``), ``"stock"`` (float32 at absolute coordinates: a buried foot far
+    from the heightfield's centre gets contacts metres deep), or ``"absent"`` (no vendored MuJoCo Warp in this
+    mujoco-mjx; ``path`` not a file). Recorded with every Warp walk whose figures it can change."""
+    src = warp_hfield_source() if path is None else Path(path)
+    if src is None or not src.is_file():
+        return "absent"
+    return "local-origin patch" if WARP_HFIELD_MARKER in src.read_text() else "stock"
 
 
 def package_version() -> str:

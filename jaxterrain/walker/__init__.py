@@ -3,8 +3,9 @@
 
 Modules: :mod:`.robots` (robot specs and their registry), :mod:`.model` (the MJCF and solver options), :mod:`.env` (reset / step / park), :mod:`.randomisation` (physics randomisation: friction, masses, motors, noise, delay, pushes), :mod:`.tiles` (terrains as
 tiles of one heightfield), :mod:`.layout` (classic vs tiles, env sizing, the backend ``auto`` resolves to: the one
-home of the layout), :mod:`.rollout` (batched walks and the rollout pool) and :mod:`.mujoco_c` (MuJoCo's C engine
-stepping the same walks on the CPU: sim2sim).
+home of the layout), :mod:`.rollout` (batched walks and the rollout pool), :mod:`.mujoco_c` (MuJoCo's C engine
+stepping the same walks on the CPU: sim2sim) and :mod:`.warp_patch` (the local-origin fix of MuJoCo Warp's heightfield
+collision, applied to MJX's vendored copy: ``python -m experiments warp-patch``).
 
     from jaxterrain.walker import WalkerEnv, WalkerConfig, flat_terrain
     env = WalkerEnv(WalkerConfig())
@@ -44,6 +45,7 @@ from jaxterrain.walker.model import (
     standing_offset,
 )
 from jaxterrain.walker.tiles import TILE_AXES, Tile, TileBank, warp_available
+from jaxterrain.walker import warp_patch
 from jaxterrain.walker import randomisation
 from jaxterrain.walker.randomisation import (PRESETS as RANDOMISATION_PRESETS, Randomisation, parse_randomisation,
                                              randomisation_from_json, randomisation_json, randomisation_label)
@@ -83,6 +85,7 @@ __all__ = [
     "Tile",
     "TileBank",
     "warp_available",
+    "warp_patch",
     "randomisation",
     "RANDOMISATION_PRESETS",
     "Randomisation",

@@ -28,7 +28,9 @@ Backends and tiled terrains (``WalkerConfig.backend``, ``WalkerConfig.tiles``):
   are tile-local, and the observation has no x / y, so a walk on tile ``i`` is the walk on that terrain alone (up to
   float32 rounding of the shifted coordinates). No model field is batched: all envs share one ``mjx.Model``.
 - ``backend = "warp"``: ``mjx.put_model(impl="warp")`` and ``make_data(impl="warp")`` (needs ``tiles >= 1`` and
-  ``pip install 'jaxterrain[warp]'``). MJX-Warp's ``Data`` carries contact buffers shared by all envs
+  ``pip install 'jaxterrain[warp]'``; then ``python -m experiments warp-patch``, :mod:`jaxterrain.walker.warp_patch`:
+  building such an env warns once per process while MJX's vendored heightfield collision is the stock kernel).
+  MJX-Warp's ``Data`` carries contact buffers shared by all envs
   (``naconmax = warp_contacts * warp_worlds``; set ``warp_worlds`` >= the number of envs stepped together, over all
   vmap axes): merge states with ``env.select`` or ``mjx.Data.where``, never with ``jax.tree.map(jnp.where, ...)``
   over ``state.data``. A step whose contacts or constraints overflowed those buffers is invalid (``failed = 1``).
@@ -63,6 +65,7 @@ with contextlib.redirect_stdout(io.StringIO()) if importlib.util.find_spec("warp
 from jaxterrain.terrain import hfield_size
 from jaxterrain.walker import randomisation as _rnd
 from jaxterrain.walker import tiles as _tiles
+from jaxterrain.walker import warp_patch as _warp_patch
 from jaxterrain.walker.model import build_model, metres_to_hfield
 from jaxterrain.walker.randomisation import is_active
 from jaxterrain.walker.robots import get as get_robot
@@ -128,6 +131,7 @@ class WalkerEnv:
         hfield_shape = (self.grid[0] * h, self.grid[1] * w) if self.tiles else (h, w)
         self.mj_model = build_model(hfield_shape, config.scale, config.solver, config.timestep, self.robot)
         self.backend = config.backend
+        _warp_patch.warn_if_stock(config.backend)  # once per process: MuJoCo Warp's stock heightfield collision
         if config.backend == "warp":
             try:
                 self.mjx_model = mjx.put_model(self.mj_model, impl="warp")

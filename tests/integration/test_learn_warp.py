@@ -4,12 +4,15 @@ states ride from block to block and through a checkpoint in the carried form (``
 
 from __future__ import annotations
 
+import json
+
 import numpy as np
 import pytest
 
 from curriculum_archives import tiny_archive_file
+from experiments import common
 from experiments.__main__ import main
-from jaxterrain.runtime import driver
+from jaxterrain.runtime import driver, provenance
 from jaxterrain.walker import warp_available
 
 
@@ -35,3 +38,10 @@ def test_a_warp_smoke_run_stopped_after_its_first_chunk_resumes_to_the_uninterru
         assert stored["leaf:.policy.env_state.data.qpos"].shape[:2] == (2, 4)  # 2 trials x 4 envs, kept
     assert main(["learn", "--resume", str(parts)]) == 0
     assert (parts / "history.csv").read_text() == (whole / "history.csv").read_text()
+    # which heightfield collision trained it: in the run's provenance lines and in every exported walker
+    kernel = provenance.warp_hfield()
+    assert kernel in ("stock", "local-origin patch")
+    lines = [json.loads(x) for x in (parts / common.PROVENANCE_NAME).read_text().splitlines()]
+    assert [line["warp_hfield"] for line in lines] == [kernel, kernel]
+    walker = json.loads((whole / "policies" / "trial_0" / "config.json").read_text())
+    assert walker["provenance"]["warp_hfield"] == kernel

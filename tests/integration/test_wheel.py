@@ -42,6 +42,8 @@ def test_the_wheel_carries_every_default_input_and_is_the_one_imported(installed
         shipped = site / "jaxterrain" / "assets" / "archives" / f"{g}_headings.npz"
         assert filecmp.cmp(shipped, ROOT / "docs" / "results" / f"exp2_{g}_headings_archive.npz", shallow=False), g
     assert (site / "jaxterrain" / "assets" / "base_policy" / "policy.msgpack").is_file()
+    patch = site / "jaxterrain" / "assets" / "patches" / "mjx_vendored_hfield_local_origin.patch"  # warp-patch's
+    assert filecmp.cmp(patch, ROOT / "docs/results/sim2sim/warp_hfield" / patch.name, shallow=False)
     probe = run(env, tmp_path, "-c", "import jaxterrain, experiments.learn as l, experiments.curriculum as c; "
                 "print(jaxterrain.__file__); print(l.CPPN_ARCHIVE); print(*c.DEFAULT_ARCHIVES.values())")
     assert probe.returncode == 0, probe.stderr[-2000:]
