@@ -215,8 +215,8 @@ def check(p: argparse.ArgumentParser, args) -> None:
         words[:1] == ("train",) and (args.backend == "warp" or (args.backend is None and warp_installed())))
     if warp and _warp_hfield() == "stock":
         p.error("MuJoCo Warp here runs its stock heightfield collision (contacts metres deep for a foot buried far "
-                "from the heightfield's centre: the ant's suite-v2 mean 0.686 against 0.777 patched); apply "
-                "docs/results/sim2sim/warp_hfield/mjx_vendored_hfield_local_origin.patch first, or pass "
+                "from the heightfield's centre: the ant's suite-v2 mean 0.686 against 0.777 patched); run "
+                "'python -m experiments warp-patch' (mjx_vendored_hfield_local_origin.patch) first, or pass "
                 + ("--eval-backend jax" if words[:1] == ("evaluate",) else "--backend jax"))
     args.what = words
 
