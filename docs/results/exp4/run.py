@@ -524,7 +524,9 @@ def stage_write(args) -> int:
         if not (args.out / "eval" / suite / "settings.json").is_file():
             print(f"write: suite {suite} not walked yet ({args.out / 'eval' / suite})", file=sys.stderr)
             return 2
-        code = module.main(reevaluate_argv(args, suite, folders, robots) + ["--write"])
+        walked = json.loads((args.out / "eval" / suite / "settings.json").read_text())["backend"]
+        code = module.main(reevaluate_argv(argparse.Namespace(**{**vars(args), "eval_backend": walked}), suite,
+                                           folders, robots) + ["--write"])  # the backend the walks ran on
         if code:
             return code
     for robot, obs, folder, names in runs(args.out):
