@@ -133,3 +133,33 @@ def test_the_plan_of_the_shipped_experiments_is_190_walks_in_the_issues_order(sc
     assert [g.split("/")[2] for g in groups[2:]] == ["exp3_gpushort"] * 8 + ["exp3b_gpushort"] * 4 + \
         ["exp3c_gpushort"] * 2 + ["wide_gpushort"] * 2 + ["ant_gpushort"]
     assert out[-1].startswith("0 of 190 walks done") and not (ROOT / "runs" / "v2eval-none-here").exists()
+
+
+def test_write_refuses_a_group_walked_on_two_heightfield_kernels(script, exp, capsys, monkeypatch):
+    """Under Warp each walk records its heightfield kernel (``provenance.warp_hfield``); ``--write`` writes a group
+    whose walks agree (its ``config.json`` names the kernel) and refuses, in one line and exit status 1, one whose
+    walks ran on the stock and the patched kernel; ``--plan`` counts each group's walks per kernel."""
+    from jaxterrain.runtime import provenance
+
+    def walk(policies, heightmaps, key, *rest):
+        return np.asarray(jax.random.uniform(key, (1, heightmaps.shape[0])), np.float32)
+
+    monkeypatch.setattr(batch, "evaluate_policies", walk)
+    warp = args("--backend", "warp")
+    monkeypatch.setattr(provenance, "warp_hfield", lambda: "stock")
+    assert script.main(warp) == 0
+    a = batch.Store(exp / "work")
+    a.path("exp/a/policies/trial_0").unlink()  # walked again on the patched kernel
+    monkeypatch.setattr(provenance, "warp_hfield", lambda: "local-origin patch")
+    assert script.main(warp) == 0
+    capsys.readouterr()
+    assert script.main([*warp, "--write"]) == 1
+    out, err = capsys.readouterr()
+    assert "2 evaluations written" in out and err.strip().splitlines() == [
+        "not written, walks on different MuJoCo Warp heightfield kernels: exp/a (1 local-origin patch, 1 stock); "
+        "walk them again on one (runs/v2eval/results/<walk>.npz: remove the odd ones)"]
+    assert not (exp / "exp" / "a" / "heldout_v2").exists()
+    assert json.loads((exp / "exp" / "b" / "heldout_v2" / "config.json").read_text())["warp_hfield"] == "stock"
+    assert script.main([*warp, "--plan"]) == 0
+    plan = capsys.readouterr().out
+    assert "exp/a: 1/1 walked [1 local-origin patch]" in plan and "base:humanoid: 2/2 walked written [2 stock]" in plan

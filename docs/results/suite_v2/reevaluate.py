@@ -300,7 +300,9 @@ def plan(store, jobs, by_group: dict, args) -> int:
         k = sum(has(j.name) for j in js)
         mark = "written" if written(group_folder(g, args), [j.name for j in js] if g.startswith("base:") else
                                     [f"base:{js[0].robot}"] + [j.name for j in js]) else ""
-        print(f"{g}: {k}/{len(js)} walked {mark}".rstrip())
+        kinds = {} if store is None else kernels(store, [j.name for j in js if has(j.name)])
+        kind = f"[{', '.join(f'{n} {w}' for w, n in sorted(kinds.items()))}]" if kinds else ""
+        print(f"{g}: {k}/{len(js)} walked {mark} {kind}".replace("  ", " ").rstrip())
     left = predict(store, jobs)
     measured = store is not None and bool(store.metas())
     print(f"{sum(has(j.name) for j in jobs)} of {len(jobs)} walks done; the rest predicted at "
@@ -311,15 +313,34 @@ def plan(store, jobs, by_group: dict, args) -> int:
     return 0
 
 
+NOT_RECORDED = "stock (not recorded)"
+"""The heightfield kernel of a Warp walk recorded before ``warp_hfield`` was (2eb907c): every one was stock."""
+
+
+def kernels(store, names) -> dict[str, int]:
+    """How many of the walks ``names`` (all in ``store``) ran on each MuJoCo Warp heightfield kernel
+    (``provenance.warp_hfield``, recorded with each walk; :data:`NOT_RECORDED` before it was); ``{}`` for a store of
+    MJX-JAX walks."""
+    if store.settings["backend"] != "warp":
+        return {}
+    out: dict[str, int] = {}
+    for n in names:
+        k = store.read(n)[1].get("warp_hfield", NOT_RECORDED)
+        out[k] = out.get(k, 0) + 1
+    return out
+
+
 def write_groups(store, by_group: dict, args, build: dict) -> int:
     """``--write``: every group whose walks are all in ``store`` written as an evaluation (``batch.write_group``,
-    from the store's records: no suite is built); the others named."""
+    from the store's records: no suite is built); the others named. A group whose walks ran on different MuJoCo
+    Warp heightfield kernels (stock and patched: :func:`kernels`; "stock (not recorded)" counts as stock) is not
+    written: it is named in one line and the exit status is 1."""
     from jaxterrain.suite import batch
 
     config = {"command": "docs/results/suite_v2/reevaluate.py", "suite": args.suite, "attempts": args.attempts,
               "best": args.best, "headings": args.headings, "backend": args.backend, "slots": args.slots or None,
               "chunk": args.chunk, "seed": args.seed, **build}
-    done, wrote, waiting = lambda n: store.has(n), 0, []  # noqa: E731
+    done, wrote, waiting, mixed = lambda n: store.has(n), 0, [], []  # noqa: E731
     for group, js in by_group.items():
         names = [j.name for j in js]
         robot = js[0].robot
@@ -331,14 +352,23 @@ def write_groups(store, by_group: dict, args, build: dict) -> int:
         if not all(map(done, rows)):
             waiting.append(f"{group} ({sum(map(done, rows))}/{len(rows)})")
             continue
+        kinds = kernels(store, rows)
+        if len({k.split(" ")[0] for k in kinds}) > 1:
+            mixed.append(f"{group} ({', '.join(f'{n} {k}' for k, n in sorted(kinds.items()))})")
+            continue
         if written(folder, rows):
             continue
         batch.write_group(store, rows, folder, store.suite(robot), labels,
                           {**config, "robot": robot, "keys": len(js) if group.startswith("base:") else 1,
-                           "policy": [] if group.startswith("base:") else names})
+                           "policy": [] if group.startswith("base:") else names,
+                           **({"warp_hfield": next(iter(kinds))} if kinds else {})})
         wrote += 1
         print(f"{group}: {folder}", flush=True)
     print(f"{wrote} evaluations written" + (f"; not yet walked: {', '.join(waiting)}" if waiting else ""), flush=True)
+    if mixed:
+        print(f"not written, walks on different MuJoCo Warp heightfield kernels: {'; '.join(mixed)}; walk them again "
+              "on one (runs/v2eval/results/<walk>.npz: remove the odd ones)", file=sys.stderr, flush=True)
+        return 1
     return 0
 
 
