@@ -87,7 +87,12 @@ def test_the_digest_sets_v2_beside_v1_with_the_figures_the_files_imply(restate, 
     cv = v2["robustness"]["fair"]["perlin"]
     per = [suite.generator_robustness(f, s2.family)["perlin"]["cvar"] for f in s2.fitness[1:]]
     assert cv == pytest.approx(np.mean(per), abs=1e-3) and "base policy" in v2["robustness"]
+    lv = {(r["treatment"], r["family"]): r for r in restate.read_csv(tmp_path / spec["out"] / "levels.csv")}
+    assert v2["levels_gained"]["fair"]["boxes"] == [float(lv[("fair", "boxes")][k]) for k in
+                                                    ("gain", "gain_low", "gain_high")]
+    assert v2["levels_gained"]["base policy"]["boxes"][0] == float(lv[("fair", "boxes")]["base"])
     md = (tmp_path / "docs/results/suite_v2/restated/expA.md").read_text()
+    assert "Levels passed on v2" in md
     assert md.startswith("# expA: the numbers of `docs/results/expA.md` on suite v2 beside v1")
     assert "| P(good > fair) |" in md and "## Worst decile" in md and "--heldout heldout_v2" in md
     assert (tmp_path / "docs/results/expA/generalisation_v2/beside.csv").is_file()

@@ -94,7 +94,8 @@ def aggregate(folder: Path) -> dict:
             "improvement": {(r["x"], r["y"]): r for r in read_csv(folder / "improvement.csv")},
             "trials": read_csv(folder / "trials.csv"),
             "correlation": json.loads((folder / "correlation.json").read_text()),
-            "meta": json.loads(meta.read_text()) if meta.is_file() else {}}
+            "meta": json.loads(meta.read_text()) if meta.is_file() else {},
+            "levels": read_csv(folder / "levels.csv") if (folder / "levels.csv").is_file() else []}
 
 
 def f(row: dict, key: str) -> float:
@@ -232,8 +233,12 @@ def suite_numbers(agg: dict, folders: dict[str, Path], heldout: str, pairs, kept
     robust = {n: robustness(folders[n] / heldout) for n in names if n in folders}
     if base_folder is not None:
         robust[BASE] = robustness(base_folder, base=True)
+    gained: dict = {}  # levels passed, each treatment's gain over the base policy with its interval
+    for r in agg.get("levels", []):
+        gained.setdefault(r["treatment"], {})[r["family"]] = [f(r, "gain"), f(r, "gain_low"), f(r, "gain_high")]
+        gained.setdefault(BASE, {})[r["family"]] = [f(r, "base"), f(r, "base_low"), f(r, "base_high")]
     return {"suite": agg["meta"].get("suite"), "order": order, "rows": rows, "claims": claims, "families": fam,
-            "level0": level0, "robustness": {k: v for k, v in robust.items() if v}}
+            "level0": level0, "levels_gained": gained, "robustness": {k: v for k, v in robust.items() if v}}
 
 
 def markdown(key: str, spec: dict, v1: dict, v2: dict, commands: list[str]) -> str:
@@ -328,6 +333,18 @@ def markdown(key: str, spec: dict, v1: dict, v2: dict, commands: list[str]) -> s
     for n in names:
         a, b = v1["level0"].get(n, {}), v2["level0"].get(n, {})
         L.append(f"| {n} | " + " | ".join(f"{a.get(g, '-')} / {b.get(g, '-')}" for g in graded) + " |")
+    gained = v2.get("levels_gained") or {}
+    if gained:
+        L += ["", "Levels passed on v2 (the highest level passed, every level below passed too): each treatment's gain "
+              "over the base policy, the mean over its trials minus the base's over its keys, with its interval over "
+              "trials, base keys and the terrains of each level (`levels.csv`); the base policy's own figure last "
+              "(-1: it fails level 0).", "",
+              "| treatment | " + " | ".join(graded) + " |", "|---|" + "---|" * len(graded)]
+        for n in [*names, BASE]:
+            r = gained.get(n, {})
+            L.append(f"| {n} | " + " | ".join(
+                (f"{r[g][0]:+.1f} [{r[g][1]:+.1f}, {r[g][2]:+.1f}]" if n != BASE else f"{r[g][0]:.1f}") if g in r
+                else "-" for g in graded) + " |")
     if v2["robustness"]:
         gens = list(dict.fromkeys(g for r in v2["robustness"].values() for g in r))
         L += ["", "## Worst decile of the generators' fresh samples (v2 only)", "",
