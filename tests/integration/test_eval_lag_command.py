@@ -6,7 +6,6 @@ same way. Minutes of CPU (two programs compile)."""
 
 from __future__ import annotations
 
-import csv
 import json
 from pathlib import Path
 
@@ -14,6 +13,7 @@ import numpy as np
 import pytest
 
 from curriculum_archives import tiny_archive_file
+from run_files import checkpoint, rows, summary
 
 pytestmark = pytest.mark.slow
 
@@ -24,20 +24,6 @@ def cli(*argv):
     from experiments.__main__ import main
 
     return main(list(argv))
-
-
-def rows(path: Path) -> list[dict]:
-    with open(path) as f:
-        return list(csv.DictReader(f))
-
-
-def checkpoint(folder: Path) -> dict:
-    with np.load(folder / "checkpoint.npz") as data:
-        return {k: data[k] for k in data.files if k.startswith("leaf:")}
-
-
-def summary(folder: Path) -> dict:
-    return {k: v for k, v in json.loads((folder / "summary.json").read_text()).items() if k != "seconds"}
 
 
 def same_run(a: Path, b: Path) -> None:

@@ -16,14 +16,13 @@ the uninterrupted one did. Several minutes of CPU: three programs compile."""
 
 from __future__ import annotations
 
-import csv
 import json
-from pathlib import Path
 
 import numpy as np
 import pytest
 
 from curriculum_archives import tiny_archive_file
+from run_files import checkpoint, rows, summary
 
 FILES = ("history.csv", "sequences.csv", "milestones.csv", "milestones.md", "metrics.csv")
 
@@ -43,20 +42,6 @@ def archives(tmp_path_factory):
     arch = A.load(a)
     b = arch._replace(fitness=np.where(arch.source >= 0, 0.7 * arch.fitness + 0.1, arch.fitness).astype(np.float32))
     return a, str(A.save(folder / "b.npz", b))
-
-
-def rows(path: Path) -> list[dict]:
-    with open(path) as f:
-        return list(csv.DictReader(f))
-
-
-def checkpoint(folder: Path) -> dict:
-    with np.load(folder / "checkpoint.npz") as data:
-        return {k: data[k] for k in data.files if k.startswith("leaf:")}
-
-
-def summary(folder: Path) -> dict:
-    return {k: v for k, v in json.loads((folder / "summary.json").read_text()).items() if k != "seconds"}
 
 
 @pytest.fixture(scope="module")
