@@ -73,7 +73,8 @@ def parser() -> argparse.ArgumentParser:
     p.add_argument("--gpus", type=int, default=None, metavar="N",
                    help="N processes, process k walking part k/N on GPU k (CUDA_VISIBLE_DEVICES=k), then --pack. "
                         "Under Warp on one 2 x H200 host (2026-11-29) two processes walked a humanoid walker in "
-                        "30-37 s each, one process alone in 10-14 s: 0.06 against 0.08 walks/s; measure first")
+                        "24-42 s each (median 33 s), one process alone in 10-15 s (median 12 s): 0.06 against "
+                        "0.08 walks/s; measure first")
     p.add_argument("--robots", nargs="*", default=None,
                    help="robots whose base policy walks with --keys keys first (default: the walkers' robots)")
     p.add_argument("--keys", type=int, default=10, help="evaluation keys of each base policy (default 10)")
@@ -242,7 +243,8 @@ def main(argv=None) -> int:
     try:
         walkers = batch.walker_jobs(args.folders)
     except ValueError as err:
-        p.error(f"FOLDER: {err}")
+        p.error(f"FOLDER: {err}" + ("; the default folders are repository-relative: run from the repository root"
+                                    if Path.cwd().resolve() != ROOT else ""))
     robots = args.robots if args.robots is not None else sorted(
         {j.robot for j in walkers}, key=lambda r: (ROBOT_ORDER.index(r) if r in ROBOT_ORDER else 99, r))
     try:
