@@ -66,8 +66,8 @@ ROBOTS = ("humanoid", "ant")
 """The robots v2 is calibrated for (each shipped robot with a base policy)."""
 
 V2_LEVELS: dict[str, dict[str, tuple[float, ...]]] = {
-    # measured: picked by calibration.select_levels from the first GPU run's candidate grids
-    # (docs/results/suite_v2/candidates_h200_2026-11-29/; its values to the 6 significant digits of its CSVs)
+    # measured: picked by calibration.select_levels from the GPU runs' candidate grids (the humanoid's:
+    # docs/results/suite_v2/candidates_h200_2026-11-29/, its values to the 6 significant digits of its CSVs)
     "humanoid": {
         "slope_up": (0.0936842, 0.102105, 0.110526, 0.118947, 0.127368, 0.135789, 0.152632, 0.161053, 0.177895,
             0.194737),
@@ -91,21 +91,20 @@ V2_LEVELS: dict[str, dict[str, tuple[float, ...]]] = {
             0.09),
     },
     "ant": {
+        # re-selected from the candidate grid walked with MuJoCo Warp's heightfield patched (local origin; the first
+        # run's stock kernel buried the ant's feet: docs/results/suite_v2/ant_patched_h200_2026-11-29/)
+        # slope_up: the first run's (stock) levels until a wider grid is walked: patched, the base policy still
+        # scores 0.91 at grade 0.32, the top of the candidate range, so no level 9 <= 0.3 exists in it yet
         "slope_up": (0.23, 0.234737, 0.239474, 0.244211, 0.253684, 0.258421, 0.267895, 0.277368, 0.282105, 0.296316),
-        "slope_down": (0.2, 0.242105, 0.263158, 0.284211, 0.326316, 0.368421, 0.410526, 0.431579, 0.452632, 0.515789),
-        "stairs_up": (0.01, 0.0117078, 0.0137073, 0.0160482, 0.0187889, 0.0219977, 0.0257544, 0.0483897, 0.0566536,
-            0.106446),
-        "stairs_down": (0.01, 0.0117078, 0.0137073, 0.066329, 0.0776566, 0.0909188, 0.106446, 0.124625, 0.145908,
-            0.170826),
-        "boxes": (0.202869, 0.231711, 0.302281, 0.345258, 0.394344, 0.450409, 0.514446, 0.587586, 0.671125, 0.766542),
-        "obstacles": (0.131833, 0.148818, 0.167991, 0.189635, 0.214067, 0.241647, 0.27278, 0.307924, 0.347596,
-            0.39238),
-        "stepping_stones": (0.002, 0.00260352, 0.00338916, 0.00441188, 0.00574321, 0.0616502, 0.0802538, 0.135997,
-            0.230457, 0.3),
-        "gaps": (0.002, 0.00265968, 0.00353694, 0.00470357, 0.00625499, 0.00831812, 0.0813613, 0.108197, 0.143885,
-            0.338387),
-        "waves": (0.2, 0.22, 0.24, 0.26, 0.28, 0.32, 0.34, 0.36, 0.38, 0.4),
-        "rough": (0.05, 0.0553922, 0.061366, 0.0753157, 0.0924364, 0.102405, 0.139238, 0.189319, 0.257414, 0.35),
+        "slope_down": (0.2421, 0.2632, 0.2842, 0.3053, 0.3474, 0.3895, 0.4105, 0.4316, 0.4737, 0.5368),
+        "stairs_up": (0.01, 0.01171, 0.01371, 0.01605, 0.01879, 0.022, 0.07766, 0.1064, 0.1246, 0.1459),
+        "stairs_down": (0.01, 0.01171, 0.01371, 0.01605, 0.07766, 0.09092, 0.1064, 0.1246, 0.1459, 0.1708),
+        "boxes": (0.1362, 0.1555, 0.1776, 0.2029, 0.2317, 0.2647, 0.3023, 0.3453, 0.3943, 0.4504),
+        "obstacles": (0.1488, 0.168, 0.1896, 0.2141, 0.2416, 0.2728, 0.3079, 0.3476, 0.3924, 0.4429),
+        "stepping_stones": (0.002, 0.002604, 0.003389, 0.06165, 0.08025, 0.1045, 0.136, 0.177, 0.2305, 0.3),
+        "gaps": (0.002, 0.00266, 0.003537, 0.004704, 0.006255, 0.1439, 0.1913, 0.2545, 0.3384, 0.45),
+        "waves": (0.22, 0.24, 0.26, 0.28, 0.3, 0.32, 0.34, 0.4, 0.48, 0.5),
+        "rough": (0.09244, 0.1024, 0.1257, 0.1392, 0.1543, 0.1709, 0.1893, 0.2097, 0.2324, 0.2574),
     },
 }
 """v2's levels: ``{robot: {family: the family's value at levels 0..9}}``, each robot's base policy from level 0

@@ -47,6 +47,19 @@ def test_the_candidate_terrains_are_v2s_terrains(cal):
     assert [r[2] for r in rows] == list(suite.V2_LEVELS["humanoid"]["boxes"])
 
 
+def test_a_range_replaces_one_familys_grid_and_bad_ranges_are_one_line(cal, capsys):
+    fam, spec = cal.parse_range("slope_up=geo:0.3:1.0")
+    assert (fam, spec) == ("slope_up", ("geo", 0.3, 1.0))
+    _, rows = cal.build("ant", "candidates", 3, 1, 96, ["slope_up", "boxes"], {fam: spec})
+    np.testing.assert_allclose([r[2] for r in rows[:3]], cal.grid_values(spec, 3))
+    np.testing.assert_allclose([r[2] for r in rows[3:]], cal.grid_values(cal.CANDIDATES["ant"]["boxes"], 3))
+    for text, why in (("flat=lin:0:1", "FAMILY must be one of"), ("slope_up=log:0.3:1", "lin|geo:LO:HI"),
+                      ("slope_up=geo:0.3:x", "must be numbers"), ("slope_up=geo:0.3:2", "0.02 <= LO < HI <= 1")):
+        with pytest.raises(SystemExit) as stop:
+            cal.main(["--range", text])
+        assert stop.value.code == 2 and why in capsys.readouterr().err, text
+
+
 def write_fitness(folder: Path, robot: str, curves: dict, grid: str = "candidates"):
     """``fitness_<robot>.csv`` and ``timing_<robot>.json`` as ``walk`` writes them: ``curves`` {family: (values,
     [values, seeds] fitness)}."""

@@ -111,8 +111,9 @@ RATES = {
                                  "for a GPU, 30 s-2 min), added once per 8-minute command; not measured"),
     "build_s": (31.0, "measured: suite v2's build, the humanoid's 25.2-31.0 s, the ant's 2.8-29.1 s, on the GPU "
                       "machines, 2026-11-29 (suite_v2/warp_progress, builds.jsonl)"),
-    "ant_eval_factor": (1.4, "measured: the ant's base-policy walks of suite v2 under Warp (stock kernel), one "
-                             "process, 15.0-15.8 s against the humanoid's median 10.9 s, one H200, 2026-11-29"),
+    "ant_eval_factor": (1.76, "measured: the ant's walkers on suite v2 under Warp with the local-origin patch, one "
+                              "process, median 20.6 s (20.4-21.2, 9 walks) against the humanoid's 11.7 s in the "
+                              "same lease, one H200, 2026-11-29 (benchmarks/RESULTS.md)"),
 }
 """The figures ``--plan`` predicts from: ``name: (value or (low, high), where it comes from)``."""
 

@@ -96,8 +96,30 @@ def grid_values(spec: tuple[str, float, float], n: int) -> np.ndarray:
     return np.array([float(f"{x:.4g}") for x in v])
 
 
-def plan(robot: str, grid: str, values: int, families) -> dict[str, np.ndarray]:
-    """``{family: [values] the values walked}`` for ``robot`` (``flat``: its one value)."""
+def parse_range(text: str) -> tuple[str, tuple[str, float, float]]:
+    """``"FAMILY=SPACING:LO:HI"`` (e.g. ``slope_up=geo:0.3:1.0``) as ``(family, (spacing, lo, hi))``; ValueError in
+    one line naming what is wrong (an unknown or ungraded family, a spacing other than lin / geo, bounds outside the
+    family's range of :data:`~jaxterrain.suite.families.FAMILIES_V2` or not increasing)."""
+    fam, _, spec = text.partition("=")
+    parts = spec.split(":")
+    if fam not in FAMILIES_V2 or FAMILIES_V2[fam].levels == 1:
+        graded = ", ".join(f for f, x in FAMILIES_V2.items() if x.levels > 1)
+        raise ValueError(f"--range {text}: FAMILY must be one of {graded}")
+    if len(parts) != 3 or parts[0] not in ("lin", "geo"):
+        raise ValueError(f"--range {text}: give FAMILY=lin|geo:LO:HI")
+    try:
+        lo, hi = float(parts[1]), float(parts[2])
+    except ValueError:
+        raise ValueError(f"--range {text}: LO and HI must be numbers") from None
+    f = FAMILIES_V2[fam]
+    if not f.lo <= lo < hi <= f.hi:
+        raise ValueError(f"--range {text}: need {f.lo:g} <= LO < HI <= {f.hi:g} ({fam}'s {f.unit} in v2)")
+    return fam, (parts[0], lo, hi)
+
+
+def plan(robot: str, grid: str, values: int, families, ranges: dict | None = None) -> dict[str, np.ndarray]:
+    """``{family: [values] the values walked}`` for ``robot`` (``flat``: its one value); ``ranges`` ``{family:
+    (spacing, lo, hi)}`` replaces the grid's range of those families (``--range``; not for ``--grid v2``)."""
     out = {}
     for f in families:
         if FAMILIES_V2[f].levels == 1:
@@ -105,14 +127,14 @@ def plan(robot: str, grid: str, values: int, families) -> dict[str, np.ndarray]:
         elif grid == "v2":
             out[f] = np.asarray(V2_LEVELS[robot][f], np.float64)
         else:
-            out[f] = grid_values(GRIDS[grid][robot][f], values)
+            out[f] = grid_values((ranges or {}).get(f) or GRIDS[grid][robot][f], values)
     return out
 
 
-def build(robot: str, grid: str, values: int, seeds: int, size: int, families):
+def build(robot: str, grid: str, values: int, seeds: int, size: int, families, ranges: dict | None = None):
     """``(heightmaps [N, size, size], rows [(family, index, value, unit, seed)])``: v2's terrains of the plan."""
     maps, rows = [], []
-    for f, vals in plan(robot, grid, values, families).items():
+    for f, vals in plan(robot, grid, values, families, ranges).items():
         for i, v in enumerate(vals):
             for s in range(seeds if FAMILIES_V2[f].levels > 1 else 1):
                 maps.append(v2_terrain(f, float(v), s, size))
@@ -130,7 +152,7 @@ def walk(robot: str, args, out: Path) -> None:
 
     t0 = time.perf_counter()
     policy = difficulty.robot_base_policy(robot)
-    maps, rows = build(robot, args.grid, args.values, args.seeds, args.size, args.families)
+    maps, rows = build(robot, args.grid, args.values, args.seeds, args.size, args.families, args.ranges)
     build_s = time.perf_counter() - t0
     protocol = difficulty.Protocol(args.attempts, args.best, args.headings)
     print(f"{robot}: {len(rows)} terrains at {args.size} px built in {build_s:.1f} s; walking {protocol.attempts} "
@@ -143,6 +165,8 @@ def walk(robot: str, args, out: Path) -> None:
                      [(robot, f, i, f"{v:.6g}", u, s, f"{x:.4f}") for (f, i, v, u, s), x in zip(rows, fit)])
     timing = {"robot": robot, "grid": args.grid, "terrains": len(rows), "size": args.size,
               "protocol": protocol._asdict(), "backend": args.backend, "slots": args.slots, "build_s": round(build_s, 2),
+              "ranges": {f: list(r) for f, r in args.ranges.items()},
+              **({"warp_hfield": provenance.warp_hfield()} if args.backend == "warp" else {}),
               "walk_s_with_compile": round(walk_s, 2), "device": provenance.device(),
               "commit": provenance.git_commit(short=True)}
     atomic_write_text(out / f"timing_{robot}.json", json.dumps(timing, indent=2) + "\n")
@@ -182,7 +206,8 @@ def summarise(out: Path, grid: str) -> None:
     for rb, fams in data.items():
         t = timing.get(rb, {})
         lines = pages[rb] = []
-        lines += [f"{t.get('terrains', '?')} terrains ({t.get('grid', grid)} grid), walked on "
+        ranges = "".join(f"; {f} over {r[1]:g} .. {r[2]:g} ({r[0]})" for f, r in t.get("ranges", {}).items())
+        lines += [f"{t.get('terrains', '?')} terrains ({t.get('grid', grid)} grid{ranges}), walked on "
                   f"{t.get('device', '?')} at commit {t.get('commit', '?')}, {t.get('backend', '?')}, "
                   f"{t.get('walk_s_with_compile', '?')} s with the compile; build {t.get('build_s', '?')} s.", ""]
         lines += ["| family | unit | values walked | level 0 | last level | largest rise (at level) | checks | "
@@ -210,7 +235,8 @@ def summarise(out: Path, grid: str) -> None:
                 lines.append(f"| {f} | {unit} | {vals.size} | {c['level0']:.3f} | {c['last']:.3f} | "
                              f"{c['max_rise']:+.3f} ({c['rise_at']}) | {marks} ({note}) | {levels} |")
             else:
-                geo = GRIDS.get(grid, CANDIDATES).get(rb, {}).get(f, ("lin",))[0] == "geo" and vals[0] > 0
+                spec = t.get("ranges", {}).get(f) or GRIDS.get(grid, CANDIDATES).get(rb, {}).get(f, ("lin",))
+                geo = spec[0] == "geo" and vals[0] > 0
                 prop = calibration.propose_values(vals, means, geometric=geo)
                 if prop is None:
                     why = "**FAIL**: the grid does not span 0.88 .. 0.22 (range " + \
@@ -314,6 +340,9 @@ def main(argv=None) -> int:
     p.add_argument("--slots", type=int, default=16384, help="rollout pool (default 16384; 0: all walks at once)")
     p.add_argument("--chunk", type=int, default=None)
     p.add_argument("--seed", type=int, default=0, help="the evaluation key's seed")
+    p.add_argument("--range", action="append", default=[], metavar="FAMILY=SPACING:LO:HI", dest="range_",
+                   help="replace the grid's range of one family (repeatable), e.g. slope_up=geo:0.3:1.0; recorded "
+                        "in timing_<robot>.json (not with --grid v2)")
     p.add_argument("--select", type=Path, default=None, metavar="FOLDER",
                    help="only rewrite FOLDER's page, figure and levels.json from its fitness CSVs (CPU)")
     args = p.parse_args(argv)
@@ -323,6 +352,12 @@ def main(argv=None) -> int:
         grids = {json.loads(t.read_text()).get("grid") for t in args.select.glob("timing_*.json")}
         summarise(args.select, grids.pop() if len(grids) == 1 else args.grid)
         return 0
+    try:
+        args.ranges = dict(parse_range(r) for r in args.range_)
+    except ValueError as err:
+        p.error(str(err))
+    if args.ranges and args.grid == "v2":
+        p.error("--range: not with --grid v2 (v2's levels are walked as they are)")
     bad = [r for r in args.robots if r not in V2_LEVELS]
     if bad:
         p.error(f"--robots: unknown {', '.join(bad)}; choose from {', '.join(V2_LEVELS)}")
