@@ -64,6 +64,7 @@ from jaxterrain.runtime import provenance
 from jaxterrain.runtime.io import atomic_save_npz, atomic_write_bytes, atomic_write_text
 from jaxterrain.suite.evaluation import evaluate_policies
 from jaxterrain.suite.heldout import Suite
+from jaxterrain.walker import WalkerConfig
 from jaxterrain.suite.outputs import write_evaluation
 from jaxterrain.terrain import TerrainScale
 
@@ -363,6 +364,7 @@ def run(jobs: Sequence[Job], store: Store, suites: Callable[[str], Suite], *, ti
     walked, stopped = [], None
     device, commit = provenance.device(), provenance.git_commit()
     engine = {"warp_hfield": provenance.warp_hfield()} if backend == "warp" else {}
+    engine["spawn"] = WalkerConfig().spawn  # the rule evaluate_policies' walkers spawn by (the library default)
     for i, job in enumerate(pending):
         p = policies[job.name]
         need = 0.0

@@ -24,7 +24,7 @@ Per-env terrains as tiles of one heightfield (needed by the MuJoCo Warp backend,
 
 from jaxterrain.walker import robots
 from jaxterrain.walker.robots import RobotSpec, register_robot
-from jaxterrain.walker.config import (BACKENDS, OBSERVATIONS, SCAN_FIELDS, WalkerConfig, flat_terrain,
+from jaxterrain.walker.config import (BACKENDS, OBSERVATIONS, SCAN_FIELDS, SPAWNS, WalkerConfig, flat_terrain,
                                       min_terrain_side, observation_fields, observation_label, resolve_config,
                                       with_observation)
 from jaxterrain.walker.env import WalkerEnv, WalkerState
@@ -77,6 +77,7 @@ __all__ = [
     "smoothness_priority",
     "BACKENDS",
     "OBSERVATIONS",
+    "SPAWNS",
     "SCAN_FIELDS",
     "observation_fields",
     "observation_label",

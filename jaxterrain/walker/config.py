@@ -10,8 +10,11 @@ Physical choices (all in :class:`WalkerConfig`):
   uniform in ``[-start_spread, start_spread]``, drawn from the reset key; the default 0 draws nothing), facing +x,
   joints at the XML pose plus uniform noise of ``joint_noise`` rad (clipped into the joint ranges) and joint
   velocities with noise ``qvel_noise`` rad/s; the body is lowered so that its lowest foot sphere sits
-  ``spawn_clearance`` above the highest terrain sample in a 0.5 m x 0.5 m patch under the start point (forward
-  kinematics per reset).
+  ``spawn_clearance`` above the highest terrain sample in a 0.5 m x 0.5 m patch under the start point and, with
+  ``spawn="feet"`` (the default), so that every foot sphere's bottom is ``spawn_clearance`` above the highest terrain
+  under it (its centre and four points a radius away); ``spawn="patch"``, the rule of every run before 2026-11-29
+  (late), started the ant with a foot cut into rising ground on 28 % of suite v2's resets (its feet stand ~0.6 m
+  from its torso; ``docs/results/suite_v2/spawn_check/``). Forward kinematics per reset.
 - Termination (``done = 1``): a fall (torso height above the terrain under it outside ``healthy_z_range``, or the
   torso leaving the sides / the back of the heightfield), reaching ``x_goal = radius_x - goal_margin``, the time
   limit ``episode_length`` env steps, or invalid physics (non-finite state or ``|qvel| > max_qvel``) or a
@@ -44,13 +47,16 @@ from jaxterrain.walker.model import SOLVER_SOUND, SolverOptions, TerrainScale, c
 from jaxterrain.walker.randomisation import Randomisation, check_randomisation
 from jaxterrain.walker.robots import ROBOT_FIELDS, get as get_robot
 
-__all__ = ["BACKENDS", "OBSERVATIONS", "SCAN_FIELDS", "WalkerConfig", "with_observation", "observation_fields",
+__all__ = ["BACKENDS", "OBSERVATIONS", "SPAWNS", "SCAN_FIELDS", "WalkerConfig", "with_observation", "observation_fields",
            "observation_label", "resolve_config", "check_config", "min_terrain_side", "check_real", "flat_terrain"]
 
 BACKENDS = ("jax", "warp")
 OBSERVATIONS = ("blind", "perceptive")
 """The observation sets: ``blind`` (torso height, orientation, joint angles and velocities: the paper's) and
 ``perceptive`` (the same, then a height scan: terrain heights minus torso z on a grid in the heading frame)."""
+SPAWNS = ("feet", "patch")
+"""The spawn rules (:class:`WalkerConfig` ``spawn``): ``feet`` (every foot clear of the terrain under it; default)
+and ``patch`` (the lowest foot clear of the 0.5 m patch under the torso only: every run before 2026-11-29, late)."""
 SCAN_FIELDS = ("observation", "scan_x", "scan_y", "scan_points")
 """The :class:`WalkerConfig` fields that define what a policy observes: a policy walks only an env with the same
 values (:func:`observation_fields`); ``scan_noise`` changes the values, not their meaning, and may differ."""
@@ -73,6 +79,7 @@ class WalkerConfig(NamedTuple):
     side_margin: Optional[float] = None  # fall when |y| > radius_y - side_margin (humanoid: 0.3; the ant: 1.3)
     start_spread: float = 0.0  # start y uniform in [-start_spread, start_spread] m (0: y = 0, no key drawn)
     spawn_clearance: float = 0.01  # lowest foot this far above the highest terrain under the start
+    spawn: str = "feet"  # SPAWNS: "feet" (each foot clear of the terrain under it too) | "patch" (before 2026-11-29)
     # termination
     healthy_z_range: Optional[tuple[float, float]] = None  # torso z minus terrain height under it (humanoid: 1, 2)
     max_qvel: float = 500.0  # |qvel| beyond this = exploding physics
@@ -229,6 +236,8 @@ def check_config(c: WalkerConfig) -> None:
     check_real("start_spread (metres)", c.start_spread, 0.0)
     if not isinstance(c.observation, str) or c.observation not in OBSERVATIONS:
         raise ValueError(f"observation must be one of {', '.join(OBSERVATIONS)}, got {c.observation!r}")
+    if not isinstance(c.spawn, str) or c.spawn not in SPAWNS:
+        raise ValueError(f"spawn must be one of {', '.join(SPAWNS)}, got {c.spawn!r}")
     for name in ("scan_x", "scan_y"):
         lo, hi = _pair(name, getattr(c, name))
         if not check_real(name, lo) <= check_real(name, hi):

@@ -188,9 +188,10 @@ class WalkerEnv:
         self.observation_size = 1 + 4 + (m.nq - 7) + m.nv
         if config.observation == "perceptive":
             self.observation_size += int(config.scan_points[0] * config.scan_points[1])
-        # spawn patch: 0.5 m x 0.5 m around the start point
-        px, py = np.meshgrid(np.linspace(-0.25, 0.25, 5), np.linspace(-0.25, 0.25, 5))
+        px, py = np.meshgrid(np.linspace(-0.25, 0.25, 5), np.linspace(-0.25, 0.25, 5))  # the 0.5 m spawn patch
         self._patch = (np.float32(self.x_start) + px.ravel().astype(np.float32), py.ravel().astype(np.float32))
+        ring = ([0, 1, -1, 0, 0], [0, 0, 0, 1, -1])  # spawn="feet": under a foot, its centre and +-radius in x, y
+        self._foot_ring = tuple(self._foot_radius[:, None] * np.float32(r) for r in ring)  # [feet, 5] x, y offsets
         sx, sy = np.meshgrid(np.linspace(*config.scan_x, config.scan_points[0]),
                              np.linspace(*config.scan_y, config.scan_points[1]), indexing="ij")
         self._scan = (sx.ravel().astype(np.float32), sy.ravel().astype(np.float32))
@@ -365,11 +366,14 @@ class WalkerEnv:
             qpos = qpos.at[1].set(oy + y0)
         qvel = jnp.concatenate([jnp.zeros(6), jax.random.uniform(key_v, (self.mj_model.nv - 6,),
                                                                  minval=-c.qvel_noise, maxval=c.qvel_noise)])
-        data = self._make_data().replace(qpos=qpos, qvel=qvel)
-        data = mjx.kinematics(m, data)
-        foot_bottom = jnp.min(data.geom_xpos[self._feet, 2] - self._foot_radius)  # torso at z = 0
-        ground = jnp.max(heights(self._patch[0], patch_y))
-        qpos = qpos.at[2].set(ground - foot_bottom + c.spawn_clearance)
+        data = mjx.kinematics(m, self._make_data().replace(qpos=qpos, qvel=qvel))
+        bottoms = data.geom_xpos[self._feet, 2] - self._foot_radius  # [feet], torso at z = 0
+        lift = jnp.max(heights(self._patch[0], patch_y)) - jnp.min(bottoms)
+        if c.spawn == "feet":  # every foot clear of the terrain under it (xy does not move when the body is lifted)
+            g = data.geom_xpos[self._feet]  # [feet, 3] world; heights() takes tile-local x, y
+            fx, fy = g[:, :1] - ox + self._foot_ring[0], g[:, 1:2] - oy + self._foot_ring[1]
+            lift = jnp.maximum(lift, jnp.max(jnp.max(heights(fx.ravel(), fy.ravel()).reshape(fx.shape), 1) - bottoms))
+        qpos = qpos.at[2].set(lift + c.spawn_clearance)
         data = mjx.kinematics(m, data.replace(qpos=qpos))
         zero = jnp.zeros((), jnp.float32)
         metrics = {"forward_reward": zero, "reward_alive": zero, "reward_quadctrl": zero, "x_velocity": zero,

@@ -15,6 +15,7 @@ import numpy as np
 import pytest
 
 from jaxterrain import suite
+from jaxterrain.runtime.io import atomic_save_npz
 from jaxterrain.suite import batch
 from reevaluate_v2 import args, exp, load_script, RESULTS, ROOT  # exp: a fixture
 
@@ -156,10 +157,22 @@ def test_write_refuses_a_group_walked_on_two_heightfield_kernels(script, exp, ca
     assert script.main([*warp, "--write"]) == 1
     out, err = capsys.readouterr()
     assert "2 evaluations written" in out and err.strip().splitlines() == [
-        "not written, walks on different MuJoCo Warp heightfield kernels: exp/a (1 local-origin patch, 1 stock); "
-        "walk them again on one (runs/v2eval/results/<walk>.npz: remove the odd ones)"]
+        "not written, walks on different MuJoCo Warp heightfield kernels or spawn rules: exp/a (1 kernel local-origin "
+        "patch, 1 kernel stock, 2 spawn feet); walk them again on one (runs/v2eval/results/<walk>.npz: remove the odd "
+        "ones)"]
     assert not (exp / "exp" / "a" / "heldout_v2").exists()
     assert json.loads((exp / "exp" / "b" / "heldout_v2" / "config.json").read_text())["warp_hfield"] == "stock"
     assert script.main([*warp, "--plan"]) == 0
     plan = capsys.readouterr().out
     assert "exp/a: 1/1 walked [1 local-origin patch]" in plan and "base:humanoid: 2/2 walked written [2 stock]" in plan
+    # a walk recorded before the spawn rule was (the patch rule) beside one spawned by the default rule ("feet")
+    assert batch.Store(exp / "work").read("exp/b/policies/trial_0")[1]["spawn"] == "feet"
+    path = a.path("exp/a/policies/trial_0")
+    with np.load(path) as z:
+        fitness, meta = z["fitness"], json.loads(str(z["meta"]))
+    meta.pop("spawn")
+    meta["warp_hfield"] = "stock"
+    atomic_save_npz(path, fitness=fitness, meta=np.array(json.dumps(meta)))
+    capsys.readouterr()
+    assert script.main([*warp, "--write"]) == 1
+    assert "exp/a (2 kernel stock, 1 spawn feet, 1 spawn patch (not recorded))" in capsys.readouterr().err

@@ -65,6 +65,30 @@ def test_the_ant_stands_on_its_four_feet_and_walks_the_heightfield():
     assert not np.any(np.asarray(done)) and 0.2 < float(state.metrics["torso_height"]) < 1.0  # it stays up
 
 
+def test_the_spawn_lifts_every_foot_clear_of_rising_ground_and_the_old_patch_rule_did_not():
+    """The ant's front feet stand ~0.65 m ahead of its torso: on ground rising 0.4 m per m from 0.25 m ahead of the
+    start, the 0.5 m patch under the torso (spawn="patch") sees little of the rise and starts two feet cut into the
+    ramp; spawn="feet" (the default) lifts the body until every foot sphere clears the highest terrain under it."""
+    config = WalkerConfig(terrain_shape=(96, 96), robot="ant")
+    assert config.spawn == "feet"
+    depth = {}
+    for spawn in ("patch", "feet"):
+        env = WalkerEnv(config._replace(spawn=spawn))
+        xs = (np.arange(96) - 47.5) * env.config.scale.cell_size
+        ramp = np.clip((xs - env.x_start - 0.25) * 0.4, 0.0, None)
+        terrain = jnp.asarray(np.broadcast_to(ramp, (96, 96)), jnp.float32)
+        xyz = np.asarray(env.reset(jax.random.key(0), terrain).data.geom_xpos[env._feet])
+        r = env._foot_radius
+        ring = [(0, 0), (1, 0), (-1, 0), (0, 1), (0, -1)]  # the foot's centre and four points a radius away
+        under = np.array([max(float(env.terrain_height(terrain, x + a * rf, y + b * rf)) for a, b in ring)
+                          for (x, y), rf in zip(xyz[:, :2], r)])
+        depth[spawn] = under - (xyz[:, 2] - r)  # > 0: the sphere's bottom is below the ground under it
+    assert (depth["patch"] > 0.05).sum() == 2  # the two front feet, 9-11 cm into the ramp
+    np.testing.assert_allclose(depth["feet"].max(), -config.spawn_clearance, atol=1e-4)  # the highest just clears
+    with pytest.raises(ValueError, match="spawn must be one of feet, patch"):
+        WalkerEnv(config._replace(spawn="torso"))
+
+
 def test_standing_offset_uses_the_robots_start_pose():
     ant = build_model((16, 16), robot="ant")
     # ankles at +-1 rad (brax's init_qpos): the 0.57 m shins reach 0.48 m down, + the 0.08 m foot spheres

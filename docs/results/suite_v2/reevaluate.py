@@ -332,11 +332,26 @@ def kernels(store, names) -> dict[str, int]:
     return out
 
 
+SPAWN_NOT_RECORDED = "patch (not recorded)"
+"""The spawn rule of a walk recorded before ``spawn`` was: every one spawned by the patch rule."""
+
+
+def spawns(store, names) -> dict[str, int]:
+    """How many of the walks ``names`` (all in ``store``) spawned by each rule (``WalkerConfig.spawn``, recorded with
+    each walk; :data:`SPAWN_NOT_RECORDED` before it was)."""
+    out: dict[str, int] = {}
+    for n in names:
+        k = store.read(n)[1].get("spawn", SPAWN_NOT_RECORDED)
+        out[k] = out.get(k, 0) + 1
+    return out
+
+
 def write_groups(store, by_group: dict, args, build: dict) -> int:
     """``--write``: every group whose walks are all in ``store`` written as an evaluation (``batch.write_group``,
     from the store's records: no suite is built); the others named. A group whose walks ran on different MuJoCo
-    Warp heightfield kernels (stock and patched: :func:`kernels`; "stock (not recorded)" counts as stock) is not
-    written: it is named in one line and the exit status is 1."""
+    Warp heightfield kernels (stock and patched: :func:`kernels`; "stock (not recorded)" counts as stock) or by
+    different spawn rules (:func:`spawns`; "patch (not recorded)" counts as patch) is not written: it is named in
+    one line and the exit status is 1."""
     from jaxterrain.suite import batch
 
     config = {"command": "docs/results/suite_v2/reevaluate.py", "suite": args.suite, "attempts": args.attempts,
@@ -354,22 +369,25 @@ def write_groups(store, by_group: dict, args, build: dict) -> int:
         if not all(map(done, rows)):
             waiting.append(f"{group} ({sum(map(done, rows))}/{len(rows)})")
             continue
-        kinds = kernels(store, rows)
-        if len({k.split(" ")[0] for k in kinds}) > 1:
-            mixed.append(f"{group} ({', '.join(f'{n} {k}' for k, n in sorted(kinds.items()))})")
+        kinds, rules = kernels(store, rows), spawns(store, rows)
+        if len({k.split(" ")[0] for k in kinds}) > 1 or len({k.split(" ")[0] for k in rules}) > 1:
+            both = {**{f"kernel {k}": n for k, n in kinds.items()}, **{f"spawn {k}": n for k, n in rules.items()}}
+            mixed.append(f"{group} ({', '.join(f'{n} {k}' for k, n in sorted(both.items()))})")
             continue
         if written(folder, rows):
             continue
         batch.write_group(store, rows, folder, store.suite(robot), labels,
                           {**config, "robot": robot, "keys": len(js) if group.startswith("base:") else 1,
                            "policy": [] if group.startswith("base:") else names,
-                           **({"warp_hfield": next(iter(kinds))} if kinds else {})})
+                           **({"warp_hfield": next(iter(kinds))} if kinds else {}),
+                           "spawn": next(iter(rules)).split(" ")[0]})
         wrote += 1
         print(f"{group}: {folder}", flush=True)
     print(f"{wrote} evaluations written" + (f"; not yet walked: {', '.join(waiting)}" if waiting else ""), flush=True)
     if mixed:
-        print(f"not written, walks on different MuJoCo Warp heightfield kernels: {'; '.join(mixed)}; walk them again "
-              "on one (runs/v2eval/results/<walk>.npz: remove the odd ones)", file=sys.stderr, flush=True)
+        print(f"not written, walks on different MuJoCo Warp heightfield kernels or spawn rules: {'; '.join(mixed)}; "
+              "walk them again on one (runs/v2eval/results/<walk>.npz: remove the odd ones)", file=sys.stderr,
+              flush=True)
         return 1
     return 0
 
