@@ -1,13 +1,14 @@
-"""Where each robot's spawn starts a foot under the terrain, on suite v2 (CPU, kinematics only, a minute or two).
+"""Where each robot's spawn starts a foot under the terrain, on suite v2 or v1 (CPU, kinematics only, a minute or two).
 
     PYTHONPATH=. python docs/results/suite_v2/spawn_check.py --out docs/results/suite_v2/spawn_check
+    PYTHONPATH=. python docs/results/suite_v2/spawn_check.py --suite v1 --out docs/results/suite_v2/spawn_check_v1
 
 Under ``spawn="patch"`` (every run before 2026-11-29, late) the walker's reset lowers the body until its lowest foot
 sphere sits ``spawn_clearance`` above the highest terrain sample of a 0.5 m x 0.5 m patch under the torso
 (:mod:`jaxterrain.walker.config`), so a foot that stands further out (the ant's stand about 0.6 m from its torso) can
 start under the terrain where the ground rises; ``spawn="feet"`` (the default since) lifts every foot clear of the
 terrain under it. ``--spawn`` picks the rules to measure (default both). For every terrain of
-``suite.load("v2", robot=...)`` and each of the HEADINGS protocol's four quarter turns, this resets the walker with
+``suite.load(--suite, robot=...)`` and each of the HEADINGS protocol's four quarter turns, this resets the walker with
 ``--keys`` keys (the joint noise moves the feet) and measures each foot's depth: the terrain height under the foot's
 centre minus the bottom of its sphere (> 0: the sphere cuts into the ground; > its radius: its centre is under the
 surface, the case where MuJoCo Warp's stock heightfield kernel returned contacts metres deep). Writes
@@ -26,7 +27,7 @@ from pathlib import Path
 import numpy as np
 
 
-def depths(robot: str, keys: int, size: int | None, spawn: str):
+def depths(robot: str, keys: int, size: int | None, spawn: str, version: str = "v2"):
     """``(suite, [terrains, turns, keys] deepest foot depth in m, foot radius)`` for ``robot``'s v2 suite under the
     spawn rule ``spawn``."""
     import jax
@@ -36,7 +37,7 @@ def depths(robot: str, keys: int, size: int | None, spawn: str):
     from jaxterrain.difficulty.protocol import HEADING_TURNS
     from jaxterrain.walker import WalkerEnv
 
-    s = suite.load("v2", robot=robot, size=size)
+    s = suite.load(version, robot=robot if suite.VERSIONS[version]["robot"] is not None else None, size=size)
     policy = difficulty.robot_base_policy(robot)
     env = WalkerEnv(difficulty.default_env_config(tuple(s.heightmaps.shape[1:]), s.scale, policy)._replace(spawn=spawn))
     feet, radius = env._feet, env._foot_radius
@@ -59,6 +60,7 @@ def main(argv=None) -> int:
     p.add_argument("--out", type=Path, default=Path("runs/spawn_check"))
     p.add_argument("--robots", nargs="+", default=["humanoid", "ant"], choices=("humanoid", "ant"))
     p.add_argument("--keys", type=int, default=2, help="reset keys per terrain and turn (default 2)")
+    p.add_argument("--suite", default="v2", choices=("v1", "v2"), help="held-out suite (default v2)")
     p.add_argument("--size", type=int, default=None, help="terrain side (a smaller build, for a test)")
     p.add_argument("--spawn", nargs="+", default=["patch", "feet"], choices=("patch", "feet"), help="spawn rules")
     args = p.parse_args(argv)
@@ -67,14 +69,14 @@ def main(argv=None) -> int:
     from jaxterrain.runtime.io import atomic_write_csv, atomic_write_text
 
     args.out.mkdir(parents=True, exist_ok=True)
-    lines = ["# Suite v2: feet under the terrain at the spawn", "",
+    lines = [f"# Suite {args.suite}: feet under the terrain at the spawn", "",
              "Written by `docs/results/suite_v2/spawn_check.py` (CPU, kinematics only). Per family: resets (terrains x "
              "4 turns x keys) whose deepest foot cuts into the terrain by more than 1 cm, whose deepest foot's centre "
              "is under the surface, and the deepest depth (m).", ""]
     for robot in args.robots:
         rows, table = [], {}
         for spawn in args.spawn:
-            s, d, r = depths(robot, args.keys, args.size, spawn)
+            s, d, r = depths(robot, args.keys, args.size, spawn, args.suite)
             table[spawn] = d
             rows += [(spawn, s.family[i], int(s.level[i]), int(s.seed[i]), t, k, f"{d[i, t, k]:.4f}")
                      for i in range(d.shape[0]) for t in range(d.shape[1]) for k in range(d.shape[2])]
