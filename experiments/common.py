@@ -705,14 +705,15 @@ def record_provenance(folder: Path, command: str, options: dict | None = None, r
     JAX devices, the process count and jax's version; where the run's walker ``backend`` (its config's, ``auto``
     resolved here by ``jaxterrain.walker.resolve_backend``) is ``warp``, also ``warp_hfield``: which heightfield
     collision MuJoCo Warp runs (``provenance.warp_hfield``: ``"local-origin patch"`` after ``warp-patch``, or
-    ``"stock"``). One ``write`` of a line opened for appending, so processes that share a run folder (``--shard``)
+    ``"stock"``); and ``spawn``, the walkers' spawn rule (``WalkerConfig().spawn``). One ``write`` of a line opened
+    for appending, so processes that share a run folder (``--shard``)
     each add theirs; in a multi-process JAX run only process 0 writes."""
     import os
 
     import jax
 
     from jaxterrain.runtime import provenance
-    from jaxterrain.walker import resolve_backend
+    from jaxterrain.walker import WalkerConfig, resolve_backend
 
     given = {k: v for k, v in (options or {}).items() if v is not None}
     line = {"time": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"), "command": command,
@@ -720,6 +721,7 @@ def record_provenance(folder: Path, command: str, options: dict | None = None, r
             "devices": provenance.device(), "processes": jax.process_count(), "jax": jax.__version__}
     if isinstance(backend, str) and resolve_backend(backend) == "warp":
         line["warp_hfield"] = provenance.warp_hfield()
+    line["spawn"] = WalkerConfig().spawn  # the walkers' spawn rule (the commands' walkers take the default)
     if jax.process_index() == 0:
         fd = os.open(Path(folder) / PROVENANCE_NAME, os.O_WRONLY | os.O_CREAT | os.O_APPEND, 0o644)
         try:

@@ -221,8 +221,9 @@ def export_policies(folder: Path, run, config, ppo, env, start_policy, bank, sta
     its file's sha256; None, and ``terrain_folder`` the folder, for a run on a folder of heightmaps), the starting
     policy (the same way), the selector, the trial, its seed, the epochs and env steps it trained, its terrain
     sequence (bank indices, cells, distances and generators in the order trained), the hardest
-    terrain it traversed, the chunk of the run; and ``provenance`` (commit, device, date; for a walker trained on MuJoCo
-    Warp, ``warp_hfield``: its heightfield collision, ``runtime.provenance.warp_hfield``). ``run`` is the treatment's
+    terrain it traversed, the chunk of the run; and ``provenance`` (commit, device, date, the walker's ``spawn`` rule;
+    for a walker trained on MuJoCo Warp, ``warp_hfield``: its heightfield collision, ``runtime.provenance.warp_hfield``).
+    ``run`` is the treatment's
     ``LearnConfig``, ``ppo`` the fine-tuning PPOConfig (the networks' shapes); ``env`` the walker env (observation and action sizes). Returns the
     folders, in trial order."""
     hist = histories(states)
@@ -257,7 +258,8 @@ def export_policies(folder: Path, run, config, ppo, env, start_policy, bank, sta
             },
             "provenance": {"commit": provenance.git_commit(), "device": provenance.device(),
                            "date": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),
-                           **({"warp_hfield": provenance.warp_hfield()} if env.backend == "warp" else {})},
+                           **({"warp_hfield": provenance.warp_hfield()} if env.backend == "warp" else {}),
+                           "spawn": env.config.spawn},
         }
         path = Path(folder) / POLICIES / (subdir or "") / f"trial_{t}"
         out.append(save_policy(path, params, normaliser, ppo, env.observation_size, env.action_size, extra=extra))

@@ -8,8 +8,9 @@ policy and every policy folder walked on the same terrains with the same key, th
     result.fitness                                # [P, N]: the base policy (its keys), then each policy
 
 Writes into the folder: ``fitness.csv``, ``levels.csv``, ``summary.md``, ``levels.png``, ``suite.png``
-(:func:`jaxterrain.suite.write_evaluation`) and ``timing.json`` (seconds, backend, device; on MuJoCo Warp also
-``warp_hfield``, its heightfield collision: ``jaxterrain.runtime.provenance.warp_hfield``); ``videos=`` (e.g.
+(:func:`jaxterrain.suite.write_evaluation`) and ``timing.json`` (seconds, backend, device, the walkers' ``spawn``
+rule; on MuJoCo Warp also ``warp_hfield``, its heightfield collision: ``jaxterrain.runtime.provenance.warp_hfield``);
+``videos=`` (e.g.
 ``jaxterrain.report.compare.evaluation_videos``) adds the run's videos when ``run.videos.on``.
 """
 
@@ -394,7 +395,8 @@ def evaluate_run(run: EvaluateRun | Prepared, folder, videos: Optional[Callable]
               "all_policies_s": round(time.perf_counter() - t1, 3),
               "repeat_equal": None if again is None else bool((first == again).all()),
               "videos_s": videos_s, "device": provenance.device(),
-              **({"warp_hfield": provenance.warp_hfield()} if backend == "warp" else {})}
+              **({"warp_hfield": provenance.warp_hfield()} if backend == "warp" else {}),
+              "spawn": WalkerConfig().spawn}  # the walkers' spawn rule (evaluate's walkers take the default)
     atomic_write_text(folder / "timing.json", json.dumps(timing, indent=2) + "\n")
     said = "" if walk_s is None else f", {walk_s:.1f} s compiled"
     say(f"one policy on {s.size} terrains: {first_s:.1f} s the first call{said} -> {folder}")

@@ -88,6 +88,7 @@ def test_levels_and_summary_follow_from_the_fitness(run):
     assert timing["terrains"] == 11 and timing["policies"] == 3 and timing["walk_s_one_policy"] is None
     assert timing["base_keys"] == 2
     assert timing["backend"] == "jax" and "warp_hfield" not in timing  # recorded for MuJoCo Warp walks only
+    assert timing["spawn"] == "feet"  # the walkers spawned by the default rule
 
 
 def test_a_policy_for_another_robot_is_refused_before_anything_is_written(tmp_path, policies, capsys):

@@ -320,6 +320,7 @@ def test_learn_writes_every_trials_walker_as_a_loadable_policy(tmp_path, learn_s
         assert max(moved) > 0.0, "the trained walker equals the base policy"
         assert (policy.observation_size, policy.action_size) == (base.observation_size, base.action_size)
         assert policy.meta["walker_config"] == base.meta["walker_config"]
+        assert policy.meta["provenance"]["spawn"] == "feet"  # the rule its walker spawned by
         c = policy.meta["curriculum"]
         assert c["trial"] == t and c["selector"] == "map" and c["epochs"] == int(np.asarray(states.epoch)[t])
         assert c["env_steps"] == c["epochs"] * cfg["steps_per_epoch"] and c["epochs"] > 0

@@ -80,6 +80,6 @@ def test_a_warp_runs_provenance_line_names_its_heightfield_collision(tmp_path, m
     args = dict(resume=None, config=None, preset=None, seed=None, out="run")
     folder, _ = common.setup_run("gradient", argparse.Namespace(**args), presets, "default", {})
     (line,) = [json.loads(x) for x in (folder / common.PROVENANCE_NAME).read_text().splitlines()]
-    assert line.get("warp_hfield") == ("stock" if recorded else None)
+    assert line.get("warp_hfield") == ("stock" if recorded else None) and line["spawn"] == "feet"
     assert common.physics({"backend": "warp", "engine": "mujoco"}) is None
     assert common.physics({"rollout_backend": "warp"}) == "warp"
