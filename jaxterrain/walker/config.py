@@ -47,8 +47,9 @@ from jaxterrain.walker.model import SOLVER_SOUND, SolverOptions, TerrainScale, c
 from jaxterrain.walker.randomisation import Randomisation, check_randomisation
 from jaxterrain.walker.robots import ROBOT_FIELDS, get as get_robot
 
-__all__ = ["BACKENDS", "OBSERVATIONS", "SPAWNS", "SCAN_FIELDS", "WalkerConfig", "with_observation", "observation_fields",
-           "observation_label", "resolve_config", "check_config", "min_terrain_side", "check_real", "flat_terrain"]
+__all__ = ["BACKENDS", "OBSERVATIONS", "SPAWNS", "SCAN_FIELDS", "WalkerConfig", "with_observation",
+           "observation_fields", "observation_label", "resolve_config", "check_config", "min_terrain_side",
+           "check_real", "flat_terrain"]
 
 BACKENDS = ("jax", "warp")
 OBSERVATIONS = ("blind", "perceptive")
