@@ -64,9 +64,9 @@ from jaxterrain.runtime import provenance
 from jaxterrain.runtime.io import atomic_save_npz, atomic_write_bytes, atomic_write_text
 from jaxterrain.suite.evaluation import evaluate_policies
 from jaxterrain.suite.heldout import Suite
-from jaxterrain.walker import WalkerConfig
 from jaxterrain.suite.outputs import write_evaluation
 from jaxterrain.terrain import TerrainScale
+from jaxterrain.walker import WalkerConfig
 
 __all__ = ["FORMAT", "FIRST_WALK_S", "BUILD_S", "MARGIN", "Job", "StoreMismatch", "Store", "settings", "walk_key",
            "base_jobs", "walker_jobs", "treatment_folders", "part", "run", "write_group", "pack"]

@@ -40,6 +40,7 @@ import argparse
 import json
 import sys
 import time
+from collections import Counter
 from pathlib import Path
 
 STARTED = time.perf_counter()
@@ -319,38 +320,31 @@ NOT_RECORDED = "stock (not recorded)"
 """The heightfield kernel of a Warp walk recorded before ``warp_hfield`` was (2eb907c): every one was stock."""
 
 
+def recorded(metas, field: str, unrecorded: str) -> dict[str, int]:
+    """How many of the walks' ``metas`` recorded each value of ``field`` (``unrecorded`` for a walk made before the
+    field was recorded)."""
+    return dict(Counter(m.get(field, unrecorded) for m in metas))
+
+
 def kernels(store, names) -> dict[str, int]:
     """How many of the walks ``names`` (all in ``store``) ran on each MuJoCo Warp heightfield kernel
     (``provenance.warp_hfield``, recorded with each walk; :data:`NOT_RECORDED` before it was); ``{}`` for a store of
     MJX-JAX walks."""
     if store.settings["backend"] != "warp":
         return {}
-    out: dict[str, int] = {}
-    for n in names:
-        k = store.read(n)[1].get("warp_hfield", NOT_RECORDED)
-        out[k] = out.get(k, 0) + 1
-    return out
+    return recorded([store.read(n)[1] for n in names], "warp_hfield", NOT_RECORDED)
 
 
 SPAWN_NOT_RECORDED = "patch (not recorded)"
-"""The spawn rule of a walk recorded before ``spawn`` was: every one spawned by the patch rule."""
-
-
-def spawns(store, names) -> dict[str, int]:
-    """How many of the walks ``names`` (all in ``store``) spawned by each rule (``WalkerConfig.spawn``, recorded with
-    each walk; :data:`SPAWN_NOT_RECORDED` before it was)."""
-    out: dict[str, int] = {}
-    for n in names:
-        k = store.read(n)[1].get("spawn", SPAWN_NOT_RECORDED)
-        out[k] = out.get(k, 0) + 1
-    return out
+"""The spawn rule (``WalkerConfig.spawn``) of a walk recorded before ``spawn`` was: every one spawned by the patch
+rule."""
 
 
 def write_groups(store, by_group: dict, args, build: dict) -> int:
     """``--write``: every group whose walks are all in ``store`` written as an evaluation (``batch.write_group``,
     from the store's records: no suite is built); the others named. A group whose walks ran on different MuJoCo
     Warp heightfield kernels (stock and patched: :func:`kernels`; "stock (not recorded)" counts as stock) or by
-    different spawn rules (:func:`spawns`; "patch (not recorded)" counts as patch) is not written: it is named in
+    different spawn rules (:data:`SPAWN_NOT_RECORDED` counts as patch) is not written: it is named in
     one line and the exit status is 1."""
     from jaxterrain.suite import batch
 
@@ -369,7 +363,9 @@ def write_groups(store, by_group: dict, args, build: dict) -> int:
         if not all(map(done, rows)):
             waiting.append(f"{group} ({sum(map(done, rows))}/{len(rows)})")
             continue
-        kinds, rules = kernels(store, rows), spawns(store, rows)
+        metas = [store.read(n)[1] for n in rows]
+        kinds = recorded(metas, "warp_hfield", NOT_RECORDED) if store.settings["backend"] == "warp" else {}
+        rules = recorded(metas, "spawn", SPAWN_NOT_RECORDED)
         if len({k.split(" ")[0] for k in kinds}) > 1 or len({k.split(" ")[0] for k in rules}) > 1:
             both = {**{f"kernel {k}": n for k, n in kinds.items()}, **{f"spawn {k}": n for k, n in rules.items()}}
             mixed.append(f"{group} ({', '.join(f'{n} {k}' for k, n in sorted(both.items()))})")
