@@ -91,20 +91,18 @@ V2_LEVELS: dict[str, dict[str, tuple[float, ...]]] = {
             0.09),
     },
     "ant": {
-        # re-selected from the candidate grid walked with MuJoCo Warp's heightfield patched (local origin; the first
-        # run's stock kernel buried the ant's feet: docs/results/suite_v2/ant_patched_h200_2026-11-29/)
-        # slope_up: the first run's (stock) levels until a wider grid is walked: patched, the base policy still
-        # scores 0.91 at grade 0.32, the top of the candidate range, so no level 9 <= 0.3 exists in it yet
-        "slope_up": (0.23, 0.234737, 0.239474, 0.244211, 0.253684, 0.258421, 0.267895, 0.277368, 0.282105, 0.296316),
-        "slope_down": (0.2421, 0.2632, 0.2842, 0.3053, 0.3474, 0.3895, 0.4105, 0.4316, 0.4737, 0.5368),
-        "stairs_up": (0.01, 0.01171, 0.01371, 0.01605, 0.01879, 0.022, 0.07766, 0.1064, 0.1246, 0.1459),
-        "stairs_down": (0.01, 0.01171, 0.01371, 0.01605, 0.07766, 0.09092, 0.1064, 0.1246, 0.1459, 0.1708),
+        # picked by calibration.select_levels from the ant's candidate grid walked with MuJoCo Warp's heightfield
+        # patched and spawn="feet" (docs/results/suite_v2/ant_feet_h200/)
+        "slope_up": (0.2611, 0.2821, 0.3032, 0.3242, 0.3453, 0.3663, 0.3874, 0.4084, 0.4295, 0.4505),
+        "slope_down": (0.2421, 0.2632, 0.2842, 0.3053, 0.3263, 0.3684, 0.4105, 0.4526, 0.4947, 0.5368),
+        "stairs_up": (0.01, 0.01171, 0.01371, 0.01605, 0.01879, 0.022, 0.09092, 0.1064, 0.1246, 0.1459),
+        "stairs_down": (0.01, 0.01171, 0.01371, 0.06633, 0.07766, 0.09092, 0.1064, 0.1246, 0.1459, 0.1708),
         "boxes": (0.1362, 0.1555, 0.1776, 0.2029, 0.2317, 0.2647, 0.3023, 0.3453, 0.3943, 0.4504),
-        "obstacles": (0.1488, 0.168, 0.1896, 0.2141, 0.2416, 0.2728, 0.3079, 0.3476, 0.3924, 0.4429),
+        "obstacles": (0.1318, 0.1488, 0.168, 0.1896, 0.2141, 0.2416, 0.2728, 0.3079, 0.3476, 0.3924),
         "stepping_stones": (0.002, 0.002604, 0.003389, 0.06165, 0.08025, 0.1045, 0.136, 0.177, 0.2305, 0.3),
         "gaps": (0.002, 0.00266, 0.003537, 0.004704, 0.006255, 0.1439, 0.1913, 0.2545, 0.3384, 0.45),
-        "waves": (0.22, 0.24, 0.26, 0.28, 0.3, 0.32, 0.34, 0.4, 0.48, 0.5),
-        "rough": (0.09244, 0.1024, 0.1257, 0.1392, 0.1543, 0.1709, 0.1893, 0.2097, 0.2324, 0.2574),
+        "waves": (0.22, 0.24, 0.26, 0.28, 0.3, 0.32, 0.36, 0.4, 0.44, 0.5),
+        "rough": (0.1024, 0.1134, 0.1257, 0.1392, 0.1543, 0.1709, 0.1893, 0.2097, 0.2324, 0.2574),
     },
 }
 """v2's levels: ``{robot: {family: the family's value at levels 0..9}}``, each robot's base policy from level 0

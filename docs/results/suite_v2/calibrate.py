@@ -40,6 +40,7 @@ import numpy as np
 from jaxterrain.suite import calibration
 from jaxterrain.suite.families import FAMILIES_V2, misfit
 from jaxterrain.suite.heldout import ROBOTS, V2_LEVELS, v2_terrain
+from jaxterrain.walker import WalkerConfig
 
 CANDIDATES: dict[str, dict[str, tuple[str, float, float]]] = {
     # (spacing, lo, hi): around where v1's curves (docs/results/exp3_gpushort, ant_gpushort) fell from 0.8 to 0.3,
@@ -167,6 +168,7 @@ def walk(robot: str, args, out: Path) -> None:
               "protocol": protocol._asdict(), "backend": args.backend, "slots": args.slots, "build_s": round(build_s, 2),
               "ranges": {f: list(r) for f, r in args.ranges.items()},
               **({"warp_hfield": provenance.warp_hfield()} if args.backend == "warp" else {}),
+              "spawn": WalkerConfig().spawn,  # the rule the walks spawn by (the library default)
               "walk_s_with_compile": round(walk_s, 2), "device": provenance.device(),
               "commit": provenance.git_commit(short=True)}
     atomic_write_text(out / f"timing_{robot}.json", json.dumps(timing, indent=2) + "\n")

@@ -379,6 +379,10 @@ def restate(key: str, spec: dict, root: Path, base_out: Path, reps: int = 2000, 
             "--out", str(root / spec["out"]), "--reps", str(reps), "--permutations", str(permutations)]
     if run and cli(argv) != 0:
         raise ValueError(f"{key}: generalise failed")
+    if run:  # the aggregate's text files name folders repository-relative, as the shown command does
+        for f in (root / spec["out"]).glob("*"):
+            if f.suffix in (".md", ".json") and str(root) + "/" in (text := f.read_text()):
+                f.write_text(text.replace(str(root) + "/", ""))
     shown = ["python -m experiments " + " ".join(a.replace(str(root) + "/", "") for a in argv)]
     v1 = suite_numbers(aggregate(root / spec["v1"]), v1_folders, "heldout", spec["pairs"], spec.get("kept"), None)
     v2 = suite_numbers(aggregate(root / spec["out"]), v2_folders, HELDOUT, spec["pairs"], spec.get("kept"), base)
