@@ -676,14 +676,14 @@ def prepare_run(command: str, args: argparse.Namespace, presets: dict[str, dict]
     if resumed:
         if given:
             write_config(folder, flat)
-        record_provenance(folder, command, vars(args), resumed=True, backend=physics(flat))
+        record_provenance(folder, command, vars(args), resumed=True, backend=physics(flat), spawn=spawn_rule(flat))
         print(f"resuming {folder}", flush=True)
         return folder, flat
     check_out(args.out)
     folder = run_folder(command, args.out)
     folder.mkdir(parents=True, exist_ok=True)
     write_config(folder, flat)
-    record_provenance(folder, command, vars(args), backend=physics(flat))
+    record_provenance(folder, command, vars(args), backend=physics(flat), spawn=spawn_rule(flat))
     print(f"run folder {folder}", flush=True)
     return folder, flat
 
@@ -697,15 +697,29 @@ def physics(flat: dict) -> str | None:
     return backend if isinstance(backend, str) else None
 
 
+def spawn_rule(flat: dict) -> str | None:
+    """The spawn rule a run's flat config makes its walkers use: a curriculum run's ``spawn`` (a ``config.json``
+    written before the key existed: ``jaxterrain.curriculum.run_config.LEGACY``'s, the rule it ran with); None for
+    commands whose walkers take the library's default."""
+    if "spawn" in flat:
+        return flat["spawn"]
+    if "epochs_per_chunk" in flat:  # learn's or curriculum's config.json, written before the key
+        from jaxterrain.curriculum.run_config import LEGACY
+
+        return LEGACY["spawn"]
+    return None
+
+
 def record_provenance(folder: Path, command: str, options: dict | None = None, resumed: bool = False,
-                      backend: str | None = None) -> dict:
+                      backend: str | None = None, spawn: str | None = None) -> dict:
     """Append one JSON line to ``folder/provenance.jsonl`` and return it: the UTC time, the command, the options
     given (those not None), whether it resumed the run, the code's commit (``jaxterrain.runtime.provenance.git_commit``:
     ``git`` of the checkout, or ``$JAXTERRAIN_COMMIT`` on a machine that received the tree without ``.git``), the
     JAX devices, the process count and jax's version; where the run's walker ``backend`` (its config's, ``auto``
     resolved here by ``jaxterrain.walker.resolve_backend``) is ``warp``, also ``warp_hfield``: which heightfield
     collision MuJoCo Warp runs (``provenance.warp_hfield``: ``"local-origin patch"`` after ``warp-patch``, or
-    ``"stock"``); and ``spawn``, the walkers' spawn rule (``WalkerConfig().spawn``). One ``write`` of a line opened
+    ``"stock"``); and ``spawn``, the walkers' spawn rule (``spawn``, the run's own, e.g. :func:`spawn_rule`; None:
+    the library's default, ``WalkerConfig().spawn``). One ``write`` of a line opened
     for appending, so processes that share a run folder (``--shard``)
     each add theirs; in a multi-process JAX run only process 0 writes."""
     import os
@@ -721,7 +735,7 @@ def record_provenance(folder: Path, command: str, options: dict | None = None, r
             "devices": provenance.device(), "processes": jax.process_count(), "jax": jax.__version__}
     if isinstance(backend, str) and resolve_backend(backend) == "warp":
         line["warp_hfield"] = provenance.warp_hfield()
-    line["spawn"] = WalkerConfig().spawn  # the walkers' spawn rule (the commands' walkers take the default)
+    line["spawn"] = spawn or WalkerConfig().spawn  # the walkers' spawn rule
     if jax.process_index() == 0:
         fd = os.open(Path(folder) / PROVENANCE_NAME, os.O_WRONLY | os.O_CREAT | os.O_APPEND, 0o644)
         try:

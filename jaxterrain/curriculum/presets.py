@@ -37,8 +37,8 @@ _PAPER = dict(archive=CPPN_ARCHIVE, curriculum="map", trials=10, descriptors=["r
               truncation="bootstrap", overlap=False, eval_lag=False, compact=True, policy_every=None,
               terrains_per_chunk=8, levels=10, levels_init=None, levels_promote=None, levels_demote=0.5,
               plr_capacity=None, plr_replay_prob=0.8, plr_staleness=0.3, plr_temperature=0.3, plr_min_fill=0.5, accel_generator=None, accel_edits=1,
-              robot=None, recipe="paper", observation=None, randomise=None, terrains=None, terrain_height=None,
-              terrain_order="name")
+              robot=None, recipe="paper", observation=None, randomise=None, spawn="feet", terrains=None,
+              terrain_height=None, terrain_order="name")
 
 FLAT_PRESETS: dict[str, dict] = {
     "smoke": {**_PAPER, "trials": 2, "epochs_per_chunk": 1, "steps_per_epoch": 80, "max_epochs": 4, "max_evals": 2,
@@ -56,6 +56,8 @@ RECIPE_NAMES = ("paper", "wide")
 """The fine-tuning recipes' names (``jaxterrain.curriculum.RECIPES``; a literal here, a test keeps them equal)."""
 BACKENDS = ("auto", "jax", "warp")
 """The walker's physics (``jaxterrain.walker.layout.BACKEND_CHOICES``; a literal, a test keeps them equal)."""
+SPAWNS = ("feet", "patch")
+"""How the walker is set down at a reset (``jaxterrain.walker.SPAWNS``; a literal, a test keeps them equal)."""
 
 RULES = {
     **{k: at_least(1) for k in ("trials", "max_epochs", "epochs_per_chunk", "steps_per_epoch", "chunks_per_call",
@@ -66,6 +68,7 @@ RULES = {
     "plr_replay_prob": fraction(), "plr_staleness": fraction(), "plr_temperature": positive(),
     "plr_min_fill": fraction(), "healthy_reward": non_negative(), "learning_rate": positive(),
     "terrain_order": one_of(("name", "difficulty")), "observation": one_of(("blind", "perceptive")),
+    "spawn": one_of(SPAWNS),
     "recipe": one_of(RECIPE_NAMES), "truncation": one_of(("mask", "bootstrap")), "backend": one_of(BACKENDS),
     **{k: one_of((True, False)) for k in ("update_normaliser", "overlap", "eval_lag", "compact", "fast_compile")},
 }
@@ -113,6 +116,9 @@ FINE_TUNING_HELP: dict[str, str] = {
                          "brax's PPO does{scope}; --no-update-normaliser keeps the base policy's statistics "
                          "fixed",
     "randomise": "physics randomisation of fine-tuning's walker{scope} (its curriculum's evaluations too) {randomise}",
+    "spawn": "how the walker is set down at each reset{scope}: feet (default: the body lifted until every foot clears "
+             "the terrain under it) or patch (only the lowest foot clear of a 0.5 m patch under the torso: every run "
+             "before 2026-11-29, which cut the ant's feet into rising ground; a run saved before reads as patch)",
     "healthy_reward": "fine-tuning reward per step for staying up, {range}{scope} (default: the walker's 5.0, "
                       "the base policy's; evaluations measure distance and do not use it)",
     "learning_rate": "fine-tuning PPO's Adam learning rate, {range}{scope}",

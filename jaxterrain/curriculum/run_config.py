@@ -19,7 +19,8 @@ The shape (each field consumed where ``docs/CONTRIBUTING.md`` says)::
       curriculum: CurriculumConfig  selector + params (selectors.*Params), threshold, budget in epochs, ppo
                                     (FINE_TUNED fields), overlap, credit, ... (curriculum.core, .walker, .outputs)
       protocol: ProtocolOverride    attempts / best / headings; None = the archive's (runner.resolve)
-      walker: WalkerSettings        backend, episode_length, healthy_reward, robot, policy, observation, randomise
+      walker: WalkerSettings        backend, episode_length, healthy_reward, robot, policy, observation, randomise,
+                                    spawn
                                     (runner: the env)
       budget: Budget                chunks_per_call, compact, fast_compile, policy_every (runner.setup, run_treatment)
 
@@ -30,8 +31,9 @@ ones there too; the others hold ``CurriculumConfig``'s defaults until resolved).
 The serialised form is the flat dict of ``config.json`` (:func:`to_flat`; every key a command-line flag's name, so
 the one field -> flag table is :data:`FLAT_FIELDS` with ``--`` + dashes); :func:`from_flat` reads it, and every
 ``config.json`` written before (a key it lacks takes the value that version ran with: ``truncation`` ``mask``,
-``backend`` ``jax``, ``overlap`` / ``eval_lag`` / ``fast_compile`` off, ``compact`` on; the keys of other
-selectors' params are dropped). The presets' flat forms live in :mod:`.presets` (no JAX: ``--help`` reads them).
+``backend`` ``jax``, ``overlap`` / ``eval_lag`` / ``fast_compile`` off, ``compact`` on, ``spawn`` ``patch``; the keys
+of other selectors' params are dropped). The presets' flat forms live in :mod:`.presets` (no JAX: ``--help`` reads
+them).
 """
 
 from __future__ import annotations
@@ -61,7 +63,8 @@ class WalkerSettings(NamedTuple):
     ``policy``'s), ``policy`` (a policy folder to start from; None = the robot's shipped base policy),
     ``observation`` (``blind`` / ``perceptive``: the start policy's observation set; None = the ``policy``'s, or
     the blind base policy), ``randomise`` (a ``--randomise`` spec of physics randomisation,
-    ``jaxterrain.walker.parse_randomisation``; None = off)."""
+    ``jaxterrain.walker.parse_randomisation``; None = off), ``spawn`` (``jaxterrain.walker.SPAWNS``: how the walker
+    is set down at a reset; ``feet``, or ``patch`` as every run before 2026-11-29)."""
 
     backend: str = "auto"
     episode_length: int = 1000
@@ -70,6 +73,7 @@ class WalkerSettings(NamedTuple):
     policy: Optional[str] = None
     observation: Optional[str] = None
     randomise: Optional[str] = None
+    spawn: str = "feet"
 
 
 class Budget(NamedTuple):
@@ -110,7 +114,7 @@ _TOP = ("archive", "descriptors", "terrains", "terrain_height", "terrain_order",
 _CURRICULUM = ("epochs_per_chunk", "steps_per_epoch", "max_epochs", "threshold", "max_fitness", "max_evals",
                "credit", "distance_origin", "overlap", "eval_lag")
 LEGACY = {"truncation": "mask", "backend": "jax", "overlap": False, "eval_lag": False, "fast_compile": False,
-          "compact": True,
+          "compact": True, "spawn": "patch",
           "seed": 0, "terrains": None, "terrain_height": None, "terrain_order": "name"}
 """The value a ``config.json`` key had in the runs made before it was written (what :func:`from_flat` fills in)."""
 
@@ -220,7 +224,7 @@ CONSUMERS = {
     "protocol": "curriculum.runner.resolve",
     "walker": "curriculum.runner.make_env", "walker.backend": "curriculum.runner.walker_layout",
     "walker.robot": "curriculum.runner.start_policy", "walker.policy": "curriculum.runner.start_policy",
-    "walker.observation": "curriculum.runner.start_policy",
+    "walker.observation": "curriculum.runner.start_policy", "walker.spawn": "curriculum.runner.make_env",
     "budget": "curriculum.runner.setup (compiled blocks), run_treatment (driver.run_chunks)",
 }
 """Where each field of :class:`LearnConfig` is consumed (``docs/CONTRIBUTING.md``; a test checks the functions)."""

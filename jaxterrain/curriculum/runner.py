@@ -251,7 +251,8 @@ def make_env(run: LearnConfig, arch, policy):
     shape = (256, 256) if arch.heightmaps is None else tuple(arch.heightmaps.shape[1:])
     try:
         env = W.walker_env(policy, shape, TerrainScale(), run.walker.episode_length, **walker_layout(run),
-                           healthy_reward=run.walker.healthy_reward, randomisation=run.walker.randomise)
+                           healthy_reward=run.walker.healthy_reward, randomisation=run.walker.randomise,
+                           spawn=run.walker.spawn)
     except ValueError as err:  # e.g. maps too small for the walker's start and goal margins
         where = f"LearnConfig.archive {run.archive}" if run.archive else f"LearnConfig.terrains {run.terrains}"
         raise BadInput(f"{where}: its {shape[0]} x {shape[1]} maps cannot hold the walker: {err}") from None

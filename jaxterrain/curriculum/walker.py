@@ -53,7 +53,7 @@ __all__ = ["walker_env_config", "walker_env", "check_policy", "walker_harness", 
 
 def walker_env_config(policy, shape: tuple[int, int], scale: TerrainScale, episode_length: Optional[int] = None,
                       backend: str = "jax", tiles: int = 0, worlds: Optional[int] = None,
-                      healthy_reward: Optional[float] = None, randomisation=None):
+                      healthy_reward: Optional[float] = None, randomisation=None, spawn: Optional[str] = None):
     """The :class:`~jaxterrain.walker.WalkerConfig` of the curriculum: the bank's terrain shape and scale, the
     contact solver the policy was trained with, and (optionally) a shorter ``episode_length``.
 
@@ -64,8 +64,11 @@ def walker_env_config(policy, shape: tuple[int, int], scale: TerrainScale, episo
     ``[H, W]`` terrain per trial), else the trials run together (one tile each). ``worlds``: MuJoCo Warp's contact
     buffers, for at least this many envs stepped together (trials x max(PPO envs, evaluation walks)); None keeps
     the walker's default. ``randomisation``: physics randomisation of the fine-tuning walker (a
-    :class:`~jaxterrain.walker.Randomisation` or a ``--randomise`` spec; None: off)."""
+    :class:`~jaxterrain.walker.Randomisation` or a ``--randomise`` spec; None: off). ``spawn``: the reset's rule
+    (``jaxterrain.walker.SPAWNS``; None: the walker's default, ``feet``)."""
     config = difficulty.default_env_config(tuple(shape), scale, policy)
+    if spawn is not None:
+        config = config._replace(spawn=spawn)
     if randomisation is not None:
         config = config._replace(randomisation=parse_randomisation(randomisation))
     if episode_length is not None:
@@ -81,11 +84,11 @@ def walker_env_config(policy, shape: tuple[int, int], scale: TerrainScale, episo
 
 def walker_env(policy, shape: tuple[int, int], scale: TerrainScale, episode_length: Optional[int] = None,
                backend: str = "jax", tiles: int = 0, worlds: Optional[int] = None,
-               healthy_reward: Optional[float] = None, randomisation=None):
+               healthy_reward: Optional[float] = None, randomisation=None, spawn: Optional[str] = None):
     """The cached :class:`~jaxterrain.walker.WalkerEnv` of :func:`walker_env_config` (builds the MuJoCo model;
     compiles nothing)."""
     return make_env(walker_env_config(policy, shape, scale, episode_length, backend, tiles, worlds,
-                                                 healthy_reward, randomisation))
+                                                 healthy_reward, randomisation, spawn))
 
 
 def check_policy(policy, env) -> None:

@@ -74,6 +74,22 @@ def test_every_shipped_run_folders_config_reads_as_a_typed_run(path):
     assert run.walker.backend == d.get("backend", "jax")
 
 
+def test_the_spawn_rule_is_the_runs_own_and_old_runs_keep_the_old_one():
+    """``walker.spawn`` reaches the env the run trains and evaluates on; a fresh run spawns by ``feet`` (every foot
+    clear of the terrain under it), a ``config.json`` written before the field existed reads as ``patch`` (the rule
+    it ran with), so resuming an old run continues it under its own rule."""
+    assert R.PRESETS["gpu-short"].walker.spawn == "feet" and R.LEGACY["spawn"] == "patch"
+    old = {k: v for k, v in R.to_flat(R.PRESETS["smoke"]).items() if k != "spawn"}
+    assert R.from_flat(old).walker.spawn == "patch"
+    for rule in ("feet", "patch"):
+        run = R.PRESETS["smoke"]._replace(walker=R.PRESETS["smoke"].walker._replace(spawn=rule))
+        assert runner.validate(run)[4].config.spawn == rule
+    from experiments import common  # the run folder's provenance.jsonl records the run's own rule
+
+    assert common.spawn_rule(old) == "patch" and common.spawn_rule(R.to_flat(R.PRESETS["smoke"])) == "feet"
+    assert common.spawn_rule({"generator": "cppn"}) is None  # a command whose walkers take the default
+
+
 def test_from_flat_refuses_unknown_keys_and_validation_names_the_field(tmp_path):
     with pytest.raises(ValueError, match=r"LearnConfig: unknown config keys \['nope'\]"):
         R.from_flat({**presets.FLAT_PRESETS["smoke"], "nope": 1})

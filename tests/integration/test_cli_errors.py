@@ -344,9 +344,11 @@ def test_recipes_shape_the_update_and_num_envs_overrides_theirs(capsys):
     ``--num-envs`` still wins; the curriculum built from it trains with that PPO shape."""
     from experiments import learn
     from jaxterrain.curriculum import FINE_TUNING, RECIPES, presets, recipe, run_config, runner
+    from jaxterrain.walker import SPAWNS
     from jaxterrain.walker.layout import BACKEND_CHOICES
 
     assert presets.RECIPE_NAMES == tuple(RECIPES) and presets.BACKENDS == BACKEND_CHOICES
+    assert presets.SPAWNS == SPAWNS
     assert RECIPES["paper"] == {k: getattr(FINE_TUNING, k) for k in RECIPES["paper"]}
     assert {k: v for k, v in learn.PRESETS["gpu-short"].items() if k in RECIPES["paper"]} == RECIPES["paper"]
     steps = lambda r: r["num_envs"] * r["unroll_length"] * r["num_unrolls"]  # noqa: E731
