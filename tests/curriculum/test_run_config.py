@@ -84,10 +84,6 @@ def test_the_spawn_rule_is_the_runs_own_and_old_runs_keep_the_old_one():
     for rule in ("feet", "patch"):
         run = R.PRESETS["smoke"]._replace(walker=R.PRESETS["smoke"].walker._replace(spawn=rule))
         assert runner.validate(run)[4].config.spawn == rule
-    from experiments import common  # the run folder's provenance.jsonl records the run's own rule
-
-    assert common.spawn_rule(old) == "patch" and common.spawn_rule(R.to_flat(R.PRESETS["smoke"])) == "feet"
-    assert common.spawn_rule({"generator": "cppn"}) is None  # a command whose walkers take the default
 
 
 def test_from_flat_refuses_unknown_keys_and_validation_names_the_field(tmp_path):

@@ -598,3 +598,13 @@ def test_learn_smoke_on_warp_end_to_end(tmp_path, four_archive):
     assert json.loads((out / "config.json").read_text())["backend"] == "warp"
 
 
+def test_provenance_records_the_runs_own_spawn_rule():
+    """A run folder's ``provenance.jsonl`` line names the spawn rule its walkers use (``common.spawn_rule``): the
+    curriculum run's ``spawn``; ``patch`` for a ``config.json`` written before the key (the rule it ran with); None
+    (the library's default) for a command whose walkers take the default."""
+    flat = run_config.to_flat(run_config.PRESETS["smoke"])
+    old = {k: v for k, v in flat.items() if k != "spawn"}
+    assert common.spawn_rule(flat) == "feet" and common.spawn_rule(old) == "patch"
+    assert common.spawn_rule({**flat, "spawn": "patch"}) == "patch"
+    assert common.spawn_rule({"generator": "cppn"}) is None
+

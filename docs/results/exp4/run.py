@@ -94,7 +94,7 @@ RATES = {
                                          "Experiment 3, 2026-11-29"),
     "treatment_s_jax": (780.0, "measured: learn --preset gpu-short --backend jax, 10.4 s a chunk x 75 chunks, one "
                                "H200, 2026-11-29 (/work/shared/NOTES.md)"),
-    "population_factor": (0.53, "measured for six: the six map treatments' chunk in one program 13.95 s against "
+    "population_factor": (0.53, "measured: for six, the six map treatments' chunk in one program 13.95 s against "
                                 "4.53 s for one alone (3.08 / 6 = 0.51; Warp, one H200, 2026-11-29, benchmarks/"
                                 "RESULTS.md); five (50 trials) interpolated linearly in the trials: 12.07 / (5 x 4.53)"),
     "v2_first_s": (67.0, "measured: the humanoid's first walk of suite v2 (compile included), MJX-JAX, one H200, "
