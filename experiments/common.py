@@ -697,6 +697,12 @@ def physics(flat: dict) -> str | None:
     return backend if isinstance(backend, str) else None
 
 
+STOCK_WARP_NOTE = ("note: this run walks on MuJoCo Warp's stock heightfield collision, which launches a foot buried "
+                   "far from the heightfield's centre (docs/results/sim2sim/warp_hfield/REPORT.md); "
+                   "'python -m experiments warp-patch' applies the fix (recorded as warp_hfield in provenance.jsonl)")
+"""What a Warp run on the stock heightfield kernel is told, once, when its run folder is made or resumed."""
+
+
 def spawn_rule(flat: dict) -> str | None:
     """The spawn rule a run's flat config makes its walkers use: a curriculum run's ``spawn`` (a ``config.json``
     written before the key existed: ``jaxterrain.curriculum.run_config.LEGACY``'s, the rule it ran with); None for
@@ -735,6 +741,8 @@ def record_provenance(folder: Path, command: str, options: dict | None = None, r
             "devices": provenance.device(), "processes": jax.process_count(), "jax": jax.__version__}
     if isinstance(backend, str) and resolve_backend(backend) == "warp":
         line["warp_hfield"] = provenance.warp_hfield()
+        if line["warp_hfield"] == "stock":
+            print(STOCK_WARP_NOTE, file=sys.stderr, flush=True)
     line["spawn"] = spawn or WalkerConfig().spawn  # the walkers' spawn rule
     if jax.process_index() == 0:
         fd = os.open(Path(folder) / PROVENANCE_NAME, os.O_WRONLY | os.O_CREAT | os.O_APPEND, 0o644)
