@@ -48,11 +48,13 @@ def _name(policy) -> str:
 
 
 def check_policies(policies: Sequence[Callable], shape: tuple[int, int], scale: TerrainScale,
-                   backend: str = "jax", randomisation: Randomisation | None = None) -> list:
+                   backend: str = "jax", randomisation: Randomisation | None = None,
+                   spawn: str | None = None) -> list:
     """Each policy's walker config for terrains of ``shape``, after checking that it fits the walker: loaded by
     ``rl.load_policy`` (it carries ``params``, ``normaliser``, ``config``), with the env's observation and action
     sizes. ValueError naming the policy's folder otherwise (one line). ``randomisation``: the physics randomisation
-    every policy walks under (None: off, whatever the policy trained with)."""
+    every policy walks under (None: off, whatever the policy trained with); ``spawn``: the reset's rule
+    (``jaxterrain.walker.SPAWNS``; None: the walker's default)."""
     configs = []
     for p in policies:
         if not all(hasattr(p, a) for a in ("params", "normaliser", "config", "observation_size", "action_size")):
@@ -60,6 +62,8 @@ def check_policies(policies: Sequence[Callable], shape: tuple[int, int], scale: 
         cfg = difficulty.default_env_config(tuple(shape), scale, p, backend)
         if randomisation is not None:
             cfg = cfg._replace(randomisation=randomisation)
+        if spawn is not None:
+            cfg = cfg._replace(spawn=spawn)
         env = make_env(cfg)
         if (int(p.observation_size), int(p.action_size)) != (env.observation_size, env.action_size):
             raise ValueError(f"policy {_name(p)}: observations {p.observation_size} / actions {p.action_size}, but "
@@ -72,7 +76,7 @@ def check_policies(policies: Sequence[Callable], shape: tuple[int, int], scale: 
 def evaluate_policies(policies: Sequence[Callable], heightmaps, key: jax.Array, protocol: Protocol = HEADINGS,
                       backend: str = "jax", scale: TerrainScale | None = None, slots: int | None = None,
                       chunk: int | None = None, engine: str = "mjx", workers: int = 1,
-                      randomisation: Randomisation | None = None) -> np.ndarray:
+                      randomisation: Randomisation | None = None, spawn: str | None = None) -> np.ndarray:
     """Fitness ``[P, N]`` float32 in [0, 1] of ``P`` policies on ``heightmaps`` [N, H, W] in [0, 1].
 
     ``protocol``: the walks (default :data:`HEADINGS`: 20 in each of 4 headings, best 5 per heading, mean over
@@ -81,8 +85,9 @@ def evaluate_policies(policies: Sequence[Callable], heightmaps, key: jax.Array, 
     ``engine``: ``"mjx"`` (default) or ``"mujoco"``: MuJoCo's C engine on ``workers`` CPU processes
     (:mod:`jaxterrain.difficulty.replay`: the same starts and protocol; ``backend`` must then be ``"jax"`` and
     ``slots`` / ``chunk`` None). ``randomisation``: a randomised protocol (every walk draws its physics from its
-    reset key, so every policy meets the same draws; None: the nominal physics; MJX only). Every policy walks with
-    ``key``. ValueError for no policy at all."""
+    reset key, so every policy meets the same draws; None: the nominal physics; MJX only). ``spawn``: how every
+    walker is set down at a reset (``jaxterrain.walker.SPAWNS``; None: the walker's default, ``feet``). Every
+    policy walks with ``key``. ValueError for no policy at all."""
     if isinstance(policies, (str, bytes)) or len(policies) == 0:
         raise ValueError(f"policies: give at least one policy (a sequence of rl.load_policy policies); got "
                          f"{policies!r}")
@@ -96,7 +101,7 @@ def evaluate_policies(policies: Sequence[Callable], heightmaps, key: jax.Array, 
     if engine == "mujoco" and randomisation is not None and randomisation_active(randomisation):
         raise ValueError("engine 'mujoco' walks the nominal physics (MuJoCo C steps one model for every walk); "
                          "randomisation needs engine 'mjx'")
-    configs = check_policies(policies, tuple(h.shape[1:]), scale, backend, randomisation)
+    configs = check_policies(policies, tuple(h.shape[1:]), scale, backend, randomisation, spawn)
     if engine == "mujoco":
         if isinstance(workers, bool) or not isinstance(workers, int) or workers < 1:
             raise ValueError(f"workers must be an int >= 1, got {workers!r}")

@@ -14,7 +14,7 @@ The shape (each field consumed where ``docs/CONTRIBUTING.md`` says)::
       terrains: Terrains        suite (v1 / v2), archive, folder (your own heightmaps), height, size, seeds,
                                 samples, families, generators: what is walked
       walks: Walks              attempts, best, headings: the protocol
-      physics: Physics          engine (mjx / mujoco), backend, workers, slots, chunk, randomise
+      physics: Physics          engine (mjx / mujoco), backend, workers, slots, chunk, randomise, spawn
       videos: Videos            on, terrains, frames, width, height, starts, format (report.compare.write_videos)
       repeat, seed, preset      walk the base policy twice to time the compiled call; the root key; the preset
 
@@ -74,7 +74,8 @@ class Physics(NamedTuple):
     """How the walks are computed: ``engine`` ``mjx`` (on the accelerator, ``backend`` ``auto`` / ``jax`` /
     ``warp``, a rollout pool of ``slots`` env slots, ``chunk`` terrains per call) or ``mujoco`` (MuJoCo's C engine
     on ``workers`` CPU processes, None: every core); ``randomise``: a physics randomisation spec every walk draws
-    from (None: the nominal physics; MJX only)."""
+    from (None: the nominal physics; MJX only); ``spawn``: how every walker is set down at a reset
+    (``jaxterrain.walker.SPAWNS``: ``feet``, or ``patch`` as every evaluation before 2026-11-29)."""
 
     engine: str = "mjx"
     backend: str = "auto"
@@ -82,6 +83,7 @@ class Physics(NamedTuple):
     slots: Optional[int] = None
     chunk: Optional[int] = None
     randomise: Optional[str] = None
+    spawn: str = "feet"
 
 
 class Videos(NamedTuple):
@@ -130,7 +132,8 @@ FIELDS: dict[str, str] = {
 
 LEGACY = {"terrain_folder": None, "terrain_height": None, "robot": None, "observation": None, "keys": 1,
           "videos": False, "video_terrains": None, "video_frames": 75, "video_width": 320, "video_height": 240,
-          "video_starts": 8, "video_format": "gif", "engine": "mjx", "workers": None, "randomise": None, "seed": 0}
+          "video_starts": 8, "video_format": "gif", "engine": "mjx", "workers": None, "randomise": None, "seed": 0,
+          "spawn": "patch"}
 """The value a ``config.json`` key had in the runs made before it was written (what :func:`from_flat` fills in)."""
 
 RULES = {
@@ -140,6 +143,7 @@ RULES = {
     "walks.best": (at_least(1), at_most("walks.attempts")), "walks.headings": walks("walks.attempts", "walks.best"),
     "physics.engine": one_of(("mjx", "mujoco")), "physics.backend": one_of(("auto", "jax", "warp")),
     "physics.workers": at_least(1), "physics.slots": at_least(1), "physics.chunk": at_least(1),
+    "physics.spawn": one_of(("feet", "patch")),
     "videos.frames": int_in(1, 4096), "videos.width": int_in(16, 4096), "videos.height": int_in(16, 4096),
     "videos.starts": int_in(1, 4096), "videos.format": one_of(VIDEO_FORMATS), "repeat": one_of((True, False)),
 }
@@ -222,6 +226,9 @@ HELP = {
     "randomise": "physics randomisation of every walk (a randomised protocol: every policy, the base policy included, "
                  "meets the same draws; default: the nominal physics; MJX only) {randomise}",
     "chunk": "terrains per call (bounds device memory)",
+    "spawn": "how every walker is set down at a reset: feet (default: the body lifted until every foot clears the "
+             "terrain under it) or patch (only the lowest foot clear of a 0.5 m patch under the torso: every "
+             "evaluation before 2026-11-29, which cut the ant's feet into rising ground)",
     "videos": "after the evaluation, videos of each --policy walker beside the base policy (the base policy alone "
               "without --policy) on chosen terrains, one walk along +x each from the same start (of --video-starts), "
               "into videos/<walker>/<family>_L<level>.gif (or .mp4: --video-format) with videos/videos.csv; needs an "

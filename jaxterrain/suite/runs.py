@@ -233,6 +233,9 @@ def check_physics(run: EvaluateRun) -> None:
         parse_randomisation(p.randomise)
     except ValueError as err:
         raise ValueError(f"{o}.physics.randomise: {err}") from None
+    if run.videos.on and p.spawn != "feet":
+        raise ValueError(f"{o}.videos.on sets the walkers down by the default spawn rule (feet); evaluate with "
+                         f"{o}.physics.spawn {p.spawn} without {o}.videos.on")
     if run.videos.on and p.randomise is not None:
         raise ValueError(f"{o}.videos.on draws the walks under the nominal physics; evaluate with "
                          f"{o}.physics.randomise without {o}.videos.on (and the videos in a run without it)")
@@ -354,7 +357,7 @@ def evaluate_run(run: EvaluateRun | Prepared, folder, videos: Optional[Callable]
     protocol = difficulty.Protocol(int(run.walks.attempts), int(run.walks.best), int(run.walks.headings))
     p = run.physics
     backend = resolve_backend(p.backend) if p.engine == "mjx" else "jax"
-    walk = dict(engine=p.engine, workers=mujoco_workers(run))
+    walk = dict(engine=p.engine, workers=mujoco_workers(run), spawn=p.spawn)
     if p.randomise is not None:
         walk["randomisation"] = parse_randomisation(p.randomise)
     for fam, why in s.dropped.items():
@@ -396,7 +399,7 @@ def evaluate_run(run: EvaluateRun | Prepared, folder, videos: Optional[Callable]
               "repeat_equal": None if again is None else bool((first == again).all()),
               "videos_s": videos_s, "device": provenance.device(),
               **({"warp_hfield": provenance.warp_hfield()} if backend == "warp" else {}),
-              "spawn": WalkerConfig().spawn}  # the walkers' spawn rule (evaluate's walkers take the default)
+              "spawn": p.spawn}  # the walkers' spawn rule
     atomic_write_text(folder / "timing.json", json.dumps(timing, indent=2) + "\n")
     said = "" if walk_s is None else f", {walk_s:.1f} s compiled"
     say(f"one policy on {s.size} terrains: {first_s:.1f} s the first call{said} -> {folder}")

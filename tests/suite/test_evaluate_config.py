@@ -23,6 +23,19 @@ def test_presets_round_trip_and_older_files_read():
     assert R.from_flat(old) == SMOKE  # before videos, engines and keys: the values those runs had
 
 
+def test_the_spawn_rule_reaches_every_walker_and_older_files_keep_theirs():
+    """``physics.spawn`` sets how every walker is set down (``feet`` by default); an evaluation's ``config.json``
+    written before the key reads as ``patch``, the rule it was walked with."""
+    from jaxterrain.suite.evaluation import check_policies
+    from jaxterrain.terrain import TerrainScale
+
+    assert SMOKE.physics.spawn == "feet" and R.LEGACY["spawn"] == "patch"
+    assert R.from_flat({k: v for k, v in R.to_flat(SMOKE).items() if k != "spawn"}).physics.spawn == "patch"
+    policies = runs.validate_evaluate(SMOKE).policies
+    for rule in ("feet", "patch"):
+        assert [c.spawn for c in check_policies(policies, (128, 128), TerrainScale(), spawn=rule)] == [rule]
+
+
 def test_validate_loads_the_base_policy_and_keeps_the_run():
     ready = runs.validate_evaluate(SMOKE)
     assert ready.run == SMOKE and len(ready.policies) == 1 and ready.suite is None  # built when walked
@@ -36,6 +49,8 @@ def test_validate_loads_the_base_policy_and_keeps_the_run():
     ({"policies": ("missing-policy",)}, "EvaluateRun.policies missing-policy: no policy.msgpack in missing-policy"),
     ({"physics.engine": "mujoco", "physics.backend": "warp"}, "EvaluateRun.physics.backend warp is an MJX backend"),
     ({"physics.workers": 4}, "EvaluateRun.physics.workers sets the CPU processes of EvaluateRun.physics.engine"),
+    ({"physics.spawn": "nope"}, "EvaluateRun.physics.spawn must be one of feet, patch; got 'nope'"),
+    ({"videos.on": True, "physics.spawn": "patch"}, "EvaluateRun.videos.on sets the walkers down by the default spawn"),
     ({"videos.terrains": "flat:0"}, "EvaluateRun.videos.terrains chooses the terrains of EvaluateRun.videos.on"),
     ({"videos.on": True, "videos.terrains": "gaps:10"}, "EvaluateRun.videos.terrains: gaps has levels 0 to 9"),
     ({"videos.format": "mp4"}, "EvaluateRun.videos.format chooses the files of EvaluateRun.videos.on"),
