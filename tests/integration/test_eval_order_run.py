@@ -62,3 +62,40 @@ def test_eval_order_stages_at_the_tiniest_size(tmp_path, monkeypatch, capsys):
     assert 0 <= table["lag"]["p_beats_sequential"][0] <= 1 and table["sequential"]["unevaluated"] == 0
     assert "| lag |" in (results / "comparison.md").read_text()
     assert (results / "generalisation" / "generalisation.md").is_file()
+
+
+@pytest.mark.slow
+def test_the_two_overlapped_orders_as_one_population_equal_their_solo_runs(tmp_path, monkeypatch, capsys):
+    """``train overlap+lag`` runs both overlapped orders in one program (stopped by its time limit and resumed):
+    each folder holds the ``config.json`` its own ``train`` writes and that run's results (its chunks' terrains as the
+    order's solo run chose them, the hardest cell of every trial, and the evaluations within 0.05, as
+    ``test_population_command``: the population's batch differs, so XLA's CPU sums differ in the last bits and the
+    walks drift by up to 8e-4 over 4 chunks here),
+    and ``train lag`` afterwards says done."""
+    archive = tiny_archive_file(tmp_path, 4, "a.npz")
+    monkeypatch.chdir(tmp_path)
+    run = load_script(SCRIPT, "eval_order_run")
+
+    def stage(out, *argv):
+        code = run.main([*argv, "--out", str(out), "--preset", "smoke", "--trials", "2", "--archive", archive])
+        return code, capsys.readouterr().out
+
+    pair, solo = tmp_path / "pair", tmp_path / "solo"
+    assert stage(pair, "train", "overlap+lag", "--time-limit", "0.05")[0] == 3
+    code, text = stage(pair, "train", "overlap+lag")
+    assert code == 0 and "train overlap+lag: done" in text, text
+    for order in ("overlap", "lag"):
+        assert stage(solo, "train", order)[0] == 0
+        mine, theirs = (json.loads((f / order / "config.json").read_text()) for f in (pair, solo))
+        assert {k: v for k, v in mine.items() if k != "archive"} == {k: v for k, v in theirs.items() if k != "archive"}
+        a, b = (json.loads((f / order / "summary.json").read_text())["hardest"] for f in (pair, solo))
+        np.testing.assert_allclose(a, b, atol=1e-4)
+        rows = [list(csv.DictReader(open(f / order / "history.csv"))) for f in (pair, solo)]
+        assert [(r["trial"], r["epoch"], r["terrain"]) for r in rows[0]] == [(r["trial"], r["epoch"], r["terrain"])
+                                                                            for r in rows[1]]
+        scores = np.array([[float(r["evaluation"]) for r in rr] for rr in rows])
+        assert np.any(scores[1] > 0)  # the chunks' evaluations walked somewhere: a comparison that can fail
+        np.testing.assert_allclose(scores[0], scores[1], atol=0.05)  # test_population_command's tolerance
+        assert (pair / order / "policies" / "trial_1" / "policy.msgpack").is_file()
+    code, text = stage(pair, "train", "lag")
+    assert code == 0 and "train lag: done" in text and "+ python" not in text

@@ -3,6 +3,7 @@
     PYTHONPATH=. python docs/results/eval_order/run.py train sequential --time-limit 9 --pack $OUT/eval_order.tar.gz
     PYTHONPATH=. python docs/results/eval_order/run.py train overlap --time-limit 9 --pack $OUT/eval_order.tar.gz
     PYTHONPATH=. python docs/results/eval_order/run.py train lag --time-limit 9 --pack $OUT/eval_order.tar.gz
+    PYTHONPATH=. python docs/results/eval_order/run.py train overlap+lag --time-limit 9 ...   # or both, one program
     PYTHONPATH=. python docs/results/eval_order/run.py evaluate sequential --time-limit 9 --pack ...   # each order
     PYTHONPATH=. python docs/results/eval_order/run.py write                       # CPU: docs/results/eval_order/
 
@@ -23,6 +24,10 @@ Stages:
 
 - ``train ORDER``: ``learn --preset P --archive A --trials N [flags] --out OUT/ORDER`` (``learn --resume`` when it
   is there), under what is left of ``--time-limit``.
+- ``train overlap+lag``: the two overlapped orders as ONE population (``jaxterrain.curriculum.batch``: one compiled
+  program; its members share the harness's work and may differ in ``eval_lag``), each with the config and into the
+  folder its own ``train`` uses, so either command continues it (each member checkpoints as its solo run does). On
+  a GPU, about the device time of one order instead of two.
 - ``evaluate ORDER``: ``evaluate --preset E --no-repeat --policy OUT/ORDER/policies/trial_* --out
   OUT/ORDER/heldout`` (``--resume`` when there): the held-out suite v1 (``--eval-preset``, default ``gpu``).
 - ``write`` (CPU): into ``--results`` (default ``docs/results/eval_order/``): ``hardest.csv`` (each trial's
@@ -55,6 +60,8 @@ STARTED = time.perf_counter()
 ROOT = Path(__file__).resolve().parents[3]
 ORDERS = {"sequential": [], "overlap": ["--overlap"], "lag": ["--overlap", "--eval-lag"]}
 """Each order's ``learn`` flags."""
+PAIR = "overlap+lag"
+"""``train``'s word for the two overlapped orders run as one population."""
 STAGES = ("train", "evaluate", "write")
 ARCHIVE = "jaxterrain/assets/archives/cppn_headings.npz"
 TRIALS = 10
@@ -108,8 +115,9 @@ def check(p: argparse.ArgumentParser, args) -> None:
     words = tuple(args.stage)
     if words[0] not in STAGES:
         p.error(f"STAGE must be one of {', '.join(STAGES)}; got {words[0]!r}")
-    if words[0] in ("train", "evaluate") and (len(words) != 2 or words[1] not in ORDERS):
-        p.error(f"{words[0]} takes one order: {', '.join(ORDERS)}; got {' '.join(words[1:]) or 'none'}")
+    choices = (*ORDERS, PAIR) if words[0] == "train" else tuple(ORDERS)
+    if words[0] in ("train", "evaluate") and (len(words) != 2 or words[1] not in choices):
+        p.error(f"{words[0]} takes one order: {', '.join(choices)}; got {' '.join(words[1:]) or 'none'}")
     if words[0] == "write" and len(words) != 1:
         p.error(f"write takes no further word; got {' '.join(words[1:])}")
     if args.time_limit is not None and not (math.isfinite(args.time_limit) and args.time_limit > 0):
@@ -159,6 +167,46 @@ def stage_train(args, order: str) -> int:
     if code == 0:
         print(f"train {order}: done ({folder})", flush=True)
     return code
+
+
+def order_flat(args, order: str) -> dict:
+    """The ``config.json`` that ``train ORDER`` writes (``learn``'s: the preset's flat config with the flags)."""
+    from experiments import learn
+
+    flat = {**learn.PRESETS[args.preset], "preset": args.preset, "seed": 0, "archive": str(args.archive),
+            "trials": int(args.trials),
+            "overlap": "--overlap" in ORDERS[order], "eval_lag": "--eval-lag" in ORDERS[order], "command": "learn"}
+    return flat if args.backend is None else {**flat, "backend": args.backend}
+
+
+def stage_train_pair(args) -> int:
+    """``train overlap+lag`` (module docstring): both orders in one ``batch.run_treatments`` call."""
+    from experiments import common
+    from jaxterrain.curriculum import batch, run_config
+
+    orders = PAIR.split("+")
+    if all(finished(args.out / o) for o in orders):
+        print(f"train {PAIR}: done ({args.out})", flush=True)
+        return 0
+    treatments = []
+    for order in orders:
+        folder = args.out / order
+        if not (folder / "config.json").is_file():
+            folder.mkdir(parents=True, exist_ok=True)
+            common.write_config(folder, order_flat(args, order))
+        flat = common.load_config(folder)
+        common.record_provenance(folder, "learn", {"order": order, "stage": f"train {PAIR}"},
+                                 resumed=(folder / "checkpoint.npz").is_file(), backend=common.physics(flat),
+                                 spawn=common.spawn_rule(flat))
+        treatments.append(batch.Treatment(order, run_config.from_flat(flat), folder))
+    left = left_minutes(args)
+    summaries = batch.run_treatments(treatments, None if left is None else max(left * 60.0, 1e-3),
+                                     progress="plain", say=lambda line: print(line, flush=True))
+    if all(s is not None for s in summaries):
+        print(f"train {PAIR}: done ({args.out})", flush=True)
+        return 0
+    print(f"train {PAIR}: stopped by the time limit (checkpointed); run the same command again", flush=True)
+    return 3
 
 
 def stage_evaluate(args, order: str) -> int:
@@ -279,7 +327,7 @@ def main(argv=None) -> int:
     check(p, args)
     stage = args.stage[0]
     if stage == "train":
-        code = stage_train(args, args.stage[1])
+        code = stage_train_pair(args) if args.stage[1] == PAIR else stage_train(args, args.stage[1])
     elif stage == "evaluate":
         code = stage_evaluate(args, args.stage[1])
     else:
