@@ -703,6 +703,13 @@ STOCK_WARP_NOTE = ("note: this run walks on MuJoCo Warp's stock heightfield coll
 """What a Warp run on the stock heightfield kernel is told, once, when its run folder is made or resumed."""
 
 
+def warp_importable() -> bool:
+    """Whether NVIDIA Warp is installed (MuJoCo Warp's kernels ship inside mujoco-mjx either way)."""
+    import importlib.util
+
+    return importlib.util.find_spec("warp") is not None
+
+
 def spawn_rule(flat: dict) -> str | None:
     """The spawn rule a run's flat config makes its walkers use: a curriculum run's ``spawn`` (a ``config.json``
     written before the key existed: ``jaxterrain.curriculum.run_config.LEGACY``'s, the rule it ran with); None for
@@ -741,7 +748,7 @@ def record_provenance(folder: Path, command: str, options: dict | None = None, r
             "devices": provenance.device(), "processes": jax.process_count(), "jax": jax.__version__}
     if isinstance(backend, str) and resolve_backend(backend) == "warp":
         line["warp_hfield"] = provenance.warp_hfield()
-        if line["warp_hfield"] == "stock":
+        if line["warp_hfield"] == "stock" and warp_importable():  # without warp the run is refused anyway
             print(STOCK_WARP_NOTE, file=sys.stderr, flush=True)
     line["spawn"] = spawn or WalkerConfig().spawn  # the walkers' spawn rule
     if jax.process_index() == 0:

@@ -612,12 +612,14 @@ def test_provenance_records_the_runs_own_spawn_rule():
 
 def test_a_warp_run_on_the_stock_heightfield_kernel_is_told_so(tmp_path, monkeypatch, capsys):
     """``record_provenance`` of a Warp run records which heightfield collision MuJoCo Warp runs and, on the stock
-    kernel, says in one line on stderr how to apply the fix; a patched kernel or an MJX-JAX run says nothing."""
+    kernel, says in one line on stderr how to apply the fix; a patched kernel, an MJX-JAX run or a machine without
+    Warp (whose run is refused in one line of its own) says nothing."""
     from jaxterrain.runtime import provenance
 
-    for kernel, backend, told in (("stock", "warp", True), ("local-origin patch", "warp", False),
-                                  ("stock", "jax", False)):
+    for kernel, backend, installed, told in (("stock", "warp", True, True), ("local-origin patch", "warp", True, False),
+                                             ("stock", "jax", True, False), ("stock", "warp", False, False)):
         monkeypatch.setattr(provenance, "warp_hfield", lambda k=kernel: k)
+        monkeypatch.setattr(common, "warp_importable", lambda i=installed: i)
         line = common.record_provenance(tmp_path, "learn", {}, backend=backend, spawn="feet")
         err = capsys.readouterr().err.strip()
         assert (err == common.STOCK_WARP_NOTE) == told and (err == "") == (not told), err
