@@ -676,14 +676,14 @@ def prepare_run(command: str, args: argparse.Namespace, presets: dict[str, dict]
     if resumed:
         if given:
             write_config(folder, flat)
-        record_provenance(folder, command, vars(args), resumed=True, backend=physics(flat), spawn=spawn_rule(flat))
+        record_provenance(folder, command, vars(args), resumed=True, backend=physics(flat), spawn=spawn_rule(command, flat))
         print(f"resuming {folder}", flush=True)
         return folder, flat
     check_out(args.out)
     folder = run_folder(command, args.out)
     folder.mkdir(parents=True, exist_ok=True)
     write_config(folder, flat)
-    record_provenance(folder, command, vars(args), backend=physics(flat), spawn=spawn_rule(flat))
+    record_provenance(folder, command, vars(args), backend=physics(flat), spawn=spawn_rule(command, flat))
     print(f"run folder {folder}", flush=True)
     return folder, flat
 
@@ -710,17 +710,23 @@ def warp_importable() -> bool:
     return importlib.util.find_spec("warp") is not None
 
 
-def spawn_rule(flat: dict) -> str | None:
-    """The spawn rule a run's flat config makes its walkers use: a curriculum run's ``spawn`` (a ``config.json``
-    written before the key existed: ``jaxterrain.curriculum.run_config.LEGACY``'s, the rule it ran with); None for
-    commands whose walkers take the library's default."""
+SPAWN_CONFIGS = {"learn": "jaxterrain.curriculum.run_config", "curriculum": "jaxterrain.curriculum.run_config",
+                 "evaluate": "jaxterrain.suite.run_config"}
+"""The commands with a ``spawn`` setting, and the run-config module whose ``LEGACY`` says what a ``config.json``
+written before the key ran with."""
+
+
+def spawn_rule(command: str, flat: dict) -> str | None:
+    """The spawn rule ``command``'s flat config makes its walkers use: its ``spawn``, or for a ``config.json``
+    written before the key existed its run config's ``LEGACY`` value (the rule it ran with); None for commands
+    whose walkers take the library's default (:data:`SPAWN_CONFIGS` lists those that do not)."""
+    if command not in SPAWN_CONFIGS:
+        return None
     if "spawn" in flat:
         return flat["spawn"]
-    if "epochs_per_chunk" in flat:  # learn's or curriculum's config.json, written before the key
-        from jaxterrain.curriculum.run_config import LEGACY
+    import importlib
 
-        return LEGACY["spawn"]
-    return None
+    return importlib.import_module(SPAWN_CONFIGS[command]).LEGACY["spawn"]
 
 
 def record_provenance(folder: Path, command: str, options: dict | None = None, resumed: bool = False,

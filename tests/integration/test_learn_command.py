@@ -604,9 +604,10 @@ def test_provenance_records_the_runs_own_spawn_rule():
     (the library's default) for a command whose walkers take the default."""
     flat = run_config.to_flat(run_config.PRESETS["smoke"])
     old = {k: v for k, v in flat.items() if k != "spawn"}
-    assert common.spawn_rule(flat) == "feet" and common.spawn_rule(old) == "patch"
-    assert common.spawn_rule({**flat, "spawn": "patch"}) == "patch"
-    assert common.spawn_rule({"generator": "cppn"}) is None
+    assert common.spawn_rule("learn", flat) == "feet" and common.spawn_rule("curriculum", old) == "patch"
+    assert common.spawn_rule("learn", {**flat, "spawn": "patch"}) == "patch"
+    assert common.spawn_rule("evaluate", {"suite": "v1"}) == "patch"  # an evaluation saved before the key
+    assert common.spawn_rule("evolve", {"generator": "cppn"}) is None
 
 
 

@@ -197,7 +197,7 @@ def stage_train_pair(args) -> int:
         flat = common.load_config(folder)
         common.record_provenance(folder, "learn", {"order": order, "stage": f"train {PAIR}"},
                                  resumed=(folder / "checkpoint.npz").is_file(), backend=common.physics(flat),
-                                 spawn=common.spawn_rule(flat))
+                                 spawn=common.spawn_rule("learn", flat))
         treatments.append(batch.Treatment(order, run_config.from_flat(flat), folder))
     left = left_minutes(args)
     summaries = batch.run_treatments(treatments, None if left is None else max(left * 60.0, 1e-3),
