@@ -33,7 +33,8 @@ __all__ = ["BOOTSTRAP_REPS", "PARTIAL", "POLICIES", "HISTORY_COLUMNS", "SEQUENCE
            "trial_policy", "export_policies"]
 
 BOOTSTRAP_REPS = 2000
-"""Resamples of the trials for ``summary.json``'s ``hardest_mean_ci`` and ``hardest_iqm`` (rliable, seed 0)."""
+"""Resamples of the trials for ``summary.json``'s ``hardest_mean_ci`` and ``hardest_iqm`` (a bootstrap over whole
+trials, :func:`jaxterrain.runtime.statistics.trial_estimates`, seed 0)."""
 PARTIAL = "summary_partial.json"
 """The summary of an unfinished run's last checkpoint (``summary.json`` marks a finished one)."""
 POLICIES = "policies"
@@ -141,8 +142,8 @@ def write_outputs(folder: Path, run, config, bank, states, seconds: float | None
     ``chunks_done`` (an unfinished run's last checkpoint, :func:`report_treatment`) the summary goes to
     ``summary_partial.json`` with ``"partial": true`` and ``"chunks_done"``, and the curve's title says so; without
     it, ``summary.json``, and a ``summary_partial.json`` left by an earlier report is removed. The summary holds each
-    trial's hardest terrain traversed, their mean +- s.e., and (rliable, the trials resampled
-    :data:`BOOTSTRAP_REPS` times) the mean's 95 % interval ``hardest_mean_ci`` and the interquartile mean with its
+    trial's hardest terrain traversed, their mean +- s.e., and (the trials resampled :data:`BOOTSTRAP_REPS`
+    times: :func:`~jaxterrain.runtime.statistics.trial_estimates`, pure numpy) the mean's 95 % interval ``hardest_mean_ci`` and the interquartile mean with its
     interval ``hardest_iqm`` ([point, low, high]). ``seconds``: the wall
     time of every command that ran the treatment, summed over resumes (each from its set-up and compilation on; the
     interpreter's start-up and imports are not in it), None where unknown. ``names``: the archive's generator names
@@ -178,7 +179,7 @@ def write_outputs(folder: Path, run, config, bank, states, seconds: float | None
     fig.tight_layout()
     save_figure(fig, folder / "curve.png")
     final = np.asarray(states.hardest, np.float64)
-    est = statistics.interval_estimates({label: final[:, None]}, reps=BOOTSTRAP_REPS)[label]  # trials as runs
+    est = statistics.trial_estimates({label: final[:, None]}, reps=BOOTSTRAP_REPS)[label]  # trials resampled
     summary = {
         "label": label, "trials": int(final.size), "hardest": final.tolist(), "hardest_mean": float(final.mean()),
         "hardest_se": float(final.std(ddof=1) / np.sqrt(final.size)) if final.size > 1 else 0.0,

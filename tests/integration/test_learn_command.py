@@ -8,6 +8,7 @@ from __future__ import annotations
 import argparse
 import json
 import re
+import sys
 import warnings
 from pathlib import Path
 
@@ -17,7 +18,7 @@ import pytest
 
 from curriculum_archives import tiny_archive_file, tree_equal, validated
 from jaxterrain.curriculum import outputs, run_config, runner
-from jaxterrain.runtime import driver
+from jaxterrain.runtime import driver, statistics
 from jaxterrain.walker import layout, warp_available
 
 from experiments import common
@@ -87,7 +88,8 @@ def test_learn_rejects_bad_input_with_one_line_naming_it(tmp_path, tiny_archive,
 @pytest.fixture(scope="module")
 def learn_smoke(tmp_path_factory, tiny_archive):
     """``(archive, run folder)``: ONE uninterrupted ``learn --preset smoke`` run on the 4-terrain archive, shared by
-    the end-to-end test and the time-limit test (its uninterrupted reference)."""
+    the end-to-end test and the time-limit test (its uninterrupted reference). rliable cannot be imported while it
+    runs: a run's files need only numpy's bootstrap (a GPU image without rliable once lost a whole run at its end)."""
     import contextlib
     import io
 
@@ -108,6 +110,7 @@ def learn_smoke(tmp_path_factory, tiny_archive):
     with pytest.MonkeyPatch.context() as mp, contextlib.redirect_stderr(err):
         mp.setattr(driver, "PLAIN_EVERY_S", 0.0)
         mp.setattr(runner.ChunkMetrics, "__call__", snapshot)
+        mp.setitem(sys.modules, "rliable", None)  # `import rliable` raises ImportError
         assert cli("learn", "--preset", "smoke", "--archive", archive, "--out", str(out)) == 0
     (out.parent / "stderr.txt").write_text(err.getvalue())
     (out.parent / "metrics_seen.json").write_text(json.dumps(seen))
@@ -141,6 +144,9 @@ def test_learn_smoke_end_to_end(learn_smoke):
     assert cfg["trials"] == 2 and cfg["curriculum"] == "map" and cfg["command"] == "learn"
     summary = json.loads((out / "summary.json").read_text())
     assert summary["trials"] == 2 and summary["epochs_max"] <= 4 and summary["bank_terrains"] == 4
+    est = statistics.trial_estimates({"x": np.array(summary["hardest"])[:, None]}, reps=2000)["x"]  # trials resampled
+    assert summary["hardest_iqm"] == list(est["iqm"]) and summary["hardest_mean_ci"] == [est["mean"].low,
+                                                                                        est["mean"].high]
     rows = (out / "history.csv").read_text().splitlines()
     assert rows[0].startswith("trial,chunk,epoch") and len(rows) == 1 + sum(summary["epochs"])
     evals = np.array([float(r.split(",")[9]) for r in rows[1:]])
