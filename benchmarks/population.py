@@ -4,6 +4,7 @@ treatments of Experiment 2 in one program against one treatment alone.
     python benchmarks/population.py --parts peak,chunk --preset gpu-short --time-limit 9 --out runs/population
     python benchmarks/population.py --parts alone --preset gpu-short --time-limit 9 --out runs/population
     python benchmarks/population.py --parts six --preset gpu-short --time-limit 9 --out runs/population  # repeat
+    python benchmarks/population.py --parts split --devices 0,1 --preset gpu-short --time-limit 9 --out runs/population
     python benchmarks/population.py --parts report --out runs/population
 
 Each part writes ``<out>/<part>.json`` (``report``: ``<out>/population.json`` and a Markdown table) and is skipped
@@ -21,8 +22,13 @@ when that file says it is done, so a command that a time limit stopped is simply
 - ``six`` / ``alone``: the whole runs, resumable across commands: the six map treatments as one population
   (``batch.run_treatments``) in ``<out>/six/``, and the first one alone (``runner.run_treatment``) in
   ``<out>/alone/``; each records its wall time (set-up and compiles included, summed over commands) once finished.
+- ``split``: the six treatments over several GPUs, one process each (``--devices 0,1``: ``CUDA_VISIBLE_DEVICES=I``
+  per process, as ``curriculum --shard I/N`` runs them): process I runs the treatments ``t % N == I`` as one
+  population in ``<out>/split/`` and writes ``<out>/split<I>of<N>.json``; the part is done when every process is,
+  its wall time the slowest process's. This command's own JAX does not preallocate GPU memory.
 - ``report``: the figures of the parts done so far and the ratios (``six`` wall time over ``alone``'s; the target:
-  at most 2; the 60-trial chunk's physics rate over the peak: at least 0.7).
+  at most 2; the 60-trial chunk's physics rate over the peak: at least 0.7; ``six`` over ``split``: the speed-up of
+  the GPUs together, target at least 1.8 for two).
 
 ``--time-limit MIN`` bounds every command: ``chunk`` times fewer chunks, ``six`` / ``alone`` checkpoint and stop
 (run them again). On a CPU, test it at tiny size: ``--preset smoke --archives a=A.npz b=B.npz --trials 1
@@ -33,6 +39,8 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
+import subprocess
 import sys
 import time
 from pathlib import Path
@@ -46,7 +54,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 import rollouts  # noqa: E402
 from common import environment, markdown_table, write_json  # noqa: E402
 
-PARTS = ("peak", "chunk", "alone", "six", "report")
+PARTS = ("peak", "chunk", "alone", "six", "split", "report")
 
 
 def log(*a) -> None:
@@ -68,9 +76,20 @@ def parse_args(argv=None) -> argparse.Namespace:
     p.add_argument("--peak-envs", default="65536", help="peak: envs per batch (rollouts.py --batch-sizes)")
     p.add_argument("--peak-layout", default="tiles", help="peak: rollouts.py --layout")
     p.add_argument("--peak-size", type=int, default=256, help="peak: terrain samples per side")
+    p.add_argument("--devices", default="0,1", help="split: the GPUs (CUDA_VISIBLE_DEVICES indices), one process each")
+    p.add_argument("--shard", default=None, help=argparse.SUPPRESS)  # I/N: one process of split (internal)
     args = p.parse_args(argv)
     parts = [x for x in args.parts.split(",") if x]
-    bad = [x for x in parts if x not in PARTS]
+    try:
+        args.devices = [int(d) for d in args.devices.split(",")]
+    except ValueError:
+        args.devices = []
+    if not args.devices or len(set(args.devices)) != len(args.devices) or min(args.devices) < 0:
+        p.exit(2, f"{p.prog}: error: --devices must be distinct GPU indices >= 0, comma separated\n")
+    if args.shard is not None:
+        args.shard = tuple(int(v) for v in args.shard.split("/"))
+        parts = ["shard"]
+    bad = [x for x in parts if x not in PARTS and x != "shard"]
     if bad or not parts:
         p.exit(2, f"{p.prog}: error: --parts: {', '.join(bad) or 'none'}; choose from {', '.join(PARTS)}\n")
     for name in ("trials", "chunks"):
@@ -178,18 +197,28 @@ def part_chunk(args, out: Path, clock: Clock) -> dict:
     return row
 
 
+def part_name(args, part: str) -> str:
+    """The JSON name of ``part`` (``split<I>of<N>`` for one process of ``split``)."""
+    return f"split{args.shard[0]}of{args.shard[1]}" if part == "shard" else part
+
+
 def part_run(args, out: Path, clock: Clock, which: str) -> dict:
-    """The whole runs: ``six`` (the map treatments as one population) or ``alone`` (the first one, today's
-    runner); resumable; the wall time (each treatment's summary ``seconds``, summed over commands) once done."""
+    """The whole runs: ``six`` (the map treatments as one population), ``alone`` (the first one, today's runner)
+    or ``shard`` (one process of ``split``: its share of the six as one population); resumable; the wall time (each
+    treatment's summary ``seconds``, summed over commands) once done."""
     from jaxterrain.curriculum import batch, runner
 
-    folder = out / which
+    folder = out / ("split" if which == "shard" else which)
     plan = treatments(args, folder)
-    previous = json.loads((out / f"{which}.json").read_text()) if (out / f"{which}.json").exists() else {}
-    commands = list(previous.get("commands", []))
+    if which == "shard":
+        i, n = args.shard
+        plan = [t for k, t in enumerate(plan) if k % n == i]
+    name = part_name(args, which)
+    previous = json.loads((out / f"{name}.json").read_text()) if (out / f"{name}.json").exists() else {}
+    commands = list(previous.get("commands_s", []))
     t0 = time.perf_counter()
     left = clock.left()
-    if which == "six":
+    if which in ("six", "shard"):
         summaries = batch.run_treatments([batch.Treatment(n, r, folder / n.replace(" ", "-")) for n, r in plan],
                                          left, say=log, progress="plain")
     else:
@@ -203,7 +232,44 @@ def part_run(args, out: Path, clock: Clock, which: str) -> dict:
         row["wall_s"] = max(float(s["seconds"]) for s in summaries)  # one program: every member's is the group's
         row["hardest_mean"] = {n: s["hardest_mean"] for (n, _), s in zip(plan, summaries)}
         row["hardest_iqm"] = {n: s["hardest_iqm"] for (n, _), s in zip(plan, summaries)}
-    log(which, row)
+    log(name, row)
+    return row
+
+
+def part_split(args, out: Path, clock: Clock) -> dict:
+    """``split``: one process per ``--devices`` GPU, each ``--shard I/N`` of this script (the same flags, the time
+    left), run together; done when every process's JSON says so."""
+    n = len(args.devices)
+    forward = ["--out", str(out), "--preset", args.preset, "--backend", args.backend]
+    forward += (["--archives", *args.archives] if args.archives else []) + (["--trials", str(args.trials)]
+                                                                           if args.trials else [])
+    left = clock.left()
+    if left is not None:
+        forward += ["--time-limit", f"{max(left, 1.0) / 60.0:.4f}"]
+    t0 = time.perf_counter()
+    procs = []
+    for i, gpu in enumerate(args.devices):
+        env = {**os.environ, "CUDA_VISIBLE_DEVICES": str(gpu)}
+        if args.preallocate is None:  # set by main for this process alone
+            env.pop("XLA_PYTHON_CLIENT_PREALLOCATE", None)
+        procs.append(subprocess.Popen([sys.executable, str(Path(__file__).resolve()), *forward, "--shard", f"{i}/{n}"],
+                                      env=env))
+    rcs = [p.wait() for p in procs]
+    shards = []
+    for i in range(n):
+        path = out / f"split{i}of{n}.json"
+        shards.append(json.loads(path.read_text()) if path.exists() else {"done": False})
+    previous = json.loads((out / "split.json").read_text()) if (out / "split.json").exists() else {}
+    row = {"preset": args.preset, "devices": args.devices, "returncodes": rcs,
+           "commands_s": list(previous.get("commands_s", [])) + [time.perf_counter() - t0],
+           "treatments": [t for s in shards for t in s.get("treatments", [])],
+           "done": all(s.get("done") for s in shards)}
+    if row["done"]:
+        row["wall_s"] = max(float(s["wall_s"]) for s in shards)  # the processes ran together: the slowest's
+        row["shard_wall_s"] = [float(s["wall_s"]) for s in shards]
+        row["hardest_mean"] = {k: v for s in shards for k, v in s["hardest_mean"].items()}
+        row["hardest_iqm"] = {k: v for s in shards for k, v in s["hardest_iqm"].items()}
+    log("split", row)
     return row
 
 
@@ -226,10 +292,14 @@ def part_report(out: Path) -> dict:
     if got["six"] and got["alone"]:
         report["six_vs_alone_wall"] = got["six"]["wall_s"] / got["alone"]["wall_s"]
         rows += [{"what": f"{p} (whole run)", "wall s": got[p]["wall_s"]} for p in ("six", "alone")]
+    if got["six"] and got["split"]:
+        report["six_vs_split_wall"] = got["six"]["wall_s"] / got["split"]["wall_s"]
+        rows.append({"what": f"split over {len(got['split']['devices'])} GPUs (whole run)",
+                     "wall s": got["split"]["wall_s"]})
     write_json(out / "population.json", report)
     print(markdown_table(rows, ["what", "s per chunk", "physics M steps/s", "of the peak", "wall s"]))
     print(json.dumps({k: v for k, v in report.items() if k in ("chunk_vs_alone", "population_of_peak",
-                                                                "six_vs_alone_wall")}))
+                                                                "six_vs_alone_wall", "six_vs_split_wall")}))
     return report
 
 
@@ -237,13 +307,17 @@ def main(argv=None) -> int:
     args = parse_args(argv)
     clock = Clock(args.time_limit)
     args.out.mkdir(parents=True, exist_ok=True)
+    args.preallocate = os.environ.get("XLA_PYTHON_CLIENT_PREALLOCATE")
+    if "split" in args.parts and args.preallocate is None:  # this process's JAX must leave the GPUs to split's
+        os.environ["XLA_PYTHON_CLIENT_PREALLOCATE"] = "false"
     log("environment", environment())
     for part in args.parts:
         if part == "report":
             part_report(args.out)
             continue
-        if done(args.out, part):
-            log(f"{part}: done before ({args.out / (part + '.json')})")
+        name = part_name(args, part)
+        if done(args.out, name):
+            log(f"{part}: done before ({args.out / (name + '.json')})")
             continue
         if clock.left() is not None and clock.left() <= 0:
             log(f"{part}: no time left; run the command again")
@@ -252,9 +326,11 @@ def main(argv=None) -> int:
             row = part_peak(args, args.out)
         elif part == "chunk":
             row = part_chunk(args, args.out, clock)
+        elif part == "split":
+            row = part_split(args, args.out, clock)
         else:
             row = part_run(args, args.out, clock, part)
-        write_json(args.out / f"{part}.json", {"environment": environment(), **row})
+        write_json(args.out / f"{name}.json", {"environment": environment(), **row})
         if not row.get("done"):
             log(f"{part}: stopped by the time limit; run the command again")
             return 3

@@ -199,6 +199,40 @@ def test_population_benchmark_at_cpu_size(tmp_path):
 
 
 @pytest.mark.slow
+def test_population_benchmark_splits_the_six_over_processes(tmp_path, capsys):
+    """``population.py --parts split --devices 0,1`` at CPU size: two processes (``CUDA_VISIBLE_DEVICES`` 0 and 1;
+    both on the CPU here) run the treatments ``t % 2 == I`` into one ``split/`` folder, each its JSON; the part is
+    done with the slowest process's wall time and every treatment's hardest cell; bad ``--devices`` in one line."""
+    import json
+
+    from curriculum_archives import tiny_archive_file
+    from jaxterrain import qd as A
+
+    bench = load_benchmark("population")
+    a = tiny_archive_file(tmp_path, 4, "a.npz")
+    arch = A.load(a)
+    b = str(A.save(tmp_path / "b.npz", arch._replace(fitness=np.where(arch.source >= 0, 0.7 * arch.fitness + 0.1,
+                                                                      arch.fitness).astype(np.float32))))
+    out = tmp_path / "bench"
+    tiny = ["--preset", "smoke", "--archives", f"a={a}", f"b={b}", "--trials", "1", "--backend", "jax",
+            "--out", str(out)]
+    for bad in ("0,0", "x", "-1"):
+        with pytest.raises(SystemExit) as err:
+            bench.parse_args(["--parts", "split", "--devices", bad, *tiny])
+        assert err.value.code == 2 and "--devices must be distinct GPU indices" in capsys.readouterr().err
+    assert bench.main(["--parts", "split", "--devices", "0,1", *tiny]) == 0
+    shards = [json.loads((out / f"split{i}of2.json").read_text()) for i in range(2)]
+    assert [s["treatments"] for s in shards] == [["a map", "combined map"], ["b map"]]
+    split = json.loads((out / "split.json").read_text())
+    assert split["done"] and split["returncodes"] == [0, 0] and split["devices"] == [0, 1]
+    assert split["wall_s"] == max(s["wall_s"] for s in shards) > 0
+    assert set(split["hardest_mean"]) == {"a map", "b map", "combined map"}
+    assert all((out / "split" / t.replace(" ", "-") / "summary.json").exists() for t in split["treatments"])
+    assert bench.main(["--parts", "split", *tiny]) == 0  # done before: skipped, its JSON untouched
+    assert json.loads((out / "split.json").read_text()) == split
+
+
+@pytest.mark.slow
 def test_eval_order_benchmark_at_cpu_size(tmp_path, capsys):
     """``benchmarks/eval_order.py`` at CPU size (the smoke preset on one 4-terrain archive, one trial, the sequential
     and the lagged order): two interleaved rounds of one chunk each, the ratios the measured figures' quotients, the
