@@ -76,6 +76,9 @@ def parse_args(argv=None) -> argparse.Namespace:
     p.add_argument("--peak-envs", default="65536", help="peak: envs per batch (rollouts.py --batch-sizes)")
     p.add_argument("--peak-layout", default="tiles", help="peak: rollouts.py --layout")
     p.add_argument("--peak-size", type=int, default=256, help="peak: terrain samples per side")
+    p.add_argument("--sequential", type=Path, default=None, metavar="DIR",
+                   help="report: a folder of the treatments run one after another (DIR/<treatment>/summary.json, "
+                        "e.g. docs/results/exp3_gpushort) to compare six's hardest cells with, trial by trial")
     p.add_argument("--devices", default="0,1", help="split: the GPUs (CUDA_VISIBLE_DEVICES indices), one process each")
     p.add_argument("--shard", default=None, help=argparse.SUPPRESS)  # I/N: one process of split (internal)
     args = p.parse_args(argv)
@@ -273,8 +276,35 @@ def part_split(args, out: Path, clock: Clock) -> dict:
     return row
 
 
-def part_report(out: Path) -> dict:
-    """The ratios of the parts done so far, as ``population.json`` and a printed table."""
+def slug(treatment: str) -> str:
+    return treatment.replace(" ", "-")
+
+
+def hardest_rows(out: Path, peers: dict[str, Path]) -> list[dict]:
+    """Six's treatments against their runs elsewhere (``peers``: ``{name: folder of treatment folders}``), trial by
+    trial: each side's mean hardest cell with its interval over trials (``statistics.trial_estimates``) and P(a
+    trial of six beats a trial of the peer) with its interval (``statistics.trial_improvement``: 0.5 inside it =
+    no difference the trials support)."""
+    from jaxterrain.runtime import statistics
+
+    rows = []
+    for summary in sorted((out / "six").glob("*/summary.json")):
+        six = np.asarray(json.loads(summary.read_text())["hardest"], np.float64)[:, None]
+        for peer, folder in peers.items():
+            other = folder / summary.parent.name / "summary.json"
+            if not other.exists():
+                continue
+            them = np.asarray(json.loads(other.read_text())["hardest"], np.float64)[:, None]
+            a, b = (statistics.trial_estimates({"x": v})["x"]["mean"] for v in (six, them))
+            p = statistics.trial_improvement(six, them)
+            rows.append({"treatment": summary.parent.name, "peer": peer, "six": list(a), "peer_mean": list(b),
+                         "p_six_better": list(p), "differ": not p.low <= 0.5 <= p.high})
+    return rows
+
+
+def part_report(out: Path, sequential: Path | None = None) -> dict:
+    """The ratios of the parts done so far, as ``population.json`` and a printed table; six's hardest cells against
+    ``alone`` (same commit) and ``sequential`` (:func:`hardest_rows`)."""
     got = {p: done(out, p) for p in PARTS[:-1]}
     report = {"environment": environment(), **{p: r for p, r in got.items() if r}}
     rows = []
@@ -296,8 +326,15 @@ def part_report(out: Path) -> dict:
         report["six_vs_split_wall"] = got["six"]["wall_s"] / got["split"]["wall_s"]
         rows.append({"what": f"split over {len(got['split']['devices'])} GPUs (whole run)",
                      "wall s": got["split"]["wall_s"]})
+    peers = {"alone": out / "alone", **({"sequential": sequential} if sequential else {})}
+    report["hardest"] = hardest_rows(out, peers) if got["six"] else []
     write_json(out / "population.json", report)
     print(markdown_table(rows, ["what", "s per chunk", "physics M steps/s", "of the peak", "wall s"]))
+    for r in report["hardest"]:
+        print(f"{r['treatment']} vs {r['peer']}: six {r['six'][0]:.2f} [{r['six'][1]:.2f}, {r['six'][2]:.2f}], "
+              f"peer {r['peer_mean'][0]:.2f} [{r['peer_mean'][1]:.2f}, {r['peer_mean'][2]:.2f}], P(six > peer) "
+              f"{r['p_six_better'][0]:.2f} [{r['p_six_better'][1]:.2f}, {r['p_six_better'][2]:.2f}]"
+              + (" DIFFER" if r["differ"] else ""))
     print(json.dumps({k: v for k, v in report.items() if k in ("chunk_vs_alone", "population_of_peak",
                                                                 "six_vs_alone_wall", "six_vs_split_wall")}))
     return report
@@ -313,7 +350,7 @@ def main(argv=None) -> int:
     log("environment", environment())
     for part in args.parts:
         if part == "report":
-            part_report(args.out)
+            part_report(args.out, args.sequential)
             continue
         name = part_name(args, part)
         if done(args.out, name):

@@ -34,7 +34,7 @@ checkpoint.
 Writes ``figure7a.png`` (hardest terrain traversed vs epoch, every map treatment, mean +- 1 standard error),
 ``figure7b.png`` (CPPN: map vs standard CL), ``table2.csv`` / ``table2.md`` (epochs to first traverse a terrain at
 5 %, ..., 50 % of 70.71, ours beside the paper's), ``hardest.csv`` / ``hardest.md`` (each treatment's hardest
-terrain traversed: mean +- s.e. beside rliable's intervals of the mean and the IQM, and the probability that one
+terrain traversed: mean +- s.e. beside intervals over trials of the mean and the IQM, and the probability that one
 treatment's trial went further than another's), ``sequences.csv`` (every trial's terrains in order, all
 treatments) and ``config.json``. Presets: those of ``learn`` (smoke, gpu-short, paper). ``--backend auto|jax|warp``: the
 walker's physics of every treatment (``learn``'s flag; saved in ``config.json``, kept by ``--resume``).
@@ -305,9 +305,10 @@ def write_sequences(folder: Path, done: list[tuple[str, Path]]) -> None:
 
 
 def write_hardest(folder: Path, rows: list[tuple[str, dict]]) -> None:
-    """hardest.csv / hardest.md: each treatment's hardest terrain traversed over its trials, mean +- s.e. beside
-    rliable's (the mean's and the interquartile mean's 95 % stratified-bootstrap intervals, seed 0), and the
-    probability that a trial of one treatment went further than a trial of another."""
+    """hardest.csv / hardest.md: each treatment's hardest terrain traversed over its trials, mean +- s.e. beside the
+    mean's and the interquartile mean's 95 % intervals (a bootstrap over whole trials, ``statistics.trial_estimates``,
+    seed 0: numpy alone, so a GPU image without rliable writes them), and the probability that a trial of one
+    treatment went further than a trial of another."""
     import numpy as np
 
     from jaxterrain.curriculum.outputs import BOOTSTRAP_REPS
@@ -315,7 +316,7 @@ def write_hardest(folder: Path, rows: list[tuple[str, dict]]) -> None:
     from jaxterrain.runtime.io import atomic_write_csv, atomic_write_text
 
     scores = {shown(label, s): np.asarray(s["hardest"], np.float64)[:, None] for label, s in rows}
-    est = statistics.interval_estimates(scores, reps=BOOTSTRAP_REPS)
+    est = statistics.trial_estimates(scores, reps=BOOTSTRAP_REPS)
     table = []
     md = ["| treatment | trials | mean +- s.e. | mean [95 % CI] | IQM [95 % CI] |", "|---|---|---|---|---|"]
     for name, x in scores.items():

@@ -160,22 +160,32 @@ def test_evaluate_policies_benchmark_walks_shipped_walkers_through_one_program(t
     assert all(w.startswith("docs/results/exp3_gpushort/") for w in r["walkers"])
 
 
-@pytest.mark.slow
-def test_population_benchmark_at_cpu_size(tmp_path):
-    """``benchmarks/population.py`` at CPU size (the smoke preset on two 4-terrain archives and their combination, one
-    trial each; the peak at 8 envs on 48 x 48 terrains): every part writes its JSON, the ratios are the measured
-    figures' quotients, a part done before is skipped, and a command out of time says so (exit 3). Three programs
-    compile: minutes of CPU."""
-    import json
-
+def two_archives(tmp_path) -> tuple[str, str]:
+    """Two 4-terrain archives (the second's fitness scaled: other cells, other choices), as paths."""
     from curriculum_archives import tiny_archive_file
     from jaxterrain import qd as A
 
-    bench = load_benchmark("population")
     a = tiny_archive_file(tmp_path, 4, "a.npz")
     arch = A.load(a)
     b = str(A.save(tmp_path / "b.npz", arch._replace(fitness=np.where(arch.source >= 0, 0.7 * arch.fitness + 0.1,
                                                                       arch.fitness).astype(np.float32))))
+    return a, b
+
+
+@pytest.mark.slow
+def test_population_benchmark_at_cpu_size(tmp_path, monkeypatch):
+    """``benchmarks/population.py`` at CPU size (the smoke preset on two 4-terrain archives and their combination, one
+    trial each; the peak at 8 envs on 48 x 48 terrains): every part writes its JSON, the ratios are the measured
+    figures' quotients, six's hardest cells against alone's and a peer folder's, a part done before is skipped, and a
+    command out of time says so (exit 3). As on the GPU machine (``tests/gpu_image.py``). Three programs compile:
+    minutes of CPU."""
+    import json
+
+    from gpu_image import image
+
+    bench = load_benchmark("population")
+    a, b = two_archives(tmp_path)
+    image(monkeypatch)
     out = tmp_path / "bench"
     tiny = ["--preset", "smoke", "--archives", f"a={a}", f"b={b}", "--trials", "1", "--backend", "jax",
             "--peak-envs", "8", "--peak-size", "48", "--peak-layout", "classic", "--chunks", "2", "--out", str(out)]
@@ -194,25 +204,29 @@ def test_population_benchmark_at_cpu_size(tmp_path):
     assert report["six_vs_alone_wall"] == pytest.approx(got["six"]["wall_s"] / got["alone"]["wall_s"])
     assert report["population_of_peak"] == pytest.approx(chunk["population"]["physics_steps_per_s"]
                                                          / got["peak"]["peak_physics_steps_per_s"])
+    alone = [r for r in report["hardest"] if r["peer"] == "alone"]
+    assert [r["treatment"] for r in alone] == ["a-map"] and 0 <= alone[0]["p_six_better"][0] <= 1
+    assert bench.main(["--parts", "report", "--sequential", str(out / "six"), *tiny]) == 0  # six against itself
+    seq = [r for r in json.loads((out / "population.json").read_text())["hardest"] if r["peer"] == "sequential"]
+    assert [r["treatment"] for r in seq] == ["a-map", "b-map", "combined-map"]
+    assert all(r["p_six_better"][0] == 0.5 and r["six"] == r["peer_mean"] and not r["differ"] for r in seq)
     assert bench.main(["--parts", "chunk", *tiny]) == 0  # done before: skipped
     assert json.loads((out / "chunk.json").read_text()) == chunk
 
 
 @pytest.mark.slow
-def test_population_benchmark_splits_the_six_over_processes(tmp_path, capsys):
+def test_population_benchmark_splits_the_six_over_processes(tmp_path, capsys, monkeypatch):
     """``population.py --parts split --devices 0,1`` at CPU size: two processes (``CUDA_VISIBLE_DEVICES`` 0 and 1;
     both on the CPU here) run the treatments ``t % 2 == I`` into one ``split/`` folder, each its JSON; the part is
-    done with the slowest process's wall time and every treatment's hardest cell; bad ``--devices`` in one line."""
+    done with the slowest process's wall time and every treatment's hardest cell; bad ``--devices`` in one line. As
+    on the GPU machine (``tests/gpu_image.py``)."""
     import json
 
-    from curriculum_archives import tiny_archive_file
-    from jaxterrain import qd as A
+    from gpu_image import image
 
     bench = load_benchmark("population")
-    a = tiny_archive_file(tmp_path, 4, "a.npz")
-    arch = A.load(a)
-    b = str(A.save(tmp_path / "b.npz", arch._replace(fitness=np.where(arch.source >= 0, 0.7 * arch.fitness + 0.1,
-                                                                      arch.fitness).astype(np.float32))))
+    a, b = two_archives(tmp_path)
+    image(monkeypatch)
     out = tmp_path / "bench"
     tiny = ["--preset", "smoke", "--archives", f"a={a}", f"b={b}", "--trials", "1", "--backend", "jax",
             "--out", str(out)]

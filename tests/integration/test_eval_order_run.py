@@ -1,7 +1,8 @@
 """``docs/results/eval_order/run.py`` end to end at the tiniest size on the CPU (slow: two ``learn`` programs and
 two suite walks compile): the sequential and the lagged order trained (the lagged one stopped by its time limit and
 resumed), both walked on a tiny suite, ``--pack`` and ``write`` (the hardest cell per trial with intervals over
-trials, generalise on the held-out walks). Each stage run again says ``done`` without running anything."""
+trials, generalise on the held-out walks). Each stage run again says ``done`` without running anything. The stages
+that run on the GPU machine run as there, without the packages its image lacks (``tests/gpu_image.py``)."""
 
 from __future__ import annotations
 
@@ -12,6 +13,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from gpu_image import image
 from scripts import load_script
 
 from curriculum_archives import tiny_archive_file
@@ -22,9 +24,12 @@ TINY = ["--size", "96", "--seeds", "1", "--families", "flat", "boxes", "--genera
 
 
 @pytest.mark.slow
-def test_eval_order_stages_at_the_tiniest_size(tmp_path, monkeypatch, capsys):
+def test_eval_order_stages_at_the_tiniest_size(tmp_path, monkeypatch, capsys, request):
     archive = tiny_archive_file(tmp_path, 4, "a.npz")  # from the repository root (the stored archive's path)
     monkeypatch.chdir(tmp_path)
+    gpu = pytest.MonkeyPatch()  # the GPU image, until write
+    request.addfinalizer(gpu.undo)
+    image(gpu)
     run = load_script(SCRIPT, "eval_order_run")
     out = tmp_path / "runs"
     base = ["--out", str(out), "--preset", "smoke", "--eval-preset", "smoke", "--trials", "2", "--archive", archive]
@@ -47,6 +52,7 @@ def test_eval_order_stages_at_the_tiniest_size(tmp_path, monkeypatch, capsys):
     assert not any(n.endswith("checkpoint.npz") for n in names)  # both finished
     for order in ("sequential", "lag"):
         assert stage("evaluate", order, *TINY)[0] == 0
+    gpu.undo()
     results = tmp_path / "results"
     code, text = stage("write", "--results", str(results))
     assert code == 0, text

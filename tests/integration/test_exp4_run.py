@@ -2,7 +2,9 @@
 mixed archive, the humanoid's blind and perceptive runs (one treatment each, ``--treatments mixed-map``), the ant's
 ``steps`` archive and one ant treatment, the evaluation of every walker and base policy on suite v2 and v1 (a tiny
 build: ``flat`` and ``boxes`` at 96 px, 2 walks), ``--pack``, ``--plan`` and ``write`` (generalise's levels passed
-per robot, observation set and suite). Each stage run again says ``done`` without running anything."""
+per robot, observation set and suite). Each stage run again says ``done`` without running anything. The stages that
+run on the GPU machine run as there, without the packages its image lacks (``tests/gpu_image.py``); ``write`` runs
+where the results are read."""
 
 from __future__ import annotations
 
@@ -10,6 +12,7 @@ import tarfile
 from pathlib import Path
 
 import pytest
+from gpu_image import image
 from scripts import load_script
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -24,8 +27,11 @@ def load():
 
 
 @pytest.mark.slow
-def test_every_stage_runs_at_the_tiniest_size(tmp_path, monkeypatch, capsys):
+def test_every_stage_runs_at_the_tiniest_size(tmp_path, monkeypatch, capsys, request):
     monkeypatch.chdir(tmp_path)
+    gpu = pytest.MonkeyPatch()  # the GPU image, until write
+    request.addfinalizer(gpu.undo)
+    image(gpu)
     run = load()
     out = tmp_path / "exp4"
     base = ["--out", str(out), "--preset", "smoke", "--trials", "1", "--keys", "2"]
@@ -69,6 +75,7 @@ def test_every_stage_runs_at_the_tiniest_size(tmp_path, monkeypatch, capsys):
     assert "evaluate v2: humanoid blind 0 walks left, humanoid perceptive 0 walks left, ant blind 0 walks left, " \
            "ant perceptive 0 walks left (rates recorded in" in plan
 
+    gpu.undo()
     results = tmp_path / "results"
     assert stage("write", *TINY, "--results", str(results))[0] == 0
     for name in ("humanoid-blind", "humanoid-perceptive", "ant-blind"):

@@ -8,7 +8,6 @@ from __future__ import annotations
 import argparse
 import json
 import re
-import sys
 import warnings
 from pathlib import Path
 
@@ -17,6 +16,7 @@ import numpy as np
 import pytest
 
 from curriculum_archives import tiny_archive_file, tree_equal, validated
+from gpu_image import image
 from jaxterrain.curriculum import outputs, run_config, runner
 from jaxterrain.runtime import driver, statistics
 from jaxterrain.walker import layout, warp_available
@@ -88,8 +88,8 @@ def test_learn_rejects_bad_input_with_one_line_naming_it(tmp_path, tiny_archive,
 @pytest.fixture(scope="module")
 def learn_smoke(tmp_path_factory, tiny_archive):
     """``(archive, run folder)``: ONE uninterrupted ``learn --preset smoke`` run on the 4-terrain archive, shared by
-    the end-to-end test and the time-limit test (its uninterrupted reference). rliable cannot be imported while it
-    runs: a run's files need only numpy's bootstrap (a GPU image without rliable once lost a whole run at its end)."""
+    the end-to-end test and the time-limit test (its uninterrupted reference). It runs as on the GPU machine, without
+    the packages its image lacks (``tests/gpu_image.py``: rliable among them)."""
     import contextlib
     import io
 
@@ -110,7 +110,7 @@ def learn_smoke(tmp_path_factory, tiny_archive):
     with pytest.MonkeyPatch.context() as mp, contextlib.redirect_stderr(err):
         mp.setattr(driver, "PLAIN_EVERY_S", 0.0)
         mp.setattr(runner.ChunkMetrics, "__call__", snapshot)
-        mp.setitem(sys.modules, "rliable", None)  # `import rliable` raises ImportError
+        image(mp)
         assert cli("learn", "--preset", "smoke", "--archive", archive, "--out", str(out)) == 0
     (out.parent / "stderr.txt").write_text(err.getvalue())
     (out.parent / "metrics_seen.json").write_text(json.dumps(seen))
