@@ -43,6 +43,9 @@ def run():
     (["evaluate", "--pack", "/x.tar.gz"], "--pack stores --out relative to the current folder"),  # --out: tmp_path
     (["evaluate", "--headings", "3"], "--headings must be one of 1, 2, 4; got 3"),
     (["archive", "mixed", "--archive-size", "16"], "--archive-size must be an integer >= 32; got 16"),
+    (["train", "humanoid", "blind", "--shard", "2/2"], "--shard must be I/N with N >= 1 and 0 <= I < N; got '2/2'"),
+    (["train", "humanoid", "blind", "--shard", "a"], "--shard must be I/N with N >= 1 and 0 <= I < N; got 'a'"),
+    (["evaluate", "--shard", "0/2"], "--shard splits the curriculum run of 'train humanoid OBS' over processes"),
 ])
 def test_bad_arguments_are_one_line_naming_the_flag(run, argv, message, capsys, tmp_path):
     with pytest.raises(SystemExit) as err:
@@ -98,6 +101,26 @@ def test_the_humanoid_run_makes_the_five_treatments(run, tmp_path):
     assert planned(run.curriculum_argv(args, "blind", ["mixed-map"]))[0] == ["mixed-map"]
     assert planned(run.curriculum_argv(args, "blind", ["steps-map", "mixed-map", "mixed-plr"]))[0] == [
         "mixed-map", "steps-map", "mixed-plr"]
+
+
+def test_a_sharded_humanoid_train_passes_its_shard_to_curriculum(run, tmp_path, monkeypatch, capsys):
+    """``train humanoid OBS --shard I/N`` runs ``curriculum ... --shard I/N``, fresh and resumed, and says that the
+    tables come from the same train without ``--shard``."""
+    calls = []
+    monkeypatch.setattr(run, "cli", lambda argv, args: calls.append(argv) or 0)
+    monkeypatch.setattr(run, "archive_done", lambda *a: True)
+    out = tmp_path / "exp4"
+    assert run.main(["train", "humanoid", "blind", "--shard", "1/2", "--out", str(out)]) == 0
+    assert calls[-1][0] == "curriculum" and "--archives" in calls[-1] and calls[-1][-2:] == ["--shard", "1/2"]
+    assert "shard 1/2: done" in capsys.readouterr().out
+    folder = run.train_folder(out, "humanoid", "blind")
+    folder.mkdir(parents=True)
+    (folder / "config.json").write_text("{}")
+    assert run.main(["train", "humanoid", "blind", "--shard", "0/2", "--out", str(out)]) == 0
+    assert calls[-1] == ["curriculum", "--resume", str(folder), "--shard", "0/2"]
+    assert run.main(["train", "humanoid", "blind", "--out", str(out)]) == 0  # the tables: no --shard
+    assert calls[-1] == ["curriculum", "--resume", str(folder)]
+    assert "train humanoid blind: done" in capsys.readouterr().out
 
 
 def test_an_ant_treatment_is_one_learn_run_on_the_ants_archive(run, tmp_path):

@@ -22,6 +22,9 @@ Stages (:data:`STAGES`):
   its five treatments (:data:`TREATMENTS`) batched in one population: the map curriculum on the steps archive and on
   the mixed archive, domain randomisation, PLR and terrain levels on the mixed archive (``--archives steps=.. mixed=..
   --baseline dr plr levels --baseline-archive mixed --no-combined --observation OBS``), ``--trials`` (10) trials each.
+  ``--shard I/N`` runs the treatments ``t % N == I`` of that run (``curriculum --shard``; t: mixed-map, steps-map,
+  mixed-dr, mixed-plr, mixed-levels), so that N processes, one per GPU, share it (on a 2 x H200: 30 and 20 trials);
+  the same train without ``--shard`` then writes the tables.
 - ``train ant --ant OBS/TREATMENT OBS/TREATMENT``: the two treatments chosen after looking at the humanoid's
   results, each a ``learn --robot ant`` run on the ant's own archive (``archive GEN --robot ant`` first; an archive's
   fitness is one robot's), ``OUT/train/ant-OBS/TREATMENT/``. The choice is saved in ``OUT/ant.json``; later stages
@@ -139,6 +142,10 @@ def parser() -> argparse.ArgumentParser:
                    help=f"train humanoid: a subset of the treatments (default all: {', '.join(TREATMENTS)}; a "
                         f"mixed-* baseline needs mixed-map, which its curriculum run makes too); saved in "
                         f"OUT/humanoid.json at the first train")
+    p.add_argument("--shard", default=None, metavar="I/N",
+                   help="train humanoid: only the treatments t %% N == I of its curriculum run (curriculum --shard), so "
+                        "that N processes (one per GPU: CUDA_VISIBLE_DEVICES=I) share one run; then the same train "
+                        "without --shard writes the tables (nothing compiles)")
     p.add_argument("--preset", choices=("gpu-short", "smoke"), default="gpu-short",
                    help="evolve / curriculum / learn preset (default gpu-short; smoke: a CPU check)")
     p.add_argument("--trials", type=int, default=TRIALS, help=f"trials of each treatment (default {TRIALS})")
@@ -196,6 +203,16 @@ def check(p: argparse.ArgumentParser, args) -> None:
             p.error("--treatments chooses the humanoid's treatments of 'train humanoid' (later stages read "
                     "OUT/humanoid.json)")
         check_treatments(p, args.treatments)
+    if args.shard is not None:
+        if not (words and words[:2] == ("train", "humanoid")):
+            p.error("--shard splits the curriculum run of 'train humanoid OBS' over processes")
+        try:
+            i, n = (int(v) for v in args.shard.split("/"))
+        except ValueError:
+            i, n = -1, 0
+        if not (n >= 1 and 0 <= i < n):
+            p.error(f"--shard must be I/N with N >= 1 and 0 <= I < N; got {args.shard!r}")
+        args.shard = (i, n)
     if args.time_limit is not None and not (math.isfinite(args.time_limit) and args.time_limit > 0):
         p.error(f"--time-limit must be a finite number of minutes > 0; got {args.time_limit}")
     if args.pack is not None and not args.pack.name.endswith((".tar.gz", ".tgz")):
@@ -407,9 +424,13 @@ def stage_train(args, robot: str, obs: str | None) -> int:
         if all(treatment_done(folder / t) for t in names) and (folder / "hardest.csv").is_file():
             print(f"train humanoid {obs}: done ({folder})", flush=True)
             return 0
-        code = cli(["curriculum", "--resume", str(folder)] if (folder / "config.json").is_file()
-                   else curriculum_argv(args, obs, names), args)
-        if code == 0:
+        shard = [] if args.shard is None else ["--shard", "{}/{}".format(*args.shard)]
+        code = cli((["curriculum", "--resume", str(folder)] if (folder / "config.json").is_file()
+                    else curriculum_argv(args, obs, names)) + shard, args)
+        if code == 0 and shard:
+            print(f"train humanoid {obs} shard {shard[1]}: done ({folder}); once every shard is, the same train "
+                  f"without --shard writes the tables", flush=True)
+        elif code == 0:
             print(f"train humanoid {obs}: done ({folder})", flush=True)
         return code
     pairs = args.ant_pairs
