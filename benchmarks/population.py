@@ -200,6 +200,12 @@ def part_chunk(args, out: Path, clock: Clock) -> dict:
     return row
 
 
+def previous(out: Path, name: str) -> dict:
+    """``<out>/<name>.json`` as an earlier command left it (``{}`` when none did)."""
+    path = out / f"{name}.json"
+    return json.loads(path.read_text()) if path.exists() else {}
+
+
 def part_name(args, part: str) -> str:
     """The JSON name of ``part`` (``split<I>of<N>`` for one process of ``split``)."""
     return f"split{args.shard[0]}of{args.shard[1]}" if part == "shard" else part
@@ -217,8 +223,7 @@ def part_run(args, out: Path, clock: Clock, which: str) -> dict:
         i, n = args.shard
         plan = [t for k, t in enumerate(plan) if k % n == i]
     name = part_name(args, which)
-    previous = json.loads((out / f"{name}.json").read_text()) if (out / f"{name}.json").exists() else {}
-    commands = list(previous.get("commands_s", []))
+    commands = list(previous(out, name).get("commands_s", []))
     t0 = time.perf_counter()
     left = clock.left()
     if which in ("six", "shard"):
@@ -258,13 +263,9 @@ def part_split(args, out: Path, clock: Clock) -> dict:
         procs.append(subprocess.Popen([sys.executable, str(Path(__file__).resolve()), *forward, "--shard", f"{i}/{n}"],
                                       env=env))
     rcs = [p.wait() for p in procs]
-    shards = []
-    for i in range(n):
-        path = out / f"split{i}of{n}.json"
-        shards.append(json.loads(path.read_text()) if path.exists() else {"done": False})
-    previous = json.loads((out / "split.json").read_text()) if (out / "split.json").exists() else {}
+    shards = [previous(out, f"split{i}of{n}") for i in range(n)]
     row = {"preset": args.preset, "devices": args.devices, "returncodes": rcs,
-           "commands_s": list(previous.get("commands_s", [])) + [time.perf_counter() - t0],
+           "commands_s": list(previous(out, "split").get("commands_s", [])) + [time.perf_counter() - t0],
            "treatments": [t for s in shards for t in s.get("treatments", [])],
            "done": all(s.get("done") for s in shards)}
     if row["done"]:

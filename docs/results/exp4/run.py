@@ -206,13 +206,12 @@ def check(p: argparse.ArgumentParser, args) -> None:
     if args.shard is not None:
         if not (words and words[:2] == ("train", "humanoid")):
             p.error("--shard splits the curriculum run of 'train humanoid OBS' over processes")
+        from experiments.common import parse_shard  # curriculum's own parser of I/N
+
         try:
-            i, n = (int(v) for v in args.shard.split("/"))
-        except ValueError:
-            i, n = -1, 0
-        if not (n >= 1 and 0 <= i < n):
+            args.shard = parse_shard(args.shard)
+        except argparse.ArgumentTypeError:
             p.error(f"--shard must be I/N with N >= 1 and 0 <= I < N; got {args.shard!r}")
-        args.shard = (i, n)
     if args.time_limit is not None and not (math.isfinite(args.time_limit) and args.time_limit > 0):
         p.error(f"--time-limit must be a finite number of minutes > 0; got {args.time_limit}")
     if args.pack is not None and not args.pack.name.endswith((".tar.gz", ".tgz")):
