@@ -9,8 +9,8 @@
 set -euo pipefail
 top=$(git rev-parse --show-toplevel); cd "$top"
 stash="${JT_STASH:-$top/../jt-stash.tar}"
-medium='^(jaxterrain/|experiments/|benchmarks/|pyproject\.toml$|docs/results/exp4/run\.py$|docs/results/steps_gpushort/archive\.npz$|docs/results/suite_v2/reevaluate\.py$)'
-tiny='^benchmarks/device/'
+medium='^(\.gitignore$|jaxterrain/|experiments/|benchmarks/|pyproject\.toml$|docs/results/exp4/run\.py$|docs/results/steps_gpushort/archive\.npz$|docs/results/suite_v2/reevaluate\.py$)'
+tiny='^(\.gitignore$|benchmarks/device/)'
 back() { if [ -f "$stash" ]; then tar xf "$stash" && rm -f "$stash"; fi; }
 case "${1:-}" in
   restore)
