@@ -170,3 +170,18 @@ def test_warp_matches_jax_on_a_short_rollout(jax_run, warp_run):
     fw, xw, dw, _ = warp_run
     np.testing.assert_allclose(xw[:20], xj[:20], atol=0.02)
     np.testing.assert_allclose(fw, fj, atol=0.05)
+
+
+@needs_warp
+def test_warp_model_prints_no_solver_cap_warnings():
+    """The walker's Warp model keeps MuJoCo Warp's overflow warnings of buffers (contacts, constraints, CCD,
+    heightfield) and drops those of the solver's iteration caps, which it reaches by design: one printed line per
+    world and step otherwise (GBs of log per GPU run)."""
+    from mujoco.mjx.third_party.mujoco_warp import OverflowType
+
+    policy = _policy()
+    env = WalkerEnv(_config(policy, backend="warp", tiles=2, warp_worlds=4))
+    flags = OverflowType(env.mjx_model.opt._impl.warn_overflow)
+    assert not flags & (OverflowType.ITERATIONS | OverflowType.LS_ITERATIONS)
+    kept = OverflowType.ALL & ~(OverflowType.ITERATIONS | OverflowType.LS_ITERATIONS)
+    assert flags == kept
