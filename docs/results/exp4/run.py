@@ -90,8 +90,9 @@ KEYS = 10
 RATES = {
     "archive_steps_s": (217.0, "measured: evolve --preset gpu-short --generator steps, one H200, MJX-JAX, 2026-11-29 "
                                "(docs/results/steps_gpushort)"),
-    "archive_mixed_s": (217.0 * 30_600 / 10_100, "assumed: the steps archive's 217 s scaled by terrains walked "
-                                                 "(30 600 / 10 100); not measured"),
+    "archive_mixed_s": (396.0, "measured: the humanoid's mixed archive, evolve --preset gpu-short --generator mixed "
+                               "(30 600 terrains), 396 s in one command, MJX-JAX, one H200 of a 2 x H200 host, "
+                               "2026-11-30 (docs/results/mixed_archive.md)"),
     "archive_ant_factor": (1.0, "assumed: the ant's archive as long as the humanoid's; not measured"),
     "treatment_s_warp": ((388.0, 476.0), "measured: a gpu-short treatment alone, 388-476 s, MuJoCo Warp, one H200, "
                                          "Experiment 3, 2026-11-29"),
