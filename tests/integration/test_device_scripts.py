@@ -1,0 +1,83 @@
+"""benchmarks/device/: the scripts that run the long GPU work (the tree shrunk and restored, one command line per
+GPU under one deadline, actor-only walkers back)."""
+
+from __future__ import annotations
+
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+ROOT = Path(__file__).resolve().parents[2]
+DEVICE = ROOT / "benchmarks" / "device"
+
+pytestmark = pytest.mark.skipif(shutil.which("git") is None or shutil.which("bash") is None
+                                or not (ROOT / ".git").exists(), reason="needs git, bash and a git checkout")
+
+
+def test_ship_writes_actor_only_walkers_that_act_the_same(tmp_path):
+    from jaxterrain import rl
+
+    trial = tmp_path / "six" / "cppn-map" / "policies" / "trial_0"
+    shutil.copytree(ROOT / "jaxterrain" / "assets" / "base_policy", trial)
+    unfinished = tmp_path / "six" / "gan-map" / "policies" / "trial_0"
+    shutil.copytree(trial, unfinished)
+    (tmp_path / "six" / "cppn-map" / "summary.json").write_text("{}")  # only finished treatments ship
+    out = subprocess.run([sys.executable, str(DEVICE / "ship.py"), str(tmp_path / "six"), "--to",
+                          str(tmp_path / "ship")], capture_output=True, text=True, check=True).stdout
+    assert "1 walkers" in out
+    shipped = tmp_path / "ship" / "six" / "cppn-map" / "policies" / "trial_0"
+    assert not (tmp_path / "ship" / "six" / "gan-map").exists()
+    full, actor = rl.load_policy(trial), rl.load_policy(shipped)
+    assert actor.meta["actor_only"] and set(actor.params) == {"policy"}
+    assert (shipped / "policy.msgpack").stat().st_size < (trial / "policy.msgpack").stat().st_size / 10
+    obs = np.random.default_rng(0).normal(size=(16, full.observation_size)).astype(np.float32)
+    np.testing.assert_array_equal(np.asarray(actor(obs)), np.asarray(full(obs)))
+
+
+def test_pair_runs_one_line_per_gpu_and_drops_warp_solver_cap_lines(tmp_path):
+    spam = ("echo 'solver iterations limit reached - please increase iterations beyond 4'; echo 'To disable the print "
+            "warning: m.opt.warn_overflow &= ~mjw.OverflowType.ITERATIONS (or = 0 for all)'; echo 'CCD overflow - "
+            "please increase naccdmax beyond 8'")
+    out = subprocess.run(["bash", str(DEVICE / "pair.sh"), "100", f"echo gpu=$CUDA_VISIBLE_DEVICES left=$(left); {spam}",
+                          "echo gpu=$CUDA_VISIBLE_DEVICES; exit 3"], cwd=tmp_path, capture_output=True, text=True,
+                         check=True).stdout
+    assert "pair: GPU 0 exited 0" in out and "pair: GPU 1 exited 3" in out
+    log0 = (tmp_path / "runs" / "gpu0.log").read_text().splitlines()
+    assert log0[0].startswith("gpu=0 left=")
+    assert 0.8 < float(log0[0].split("left=")[1]) <= (100 - 45) / 60  # minutes before the deadline
+    assert log0[1:] == ["CCD overflow - please increase naccdmax beyond 8"]  # buffer overflows stay
+    assert (tmp_path / "runs" / "gpu1.log").read_text() == "gpu=1\n"
+
+
+def test_state_shrinks_the_tracked_tree_and_restores_it(tmp_path):
+    repo = tmp_path / "repo"
+    subprocess.run(["git", "clone", "-q", "--local", str(ROOT), str(repo)], check=True)
+    subprocess.run(["git", "checkout", "-q", subprocess.run(["git", "rev-parse", "HEAD"], cwd=ROOT, text=True,
+                    capture_output=True, check=True).stdout.strip()], cwd=repo, check=True)
+    (repo / "runs").mkdir()
+    (repo / "runs" / "kept.txt").write_text("ignored files are not touched")
+    env = {"JT_STASH": str(tmp_path / "stash.tar"), "PATH": "/usr/bin:/bin"}
+    state = DEVICE / "state.sh"  # this tree's script, run in the clone
+
+    def tracked_present():
+        files = subprocess.run(["git", "ls-files"], cwd=repo, capture_output=True, text=True, check=True).stdout.split()
+        return {f for f in files if (repo / f).exists()}
+
+    everything = tracked_present()
+    subprocess.run(["bash", str(state), "medium"], cwd=repo, env=env, check=True, capture_output=True)
+    medium = tracked_present()
+    assert {".gitignore", "pyproject.toml", "docs/results/exp4/run.py"} <= medium
+    assert all(f.split("/")[0] in {".gitignore", "pyproject.toml", "jaxterrain", "experiments", "benchmarks", "docs"}
+               for f in medium)
+    assert "README.md" not in medium and not any(f.startswith("tests/") for f in medium)
+    subprocess.run(["bash", str(state), "tiny"], cwd=repo, env=env, check=True, capture_output=True)
+    assert tracked_present() == {f for f in everything if f == ".gitignore" or f.startswith("benchmarks/device/")}
+    subprocess.run(["bash", str(state), "restore"], cwd=repo, env=env, check=True, capture_output=True)
+    assert tracked_present() == everything
+    assert not (tmp_path / "stash.tar").exists() and (repo / "runs" / "kept.txt").exists()
+    status = subprocess.run(["git", "status", "--porcelain"], cwd=repo, capture_output=True, text=True).stdout
+    assert status == ""
