@@ -86,8 +86,8 @@ _WARP_DROPPED = (1 << 0) | (1 << 1) | (1 << 2) | (1 << 3)  # NEFC, NJMAX_NNZ, BR
 SOLVER_CAP_WARNINGS = ("ITERATIONS", "LS_ITERATIONS")
 """MuJoCo Warp's overflow warnings switched off on the walker's model: a world that ends its step at the solver's
 (or line search's) iteration cap. The walker caps Newton's iterations by design (:class:`SolverOptions`), so under
-load most worlds reach the cap every step, and each printed one line from the GPU: 11 GB of log in 8 minutes for a
-60-trial population (2 x H200, 2026-11-30), slowing its chunk from 13.95 to 17.4 s. The cap is still recorded in
+load most worlds reach the cap every step, and each printed one line from the GPU: 5.9 GB of log in 8 minutes for a
+60-trial population and 5.3 GB for one treatment beside it (2 x H200, 2026-11-30). The cap is still recorded in
 the Warp data's overflow flags; the warnings of overflowing buffers (contacts, CCD, heightfield) stay on."""
 
 

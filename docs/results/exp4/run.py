@@ -95,7 +95,7 @@ RATES = {
                                "2026-11-30 (docs/results/mixed_archive.md)"),
     "archive_ant_factor": (1.0, "assumed: the ant's archive as long as the humanoid's; not measured"),
     "treatment_s_warp": ((388.0, 476.0), "measured: a gpu-short treatment alone, 388-476 s, MuJoCo Warp, one H200, "
-                                         "Experiment 3, 2026-11-29"),
+                                         "Experiment 2 (exp2_all.md), 2026-11-29"),
     "treatment_s_jax": (780.0, "measured: learn --preset gpu-short --backend jax, 10.4 s a chunk x 75 chunks, one "
                                "H200, 2026-11-29 (/work/shared/NOTES.md)"),
     "population_factor": (0.53, "measured: for six, the six map treatments' chunk in one program 13.95 s against "
