@@ -66,8 +66,8 @@ from jaxterrain.terrain import hfield_size
 from jaxterrain.walker import randomisation as _rnd
 from jaxterrain.walker import tiles as _tiles
 from jaxterrain.walker import warp_patch as _warp_patch
+from jaxterrain.walker.warp_model import quiet_solver_caps
 from jaxterrain.walker.model import build_model, metres_to_hfield
-from jaxterrain.walker.randomisation import is_active
 from jaxterrain.walker.robots import get as get_robot
 from jaxterrain.walker.tiles import Tile, TileBank
 from jaxterrain.walker.config import (BACKENDS, OBSERVATIONS, SCAN_FIELDS, WalkerConfig, check_config, flat_terrain,
@@ -80,31 +80,6 @@ __all__ = ["PARK_HEIGHT", "WalkerState", "WalkerEnv"]
 PARK_HEIGHT = 100.0  # m above the terrain's top where WalkerEnv.park puts walkers whose outcome is recorded
 # MuJoCo Warp overflow bits (mujoco_warp OverflowType) that mean dropped contacts or constraints: the step is invalid.
 _WARP_DROPPED = (1 << 0) | (1 << 1) | (1 << 2) | (1 << 3)  # NEFC, NJMAX_NNZ, BROADPHASE, NARROWPHASE
-
-
-
-SOLVER_CAP_WARNINGS = ("ITERATIONS", "LS_ITERATIONS")
-"""MuJoCo Warp's overflow warnings switched off on the walker's model: a world that ends its step at the solver's
-(or line search's) iteration cap. The walker caps Newton's iterations by design (:class:`SolverOptions`), so under
-load most worlds reach the cap every step, and each printed one line from the GPU: 5.9 GB of log in 8 minutes for a
-60-trial population and 5.3 GB for one treatment beside it (2 x H200, 2026-11-30). The cap is still recorded in
-the Warp data's overflow flags; the warnings of overflowing buffers (contacts, CCD, heightfield) stay on."""
-
-
-def quiet_solver_caps(mjx_model):
-    """``mjx_model`` (``impl="warp"``) with :data:`SOLVER_CAP_WARNINGS` cleared from ``opt.warn_overflow`` (a
-    static field: read when Warp's kernels are built). A model of another MJX version without it is returned as
-    is."""
-    impl = getattr(mjx_model.opt, "_impl", None)
-    if impl is None or not hasattr(impl, "warn_overflow"):
-        return mjx_model
-    from mujoco.mjx.third_party.mujoco_warp import OverflowType
-
-    off = 0
-    for name in SOLVER_CAP_WARNINGS:
-        off |= int(getattr(OverflowType, name, 0))
-    impl = impl.replace(warn_overflow=int(impl.warn_overflow) & ~off)
-    return mjx_model.replace(opt=mjx_model.opt.replace(_impl=impl))
 
 
 class WalkerState(NamedTuple):
@@ -203,7 +178,7 @@ class WalkerEnv:
             raise ValueError(f"robot {self.robot.name!r}: every joint after the free root must be a hinge")
         self._feet = np.array([mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_GEOM, n) for n in self.robot.foot_geoms])
         self._foot_radius = np.asarray(m.geom_size[self._feet, 0], np.float32)
-        self._random = is_active(config.randomisation)  # off: no draws, no state leaves, the shared model
+        self._random = _rnd.is_active(config.randomisation)  # off: no draws, no state leaves, the shared model
         self._torso, self._torso_mass = int(torso), float(m.body_mass[torso])
         added = config.randomisation.added_mass
         if added is not None and self._torso_mass + added[0] <= 0:
