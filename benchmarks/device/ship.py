@@ -1,4 +1,4 @@
-"""Actor-only copies of the walkers of finished runs (``rl.save_policy(..., actor_only=True)``: ~24 KB instead of
+"""Actor-only copies of the walkers of finished runs (``rl.save_actor_only``: ~24 KB instead of
 ~1.1 MB, enough to walk and evaluate), so that a population's 60 walkers fit in what one device call returns.
 
     python3 benchmarks/device/ship.py runs/population/six runs/population/alone --to runs/ship
@@ -30,10 +30,7 @@ def main(argv=None) -> int:
             dest = args.to / run.name / treatment.name / "policies" / trial.name
             if not (treatment / "summary.json").exists() or (dest / "policy.msgpack").exists():
                 continue
-            pol = rl.load_policy(trial)
-            extra = {k: v for k, v in pol.meta.items() if k != "actor_only"}
-            rl.save_policy(dest, pol.params, pol.normaliser, pol.config, pol.observation_size, pol.action_size,
-                           extra=extra, actor_only=True)
+            rl.save_actor_only(trial, dest)
             n += 1
     print(f"ship: {n} walkers written actor-only under {args.to}")
     return 0

@@ -6,7 +6,7 @@ humanoid recipe). Public API::
 
     PPOConfig, TrainState, init, update, run_updates, ride_updates, Ride, make_train, train, chunk_fn, reset_envs,
     raw_key, Progress,
-    gae, ppo_loss, save_checkpoint, load_checkpoint, save_policy, load_policy,
+    gae, ppo_loss, save_checkpoint, load_checkpoint, save_policy, save_actor_only, load_policy,
     widen_inputs, scan_statistics, perceptive_twin   (a blind policy's perceptive twin: jaxterrain.rl.perception)
     export_onnx, onnx_metadata, read_onnx_metadata   (jaxterrain.rl.onnx; needs the extra jaxterrain[onnx])
 """
@@ -18,6 +18,7 @@ from jaxterrain.rl.checkpoint import (
     load_checkpoint,
     load_policy,
     policy_fn,
+    save_actor_only,
     save_checkpoint,
     save_policy,
 )
@@ -44,7 +45,7 @@ __all__ = [
     "checkpoint_metadata", "chunk_fn", "compiled_chunk", "deterministic_action", "export_onnx", "gae", "init",
     "init_stats",
     "load_checkpoint", "load_policy", "loss_fn", "make_optimizer", "make_train", "normalize", "policy_fn", "ppo_loss",
-    "onnx_metadata", "raw_key", "read_onnx_metadata", "reset_envs", "Ride", "ride_updates", "run_updates", "save_checkpoint", "save_policy", "train", "update",
+    "onnx_metadata", "raw_key", "read_onnx_metadata", "reset_envs", "Ride", "ride_updates", "run_updates", "save_actor_only", "save_checkpoint", "save_policy", "train", "update",
     "update_stats",
     "validate_config", "PerceptiveTwin", "perceptive_twin", "scan_statistics", "widen_inputs",
 ]

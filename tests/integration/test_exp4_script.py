@@ -22,6 +22,13 @@ def run():
     return module
 
 
+@pytest.fixture(autouse=True)
+def no_stock_warp_here(run, monkeypatch):
+    """These tests hold whether or not this machine has MuJoCo Warp: where warp-lang is installed and unpatched, the
+    presets' ``auto`` backend would make a train stage refuse the stock heightfield collision (tested on its own)."""
+    monkeypatch.setattr(run, "_warp_hfield", lambda: "local-origin patch")
+
+
 @pytest.mark.parametrize("argv, message", [
     ([], "give a stage (archive, train, evaluate, write) or --plan"),
     (["fly"], "STAGE must be one of archive, train, evaluate, write; got 'fly'"),
@@ -221,3 +228,33 @@ def test_a_stage_with_no_time_left_starts_nothing_and_says_how_to_go_on(run, tmp
     assert json.loads((out / "humanoid.json").read_text()) == {"treatments": ["steps-map", "mixed-map"]}
     assert run.main([*argv[:3], "--treatments", "mixed-map", *argv[6:]]) == 2
     assert "humanoid.json chose steps-map mixed-map" in capsys.readouterr().err
+
+
+def test_the_pack_carries_walkers_actor_only(run, tmp_path, monkeypatch):
+    """A finished treatment's walkers travel without their value networks (the device returns at most 16 MiB a
+    file; 50 full humanoid walkers are ~55 MB): the packed walker acts as the one on disk, which stays whole."""
+    import shutil
+    import tarfile
+
+    import numpy as np
+
+    from jaxterrain import rl
+
+    monkeypatch.chdir(tmp_path)
+    treatment = tmp_path / "exp4" / "train" / "humanoid-blind" / "mixed-map"
+    walker = treatment / "policies" / "trial_0"
+    walker.mkdir(parents=True)
+    for name in ("policy.msgpack", "config.json"):
+        shutil.copy(rl.BASE_POLICY_DIR / name, walker / name)
+    (treatment / "summary.json").write_text("{}")
+    run.pack(argparse.Namespace(out=Path("exp4"), pack=tmp_path / "exp4.tar.gz"))
+    with tarfile.open(tmp_path / "exp4.tar.gz") as tar:
+        names = tar.getnames()
+        tar.extractall(tmp_path / "unpacked")
+    assert sorted(names) == ["exp4/train/humanoid-blind/mixed-map/policies/trial_0/config.json",
+                             "exp4/train/humanoid-blind/mixed-map/policies/trial_0/policy.msgpack",
+                             "exp4/train/humanoid-blind/mixed-map/summary.json"]
+    full, packed = rl.load_policy(walker), rl.load_policy(tmp_path / "unpacked" / names[0].rsplit("/", 1)[0])
+    assert packed.meta["actor_only"] and not full.meta.get("actor_only") and "value" in full.params
+    obs = np.random.default_rng(1).normal(size=(8, full.observation_size)).astype(np.float32)
+    np.testing.assert_array_equal(np.asarray(packed(obs)), np.asarray(full(obs)))

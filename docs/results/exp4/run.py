@@ -46,10 +46,10 @@ Stages (:data:`STAGES`):
 ``--pack FILE.tar.gz``: after the stage, ONE gzipped tar of what the next command needs (:func:`pack_members`): the
 archives without their ``checkpoint/`` folders once finished, every train run without the checkpoints of its
 finished treatments (an unfinished one keeps ``checkpoint.npz``, needed to resume on another machine; the tar's
-size is printed: the device returns at most 64 MiB a call, so resume a long ``train`` on the same warm machine), the
-evaluation stores. ``--preset smoke`` with the tiny suite flags (``--size --seeds --families --generators
---attempts --best --headings --slots``, as reevaluate.py's) runs every stage on a CPU
-(``tests/integration/test_exp4_run.py``).
+size is printed: the device returns at most 16 MiB a file, so resume a long ``train`` on the same warm machine), the
+walkers actor-only (``rl.save_actor_only``: they walk and evaluate, ~24 KB each), the evaluation stores.
+``--preset smoke`` with the tiny suite flags (``--size --seeds --families --generators --attempts --best --headings
+--slots``, as reevaluate.py's) runs every stage on a CPU (``tests/integration/test_exp4_run.py``).
 """
 
 from __future__ import annotations
@@ -750,21 +750,39 @@ def pack_members(out: Path) -> list[Path]:
     return members
 
 
+def walker_file(path: Path) -> bool:
+    """Whether ``path`` is a walker's ``policy.msgpack`` or ``config.json`` (a folder under ``policies/`` holding
+    both)."""
+    return (path.name in ("policy.msgpack", "config.json") and "policies" in path.parts[:-1]
+            and (path.parent / "policy.msgpack").is_file() and (path.parent / "config.json").is_file())
+
+
 def pack(args) -> None:
     import io
     import tarfile
 
     from jaxterrain.runtime.io import atomic_write_bytes
 
+    import tempfile
+
+    from jaxterrain import rl
+
     root = Path.cwd().resolve()
     buf = io.BytesIO()
-    with tarfile.open(fileobj=buf, mode="w:gz") as tar:
+    with tempfile.TemporaryDirectory() as tmp, tarfile.open(fileobj=buf, mode="w:gz") as tar:
         for path in pack_members(args.out):
-            tar.add(path, arcname=os.path.relpath(path.resolve(), root))
+            arcname = os.path.relpath(path.resolve(), root)
+            if walker_file(path):  # a walker travels actor-only: 50 full ones (~55 MB) would not come back
+                copy = Path(tmp) / os.path.dirname(arcname)
+                if not (copy / "policy.msgpack").is_file():
+                    rl.save_actor_only(path.parent, copy)
+                path = copy / path.name
+            tar.add(path, arcname=arcname)
     atomic_write_bytes(args.pack, buf.getvalue())
     size = args.pack.stat().st_size
     checkpoints = sum(p.stat().st_size for p in pack_members(args.out) if p.name.startswith("checkpoint"))
-    over = "; OVER the 64 MiB a device call returns: resume on the same warm machine" if size > 64 * 2**20 else ""
+    over = ("; OVER the 16 MiB a file the device returns: resume on the same warm machine" if size > 16 * 2**20
+            else "")
     print(f"packed {args.out} into {args.pack} ({size / 2**20:.2f} MiB; checkpoints {checkpoints / 2**20:.1f} MiB "
           f"before compression){over}", flush=True)
 
