@@ -131,7 +131,6 @@ def save_policy(path: str | os.PathLike, params: Any, normaliser: nets.RunningSt
     return path
 
 
-
 def save_actor_only(src: str | os.PathLike, dst: str | os.PathLike) -> Path:
     """Copy the policy folder ``src`` (:func:`save_policy`'s) to ``dst`` without its value network (``actor_only``):
     the same deterministic actions, ~24 KB instead of ~1.1 MB for the humanoid's walker; enough to walk, evaluate
@@ -140,6 +139,7 @@ def save_actor_only(src: str | os.PathLike, dst: str | os.PathLike) -> Path:
     extra = {k: v for k, v in policy.meta.items() if k != "actor_only"}
     return save_policy(dst, policy.params, policy.normaliser, policy.config, policy.observation_size,
                        policy.action_size, extra=extra, actor_only=True)
+
 
 def _to_jnp(tree):
     return jax.tree_util.tree_map(jnp.asarray, tree)
