@@ -760,17 +760,16 @@ def walker_file(path: Path) -> bool:
 def pack(args) -> None:
     import io
     import tarfile
-
-    from jaxterrain.runtime.io import atomic_write_bytes
-
     import tempfile
 
     from jaxterrain import rl
+    from jaxterrain.runtime.io import atomic_write_bytes
 
     root = Path.cwd().resolve()
+    members = pack_members(args.out)
     buf = io.BytesIO()
     with tempfile.TemporaryDirectory() as tmp, tarfile.open(fileobj=buf, mode="w:gz") as tar:
-        for path in pack_members(args.out):
+        for path in members:
             arcname = os.path.relpath(path.resolve(), root)
             if walker_file(path):  # a walker travels actor-only: 50 full ones (~55 MB) would not come back
                 copy = Path(tmp) / os.path.dirname(arcname)
@@ -780,7 +779,7 @@ def pack(args) -> None:
             tar.add(path, arcname=arcname)
     atomic_write_bytes(args.pack, buf.getvalue())
     size = args.pack.stat().st_size
-    checkpoints = sum(p.stat().st_size for p in pack_members(args.out) if p.name.startswith("checkpoint"))
+    checkpoints = sum(p.stat().st_size for p in members if p.name.startswith("checkpoint"))
     over = ("; OVER the 16 MiB a file the device returns: resume on the same warm machine" if size > 16 * 2**20
             else "")
     print(f"packed {args.out} into {args.pack} ({size / 2**20:.2f} MiB; checkpoints {checkpoints / 2**20:.1f} MiB "
