@@ -93,14 +93,17 @@ RATES = {
     "archive_mixed_s": (396.0, "measured: the humanoid's mixed archive, evolve --preset gpu-short --generator mixed "
                                "(30 600 terrains), 396 s in one command, MJX-JAX, one H200 of a 2 x H200 host, "
                                "2026-11-30 (docs/results/mixed_archive.md)"),
-    "archive_ant_factor": (1.0, "assumed: the ant's archive as long as the humanoid's; not measured"),
+    "archive_ant_factor": (1.76, "measured: the ant's steps archive, 381.2 s for the command with its compile (one "
+                                 "H200 of a 2 x H200 host, MJX-JAX, 2026-11-30, docs/results/exp4/archives/"
+                                 "ant-steps.tar.gz), against the humanoid's 217 s (another lease, 2026-11-29)"),
     "treatment_s_warp": ((388.0, 476.0), "measured: a gpu-short treatment alone, 388-476 s, MuJoCo Warp, one H200, "
                                          "Experiment 2 (exp2_all.md), 2026-11-29"),
     "treatment_s_jax": (780.0, "measured: learn --preset gpu-short --backend jax, 10.4 s a chunk x 75 chunks, one "
                                "H200, 2026-11-29 (/work/shared/NOTES.md)"),
-    "population_factor": (0.53, "measured: for six, the six map treatments' chunk in one program 13.95 s against "
-                                "4.53 s for one alone (3.08 / 6 = 0.51; Warp, one H200, 2026-11-29, benchmarks/"
-                                "RESULTS.md); five (50 trials) interpolated linearly in the trials: 12.07 / (5 x 4.53)"),
+    "population_factor": (0.47, "measured: the six map treatments' whole run as one population, 10.87 s a chunk "
+                                "against 4.09 s for one alone in the same lease (10.87 / (6 x 4.09) = 0.44; Warp, "
+                                "2 x H200, 2026-11-30, docs/results/population.md); five (50 trials) interpolated "
+                                "linearly in the trials: 9.51 / (5 x 4.09)"),
     "v2_first_s": (67.0, "measured: the humanoid's first walk of suite v2 (compile included), MJX-JAX, one H200, "
                          "2026-11-29"),
     "v2_walker_s_jax": ((25.0, 35.0), "measured: the humanoid's walk of suite v2 (701 terrains, 80 walks each), "
@@ -112,8 +115,10 @@ RATES = {
     "v1_walker_s_warp": ((7.0, 7.0), "measured: suite v1, ~7 s a walker, MuJoCo Warp, one H200, 2026-11-29"),
     "v1_walker_s_jax": ((25.0 * 372 / 701, 35.0 * 372 / 701), "assumed: v2's MJX-JAX rate x 372 / 701 terrains; not "
                                                              "measured"),
-    "compile_s": ((30.0, 120.0), "assumed: the compile each train command repeats (curriculum's printed estimate "
-                                 "for a GPU, 30 s-2 min), added once per 8-minute command; not measured"),
+    "compile_s": ((35.0, 85.0), "measured: what each train command spends outside its chunks (set-up, compile): "
+                                "35-41 s for one treatment, 67-85 s for the six-treatment population, per command "
+                                "(commands_s less the chunks' time; Warp, 2 x H200, 2026-11-30, "
+                                "docs/results/population)"),
     "build_s": (31.0, "measured: suite v2's build, the humanoid's 25.2-31.0 s, the ant's 2.8-29.1 s, on the GPU "
                       "machines, 2026-11-29 (suite_v2/warp_progress, builds.jsonl)"),
     "ant_eval_factor": (1.76, "measured: the ant's walkers on suite v2 under Warp with the local-origin patch, one "
