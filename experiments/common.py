@@ -652,6 +652,8 @@ def prepare_run(command: str, args: argparse.Namespace, presets: dict[str, dict]
     if resumed:
         folder = resume_folder(command, args.resume, getattr(args, "out", None))
         config = load_config(folder)
+        if command in SPAWN_CONFIGS and "spawn" not in config:  # saved before the key: the rule it started with
+            config.update(started_spawn(folder))
         ignored = sorted(k for k in given if k not in extendable)
         if ignored:
             print(f"--resume: ignoring {ignored}; the run continues with its saved config", file=sys.stderr)
@@ -727,6 +729,20 @@ def spawn_rule(command: str, flat: dict) -> str | None:
     import importlib
 
     return importlib.import_module(SPAWN_CONFIGS[command]).LEGACY["spawn"]
+
+
+def started_spawn(folder: Path) -> dict:
+    """``{"spawn": rule}``, the spawn rule a run folder's ``provenance.jsonl`` records for the process that started the
+    run (its first line, not resumed; lines written since 2026-11-29 say the rule, the library's default then), or
+    ``{}`` where none does: a resumed run whose ``config.json`` was saved before its command had the key continues
+    under the rule it started with, and one started before the rule was recorded reads its run config's ``LEGACY``
+    (``patch``)."""
+    try:
+        first = json.loads((Path(folder) / PROVENANCE_NAME).read_text().splitlines()[0])
+    except (OSError, IndexError, ValueError):
+        return {}
+    spawn = first.get("spawn") if isinstance(first, dict) and not first.get("resumed") else None
+    return {"spawn": spawn} if spawn in ("feet", "patch") else {}
 
 
 def record_provenance(folder: Path, command: str, options: dict | None = None, resumed: bool = False,
