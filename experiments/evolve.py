@@ -77,7 +77,8 @@ def overrides(args) -> dict:
 
 def check_flags(args, run) -> None:
     """Flags that this run would accept and ignore: ``--mix`` / ``--fresh`` without ``--generator mixed``,
-    ``--robot`` / ``--observation`` with a fitness that walks no robot; :class:`~experiments.common.UsageError`."""
+    ``--robot`` / ``--observation`` / ``--spawn`` with a fitness that walks no robot;
+    :class:`~experiments.common.UsageError`."""
     if run.generator != "mixed":
         for flag, value in (("--mix", args.mix), ("--fresh", args.fresh)):
             if value is not None:
@@ -87,9 +88,10 @@ def check_flags(args, run) -> None:
         if args.robot is not None:
             raise common.UsageError(f"--robot {args.robot}: only the walker fitness walks a robot (--fitness "
                                     f"difficulty); this run's fitness is {run.fitness!r}, which walks none")
-        if args.observation is not None:
-            raise common.UsageError(f"--observation {args.observation}: only the walker fitness walks a policy "
-                                    f"(--fitness difficulty); this run's fitness is {run.fitness!r}")
+        for flag, value in (("--observation", args.observation), ("--spawn", args.spawn)):
+            if value is not None:
+                raise common.UsageError(f"{flag} {value}: only the walker fitness walks a policy (--fitness "
+                                        f"difficulty); this run's fitness is {run.fitness!r}")
 
 
 def main(args) -> int:

@@ -65,7 +65,7 @@ from jaxterrain.difficulty.protocol import (  # the protocol and its pure aggreg
 from jaxterrain.walker.layout import is_tiled, make_env
 from jaxterrain.walker.rollout import batched_distances, job_queue, pooled_distances, smoothness_priority
 from jaxterrain.terrain import TerrainScale, validate_scale
-from jaxterrain.walker import BACKENDS, WalkerConfig, WalkerEnv
+from jaxterrain.walker import BACKENDS, SPAWNS, WalkerConfig, WalkerEnv
 from jaxterrain.difficulty.policies import check_observation, default_env_config, default_policy, robot_base_policy
 from jaxterrain.runtime import sharding
 
@@ -375,7 +375,7 @@ def evaluate(heightmaps, key: jax.Array, attempts: Optional[int] = None, best: O
 
 def fitness_fn(size: int, protocol: Protocol = PAPER, scale: Optional[TerrainScale] = None,
                slots: Optional[int] = None, smooth_first: bool = True, backend: str = "jax",
-               robot: str = "humanoid", observation: str = "blind") -> Callable:
+               robot: str = "humanoid", observation: str = "blind", spawn: str = "feet") -> Callable:
     """Terrain fitness as a pure function, for use inside jit / scan (e.g. ``qd.evolve(fitness_fn=...)``):
     ``fitness(heightmaps [B, size, size] in [0, 1], key, needed=None) -> [B]`` float32 in [0, 1].
 
@@ -390,10 +390,12 @@ def fitness_fn(size: int, protocol: Protocol = PAPER, scale: Optional[TerrainSca
 
     The function's ``keyed`` attribute is its per-row-key form, ``(heightmaps [B, size, size], keys [B], needed=None)
     -> [B]`` (:func:`keyed_distances`: terrain ``b`` walks from ``keys[b]``, one pool of ``slots`` per call), which
-    the sharded MAP-Elites scoring calls on each device's rows (``scoring.keyed_fitness``).
+    the sharded MAP-Elites scoring calls on each device's rows (``scoring.keyed_fitness``); its ``env`` attribute
+    is the :class:`~jaxterrain.walker.WalkerEnv` it walks.
 
     ``robot``: whose shipped base policy walks (:func:`robot_base_policy`; the humanoid's by default);
-    ``observation``: its blind (default, the paper's) or perceptive twin, in an env of its observation set.
+    ``observation``: its blind (default, the paper's) or perceptive twin, in an env of its observation set;
+    ``spawn``: how each walker is set down at a reset (``walker.SPAWNS``: ``feet``, the default, or ``patch``).
     """
     if not isinstance(size, int) or size < 4:
         raise ValueError(f"size must be an int >= 4 (heightmap side in pixels), got {size!r}")
@@ -401,18 +403,22 @@ def fitness_fn(size: int, protocol: Protocol = PAPER, scale: Optional[TerrainSca
         raise ValueError(f"slots must be an int >= 1 or None, got {slots!r}")
     if backend not in BACKENDS:
         raise ValueError(f"backend must be one of {BACKENDS}, got {backend!r}")
+    if spawn not in SPAWNS:
+        raise ValueError(f"spawn must be one of {', '.join(SPAWNS)}, got {spawn!r}")
     protocol = protocol_from(protocol, None, None)
     scale = validate_scale(TerrainScale() if scale is None else scale)
     robot_base_policy(robot, observation)  # unknown, or without a shipped base policy: ValueError here
     return _fitness_fn_cached(size, protocol, scale, slots, bool(smooth_first) and slots is not None, backend, robot,
-                              observation)
+                              observation, spawn)
 
 
 @functools.lru_cache(maxsize=16)
 def _fitness_fn_cached(size: int, protocol: Protocol, scale: TerrainScale, slots, smooth_first: bool,
-                       backend: str = "jax", robot: str = "humanoid", observation: str = "blind") -> Callable:
+                       backend: str = "jax", robot: str = "humanoid", observation: str = "blind",
+                       spawn: str = "feet") -> Callable:
     policy = robot_base_policy(robot, observation)
-    env = make_env(protocol_env_config(default_env_config((size, size), scale, policy, backend), protocol))
+    config = default_env_config((size, size), scale, policy, backend)._replace(spawn=spawn)
+    env = make_env(protocol_env_config(config, protocol))
 
     def walk(distances_fn, heightmaps, keys, needed):
         terrains = jnp.asarray(heightmaps, jnp.float32) * jnp.float32(scale.height)
@@ -427,7 +433,7 @@ def _fitness_fn_cached(size: int, protocol: Protocol, scale: TerrainScale, slots
     def keyed(heightmaps, keys, needed=None):
         return walk(keyed_distances, heightmaps, keys, needed)
 
-    fitness.keyed = keyed
+    fitness.keyed, fitness.env = keyed, env
     return fitness
 
 

@@ -44,16 +44,19 @@ FITNESSES: dict[str, Optional[Callable]] = {"difficulty": None, "slope": slope_f
 
 def difficulty_fitness(size: int, attempts: int = 20, best: int = 5, scale: Optional[TerrainScale] = None,
                        slots: int | None = None, smooth_first: bool = True, backend: str = "jax",
-                       headings: int = 1, robot: str = "humanoid", observation: str = "blind") -> Callable:
+                       headings: int = 1, robot: str = "humanoid", observation: str = "blind",
+                       spawn: str = "feet") -> Callable:
     """The walker's fitness as a pure ``(heightmaps [B, size, size], key, needed [B] bool) -> [B]``:
     ``fitness_fn(size, Protocol(attempts, best, headings), scale, slots, smooth_first, backend)`` (the shipped base
     policy, ``attempts`` rollouts per terrain, mean of the ``best`` distances per heading, mean over ``headings``;
     cached there per argument values). ``slots``: env slots of a rollout pool (None = all at once; terrains not
     ``needed`` are never walked); ``smooth_first``: the pool starts the smoothest terrains' rollouts first (speed
     only); ``backend``: the walker's physics, ``"jax"`` or ``"warp"`` (MuJoCo Warp on terrain tiles); ``robot``:
-    whose shipped base policy walks (default the humanoid's); ``observation``: its blind or perceptive twin."""
+    whose shipped base policy walks (default the humanoid's); ``observation``: its blind or perceptive twin;
+    ``spawn``: how each walker is set down at a reset (``walker.SPAWNS``: ``feet``, the walker's default, or
+    ``patch``)."""
     return fitness_fn(int(size), Protocol(attempts, best, headings), scale, slots, smooth_first, backend, robot,
-                      observation)
+                      observation, spawn)
 
 
 def named_fitness(name: str, attempts: int, best: int, size: int, slots: int | None = None) -> Callable:

@@ -12,10 +12,11 @@ import numpy as np
 
 from jaxterrain.runtime.validation import walks
 from jaxterrain.terrain import TerrainScale, validate_scale
+from jaxterrain.walker.config import SPAWNS
 from jaxterrain.walker.robots import names as robot_names
 
 __all__ = ["PRNGKey", "FitnessFn", "DEFAULT_RANGES", "EvolveConfig", "Archive", "resolve_config", "config_to_dict",
-           "config_from_dict"]
+           "config_from_dict", "LEGACY_SPAWN"]
 
 PRNGKey = jax.Array
 FitnessFn = Callable[[jax.Array, PRNGKey, jax.Array], jax.Array]
@@ -83,6 +84,9 @@ class EvolveConfig(NamedTuple):
         ``rl.base_policy_dir(robot)``). The archive records it: an archive's fitness is one robot's difficulty.
       observation: which of the robot's shipped base policies walks: ``"blind"`` (the paper's) or
         ``"perceptive"`` (its twin with a height scan, ``rl.base_policy_dir(robot, "perceptive")``); recorded too.
+      spawn: how the walker fitness sets each walker down at a reset (``walker.SPAWNS``, ``WalkerConfig.spawn``):
+        ``"feet"`` (every foot clear of the terrain under it) or ``"patch"`` (the rule of every archive before
+        2026-11-29: an archive header written before the field reads as ``"patch"``); recorded too.
 
     The run settings (and ``generations``) stay here so that config files and archive headers keep one shape; they
     are the host driver's, not the algorithm's.
@@ -109,6 +113,7 @@ class EvolveConfig(NamedTuple):
     headings: int = 1
     robot: str = "humanoid"
     observation: str = "blind"
+    spawn: str = "feet"
 
 
 class Archive(NamedTuple):
@@ -181,6 +186,8 @@ def resolve_config(config: EvolveConfig) -> EvolveConfig:
         raise ValueError(f"EvolveConfig.robot must be one of {', '.join(robot_names())}; got {config.robot!r}")
     if config.observation not in ("blind", "perceptive"):
         raise ValueError(f"EvolveConfig.observation must be 'blind' or 'perceptive'; got {config.observation!r}")
+    if not isinstance(config.spawn, str) or config.spawn not in SPAWNS:
+        raise ValueError(f"EvolveConfig.spawn must be one of {', '.join(SPAWNS)}; got {config.spawn!r}")
     if config.robot_height is not None and not (
             isinstance(config.robot_height, numbers.Real) and not isinstance(config.robot_height, bool)
             and math.isfinite(config.robot_height) and config.robot_height > 0):
@@ -242,12 +249,18 @@ def config_to_dict(config: EvolveConfig) -> dict:
     return d
 
 
+LEGACY_SPAWN = "patch"
+"""The spawn rule of a config dict written before :class:`EvolveConfig` had ``spawn`` (what
+:func:`config_from_dict` fills in): the rule of every archive evolved before 2026-11-29."""
+
+
 def config_from_dict(d: dict) -> EvolveConfig:
-    """Inverse of :func:`config_to_dict`; unknown keys raise ``ValueError``."""
+    """Inverse of :func:`config_to_dict`; unknown keys raise ``ValueError``; a dict without ``spawn`` (an archive
+    written before the field) reads as :data:`LEGACY_SPAWN`."""
     unknown = set(d) - set(EvolveConfig._fields)
     if unknown:
         raise ValueError(f"unknown EvolveConfig field(s) {sorted(unknown)}; known: {list(EvolveConfig._fields)}")
-    d = dict(d)
+    d = {"spawn": LEGACY_SPAWN, **d}
     if "descriptors" in d:
         d["descriptors"] = tuple(d["descriptors"])
     if d.get("ranges") is not None:

@@ -82,10 +82,10 @@ def _traversable_fn(robot_height, window, scale) -> Callable:
 
 def default_fitness(size: int, config: A.EvolveConfig) -> A.FitnessFn:
     """The walker fitness of a config: :func:`jaxterrain.difficulty.difficulty_fitness` at the config's attempts,
-    best, headings, scale, slots, backend, robot and observation set."""
+    best, headings, scale, slots, backend, robot, observation set and spawn rule."""
     return difficulty.difficulty_fitness(int(size), config.attempts, config.best, config.scale, config.rollout_slots,
                                          backend=config.rollout_backend, headings=config.headings,
-                                         robot=config.robot, observation=config.observation)
+                                         robot=config.robot, observation=config.observation, spawn=config.spawn)
 
 
 def problem(generator, descriptors, config: A.EvolveConfig, fitness_fn=None, traversable=None, names=None,
@@ -429,8 +429,10 @@ def _template(key, scoring: S.Scoring, emitter: ME.Emitter, config: A.EvolveConf
 
 
 def _check_meta(run_dir: Path, saved: dict, meta: dict, done: int, generations: int) -> None:
-    """Refuse a checkpoint of another run (generator, key, config except the run settings)."""
+    """Refuse a checkpoint of another run (generator, key, config except the run settings); one saved before the
+    config had ``spawn`` is taken to be of the config's rule (the run's ``config.json`` says which)."""
     where = str(Path(run_dir) / driver.CHECKPOINT_NAME)
+    saved = {**saved, "config": {"spawn": meta["config"].get("spawn"), **(saved.get("config") or {})}}
     for name in ("generator", "treatments"):
         if saved.get(name) != meta.get(name):
             raise ValueError(f"checkpoint {where!r} is of {name} {saved.get(name)!r}, not {meta.get(name)!r}")
@@ -477,8 +479,6 @@ def progress_printer(name: str):
         )
 
     return report
-
-
 
 
 def _key_data(key) -> np.ndarray:

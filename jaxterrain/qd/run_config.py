@@ -15,7 +15,8 @@ The shapes (each field consumed where ``docs/CONTRIBUTING.md`` says; ``schema.sh
         fresh; --generator mixed)         seed, preset
       map_elites: MapElites (generations, batch_size, initial_population, bins, window, stride,
         checkpoint_every, robot_height, out_of_range, store_heightmaps)
-      walks: Walks (attempts, best, headings, robot, observation, backend, rollout_slots: the walker fitness)
+      walks: Walks (attempts, best, headings, robot, observation, backend, rollout_slots, spawn: the walker
+        fitness)
       seed, preset
 
 The serialised form is ``config.json``'s flat dict (:func:`to_flat` / :func:`from_flat`, through
@@ -34,7 +35,7 @@ from jaxterrain.runtime.schema import at_least, at_most, from_flat as _from_flat
 from jaxterrain.runtime.schema import replace, to_flat as _to_flat, walks
 
 __all__ = ["MapElites", "Walks", "Mixture", "EvolveRun", "CoverageRun", "EVOLVE_FIELDS", "COVERAGE_FIELDS",
-           "LEGACY", "EVOLVE_RULES", "COVERAGE_RULES", "MIX_DEFAULT", "GENERATORS", "PAIRS", "PRESETS",
+           "LEGACY", "EVOLVE_RULES", "COVERAGE_RULES", "MIX_DEFAULT", "SPAWNS", "GENERATORS", "PAIRS", "PRESETS",
            "COVERAGE_PRESETS", "FLAT_PRESETS", "COVERAGE_FLAT_PRESETS", "EVOLVE_CONSUMERS", "COVERAGE_CONSUMERS",
            "from_flat", "to_flat", "coverage_from_flat", "coverage_to_flat", "EVOLVE_HELP", "COVERAGE_HELP"]
 
@@ -62,7 +63,8 @@ class Walks(NamedTuple):
     """The walker fitness (``fitness`` ``difficulty``): ``attempts`` walks per terrain in total, the ``best`` per
     heading averaged, over ``headings`` (1, 2, 4), by the shipped base policy of ``robot`` (its ``observation``
     set), on ``backend`` physics (``auto`` / ``jax`` / ``warp``) with a pool of ``rollout_slots`` env slots per
-    device (None: every walk at once; speed only)."""
+    device (None: every walk at once; speed only), each walker set down at a reset by the ``spawn`` rule
+    (``jaxterrain.walker.SPAWNS``: ``feet``, or ``patch`` as every archive before 2026-11-29)."""
 
     attempts: int = 20
     best: int = 5
@@ -71,6 +73,7 @@ class Walks(NamedTuple):
     observation: str = "blind"
     backend: str = "jax"
     rollout_slots: Optional[int] = None
+    spawn: str = "feet"
 
 
 class Mixture(NamedTuple):
@@ -142,10 +145,13 @@ COVERAGE_FIELDS: dict[str, str] = {
 
 LEGACY = {"headings": 1, "robot_height": None, "out_of_range": "clip", "store_heightmaps": True,
           "rollout_slots": None, "rollout_backend": "jax", "robot": "humanoid", "observation": "blind", "mix": None,
-          "fresh": 1, "seed": 0, "batched": False, "ranges": None}
+          "fresh": 1, "seed": 0, "batched": False, "ranges": None, "spawn": "patch"}
 """The value a ``config.json`` key had in the runs made before it was written (what :func:`from_flat` fills in)."""
 
 _FITNESSES = ("difficulty", "slope")  # jaxterrain.difficulty.FITNESSES (a test keeps them equal)
+SPAWNS = ("feet", "patch")
+"""How the walker fitness sets each walker down at a reset (``jaxterrain.walker.SPAWNS``; a literal, a test keeps
+them equal)."""
 _COMMON_RULES = {
     "size": at_least(1), "fitness": one_of(_FITNESSES),
     **{f"map_elites.{k}": at_least(1) for k in ("generations", "batch_size", "initial_population", "bins",
@@ -155,7 +161,7 @@ _COMMON_RULES = {
     "walks.attempts": at_least(1), "walks.best": (at_least(1), at_most("walks.attempts")),
     "walks.headings": walks("walks.attempts", "walks.best"),
     "walks.observation": one_of(("blind", "perceptive")), "walks.backend": one_of(("auto", "jax", "warp")),
-    "walks.rollout_slots": at_least(1),
+    "walks.rollout_slots": at_least(1), "walks.spawn": one_of(SPAWNS),
 }
 EVOLVE_RULES = {**_COMMON_RULES, "mixture.fresh": at_least(0)}
 """The checks of single fields of :class:`EvolveRun` (``schema.check``; those against registries and between
@@ -292,6 +298,11 @@ EVOLVE_HELP: dict[str, str] = {
              "--plugin's); the archive records it",
     "observation": "which of the robot's shipped base policies the walker fitness walks: blind (default, the "
                    "paper's) or perceptive (with a height scan); the archive records it",
+    "spawn": "how the walker fitness sets each walker down at a reset: feet (default: the body lifted until every "
+             "foot clears the terrain under it) or patch (only the lowest foot clear of a 0.5 m patch under the "
+             "torso: every archive before 2026-11-29, which cut the ant's feet into rising ground; a run saved before "
+             "reads as patch, or resumed, as the rule its provenance.jsonl says it started with); the archive "
+             "records it",
     "store_heightmaps": "store the elites' heightmaps in archive.npz (--no-store-heightmaps: leave them out, they can "
                         "be re-rendered from the genomes)",
 }

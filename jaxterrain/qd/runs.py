@@ -86,12 +86,12 @@ def evolve_config(run: EvolveRun) -> EvolveConfig:
         out_of_range=m.out_of_range, store_heightmaps=bool(m.store_heightmaps),
         rollout_slots=None if w.rollout_slots is None else int(w.rollout_slots),
         rollout_backend=str(w.backend) if w.backend != "auto" else resolve_backend("auto"),
-        robot=str(w.robot or "humanoid"), observation=str(w.observation or "blind"))
+        robot=str(w.robot or "humanoid"), observation=str(w.observation or "blind"), spawn=w.spawn)
 
 
 _EVOLVE_CONFIG_FIELDS = {"descriptors": "descriptors", "ranges": "ranges", "rollout_backend": "walks.backend",
                          **{f: f"walks.{f}" for f in ("attempts", "best", "headings", "robot", "observation",
-                                                      "rollout_slots")}}
+                                                      "rollout_slots", "spawn")}}
 
 
 def check_generators(names, size: int, owner: str, field: str, size_field: str = "size") -> None:

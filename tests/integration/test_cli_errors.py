@@ -190,6 +190,8 @@ CASES = [
     (["evolve", "--robot", "humanoid", "--fitness", "slope"], "--robot humanoid: only the walker fitness walks a robot"),
     # issue 64: observation sets
     (["evolve", "--observation", "perceptive"], "--observation perceptive: only the walker fitness walks a policy"),
+    (["evolve", "--spawn", "patch"], "--spawn patch: only the walker fitness walks a policy (--fitness difficulty); "
+                                     "this run's fitness is 'slope'"),
     (["train-base-policy", "--scan-noise", "0.1"], "--scan-noise needs --observation perceptive"),
     (["train-base-policy", "--observation", "perceptive", "--scan-noise", "-1"], "--scan-noise must be a finite "
                                                                                 "number >= 0"),

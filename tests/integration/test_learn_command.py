@@ -613,7 +613,8 @@ def test_provenance_records_the_runs_own_spawn_rule():
     assert common.spawn_rule("learn", flat) == "feet" and common.spawn_rule("curriculum", old) == "patch"
     assert common.spawn_rule("learn", {**flat, "spawn": "patch"}) == "patch"
     assert common.spawn_rule("evaluate", {"suite": "v1"}) == "patch"  # an evaluation saved before the key
-    assert common.spawn_rule("evolve", {"generator": "cppn"}) is None
+    assert common.spawn_rule("evolve", {"generator": "cppn"}) == "patch"  # an archive's run saved before the key
+    assert common.spawn_rule("gradient", {"band_width": 1.0}) is None
 
 
 

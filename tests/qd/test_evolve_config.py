@@ -4,6 +4,8 @@ compiles."""
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import pytest
 
 from jaxterrain import difficulty
@@ -34,8 +36,42 @@ def test_an_older_config_json_reads_with_the_values_its_run_had():
     assert runs.evolve_config(run).headings == 1 and runs.evolve_config(run).rollout_backend == "jax"
 
 
+def test_the_spawn_rule_reaches_the_walker_fitness_and_older_files_keep_theirs():
+    """``walks.spawn`` sets how the walker fitness sets every walker down (``feet`` by default): it reaches the
+    :class:`~jaxterrain.qd.EvolveConfig` (which the archive records) and the env the fitness walks; an evolve or
+    coverage ``config.json`` written before the key, and an archive header of then, read as ``patch``, the rule
+    they were evolved with; a checkpoint of then resumes under the run's rule. Builds the env, compiles nothing."""
+    from jaxterrain.qd import EvolveConfig, config_from_dict, config_to_dict, default_fitness, resolve_config
+    from jaxterrain.qd.evolution import _check_meta, _resume_signature
+    from jaxterrain.walker import SPAWNS
+
+    assert R.SPAWNS == SPAWNS and R.PRESETS["gpu"].walks.spawn == "feet" and R.LEGACY["spawn"] == "patch"
+    assert R.from_flat({k: v for k, v in R.to_flat(R.PRESETS["gpu"]).items() if k != "spawn"}).walks.spawn == "patch"
+    old = {k: v for k, v in R.coverage_to_flat(R.COVERAGE_PRESETS["gpu"]).items() if k != "spawn"}
+    assert R.coverage_from_flat(old).walks.spawn == "patch"
+    walker = {"fitness": "difficulty", "size": 64, "map_elites.window": 8, "ranges": None}
+    for rule in SPAWNS:
+        run = runs.validate_evolve(schema.replace(R.PRESETS["smoke"], {**walker, "walks.spawn": rule}))
+        config = resolve_config(runs.evolve_config(run))
+        assert config.spawn == rule and config_from_dict(config_to_dict(config)) == config
+        assert default_fitness(64, config).env.config.spawn == rule  # the walks' WalkerConfig
+    header = config_to_dict(EvolveConfig())
+    del header["spawn"]
+    assert config_from_dict(header).spawn == "patch"  # an archive evolved before the field
+    meta = {"generator": "perlin", "key": [0, 1], "config": _resume_signature(EvolveConfig(spawn="feet"))}
+    before = {**meta, "config": {k: v for k, v in meta["config"].items() if k != "spawn"}}
+    _check_meta(Path("run"), before, meta, 0, 10)  # a checkpoint of then: the run's config.json says which rule
+    with pytest.raises(ValueError, match="was made with another config"):
+        _check_meta(Path("run"), {**meta, "config": {**meta["config"], "spawn": "patch"}}, meta, 0, 10)
+    with pytest.raises(ValueError, match="EvolveConfig.spawn must be one of feet, patch; got 'torso'"):
+        resolve_config(EvolveConfig(spawn="torso"))
+    with pytest.raises(ValueError, match="spawn must be one of feet, patch, got 'torso'"):
+        difficulty.difficulty_fitness(64, spawn="torso")
+
+
 @pytest.mark.parametrize("changes, message", [
     ({"map_elites.bins": 0}, "EvolveRun.map_elites.bins must be an integer >= 1; got 0"),
+    ({"walks.spawn": "torso"}, "EvolveRun.walks.spawn must be one of feet, patch; got 'torso'"),
     ({"walks.best": 30}, "EvolveRun.walks.best must be <= EvolveRun.walks.attempts (2); got 30"),
     ({"descriptors": ("foo", "tpi")}, "EvolveRun.descriptors: unknown descriptor 'foo'; choose from"),
     ({"generator": "nope"}, "EvolveRun.generator: unknown generator 'nope'; choose from"),
