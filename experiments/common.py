@@ -714,7 +714,7 @@ def warp_importable() -> bool:
 
 SPAWN_CONFIGS = {"learn": "jaxterrain.curriculum.run_config", "curriculum": "jaxterrain.curriculum.run_config",
                  "evaluate": "jaxterrain.suite.run_config", "evolve": "jaxterrain.qd.run_config",
-                 "coverage": "jaxterrain.qd.run_config"}
+                 "coverage": "jaxterrain.qd.run_config", "train-base-policy": "jaxterrain.difficulty.run_config"}
 """The commands with a ``spawn`` setting, and the run-config module whose ``LEGACY`` says what a ``config.json``
 written before the key ran with."""
 

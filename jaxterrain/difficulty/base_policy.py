@@ -126,7 +126,8 @@ def resolve_settings(run: BasePolicyRun) -> RunSettings:
     except ValueError as err:
         raise ValueError(f"BasePolicyRun.walker.randomise: {err}") from None
     env_cfg = resolve_config(env_cfg._replace(robot=w.robot or "humanoid", observation=w.observation or "blind",
-                                              scan_noise=float(w.scan_noise or 0.0), randomisation=randomisation))
+                                              scan_noise=float(w.scan_noise or 0.0), randomisation=randomisation,
+                                              spawn=w.spawn))
     if w.solver is not None:
         try:
             env_cfg = env_cfg._replace(solver=parse_solver(w.solver))

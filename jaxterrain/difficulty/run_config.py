@@ -9,7 +9,7 @@ nested where the concepts nest, with its presets and its serialised form.
 The shape (each field consumed where ``docs/CONTRIBUTING.md`` says)::
 
     BasePolicyRun
-      walker: BaseWalker        robot, observation, scan_noise, randomise, solver (the trained walker's env)
+      walker: BaseWalker        robot, observation, scan_noise, randomise, solver, spawn (the trained walker's env)
       ppo: PPOSettings          num_envs (None: the preset's PPOConfig's)
       schedule: Schedule        env_steps, updates_per_chunk, time_budget (seconds; runs before --time-limit)
       evaluation: FlatEvaluation  attempts, best (the flat-ground check of the trained walker)
@@ -28,21 +28,24 @@ from typing import NamedTuple, Optional
 from jaxterrain.runtime.schema import at_least, at_most, from_flat as _from_flat, non_negative, one_of, positive
 from jaxterrain.runtime.schema import replace, to_flat as _to_flat
 
-__all__ = ["HELP", "BaseWalker", "PPOSettings", "Schedule", "FlatEvaluation", "BasePolicyRun", "FIELDS", "LEGACY", "RULES",
-           "EXTENDABLE", "PRESETS", "FLAT_PRESETS", "CONSUMERS", "from_flat", "to_flat"]
+__all__ = ["HELP", "BaseWalker", "PPOSettings", "Schedule", "FlatEvaluation", "BasePolicyRun", "FIELDS", "LEGACY",
+           "SPAWNS", "RULES", "EXTENDABLE", "PRESETS", "FLAT_PRESETS", "CONSUMERS", "from_flat", "to_flat"]
 
 
 class BaseWalker(NamedTuple):
     """The walker trained: ``robot`` (``walker.robots``), ``observation`` (``blind`` / ``perceptive``: a height
     scan, its heights with Gaussian noise of std ``scan_noise`` metres), ``randomise`` (a physics randomisation
     spec, ``walker.parse_randomisation``; None: off) and the contact ``solver`` (``walker.parse_solver``: ``sound``,
-    ``fast``, ``xml`` or ``ITERATIONS,LS_ITERATIONS,EULERDAMP``; None: sound), all recorded with the policy."""
+    ``fast``, ``xml`` or ``ITERATIONS,LS_ITERATIONS,EULERDAMP``; None: sound) and the ``spawn`` rule that sets
+    the walker down at a reset (``walker.SPAWNS``: ``feet``, or ``patch`` as every run before 2026-11-29; on the
+    flat ground it trains on both set it down at the same height), all recorded with the policy."""
 
     robot: str = "humanoid"
     observation: str = "blind"
     scan_noise: float = 0.0
     randomise: Optional[str] = None
     solver: Optional[str] = None
+    spawn: str = "feet"
 
 
 class PPOSettings(NamedTuple):
@@ -89,11 +92,15 @@ FIELDS: dict[str, str] = {
 """``{flat key: field path}`` of :class:`BasePolicyRun`: ``config.json``'s keys, which are the flags' names."""
 
 LEGACY = {"robot": "humanoid", "observation": "blind", "scan_noise": 0.0, "randomise": None, "solver": None,
-          "num_envs": None, "time_budget": None, "seed": 0}
+          "num_envs": None, "time_budget": None, "seed": 0, "spawn": "patch"}
 """The value a ``config.json`` key had in the runs made before it was written (what :func:`from_flat` fills in)."""
+
+SPAWNS = ("feet", "patch")
+"""How the walker is set down at a reset (``jaxterrain.walker.SPAWNS``; a literal, a test keeps them equal)."""
 
 RULES = {
     "walker.observation": one_of(("blind", "perceptive")), "walker.scan_noise": non_negative(),
+    "walker.spawn": one_of(SPAWNS),
     "ppo.num_envs": at_least(1), "schedule.env_steps": positive(), "schedule.updates_per_chunk": at_least(1),
     "schedule.time_budget": positive(), "evaluation.attempts": at_least(1),
     "evaluation.best": (at_least(1), at_most("evaluation.attempts")),
@@ -161,6 +168,11 @@ HELP = {
     "scan_noise": "perceptive: std of Gaussian noise on each scanned height, in metres",
     "randomise": "physics randomisation of the training walker (recorded with the policy; the flat-ground evaluation "
                  "walks the nominal physics) {randomise}",
+    "spawn": "how the walker is set down at each reset: feet (default: the body lifted until every foot clears the "
+             "terrain under it) or patch (only the lowest foot clear of a 0.5 m patch under the torso: every run "
+             "before 2026-11-29; a run saved before reads as patch, or resumed, as the rule its provenance.jsonl says "
+             "it started with); on the flat ground the walker trains and is evaluated on, both rules set it down at "
+             "the same height; recorded with the policy",
     "eval_attempts": "flat-ground evaluation walks",
     "eval_best": "of which the best are averaged",
 }

@@ -37,7 +37,21 @@ def test_the_solver_is_read_and_a_bad_one_names_the_field():
         base_policy.resolve_settings(schema.replace(SMOKE, {"walker.solver": "4,16"}))
 
 
+def test_the_spawn_rule_reaches_the_training_walker_and_older_files_keep_theirs():
+    """``walker.spawn`` sets how the trained walker is set down at a reset (``feet`` by default): it reaches the
+    walker config the run trains and evaluates in (and records with the policy); a ``config.json`` written before
+    the key reads as ``patch``, the rule it ran with."""
+    from jaxterrain.walker import SPAWNS
+
+    assert R.SPAWNS == SPAWNS and R.PRESETS["gpu"].walker.spawn == "feet" and R.LEGACY["spawn"] == "patch"
+    assert R.from_flat({k: v for k, v in R.to_flat(SMOKE).items() if k != "spawn"}).walker.spawn == "patch"
+    for rule in SPAWNS:
+        settings = base_policy.validate_base_run(schema.replace(SMOKE, {"walker.spawn": rule}))
+        assert settings.env_config.spawn == rule and base_policy.walker_json(settings.env_config)["spawn"] == rule
+
+
 @pytest.mark.parametrize("changes, message", [
+    ({"walker.spawn": "torso"}, "BasePolicyRun.walker.spawn must be one of feet, patch; got 'torso'"),
     ({"walker.scan_noise": 0.1}, "BasePolicyRun.walker.scan_noise needs BasePolicyRun.walker.observation perceptive"),
     ({"walker.robot": "dog"}, "BasePolicyRun.walker.robot: robot must be one of"),
     ({"walker.randomise": "mass=0:1"}, "BasePolicyRun.walker.randomise: randomisation.mass"),

@@ -1,8 +1,8 @@
 """``--spawn feet|patch`` of the commands that walk a policy outside a curriculum, as ``learn`` / ``curriculum`` /
-``evaluate`` take it: ``evolve`` (the walker fitness). The flag parses into the run's config (``config.json``), the
-typed run built from it hands the rule to the walker config the run walks, a bad value is one argparse line, a
-resumed run keeps its saved rule (another one given is ignored with a note, as in ``learn``) and its
-``provenance.jsonl`` line says it. CPU: nothing compiles, no run starts."""
+``evaluate`` take it: ``evolve`` (the walker fitness) and ``train-base-policy`` (the trained walker). The flag parses
+into the run's config (``config.json``), the typed run built from it hands the rule to the walker config the run
+walks, a bad value is one argparse line, a resumed run keeps its saved rule (another one given is ignored with a
+note, as in ``learn``) and its ``provenance.jsonl`` line says it. CPU: nothing compiles, no run starts."""
 
 from __future__ import annotations
 
@@ -13,7 +13,7 @@ import pytest
 from experiments import __main__ as cli
 from experiments import common
 
-WALKING = {"evolve": ["--fitness", "difficulty", "--size", "64"]}
+WALKING = {"evolve": ["--fitness", "difficulty", "--size", "64"], "train-base-policy": []}
 """Each command, with the flags that make its smoke preset walk a policy (evolve's smoke fitness is the slope)."""
 
 
@@ -30,9 +30,13 @@ def printed(capsys, *argv, notes: list | None = None) -> dict:
 
 def walker_spawn(command: str, flat: dict) -> str:
     """The spawn rule of the walker config that ``command``'s typed run (read from its flat config) walks."""
-    from jaxterrain.qd import run_config, runs
+    if command == "evolve":
+        from jaxterrain.qd import run_config, runs
 
-    return runs.evolve_config(runs.validate_evolve(run_config.from_flat(flat))).spawn  # -> default_fitness's env
+        return runs.evolve_config(runs.validate_evolve(run_config.from_flat(flat))).spawn  # -> default_fitness's env
+    from jaxterrain.difficulty import base_policy, run_config
+
+    return base_policy.validate_base_run(run_config.from_flat(flat)).env_config.spawn
 
 
 @pytest.mark.parametrize("command", sorted(WALKING))
