@@ -22,7 +22,8 @@ Presets:
 
 ``--randomise SPEC`` trains under physics randomisation (``jaxterrain.walker.parse_randomisation``: friction, masses,
 motors, observation noise, action delay, pushes, or ``legged-gym``); the policy records it in its ``walker_config``,
-and ``eval.json`` walks the nominal physics.
+and ``eval.json`` walks the nominal physics. ``--spawn feet|patch`` sets how the walker is set down at a reset,
+recorded with the policy too; on the flat ground it trains on, both rules set it down at the same height.
 
 Writes into ``--out RUN_DIR``: ``config.json`` (the settings, as in every command: ``--config RUN/config.json``
 re-runs them), ``run.json`` (the command lines that started and resumed it, the updates, the walker and PPO
