@@ -265,7 +265,8 @@ def evolve_configs(draw):
         out_of_range=draw(st.sampled_from(["clip", "reject"])), store_heightmaps=draw(st.booleans()),
         rollout_slots=draw(st.one_of(st.none(), st.integers(1, 512))),
         scale=TerrainScale(draw(st.floats(0.01, 0.1)), draw(st.floats(0.25, 2.0))),
-        rollout_backend=draw(st.sampled_from(["jax", "warp"])), robot=draw(st.sampled_from(["humanoid", "ant"])))
+        rollout_backend=draw(st.sampled_from(["jax", "warp"])), robot=draw(st.sampled_from(["humanoid", "ant"])),
+        spawn=draw(st.sampled_from(["feet", "patch"])))
 
 
 @bounded(40)
@@ -302,6 +303,7 @@ EVOLVE_BREAKS = {
                               TerrainScale._make((0.04, None)), TerrainScale._make(([0.04], 1.0))]),
     "rollout_backend": st.sampled_from(["mjx", None, "JAX"]),
     "robot": st.sampled_from(["dog", None, ""]),
+    "spawn": st.sampled_from(["torso", None, "", 1, ["feet"]]),
 }
 
 
