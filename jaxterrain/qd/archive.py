@@ -188,7 +188,8 @@ def refused(archive: Archive, generator_options: dict | None = None, gens: dict 
 
 
 def reseat(archive: Archive, fitness: np.ndarray, generator_options: dict | None = None, batch: int = 64,
-           gens: dict | None = None, descriptor_fn=None, protocol=None) -> tuple[Archive, dict]:
+           gens: dict | None = None, descriptor_fn=None, protocol=None,
+           spawn: str | None = None) -> tuple[Archive, dict]:
     """A sound archive from the STORED genomes of ``archive``: each one in the cell its own terrain falls in, with a
     fitness measured on that terrain.
 
@@ -207,6 +208,8 @@ def reseat(archive: Archive, fitness: np.ndarray, generator_options: dict | None
       protocol: the :class:`jaxterrain.difficulty.Protocol` ``fitness`` was measured under, recorded in the new
         archive's config (``attempts``, ``best``, ``headings``; ``start_spread`` 0 and ``rule`` "mean" only, which
         the config implies); None keeps the archive's.
+      spawn: the spawn rule ``fitness`` was walked under (``walker.SPAWNS``), recorded in the new archive's config;
+        None keeps the archive's.
 
     Returns:
       ``(reseated, counts)``: the new archive (``heightmaps`` None: render them with ``qd.from_archive``;
@@ -225,6 +228,8 @@ def reseat(archive: Archive, fitness: np.ndarray, generator_options: dict | None
                              f"start_spread={protocol.start_spread}, rule={protocol.rule!r} (need 0.0 and 'mean')")
         config = resolve_config(config._replace(attempts=int(protocol.attempts), best=int(protocol.best),
                                                 headings=int(protocol.headings)))
+    if spawn is not None:
+        config = resolve_config(config._replace(spawn=spawn))
     bad = refused(archive, generator_options, gens)
     cells, raw = rederive_cells(archive, generator_options, batch, gens, descriptor_fn)
     filled = archive.source >= 0

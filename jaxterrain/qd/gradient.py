@@ -37,6 +37,7 @@ from jaxterrain.qd.grid import cell_bins, cell_distance
 from jaxterrain.runtime import estimates
 from jaxterrain.runtime.io import atomic_write_bytes, atomic_write_text, save_figure
 from jaxterrain.terrain import TerrainScale
+from jaxterrain.walker import WalkerConfig
 
 __all__ = ["DISTANCES", "GradientSettings", "GradientResult", "gradient", "distance_from_origin", "band_table",
            "correlations", "spread_sample", "grid_bands", "load_elites", "walk_archive", "protocol_label",
@@ -323,11 +324,12 @@ def save_walks(path: Path, elites: dict, walked: dict, protocol) -> None:
 
 def write_reseated(path: Path, elites: dict, walked: dict, protocol=None, say=print) -> dict:
     """``jaxterrain.qd.reseat`` of the walked archive (fitness = the walk's, per filled cell, under
-    ``protocol``, which the archive then records) saved at ``path``; says and returns its counts."""
+    ``protocol`` and the walker's default spawn rule, which the archive then records) saved at ``path``; says and
+    returns its counts."""
     arch = elites["archive"]
     fitness = np.full(arch.fitness.shape[0], np.nan, np.float32)
     fitness[elites["cells"][walked["rows"]]] = walked["fitness"]
-    reseated, counts = reseat(arch, fitness, protocol=protocol)
+    reseated, counts = reseat(arch, fitness, protocol=protocol, spawn=WalkerConfig().spawn)  # timed_distances' walks
     save(path, reseated)
     say(f"  reseated -> {path.name}: " + ", ".join(f"{k} {v}" for k, v in counts.items()))
     return counts

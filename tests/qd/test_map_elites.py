@@ -238,6 +238,8 @@ def test_reseat_moves_refuses_and_resolves_collisions_like_insert():
 
     out3, _ = A.reseat(broken, fitness, gens={"uv": gen}, descriptor_fn=desc2, protocol=difficulty.HEADINGS)
     assert (out3.config.attempts, out3.config.best, out3.config.headings) == (80, 5, 4)  # recorded with the fitness
+    assert out3.config.spawn == broken.config.spawn == "feet"  # kept without spawn=, else the rule given
+    assert A.reseat(broken, fitness, gens={"uv": gen}, descriptor_fn=desc2, spawn="patch")[0].config.spawn == "patch"
     with pytest.raises(ValueError, match="start_spread"):
         A.reseat(broken, fitness, gens={"uv": gen}, descriptor_fn=desc2, protocol=difficulty.Protocol(start_spread=1.0))
 
