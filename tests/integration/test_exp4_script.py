@@ -188,6 +188,29 @@ def test_the_plan_reads_a_run_folder(run, tmp_path, capsys):
     assert "train humanoid blind: 1/5 treatments done" in capsys.readouterr().out
 
 
+def test_the_plan_counts_an_ant_archive_evolved_early_by_what_is_left(run, tmp_path, capsys):
+    """Before the ant's treatments are chosen its archives may already be evolving: a finished one is done (no
+    device time), one stopped after 3 of its 5 generations has 2 / 5 of its time left (the checkpoint's
+    ``metrics.csv``: a header, the initial population, one row per generation)."""
+    out = tmp_path / "exp4"
+    steps, mixed = run.archive_folder(out, "ant", "steps"), run.archive_folder(out, "ant", "mixed")
+    for folder in (steps, mixed):
+        (folder / "checkpoint").mkdir(parents=True)
+        (folder / "config.json").write_text(json.dumps({"generations": 5}))
+    (steps / "archive.npz").write_text("x")
+    (steps / "done.json").write_text("{}")
+    (mixed / "checkpoint" / "metrics.csv").write_text("step,coverage\n" + "".join(f"{i},1\n" for i in range(1, 5)))
+    assert run.archive_share_left(out, "ant", "steps", "gpu-short") == 0.0
+    assert run.archive_share_left(out, "ant", "mixed", "gpu-short") == pytest.approx(0.4)
+    assert run.archive_share_left(out, "humanoid", "mixed", "gpu-short") == 1.0  # nothing there yet
+    assert run.main(["--plan", "--out", str(out)]) == 0
+    text = capsys.readouterr().out
+    assert "archive steps --robot ant: done" in text and "archive mixed --robot ant: partial (40% left)" in text
+    assert "archive steps --robot ant (not chosen yet)" not in text
+    full = run.RATES["archive_mixed_s"][0] * run.RATES["archive_ant_factor"][0]
+    assert f"archive mixed --robot ant (not chosen yet): {0.4 * full / 60:.1f}-" in text
+
+
 def test_the_pack_leaves_out_finished_checkpoints(run, tmp_path):
     out = tmp_path / "exp4"
     files = ["archive/humanoid-mixed/archive.npz", "archive/humanoid-mixed/done.json",

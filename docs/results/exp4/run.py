@@ -309,6 +309,22 @@ def archive_done(out: Path, robot: str, gen: str, preset: str) -> bool:
     return path.is_file() and (archive_folder(out, robot, gen) / "done.json").is_file()
 
 
+def archive_share_left(out: Path, robot: str, gen: str, preset: str) -> float:
+    """The share of an archive's ``evolve`` run still to do: 0 when done, 1 when not started, else the generations
+    left over all (its checkpoint's ``metrics.csv`` holds one row for the initial population and one per
+    generation since; the initial population, a tenth of a generation's offspring, is not counted)."""
+    if archive_done(out, robot, gen, preset):
+        return 0.0
+    folder = archive_folder(out, robot, gen)
+    metrics = folder / "checkpoint" / "metrics.csv"
+    try:
+        total = int(json.loads((folder / "config.json").read_text())["generations"])
+        done = len(metrics.read_text().strip().splitlines()) - 2  # header and the initial population
+    except (OSError, KeyError, ValueError, TypeError):
+        return 1.0
+    return min(1.0, max(0.0, (total - done) / total)) if total > 0 and done >= 0 else 1.0
+
+
 def train_folder(out: Path, robot: str, obs: str) -> Path:
     return out / "train" / f"{robot}-{obs}"
 
@@ -597,8 +613,10 @@ def predict(state: dict, rates: dict = RATES) -> dict:
     - before the ant's treatments are chosen (``state["ant_pending"]``): two ant treatments, both ant archives and
       the ant's walks (two programs: ``2 x trials`` walkers and ``2 x keys`` base walks per suite)."""
     out = {}
+    share = state.get("archive_share", {})  # {(robot, gen): share left}; 1 where absent
     for robot, gen in state["archives_left"]:
         s = rates[f"archive_{gen}_s"][0] * (rates["archive_ant_factor"][0] if robot == "ant" else 1.0)
+        s *= share.get((robot, gen), 1.0)
         out[f"archive {gen} --robot {robot}"] = (s, s)
     lo_t, hi_t = _mid(rates[f"treatment_s_{state['train_backend']}"][0])
     lo_c, hi_c = _mid(rates["compile_s"][0])
@@ -615,8 +633,9 @@ def predict(state: dict, rates: dict = RATES) -> dict:
     if state["ant_pending"]:
         out["train ant (2 treatments, not chosen yet)"] = train((2 * lo_t, 2 * hi_t))
         for gen in GENERATORS:
-            s = rates[f"archive_{gen}_s"][0] * rates["archive_ant_factor"][0]
-            out[f"archive {gen} --robot ant (not chosen yet)"] = (s, s)
+            s = rates[f"archive_{gen}_s"][0] * rates["archive_ant_factor"][0] * share.get(("ant", gen), 1.0)
+            if s > 0:
+                out[f"archive {gen} --robot ant (not chosen yet)"] = (s, s)
         for w in walks_left.values():
             for obs in OBSERVATIONS:
                 w[("ant", obs)] = state["trials"] + state["keys"]
@@ -655,6 +674,8 @@ def read_state(args) -> dict:
              "train_left": {}, "walks_left": {}, "measured": {}, "ant_pending": choice is None,
              "train_backend": args.backend or "warp", "eval_backend": args.eval_backend, "trials": args.trials,
              "keys": args.keys}
+    state["archive_share"] = {(r, g): archive_share_left(out, r, g, args.preset)
+                              for r, g in [("humanoid", g) for g in GENERATORS] + [("ant", g) for g in GENERATORS]}
     plan = runs(out)
     for robot, obs, folder, names in plan:
         state["train_left"][f"{robot} {obs}"] = sum(not treatment_done(folder / t) for t in names)
@@ -705,11 +726,16 @@ def print_plan(args) -> int:
     print(f"Experiment 4 in {args.out} (preset {args.preset}, {args.trials} trials, {args.keys} keys):")
     for robot, gen in [("humanoid", g) for g in GENERATORS] + [("ant", g) for g in GENERATORS]:
         if robot == "ant" and state["ant_pending"]:
+            left = state["archive_share"][("ant", gen)]
+            if left < 1.0:  # evolved ahead of the ant's choice
+                mark = "done" if left == 0.0 else f"partial ({left:.0%} left)"
+                print(f"  archive {gen} --robot ant: {mark} ({archive_folder(args.out, 'ant', gen)})")
             continue
         needed = f"{gen}-map" in humanoid_choice(args.out) if robot == "humanoid" else any(
             t.startswith(gen) for _, t in ant_choice(args.out) or [])
         if needed:
-            mark = "left" if (robot, gen) in state["archives_left"] else "done"
+            left = state["archive_share"][(robot, gen)]
+            mark = "done" if left == 0.0 else "left" if left == 1.0 else f"partial ({left:.0%} left)"
             print(f"  archive {gen} --robot {robot}: {mark} ({archive_path(args.out, robot, gen, args.preset)})")
     for name, left in state["train_left"].items():
         total = len(humanoid_choice(args.out)) if name.startswith("humanoid") else sum(
