@@ -14,9 +14,10 @@ roughness-sorted standard CL of Figure 7b; ``--baseline roughness random`` adds 
 treatments). Experiment 4 runs the field's curricula on the mixed archive:
 ``--archives steps=S.npz mixed=M.npz --baseline dr plr levels --baseline-archive mixed --no-combined`` (the map on
 each archive, then ``mixed-dr``, ``mixed-plr``, ``mixed-levels``). Finished treatments are kept, so ``--resume``
-continues where the time limit stopped. ``--shard I/N`` runs only the treatments ``t % N == I`` of that order, so
-that independent processes (e.g. one per GPU: ``CUDA_VISIBLE_DEVICES=I ... --out RUN --shard I/N``) share one run
-folder; ``--resume RUN`` without
+continues where the time limit stopped. ``--shard I/N`` runs only process I's share, so that independent processes
+(e.g. one per GPU: ``CUDA_VISIBLE_DEVICES=I ... --out RUN --shard I/N``) share one run folder: whole populations,
+balanced (``batch.shard_groups``; Experiment 4's five over two: the two map treatments and terrain levels, then DR
+and PLR), or ``t % N == I`` of that order with ``--no-batch-treatments``; ``--resume RUN`` without
 ``--shard`` then reuses the finished treatments and writes the tables. ``--resume RUN --report`` writes the tables
 and figures from the treatments as they stand, the unfinished ones from their last checkpoint (``learn --report``;
 marked ``[partial: E epochs]``), without training: e.g. before a GPU machine is given back.
@@ -108,8 +109,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="with --resume: Table 2 and the figures from the treatments as they stand (unfinished "
                              "ones from their last checkpoint, marked partial), without training")
     parser.add_argument("--shard", type=common.parse_shard, default=None, metavar="I/N",
-                        help="run only the treatments t %% N == I of the fixed order (independent processes, e.g. one "
-                             "per GPU, on one run folder); then --resume without --shard writes the tables")
+                        help="run only process I's share of the treatments (independent processes, e.g. one per GPU, "
+                             "on one run folder): whole populations balanced over the N processes "
+                             "(batch.shard_groups), or t %% N == I of the fixed order with --no-batch-treatments; "
+                             "then --resume without --shard writes the tables")
     parser.add_argument("--batch-treatments", action=argparse.BooleanOptionalAction, default=True,
                         help="run the treatments that share a walker and the harness's work (e.g. the map "
                              "curriculum on every archive) as one population in one compiled program, each "
@@ -386,6 +389,19 @@ def check_population_flags(args) -> None:
         raise common.UsageError(f"--block-seconds must be a finite number > 0; got {args.block_seconds}")
 
 
+def shard_of(args, checked: list, count: int, devices: int) -> list[int]:
+    """The ``--shard`` process of each treatment of the plan (``checked``: their ``runner.validate`` results, in
+    the plan's order): with populations (``--batch-treatments``, one device) ``batch.shard_groups`` keeps each
+    population on one process and balances them; else ``t % count``."""
+    from jaxterrain.curriculum import batch
+
+    if count == 1 or not args.batch_treatments or devices > 1:
+        return [t % count for t in range(len(checked))]
+    keys = [batch.group_key(run, config, policy, env) for run, config, _, policy, env in checked]
+    return batch.shard_groups(keys, [batch.envs_of(c[0]) for c in checked], [int(c[0].trials) for c in checked],
+                              count, int(args.population_envs or batch.DEFAULT_ENVS))
+
+
 def run_populations(args, cfg: dict, folder: Path, mine: list, left: float | None) -> list | None:
     """The treatments ``mine`` (``(name, archive, curriculum)``) in populations (``jaxterrain.curriculum.batch``):
     one line per population saying which treatments share a program; their summaries (None where the time limit
@@ -420,13 +436,13 @@ def main(args) -> int:
     start = time.perf_counter()
     limit = None if args.time_limit is None else 60.0 * args.time_limit
     curriculum = "map"  # the curriculum whose flags an error names (its own, once the plan is read)
+    checked = []  # each treatment's validated run, for --shard's populations
     try:
         plan = treatments(cfg, folder)
         for name, path, curriculum in plan:  # every treatment's input, before anything is compiled
             run = treatment_run(cfg, path, curriculum)
-            runner.check_resumable(folder / f"{name}-{curriculum}", run,
-                                  runner.validate(runner.report_run(run) if args.report else run)[2],
-                                  physics=not args.report)
+            checked.append(runner.validate(runner.report_run(run) if args.report else run))
+            runner.check_resumable(folder / f"{name}-{curriculum}", run, checked[-1][2], physics=not args.report)
     except runner.BadInput as err:
         print(f"curriculum: {learn.flags_in(str(err), curriculum)}", file=sys.stderr)
         if args.resume is None and {p.name for p in folder.iterdir()} <= {common.CONFIG_NAME, common.PROVENANCE_NAME,
@@ -438,7 +454,7 @@ def main(args) -> int:
     rows, done = [], []
     shard_i, shard_n = args.shard or (0, 1)
     shard = "" if args.shard is None else f" --shard {shard_i}/{shard_n}"
-    mine = [(name, path, curriculum) for t, (name, path, curriculum) in enumerate(plan) if t % shard_n == shard_i]
+    mine = [p for p, k in zip(plan, shard_of(args, checked, shard_n, mesh.size)) if k == shard_i]
     for name, path, curriculum in mine:
         sub = folder / f"{name}-{curriculum}"
         sub.mkdir(parents=True, exist_ok=True)

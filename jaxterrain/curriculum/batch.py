@@ -57,7 +57,7 @@ from jaxterrain.curriculum.run_config import LearnConfig, to_flat
 from jaxterrain.runtime import driver, estimates, xla
 
 __all__ = ["Treatment", "Member", "DEFAULT_ENVS", "BLOCK_SECONDS", "group_key", "envs_of", "plan_groups",
-           "device_memory", "program_bytes", "drive", "population", "run_treatments"]
+           "device_memory", "program_bytes", "drive", "population", "run_treatments", "FIXED_TRIALS", "shard_groups"]
 
 DEFAULT_ENVS = 131_072
 """Envs stepped together in one program at most (``max_envs``), unless set: the top of the range where the
@@ -123,6 +123,45 @@ def plan_groups(keys: Sequence, envs: Sequence[int], max_envs: int) -> list[list
             open_by_key[key] = g
         g.append(i)
     return groups
+
+
+FIXED_TRIALS = 20.0
+"""A population's cost per chunk in trials' worth (:func:`shard_groups`): ``FIXED_TRIALS + trials``. Measured: a
+10-trial treatment 4.09 s a chunk, the 60-trial six 10.87 s (one H200, MuJoCo Warp, 2026-11-30,
+``docs/results/population.md``): 2.73 s + 0.136 s a trial, the fixed part worth 20 trials."""
+
+
+def shard_groups(keys: Sequence, envs: Sequence[int], trials: Sequence[int], count: int,
+                 max_envs: int = DEFAULT_ENVS) -> list[int]:
+    """The process (``0 .. count - 1``) of each treatment when ``count`` processes share them (``curriculum --shard
+    I/N``, one per GPU): populations whole where there are enough of them. The groups of :func:`plan_groups`; while
+    there are fewer than ``count``, the costliest with more than one treatment is halved (its treatments
+    alternately, as ``t % 2``); then longest first, each to the least loaded process, a population's cost
+    ``FIXED_TRIALS + its trials`` (:data:`FIXED_TRIALS`). Pure and deterministic: every process computes the same
+    answer from the same plan. Example: map on two archives (10 trials each, one group), DR and PLR (one group),
+    terrain levels (its own) over 2 processes: ``[0, 0, 1, 1, 0]``."""
+    if count < 1:
+        raise ValueError(f"count must be >= 1, got {count}")
+    groups = plan_groups(keys, envs, max_envs)
+
+    def cost(g):
+        return FIXED_TRIALS + sum(trials[i] for i in g)
+
+    while len(groups) < count:
+        splittable = [g for g in groups if len(g) > 1]
+        if not splittable:
+            break
+        big = max(splittable, key=lambda g: (cost(g), -g[0]))
+        at = groups.index(big)
+        groups[at:at + 1] = [big[0::2], big[1::2]]
+    load = [0.0] * count
+    shard = [0] * len(keys)
+    for g in sorted(groups, key=lambda g: (-cost(g), g[0])):
+        k = min(range(count), key=lambda j: (load[j], j))
+        load[k] += cost(g)
+        for i in g:
+            shard[i] = k
+    return shard
 
 
 def device_memory() -> Optional[int]:

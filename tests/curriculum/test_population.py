@@ -132,6 +132,25 @@ def test_plan_groups_keeps_equal_keys_together_under_the_env_cap():
     assert plan_groups(keys, [50, 10, 10, 10, 10], 20) == [[0], [1, 3], [2, 4]]  # one over the cap: alone
 
 
+def test_shards_keep_populations_whole_and_balance_them():
+    """``curriculum --shard I/N`` with populations: each population on one process, longest first to the least
+    loaded (a population costs ``FIXED_TRIALS + trials``); fewer populations than processes: the costliest is
+    halved, its treatments alternately (the six map treatments over two GPUs: ``t % 2``)."""
+    from jaxterrain.curriculum.batch import shard_groups
+
+    exp4 = ["map", "map", "dr", "dr", "levels"]  # Experiment 4: steps-map, mixed-map, mixed-dr, mixed-plr, levels
+    assert shard_groups(exp4, [5000] * 5, [10] * 5, 2) == [0, 0, 1, 1, 0]
+    assert shard_groups(exp4, [5000] * 5, [10] * 5, 3) == [0, 0, 1, 1, 2]
+    assert shard_groups(exp4, [5000] * 5, [10] * 5, 1) == [0] * 5
+    assert shard_groups(["map"] * 6, [5000] * 6, [10] * 6, 2) == [0, 1, 0, 1, 0, 1]
+    assert shard_groups(["map"] * 6, [5000] * 6, [10] * 6, 4) == [0, 1, 2, 3, 0, 1]  # halved twice, then placed
+    assert shard_groups(["map"], [5000], [10], 3) == [0]  # one treatment: the other processes get none
+    # the env cap splits a group first (plan_groups), and a bigger population goes first
+    assert shard_groups(["map"] * 3 + ["dr"], [5000] * 4, [10, 10, 10, 40], 2, max_envs=10_000) == [1, 1, 1, 0]
+    with pytest.raises(ValueError, match="count"):
+        shard_groups(exp4, [1] * 5, [1] * 5, 0)
+
+
 def _hosted(folders, restore=False):
     """The members of :func:`members` as host members of ``batch.drive`` in ``folders``, fresh or each restored
     from its own checkpoint; and the population's block."""

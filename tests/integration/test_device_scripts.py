@@ -81,3 +81,13 @@ def test_state_shrinks_the_tracked_tree_and_restores_it(tmp_path):
     assert not (tmp_path / "stash.tar").exists() and (repo / "runs" / "kept.txt").exists()
     status = subprocess.run(["git", "status", "--porcelain"], cwd=repo, capture_output=True, text=True).stdout
     assert status == ""
+
+
+def test_exp4_script_parses_and_refuses_a_bad_observation_set(tmp_path):
+    """``exp4.sh`` (Experiment 4's training on a 2 x H200): valid bash, and a bad OBS refused in one line before
+    anything runs or unpacks."""
+    subprocess.run(["bash", "-n", str(DEVICE / "exp4.sh")], check=True)
+    got = subprocess.run(["bash", str(DEVICE / "exp4.sh"), "100", "sighted"], cwd=tmp_path, capture_output=True,
+                         text=True)
+    assert got.returncode == 2 and got.stderr == "exp4.sh: OBS must be blind or perceptive, got sighted\n"
+    assert not (tmp_path / "runs").exists()

@@ -281,3 +281,47 @@ def test_the_pack_carries_walkers_actor_only(run, tmp_path, monkeypatch):
     assert packed.meta["actor_only"] and not full.meta.get("actor_only") and "value" in full.params
     obs = np.random.default_rng(1).normal(size=(8, full.observation_size)).astype(np.float32)
     np.testing.assert_array_equal(np.asarray(packed(obs)), np.asarray(full(obs)))
+
+
+def test_the_pack_leaves_out_unfinished_train_checkpoints_that_would_not_come_back(run, tmp_path, monkeypatch,
+                                                                                   capsys):
+    """Unfinished train checkpoints over ``PACK_TRAIN_CHECKPOINTS`` in all stay out of the pack, said in one line
+    (a pack over 16 MiB would not come back at all); under it they go in; an archive's checkpoint always does."""
+    import tarfile
+
+    monkeypatch.chdir(tmp_path)
+    monkeypatch.setattr(run, "PACK_TRAIN_CHECKPOINTS", 1000)
+    out = Path("exp4")
+    files = {"train/humanoid-blind/mixed-dr/checkpoint.npz": 600, "train/humanoid-blind/mixed-plr/checkpoint.npz": 600,
+             "archive/ant-mixed/checkpoint/checkpoint.npz": 5000}
+    for f, size in files.items():
+        (out / f).parent.mkdir(parents=True, exist_ok=True)
+        (out / f).write_bytes(b"x" * size)
+
+    def packed():
+        run.pack(argparse.Namespace(out=out, pack=tmp_path / "exp4.tar.gz"))
+        with tarfile.open(tmp_path / "exp4.tar.gz") as tar:
+            return sorted(tar.getnames())
+
+    assert packed() == ["exp4/archive/ant-mixed/checkpoint/checkpoint.npz"]
+    assert "left out 2 unfinished train checkpoint(s)" in capsys.readouterr().out
+    (out / "train/humanoid-blind/mixed-plr/checkpoint.npz").unlink()  # 600 bytes: under the limit, it goes in
+    assert packed() == ["exp4/archive/ant-mixed/checkpoint/checkpoint.npz",
+                        "exp4/train/humanoid-blind/mixed-dr/checkpoint.npz"]
+    assert "left out" not in capsys.readouterr().out
+
+
+def test_plan_with_pack_packs_without_running_anything(run, tmp_path, monkeypatch, capsys):
+    """``--plan --pack FILE``: the plan, then the pack of what is there (the device script's pack when a train has
+    not finished: nothing may start then)."""
+    import tarfile
+
+    monkeypatch.chdir(tmp_path)
+    done = Path("exp4") / "archive" / "ant-steps"
+    done.mkdir(parents=True)
+    for name in ("archive.npz", "done.json"):
+        (done / name).write_text("x")
+    assert run.main(["--plan", "--out", "exp4", "--pack", "exp4.tar.gz"]) == 0
+    assert "predicted device time" in capsys.readouterr().out
+    with tarfile.open(tmp_path / "exp4.tar.gz") as tar:
+        assert sorted(tar.getnames()) == ["exp4/archive/ant-steps/archive.npz", "exp4/archive/ant-steps/done.json"]

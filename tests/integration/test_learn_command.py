@@ -279,6 +279,24 @@ def test_curriculum_shards_share_one_run_folder_and_resume_writes_the_tables(tmp
     assert not (tmp_path / "twice").exists()
 
 
+def test_curriculum_shards_give_each_process_whole_populations(tmp_path, tiny_archive, capsys):
+    """With populations, ``--shard I/N`` hands out whole populations (``batch.shard_groups``): Experiment 4's plan
+    over two processes puts the two map treatments and terrain levels on process 0, DR and PLR (one population) on
+    process 1, so process 1 is done once those two are (finished here by hand: nothing compiles)."""
+    archive = tiny_archive(4, "four.npz")
+    run = tmp_path / "exp4"
+    fake = {"milestone_epochs": [40.0] + [None] * 9, "milestone_trials": [2] + [0] * 9, "hardest_mean": 3.0,
+            "hardest": [2.5, 3.5], "curve": {"epoch": [0, 40], "mean": [0.0, 3.0], "se": [0.0, 0.5]}}
+    for sub in ("mixed-dr", "mixed-plr"):
+        (run / sub).mkdir(parents=True)
+        (run / sub / "summary.json").write_text(json.dumps(fake))
+    assert cli("curriculum", "--preset", "smoke", "--archives", f"steps={archive}", f"mixed={archive}", "--baseline",
+               "dr", "plr", "levels", "--baseline-archive", "mixed", "--no-combined", "--out", str(run),
+               "--shard", "1/2") == 0
+    assert "shard 1/2 done (2 of 5 treatments)" in capsys.readouterr().out
+    assert not any((run / sub).exists() for sub in ("steps-map", "mixed-map", "mixed-levels"))  # process 0's
+
+
 def test_curriculum_runs_the_baselines_on_the_baseline_archive_and_skips_the_combined_one(tmp_path):
     """``--baseline-archive NAME`` puts the baselines on that archive, ``--no-combined`` drops the combined map
     treatment (Experiment 4's plan: nothing is read or written for it); a config.json written before the keys existed

@@ -22,9 +22,9 @@ Stages (:data:`STAGES`):
   its five treatments (:data:`TREATMENTS`) batched in one population: the map curriculum on the steps archive and on
   the mixed archive, domain randomisation, PLR and terrain levels on the mixed archive (``--archives steps=.. mixed=..
   --baseline dr plr levels --baseline-archive mixed --no-combined --observation OBS``), ``--trials`` (10) trials each.
-  ``--shard I/N`` runs the treatments ``t % N == I`` of that run (``curriculum --shard``; t: mixed-map, steps-map,
-  mixed-dr, mixed-plr, mixed-levels), so that N processes, one per GPU, share it (on a 2 x H200: 30 and 20 trials);
-  the same train without ``--shard`` then writes the tables.
+  ``--shard I/N`` runs process I's share of that run (``curriculum --shard``: whole populations, balanced), so that N
+  processes, one per GPU, share it (on a 2 x H200: process 0 the two map treatments, then terrain levels; process 1
+  DR and PLR, one population); the same train without ``--shard`` then writes the tables.
 - ``train ant --ant OBS/TREATMENT OBS/TREATMENT``: the two treatments chosen after looking at the humanoid's
   results, each a ``learn --robot ant`` run on the ant's own archive (``archive GEN --robot ant`` first; an archive's
   fitness is one robot's), ``OUT/train/ant-OBS/TREATMENT/``. The choice is saved in ``OUT/ant.json``; later stages
@@ -138,7 +138,8 @@ def parser() -> argparse.ArgumentParser:
     p.add_argument("--time-limit", type=float, default=None, metavar="MIN",
                    help="stop (resumably) so that the command ends within about MIN minutes")
     p.add_argument("--pack", type=Path, default=None, metavar="FILE",
-                   help="afterwards, one gzipped tar (.tar.gz) of what the next command needs")
+                   help="afterwards, one gzipped tar (.tar.gz) of what the next command needs (with --plan: the "
+                        "pack alone, nothing runs)")
     p.add_argument("--plan", action="store_true", help="print what is done and the predicted device minutes")
     p.add_argument("--robot", choices=ROBOTS, default="humanoid", help="archive: whose archive (default humanoid)")
     p.add_argument("--ant", nargs="+", default=None, metavar="OBS/TREATMENT",
@@ -149,9 +150,9 @@ def parser() -> argparse.ArgumentParser:
                         f"mixed-* baseline needs mixed-map, which its curriculum run makes too); saved in "
                         f"OUT/humanoid.json at the first train")
     p.add_argument("--shard", default=None, metavar="I/N",
-                   help="train humanoid: only the treatments t %% N == I of its curriculum run (curriculum --shard), so "
-                        "that N processes (one per GPU: CUDA_VISIBLE_DEVICES=I) share one run; then the same train "
-                        "without --shard writes the tables (nothing compiles)")
+                   help="train humanoid: only process I's share of its curriculum run (curriculum --shard: whole "
+                        "populations, balanced), so that N processes (one per GPU: CUDA_VISIBLE_DEVICES=I) share one "
+                        "run; then the same train without --shard writes the tables (nothing compiles)")
     p.add_argument("--preset", choices=("gpu-short", "smoke"), default="gpu-short",
                    help="evolve / curriculum / learn preset (default gpu-short; smoke: a CPU check)")
     p.add_argument("--trials", type=int, default=TRIALS, help=f"trials of each treatment (default {TRIALS})")
@@ -222,8 +223,6 @@ def check(p: argparse.ArgumentParser, args) -> None:
         p.error(f"--time-limit must be a finite number of minutes > 0; got {args.time_limit}")
     if args.pack is not None and not args.pack.name.endswith((".tar.gz", ".tgz")):
         p.error(f"--pack must name a .tar.gz or .tgz file; got {args.pack}")
-    if args.pack is not None and args.plan:
-        p.error("--pack packs after a stage; --plan runs none")
     if args.pack is not None and not args.out.resolve().is_relative_to(Path.cwd().resolve()):
         p.error(f"--pack stores --out relative to the current folder (unpack it there); --out {args.out} is outside it")
     for name, lo in (("trials", 1), ("keys", 1), ("archive_size", 32), ("size", 32), ("seeds", 1), ("samples", 1),
@@ -788,6 +787,11 @@ def walker_file(path: Path) -> bool:
             and (path.parent / "policy.msgpack").is_file() and (path.parent / "config.json").is_file())
 
 
+PACK_TRAIN_CHECKPOINTS = 12 * 2**20
+"""Unfinished train checkpoints beyond this many bytes in all stay out of a pack (said in one line), so that the
+pack stays under the 16 MiB a file the device returns may have; archives and finished work always go in."""
+
+
 def pack(args) -> None:
     import io
     import tarfile
@@ -798,6 +802,14 @@ def pack(args) -> None:
 
     root = Path.cwd().resolve()
     members = pack_members(args.out)
+    unfinished = [p for p in members if p.name.startswith("checkpoint") and p.suffix == ".npz"
+                  and p.relative_to(args.out).parts[0] == "train"]
+    held = sum(p.stat().st_size for p in unfinished)
+    if held > PACK_TRAIN_CHECKPOINTS:  # the pack would not come back: keep what will
+        members = [p for p in members if p not in unfinished]
+        print(f"pack: left out {len(unfinished)} unfinished train checkpoint(s), {held / 2**20:.1f} MiB, over what a "
+              f"pack may carry ({PACK_TRAIN_CHECKPOINTS / 2**20:.0f} MiB): they resume on this machine only",
+              flush=True)
     buf = io.BytesIO()
     with tempfile.TemporaryDirectory() as tmp, tarfile.open(fileobj=buf, mode="w:gz") as tar:
         for path in members:
@@ -821,8 +833,11 @@ def main(argv=None) -> int:
     p = parser()
     args = p.parse_args(argv)
     check(p, args)
-    if args.plan:
-        return print_plan(args)
+    if args.plan:  # with --pack: the plan, then the pack (nothing runs)
+        code = print_plan(args)
+        if args.pack is not None and args.out.is_dir():
+            pack(args)
+        return code
     stage = args.what[0]
     if stage == "archive":
         code = stage_archive(args, args.what[1], args.robot)
