@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # Experiment 4's humanoid training for one observation set on a 2 x H200, after `source benchmarks/device/setup.sh`;
 # run it again on the same warm machine until both shards say done (a train's checkpoints do not come back: both
-# shards must finish on one machine, about 15 min of device time).
+# shards must finish on one machine: GPU 0's, about 15-19 min of device time).
 #   GPU 0: docs/results/exp4/run.py train humanoid OBS --shard 0/2  (the two map treatments, then terrain levels)
 #   GPU 1: docs/results/exp4/run.py train humanoid OBS --shard 1/2  (DR and PLR, one population), then the ant's
 #          mixed archive (archive mixed --robot ant) with the time left

@@ -19,7 +19,8 @@ Stages (:data:`STAGES`):
   (those docs/results/mixed_archive.md names for the mixed archive) and ``--robot ant`` for the ant. The
   humanoid's ``steps`` archive at ``gpu-short`` ships (``docs/results/steps_gpushort/archive.npz``): nothing runs.
 - ``train humanoid OBS`` (OBS: ``blind`` / ``perceptive``): ONE ``curriculum`` run, ``OUT/train/humanoid-OBS/``,
-  its five treatments (:data:`TREATMENTS`) batched in one population: the map curriculum on the steps archive and on
+  its five treatments (:data:`TREATMENTS`) in three populations (the two map treatments, DR and PLR, terrain levels:
+  ``curriculum``'s grouping): the map curriculum on the steps archive and on
   the mixed archive, domain randomisation, PLR and terrain levels on the mixed archive (``--archives steps=.. mixed=..
   --baseline dr plr levels --baseline-archive mixed --no-combined --observation OBS``), ``--trials`` (10) trials each.
   ``--shard I/N`` runs process I's share of that run (``curriculum --shard``: whole populations, balanced), so that N
@@ -100,10 +101,11 @@ RATES = {
                                          "Experiment 2 (exp2_all.md), 2026-11-29"),
     "treatment_s_jax": (780.0, "measured: learn --preset gpu-short --backend jax, 10.4 s a chunk x 75 chunks, one "
                                "H200, 2026-11-29 (/work/shared/NOTES.md)"),
-    "population_factor": (0.47, "measured: the six map treatments' whole run as one population, 10.87 s a chunk "
-                                "against 4.09 s for one alone in the same lease (10.87 / (6 x 4.09) = 0.44; Warp, "
-                                "2 x H200, 2026-11-30, docs/results/population.md); five (50 trials) interpolated "
-                                "linearly in the trials: 9.51 / (5 x 4.09)"),
+    "population_factor": (0.73, "measured: the six map treatments' whole run as one population, 10.87 s a chunk "
+                                "against 4.09 s for one alone in the same lease (Warp, 2 x H200, 2026-11-30, "
+                                "docs/results/population.md): 2.73 s + 0.136 s a trial (batch.FIXED_TRIALS). The "
+                                "humanoid's five treatments run as three populations (20, 20 and 10 trials): "
+                                "(5.45 + 5.45 + 4.09) / (5 x 4.09)"),
     "v2_first_s": (67.0, "measured: the humanoid's first walk of suite v2 (compile included), MJX-JAX, one H200, "
                          "2026-11-29"),
     "v2_walker_s_jax": ((25.0, 35.0), "measured: the humanoid's walk of suite v2 (701 terrains, 80 walks each), "
@@ -116,7 +118,7 @@ RATES = {
     "v1_walker_s_jax": ((25.0 * 372 / 701, 35.0 * 372 / 701), "assumed: v2's MJX-JAX rate x 372 / 701 terrains; not "
                                                              "measured"),
     "compile_s": ((35.0, 85.0), "measured: what each train command spends outside its chunks (set-up, compile): "
-                                "35-41 s for one treatment, 67-85 s for the six-treatment population, per command "
+                                "35-42 s for one treatment, 67-85 s for the six-treatment population, per command "
                                 "(commands_s less the chunks' time; Warp, 2 x H200, 2026-11-30, "
                                 "docs/results/population)"),
     "build_s": (31.0, "measured: suite v2's build, the humanoid's 25.2-31.0 s, the ant's 2.8-29.1 s, on the GPU "
