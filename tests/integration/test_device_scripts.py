@@ -91,3 +91,11 @@ def test_exp4_script_parses_and_refuses_a_bad_observation_set(tmp_path):
                          text=True)
     assert got.returncode == 2 and got.stderr == "exp4.sh: OBS must be blind or perceptive, got sighted\n"
     assert not (tmp_path / "runs").exists()
+
+
+def test_heldout_script_parses_and_needs_walkers_for_a_new_folder(tmp_path):
+    """``heldout.sh OUT POLICY...``: valid bash; a new folder without walkers is refused in one line (a folder with
+    a config.json resumes instead)."""
+    subprocess.run(["bash", "-n", str(DEVICE / "heldout.sh")], check=True)
+    got = subprocess.run(["bash", str(DEVICE / "heldout.sh"), "runs/h"], cwd=tmp_path, capture_output=True, text=True)
+    assert got.returncode == 2 and got.stderr == "heldout.sh: no POLICY_DIR given\n"
