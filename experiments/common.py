@@ -706,10 +706,11 @@ STOCK_WARP_NOTE = ("note: this run walks on MuJoCo Warp's stock heightfield coll
 
 
 def warp_importable() -> bool:
-    """Whether NVIDIA Warp is installed (MuJoCo Warp's kernels ship inside mujoco-mjx either way)."""
-    import importlib.util
+    """Whether the walker can run on MuJoCo Warp here (``jaxterrain.walker.tiles.warp_available``: warp-lang and
+    MJX's MuJoCo Warp import), the check whose failure refuses a Warp run; called only for a Warp run."""
+    from jaxterrain.walker import tiles
 
-    return importlib.util.find_spec("warp") is not None
+    return tiles.warp_available()[0]
 
 
 SPAWN_CONFIGS = {"learn": "jaxterrain.curriculum.run_config", "curriculum": "jaxterrain.curriculum.run_config",

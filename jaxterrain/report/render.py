@@ -260,6 +260,16 @@ def _compiled_walk(env_config, steps: int, policy: Callable, with_params: bool):
     return env, jax.jit(walks)
 
 
+def _key_batch(key, b: int) -> bool:
+    """Whether ``key`` is a batch of ``b`` PRNG keys: typed keys ``[b]``, or raw ``uint32`` keys ``[b, 2]`` (one raw
+    key ``[2]`` is ONE key, also when ``b`` is 2)."""
+    import jax
+
+    shape, dtype = tuple(getattr(key, "shape", ())), getattr(key, "dtype", None)
+    typed = dtype is not None and jax.dtypes.issubdtype(dtype, jax.dtypes.prng_key)
+    return shape[:1] == (b,) and len(shape) == (1 if typed else 2)
+
+
 def record_walks(heightmaps, key, steps: int = 1000, policy: Optional[Callable] = None, scale=None,
                  env_config=None) -> list[Walk]:
     """Walk the policy once on each of ``heightmaps`` [B, H, W] (values in [0, 1]) for up to ``steps`` env steps.
@@ -298,7 +308,7 @@ def record_walks(heightmaps, key, steps: int = 1000, policy: Optional[Callable] 
         fn_policy, params, with_params = policy, None, False
     env, fn = _compiled_walk(env_config, steps, fn_policy, with_params)
     terrains = maps * np.float32(env_config.scale.height)
-    keys = key if tuple(getattr(key, "shape", ())) == (maps.shape[0],) else jax.random.split(key, maps.shape[0])
+    keys = key if _key_batch(key, maps.shape[0]) else jax.random.split(key, maps.shape[0])
     qpos, length, dist, fell = jax.device_get(fn(keys, jnp.asarray(terrains), params))
     out = []
     for i in range(maps.shape[0]):

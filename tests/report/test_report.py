@@ -152,3 +152,15 @@ def test_mjx_rollout_replayed_by_the_renderer():
                                 steps=40, frames=3, width=64, height=48)
     assert [v.label for v in videos] == ["flat", "step"]
     assert all(v.gif is not None and v.gif[:6] == b"GIF89a" and "walked" in v.outcome for v in videos)
+
+
+def test_record_walks_tells_one_raw_key_from_a_batch_of_keys():
+    """``record_walks``' key rule: a batch of B keys (typed ``[B]``, raw ``[B, 2]``) is used as given; one key is
+    split B ways, also a raw ``PRNGKey`` ``[2]`` when B is 2 (it was taken for two keys and failed inside vmap)."""
+    import jax
+
+    assert render._key_batch(jax.random.split(jax.random.key(0), 2), 2)
+    assert render._key_batch(jax.random.split(jax.random.PRNGKey(0), 2), 2)
+    assert not render._key_batch(jax.random.PRNGKey(0), 2)
+    assert not render._key_batch(jax.random.key(0), 2)
+    assert not render._key_batch(jax.random.split(jax.random.key(0), 3), 2)
