@@ -475,6 +475,8 @@ def check_args(command: str, args: argparse.Namespace, typed: Typed | None = Non
     config's values checked once, by the library, on the resolved config (:func:`setup_typed`): here only its other
     flags (``--time-limit``, ``--devices``, ...)."""
     values = vars(args)
+    if values.get("one_piece") and values.get("time_limit") is not None:
+        raise UsageError(f"--time-limit: {command} runs in one piece (nothing to stop at and resume); drop the flag")
     check_values({k: v for k, v in values.items() if typed is None or k not in typed.fields})
     check_out(values.get("out"))
     check_resume(command, values.get("resume"))
@@ -487,9 +489,11 @@ def check_args(command: str, args: argparse.Namespace, typed: Typed | None = Non
 
 
 def add_run_arguments(parser: argparse.ArgumentParser, presets: dict[str, dict], default_preset: str,
-                      notes: dict[str, str] | None = None) -> None:
+                      notes: dict[str, str] | None = None, time_limit: bool = True) -> None:
     """Add ``--preset``, ``--config``, ``--resume``, ``--out``, ``--seed``, ``--time-limit`` and ``--print-config``.
-    ``notes``: the meaning of the command's own presets (those beyond :data:`PRESET_NAMES`)."""
+    ``notes``: the meaning of the command's own presets (those beyond :data:`PRESET_NAMES`); ``time_limit``: False for
+    a command that runs in one piece (its ``--time-limit`` is hidden and refused in one line by :func:`check_args`,
+    never accepted and ignored)."""
     command = parser.prog.split()[-1]
     parser.add_argument("--preset", choices=sorted(presets), default=None,
                         help=preset_help(command, presets, default_preset, notes).replace("%", "%%"))
@@ -500,7 +504,9 @@ def add_run_arguments(parser: argparse.ArgumentParser, presets: dict[str, dict],
     parser.add_argument("--seed", type=int, default=None,
                         help="PRNG seed of the run (every random draw derives from it; default 0)")
     parser.add_argument("--time-limit", type=float, default=None, metavar="MIN",
-                        help="stop cleanly after about MIN minutes (after a checkpoint); continue with --resume")
+                        help="stop cleanly after about MIN minutes (after a checkpoint); continue with --resume"
+                        if time_limit else argparse.SUPPRESS)
+    parser.set_defaults(one_piece=not time_limit)
     parser.add_argument("--print-config", action="store_true",
                         help="print the resolved configuration (preset, --config and flags) as JSON and exit, "
                              "before any run folder is made or anything compiles")

@@ -39,6 +39,9 @@ labelled by their folders relative to a common parent, and the families dropped 
 same, coloured by the share of each family's levels passed),
 ``suite.png`` (a terrain of every family at its easiest, middle and hardest level) and ``timing.json``.
 
+``--time-limit MIN`` starts no further policy's walk of the suite after MIN minutes (exit code 3; each row walked
+is kept in ``walked.npz``) and ``--resume FOLDER`` walks only the rows left.
+
 ``--randomise SPEC`` walks every policy under randomised physics (``jaxterrain.walker.parse_randomisation``; every
 policy meets the same draws; MJX only, without ``--videos``); by default the nominal physics, whatever a policy was
 trained under.
@@ -110,7 +113,11 @@ def main(args) -> int:
 
     folder, run = common.setup_typed("evaluate", args, PRESETS, "smoke", TYPED, overrides(args), validate)
     try:
-        runs.evaluate_run(ready[-1], folder, videos=compare.evaluation_videos, note=say_err)
+        result = runs.evaluate_run(ready[-1], folder, videos=compare.evaluation_videos, note=say_err,
+                                   time_limit_s=common.minutes_to_seconds(args.time_limit))
     except runs.TerrainError as err:  # built when walked (after the run folder): e.g. a size that holds no family
         raise common.UsageError(common.flags_in(str(err), TYPED)) from None
+    if result is None:
+        print(f"time limit reached; continue with: python -m experiments evaluate --resume {folder}", flush=True)
+        return 3
     return 0

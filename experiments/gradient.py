@@ -40,7 +40,7 @@ DISTANCES = ("corner", "index")
 # The command
 # ----------------------------------------------------------------------------------------------------------------
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    common.add_run_arguments(parser, PRESETS, "default")
+    common.add_run_arguments(parser, PRESETS, "default", time_limit=False)
     parser.add_argument("archives", nargs="*", type=str, help="archive.npz files (jaxterrain.qd.save format)")
     parser.add_argument("--protocol", choices=PROTOCOLS, default=None,
                         help="also walk every elite again under this protocol (difficulty.PAPER or HEADINGS)")

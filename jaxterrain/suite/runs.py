@@ -31,7 +31,7 @@ from jaxterrain.qd import load as load_archive
 from jaxterrain.rl import load_policy
 from jaxterrain.runtime import provenance, schema
 from jaxterrain.runtime.estimates import compiling
-from jaxterrain.runtime.io import atomic_write_text
+from jaxterrain.runtime.io import atomic_save_npz, atomic_write_text
 from jaxterrain.suite.evaluation import check_policies, evaluate_policies
 from jaxterrain.suite.families import FAMILIES
 from jaxterrain.suite.folder import TERRAIN_SIDE, folder_suite, load_folder
@@ -44,7 +44,7 @@ from jaxterrain.walker import (WalkerConfig, min_terrain_side, parse_randomisati
 
 __all__ = ["MUJOCO_STEPS_PER_CORE_S", "MUJOCO_MAX_HOURS", "TerrainError", "Prepared", "EvaluationResult", "base_names",
            "is_base", "parse_picks", "load_policies", "terrains_of", "fit_size", "mujoco_workers", "check_physics",
-           "video_picks", "check_video_format", "validate_evaluate", "evaluate_run"]
+           "video_picks", "check_video_format", "validate_evaluate", "PROGRESS", "evaluate_run"]
 
 MUJOCO_STEPS_PER_CORE_S = 1000
 """MuJoCo C humanoid env steps per second per core, measured (``docs/results/sim2sim.md``)."""
@@ -337,14 +337,39 @@ def validate_evaluate(run: EvaluateRun, raise_size: bool = False,
     return Prepared(run, policies, built)
 
 
+PROGRESS = "walked.npz"
+"""The file of an unfinished :func:`evaluate_run`: ``fitness`` [R, N] (the rows walked) and ``stamp`` (JSON: the
+rows' names, the suite's name and size, the seed), removed once the evaluation is written."""
+
+
+def _load_progress(folder: Path, stamp: dict, note: Callable[[str], None]) -> list:
+    """The rows ``folder/PROGRESS`` holds when it was written for the same rows, suite and seed (``stamp``); else
+    none (a note says why it is not used)."""
+    path = folder / PROGRESS
+    if not path.exists():
+        return []
+    with np.load(path) as z:
+        saved, fitness = json.loads(str(z["stamp"])), np.asarray(z["fitness"])
+    if saved != stamp or fitness.ndim != 2 or fitness.shape[1] != stamp["terrains"]:
+        note(f"evaluate: {path} was written for another run (policies, suite or seed differ); walking every row")
+        return []
+    return list(fitness)
+
+
 def evaluate_run(run: EvaluateRun | Prepared, folder, videos: Optional[Callable] = None,
-                 say: Callable[[str], None] = print, note: Callable[[str], None] = print) -> EvaluationResult:
+                 say: Callable[[str], None] = print, note: Callable[[str], None] = print,
+                 time_limit_s: Optional[float] = None) -> Optional[EvaluationResult]:
     """Walk the base policy (with ``base.keys`` keys) and every policy of ``run`` (an :class:`EvaluateRun`, validated
     here, or :func:`validate_evaluate`'s :class:`Prepared`) on its terrains with the same key and write the
     evaluation into ``folder`` (module docstring). ``videos(prepared, folder, names, suite, fitness, say, note)``:
     called when ``run.videos.on`` (``jaxterrain.report.compare.evaluation_videos``), its seconds recorded in
     ``timing.json``.
-    ``say``: progress lines; ``note``: what was dropped or changed (stderr on the command line)."""
+    ``say``: progress lines; ``note``: what was dropped or changed (stderr on the command line).
+
+    Resumable: the rows walked so far (one per walk of a policy on the whole suite, the base policy's keys first) are
+    kept in ``folder/walked.npz`` (:data:`PROGRESS`, written atomically after every row); a later call on the same
+    folder and run walks only the rows left. ``time_limit_s``: seconds from now after which no further row starts;
+    returns None when rows are left (call again to continue), so a limit is honoured to within one row."""
     t0 = time.perf_counter()
     ready = run if isinstance(run, Prepared) else validate_evaluate(run, note=note)
     run, policies = ready.run, ready.policies
@@ -371,21 +396,41 @@ def evaluate_run(run: EvaluateRun | Prepared, folder, videos: Optional[Callable]
     def walked(chosen, k):
         return evaluate_policies(chosen, s.heightmaps, k, protocol, backend, s.scale, p.slots, p.chunk, **walk)
 
+    # the rows in order: the base policy with each key (runs of the comparator), then every other policy with the
+    # first key (the same compiled program, their weights as data)
+    jobs = [(0, jax.random.fold_in(key, k) if k else key) for k in range(n_keys)]
+    jobs += [(i, key) for i in range(1, len(policies))]
+    stamp = {"names": names, "suite": s.name, "terrains": int(s.size), "seed": int(run.seed)}
+    rows = _load_progress(folder, stamp, note)
+    resumed = len(rows)
+    if resumed:
+        say(f"resuming: {resumed} of {len(jobs)} policy rows already walked ({folder / PROGRESS})")
     t1 = time.perf_counter()
-    with compiling("suite-walk", f"{s.size} terrains x {protocol.attempts} walks, {backend} physics"):
-        first = walked(policies[:1], key)
-    first_s = time.perf_counter() - t1  # compile + walk of the base policy
-    again, walk_s = None, None
-    if run.repeat:  # the same walks again, compiled: one policy on the whole suite
+    first_s = again = walk_s = None
+    while len(rows) < len(jobs):
+        if time_limit_s is not None and rows[resumed:] and time.perf_counter() - t0 > time_limit_s:
+            say(f"time limit: {len(rows)} of {len(jobs)} policy rows walked, kept in {folder / PROGRESS}")
+            return None
+        i, k = jobs[len(rows)]
         t2 = time.perf_counter()
-        again = walked(policies[:1], key)
-        walk_s = time.perf_counter() - t2
-    fitness = first
-    for k in range(1, n_keys):  # the base policy again, with independent keys: runs of the comparator
-        fitness = np.concatenate([fitness, walked(policies[:1], jax.random.fold_in(key, k))])
-    if len(policies) > 1:  # the other policies: the same compiled program, their weights as data
-        fitness = np.concatenate([fitness, walked(policies[1:], key)])
+        if first_s is None:  # this process's first walk compiles
+            with compiling("suite-walk", f"{s.size} terrains x {protocol.attempts} walks, {backend} physics"):
+                row = walked(policies[i:i + 1], k)
+            first_s = time.perf_counter() - t2  # compile + one walk of the suite
+            if run.repeat and len(rows) == 0:  # the same walks again, compiled: one policy on the whole suite
+                t3 = time.perf_counter()
+                again = walked(policies[:1], key)
+                walk_s = time.perf_counter() - t3
+                again = bool((row == again).all())
+        else:
+            row = walked(policies[i:i + 1], k)
+        rows.append(row[0])
+        if len(rows) < len(jobs):
+            atomic_save_npz(folder / PROGRESS, fitness=np.stack(rows), stamp=np.array(json.dumps(stamp)))
+        say(f"walked {names[len(rows) - 1]} ({len(rows)} of {len(jobs)}) in {time.perf_counter() - t2:.1f} s")
+    fitness = np.stack(rows).astype(np.float32)
     write_evaluation(folder, names, s, fitness)
+    (folder / PROGRESS).unlink(missing_ok=True)
     videos_s = None
     if run.videos.on and videos is not None:
         t3 = time.perf_counter()
@@ -394,13 +439,15 @@ def evaluate_run(run: EvaluateRun | Prepared, folder, videos: Optional[Callable]
     timing = {"suite": s.name, "terrains": s.size, "policies": len(policies), "base_keys": n_keys, "backend": backend,
               "engine": p.engine, "workers": walk["workers"] if p.engine == "mujoco" else None,
               "walks_per_terrain": protocol.attempts, "build_s": round(build_s, 3),
-              "first_call_s": round(first_s, 3), "walk_s_one_policy": None if walk_s is None else round(walk_s, 3),
-              "all_policies_s": round(time.perf_counter() - t1, 3),
-              "repeat_equal": None if again is None else bool((first == again).all()),
+              "first_call_s": None if first_s is None else round(first_s, 3),
+              "walk_s_one_policy": None if walk_s is None else round(walk_s, 3),
+              "all_policies_s": round(time.perf_counter() - t1, 3), "rows_resumed": resumed,
+              "repeat_equal": again,
               "videos_s": videos_s, "device": provenance.device(),
               **({"warp_hfield": provenance.warp_hfield()} if backend == "warp" else {}),
               "spawn": p.spawn}  # the walkers' spawn rule
     atomic_write_text(folder / "timing.json", json.dumps(timing, indent=2) + "\n")
     said = "" if walk_s is None else f", {walk_s:.1f} s compiled"
-    say(f"one policy on {s.size} terrains: {first_s:.1f} s the first call{said} -> {folder}")
+    first = "" if first_s is None else f": {first_s:.1f} s the first call{said}"
+    say(f"{len(policies)} policies on {s.size} terrains{first} -> {folder}")
     return EvaluationResult(names, policies, s, fitness, timing)

@@ -85,6 +85,8 @@ CASES = [
     (["gradient", "missing.npz", "--threshold", "2"], "--threshold must be a number in (0, 1]; got 2.0"),
     (["gradient", "missing.npz", "--sample", "-1"], "--sample must be an integer >= 1; got -1"),
     (["gradient", "missing.npz", "--chunk", "0"], "--chunk must be an integer >= 1; got 0"),
+    (["gradient", "missing.npz", "--time-limit", "5"], "--time-limit: gradient runs in one piece"),
+    (["shares", "--time-limit", "5"], "--time-limit: shares runs in one piece"),
     (["train-gan", "--size", "100"], "--size / the preset's architecture: GanConfig: size=100 must be"),
     (["features", "--windows", "1000"], "--windows must be <= preset 'smoke': 'size' (48); got [1000]"),
     (["train-traversability", "--terrains", "0"], "--terrains must be an integer >= 1; got 0"),

@@ -179,3 +179,24 @@ def test_engine_mujoco_walks_the_suite_with_mujoco_c_beside_mjx(tmp_path, run):
     mjx = [r for r in read(run / "fitness.csv") if r["policy"] == "base" and r["family"] == "flat"]
     assert len(c) == len(mjx) == 1
     assert abs(float(c[0]["fitness"]) - float(mjx[0]["fitness"])) <= 0.05
+
+
+def test_a_time_limit_stops_between_policies_and_resume_walks_only_the_rows_left(tmp_path, run, policies, capsys):
+    """``--time-limit`` (here 6 ms: past after the first walk) stops after one policy row with exit code 3, the row
+    kept in ``walked.npz`` and no tables written; ``--resume`` walks the three rows left and writes the same fitness
+    as the ``run`` fixture's one call (same policies, keys and terrains, one process)."""
+    from jaxterrain.suite import runs
+
+    copy, still, _ = policies
+    out = tmp_path / "cut"
+    assert cli("evaluate", "--preset", "smoke", "--families", "flat", "gaps", "--generators", "--policy", str(copy),
+               str(still), "--keys", "2", "--out", str(out), "--time-limit", "0.0001") == 3
+    assert "continue with: python -m experiments evaluate --resume" in capsys.readouterr().out
+    with np.load(out / runs.PROGRESS) as z:
+        assert z["fitness"].shape == (1, 11)
+    assert not (out / "fitness.csv").exists()
+    assert cli("evaluate", "--resume", str(out)) == 0
+    assert "resuming: 1 of 4 policy rows already walked" in capsys.readouterr().out
+    assert not (out / runs.PROGRESS).exists()
+    assert read(out / "fitness.csv") == read(run / "fitness.csv")
+    assert json.loads((out / "timing.json").read_text())["rows_resumed"] == 1
