@@ -400,7 +400,10 @@ def evaluate_run(run: EvaluateRun | Prepared, folder, videos: Optional[Callable]
     # first key (the same compiled program, their weights as data)
     jobs = [(0, jax.random.fold_in(key, k) if k else key) for k in range(n_keys)]
     jobs += [(i, key) for i in range(1, len(policies))]
-    stamp = {"names": names, "suite": s.name, "terrains": int(s.size), "seed": int(run.seed)}
+    # the rows' identity: policy folders relative to the run folder (as config.json keeps them: a resumed run's are
+    # resolved from there, a fresh run's are as given)
+    rows_of = [n if is_base(n) else os.path.relpath(Path(n).resolve(), folder.resolve()) for n in names]
+    stamp = {"names": rows_of, "suite": s.name, "terrains": int(s.size), "seed": int(run.seed)}
     rows = _load_progress(folder, stamp, note)
     resumed = len(rows)
     if resumed:

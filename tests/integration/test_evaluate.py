@@ -7,6 +7,7 @@ from __future__ import annotations
 import csv
 import json
 import shutil
+from pathlib import Path
 
 import jax
 import numpy as np
@@ -181,16 +182,20 @@ def test_engine_mujoco_walks_the_suite_with_mujoco_c_beside_mjx(tmp_path, run):
     assert abs(float(c[0]["fitness"]) - float(mjx[0]["fitness"])) <= 0.05
 
 
-def test_a_time_limit_stops_between_policies_and_resume_walks_only_the_rows_left(tmp_path, run, policies, capsys):
+def test_a_time_limit_stops_between_policies_and_resume_walks_only_the_rows_left(tmp_path, run, policies, capsys,
+                                                                                  monkeypatch):
     """``--time-limit`` (here 6 ms: past after the first walk) stops after one policy row with exit code 3, the row
-    kept in ``walked.npz`` and no tables written; ``--resume`` walks the three rows left and writes the same fitness
-    as the ``run`` fixture's one call (same policies, keys and terrains, one process)."""
+    kept in ``walked.npz`` and no tables written; ``--resume`` (from another directory: the policies were given
+    relative to the first) walks the three rows left and writes the same fitness as the ``run`` fixture's one call
+    (same policies, keys and terrains, one process)."""
     from jaxterrain.suite import runs
 
     copy, still, _ = policies
     out = tmp_path / "cut"
-    assert cli("evaluate", "--preset", "smoke", "--families", "flat", "gaps", "--generators", "--policy", str(copy),
-               str(still), "--keys", "2", "--out", str(out), "--time-limit", "0.0001") == 3
+    monkeypatch.chdir(copy.parent)
+    assert cli("evaluate", "--preset", "smoke", "--families", "flat", "gaps", "--generators", "--policy", copy.name,
+               still.name, "--keys", "2", "--out", str(out), "--time-limit", "0.0001") == 3
+    monkeypatch.chdir(tmp_path)
     assert "continue with: python -m experiments evaluate --resume" in capsys.readouterr().out
     with np.load(out / runs.PROGRESS) as z:
         assert z["fitness"].shape == (1, 11)
@@ -198,5 +203,7 @@ def test_a_time_limit_stops_between_policies_and_resume_walks_only_the_rows_left
     assert cli("evaluate", "--resume", str(out)) == 0
     assert "resuming: 1 of 4 policy rows already walked" in capsys.readouterr().out
     assert not (out / runs.PROGRESS).exists()
-    assert read(out / "fitness.csv") == read(run / "fitness.csv")
+    cut, whole = read(out / "fitness.csv"), read(run / "fitness.csv")
+    assert [r["fitness"] for r in cut] == [r["fitness"] for r in whole]
+    assert [Path(r["policy"]).name for r in cut] == [Path(r["policy"]).name for r in whole]
     assert json.loads((out / "timing.json").read_text())["rows_resumed"] == 1
