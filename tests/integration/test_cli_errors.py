@@ -216,6 +216,13 @@ CASES = [
     (["perceptive-policy", "--out", "x", "--robot", "dog"], "--robot: robot must be one of humanoid, ant, got 'dog'"),
     (["perceptive-policy", "--out", "x", "--from", str(ROOT / "jaxterrain" / "assets" / "base_policy_perceptive")],
      "the policy is already perceptive"),
+    # flags that were accepted and ignored (the audit after evaluate --time-limit): each refused in one line
+    (["gradient", "A.npz", "--attempts", "4"], "--attempts: sets the walks of --protocol, which is not given"),
+    (["gradient", "A.npz", "--sample", "5"], "--sample: sets the walks of --protocol, which is not given"),
+    (["gradient", "A.npz", "--rollout-slots", "64"], "--rollout-slots: sets the walks of --protocol, which is not"),
+    (["gradient", "A.npz", "--seed", "3"], "--seed: sets the walks of --protocol, which is not given"),
+    (["shares", "--seed", "3"], "--seed: shares draws nothing at random"),
+
 ]
 
 
@@ -303,7 +310,8 @@ def test_every_preset_passes_the_checks():
                 common.check_values(values, where)
 
 
-NEEDS = {"gradient": [str(ROOT / "docs" / "results" / "exp2_perlin_headings_archive.npz")]}  # required inputs
+NEEDS = {"gradient": [str(ROOT / "docs" / "results" / "exp2_perlin_headings_archive.npz"),  # required inputs
+                      "--protocol", "paper"]}  # gradient's --seed seeds the walks of --protocol (refused without)
 LONG_COMMANDS = ["coverage", "curriculum", "evaluate", "evolve", "features", "gradient", "learn", "train-base-policy",
                  "train-gan", "train-traversability"]
 

@@ -93,7 +93,8 @@ def test_a_boolean_setting_works_both_ways_and_help_shows_the_printed_value(name
     (["evolve", "--no-heightmaps"], "store_heightmaps", False),
     (["evolve", "--rollout-backend", "warp"], "rollout_backend", "warp"),
     (["evaluate", "--slots", "48"], "slots", 48),
-    (["gradient", common.shipped("archives/cppn_headings.npz"), "--slots", "all"], "slots", "all"),
+    (["gradient", common.shipped("archives/cppn_headings.npz"), "--slots", "all", "--protocol", "paper"], "slots",
+     "all"),  # --slots sizes the walks of --protocol (refused without it)
     (["features", "--samples", "12"], "samples", 12),
 ])
 def test_old_spellings_still_parse_hidden_and_name_the_new_one(argv, key, value, capsys):
