@@ -222,6 +222,12 @@ CASES = [
     (["gradient", "A.npz", "--rollout-slots", "64"], "--rollout-slots: sets the walks of --protocol, which is not"),
     (["gradient", "A.npz", "--seed", "3"], "--seed: sets the walks of --protocol, which is not given"),
     (["shares", "--seed", "3"], "--seed: shares draws nothing at random"),
+    (["evolve", "--attempts", "4"], "--attempts: sets the walks of the walker fitness (--fitness difficulty); this "
+                                    "run's fitness is 'slope', which walks none"),
+    (["evolve", "--protocol", "headings"], "--protocol: sets the walks of the walker fitness"),
+    (["evolve", "--backend", "jax"], "--backend: sets the walks of the walker fitness"),
+    (["coverage", "--protocol", "paper"], "--protocol: sets the walks of the walker fitness (--fitness difficulty); "
+                                          "this run's fitness is 'slope'"),
 
 ]
 

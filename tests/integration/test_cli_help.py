@@ -91,7 +91,7 @@ def test_a_boolean_setting_works_both_ways_and_help_shows_the_printed_value(name
     (["learn", "--freeze-normaliser"], "update_normaliser", False),
     (["curriculum", "--freeze-normaliser"], "update_normaliser", False),
     (["evolve", "--no-heightmaps"], "store_heightmaps", False),
-    (["evolve", "--rollout-backend", "warp"], "rollout_backend", "warp"),
+    (["evolve", "--rollout-backend", "warp", "--preset", "gpu"], "rollout_backend", "warp"),  # a fitness that walks
     (["evaluate", "--slots", "48"], "slots", 48),
     (["gradient", common.shipped("archives/cppn_headings.npz"), "--slots", "all", "--protocol", "paper"], "slots",
      "all"),  # --slots sizes the walks of --protocol (refused without it)
