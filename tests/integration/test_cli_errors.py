@@ -228,6 +228,14 @@ CASES = [
     (["evolve", "--backend", "jax"], "--backend: sets the walks of the walker fitness"),
     (["coverage", "--protocol", "paper"], "--protocol: sets the walks of the walker fitness (--fitness difficulty); "
                                           "this run's fitness is 'slope'"),
+    (["evaluate", "--archive", "A.npz", "--families", "flat"], "--families: builds the held-out suite; this run "
+                                                               "walks --archive A.npz instead"),
+    (["evaluate", "--archive", "A.npz", "--size", "256"], "--size: builds the held-out suite; this run walks "
+                                                          "--archive A.npz instead"),
+    (["evaluate", "--video-frames", "10"], "--video-frames: shapes the videos of --videos, which is off: give "
+                                           "--videos too"),
+    (["evaluate", "--video-format", "gif"], "--video-format: shapes the videos of --videos, which is off"),
+    (["evaluate", "--gl", "egl"], "--gl: shapes the videos of --videos, which is off"),
 
 ]
 
