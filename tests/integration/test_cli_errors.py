@@ -236,6 +236,13 @@ CASES = [
                                            "--videos too"),
     (["evaluate", "--video-format", "gif"], "--video-format: shapes the videos of --videos, which is off"),
     (["evaluate", "--gl", "egl"], "--gl: shapes the videos of --videos, which is off"),
+    (["train-base-policy", "--assets-dir", "x"], "--assets-dir: where --export-assets writes; give --export-assets"),
+    (["train-base-policy", "--skip-eval", "--eval-best", "2"], "--eval-best: sets the flat-ground evaluation, which "
+                                                               "--skip-eval skips"),
+    (["train-gan", "--quality-only", "A.npz", "--steps", "5"], "--steps: --quality-only checks the given weights and "
+                                                               "trains nothing"),
+    (["train-gan", "--quality-only", "A.npz", "--time-limit", "5"], "--time-limit: --quality-only checks the given "
+                                                                    "weights"),
 
 ]
 
