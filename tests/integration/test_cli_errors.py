@@ -243,6 +243,13 @@ CASES = [
                                                                "trains nothing"),
     (["train-gan", "--quality-only", "A.npz", "--time-limit", "5"], "--time-limit: --quality-only checks the given "
                                                                     "weights"),
+    (["learn", "--resume", "RUN", "--report", "--export-policies"], "--export-policies and --report each write from "
+                                                                    "the last checkpoint and stop; give one"),
+    (["learn", "--resume", "RUN", "--report", "--time-limit", "5"], "--time-limit: --report trains nothing"),
+    (["curriculum", "--resume", "RUN", "--report", "--shard", "0/2"], "--shard: --report writes the tables of every "
+                                                                      "treatment and trains nothing"),
+    (["curriculum", "--archives", "cppn=A.npz", "--combined"], "--combined: the map curriculum on the combination of "
+                                                               "several --archives; this run has one (cppn)"),
 
 ]
 
