@@ -250,7 +250,15 @@ CASES = [
                                                                       "treatment and trains nothing"),
     (["curriculum", "--archives", "cppn=A.npz", "--combined"], "--combined: the map curriculum on the combination of "
                                                                "several --archives; this run has one (cppn)"),
-
+    (["export", "A.npz", "--format", "png", "npy", "--cell-size", "0.1"], "--cell-size: metres of the obj, stl, mjcf "
+                                                                          "files; --format png npy writes heightmap"),
+    (["report", "RUN", "--no-videos", "--policy", "missing"], "--policy: shapes the walker videos, which --no-videos "
+                                                              "leaves out"),
+    (["report", "RUN", "--video-width", "0"], "--video-width must be >= 1, got 0"),  # named --width before
+    (["report", "RUN", "--video-steps", "0"], "--video-steps must be >= 1, got 0"),  # named --steps before
+    (["quickstart", "--walk", "0", "--attempts", "4"], "--attempts: sets the walks, which --walk 0 leaves out"),
+    (["quickstart", "--no-report", "--report-frames", "10"], "--report-frames: sets the report's videos, which "
+                                                             "--no-report leaves out"),
 ]
 
 
