@@ -477,6 +477,9 @@ def check_args(command: str, args: argparse.Namespace, typed: Typed | None = Non
     values = vars(args)
     if values.get("one_piece") and values.get("time_limit") is not None:
         raise UsageError(f"--time-limit: {command} runs in one piece (nothing to stop at and resume); drop the flag")
+    if values.get("unseeded") and values.get("seed") is not None:
+        raise UsageError(f"--seed: {command} draws nothing at random (its tables are the same for every seed); drop "
+                         f"the flag")
     check_values({k: v for k, v in values.items() if typed is None or k not in typed.fields})
     check_out(values.get("out"))
     check_resume(command, values.get("resume"))
@@ -488,12 +491,21 @@ def check_args(command: str, args: argparse.Namespace, typed: Typed | None = Non
             raise UsageError(f"{flag(key)} {str(path)!r}: no such file or folder")
 
 
+def refuse_given(flags: dict[str, Any], why: str) -> None:
+    """The first of ``flags`` (``{flag: its parsed value}``, None: not given) that was given, refused in one line
+    ``<flag>: <why>``: a flag this run would accept and ignore (:class:`UsageError`)."""
+    for name, value in flags.items():
+        if value is not None:
+            raise UsageError(f"{name}: {why}")
+
+
 def add_run_arguments(parser: argparse.ArgumentParser, presets: dict[str, dict], default_preset: str,
-                      notes: dict[str, str] | None = None, time_limit: bool = True) -> None:
+                      notes: dict[str, str] | None = None, time_limit: bool = True, seed: bool = True) -> None:
     """Add ``--preset``, ``--config``, ``--resume``, ``--out``, ``--seed``, ``--time-limit`` and ``--print-config``.
     ``notes``: the meaning of the command's own presets (those beyond :data:`PRESET_NAMES`); ``time_limit``: False for
     a command that runs in one piece (its ``--time-limit`` is hidden and refused in one line by :func:`check_args`,
-    never accepted and ignored)."""
+    never accepted and ignored); ``seed``: False for a command that draws nothing at random (its ``--seed`` hidden
+    and refused the same way)."""
     command = parser.prog.split()[-1]
     parser.add_argument("--preset", choices=sorted(presets), default=None,
                         help=preset_help(command, presets, default_preset, notes).replace("%", "%%"))
@@ -502,7 +514,10 @@ def add_run_arguments(parser: argparse.ArgumentParser, presets: dict[str, dict],
                         help="continue the run in FOLDER (default: the newest run of this command)")
     parser.add_argument("--out", type=Path, default=None, help="run folder (default runs/<command>-<timestamp>)")
     parser.add_argument("--seed", type=int, default=None,
-                        help="PRNG seed of the run (every random draw derives from it; default 0)")
+                        help="PRNG seed of the run (every random draw derives from it; default 0)" if seed
+                        else argparse.SUPPRESS)
+    if not seed:
+        parser.set_defaults(unseeded=True)
     parser.add_argument("--time-limit", type=float, default=None, metavar="MIN",
                         help="stop cleanly after about MIN minutes (after a checkpoint); continue with --resume"
                         if time_limit else argparse.SUPPRESS)

@@ -74,12 +74,24 @@ def check_shard(args, run) -> None:
         raise common.UsageError("--batched runs every treatment in one process; it cannot be combined with --shard")
 
 
+def check_flags(args, run) -> None:
+    """A new run's flags that it would accept and ignore: ``--shard`` with ``--batched`` (:func:`check_shard`),
+    ``--protocol`` with a fitness that walks no robot; :class:`~experiments.common.UsageError`."""
+    check_shard(args, run)
+    if run.fitness != "difficulty":
+        common.refuse_given({"--protocol": args.protocol}, f"sets the walks of the walker fitness (--fitness "
+                                                            f"difficulty); this run's fitness is {run.fitness!r}, "
+                                                            f"which walks none")
+
+
 def main(args) -> int:
     from jaxterrain.qd import table1
 
     mesh = common.device_mesh(args.devices)
     folder, run = common.setup_typed("coverage", args, PRESETS, "smoke", TYPED, overrides(args),
-                                     table1.validate_coverage, check=lambda r: check_shard(args, r))
+                                     table1.validate_coverage, check=lambda r: check_flags(args, r))
+    if args.resume is not None:  # a resumed run's --shard against its saved --batched, before anything compiles
+        check_shard(args, run)
     result = table1.coverage_run(run, folder, common.minutes_to_seconds(args.time_limit), mesh=mesh, shard=args.shard)
     resume_hint = f"python -m experiments coverage --resume {folder}"
     if result is None:

@@ -156,6 +156,9 @@ def check_config(args, cfg: dict) -> None:
             text = str(err).removeprefix(f"LearnConfig.archive {path}: ")
             raise common.UsageError(f"--archives {name}={path}: {text}") from None
     learn.check_selector_flags(args, ["map", *baselines(cfg)], "--baseline")
+    if getattr(args, "combined", None) and len(cfg["archives"]) < 2:
+        raise common.UsageError(f"--combined: the map curriculum on the combination of several --archives; this run "
+                                f"has one ({', '.join(cfg['archives'])})")
 
 
 def baseline_archive(cfg: dict) -> str:
@@ -426,6 +429,9 @@ def main(args) -> int:
     check_population_flags(args)
     if args.report and args.resume is None:
         raise common.UsageError("--report needs --resume RUN (the run to report on)")
+    if args.report:
+        common.refuse_given({"--shard": args.shard, "--time-limit": args.time_limit},
+                            "--report writes the tables of every treatment and trains nothing: drop one of them")
     if args.baseline is not None and len(set(args.baseline)) < len(args.baseline):
         raise common.UsageError(f"--baseline: each of {', '.join(BASELINES)} at most once; got {' '.join(args.baseline)}")
     over = {"archives": parse_archives(args.archives), **cli_gen.given(args, HELP),

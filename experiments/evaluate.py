@@ -96,6 +96,25 @@ def overrides(args) -> dict:
     return out
 
 
+def check_flags(args, run) -> None:
+    """A new run's flags that it would accept and ignore: the suite's (``--suite``, ``--size``, ``--seeds``,
+    ``--terrains N``, ``--families``, ``--generators``) when ``--archive`` or ``--terrains DIR`` is walked instead
+    (``--size`` sizes a folder's terrains too), the videos' (``--video-frames``, ``--video-starts``,
+    ``--video-width``, ``--video-height``, ``--video-format``, ``--gl``) without ``--videos``;
+    :class:`~experiments.common.UsageError`."""
+    t = run.terrains
+    if t.archive or t.folder:
+        instead = f"--archive {t.archive}" if t.archive else f"--terrains {t.folder}"
+        common.refuse_given({"--suite": args.suite, "--size": args.size if t.archive else None, "--seeds": args.seeds,
+                             "--terrains": args.samples if isinstance(args.samples, int) else None,
+                             "--families": args.families, "--generators": args.generators},
+                            f"builds the held-out suite; this run walks {instead} instead: drop it")
+    if not run.videos.on:
+        common.refuse_given({common.flag(k): getattr(args, k) for k in ("video_frames", "video_starts", "video_width",
+                                                                         "video_height", "video_format", "gl")},
+                            "shapes the videos of --videos, which is off: give --videos too")
+
+
 def main(args) -> int:
     from jaxterrain.report import compare
     from jaxterrain.suite import runs
@@ -111,7 +130,8 @@ def main(args) -> int:
         ready.append(runs.validate_evaluate(run, raise_size=args.size is None, note=say_err))
         return ready[-1].run
 
-    folder, run = common.setup_typed("evaluate", args, PRESETS, "smoke", TYPED, overrides(args), validate)
+    folder, run = common.setup_typed("evaluate", args, PRESETS, "smoke", TYPED, overrides(args), validate,
+                                     check=lambda r: check_flags(args, r))
     try:
         result = runs.evaluate_run(ready[-1], folder, videos=compare.evaluation_videos, note=say_err,
                                    time_limit_s=common.minutes_to_seconds(args.time_limit))

@@ -77,7 +77,8 @@ def overrides(args) -> dict:
 
 def check_flags(args, run) -> None:
     """Flags that this run would accept and ignore: ``--mix`` / ``--fresh`` without ``--generator mixed``,
-    ``--robot`` / ``--observation`` / ``--spawn`` with a fitness that walks no robot;
+    ``--robot`` / ``--observation`` / ``--spawn`` and the walks' flags (``--protocol``, ``--attempts``, ``--best``,
+    ``--headings``, ``--rollout-slots``, ``--backend``) with a fitness that walks no robot;
     :class:`~experiments.common.UsageError`."""
     if run.generator != "mixed":
         for flag, value in (("--mix", args.mix), ("--fresh", args.fresh)):
@@ -92,6 +93,11 @@ def check_flags(args, run) -> None:
             if value is not None:
                 raise common.UsageError(f"{flag} {value}: only the walker fitness walks a policy (--fitness "
                                         f"difficulty); this run's fitness is {run.fitness!r}")
+        common.refuse_given({"--protocol": args.protocol, "--attempts": args.attempts, "--best": args.best,
+                             "--headings": args.headings, "--rollout-slots": args.rollout_slots,
+                             "--backend": args.rollout_backend},
+                            f"sets the walks of the walker fitness (--fitness difficulty); this run's fitness is "
+                            f"{run.fitness!r}, which walks none")
 
 
 def main(args) -> int:

@@ -17,6 +17,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from experiments import common
 from experiments.common import UsageError
 
 FORMATS = ("obj", "stl", "png", "npy", "mjcf")
@@ -30,8 +31,14 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "fitness) or 'all' (every filled cell)")
     parser.add_argument("--format", nargs="+", choices=FORMATS, default=["obj"], help="file format(s)")
     parser.add_argument("--out", type=Path, default=None, help="folder (default: <archive stem>_terrains beside it)")
-    parser.add_argument("--cell-size", type=float, default=0.04, help="metres between neighbouring pixels")
-    parser.add_argument("--height", type=float, default=1.0, help="metres for heightmap value 1.0")
+    parser.add_argument("--cell-size", type=float, default=None,
+                        help="metres between neighbouring pixels of the obj, stl and mjcf files (default 0.04)")
+    parser.add_argument("--height", type=float, default=None,
+                        help="metres for heightmap value 1.0 in the obj, stl and mjcf files (default 1.0)")
+
+
+SCALED = ("obj", "stl", "mjcf")
+"""The formats in metres (``--cell-size`` and ``--height`` apply); ``png`` and ``npy`` keep heightmap units."""
 
 
 def parse_cells(text: str, arch) -> list[int]:
@@ -76,8 +83,13 @@ def main(args: argparse.Namespace) -> int:
     from jaxterrain.runtime.io import atomic_write_text
     from jaxterrain.report.archives import elite_heightmaps
 
+    if not set(args.format) & set(SCALED):  # png / npy only: the metres would be accepted and ignored
+        common.refuse_given({"--cell-size": args.cell_size, "--height": args.height},
+                            f"metres of the {', '.join(SCALED)} files; --format {' '.join(args.format)} writes "
+                            f"heightmap units: drop it")
     try:
-        scale = T.TerrainScale(args.cell_size, args.height)
+        scale = T.TerrainScale(0.04 if args.cell_size is None else args.cell_size,
+                               1.0 if args.height is None else args.height)
     except ValueError as err:
         raise UsageError(str(err)) from None
     try:

@@ -33,6 +33,8 @@ PRESETS: dict[str, dict] = common.with_preset_names({
                     distance="corner", reseat=False),
 }, {"smoke": "default", "gpu-short": "default", "gpu": "default", "paper": "default"})
 PROTOCOLS = ("paper", "headings")
+WALK_KEYS = ("attempts", "best", "headings", "start_spread", "rule", "chunk", "sample")
+"""The keys that only shape the walks of ``--protocol`` (with ``slots`` and ``seed``: refused without it)."""
 DISTANCES = ("corner", "index")
 
 
@@ -126,6 +128,12 @@ def check_config(cfg: dict) -> None:
     if cfg.get("distance") not in DISTANCES:
         raise common.UsageError(f"--distance must be one of {', '.join(DISTANCES)}; got {cfg.get('distance')!r}")
     protocol = resolve_protocol(cfg)
+    if protocol is None:  # nothing is walked: the flags of the walks would be accepted and ignored
+        common.refuse_given({common.flag(k): cfg.get(k) for k in WALK_KEYS}
+                            | {"--rollout-slots": None if cfg.get("slots") in (None, "auto") else cfg["slots"],
+                               "--seed": cfg.get("seed") or None},
+                            "sets the walks of --protocol, which is not given (the stored fitness is read, nothing "
+                            "is walked): give --protocol paper or headings, or drop it")
     if cfg.get("reseat") and (protocol is None or cfg.get("sample") is not None):
         raise common.UsageError("--reseat needs --protocol (every elite walked again) and no --sample")
     if cfg.get("reseat") and (protocol.start_spread != 0.0 or protocol.rule != "mean"):

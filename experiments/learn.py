@@ -227,6 +227,12 @@ def main(args) -> int:
         raise common.UsageError("--report needs --resume RUN (the run to report on)")
     if args.export_policies and args.resume is None:
         raise common.UsageError("--export-policies needs --resume RUN (the run whose walkers to write)")
+    if args.export_policies and args.report:
+        raise common.UsageError("--export-policies and --report each write from the last checkpoint and stop; give "
+                                "one of them")
+    if args.export_policies or args.report:
+        common.refuse_given({"--time-limit": args.time_limit}, f"{'--report' if args.report else '--export-policies'} "
+                                                               f"trains nothing: drop one of them")
     mesh = common.device_mesh(args.devices)
     folder, cfg = common.setup_run("learn", args, PRESETS, "smoke", overrides(args), rules=RULES,
                                    check=lambda c: (check_selector_flags(args, [c["curriculum"]]), run_of(c),

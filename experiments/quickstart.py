@@ -35,13 +35,34 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="generator names (default: every generator that loads)")
     parser.add_argument("--walk", type=int, default=4,
                         help="terrains per generator walked by the base policy (0: none)")
-    parser.add_argument("--attempts", type=int, default=8, help="walks per terrain (the paper: 20)")
-    parser.add_argument("--best", type=int, default=2, help="fitness = mean of the best this many walks (paper: 5)")
+    parser.add_argument("--attempts", type=int, default=None,
+                        help="walks per walked terrain (default 8; the paper: 20)")
+    parser.add_argument("--best", type=int, default=None,
+                        help="fitness = mean of the best this many walks (default 2; the paper: 5)")
     parser.add_argument("--out", default=None, help="run folder (default runs/quickstart-<time>)")
     parser.add_argument("--report", action=argparse.BooleanOptionalAction, default=True,
                         help="write report/, the HTML page (--no-report: leave it out)")
-    parser.add_argument("--report-frames", type=int, default=60,
-                        help="frames per walker video in the report (0: a report without videos)")
+    parser.add_argument("--report-frames", type=int, default=None,
+                        help="frames per walker video in the report (default 60; 0: a report without videos)")
+
+
+DEFAULTS = {"attempts": 8, "best": 2, "report_frames": 60}
+"""The values of the options whose default is None (not given), so that a flag the run would ignore is refused:
+``--attempts`` / ``--best`` with ``--walk 0``, ``--report-frames`` with ``--no-report``."""
+
+
+def check_flags(args: argparse.Namespace) -> None:
+    """Flags this run would accept and ignore refused (:class:`~experiments.common.UsageError`), then the defaults
+    of :data:`DEFAULTS` filled in (``config.json`` records them as before)."""
+    if args.walk == 0:
+        common.refuse_given({"--attempts": args.attempts, "--best": args.best},
+                            "sets the walks, which --walk 0 leaves out: drop one of them")
+    if not args.report:
+        common.refuse_given({"--report-frames": args.report_frames},
+                            "sets the report's videos, which --no-report leaves out: drop one of them")
+    for key, value in DEFAULTS.items():
+        if getattr(args, key) is None:
+            setattr(args, key, value)
 
 
 NAMES = ("tri", "tpi", "roughness")
@@ -232,6 +253,7 @@ def main(args: argparse.Namespace) -> int:
     from jaxterrain import generators
     from jaxterrain.runtime.io import atomic_write_text
 
+    check_flags(args)
     if args.n < 1:
         raise UsageError("--terrains must be >= 1")
     if not 32 <= args.size <= 1024:

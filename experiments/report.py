@@ -31,19 +31,30 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--title", default="jaxterrain report", help="page title")
     parser.add_argument("--videos", action=argparse.BooleanOptionalAction, default=True,
                         help="walker videos (--no-videos: leave out the walks, no MJX rollout, no GL)")
-    parser.add_argument("--video-steps", dest="steps", type=int, default=1000, help="env steps walked per video (15 ms each)")
-    common.add_deprecated_alias(parser, "--steps", "--video-steps", "steps", type=int)
-    parser.add_argument("--frames", type=int, default=60, help="frames per video (evenly spaced over the walk)")
-    parser.add_argument("--video-width", dest="width", type=int, default=320, help="video width in pixels")
-    parser.add_argument("--video-height", dest="height", type=int, default=240, help="video height in pixels")
+    parser.add_argument("--video-steps", dest="video_steps", type=int, default=None,
+                        help="env steps walked per video (15 ms each; default 1000)")
+    common.add_deprecated_alias(parser, "--steps", "--video-steps", "video_steps", type=int)
+    parser.add_argument("--frames", type=int, default=None,
+                        help="frames per video (evenly spaced over the walk; default 60)")
+    parser.add_argument("--video-width", dest="width", type=int, default=None,
+                        help="video width in pixels (default 320)")
+    parser.add_argument("--video-height", dest="height", type=int, default=None,
+                        help="video height in pixels (default 240)")
     common.add_deprecated_alias(parser, "--width", "--video-width", "width", type=int)
     common.add_deprecated_alias(parser, "--height", "--video-height", "height", type=int)
     parser.add_argument("--thumb", type=int, default=64, help="thumbnail side in pixels")
     parser.add_argument("--policy", type=Path, default=None,
-                        help="policy folder (jaxterrain.rl.save_policy); default: the shipped base policy")
-    parser.add_argument("--seed", type=int, default=0, help="PRNG seed of the walks' initial states")
+                        help="policy folder (jaxterrain.rl.save_policy) the videos walk; default: the shipped base "
+                             "policy")
+    parser.add_argument("--seed", type=int, default=None, help="PRNG seed of the videos' walks (default 0)")
     parser.add_argument("--gl", choices=("osmesa", "egl", "glfw"), default=None,
                         help="MuJoCo OpenGL backend (default: $MUJOCO_GL, else egl with an NVIDIA GPU, else osmesa)")
+
+
+VIDEO_FLAGS = (("--video-steps", "video_steps", 1000), ("--frames", "frames", 60), ("--video-width", "width", 320),
+               ("--video-height", "height", 240), ("--thumb", "thumb", 64))
+"""``(flag, dest, default)`` of the sizes checked >= 1 (the videos' default None: not given, so that
+``--no-videos`` refuses them)."""
 
 
 def main(args: argparse.Namespace) -> int:
@@ -56,9 +67,16 @@ def main(args: argparse.Namespace) -> int:
     for run in args.runs:
         if not run.is_dir():
             raise UsageError(f"run folder not found: {run}")
-    for name in ("steps", "frames", "width", "height", "thumb"):
-        if getattr(args, name) < 1:
-            raise UsageError(f"--{name} must be >= 1, got {getattr(args, name)}")
+    if not args.videos:  # --no-videos walks nothing: the videos' flags would be accepted and ignored
+        common.refuse_given({"--video-steps": args.video_steps, "--frames": args.frames, "--video-width": args.width,
+                             "--video-height": args.height, "--policy": args.policy, "--seed": args.seed,
+                             "--gl": args.gl}, "shapes the walker videos, which --no-videos leaves out: drop one of "
+                                               "them")
+    for flag, name, default in VIDEO_FLAGS:
+        value = default if getattr(args, name) is None else getattr(args, name)
+        if value < 1:
+            raise UsageError(f"{flag} must be >= 1, got {value}")
+        setattr(args, name, value)
     out = args.out or (args.runs[0] / "report" if len(args.runs) == 1 else run_folder("report"))
     policy = None
     if args.policy is not None:
@@ -68,8 +86,8 @@ def main(args: argparse.Namespace) -> int:
             policy = load_policy(args.policy)
         except (OSError, ValueError) as err:
             raise UsageError(f"--policy {args.policy}: {str(err).splitlines()[0]}") from None
-    path = write_report(args.runs, out, title=args.title, videos=args.videos, video_steps=args.steps,
+    path = write_report(args.runs, out, title=args.title, videos=args.videos, video_steps=args.video_steps,
                         video_frames=args.frames, video_size=(args.width, args.height), thumb=args.thumb,
-                        seed=args.seed, policy=policy, progress=lambda s: print(s, flush=True))
+                        seed=args.seed or 0, policy=policy, progress=lambda s: print(s, flush=True))
     print(f"wrote {path} and {path.with_suffix('.md')}")
     return 0

@@ -31,7 +31,7 @@ PRESETS: dict[str, dict] = common.with_preset_names({
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    common.add_run_arguments(parser, PRESETS, "default", time_limit=False)
+    common.add_run_arguments(parser, PRESETS, "default", time_limit=False, seed=False)
     parser.add_argument("--mixed", default=None, metavar="ARCHIVE",
                         help="the mixed archive: an archive.npz or the run folder of evolve --generator mixed")
     parser.add_argument("--separate", nargs="+", default=None, metavar="ARCHIVE",

@@ -95,10 +95,22 @@ def resume_command(command: str, run: Path) -> str:
     return f"{' '.join(again)} --resume {run}"
 
 
+def check_flags(args: argparse.Namespace) -> None:
+    """Flags that would be accepted and ignored: ``--assets-dir`` without ``--export-assets``, ``--eval-attempts`` /
+    ``--eval-best`` with ``--skip-eval``; :class:`~experiments.common.UsageError`."""
+    if not args.export_assets:
+        common.refuse_given({"--assets-dir": args.assets_dir}, "where --export-assets writes; give --export-assets "
+                                                               "too, or drop it")
+    if args.skip_eval:
+        common.refuse_given({"--eval-attempts": args.eval_attempts, "--eval-best": args.eval_best},
+                            "sets the flat-ground evaluation, which --skip-eval skips: drop one of them")
+
+
 def main(args: argparse.Namespace) -> int:
     """Resolve, validate, train (checkpointed, budgeted, resumable), save the policy, evaluate it, optionally export
     it: ``jaxterrain.difficulty.base_policy.train_base_policy``."""
     started = time.perf_counter()
+    check_flags(args)
     from jaxterrain import rl
     from jaxterrain.difficulty import base_policy
 

@@ -230,6 +230,18 @@ def run_quality_only(weights: str, cfg: dict, run_dir: Path, tiles) -> None:
     print(json.dumps(report["mean_w1"]), "gan_closer_than_perlin:", report["gan_closer_than_perlin"])
 
 
+def check_quality_only(args: argparse.Namespace) -> None:
+    """``--quality-only WEIGHTS`` checks those weights and trains nothing: the training's flags (the weights
+    record their own architecture, so ``--size`` too) would be accepted and ignored;
+    :class:`~experiments.common.UsageError`."""
+    if args.quality_only is not None:
+        common.refuse_given({"--steps": args.steps, "--batch-size": args.batch_size, "--size": args.size,
+                             "--learning-rate": args.lr, "--r1": args.r1, "--sample-every": args.sample_every,
+                             "--checkpoint-every": args.ckpt_every, "--log-every": args.log_every,
+                             "--time-limit": args.time_limit, "--export-assets": args.export_assets or None},
+                            "--quality-only checks the given weights and trains nothing: drop one of them")
+
+
 def main(args: argparse.Namespace) -> int:
     """Resolve the settings and the run folder, load the data, train (or resume) with
     ``jaxterrain.generators.gan_train.train_gan``, optionally export."""
@@ -237,6 +249,7 @@ def main(args: argparse.Namespace) -> int:
     from jaxterrain.generators.gan import ASSET_DIR
     from jaxterrain.generators.gan_train import train_gan
 
+    check_quality_only(args)
     run_dir, cfg = common.setup_resumable_run("train-gan", args, PRESETS, "smoke", overrides(args), EXTENDABLE,
                                               check=check_config)
     config = make_config(cfg)

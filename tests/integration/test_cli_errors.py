@@ -216,6 +216,49 @@ CASES = [
     (["perceptive-policy", "--out", "x", "--robot", "dog"], "--robot: robot must be one of humanoid, ant, got 'dog'"),
     (["perceptive-policy", "--out", "x", "--from", str(ROOT / "jaxterrain" / "assets" / "base_policy_perceptive")],
      "the policy is already perceptive"),
+    # flags that were accepted and ignored (the audit after evaluate --time-limit): each refused in one line
+    (["gradient", "A.npz", "--attempts", "4"], "--attempts: sets the walks of --protocol, which is not given"),
+    (["gradient", "A.npz", "--sample", "5"], "--sample: sets the walks of --protocol, which is not given"),
+    (["gradient", "A.npz", "--rollout-slots", "64"], "--rollout-slots: sets the walks of --protocol, which is not"),
+    (["gradient", "A.npz", "--seed", "3"], "--seed: sets the walks of --protocol, which is not given"),
+    (["shares", "--seed", "3"], "--seed: shares draws nothing at random"),
+    (["evolve", "--attempts", "4"], "--attempts: sets the walks of the walker fitness (--fitness difficulty); this "
+                                    "run's fitness is 'slope', which walks none"),
+    (["evolve", "--protocol", "headings"], "--protocol: sets the walks of the walker fitness"),
+    (["evolve", "--backend", "jax"], "--backend: sets the walks of the walker fitness"),
+    (["coverage", "--protocol", "paper"], "--protocol: sets the walks of the walker fitness (--fitness difficulty); "
+                                          "this run's fitness is 'slope'"),
+    (["evaluate", "--archive", "A.npz", "--families", "flat"], "--families: builds the held-out suite; this run "
+                                                               "walks --archive A.npz instead"),
+    (["evaluate", "--archive", "A.npz", "--size", "256"], "--size: builds the held-out suite; this run walks "
+                                                          "--archive A.npz instead"),
+    (["evaluate", "--video-frames", "10"], "--video-frames: shapes the videos of --videos, which is off: give "
+                                           "--videos too"),
+    (["evaluate", "--video-format", "gif"], "--video-format: shapes the videos of --videos, which is off"),
+    (["evaluate", "--gl", "egl"], "--gl: shapes the videos of --videos, which is off"),
+    (["train-base-policy", "--assets-dir", "x"], "--assets-dir: where --export-assets writes; give --export-assets"),
+    (["train-base-policy", "--skip-eval", "--eval-best", "2"], "--eval-best: sets the flat-ground evaluation, which "
+                                                               "--skip-eval skips"),
+    (["train-gan", "--quality-only", "A.npz", "--steps", "5"], "--steps: --quality-only checks the given weights and "
+                                                               "trains nothing"),
+    (["train-gan", "--quality-only", "A.npz", "--time-limit", "5"], "--time-limit: --quality-only checks the given "
+                                                                    "weights"),
+    (["learn", "--resume", "RUN", "--report", "--export-policies"], "--export-policies and --report each write from "
+                                                                    "the last checkpoint and stop; give one"),
+    (["learn", "--resume", "RUN", "--report", "--time-limit", "5"], "--time-limit: --report trains nothing"),
+    (["curriculum", "--resume", "RUN", "--report", "--shard", "0/2"], "--shard: --report writes the tables of every "
+                                                                      "treatment and trains nothing"),
+    (["curriculum", "--archives", "cppn=A.npz", "--combined"], "--combined: the map curriculum on the combination of "
+                                                               "several --archives; this run has one (cppn)"),
+    (["export", "A.npz", "--format", "png", "npy", "--cell-size", "0.1"], "--cell-size: metres of the obj, stl, mjcf "
+                                                                          "files; --format png npy writes heightmap"),
+    (["report", "RUN", "--no-videos", "--policy", "missing"], "--policy: shapes the walker videos, which --no-videos "
+                                                              "leaves out"),
+    (["report", "RUN", "--video-width", "0"], "--video-width must be >= 1, got 0"),  # named --width before
+    (["report", "RUN", "--video-steps", "0"], "--video-steps must be >= 1, got 0"),  # named --steps before
+    (["quickstart", "--walk", "0", "--attempts", "4"], "--attempts: sets the walks, which --walk 0 leaves out"),
+    (["quickstart", "--no-report", "--report-frames", "10"], "--report-frames: sets the report's videos, which "
+                                                             "--no-report leaves out"),
 ]
 
 
@@ -303,7 +346,8 @@ def test_every_preset_passes_the_checks():
                 common.check_values(values, where)
 
 
-NEEDS = {"gradient": [str(ROOT / "docs" / "results" / "exp2_perlin_headings_archive.npz")]}  # required inputs
+NEEDS = {"gradient": [str(ROOT / "docs" / "results" / "exp2_perlin_headings_archive.npz"),  # required inputs
+                      "--protocol", "paper"]}  # gradient's --seed seeds the walks of --protocol (refused without)
 LONG_COMMANDS = ["coverage", "curriculum", "evaluate", "evolve", "features", "gradient", "learn", "train-base-policy",
                  "train-gan", "train-traversability"]
 

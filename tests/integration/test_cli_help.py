@@ -91,9 +91,10 @@ def test_a_boolean_setting_works_both_ways_and_help_shows_the_printed_value(name
     (["learn", "--freeze-normaliser"], "update_normaliser", False),
     (["curriculum", "--freeze-normaliser"], "update_normaliser", False),
     (["evolve", "--no-heightmaps"], "store_heightmaps", False),
-    (["evolve", "--rollout-backend", "warp"], "rollout_backend", "warp"),
+    (["evolve", "--rollout-backend", "warp", "--preset", "gpu"], "rollout_backend", "warp"),  # a fitness that walks
     (["evaluate", "--slots", "48"], "slots", 48),
-    (["gradient", common.shipped("archives/cppn_headings.npz"), "--slots", "all"], "slots", "all"),
+    (["gradient", common.shipped("archives/cppn_headings.npz"), "--slots", "all", "--protocol", "paper"], "slots",
+     "all"),  # --slots sizes the walks of --protocol (refused without it)
     (["features", "--samples", "12"], "samples", 12),
 ])
 def test_old_spellings_still_parse_hidden_and_name_the_new_one(argv, key, value, capsys):
@@ -108,7 +109,7 @@ def test_old_spellings_still_parse_hidden_and_name_the_new_one(argv, key, value,
 def test_report_and_quickstart_switches_work_both_ways():
     report = COMMANDS["report"][1]
     assert report.parse_args(["RUN"]).videos is True and report.parse_args(["RUN", "--no-videos"]).videos is False
-    assert report.parse_args(["RUN", "--steps", "7"]).steps == 7  # the old spelling of --video-steps
+    assert report.parse_args(["RUN", "--steps", "7"]).video_steps == 7  # the old spelling of --video-steps
     quick = COMMANDS["quickstart"][1]
     assert quick.parse_args([]).report is True and quick.parse_args(["--no-report"]).report is False
     assert quick.parse_args(["--n", "3"]).n == 3 and quick.parse_args(["--terrains", "3"]).n == 3
