@@ -102,9 +102,9 @@ RATES = {
     "treatment_s_jax": (780.0, "measured: learn --preset gpu-short --backend jax, 10.4 s a chunk x 75 chunks, one "
                                "H200, 2026-11-29 (/work/shared/NOTES.md)"),
     "population_factor": (0.74, "measured: Experiment 4's blind humanoid training itself, its five treatments as "
-                                "three populations: 5.00 and 5.31 s a chunk for the two 20-trial populations "
+                                "three populations: 5.04 and 5.31 s a chunk for the two 20-trial populations "
                                 "against 3.80 s for terrain levels alone (Warp, 2 x H200, same lease, 2026-11-30, "
-                                "docs/results/exp4/chunk_times.py): (5.00 + 5.31 + 3.80) / (5 x 3.80). The six map "
+                                "docs/results/exp4/chunk_times.py): (5.04 + 5.31 + 3.80) / (5 x 3.80). The six map "
                                 "treatments' run predicted 0.73 (2.73 s + 0.136 s a trial, batch.FIXED_TRIALS)"),
     "v2_first_s": (67.0, "measured: the humanoid's first walk of suite v2 (compile included), MJX-JAX, one H200, "
                          "2026-11-29"),

@@ -23,11 +23,10 @@ RUNS = {"six": ("gpu1.log.gz", r"population 1: chunk (\d+) of \d+.*?, ([\d.]+) s
 
 
 def commands(path: Path, pattern: str) -> list[list[tuple[int, float]]]:
-    """Per command of the log (a new command: an ``environment {`` line, or ``pair.sh``'s ``+ python`` echo): its
-    ``(chunk, running s/chunk)`` lines in order."""
+    """Per command of the log: its ``(chunk, running s/chunk)`` lines in order."""
     out: list[list[tuple[int, float]]] = [[]]
     for line in gzip.open(path, "rt"):
-        if ("environment {" in line or line.startswith("+ python")) and out[-1]:
+        if "environment {" in line and out[-1]:
             out.append([])
         m = re.search(pattern, line)
         if m:
