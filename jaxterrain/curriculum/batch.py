@@ -361,7 +361,8 @@ def _setup(valid: Sequence[_Valid], memory_bytes: Optional[int], say: Callable):
 
     physics = runner.physics_of(v0.run)
     fresh = None not in blocks
-    note = estimates.compiling("curriculum-block", f"{total} trials of {len(valid)} treatments, {physics} physics") \
+    note = estimates.compiling("curriculum-block", f"{total} trials of {len(valid)} treatments, {physics} physics",
+                               then=estimates.first_chunk_note(physics)) \
         if fresh else contextlib.nullcontext()
     with note:
         need = program_bytes(program(None))

@@ -336,8 +336,9 @@ def setup(run: LearnConfig, config, arch, policy, env, mesh=None):
     fast = bool(run.budget.fast_compile)
     sig = (config, ppo, env.config, int(run.trials), tuple(bank.heightmaps.shape), fast, mesh)
     fresh = sig not in PROGRAMS  # a treatment of the same shape as an earlier one reuses its programs
-    note = (estimates.compiling("curriculum-block", f"{int(run.trials)} trials, {physics_of(run)} physics")
-            if fresh else contextlib.nullcontext())
+    physics = physics_of(run)
+    note = (estimates.compiling("curriculum-block", f"{int(run.trials)} trials, {physics} physics",
+                                then=estimates.first_chunk_note(physics)) if fresh else contextlib.nullcontext())
     with note:  # what compiles and about how long it takes here, then how long it took
         if fresh:
             PROGRAMS[sig] = (compiled(init_fn, fast, keys, bank, start),

@@ -23,8 +23,8 @@ import sys
 import time
 from typing import Iterator, NamedTuple, Optional
 
-__all__ = ["Estimate", "PROGRAMS", "CPU_NOTE", "ESTIMATES", "SMOKE_MINUTES", "platform_of", "first_call_note",
-           "announce", "compiling"]
+__all__ = ["Estimate", "PROGRAMS", "CPU_NOTE", "ESTIMATES", "SMOKE_MINUTES", "WARP_FIRST_CHUNK", "platform_of",
+           "first_chunk_note", "first_call_note", "announce", "compiling"]
 
 
 class Estimate(NamedTuple):
@@ -103,31 +103,46 @@ def _span(e: Estimate) -> str:
     return f"{low}-{high}"
 
 
-def first_call_note(program: str, detail: str = "", platform: Optional[str] = None) -> str:
+WARP_FIRST_CHUNK = ("on a fresh machine the first chunk also builds MuJoCo Warp's kernels: about 65-85 s more on "
+                    "an H200, none once cached")
+"""What a curriculum block's first chunk adds under MuJoCo Warp (its kernels build at their first launch, after the
+XLA compile that :func:`compiling` times): measured, Experiment 4's first chunks on a fresh 2 x H200, 89.8 s and
+72.4 s against 5.0-5.3 s for later ones (2026-11-30, ``docs/results/exp4/logs/``)."""
+
+
+def first_chunk_note(physics: str) -> str:
+    """What a curriculum block's first run adds after its compile on this ``physics`` (:data:`WARP_FIRST_CHUNK` for
+    ``"warp"``, else nothing): the ``then`` of its :func:`compiling`."""
+    return WARP_FIRST_CHUNK if physics == "warp" else ""
+
+
+def first_call_note(program: str, detail: str = "", platform: Optional[str] = None, then: str = "") -> str:
     """One line before ``program``'s first (compiling) call: what compiles, and about how long it takes on this
     platform and on the other one, e.g. ``compiling the walks of the held-out suite (jax physics, cpu): about 2-4 min
-    on 2 CPU cores, 30 s-2 min on a GPU``. ``detail`` (sizes, backend) goes in the brackets. KeyError for a program
-    not in :data:`PROGRAMS`."""
+    on 2 CPU cores, 30 s-2 min on a GPU``. ``detail`` (sizes, backend) goes in the brackets; ``then`` (what the first
+    run adds after the compile, e.g. :func:`first_chunk_note`) after a semicolon. KeyError for a program not in
+    :data:`PROGRAMS`."""
     what = PROGRAMS[program]
     here = platform_of(platform)
     mine, other = ESTIMATES[(program, here)], ESTIMATES[(program, "gpu" if here == "cpu" else "cpu")]
     where = {"cpu": f"on {CPU_NOTE}", "gpu": "on a GPU"}
     inside = "; ".join(x for x in (detail, here) if x)
     return (f"compiling {what} ({inside}): about {_span(mine)} {where[here]}, {_span(other)} "
-            f"{where['gpu' if here == 'cpu' else 'cpu']}")
+            f"{where['gpu' if here == 'cpu' else 'cpu']}" + (f"; {then}" if then else ""))
 
 
-def announce(program: str, detail: str = "", platform: Optional[str] = None, file=None) -> None:
+def announce(program: str, detail: str = "", platform: Optional[str] = None, file=None, then: str = "") -> None:
     """Print :func:`first_call_note` (to stdout, flushed)."""
-    print(first_call_note(program, detail, platform), file=file or sys.stdout, flush=True)
+    print(first_call_note(program, detail, platform, then), file=file or sys.stdout, flush=True)
 
 
 @contextlib.contextmanager
-def compiling(program: str, detail: str = "", platform: Optional[str] = None, file=None) -> Iterator[None]:
-    """Around the first call of ``program``: :func:`announce` before it, ``compiled ... in N s`` after it (the call's
-    whole time, its first run included)."""
+def compiling(program: str, detail: str = "", platform: Optional[str] = None, file=None,
+              then: str = "") -> Iterator[None]:
+    """Around the first call of ``program``: :func:`announce` before it (``then``: what its first run adds later),
+    ``compiled ... in N s`` after it (the call's whole time, its first run included)."""
     out = file or sys.stdout
-    announce(program, detail, platform, out)
+    announce(program, detail, platform, out, then)
     t0 = time.perf_counter()
     yield
     print(f"compiled {program} in {time.perf_counter() - t0:.0f} s", file=out, flush=True)
