@@ -237,7 +237,7 @@ def check(p: argparse.ArgumentParser, args) -> None:
     if args.out.exists() and not args.out.is_dir():
         p.error(f"--out {args.out} is a file")
     warp = (words[:1] == ("evaluate",) and args.eval_backend == "warp") or (
-        words[:1] == ("train",) and (args.backend == "warp" or (args.backend is None and warp_installed())))
+        words[:1] == ("train",) and (args.backend == "warp" or (args.backend is None and auto_picks_warp())))
     if warp and _warp_hfield() == "stock":
         p.error("MuJoCo Warp here runs its stock heightfield collision (contacts metres deep for a foot buried far "
                 "from the heightfield's centre: the ant's suite-v2 mean 0.686 against 0.777 patched); run "
@@ -252,9 +252,14 @@ def _warp_hfield() -> str:
     return provenance.warp_hfield()
 
 
-def warp_installed() -> bool:
-    """Whether warp-lang is importable here (what the presets' ``auto`` backend picks MuJoCo Warp by)."""
-    return importlib.util.find_spec("warp") is not None
+def auto_picks_warp() -> bool:
+    """Whether the presets' ``auto`` backend runs MuJoCo Warp here: warp-lang importable and JAX on a GPU (the rule
+    of ``jaxterrain.walker.resolve_backend``; a CPU with warp-lang installed runs MJX-JAX)."""
+    if importlib.util.find_spec("warp") is None:
+        return False
+    import jax  # only where warp-lang is installed
+
+    return jax.default_backend() == "gpu"
 
 
 def parse_ant(p: argparse.ArgumentParser, items: list[str]) -> list[tuple[str, str]]:
