@@ -364,13 +364,22 @@ def _tile_walks(env, act, attempts: int, headings: int, data, index, keys, param
     return (final, t) if steps else final
 
 
+_STATE_SHAPES: dict = {}  # (walker config, PPOConfig, terrain shape) -> the rl.TrainState's shapes (eval_shape)
+
+
 def start_state(env, ppo: rl.PPOConfig, policy, shape: tuple[int, int]) -> rl.TrainState:
     """The starting ``rl.TrainState``: the policy's params (policy AND value net) and normaliser, a fresh Adam state,
     and zeros for the ``ppo.num_envs`` env states (only their structure counts: the curriculum restarts the envs on
-    its first terrain before training). Traces the env once (``jax.eval_shape``); compiles nothing. A tiled env's
-    (its envs on one tile) has the same structure; MuJoCo Warp's shared contact buffers stay unbatched."""
-    terrain = (lambda: env.flat_bank().at(0)) if env.tiles else (lambda: jnp.zeros(tuple(shape), jnp.float32))
-    like = jax.eval_shape(lambda k: rl.init(k, env, ppo, terrain()), jax.random.key(0))
+    its first terrain before training). Traces the env (``jax.eval_shape``) once per walker config, PPOConfig and
+    terrain shape in a process (the MJX reset's trace takes seconds on a CPU, and every ``learn --resume``,
+    ``--report`` or ``--export-policies`` of a treatment, and every treatment of ``curriculum``, starts here); compiles
+    nothing. A tiled env's (its envs on one tile) has the same structure; MuJoCo Warp's shared contact buffers stay
+    unbatched."""
+    sig = (env.config, ppo, tuple(shape))  # a WalkerEnv is built from its config alone
+    like = _STATE_SHAPES.get(sig)
+    if like is None:
+        terrain = (lambda: env.flat_bank().at(0)) if env.tiles else (lambda: jnp.zeros(tuple(shape), jnp.float32))
+        like = _STATE_SHAPES[sig] = jax.eval_shape(lambda k: rl.init(k, env, ppo, terrain()), jax.random.key(0))
     zeros = jax.tree.map(lambda x: jnp.zeros(x.shape, x.dtype), like)
     params = jax.tree.map(jnp.asarray, policy.params)
     return zeros._replace(params=params, normaliser=policy.normaliser,

@@ -1,9 +1,10 @@
 """``learn --terrains DIR`` and ``evaluate --terrains DIR``: your own heightmaps in one line (issue 62, item 5).
 
-The levels run shares its compiled block with ``test_curriculum.py``'s ``levels`` smoke run (the same selector,
-protocol and a bank of 4 terrains of 256 x 256: the bank's values are data), so in one process it costs its chunks.
-It is also the default suite's end-to-end test of ``learn --curriculum levels`` (``test_learn_command.py``'s
-``levels`` case is slow: the same compile a second time)."""
+The levels run compiles its own block (no other test of the default suite runs the levels curriculum through the
+real walker): the suite's longest test, 174 s of CPU run alone (2026-11-30: about a third tracing, most of the
+rest the XLA compile at the smoke preset's cheap options). It is the default suite's end-to-end test of
+``learn --curriculum levels`` (``test_learn_command.py``'s ``levels`` case is slow: the same compile a second
+time)."""
 
 import json
 import shutil

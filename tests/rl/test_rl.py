@@ -14,6 +14,7 @@ import numpy as np
 import pytest
 
 from jaxterrain import rl
+from jaxterrain.runtime import xla
 
 
 # ---------------------------------------------------------------------------------------------------------------
@@ -61,6 +62,17 @@ CFG = rl.PPOConfig(num_envs=16, unroll_length=8, num_unrolls=2, num_minibatches=
                    policy_hidden=(16, 16), value_hidden=(32, 32))
 TERRAIN = jnp.zeros((4, 4), jnp.float32)
 ENV = PointEnv()  # shared, so that tests reuse the compiled training chunks (cached per env, config, length)
+
+
+# XLA's cheap CPU compile options (lowest backend optimisation, the classic emitter) for the programs a test checks
+# against bounds or another computation within a tolerance only; the updates below would otherwise run eagerly, op by
+# op, each scan and loop compiled at the default options on its own
+FAST_COMPILE = xla.known_options(xla.FAST_CPU_COMPILE)
+
+
+def compiled(fn, *args):
+    """``fn(*args)``, compiled with :data:`FAST_COMPILE`."""
+    return jax.jit(fn).lower(*args).compile(FAST_COMPILE)(*args)
 
 
 def tree_equal(a, b) -> bool:
@@ -156,8 +168,10 @@ def test_update_normaliser_false_keeps_the_statistics():
     """``PPOConfig.update_normaliser=False`` (fine-tuning with the base policy's statistics frozen): an update
     leaves the normaliser as given and still trains; True merges the collected observations."""
     state = rl.init(jax.random.PRNGKey(0), ENV, CFG, TERRAIN)
-    for flag in (True, False):
-        new, _ = rl.update(state, jax.random.PRNGKey(1), TERRAIN, env=ENV, config=CFG._replace(update_normaliser=flag))
+    news = compiled(lambda s: [rl.update(s, jax.random.PRNGKey(1), TERRAIN, env=ENV,
+                                         config=CFG._replace(update_normaliser=flag))[0] for flag in (True, False)],
+                    state)
+    for flag, new in zip((True, False), news):
         assert tree_equal(new.normaliser, state.normaliser) is not flag
         assert not tree_equal(new.params, state.params)
 
@@ -171,8 +185,9 @@ def test_truncation_bootstrap_values_the_final_observation():
 
     cfg = CFG._replace(unroll_length=16, num_unrolls=1)
     state = rl.init(jax.random.PRNGKey(0), ENV, cfg, TERRAIN)
-    data = {t: jax.jit(lambda s, c=cfg._replace(truncation=t): collect_steps(s, jax.random.PRNGKey(1), TERRAIN, ENV, c)[2])(
-        state) for t in ("mask", "bootstrap")}
+    data = dict(zip(("mask", "bootstrap"), compiled(lambda s: [
+        collect_steps(s, jax.random.PRNGKey(1), TERRAIN, ENV, cfg._replace(truncation=t))[2]
+        for t in ("mask", "bootstrap")], state)))
     last = data["mask"].done[0, -1]
     assert np.all(np.asarray(last) == 1.0) and np.all(np.asarray(data["mask"].truncation[0, -1]) == 1.0)
     assert np.all(np.asarray(data["mask"].bootstrap) == 0.0)
@@ -184,8 +199,9 @@ def test_truncation_bootstrap_values_the_final_observation():
     expected = cfg.gamma * nets.value_apply(cfg, state.params, state.normaliser, final)
     np.testing.assert_allclose(np.asarray(boot.bootstrap[0, -1]), np.asarray(expected), rtol=1e-5, atol=1e-6)
     assert np.all(np.asarray(boot.bootstrap[0, :-1]) == 0.0)
-    for t in ("mask", "bootstrap"):  # both train
-        new, metrics = rl.update(state, jax.random.PRNGKey(2), TERRAIN, env=ENV, config=cfg._replace(truncation=t))
+    for new, metrics in compiled(lambda s: [rl.update(s, jax.random.PRNGKey(2), TERRAIN, env=ENV,
+                                                      config=cfg._replace(truncation=t))
+                                            for t in ("mask", "bootstrap")], state):  # both train
         assert np.isfinite(float(metrics["value_loss"])) and not tree_equal(new.params, state.params)
 
 

@@ -11,6 +11,7 @@ import mujoco
 import numpy as np
 import pytest
 
+from jaxterrain.runtime import xla
 from jaxterrain.terrain import TerrainScale
 from jaxterrain.walker import WalkerConfig, WalkerEnv
 from jaxterrain.walker import robots
@@ -32,6 +33,15 @@ def _reference_module():
 # observation layout) moves these by 1e-1 or more.
 WALK_TOLERANCE = {"qpos": 1e-3, "obs": 2e-2, "reward": 1e-3}
 
+# the ant's programs below are checked against bounds only: compiled cheaply (XLA's lowest backend optimisation, the
+# classic emitter; as in test_walker.py), each reset and walk as one program (an eager MJX reset, op by op, costs more
+# CPU than compiling it)
+FAST_COMPILE = xla.known_options(xla.FAST_CPU_COMPILE)
+
+
+def compiled(fn, *args):
+    return jax.jit(fn).lower(*args).compile(FAST_COMPILE)(*args)
+
 
 def test_the_humanoid_spec_walks_as_the_walker_before_robot_specs_within_float32_tolerance():
     ref = _reference_module()
@@ -51,17 +61,20 @@ def test_the_ant_stands_on_its_four_feet_and_walks_the_heightfield():
     assert (env.action_size, env.observation_size) == (8, 1 + 4 + 8 + 14)
     assert env.config.healthy_z_range == (0.2, 1.0) and env.config.ctrl_cost_weight == 0.5  # brax's Ant
     terrain = jnp.asarray(np.random.default_rng(3).uniform(0, 0.2, (32, 64)), jnp.float32)
-    state = env.reset(jax.random.key(0), terrain)
-    feet = state.data.geom_xpos[env._feet]
-    bottoms = np.asarray(feet[:, 2]) - 0.08
-    assert np.all(bottoms >= float(jnp.max(terrain)) - 0.2)  # spawned on its feet over the terrain
-    assert 0.2 < float(state.metrics["torso_height"]) < 1.0
 
     def step(s, _):
         s = env.step(s, jnp.zeros(8), terrain)
         return s, s.done
 
-    state, done = jax.jit(lambda s: jax.lax.scan(step, s, None, length=60))(state)
+    def walk(key):  # the reset and the 60 steps in one program
+        start = env.reset(key, terrain)
+        return (start,) + jax.lax.scan(step, start, None, length=60)
+
+    start, state, done = compiled(walk, jax.random.key(0))
+    feet = start.data.geom_xpos[env._feet]
+    bottoms = np.asarray(feet[:, 2]) - 0.08
+    assert np.all(bottoms >= float(jnp.max(terrain)) - 0.2)  # spawned on its feet over the terrain
+    assert 0.2 < float(start.metrics["torso_height"]) < 1.0
     assert not np.any(np.asarray(done)) and 0.2 < float(state.metrics["torso_height"]) < 1.0  # it stays up
 
 
@@ -77,7 +90,7 @@ def test_the_spawn_lifts_every_foot_clear_of_rising_ground_and_the_old_patch_rul
         xs = (np.arange(96) - 47.5) * env.config.scale.cell_size
         ramp = np.clip((xs - env.x_start - 0.25) * 0.4, 0.0, None)
         terrain = jnp.asarray(np.broadcast_to(ramp, (96, 96)), jnp.float32)
-        xyz = np.asarray(env.reset(jax.random.key(0), terrain).data.geom_xpos[env._feet])
+        xyz = np.asarray(compiled(env.reset, jax.random.key(0), terrain).data.geom_xpos[env._feet])
         r = env._foot_radius
         ring = [(0, 0), (1, 0), (-1, 0), (0, 1), (0, -1)]  # the foot's centre and four points a radius away
         under = np.array([max(float(env.terrain_height(terrain, x + a * rf, y + b * rf)) for a, b in ring)
