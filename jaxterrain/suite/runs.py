@@ -16,6 +16,7 @@ rule; on MuJoCo Warp also ``warp_hfield``, its heightfield collision: ``jaxterra
 
 from __future__ import annotations
 
+import contextlib
 import json
 import os
 import time
@@ -416,17 +417,17 @@ def evaluate_run(run: EvaluateRun | Prepared, folder, videos: Optional[Callable]
             return None
         i, k = jobs[len(rows)]
         t2 = time.perf_counter()
-        if first_s is None:  # this process's first walk compiles
-            with compiling("suite-walk", f"{s.size} terrains x {protocol.attempts} walks, {backend} physics"):
-                row = walked(policies[i:i + 1], k)
-            first_s = time.perf_counter() - t2  # compile + one walk of the suite
-            if run.repeat and len(rows) == 0:  # the same walks again, compiled: one policy on the whole suite
-                t3 = time.perf_counter()
-                again = walked(policies[:1], key)
-                walk_s = time.perf_counter() - t3
-                again = bool((row == again).all())
-        else:
+        fresh = first_s is None  # this process's first walk compiles
+        with (compiling("suite-walk", f"{s.size} terrains x {protocol.attempts} walks, {backend} physics") if fresh
+              else contextlib.nullcontext()):
             row = walked(policies[i:i + 1], k)
+        if fresh:
+            first_s = time.perf_counter() - t2  # compile + one walk of the suite
+            if run.repeat and not rows:  # the same walks again, compiled: one policy on the whole suite
+                t3 = time.perf_counter()
+                repeat = walked(policies[:1], key)
+                walk_s = time.perf_counter() - t3
+                again = bool((row == repeat).all())
         rows.append(row[0])
         if len(rows) < len(jobs):
             atomic_save_npz(folder / PROGRESS, fitness=np.stack(rows), stamp=np.array(json.dumps(stamp)))
