@@ -53,6 +53,8 @@ def no_stock_warp_here(run, monkeypatch):
     (["train", "humanoid", "blind", "--shard", "2/2"], "--shard must be I/N with N >= 1 and 0 <= I < N; got '2/2'"),
     (["train", "humanoid", "blind", "--shard", "a"], "--shard must be I/N with N >= 1 and 0 <= I < N; got 'a'"),
     (["evaluate", "--shard", "0/2"], "--shard splits the curriculum run of 'train humanoid OBS' over processes"),
+    (["evaluate", "--part", "2/2"], "--part must be K/N with integers 0 <= K < N; got '2/2'"),
+    (["train", "humanoid", "blind", "--part", "0/2"], "--part splits the walks of 'evaluate' over processes"),
 ])
 def test_bad_arguments_are_one_line_naming_the_flag(run, argv, message, capsys, tmp_path):
     with pytest.raises(SystemExit) as err:
@@ -128,6 +130,39 @@ def test_a_sharded_humanoid_train_passes_its_shard_to_curriculum(run, tmp_path, 
     assert run.main(["train", "humanoid", "blind", "--out", str(out)]) == 0  # the tables: no --shard
     assert calls[-1] == ["curriculum", "--resume", str(folder)]
     assert "train humanoid blind: done" in capsys.readouterr().out
+
+
+def test_a_partial_evaluate_passes_its_part_and_counts_only_its_share(run, tmp_path, monkeypatch, capsys):
+    """``evaluate --part K/N`` runs reevaluate.py with ``--part K/N`` on every suite and counts as left only the
+    walks of its share (``batch.part`` of reevaluate.py's job order), so that a part done says done while the other
+    part still walks."""
+    from jaxterrain.suite import batch
+
+    out = tmp_path / "exp4"
+    monkeypatch.setattr(run, "treatment_done", lambda f: True)
+    monkeypatch.setattr(run, "humanoid_choice", lambda o: list(run.TREATMENTS))
+    walkers = [batch.Job(f"{o}/{t}/policies/trial_{k}", "humanoid", f"{o}/{t}/policies/trial_{k}", 0, f"{o}/{t}")
+               for o in run.OBSERVATIONS for t in run.TREATMENTS for k in range(2)]
+    monkeypatch.setattr(batch, "walker_jobs", lambda folders: list(walkers))  # 20 walkers, no policy files
+    calls = []
+
+    class Reevaluate:
+        @staticmethod
+        def main(argv):
+            calls.append(argv)
+            jobs = [j for o in run.OBSERVATIONS for j in batch.base_jobs("humanoid", 2, o)] + walkers
+            results = out / "eval" / argv[argv.index("--suite") + 1] / "results"
+            results.mkdir(parents=True, exist_ok=True)
+            for j in batch.part(jobs, 1, 2):  # part 1/2 walked, part 0/2 not
+                (results / f"{run._file(j.name)}.npz").write_text("")
+            return 0
+
+    monkeypatch.setattr(run, "load_reevaluate", lambda: Reevaluate)
+    assert run.main(["evaluate", "--part", "1/2", "--keys", "2", "--out", str(out)]) == 0
+    assert [c[c.index("--part") + 1] for c in calls] == ["1/2", "1/2"]  # v2, then v1
+    assert "evaluate part 1/2: done" in capsys.readouterr().out
+    assert run.main(["evaluate", "--part", "0/2", "--keys", "2", "--out", str(out)]) == 0
+    assert "evaluate part 0/2: 24 walks left; run it again" in capsys.readouterr().out  # (4 bases + 20) / 2 x 2
 
 
 def test_an_ant_treatment_is_one_learn_run_on_the_ants_archive(run, tmp_path):

@@ -30,11 +30,12 @@ Stages (:data:`STAGES`):
   results, each a ``learn --robot ant`` run on the ant's own archive (``archive GEN --robot ant`` first; an archive's
   fitness is one robot's), ``OUT/train/ant-OBS/TREATMENT/``. The choice is saved in ``OUT/ant.json``; later stages
   read it.
-- ``evaluate``: every walker of the train runs and each robot's shipped base policies, blind and perceptive, with
+- ``evaluate [--part K/N]``: every walker of the train runs and each robot's shipped base policies, blind and perceptive, with
   ``--keys`` (10) evaluation keys, on suite v2 and then v1 (``suite.load(V, robot=...)``), through
   ``docs/results/suite_v2/reevaluate.py`` (:mod:`jaxterrain.suite.batch`: one result file per walk, written when it
   ends; a rerun skips what is there); ``OUT/eval/<suite>/`` are the stores. ``--eval-backend jax|warp`` (default
-  warp, 2-3 times faster on v2). A stage that would run MuJoCo Warp with its stock heightfield collision
+  warp, 2-3 times faster on v2). ``--part K/N`` walks every N-th walk from the K-th (N processes, one per GPU,
+  into one store: ``benchmarks/device/exp4_eval.sh``). A stage that would run MuJoCo Warp with its stock heightfield collision
   (``provenance.warp_hfield()``) is refused in one line: apply the local-origin patch first.
 - ``write`` (CPU): each store's groups as evaluation folders (``reevaluate.py --write``: ``heldout_<suite>/`` in
   each treatment, the base policies in ``OUT/base_<suite>/<robot>[_perceptive]/``), then ``generalise`` per robot,
@@ -155,6 +156,9 @@ def parser() -> argparse.ArgumentParser:
                    help="train humanoid: only process I's share of its curriculum run (curriculum --shard: whole "
                         "populations, balanced), so that N processes (one per GPU: CUDA_VISIBLE_DEVICES=I) share one "
                         "run; then the same train without --shard writes the tables (nothing compiles)")
+    p.add_argument("--part", default=None, metavar="K/N",
+                   help="evaluate: walk only part K of N of the walks (reevaluate.py's --part: every N-th walk from "
+                        "the K-th, into the one store), so that N processes, one per GPU, share them")
     p.add_argument("--preset", choices=("gpu-short", "smoke"), default="gpu-short",
                    help="evolve / curriculum / learn preset (default gpu-short; smoke: a CPU check)")
     p.add_argument("--trials", type=int, default=TRIALS, help=f"trials of each treatment (default {TRIALS})")
@@ -221,6 +225,13 @@ def check(p: argparse.ArgumentParser, args) -> None:
             args.shard = parse_shard(args.shard)
         except argparse.ArgumentTypeError:
             p.error(f"--shard must be I/N with N >= 1 and 0 <= I < N; got {args.shard!r}")
+    if args.part is not None:
+        if words[:1] != ("evaluate",):
+            p.error("--part splits the walks of 'evaluate' over processes")
+        k, sep, n = args.part.partition("/")
+        if not (sep and k.isdigit() and n.isdigit() and 0 <= int(k) < int(n)):
+            p.error(f"--part must be K/N with integers 0 <= K < N; got {args.part!r}")
+        args.part = (int(k), int(n))
     if args.time_limit is not None and not (math.isfinite(args.time_limit) and args.time_limit > 0):
         p.error(f"--time-limit must be a finite number of minutes > 0; got {args.time_limit}")
     if args.pack is not None and not args.pack.name.endswith((".tar.gz", ".tgz")):
@@ -538,7 +549,8 @@ def stage_evaluate(args) -> int:
     module = load_reevaluate()
     for suite in args.suites:
         argv = reevaluate_argv(args, suite, folders, robots) + (
-            [] if args.time_limit is None else ["--time-limit", str(args.time_limit)])
+            [] if args.time_limit is None else ["--time-limit", str(args.time_limit)]) + (
+            [] if args.part is None else ["--part", "{}/{}".format(*args.part)])
         print(f"+ reevaluate.py {' '.join(argv)}", flush=True)
         code = module.main(argv)
         if code:
@@ -546,16 +558,20 @@ def stage_evaluate(args) -> int:
         if plan_walks(args, folders, robots, [suite]):  # the time limit stopped it: the next suite waits
             break
     left = plan_walks(args, folders, robots)
-    print("evaluate: done" if not left and not waiting else f"evaluate: {left} walks left; run it again", flush=True)
+    part = "" if args.part is None else " part {}/{}".format(*args.part)
+    print(f"evaluate{part}: done" if not left and not waiting else f"evaluate{part}: {left} walks left; run it again",
+          flush=True)
     return 0
 
 
 def plan_walks(args, folders: list[Path], robots: list[str], suites: list[str] | None = None) -> int:
-    """Walks not yet in the stores of ``suites`` (default ``--suites``)."""
+    """Walks not yet in the stores of ``suites`` (default ``--suites``): of ``--part``'s share only, when given
+    (the jobs in reevaluate.py's order: each robot's base policies, blind then perceptive, then the walkers)."""
     from jaxterrain.suite import batch
 
     jobs = [j for r in robots for o in OBSERVATIONS for j in batch.base_jobs(r, args.keys, o)]
     jobs += batch.walker_jobs(folders)
+    jobs = jobs if args.part is None else batch.part(jobs, *args.part)
     n = 0
     for suite in args.suites if suites is None else suites:
         results = args.out / "eval" / suite / "results"
