@@ -207,3 +207,37 @@ def test_a_time_limit_stops_between_policies_and_resume_walks_only_the_rows_left
     assert [r["fitness"] for r in cut] == [r["fitness"] for r in whole]
     assert [Path(r["policy"]).name for r in cut] == [Path(r["policy"]).name for r in whole]
     assert json.loads((out / "timing.json").read_text())["rows_resumed"] == 1
+
+
+def test_repeat_is_walked_once_per_run_across_time_limit_stops(tmp_path, policies, capsys, monkeypatch):
+    """``--repeat`` walks the first row of a run twice, and the result is kept in ``walked.npz`` through a
+    ``--time-limit`` stop: a resume reports it in ``timing.json`` without walking it again. A resumed file without it
+    (an older version's) walks the resumed call's first row twice, once: a second resume does not repeat it."""
+    from jaxterrain.suite import runs
+
+    walks = []
+    walk = runs.evaluate_policies
+    monkeypatch.setattr(runs, "evaluate_policies", lambda *a, **k: (walks.append(len(a[0])), walk(*a, **k))[1])
+    copy, still, _ = policies
+    out = tmp_path / "cut"
+    assert cli("evaluate", "--preset", "smoke", "--families", "flat", "--generators", "--policy", str(copy),
+               str(still), "--repeat", "--out", str(out), "--time-limit", "0.0001") == 3
+    assert len(walks) == 2  # the base policy's row, and again
+
+    def progress():
+        with np.load(out / runs.PROGRESS) as z:
+            return {k: z[k] for k in z.files}
+
+    saved = progress()
+    assert saved["fitness"].shape == (1, 1) and json.loads(str(saved["repeat"]))["equal"] is True
+    del saved["repeat"]  # as a run stopped before the repeat walk was kept left it
+    np.savez(out / runs.PROGRESS, **saved)
+    assert cli("evaluate", "--resume", str(out), "--time-limit", "0.0001") == 3
+    assert len(walks) == 4  # the copy's row, and again
+    assert progress()["fitness"].shape == (2, 1) and json.loads(str(progress()["repeat"]))["equal"] is True
+    capsys.readouterr()
+    assert cli("evaluate", "--resume", str(out)) == 0
+    assert len(walks) == 5  # the last row, not repeated
+    assert "resuming: 2 of 3 policy rows already walked" in capsys.readouterr().out
+    timing = json.loads((out / "timing.json").read_text())
+    assert timing["repeat_equal"] is True and timing["walk_s_one_policy"] > 0 and timing["rows_resumed"] == 2
