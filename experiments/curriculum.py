@@ -430,7 +430,7 @@ def main(args) -> int:
     if args.report and args.resume is None:
         raise common.UsageError("--report needs --resume RUN (the run to report on)")
     if args.report:
-        common.refuse_given({"--shard": args.shard, "--time-limit": args.time_limit},
+        common.refuse_given({"--shard": args.shard, "--time-limit": args.time_limit, "--devices": args.devices},
                             "--report writes the tables of every treatment and trains nothing: drop one of them")
     if args.baseline is not None and len(set(args.baseline)) < len(args.baseline):
         raise common.UsageError(f"--baseline: each of {', '.join(BASELINES)} at most once; got {' '.join(args.baseline)}")

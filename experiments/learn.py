@@ -231,8 +231,8 @@ def main(args) -> int:
         raise common.UsageError("--export-policies and --report each write from the last checkpoint and stop; give "
                                 "one of them")
     if args.export_policies or args.report:
-        common.refuse_given({"--time-limit": args.time_limit}, f"{'--report' if args.report else '--export-policies'} "
-                                                               f"trains nothing: drop one of them")
+        common.refuse_given({"--time-limit": args.time_limit, "--devices": args.devices},
+                            f"{'--report' if args.report else '--export-policies'} trains nothing: drop one of them")
     mesh = common.device_mesh(args.devices)
     folder, cfg = common.setup_run("learn", args, PRESETS, "smoke", overrides(args), rules=RULES,
                                    check=lambda c: (check_selector_flags(args, [c["curriculum"]]), run_of(c),

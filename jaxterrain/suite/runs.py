@@ -339,22 +339,24 @@ def validate_evaluate(run: EvaluateRun, raise_size: bool = False,
 
 
 PROGRESS = "walked.npz"
-"""The file of an unfinished :func:`evaluate_run`: ``fitness`` [R, N] (the rows walked) and ``stamp`` (JSON: the
-rows' names, the suite's name and size, the seed), removed once the evaluation is written."""
+"""The file of an unfinished :func:`evaluate_run`: ``fitness`` [R, N] (the rows walked), ``stamp`` (JSON: the
+rows' names, the suite's name and size, the seed) and, once ``repeat``'s walk is done, ``repeat`` (JSON:
+``{"equal": bool, "walk_s": seconds}``), removed once the evaluation is written."""
 
 
-def _load_progress(folder: Path, stamp: dict, note: Callable[[str], None]) -> list:
-    """The rows ``folder/PROGRESS`` holds when it was written for the same rows, suite and seed (``stamp``); else
-    none (a note says why it is not used)."""
+def _load_progress(folder: Path, stamp: dict, note: Callable[[str], None]) -> tuple[list, Optional[dict]]:
+    """The rows ``folder/PROGRESS`` holds when it was written for the same rows, suite and seed (``stamp``), and its
+    ``repeat`` walk's result (None: not walked yet); else none (a note says why it is not used)."""
     path = folder / PROGRESS
     if not path.exists():
-        return []
+        return [], None
     with np.load(path) as z:
         saved, fitness = json.loads(str(z["stamp"])), np.asarray(z["fitness"])
+        repeat = json.loads(str(z["repeat"])) if "repeat" in z.files else None
     if saved != stamp or fitness.ndim != 2 or fitness.shape[1] != stamp["terrains"]:
         note(f"evaluate: {path} was written for another run (policies, suite or seed differ); walking every row")
-        return []
-    return list(fitness)
+        return [], None
+    return list(fitness), repeat
 
 
 def evaluate_run(run: EvaluateRun | Prepared, folder, videos: Optional[Callable] = None,
@@ -370,7 +372,10 @@ def evaluate_run(run: EvaluateRun | Prepared, folder, videos: Optional[Callable]
     Resumable: the rows walked so far (one per walk of a policy on the whole suite, the base policy's keys first) are
     kept in ``folder/walked.npz`` (:data:`PROGRESS`, written atomically after every row); a later call on the same
     folder and run walks only the rows left. ``time_limit_s``: seconds from now after which no further row starts;
-    returns None when rows are left (call again to continue), so a limit is honoured to within one row."""
+    returns None when rows are left (call again to continue), so a limit is honoured to within one row. ``repeat``
+    walks the first row a call walks a second time (compiled: the base policy's row), once per run: its result is
+    kept in :data:`PROGRESS` for the calls after, and a call resuming a file without it (one an older version
+    wrote) walks its own first row twice."""
     t0 = time.perf_counter()
     ready = run if isinstance(run, Prepared) else validate_evaluate(run, note=note)
     run, policies = ready.run, ready.policies
@@ -405,12 +410,13 @@ def evaluate_run(run: EvaluateRun | Prepared, folder, videos: Optional[Callable]
     # resolved from there, a fresh run's are as given)
     rows_of = [n if is_base(n) else os.path.relpath(Path(n).resolve(), folder.resolve()) for n in names]
     stamp = {"names": rows_of, "suite": s.name, "terrains": int(s.size), "seed": int(run.seed)}
-    rows = _load_progress(folder, stamp, note)
+    rows, done = _load_progress(folder, stamp, note)  # done: the repeat walk of an earlier call (None: not walked)
     resumed = len(rows)
     if resumed:
         say(f"resuming: {resumed} of {len(jobs)} policy rows already walked ({folder / PROGRESS})")
     t1 = time.perf_counter()
-    first_s = again = walk_s = None
+    first_s = None
+    again, walk_s = (None, None) if done is None else (bool(done["equal"]), float(done["walk_s"]))
     while len(rows) < len(jobs):
         if time_limit_s is not None and rows[resumed:] and time.perf_counter() - t0 > time_limit_s:
             say(f"time limit: {len(rows)} of {len(jobs)} policy rows walked, kept in {folder / PROGRESS}")
@@ -423,14 +429,15 @@ def evaluate_run(run: EvaluateRun | Prepared, folder, videos: Optional[Callable]
             row = walked(policies[i:i + 1], k)
         if fresh:
             first_s = time.perf_counter() - t2  # compile + one walk of the suite
-            if run.repeat and not rows:  # the same walks again, compiled: one policy on the whole suite
+            if run.repeat and again is None:  # the same walks again, compiled: one policy on the whole suite
                 t3 = time.perf_counter()
-                repeat = walked(policies[:1], key)
+                repeat = walked(policies[i:i + 1], k)
                 walk_s = time.perf_counter() - t3
                 again = bool((row == repeat).all())
         rows.append(row[0])
         if len(rows) < len(jobs):
-            atomic_save_npz(folder / PROGRESS, fitness=np.stack(rows), stamp=np.array(json.dumps(stamp)))
+            kept = {} if again is None else {"repeat": np.array(json.dumps({"equal": again, "walk_s": walk_s}))}
+            atomic_save_npz(folder / PROGRESS, fitness=np.stack(rows), stamp=np.array(json.dumps(stamp)), **kept)
         say(f"walked {names[len(rows) - 1]} ({len(rows)} of {len(jobs)}) in {time.perf_counter() - t2:.1f} s")
     fitness = np.stack(rows).astype(np.float32)
     write_evaluation(folder, names, s, fitness)

@@ -246,8 +246,13 @@ CASES = [
     (["learn", "--resume", "RUN", "--report", "--export-policies"], "--export-policies and --report each write from "
                                                                     "the last checkpoint and stop; give one"),
     (["learn", "--resume", "RUN", "--report", "--time-limit", "5"], "--time-limit: --report trains nothing"),
+    (["learn", "--resume", "RUN", "--report", "--devices", "2"], "--devices: --report trains nothing"),
+    (["learn", "--resume", "RUN", "--export-policies", "--devices", "1"], "--devices: --export-policies trains "
+                                                                          "nothing"),
     (["curriculum", "--resume", "RUN", "--report", "--shard", "0/2"], "--shard: --report writes the tables of every "
                                                                       "treatment and trains nothing"),
+    (["curriculum", "--resume", "RUN", "--report", "--devices", "2"], "--devices: --report writes the tables of "
+                                                                      "every treatment and trains nothing"),
     (["curriculum", "--archives", "cppn=A.npz", "--combined"], "--combined: the map curriculum on the combination of "
                                                                "several --archives; this run has one (cppn)"),
     (["export", "A.npz", "--format", "png", "npy", "--cell-size", "0.1"], "--cell-size: metres of the obj, stl, mjcf "

@@ -187,18 +187,19 @@ def test_a_time_limit_stops_between_policies_and_resume_walks_only_the_rows_left
     """``--time-limit`` (here 6 ms: past after the first walk) stops after one policy row with exit code 3, the row
     kept in ``walked.npz`` and no tables written; ``--resume`` (from another directory: the policies were given
     relative to the first) walks the three rows left and writes the same fitness as the ``run`` fixture's one call
-    (same policies, keys and terrains, one process)."""
+    (same policies, keys and terrains, one process). ``--repeat``'s walk (the first row again, compiled) is kept in
+    ``walked.npz`` through the stop and reported by the resumed call's ``timing.json``."""
     from jaxterrain.suite import runs
 
     copy, still, _ = policies
     out = tmp_path / "cut"
     monkeypatch.chdir(copy.parent)
     assert cli("evaluate", "--preset", "smoke", "--families", "flat", "gaps", "--generators", "--policy", copy.name,
-               still.name, "--keys", "2", "--out", str(out), "--time-limit", "0.0001") == 3
+               still.name, "--keys", "2", "--repeat", "--out", str(out), "--time-limit", "0.0001") == 3
     monkeypatch.chdir(tmp_path)
     assert "continue with: python -m experiments evaluate --resume" in capsys.readouterr().out
     with np.load(out / runs.PROGRESS) as z:
-        assert z["fitness"].shape == (1, 11)
+        assert z["fitness"].shape == (1, 11) and json.loads(str(z["repeat"]))["equal"] is True
     assert not (out / "fitness.csv").exists()
     assert cli("evaluate", "--resume", str(out)) == 0
     assert "resuming: 1 of 4 policy rows already walked" in capsys.readouterr().out
@@ -206,4 +207,40 @@ def test_a_time_limit_stops_between_policies_and_resume_walks_only_the_rows_left
     cut, whole = read(out / "fitness.csv"), read(run / "fitness.csv")
     assert [r["fitness"] for r in cut] == [r["fitness"] for r in whole]
     assert [Path(r["policy"]).name for r in cut] == [Path(r["policy"]).name for r in whole]
-    assert json.loads((out / "timing.json").read_text())["rows_resumed"] == 1
+    timing = json.loads((out / "timing.json").read_text())
+    assert timing["rows_resumed"] == 1 and timing["repeat_equal"] is True and timing["walk_s_one_policy"] > 0
+
+
+@pytest.mark.slow  # its own compile (~90 s); the kept repeat is also checked by the time-limit test above
+def test_repeat_is_walked_once_per_run_across_time_limit_stops(tmp_path, policies, capsys, monkeypatch):
+    """``--repeat`` walks the first row of a run twice, and the result is kept in ``walked.npz`` through a
+    ``--time-limit`` stop: a resume reports it in ``timing.json`` without walking it again. A resumed file without it
+    (an older version's) walks the resumed call's first row twice, once: a second resume does not repeat it."""
+    from jaxterrain.suite import runs
+
+    walks = []
+    walk = runs.evaluate_policies
+    monkeypatch.setattr(runs, "evaluate_policies", lambda *a, **k: (walks.append(len(a[0])), walk(*a, **k))[1])
+    copy, still, _ = policies
+    out = tmp_path / "cut"
+    assert cli("evaluate", "--preset", "smoke", "--families", "flat", "--generators", "--policy", str(copy),
+               str(still), "--repeat", "--out", str(out), "--time-limit", "0.0001") == 3
+    assert len(walks) == 2  # the base policy's row, and again
+
+    def progress():
+        with np.load(out / runs.PROGRESS) as z:
+            return {k: z[k] for k in z.files}
+
+    saved = progress()
+    assert saved["fitness"].shape == (1, 1) and json.loads(str(saved["repeat"]))["equal"] is True
+    del saved["repeat"]  # as a run stopped before the repeat walk was kept left it
+    np.savez(out / runs.PROGRESS, **saved)
+    assert cli("evaluate", "--resume", str(out), "--time-limit", "0.0001") == 3
+    assert len(walks) == 4  # the copy's row, and again
+    assert progress()["fitness"].shape == (2, 1) and json.loads(str(progress()["repeat"]))["equal"] is True
+    capsys.readouterr()
+    assert cli("evaluate", "--resume", str(out)) == 0
+    assert len(walks) == 5  # the last row, not repeated
+    assert "resuming: 2 of 3 policy rows already walked" in capsys.readouterr().out
+    timing = json.loads((out / "timing.json").read_text())
+    assert timing["repeat_equal"] is True and timing["walk_s_one_policy"] > 0 and timing["rows_resumed"] == 2
