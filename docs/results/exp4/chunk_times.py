@@ -11,7 +11,7 @@ the command's running mean over the chunks it has done (rounded to 0.1 s); a com
 ``resuming <treatment> at chunk N``, so its chunks start at N + 1 (a command may end after chunks it did not
 print). A new command starts at ``pair.sh``'s ``+ python`` echo. The populations' lines are told apart by their
 trial count T (20: a pair of treatments, 10: terrain levels alone). Per command this leaves out the first printed
-group of chunks (a cold first chunk holds MuJoCo Warp's kernel builds: 72-90 s; a resumed command's first group
+group of chunks (a cold first chunk holds MuJoCo Warp's kernel builds: 72-93 s; a resumed command's first group
 took 4-6 s more than its other chunks) and prints the mean of the rest; then the mean over the commands, weighted
 by chunks.
 """
