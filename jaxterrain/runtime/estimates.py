@@ -103,11 +103,12 @@ def _span(e: Estimate) -> str:
     return f"{low}-{high}"
 
 
-WARP_FIRST_CHUNK = ("on a fresh machine the first chunk also builds MuJoCo Warp's kernels: about 65-85 s more on "
+WARP_FIRST_CHUNK = ("on a fresh machine the first chunk also builds MuJoCo Warp's kernels: about 65-90 s more on "
                     "an H200, none once cached")
 """What a curriculum block's first chunk adds under MuJoCo Warp (its kernels build at their first launch, after the
 XLA compile that :func:`compiling` times): measured, Experiment 4's first chunks on a fresh 2 x H200, 89.8 s and
-72.4 s against 5.0-5.3 s for later ones (2026-11-30, ``docs/results/exp4/logs/``)."""
+72.4 s (blind) and 93.2 s and 77.9 s (perceptive) against 5.0-5.6 s for later ones (2026-11-30,
+``docs/results/exp4/logs/``)."""
 
 
 def first_chunk_note(physics: str) -> str:
