@@ -3,9 +3,11 @@ GPU under one deadline, actor-only walkers back)."""
 
 from __future__ import annotations
 
+import os
 import shutil
 import subprocess
 import sys
+import tarfile
 from pathlib import Path
 
 import numpy as np
@@ -99,3 +101,31 @@ def test_heldout_script_parses_and_needs_walkers_for_a_new_folder(tmp_path):
     subprocess.run(["bash", "-n", str(DEVICE / "heldout.sh")], check=True)
     got = subprocess.run(["bash", str(DEVICE / "heldout.sh"), "runs/h"], cwd=tmp_path, capture_output=True, text=True)
     assert got.returncode == 2 and got.stderr == "heldout.sh: no POLICY_DIR given\n"
+
+
+@pytest.mark.slow
+def test_separate_runs_five_archives_and_their_shares_at_smoke_size(tmp_path):
+    """``separate.sh`` (issue 64 item 3's separate archives over two GPUs) at smoke size on the CPU: the five paper
+    generators' ``evolve`` runs, each marked done, then ``shares`` of a mixed run against their combination with a
+    ``steps`` run; everything in ``separate.tar.gz``; a second call starts no ``evolve`` again (about 6 min)."""
+    env = {**os.environ, "PATH": f"{Path(sys.executable).parent}:{os.environ['PATH']}"}
+    for gen in ("mixed", "steps"):
+        subprocess.run([sys.executable, "-m", "experiments", "evolve", "--preset", "smoke", "--generator", gen,
+                        "--out", f"sm-{gen}"], cwd=tmp_path, env=env, check=True, capture_output=True)
+    out = tmp_path / "out"
+    out.mkdir()
+    env = {**env, "OUT": str(out), "PRESET": "smoke", "MIXED": "sm-mixed", "STEPS": "sm-steps"}
+    subprocess.run(["bash", str(DEVICE / "separate.sh"), "600"], cwd=tmp_path, env=env, check=True,
+                   capture_output=True)
+    gens = ("perlin", "worley", "gan", "diamond_square", "cppn")
+    assert all((tmp_path / "runs" / f"sep-{g}" / "done.json").is_file() for g in gens)
+    shares = (tmp_path / "runs" / "shares" / "shares.md").read_text()
+    assert "Cells filled in both:" in shares
+    with tarfile.open(out / "separate.tar.gz") as tar:
+        names = tar.getnames()
+    assert all(f"runs/sep-{g}/archive.npz" in names for g in gens) and "runs/shares/shares.csv" in names
+    subprocess.run(["bash", str(DEVICE / "separate.sh"), "600"], cwd=tmp_path, env=env, check=True,
+                   capture_output=True)
+    logs = (tmp_path / "runs" / "gpu0.log").read_text() + (tmp_path / "runs" / "gpu1.log").read_text()
+    assert all(logs.count(f"separate {g}: done") == 2 for g in gens)  # the second call: done, nothing evolved
+    assert logs.count("compiling a MAP-Elites generation") == 5

@@ -57,8 +57,12 @@ def test_every_stage_runs_at_the_tiniest_size(tmp_path, monkeypatch, capsys, req
     assert stage("train", "ant", "--ant", "blind/steps-map")[0] == 0
     assert (out / "train" / "ant-blind" / "steps-map" / "summary.json").is_file()
 
-    code, text = stage("evaluate", *TINY, "--eval-backend", "jax", "--pack", str(tmp_path / "exp4.tar.gz"))
-    assert code == 0 and "evaluate: done" in text, text
+    # two parts into one store (exp4_eval.sh's one process per GPU), one after the other here
+    code, text = stage("evaluate", *TINY, "--eval-backend", "jax", "--part", "0/2")
+    assert code == 0 and "evaluate part 0/2: done" in text, text
+    code, text = stage("evaluate", *TINY, "--eval-backend", "jax", "--part", "1/2", "--pack",
+                       str(tmp_path / "exp4.tar.gz"))
+    assert code == 0 and "evaluate part 1/2: done" in text, text
     from jaxterrain.suite import batch
 
     for suite in ("v2", "v1"):  # 3 walkers, 2 robots x 2 observation sets x 2 keys of base policies
