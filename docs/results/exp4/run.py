@@ -228,10 +228,12 @@ def check(p: argparse.ArgumentParser, args) -> None:
     if args.part is not None:
         if words[:1] != ("evaluate",):
             p.error("--part splits the walks of 'evaluate' over processes")
-        k, sep, n = args.part.partition("/")
-        if not (sep and k.isdigit() and n.isdigit() and 0 <= int(k) < int(n)):
+        from experiments.common import parse_shard  # the same I/N as --shard
+
+        try:
+            args.part = parse_shard(args.part)
+        except argparse.ArgumentTypeError:
             p.error(f"--part must be K/N with integers 0 <= K < N; got {args.part!r}")
-        args.part = (int(k), int(n))
     if args.time_limit is not None and not (math.isfinite(args.time_limit) and args.time_limit > 0):
         p.error(f"--time-limit must be a finite number of minutes > 0; got {args.time_limit}")
     if args.pack is not None and not args.pack.name.endswith((".tar.gz", ".tgz")):
