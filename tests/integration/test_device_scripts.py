@@ -95,6 +95,17 @@ def test_exp4_script_parses_and_refuses_a_bad_observation_set(tmp_path):
     assert not (tmp_path / "runs").exists()
 
 
+def test_exp4_ant_script_parses_and_refuses_a_third_treatment(tmp_path):
+    """``exp4_ant.sh`` (the ant's two treatments, one per GPU, then its walks): valid bash, and anything but two
+    treatments refused in one line before anything runs or unpacks."""
+    subprocess.run(["bash", "-n", str(DEVICE / "exp4_ant.sh")], check=True)
+    got = subprocess.run(["bash", str(DEVICE / "exp4_ant.sh"), "100", "blind/mixed-dr"], cwd=tmp_path,
+                         capture_output=True, text=True)
+    assert got.returncode == 2
+    assert got.stderr == "exp4_ant.sh: give two OBS/TREATMENT (the ant's treatments), got: blind/mixed-dr\n"
+    assert not (tmp_path / "runs").exists()
+
+
 def test_heldout_script_parses_and_needs_walkers_for_a_new_folder(tmp_path):
     """``heldout.sh OUT POLICY...``: valid bash; a new folder without walkers is refused in one line (a folder with
     a config.json resumes instead)."""

@@ -52,7 +52,7 @@ def no_stock_warp_here(run, monkeypatch):
     (["archive", "mixed", "--archive-size", "16"], "--archive-size must be an integer >= 32; got 16"),
     (["train", "humanoid", "blind", "--shard", "2/2"], "--shard must be I/N with N >= 1 and 0 <= I < N; got '2/2'"),
     (["train", "humanoid", "blind", "--shard", "a"], "--shard must be I/N with N >= 1 and 0 <= I < N; got 'a'"),
-    (["evaluate", "--shard", "0/2"], "--shard splits the curriculum run of 'train humanoid OBS' over processes"),
+    (["evaluate", "--shard", "0/2"], "--shard splits a 'train' stage over processes"),
     (["evaluate", "--part", "2/2"], "--part must be K/N with integers 0 <= K < N; got '2/2'"),
     (["train", "humanoid", "blind", "--part", "0/2"], "--part splits the walks of 'evaluate' over processes"),
 ])
@@ -163,6 +163,32 @@ def test_a_partial_evaluate_passes_its_part_and_counts_only_its_share(run, tmp_p
     assert "evaluate part 1/2: done" in capsys.readouterr().out
     assert run.main(["evaluate", "--part", "0/2", "--keys", "2", "--out", str(out)]) == 0
     assert "evaluate part 0/2: 24 walks left; run it again" in capsys.readouterr().out  # (4 bases + 20) / 2 x 2
+
+
+def test_a_sharded_ant_train_runs_only_its_share_of_the_chosen_treatments(run, tmp_path, monkeypatch, capsys):
+    """``train ant --ant A B --shard I/2`` trains the I-th of the two chosen treatments (one per GPU); both
+    processes save the same choice, and a third process without ``--shard`` finds both done."""
+    calls = []
+
+    def learn(argv, args):
+        calls.append(argv)
+        folder = Path(argv[argv.index("--out") + 1])
+        (folder / "policies").mkdir(parents=True)
+        (folder / "summary.json").write_text("{}")
+        return 0
+
+    monkeypatch.setattr(run, "cli", learn)
+    monkeypatch.setattr(run, "archive_done", lambda *a: True)
+    out = tmp_path / "exp4"
+    ant = ["--ant", "blind/mixed-dr", "blind/mixed-levels"]
+    assert run.main(["train", "ant", *ant, "--shard", "1/2", "--out", str(out)]) == 0
+    assert [c[c.index("--curriculum") + 1] for c in calls] == ["levels"]
+    assert run.main(["train", "ant", *ant, "--shard", "0/2", "--out", str(out)]) == 0
+    assert [c[c.index("--curriculum") + 1] for c in calls] == ["levels", "dr"]
+    assert run.ant_choice(out) == [("blind", "mixed-dr"), ("blind", "mixed-levels")]
+    capsys.readouterr()
+    assert run.main(["train", "ant", *ant, "--out", str(out)]) == 0 and len(calls) == 2
+    assert capsys.readouterr().out.count(": done (") == 2
 
 
 def test_an_ant_treatment_is_one_learn_run_on_the_ants_archive(run, tmp_path):

@@ -29,7 +29,7 @@ Stages (:data:`STAGES`):
 - ``train ant --ant OBS/TREATMENT OBS/TREATMENT``: the two treatments chosen after looking at the humanoid's
   results, each a ``learn --robot ant`` run on the ant's own archive (``archive GEN --robot ant`` first; an archive's
   fitness is one robot's), ``OUT/train/ant-OBS/TREATMENT/``. The choice is saved in ``OUT/ant.json``; later stages
-  read it.
+  read it. ``--shard I/N`` trains only the I-th, (I+N)-th, ... of the ``--ant`` treatments (one per GPU).
 - ``evaluate [--part K/N]``: every walker of the train runs and each robot's shipped base policies, blind and perceptive, with
   ``--keys`` (10) evaluation keys, on suite v2 and then v1 (``suite.load(V, robot=...)``), through
   ``docs/results/suite_v2/reevaluate.py`` (:mod:`jaxterrain.suite.batch`: one result file per walk, written when it
@@ -155,7 +155,8 @@ def parser() -> argparse.ArgumentParser:
     p.add_argument("--shard", default=None, metavar="I/N",
                    help="train humanoid: only process I's share of its curriculum run (curriculum --shard: whole "
                         "populations, balanced), so that N processes (one per GPU: CUDA_VISIBLE_DEVICES=I) share one "
-                        "run; then the same train without --shard writes the tables (nothing compiles)")
+                        "run; then the same train without --shard writes the tables (nothing compiles). train ant: "
+                        "only the I-th, (I+N)-th, ... of the --ant treatments")
     p.add_argument("--part", default=None, metavar="K/N",
                    help="evaluate: walk only part K of N of the walks (reevaluate.py's --part: every N-th walk from "
                         "the K-th, into the one store), so that N processes, one per GPU, share them")
@@ -217,8 +218,9 @@ def check(p: argparse.ArgumentParser, args) -> None:
                     "OUT/humanoid.json)")
         check_treatments(p, args.treatments)
     if args.shard is not None:
-        if not (words and words[:2] == ("train", "humanoid")):
-            p.error("--shard splits the curriculum run of 'train humanoid OBS' over processes")
+        if not (words and words[0] == "train"):
+            p.error("--shard splits a 'train' stage over processes (train humanoid OBS: its curriculum run's "
+                    "populations; train ant: its treatments)")
         from experiments.common import parse_shard  # curriculum's own parser of I/N
 
         try:
@@ -489,6 +491,9 @@ def stage_train(args, robot: str, obs: str | None) -> int:
 
         args.out.mkdir(parents=True, exist_ok=True)
         atomic_write_text(args.out / "ant.json", json.dumps({"treatments": [list(x) for x in pairs]}) + "\n")
+    if args.shard is not None:  # process I of N trains the I-th, (I+N)-th, ... of the --ant treatments
+        index, count = args.shard
+        pairs = pairs[index::count]
     for obs, treatment in pairs:
         folder = train_folder(args.out, "ant", obs) / treatment
         if treatment_done(folder):
