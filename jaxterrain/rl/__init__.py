@@ -35,6 +35,7 @@ from jaxterrain.rl.ppo import (
     reset_envs,
     ride_updates,
     run_updates,
+    scale_scan_rows,
     update,
 )
 from jaxterrain.rl.state import EpisodeStats, Ride, TrainState, Transition, raw_key
@@ -45,7 +46,7 @@ __all__ = [
     "checkpoint_metadata", "chunk_fn", "compiled_chunk", "deterministic_action", "export_onnx", "gae", "init",
     "init_stats",
     "load_checkpoint", "load_policy", "loss_fn", "make_optimizer", "make_train", "normalize", "policy_fn", "ppo_loss",
-    "onnx_metadata", "raw_key", "read_onnx_metadata", "reset_envs", "Ride", "ride_updates", "run_updates", "save_actor_only", "save_checkpoint", "save_policy", "train", "update",
+    "onnx_metadata", "raw_key", "read_onnx_metadata", "reset_envs", "Ride", "ride_updates", "run_updates", "scale_scan_rows", "save_actor_only", "save_checkpoint", "save_policy", "train", "update",
     "update_stats",
     "validate_config", "PerceptiveTwin", "perceptive_twin", "scan_statistics", "widen_inputs",
 ]

@@ -38,16 +38,38 @@ from jaxterrain.rl.state import EnvLike, Ride, TrainState, Transition, raw_key
 from jaxterrain.runtime import sharding
 from jaxterrain.walker.layout import terrain_axis
 
-__all__ = ["make_optimizer", "init", "reset_envs", "loss_fn", "update", "run_updates", "ride_updates",
+__all__ = ["make_optimizer", "scale_scan_rows", "init", "reset_envs", "loss_fn", "update", "run_updates", "ride_updates",
            "make_train"]
 
 
 def make_optimizer(config: PPOConfig) -> optax.GradientTransformation:
-    """Adam(learning_rate), after global-norm clipping when ``max_grad_norm`` is set."""
-    adam = optax.adam(config.learning_rate)
-    if config.max_grad_norm is None:
-        return adam
-    return optax.chain(optax.clip_by_global_norm(config.max_grad_norm), adam)
+    """Adam(learning_rate), after global-norm clipping when ``max_grad_norm`` is set; with ``scan_inputs`` > 0 and
+    ``scan_lr_scale`` != 1, Adam's updates of the first-layer kernel rows that read the last ``scan_inputs``
+    observation entries (``mlp/hidden_0/kernel`` [O, H] of both networks) are multiplied by ``scan_lr_scale``."""
+    steps = [optax.adam(config.learning_rate)]
+    if config.max_grad_norm is not None:
+        steps.insert(0, optax.clip_by_global_norm(config.max_grad_norm))
+    if config.scan_inputs > 0 and config.scan_lr_scale != 1.0:
+        steps.append(scale_scan_rows(config.scan_inputs, config.scan_lr_scale))
+    return steps[0] if len(steps) == 1 else optax.chain(*steps)
+
+
+def scale_scan_rows(scan_inputs: int, scale: float) -> optax.GradientTransformation:
+    """Multiply the updates of every ``hidden_0/kernel`` ([O, H]) in its last ``scan_inputs`` rows by ``scale``;
+    every other update passes unchanged. Stateless."""
+
+    def scaled(path, u):
+        names = [getattr(k, "key", None) for k in path]
+        if names[-2:] != ["hidden_0", "kernel"] or u.ndim != 2 or u.shape[0] < scan_inputs:
+            return u
+        rows = jnp.arange(u.shape[0])[:, None] >= u.shape[0] - scan_inputs
+        return jnp.where(rows, u * jnp.asarray(scale, u.dtype), u)
+
+    def update(updates, state, params=None):
+        del params
+        return jax.tree_util.tree_map_with_path(scaled, updates), state
+
+    return optax.GradientTransformation(lambda params: optax.EmptyState(), update)
 
 
 # ----------------------------------------------------------------------------------------------------------------

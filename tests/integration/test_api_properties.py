@@ -535,7 +535,8 @@ def ppo_configs(draw):
         value_hidden=tuple(draw(st.lists(st.integers(1, 64), min_size=1, max_size=4))),
         activation=draw(st.sampled_from(["swish", "relu", "tanh", "elu"])),
         action_distribution=draw(st.sampled_from(["tanh_normal", "normal"])), min_std=draw(st.floats(0.0, 1.0)),
-        init_std=draw(st.floats(1e-3, 3.0)), truncation=draw(st.sampled_from(["mask", "bootstrap"])))
+        init_std=draw(st.floats(1e-3, 3.0)), truncation=draw(st.sampled_from(["mask", "bootstrap"])),
+        scan_inputs=draw(st.integers(0, 200)), scan_lr_scale=draw(st.floats(1e-3, 10.0)))
 
 
 @bounded(40)
@@ -548,8 +549,9 @@ def test_valid_ppo_configs_pass_unchanged_and_survive_their_json_form(config):
 PPO_BREAKS = {
     **{f: st.one_of(st.integers(-3, 0), NOT_INTS) for f in ("num_envs", "unroll_length", "num_unrolls",
                                                            "num_minibatches", "update_epochs")},
+    "scan_inputs": st.one_of(st.integers(-3, -1), NOT_INTS),
     **{f: st.one_of(st.floats(max_value=0.0), NON_FINITE, NOT_NUMBERS, st.booleans())
-       for f in ("learning_rate", "clip_eps", "reward_scaling", "init_std")},
+       for f in ("learning_rate", "clip_eps", "reward_scaling", "init_std", "scan_lr_scale")},
     **{f: st.one_of(st.floats(max_value=-1e-9), st.floats(min_value=1.0 + 1e-9), NON_FINITE, NOT_NUMBERS)
        for f in ("gamma", "gae_lambda")},
     **{f: st.one_of(st.floats(max_value=-1e-9), NON_FINITE, NOT_NUMBERS, st.booleans())

@@ -124,3 +124,38 @@ def test_the_perceptive_twin_walks_flat_ground_with_the_blind_actions():
 
     last, diff = jax.jit(walk)(jax.random.PRNGKey(3))
     assert float(jnp.max(diff)) <= 1e-6 and float(jnp.min(last.data.qpos[:, 0])) > env.x_start  # walked forward
+
+
+def test_scan_lr_scale_shrinks_adams_steps_on_the_first_layers_scan_rows_only():
+    """``PPOConfig(scan_inputs=S, scan_lr_scale=c)``: one Adam step moves the first-layer kernel rows that read the
+    last S observation entries (policy and value networks) c times as far as with c = 1, and every other weight
+    exactly as far; bad values are refused in one line."""
+    base = rl.load_policy()
+    extra = 153
+    params, _ = rl.widen_inputs(base.params, base.normaliser, extra, np.zeros(extra, np.float32),
+                                np.ones(extra, np.float32))
+    grads = jax.tree_util.tree_map(lambda p: jnp.ones_like(p) * 0.5, params)  # same gradient on every weight
+
+    def step(config):
+        opt = rl.make_optimizer(config)
+        updates, _ = opt.update(grads, opt.init(params), params)
+        return updates
+
+    plain = step(base.config._replace(scan_inputs=extra))  # scale 1: as every weight
+    scaled = step(base.config._replace(scan_inputs=extra, scan_lr_scale=0.1))
+    for net in ("policy", "value"):
+        k_plain = np.asarray(plain[net]["params"]["mlp"]["hidden_0"]["kernel"])
+        k_scaled = np.asarray(scaled[net]["params"]["mlp"]["hidden_0"]["kernel"])
+        blind = k_plain.shape[0] - extra
+        assert k_plain.shape[0] == base.observation_size + extra
+        np.testing.assert_allclose(k_scaled[blind:], 0.1 * k_plain[blind:], rtol=1e-6)
+        np.testing.assert_array_equal(k_scaled[:blind], k_plain[:blind])
+        assert np.abs(k_plain[blind:]).min() > 0
+        np.testing.assert_array_equal(np.asarray(scaled[net]["params"]["mlp"]["hidden_1"]["kernel"]),
+                                      np.asarray(plain[net]["params"]["mlp"]["hidden_1"]["kernel"]))
+    recorded = base.config._replace(scan_inputs=extra, scan_lr_scale=0.1)
+    assert rl.PPOConfig.from_json_dict(recorded.to_json_dict()) == recorded  # a policy file records both
+    with pytest.raises(ValueError, match="^PPOConfig.scan_lr_scale must be a finite number > 0.0"):
+        rl.validate_config(base.config._replace(scan_lr_scale=0.0))
+    with pytest.raises(ValueError, match="scan_inputs"):
+        rl.validate_config(base.config._replace(scan_inputs=-1))
