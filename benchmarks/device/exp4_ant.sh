@@ -21,10 +21,7 @@ bash "$here/pair.sh" "$limit" \
   "$run train ant --ant $ant --shard 1/2 --time-limit \"\$(left)\""
 rest=$(( limit - ($(date +%s) - start) ))
 if grep -q "train ant $1: done" runs/gpu0.log && grep -q "train ant $2: done" runs/gpu1.log && [ "$rest" -gt 150 ]
-then
-  bash "$here/pair.sh" "$rest" \
-    "$run evaluate --part 0/2 --time-limit \"\$(left)\"" \
-    "$run evaluate --part 1/2 --time-limit \"\$(left)\""
+then exec bash "$here/exp4_eval.sh" "$rest"  # the walks left (the ant's), one part per GPU, then the pack
 fi
 $run --plan --pack "$OUT/exp4.tar.gz"
 cp runs/gpu0.log runs/gpu1.log "$OUT/"
