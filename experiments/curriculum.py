@@ -142,9 +142,9 @@ def parse_archives(items) -> dict | None:
 
 def check_config(args, cfg: dict) -> None:
     """Before a run folder: ``--baseline-archive`` names one of ``--archives`` (:func:`check_baseline_archive`), every
-    ``--archives`` file reads as an archive a curriculum can use
-    (``runner.load_archive``; read again per treatment), and every curriculum flag given belongs to the map
-    curriculum or a ``--baseline`` (``learn.check_selector_flags``); :class:`~experiments.common.UsageError`."""
+    ``--archives`` file reads as an archive a curriculum can use (``runner.load_archive``; read again per treatment),
+    every curriculum flag given belongs to the map curriculum or a ``--baseline`` (``learn.check_selector_flags``)
+    and ``--scan-lr-scale`` has a scan (``learn.check_scan_lr``); :class:`~experiments.common.UsageError`."""
     from jaxterrain.curriculum import runner
 
     check_baseline_archive(cfg, given=getattr(args, "baseline_archive", None) is not None,
@@ -156,6 +156,7 @@ def check_config(args, cfg: dict) -> None:
             text = str(err).removeprefix(f"LearnConfig.archive {path}: ")
             raise common.UsageError(f"--archives {name}={path}: {text}") from None
     learn.check_selector_flags(args, ["map", *baselines(cfg)], "--baseline")
+    learn.check_scan_lr(_treatment_cfg(cfg, next(iter(cfg["archives"].values())), "map"))
     if getattr(args, "combined", None) and len(cfg["archives"]) < 2:
         raise common.UsageError(f"--combined: the map curriculum on the combination of several --archives; this run "
                                 f"has one ({', '.join(cfg['archives'])})")

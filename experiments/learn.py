@@ -49,6 +49,9 @@ Fine-tuning: the reward is the base policy's own (brax's humanoid: 1.25 x forwar
 staying up - control cost); ``--healthy-reward`` changes the per-step bonus for PPO only (evaluations measure
 distance). The observation normaliser keeps merging the fine-tuning data, as brax's PPO does;
 ``--no-update-normaliser`` keeps the base policy's statistics. Why both exist: docs/results/exp2_headings.md.
+``--scan-lr-scale C`` (with ``--observation perceptive`` or a perceptive ``--policy``; a blind walker is refused):
+Adam's steps on the first-layer weights that read the height scan are C times every other weight's
+(``rl.PPOConfig.scan_lr_scale``; the scan's size is the walker's; docs/results/exp4/scan_diag/).
 
 Presets (``jaxterrain.curriculum.presets``; typed, ``jaxterrain.curriculum.run_config.PRESETS``): ``paper`` (30 000
 epochs, the paper's budget), ``gpu-short`` (3 000 epochs, a tenth), ``smoke`` (CPU,
@@ -195,6 +198,21 @@ def overrides(args) -> dict:
     return out
 
 
+def check_scan_lr(cfg: dict) -> None:
+    """``--scan-lr-scale`` other than 1 on a blind walker (the start policy's observation set: ``--observation``, a
+    ``--policy``'s, or the blind base policy) would be accepted and ignored: refused before the run folder is made
+    (``runner.check_scan_lr``); :class:`~experiments.common.UsageError` naming the flag."""
+    if cfg.get("scan_lr_scale", 1.0) == 1.0:
+        return
+    from jaxterrain.curriculum import runner
+
+    run = run_of(cfg)
+    try:
+        runner.check_scan_lr(run, runner.start_policy(run))
+    except runner.BadInput as err:
+        raise common.UsageError(flags_in(str(err), run.curriculum.selector)) from None
+
+
 def check_terrain_flags(args, cfg: dict) -> None:
     """``--terrains DIR`` read and checked before the run folder is made (``own_terrains.check_terrains``: the
     folder and its files, the height, the order, a curriculum that needs no archive), and not given with
@@ -236,7 +254,7 @@ def main(args) -> int:
     mesh = common.device_mesh(args.devices)
     folder, cfg = common.setup_run("learn", args, PRESETS, "smoke", overrides(args), rules=RULES,
                                    check=lambda c: (check_selector_flags(args, [c["curriculum"]]), run_of(c),
-                                                    check_terrain_flags(args, c)))
+                                                    check_terrain_flags(args, c), check_scan_lr(c)))
     run = run_of(cfg)
     try:  # the library validates the run once, before anything compiles (runner.validate)
         if args.export_policies:

@@ -48,6 +48,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from jaxterrain.curriculum import runner
+from jaxterrain.curriculum import walker as W
 from jaxterrain.curriculum.checkpoints import restore_states
 from jaxterrain.curriculum.outputs import export_policies, write_outputs
 from jaxterrain.curriculum.own_terrains import OwnTerrains, rank_terrains
@@ -99,7 +100,7 @@ def group_key(run: LearnConfig, config, policy, env) -> tuple:
     ``compact`` and ``chunks_per_call``."""
     b = run.budget
     return (population_key(config), runner.physics_of(run), env.config._replace(tiles=0, warp_worlds=0),
-            config.ppo_config(policy.config), bool(b.fast_compile), bool(b.compact), int(b.chunks_per_call))
+            W.fine_tuning_ppo(config, policy, env), bool(b.fast_compile), bool(b.compact), int(b.chunks_per_call))
 
 
 def envs_of(run: LearnConfig) -> int:

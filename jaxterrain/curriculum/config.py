@@ -29,7 +29,11 @@ terrains predicted easier than the one just trained are removed, the run ends wh
   line are unlike any other, ``mask`` lets the value net diverge and fine-tuning ruin the walker; ``bootstrap``
   keeps standard CL learning, leaves the map treatments where they were and costs nothing measurable on the GPU
   (``docs/results/exp2_paper.md``). Runs saved before 2026-11-27 (no ``truncation`` in their config) used ``mask``
-  and resume with it (``experiments learn``).
+  and resume with it (``experiments learn``). ``scan_lr_scale = 1.0``: a perceptive walker's Adam steps on the
+  first-layer weights that read its height scan as every other weight's; ``learn --scan-lr-scale 0.1`` shrinks
+  them (``rl.PPOConfig.scan_lr_scale``; the scan's 153 correlated inputs otherwise move the first layer 8-10x as
+  far as the blind ones, ``docs/results/exp4/scan_diag/``). Its ``scan_inputs`` is the walker's scan size, set by
+  :meth:`CurriculumConfig.ppo_config`; a blind walker refuses any other scale. Runs saved before it used 1.0.
 
 ``max_fitness = 1.0`` - "maximum fitness" is the maximum of the normalised distance (the far edge), so the threshold
   is fitness >= 0.9. (IT&E's own stop rule compares with the GP's maximum mean; that is a different quantity.)
@@ -100,10 +104,12 @@ CREDITS = ("threshold", "finished")
 DISTANCE_ORIGINS = ("origin", "top_right")
 # The PPOConfig fields that fine-tuning sets (how much is collected per update, how it is trained on); every other
 # field (networks, normaliser, clipping, discount, ...) is the base policy's, whose params and normaliser carry over.
+# scan_lr_scale: Adam's step on the first-layer weights that read a perceptive walker's height scan; its scan_inputs
+# (the scan's size) is not set here: ppo_config takes it from the walker (0 for a blind one, which refuses a scale).
 FINE_TUNED = ("num_envs", "unroll_length", "num_unrolls", "num_minibatches", "update_epochs", "learning_rate",
-              "update_normaliser", "truncation")
+              "update_normaliser", "truncation", "scan_lr_scale")
 FINE_TUNING = PPOConfig(num_envs=500, unroll_length=10, num_unrolls=8, num_minibatches=8, update_epochs=8,
-                        learning_rate=3e-4, update_normaliser=True, truncation="bootstrap")
+                        learning_rate=3e-4, update_normaliser=True, truncation="bootstrap", scan_lr_scale=1.0)
 
 RECIPES: dict[str, dict[str, int]] = {
     "paper": {"num_envs": 500, "unroll_length": 10, "num_unrolls": 8, "num_minibatches": 8, "update_epochs": 8},
@@ -157,9 +163,10 @@ class CurriculumConfig(NamedTuple):
       credit: ``threshold`` or ``finished``: which terrains count for the hardest-terrain record.
       distance_origin: ``origin`` or ``top_right``: how a cell's hardness (distance) is measured.
       ppo: a :class:`jaxterrain.rl.PPOConfig` whose :data:`FINE_TUNED` fields (``num_envs, unroll_length,
-        num_unrolls, num_minibatches, update_epochs, learning_rate, update_normaliser, truncation``) are the
-        fine-tuning PPO's (the base policy's recipe otherwise, :meth:`ppo_config`); its other fields must keep
-        ``PPOConfig``'s defaults. Default :data:`FINE_TUNING`; e.g. ``ppo=FINE_TUNING._replace(num_envs=64)``.
+        num_unrolls, num_minibatches, update_epochs, learning_rate, update_normaliser, truncation,
+        scan_lr_scale``) are the fine-tuning PPO's (the base policy's recipe otherwise, :meth:`ppo_config`, which
+        takes ``scan_inputs`` from the walker); its other fields must keep ``PPOConfig``'s defaults. Default
+        :data:`FINE_TUNING`; e.g. ``ppo=FINE_TUNING._replace(num_envs=64)``.
         ``steps_per_update`` (``num_envs x unroll_length x num_unrolls``) must divide a chunk's env steps.
       overlap: evaluate each chunk's policy while the next chunk trains, its walks stepped in the same physics
         calls as the PPO envs (``rl.ride_updates``); the next chunk trains on the current terrain on the chance that
@@ -233,10 +240,14 @@ class CurriculumConfig(NamedTuple):
 
         return Protocol(int(self.attempts), int(self.best), int(self.headings))
 
-    def ppo_config(self, base: PPOConfig) -> PPOConfig:
+    def ppo_config(self, base: PPOConfig, scan_inputs: int = 0) -> PPOConfig:
         """The fine-tuning :class:`jaxterrain.rl.PPOConfig`: ``base`` (the base policy's) with the :data:`FINE_TUNED`
-        fields of :attr:`ppo`."""
-        return base._replace(**{name: getattr(self.ppo, name) for name in FINE_TUNED})
+        fields of :attr:`ppo` and ``scan_inputs``, the walker's height scan entries (``walker.scan_size``; 0: blind).
+        ``ValueError`` when ``ppo.scan_lr_scale`` is not 1 and there is no scan to scale."""
+        if scan_inputs == 0 and self.ppo.scan_lr_scale != 1.0:
+            raise ValueError(f"CurriculumConfig.ppo.scan_lr_scale {self.ppo.scan_lr_scale!r}: scales Adam's step on "
+                             f"the weights that read a height scan, and this walker has none (blind): it must be 1.0")
+        return base._replace(**{name: getattr(self.ppo, name) for name in FINE_TUNED}, scan_inputs=int(scan_inputs))
 
     def to_json_dict(self) -> dict:
         """A JSON-serialisable dict: the fields, with ``ppo`` as ``{name: value}`` of its :data:`FINE_TUNED` fields

@@ -34,7 +34,7 @@ _PAPER = dict(archive=CPPN_ARCHIVE, curriculum="map", trials=10, descriptors=["r
               distance_origin="origin", roughness_stride=5, max_observations=None, num_envs=500, unroll_length=10,
               num_unrolls=8, num_minibatches=8, update_epochs=8, learning_rate=3e-4, episode_length=1000,
               chunks_per_call=25, fast_compile=False, backend="auto", healthy_reward=None, update_normaliser=True,
-              truncation="bootstrap", overlap=False, eval_lag=False, compact=True, policy_every=None,
+              truncation="bootstrap", scan_lr_scale=1.0, overlap=False, eval_lag=False, compact=True, policy_every=None,
               terrains_per_chunk=8, levels=10, levels_init=None, levels_promote=None, levels_demote=0.5,
               plr_capacity=None, plr_replay_prob=0.8, plr_staleness=0.3, plr_temperature=0.3, plr_min_fill=0.5, accel_generator=None, accel_edits=1,
               robot=None, recipe="paper", observation=None, randomise=None, spawn="feet", terrains=None,
@@ -67,6 +67,7 @@ RULES = {
     "threshold": unit(), "levels_init": at_least(0), "levels_promote": unit(), "levels_demote": fraction(),
     "plr_replay_prob": fraction(), "plr_staleness": fraction(), "plr_temperature": positive(),
     "plr_min_fill": fraction(), "healthy_reward": non_negative(), "learning_rate": positive(),
+    "scan_lr_scale": positive(),
     "terrain_order": one_of(("name", "difficulty")), "observation": one_of(("blind", "perceptive")),
     "spawn": one_of(SPAWNS),
     "recipe": one_of(RECIPE_NAMES), "truncation": one_of(("mask", "bootstrap")), "backend": one_of(BACKENDS),
@@ -122,6 +123,9 @@ FINE_TUNING_HELP: dict[str, str] = {
     "healthy_reward": "fine-tuning reward per step for staying up, {range}{scope} (default: the walker's 5.0, "
                       "the base policy's; evaluations measure distance and do not use it)",
     "learning_rate": "fine-tuning PPO's Adam learning rate, {range}{scope}",
+    "scan_lr_scale": "a perceptive walker's Adam steps on the first-layer weights that read its height scan, as a "
+                     "multiple of every other weight's, {range}{scope} (1: no difference; about 0.1 evens out the "
+                     "scan's 153 correlated inputs, docs/results/exp4/scan_diag/); a blind walker takes only 1",
     "truncation": "what fine-tuning PPO learns from a walk that ends at the goal or the time limit{scope}: "
                   "bootstrap (default: r + gamma V(final observation); keeps the value net from diverging and "
                   "standard CL learning, docs/results/exp2_paper.md) or mask (brax's: nothing; the runs before "

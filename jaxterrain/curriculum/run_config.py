@@ -31,9 +31,9 @@ ones there too; the others hold ``CurriculumConfig``'s defaults until resolved).
 The serialised form is the flat dict of ``config.json`` (:func:`to_flat`; every key a command-line flag's name, so
 the one field -> flag table is :data:`FLAT_FIELDS` with ``--`` + dashes); :func:`from_flat` reads it, and every
 ``config.json`` written before (a key it lacks takes the value that version ran with: ``truncation`` ``mask``,
-``backend`` ``jax``, ``overlap`` / ``eval_lag`` / ``fast_compile`` off, ``compact`` on, ``spawn`` ``patch``; the keys
-of other selectors' params are dropped). The presets' flat forms live in :mod:`.presets` (no JAX: ``--help`` reads
-them).
+``backend`` ``jax``, ``overlap`` / ``eval_lag`` / ``fast_compile`` off, ``compact`` on, ``spawn`` ``patch``,
+``scan_lr_scale`` 1.0; the keys of other selectors' params are dropped). The presets' flat forms live in
+:mod:`.presets` (no JAX: ``--help`` reads them).
 """
 
 from __future__ import annotations
@@ -114,7 +114,7 @@ _TOP = ("archive", "descriptors", "terrains", "terrain_height", "terrain_order",
 _CURRICULUM = ("epochs_per_chunk", "steps_per_epoch", "max_epochs", "threshold", "max_fitness", "max_evals",
                "credit", "distance_origin", "overlap", "eval_lag")
 LEGACY = {"truncation": "mask", "backend": "jax", "overlap": False, "eval_lag": False, "fast_compile": False,
-          "compact": True, "spawn": "patch",
+          "compact": True, "spawn": "patch", "scan_lr_scale": 1.0,
           "seed": 0, "terrains": None, "terrain_height": None, "terrain_order": "name"}
 """The value a ``config.json`` key had in the runs made before it was written (what :func:`from_flat` fills in)."""
 
@@ -163,6 +163,7 @@ def from_flat(flat: dict) -> LearnConfig:
     curriculum.setdefault("truncation", LEGACY["truncation"])
     curriculum.setdefault("overlap", LEGACY["overlap"])
     curriculum.setdefault("eval_lag", LEGACY["eval_lag"])
+    curriculum.setdefault("scan_lr_scale", LEGACY["scan_lr_scale"])
     base = LearnConfig()
     return LearnConfig(
         archive=d.get("archive", base.archive), descriptors=tuple(d.get("descriptors", base.descriptors)),
@@ -219,6 +220,8 @@ CONSUMERS = {
     "curriculum.attempts": "curriculum.walker.walker_harness (evaluations)",
     "curriculum.best": "curriculum.walker.walker_harness", "curriculum.headings": "curriculum.walker.walker_harness",
     "curriculum.ppo": "curriculum.walker.walker_harness (rl.ppo)",
+    "curriculum.ppo.scan_inputs": "curriculum.walker.fine_tuning_ppo (the walker's scan size; not a flag)",
+    "curriculum.ppo.scan_lr_scale": "curriculum.walker.fine_tuning_ppo (rl.make_optimizer)",
     "curriculum.overlap": "curriculum.core.step, runner.walker_layout",
     "curriculum.eval_lag": "curriculum.core.chunk_update",
     "protocol": "curriculum.runner.resolve",

@@ -43,9 +43,9 @@ from jaxterrain.walker import carry_rows, robots, tiles
 from jaxterrain.walker.layout import resolve_backend
 
 __all__ = ["BadInput", "ChunkMetrics", "ChunkProgress", "PARTIAL", "FAST_COMPILE", "PROGRAMS", "curriculum_config",
-           "resolve", "start_policy", "load_archive", "archive_digest", "check_resumable", "physics_of",
-           "selector_slots", "walker_layout", "validate", "make_env", "strip_envs", "ENV_STATES", "compiled",
-           "make_block", "chunk_metrics", "inputs", "setup", "run_treatment", "report_run", "restored",
+           "resolve", "start_policy", "check_scan_lr", "load_archive", "archive_digest", "check_resumable",
+           "physics_of", "selector_slots", "walker_layout", "validate", "make_env", "strip_envs", "ENV_STATES",
+           "compiled", "make_block", "chunk_metrics", "inputs", "setup", "run_treatment", "report_run", "restored",
            "report_treatment", "export_treatment"]
 
 class BadInput(ValueError):
@@ -213,6 +213,14 @@ def start_policy(run: LearnConfig):
     return policy
 
 
+def check_scan_lr(run: LearnConfig, policy) -> None:
+    """:class:`BadInput` when ``curriculum.ppo.scan_lr_scale`` is not 1 and the start ``policy`` (whose observation
+    set the walker takes) sees no height scan: the scale would be accepted and ignored."""
+    if (scale := run.curriculum.ppo.scan_lr_scale) != 1.0 and policy_observation(policy)["observation"] == "blind":
+        raise BadInput(f"LearnConfig.curriculum.ppo.scan_lr_scale {scale!r} must be 1.0 for a blind walker (it scales "
+                       f"Adam's steps on weights reading a height scan: LearnConfig.walker.observation perceptive)")
+
+
 def _check_top(run: LearnConfig) -> None:
     """The run's own integers: ``trials``, ``budget.chunks_per_call``, ``walker.episode_length`` (>= 1)."""
     if not isinstance(run, LearnConfig):
@@ -237,6 +245,7 @@ def validate(run: LearnConfig):
     run = resolve(run, arch)
     config = curriculum_config(run)
     policy = start_policy(run)
+    check_scan_lr(run, policy)
     archive_robot = getattr(arch.config, "robot", None) or "humanoid"
     if own is None and archive_robot != policy_robot(policy):
         raise BadInput(f"LearnConfig.archive {run.archive}: its fitness is the {archive_robot}'s, but the policy walks "
@@ -312,7 +321,7 @@ def inputs(run: LearnConfig, config, arch, policy, env):
     (``walker.carry_rows``: MuJoCo Warp's buffers shared by every env empty, ``[trials, 0, ...]``), so a block
     returns them with the shapes it was compiled for, on either backend."""
     bank = bank_of(arch)
-    ppo = config.ppo_config(policy.config)
+    ppo = W.fine_tuning_ppo(config, policy, env)
     harness = W.walker_harness(env, ppo, config)
     start = W.start_state(env, ppo, policy, bank.heightmaps.shape[1:])
     keys = jax.random.split(jax.random.fold_in(jax.random.key(int(run.seed)), 2), int(run.trials))
@@ -393,7 +402,7 @@ def run_treatment(run: LearnConfig, folder: Path, time_limit_s: float | None = N
               flush=True)
 
     every = int(run.budget.policy_every or 0)  # snapshots of the walkers along the run
-    ppo = config.ppo_config(policy.config)
+    ppo = W.fine_tuning_ppo(config, policy, env)
 
     one_device = mesh is None or mesh.size == 1  # several: each callback sees its device's rows only
     metrics_csv = ChunkMetrics(folder) if one_device else None
@@ -487,5 +496,5 @@ def export_treatment(run: LearnConfig, folder: Path) -> list[Path]:
     (:func:`~jaxterrain.curriculum.outputs.export_policies`), for runs made before treatments wrote them, or of a
     run stopped by its time limit. Compiles nothing (:func:`restored`)."""
     resolved, config, arch, policy, env, bank, states, _, _ = restored(run, folder)
-    return export_policies(folder, resolved, config, config.ppo_config(policy.config), env, policy, bank, states,
+    return export_policies(folder, resolved, config, W.fine_tuning_ppo(config, policy, env), env, policy, bank, states,
                            names=arch.generator_names)

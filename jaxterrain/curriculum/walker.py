@@ -3,7 +3,7 @@
     policy = rl.load_policy()                                    # the shipped base policy (or a file)
     env = walker_env(policy, bank.heightmaps.shape[1:], scale)   # the walker it was trained on, on the bank's terrains
     check_policy(policy, env)                                    # ValueError naming the file on a mismatch
-    ppo = config.ppo_config(policy.config)                       # fine-tuning PPO (CurriculumConfig.ppo_config)
+    ppo = fine_tuning_ppo(config, policy, env)                   # fine-tuning PPO (CurriculumConfig.ppo_config)
     harness = walker_harness(env, ppo, config)
     start = start_state(env, ppo, policy, bank.heightmaps.shape[1:])   # the policy's params, value net, normaliser
 
@@ -44,11 +44,11 @@ from jaxterrain.curriculum.config import CurriculumConfig
 from jaxterrain.curriculum.core import Harness
 from jaxterrain.rl import networks as nets
 from jaxterrain.terrain import TerrainScale
-from jaxterrain.walker import TILE_AXES, Tile, TileBank, parse_randomisation
+from jaxterrain.walker import TILE_AXES, Tile, TileBank, parse_randomisation, scan_size
 from jaxterrain.walker.layout import make_env
 
-__all__ = ["walker_env_config", "walker_env", "check_policy", "walker_harness", "tile_layout", "select_policy",
-           "tile_distances", "start_state"]
+__all__ = ["walker_env_config", "walker_env", "check_policy", "fine_tuning_ppo", "walker_harness", "tile_layout",
+           "select_policy", "tile_distances", "start_state"]
 
 
 def walker_env_config(policy, shape: tuple[int, int], scale: TerrainScale, episode_length: Optional[int] = None,
@@ -113,6 +113,14 @@ def check_policy(policy, env) -> None:
                          f"(policy_hidden={policy.config.policy_hidden}, value_hidden={policy.config.value_hidden})")
     if tuple(policy.normaliser.mean.shape) != (obs,):
         raise ValueError(f"{where}: normaliser of size {policy.normaliser.mean.shape}, expected ({obs},)")
+
+
+def fine_tuning_ppo(config: CurriculumConfig, policy, env) -> rl.PPOConfig:
+    """The fine-tuning :class:`jaxterrain.rl.PPOConfig` of a curriculum on walker ``env`` from ``policy``:
+    :meth:`CurriculumConfig.ppo_config` of the policy's own, with ``scan_inputs`` the walker's height scan entries
+    (:func:`jaxterrain.walker.scan_size`: the last ones of its observation, those ``scan_lr_scale`` applies to; 0
+    for a blind walker, which refuses a ``scan_lr_scale`` other than 1 with ``ValueError``)."""
+    return config.ppo_config(policy.config, scan_size(env.config))
 
 
 def walker_harness(env, ppo: rl.PPOConfig, config: CurriculumConfig) -> Harness:

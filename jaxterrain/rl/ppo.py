@@ -56,20 +56,36 @@ def make_optimizer(config: PPOConfig) -> optax.GradientTransformation:
 
 def scale_scan_rows(scan_inputs: int, scale: float) -> optax.GradientTransformation:
     """Multiply the updates of every ``hidden_0/kernel`` ([O, H]) in its last ``scan_inputs`` rows by ``scale``;
-    every other update passes unchanged. Stateless."""
+    every other update passes unchanged. Stateless. ``ValueError`` (at ``init`` and ``update``) when the tree has
+    no ``hidden_0/kernel``, or one with ``scan_inputs`` rows or fewer: the scan would not be the observation's last
+    rows of a wider input, and its scale would be ignored or spread over the whole first layer."""
+
+    def first_layer(path, u) -> bool:
+        return [getattr(k, "key", None) for k in path][-2:] == ["hidden_0", "kernel"] and u.ndim == 2
+
+    def check(tree) -> None:
+        shapes = [tuple(u.shape) for path, u in jax.tree_util.tree_leaves_with_path(tree) if first_layer(path, u)]
+        if not shapes or any(rows <= scan_inputs for rows, _ in shapes):
+            raise ValueError(f"rl.scale_scan_rows: scan_inputs={scan_inputs} needs first-layer kernels "
+                             f"(hidden_0/kernel, [observation, hidden]) of more than {scan_inputs} rows (the blind "
+                             f"observation, then the scan); got {shapes or 'none'}")
 
     def scaled(path, u):
-        names = [getattr(k, "key", None) for k in path]
-        if names[-2:] != ["hidden_0", "kernel"] or u.ndim != 2 or u.shape[0] < scan_inputs:
+        if not first_layer(path, u):
             return u
         rows = jnp.arange(u.shape[0])[:, None] >= u.shape[0] - scan_inputs
         return jnp.where(rows, u * jnp.asarray(scale, u.dtype), u)
 
+    def init(params):
+        check(params)
+        return optax.EmptyState()
+
     def update(updates, state, params=None):
         del params
+        check(updates)
         return jax.tree_util.tree_map_with_path(scaled, updates), state
 
-    return optax.GradientTransformation(lambda params: optax.EmptyState(), update)
+    return optax.GradientTransformation(init, update)
 
 
 # ----------------------------------------------------------------------------------------------------------------

@@ -26,7 +26,7 @@ from jaxterrain.walker import robots
 from jaxterrain.walker.robots import RobotSpec, register_robot
 from jaxterrain.walker.config import (BACKENDS, OBSERVATIONS, SCAN_FIELDS, SPAWNS, WalkerConfig, flat_terrain,
                                       min_terrain_side, observation_fields, observation_label, resolve_config,
-                                      with_observation)
+                                      scan_size, with_observation)
 from jaxterrain.walker.env import WalkerEnv, WalkerState
 from jaxterrain.walker.surface import sample_heights
 from jaxterrain.walker.model import (
@@ -81,6 +81,7 @@ __all__ = [
     "SCAN_FIELDS",
     "observation_fields",
     "observation_label",
+    "scan_size",
     "with_observation",
     "TILE_AXES",
     "Tile",

@@ -48,7 +48,7 @@ from jaxterrain.walker.randomisation import Randomisation, check_randomisation
 from jaxterrain.walker.robots import ROBOT_FIELDS, get as get_robot
 
 __all__ = ["BACKENDS", "OBSERVATIONS", "SPAWNS", "SCAN_FIELDS", "WalkerConfig", "with_observation",
-           "observation_fields", "observation_label", "resolve_config", "check_config", "min_terrain_side",
+           "observation_fields", "observation_label", "scan_size", "resolve_config", "check_config", "min_terrain_side",
            "check_real", "flat_terrain"]
 
 BACKENDS = ("jax", "warp")
@@ -168,6 +168,14 @@ def observation_label(fields: dict) -> str:
         return str(fields.get("observation"))
     (x0, x1), (y0, y1), (nx, ny) = fields["scan_x"], fields["scan_y"], fields["scan_points"]
     return f"perceptive ({nx} x {ny} heights, x {x0:g}..{x1:g} m, y {y0:g}..{y1:g} m)"
+
+
+def scan_size(config: WalkerConfig) -> int:
+    """The height scan's entries in the observation (``scan_points[0] x scan_points[1]``; the humanoid's 17 x 9 =
+    153) of a perceptive :class:`WalkerConfig` (its grid None: the robot's default), 0 for a blind one.
+    :class:`~jaxterrain.walker.WalkerEnv` appends them last, after the blind observation."""
+    fields = observation_fields(config)
+    return 0 if fields["observation"] != "perceptive" else int(fields["scan_points"][0] * fields["scan_points"][1])
 
 
 def min_terrain_side(config: WalkerConfig = WalkerConfig()) -> int:

@@ -72,7 +72,7 @@ from jaxterrain.walker.robots import get as get_robot
 from jaxterrain.walker.tiles import Tile, TileBank
 from jaxterrain.walker.config import (BACKENDS, OBSERVATIONS, SCAN_FIELDS, WalkerConfig, check_config, flat_terrain,
                                      min_terrain_side, observation_fields, observation_label, resolve_config,
-                                     with_observation)
+                                     scan_size, with_observation)
 from jaxterrain.walker.surface import sample_heights, state_key, yaw
 
 __all__ = ["PARK_HEIGHT", "WalkerState", "WalkerEnv"]
@@ -185,9 +185,7 @@ class WalkerEnv:
             raise ValueError(f"randomisation.added_mass must be (low, high) kg with low > -{self._torso_mass:.3g} (the "
                              f"{self.robot.name}'s torso mass), got {added}")
         self.action_size = int(m.nu)
-        self.observation_size = 1 + 4 + (m.nq - 7) + m.nv
-        if config.observation == "perceptive":
-            self.observation_size += int(config.scan_points[0] * config.scan_points[1])
+        self.observation_size = 1 + 4 + (m.nq - 7) + m.nv + scan_size(config)
         px, py = np.meshgrid(np.linspace(-0.25, 0.25, 5), np.linspace(-0.25, 0.25, 5))  # the 0.5 m spawn patch
         self._patch = (np.float32(self.x_start) + px.ravel().astype(np.float32), py.ravel().astype(np.float32))
         ring = ([0, 1, -1, 0, 0], [0, 0, 0, 1, -1])  # spawn="feet": under a foot, its centre and +-radius in x, y

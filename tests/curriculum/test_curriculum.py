@@ -587,16 +587,17 @@ def test_config_validation_names_the_field():
 
 
 def test_config_fine_tuning_ppo_is_one_ppo_config():
-    """The fine-tuning PPO is ``CurriculumConfig.ppo`` (a PPOConfig): its eight FINE_TUNED fields replace the base
-    policy's, nothing else may be set there (not silently ignored), and the JSON reads nested or flat (configs written
-    without ``truncation`` take the default: ``experiments learn`` reads its own old configs as ``mask``)."""
+    """The fine-tuning PPO is ``CurriculumConfig.ppo`` (a PPOConfig): its nine FINE_TUNED fields replace the base
+    policy's, nothing else may be set there (not silently ignored; ``scan_inputs`` is the walker's, set by
+    ``ppo_config``), and the JSON reads nested or flat (configs written without ``truncation`` take the default:
+    ``experiments learn`` reads its own old configs as ``mask``)."""
     from jaxterrain import rl
     from jaxterrain.curriculum.config import FINE_TUNED
 
     config = C.CurriculumConfig()
     assert FINE_TUNED == ("num_envs", "unroll_length", "num_unrolls", "num_minibatches", "update_epochs",
-                          "learning_rate", "update_normaliser", "truncation")
-    assert [getattr(config.ppo, k) for k in FINE_TUNED] == [500, 10, 8, 8, 8, 3e-4, True, "bootstrap"]
+                          "learning_rate", "update_normaliser", "truncation", "scan_lr_scale")
+    assert [getattr(config.ppo, k) for k in FINE_TUNED] == [500, 10, 8, 8, 8, 3e-4, True, "bootstrap", 1.0]
     assert config.steps_per_update == 40_000 and config.updates_per_chunk == 4
     base = rl.PPOConfig(gamma=0.99, policy_hidden=(8,), num_envs=7, learning_rate=1.0)
     assert config.ppo_config(base) == base._replace(num_envs=500, unroll_length=10, num_unrolls=8, num_minibatches=8,
@@ -609,10 +610,21 @@ def test_config_fine_tuning_ppo_is_one_ppo_config():
         C.validate_config(config._replace(ppo=config.ppo._replace(learning_rate=float("inf"))))
     with pytest.raises(ValueError, match="must be a jaxterrain.rl.PPOConfig"):
         C.validate_config(config._replace(ppo={"num_envs": 4}))
+    with pytest.raises(ValueError, match=r"CurriculumConfig\.ppo\.scan_inputs must keep PPOConfig's default"):
+        C.validate_config(config._replace(ppo=config.ppo._replace(scan_inputs=153)))  # the walker's, not a setting
+    with pytest.raises(ValueError, match=r"CurriculumConfig\.ppo: PPOConfig\.scan_lr_scale must be a finite number"):
+        C.validate_config(config._replace(ppo=config.ppo._replace(scan_lr_scale=0.0)))
+    scaled = config._replace(ppo=config.ppo._replace(scan_lr_scale=0.1))
+    tuned = scaled.ppo_config(base, scan_inputs=153)
+    assert (tuned.scan_inputs, tuned.scan_lr_scale, tuned.gamma) == (153, 0.1, 0.99)
+    assert config.ppo_config(base._replace(scan_inputs=7)).scan_inputs == 0  # the walker's scan, not the base's
+    with pytest.raises(ValueError, match=r"^CurriculumConfig\.ppo\.scan_lr_scale 0\.1: .* this walker has none"):
+        scaled.ppo_config(base)  # no scan: the scale would be ignored
     small_ppo = config._replace(selector="random", ppo=config.ppo._replace(num_envs=4, update_epochs=1))
     d = json.loads(json.dumps(small_ppo.to_json_dict()))
     assert d["ppo"] == {"num_envs": 4, "unroll_length": 10, "num_unrolls": 8, "num_minibatches": 8,
-                        "update_epochs": 1, "learning_rate": 3e-4, "update_normaliser": True, "truncation": "bootstrap"}
+                        "update_epochs": 1, "learning_rate": 3e-4, "update_normaliser": True, "truncation": "bootstrap",
+                        "scan_lr_scale": 1.0}
     assert C.CurriculumConfig.from_json_dict(d) == small_ppo
     flat = {**{k: v for k, v in d.items() if k != "ppo"}, **d["ppo"]}  # learn's config.json layout
     assert C.CurriculumConfig.from_json_dict(flat) == small_ppo
@@ -657,6 +669,35 @@ def test_learn_fine_tuning_knobs_reach_the_walker_and_ppo(tiny_archive):
     assert validated(legacy)[0].ppo_config(rl.PPOConfig()).truncation == "mask"
     with pytest.raises(runner.BadInput, match="truncation"):
         validated({**cfg, "truncation": "drop"})
+
+
+def test_scan_lr_scale_reaches_the_fine_tuning_ppo_with_the_walkers_scan_size(tiny_archive, tmp_path):
+    """``--scan-lr-scale`` (config ``scan_lr_scale``) reaches the fine-tuning PPOConfig of a perceptive run, whose
+    ``scan_inputs`` is the walker's scan (17 x 9 = 153, the last entries of its observation; not a setting): its
+    optimiser steps the start policy's first-layer scan rows 0.1 times as far as the blind rows, in both networks.
+    The trials' policy files record both (``outputs.export_policies`` saves that PPOConfig). A blind walker has no
+    scan (``scan_inputs`` 0) and refuses any other scale, naming the field. Builds the envs and takes one Adam step;
+    no physics compiles."""
+    from jaxterrain import rl
+    from jaxterrain.curriculum import walker as W
+
+    cfg = {**FLAT_PRESETS["smoke"], "archive": tiny_archive(4, "four.npz")}
+    config, _, policy, env = validated({**cfg, "observation": "perceptive", "scan_lr_scale": 0.1})
+    ppo = W.fine_tuning_ppo(config, policy, env)
+    blind = rl.load_policy().observation_size
+    assert (ppo.scan_inputs, ppo.scan_lr_scale) == (153, 0.1) and env.observation_size == blind + 153
+    opt = rl.make_optimizer(ppo)
+    updates, _ = opt.update(jax.tree.map(jnp.ones_like, policy.params), opt.init(policy.params), policy.params)
+    for net in ("policy", "value"):
+        kernel = np.asarray(updates[net]["params"]["mlp"]["hidden_0"]["kernel"])
+        np.testing.assert_allclose(kernel[blind:], np.full_like(kernel[blind:], 0.1 * kernel[:blind].mean()), rtol=1e-5)
+    rl.save_policy(tmp_path / "trial_0", policy.params, policy.normaliser, ppo, env.observation_size, env.action_size)
+    assert rl.load_policy(tmp_path / "trial_0").config == ppo
+    config, _, policy, env = validated(cfg)
+    assert W.fine_tuning_ppo(config, policy, env).scan_inputs == 0 and config.ppo.scan_lr_scale == 1.0
+    with pytest.raises(runner.BadInput, match=r"^LearnConfig\.curriculum\.ppo\.scan_lr_scale 0\.5 must be 1\.0 for a "
+                                              r"blind walker"):
+        validated({**cfg, "scan_lr_scale": 0.5})
 
 
 def test_learn_time_limit_counts_set_up_and_compilation(tmp_path, tiny_archive, monkeypatch):

@@ -71,6 +71,7 @@ def test_every_shipped_run_folders_config_reads_as_a_typed_run(path):
     renamed = {R.RENAMED.get(k, k): v for k, v in d.items()}
     assert {k: back[k] for k in renamed if k not in others} == {k: v for k, v in renamed.items() if k not in others}
     assert run.curriculum.ppo.truncation == d.get("truncation", "mask")
+    assert run.curriculum.ppo.scan_lr_scale == d.get("scan_lr_scale", 1.0)
     assert run.walker.backend == d.get("backend", "jax")
 
 
@@ -84,6 +85,20 @@ def test_the_spawn_rule_is_the_runs_own_and_old_runs_keep_the_old_one():
     for rule in ("feet", "patch"):
         run = R.PRESETS["smoke"]._replace(walker=R.PRESETS["smoke"].walker._replace(spawn=rule))
         assert runner.validate(run)[4].config.spawn == rule
+
+
+def test_scan_lr_scale_is_saved_and_runs_saved_before_it_read_as_1():
+    """``curriculum.ppo.scan_lr_scale`` is config.json's ``scan_lr_scale`` (``--scan-lr-scale``), read back equal;
+    a config.json written before the key reads as 1.0 (``LEGACY``: Adam's steps as they were), so an old run
+    resumes unchanged. ``scan_inputs`` is no key: the walker's scan size (``curriculum.walker.fine_tuning_ppo``)."""
+    smoke = R.PRESETS["smoke"]
+    assert R.LEGACY["scan_lr_scale"] == 1.0 and smoke.curriculum.ppo.scan_lr_scale == 1.0
+    run = smoke._replace(curriculum=smoke.curriculum._replace(ppo=smoke.curriculum.ppo._replace(scan_lr_scale=0.1)))
+    flat = json.loads(json.dumps(R.to_flat(run, "learn")))
+    assert flat["scan_lr_scale"] == 0.1 and R.FLAT_FIELDS["scan_lr_scale"] == "curriculum.ppo.scan_lr_scale"
+    assert R.from_flat(flat) == run and "scan_inputs" not in flat
+    old = {k: v for k, v in flat.items() if k != "scan_lr_scale"}
+    assert R.from_flat(old).curriculum.ppo.scan_lr_scale == 1.0
 
 
 def test_from_flat_refuses_unknown_keys_and_validation_names_the_field(tmp_path):

@@ -204,6 +204,10 @@ CASES = [
     (["curriculum", "--randomise", "delay=2:1"], "--randomise: randomisation.delay must be (low, high) env steps"),
     (["evaluate", "--randomise", "push=10"], "--randomise: item push=10: give EVERY:VELOCITY"),
     (["evaluate", "--randomise", "legged-gym", "--videos"], "--videos draws the walks under the nominal physics"),
+    (["learn", "--scan-lr-scale", "0.5"], "--scan-lr-scale 0.5 must be 1.0 for a blind walker (it scales Adam's "
+                                          "steps on weights reading a height scan: --observation perceptive)"),
+    (["curriculum", "--scan-lr-scale", "2"], "--scan-lr-scale 2.0 must be 1.0 for a blind walker"),
+    (["learn", "--observation", "perceptive", "--scan-lr-scale", "0"], "--scan-lr-scale must be a finite number > 0"),
     (["perceptive-policy"], "give --out FOLDER or --export-assets"),
     (["perceptive-policy", "--out", "x", "--std-floor", "0"], "--std-floor must be a finite number > 0"),
     # issue 64 item 4: which archive the baselines run on (checked before any archive is read)

@@ -562,6 +562,33 @@ def test_the_fine_tuning_flags_and_the_default_archives():
     assert learn.PRESETS == presets.FLAT_PRESETS
 
 
+def test_scan_lr_scale_is_saved_handed_to_the_runner_and_kept_on_resume(tmp_path, four_archive, monkeypatch, capsys):
+    """``learn`` / ``curriculum --observation perceptive --scan-lr-scale 0.1`` save the scale in ``config.json``
+    (each treatment's too) and hand the runner a run whose fine-tuning PPO scales the walker's 153 scan rows by it;
+    ``--resume`` continues with the saved value (a flag given then is ignored, with a note). The runner is a
+    stand-in (None: stopped by the time limit): nothing compiles."""
+    from jaxterrain.curriculum import walker as W
+
+    seen = []
+    monkeypatch.setattr(runner, "run_treatment", lambda run, folder, *a, **kw: seen.append((run, Path(folder))))
+    out = tmp_path / "learn"
+    assert cli("learn", "--preset", "smoke", "--archive", four_archive, "--observation", "perceptive",
+               "--scan-lr-scale", "0.1", "--out", str(out)) == 3
+    assert json.loads((out / "config.json").read_text())["scan_lr_scale"] == 0.1 and seen[-1][1] == out
+    _, config, _, policy, env = runner.validate(seen[-1][0])
+    ppo = W.fine_tuning_ppo(config, policy, env)
+    assert (ppo.scan_inputs, ppo.scan_lr_scale) == (153, 0.1)
+    capsys.readouterr()
+    assert cli("learn", "--resume", str(out), "--scan-lr-scale", "0.5") == 3
+    assert seen[-1][0] == seen[0][0] and "--resume: ignoring ['scan_lr_scale']" in capsys.readouterr().err
+    out = tmp_path / "curriculum"
+    assert cli("curriculum", "--preset", "smoke", "--archives", f"cppn={four_archive}", "--observation",
+               "perceptive", "--scan-lr-scale", "0.1", "--no-batch-treatments", "--out", str(out)) == 3
+    for name in ("cppn-map", "cppn-roughness"):
+        assert json.loads((out / name / "config.json").read_text())["scan_lr_scale"] == 0.1
+    assert seen[-1][0].curriculum.ppo.scan_lr_scale == 0.1 and seen[-1][0].walker.observation == "perceptive"
+
+
 # ---------------------------------------------------------------------------------------------------------------
 # learn --backend
 # ---------------------------------------------------------------------------------------------------------------

@@ -159,3 +159,24 @@ def test_scan_lr_scale_shrinks_adams_steps_on_the_first_layers_scan_rows_only():
         rl.validate_config(base.config._replace(scan_lr_scale=0.0))
     with pytest.raises(ValueError, match="scan_inputs"):
         rl.validate_config(base.config._replace(scan_inputs=-1))
+
+
+def test_scan_lr_scale_refuses_networks_whose_first_layer_is_not_wider_than_the_scan():
+    """``scale_scan_rows`` (``make_optimizer`` with ``scan_lr_scale`` != 1) scales the last ``scan_inputs`` rows of
+    every first-layer kernel; networks with no first layer, or one of ``scan_inputs`` rows or fewer (a blind
+    policy's, or a scan size that is not the walker's), are refused in one line at ``init`` and at ``update``."""
+    config = rl.PPOConfig(policy_hidden=(4,), value_hidden=(4,), scan_inputs=6, scan_lr_scale=0.1)
+    wide = nets.init_params(jax.random.PRNGKey(0), config, 9, 2)  # 3 blind entries, then 6 scanned
+    opt = rl.make_optimizer(config)
+    updates, _ = opt.update(jax.tree.map(jnp.ones_like, wide), opt.init(wide), wide)
+    kernel = np.asarray(updates["policy"]["params"]["mlp"]["hidden_0"]["kernel"])
+    np.testing.assert_allclose(kernel[3:], 0.1 * kernel[:3].mean() * np.ones_like(kernel[3:]), rtol=1e-5)
+    for narrow in (nets.init_params(jax.random.PRNGKey(0), config, 6, 2),  # the scan alone: no blind rows
+                   nets.init_params(jax.random.PRNGKey(0), config, 4, 2),
+                   {"policy": {"params": {"dense": {"kernel": jnp.ones((9, 4))}}}}):  # no hidden_0 at all
+        with pytest.raises(ValueError, match=r"^rl.scale_scan_rows: scan_inputs=6 needs first-layer kernels"):
+            opt.init(narrow)
+        scale = rl.scale_scan_rows(6, 0.1)
+        with pytest.raises(ValueError, match=r"^rl.scale_scan_rows: scan_inputs=6 needs"):
+            scale.update(narrow, scale.init(wide))
+    assert rl.make_optimizer(config._replace(scan_lr_scale=1.0)).init(narrow) is not None  # scale 1: nothing scaled

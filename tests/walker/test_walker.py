@@ -280,8 +280,9 @@ def test_height_scan_turns_with_the_heading_noise_is_a_pure_function_of_the_stat
 
 def test_observation_fields_and_old_records():
     """What a walker observes, from a config or a policy's recorded walker_config: blind carries no grid, a record
-    without the field is blind (or perceptive where it said height_scan: true), the robot's grid fills in."""
-    from jaxterrain.walker import observation_fields, observation_label, with_observation
+    without the field is blind (or perceptive where it said height_scan: true), the robot's grid fills in;
+    ``scan_size``: the scan's entries at the end of the observation (0 blind)."""
+    from jaxterrain.walker import observation_fields, observation_label, scan_size, with_observation
 
     assert observation_fields(CFG) == {"observation": "blind"}
     seeing = observation_fields(with_observation(CFG, "perceptive"))
@@ -290,6 +291,8 @@ def test_observation_fields_and_old_records():
     assert observation_fields({"observation": "perceptive", "scan_points": [17, 9]}) == seeing
     assert observation_fields({"height_scan": True, "robot": "ant"})["scan_points"] == (17, 11)
     assert observation_label(seeing) == "perceptive (17 x 9 heights, x -0.4..1.2 m, y -0.4..0.4 m)"
+    assert scan_size(CFG) == 0 and scan_size(with_observation(CFG, "perceptive")) == 153
+    assert scan_size(with_observation(CFG, "perceptive")._replace(robot="ant")) == 17 * 11
     with pytest.raises(ValueError, match="^observation must be one of blind, perceptive"):
         with_observation(CFG, "sighted")
 
