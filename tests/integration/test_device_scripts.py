@@ -106,6 +106,24 @@ def test_exp4_ant_script_parses_and_refuses_a_third_treatment(tmp_path):
     assert not (tmp_path / "runs").exists()
 
 
+@pytest.mark.parametrize("argv, message", [
+    (["0.1", "mixed-dr", "mixed-plr", "mixed-map"], "give one or two treatments (one per GPU), got: mixed-dr "
+                                                    "mixed-plr mixed-map"),
+    (["mixed-accel"], "TREATMENT must be one of steps-map mixed-map mixed-dr mixed-plr mixed-levels, got mixed-accel"),
+    (["1", "mixed-dr"], "C must be a finite number > 0 other than 1, got 1"),
+    (["0", "mixed-dr"], "C must be a finite number > 0 other than 1, got 0"),
+])
+def test_exp4_scan_script_parses_and_refuses_bad_arguments(tmp_path, argv, message):
+    """``exp4_scan.sh LIMIT_S [C] [T1 [T2]]`` (the perceptive humanoid retrained with --scan-lr-scale C, one
+    treatment per GPU, then its walks): valid bash, and a bad scale, an unknown treatment or a third one refused in
+    one line before anything runs or unpacks."""
+    subprocess.run(["bash", "-n", str(DEVICE / "exp4_scan.sh")], check=True)
+    got = subprocess.run(["bash", str(DEVICE / "exp4_scan.sh"), "100", *argv], cwd=tmp_path, capture_output=True,
+                         text=True)
+    assert got.returncode == 2 and got.stderr == f"exp4_scan.sh: {message}\n"
+    assert not (tmp_path / "runs").exists()
+
+
 def test_heldout_script_parses_and_needs_walkers_for_a_new_folder(tmp_path):
     """``heldout.sh OUT POLICY...``: valid bash; a new folder without walkers is refused in one line (a folder with
     a config.json resumes instead)."""

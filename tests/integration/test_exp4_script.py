@@ -55,6 +55,18 @@ def no_stock_warp_here(run, monkeypatch):
     (["evaluate", "--shard", "0/2"], "--shard splits a 'train' stage over processes"),
     (["evaluate", "--part", "2/2"], "--part must be K/N with integers 0 <= K < N; got '2/2'"),
     (["train", "humanoid", "blind", "--part", "0/2"], "--part splits the walks of 'evaluate' over processes"),
+    (["evaluate", "--scan-lr-scale", "0.1"], "--scan-lr-scale retrains perceptive humanoid treatments: 'train "
+                                             "humanoid perceptive --scan-lr-scale C --treatments T ...'"),
+    (["train", "humanoid", "blind", "--scan-lr-scale", "0.1", "--treatments", "mixed-dr"],
+     "--scan-lr-scale retrains perceptive humanoid treatments"),
+    (["train", "ant", "--ant", "blind/mixed-dr", "--scan-lr-scale", "0.1"],
+     "--scan-lr-scale retrains perceptive humanoid treatments"),
+    (["train", "humanoid", "perceptive", "--scan-lr-scale", "0.1"], "--scan-lr-scale needs --treatments T [T ...]"),
+    *[(["train", "humanoid", "perceptive", "--scan-lr-scale", c, "--treatments", "mixed-dr"],
+       "--scan-lr-scale must be a finite number > 0 other than 1 (1: the original run, without the flag); got "
+       + str(float(c))) for c in ("0", "-0.1", "1", "1.0", "nan", "inf")],
+    (["train", "humanoid", "perceptive", "--scan-lr-scale", "0.1", "--treatments", "mixed-dr", "mixed-dr"],
+     "--treatments: each treatment once; got mixed-dr mixed-dr"),
 ])
 def test_bad_arguments_are_one_line_naming_the_flag(run, argv, message, capsys, tmp_path):
     with pytest.raises(SystemExit) as err:
@@ -193,7 +205,7 @@ def test_a_sharded_ant_train_runs_only_its_share_of_the_chosen_treatments(run, t
 
 def test_an_ant_treatment_is_one_learn_run_on_the_ants_archive(run, tmp_path):
     args = argparse.Namespace(out=tmp_path, preset="gpu-short", trials=10, backend="warp", archive_size=None)
-    argv = run.learn_argv(args, "perceptive", "mixed-plr")
+    argv = run.learn_argv(args, "ant", "perceptive", "mixed-plr", run.train_folder(tmp_path, "ant", "perceptive"))
     assert argv[:2] == ["learn", "--robot"] and argv[2] == "ant"
     flags = dict(zip(argv[3::2], argv[4::2]))
     assert flags == {"--preset": "gpu-short", "--archive": str(tmp_path / "archive" / "ant-mixed" / "archive.npz"),
@@ -386,3 +398,175 @@ def test_plan_with_pack_packs_without_running_anything(run, tmp_path, monkeypatc
     assert "predicted device time" in capsys.readouterr().out
     with tarfile.open(tmp_path / "exp4.tar.gz") as tar:
         assert sorted(tar.getnames()) == ["exp4/archive/ant-steps/archive.npz", "exp4/archive/ant-steps/done.json"]
+
+
+def scan_args(run, tmp_path, *extra):
+    """``train humanoid perceptive --scan-lr-scale 0.1 --treatments ...`` parsed and checked (nothing runs)."""
+    p = run.parser()
+    args = p.parse_args(["train", "humanoid", "perceptive", "--scan-lr-scale", "0.1", "--out", str(tmp_path / "exp4"),
+                         *extra])
+    run.check(p, args)
+    return args
+
+
+def test_a_scan_retrain_treatment_is_one_learn_run_with_the_scale(run, tmp_path):
+    """Each retrained treatment is ``learn --robot humanoid --observation perceptive --scan-lr-scale C`` on the
+    humanoid's archive of its generator with its curriculum (the shipped steps archive at gpu-short), into
+    ``OUT/train/humanoid-perceptive-scan<C>/<T>``; ``learn``'s own parser reads it. A retrain needs no mixed-map
+    beside a mixed-* baseline (learn runs, not one curriculum run)."""
+    from experiments import learn
+
+    args = scan_args(run, tmp_path, "--treatments", "mixed-dr", "steps-map", "--backend", "jax")
+    folder = run.scan_folder(args.out, 0.1)
+    assert folder == tmp_path / "exp4" / "train" / "humanoid-perceptive-scan0.1"
+    parser = argparse.ArgumentParser()
+    learn.add_arguments(parser)
+    for treatment, archive, curriculum in (("mixed-dr", args.out / "archive" / "humanoid-mixed" / "archive.npz", "dr"),
+                                           ("steps-map", ROOT / run.SHIPPED_STEPS, "map")):
+        argv = run.learn_argv(args, "humanoid", "perceptive", treatment, folder, args.scan_lr_scale)
+        assert argv[0] == "learn"
+        a = parser.parse_args(argv[1:])
+        assert (a.robot, a.observation, a.scan_lr_scale, a.curriculum, a.preset, a.trials, a.backend) == (
+            "humanoid", "perceptive", 0.1, curriculum, "gpu-short", 10, "jax")
+        assert a.archive == str(archive) and a.out == folder / treatment
+    ant = run.learn_argv(args, "ant", "blind", "mixed-dr", run.train_folder(args.out, "ant", "blind"))
+    assert "--scan-lr-scale" not in ant  # the ant's runs: as before
+
+
+def test_a_sharded_scan_retrain_trains_its_share_and_keeps_its_choice(run, tmp_path, monkeypatch, capsys):
+    """``--shard I/2`` trains the I-th of the saved treatments (one learn run each); the choice lands in
+    ``OUT/scan.json`` and another scale or set is refused in one line; a treatment with a config.json resumes; the
+    original ``train humanoid perceptive`` (no --scan-lr-scale) still runs its curriculum run and writes no
+    scan.json."""
+    calls = []
+
+    def learn(argv, args):
+        calls.append(argv)
+        if argv[0] == "learn" and argv[1] != "--resume":
+            folder = Path(argv[argv.index("--out") + 1])
+            (folder / "policies").mkdir(parents=True)
+            (folder / "summary.json").write_text("{}")
+        return 0
+
+    monkeypatch.setattr(run, "cli", learn)
+    monkeypatch.setattr(run, "archive_done", lambda *a: True)
+    out = tmp_path / "exp4"
+    base = ["train", "humanoid", "perceptive", "--out", str(out)]
+    scan = [*base, "--scan-lr-scale", "0.1", "--treatments", "mixed-dr", "mixed-plr"]
+    assert run.main([*scan, "--shard", "1/2"]) == 0
+    assert [(c[c.index("--curriculum") + 1], c[c.index("--scan-lr-scale") + 1]) for c in calls] == [("plr", "0.1")]
+    assert json.loads((out / "scan.json").read_text()) == {"scale": 0.1, "treatments": ["mixed-dr", "mixed-plr"]}
+    assert "train humanoid perceptive-scan0.1/mixed-plr: done" in capsys.readouterr().out
+    assert run.main([*base, "--scan-lr-scale", "0.1", "--treatments", "mixed-plr", "mixed-dr", "--shard", "0/2"]) == 0
+    assert calls[-1][calls[-1].index("--curriculum") + 1] == "dr"  # the saved order splits, not the one given
+    assert run.main(scan) == 0 and len(calls) == 2  # both done: nothing runs
+    assert capsys.readouterr().out.count(": done (") == 3
+    for other in (["--scan-lr-scale", "0.2", "--treatments", "mixed-dr", "mixed-plr"],
+                  ["--scan-lr-scale", "0.1", "--treatments", "mixed-dr"]):
+        assert run.main([*base, *other]) == 2
+        assert "scan.json chose --scan-lr-scale 0.1 --treatments mixed-dr mixed-plr" in capsys.readouterr().err
+    (out / "scan.json").unlink()
+    folder = run.scan_folder(out, 0.1) / "mixed-levels"
+    folder.mkdir(parents=True)
+    (folder / "config.json").write_text("{}")
+    assert run.main([*base, "--scan-lr-scale", "0.1", "--treatments", "mixed-levels"]) == 0
+    assert calls[-1] == ["learn", "--resume", str(folder)]
+    assert run.main(base) == 0  # the original run: one curriculum run, its own folder
+    assert calls[-1][0] == "curriculum" and calls[-1][calls[-1].index("--out") + 1] == str(
+        run.train_folder(out, "humanoid", "perceptive")) and "--scan-lr-scale" not in calls[-1]
+
+
+def fake_finished(folder: Path, names, trials: int = 2) -> None:
+    """Treatments as a finished train leaves them (summary.json, policies/trial_K)."""
+    for t in names:
+        for k in range(trials):
+            (folder / t / "policies" / f"trial_{k}").mkdir(parents=True, exist_ok=True)
+        (folder / t / "summary.json").write_text("{}")
+
+
+def test_the_scan_retrain_is_a_run_of_its_own_in_the_plan(run, tmp_path, capsys):
+    """Once ``OUT/scan.json`` exists, :func:`runs` lists the retrain after the others (its own folder, the
+    perceptive base policy's walks not counted twice); ``--plan``'s state keys it apart from the original perceptive
+    run (train and walks), its learn runs are not counted as a population, and its walkers walk on the perceptive
+    program (no second first walk)."""
+    out = tmp_path / "exp4"
+    out.mkdir()
+    (out / "humanoid.json").write_text(json.dumps({"treatments": ["mixed-map", "mixed-dr"]}))
+    for obs in run.OBSERVATIONS:
+        fake_finished(run.train_folder(out, "humanoid", obs), ["mixed-map", "mixed-dr"])
+    args = argparse.Namespace(out=out, preset="gpu-short", backend=None, eval_backend="warp", trials=2, keys=3,
+                              suites=["v2"])
+    before = run.read_state(args)
+    assert before["train_left"] == {"humanoid blind": 0, "humanoid perceptive": 0}
+    (out / "scan.json").write_text(json.dumps({"scale": 0.1, "treatments": ["mixed-dr", "steps-map"]}))
+    scan = run.scan_folder(out, 0.1)
+    assert run.runs(out)[-1] == ("humanoid", "perceptive", scan, ["mixed-dr", "steps-map"])
+    assert [f.name for _, _, f, _ in run.runs(out)[:2]] == ["humanoid-blind", "humanoid-perceptive"]
+    fake_finished(scan, ["mixed-dr"])
+    state = run.read_state(args)
+    assert state["train_left"] == {"humanoid blind": 0, "humanoid perceptive": 0, "humanoid perceptive-scan0.1": 1}
+    assert state["walks_left"]["v2"] == {("humanoid", "blind"): 4 + 3, ("humanoid", "perceptive"): 4 + 3,
+                                         ("humanoid", "perceptive-scan0.1"): 4}  # the base walks once
+    assert run.humanoid_generators(out) == ["steps", "mixed"]  # the retrain's steps-map: the shipped archive
+    assert state["archives_left"] == [("humanoid", "mixed")]
+    rates = {**run.RATES, "treatment_s_warp": ((400.0, 500.0), ""), "population_factor": (0.5, ""),
+             "compile_s": ((10.0, 80.0), ""), "v2_first_s": (70.0, ""), "v2_walker_s_warp": ((20.0, 30.0), ""),
+             "build_s": (60.0, "")}
+    got = run.predict({**state, "ant_pending": False, "measured": {}, "archives_left": []}, rates)
+    assert got["train humanoid perceptive-scan0.1"] == (400.0 + 2 * 10, 500.0 + 2 * 80)  # no population factor
+    assert got["evaluate v2"] == (60 + 2 * 70 + (18 - 2) * 20.0, 60 + 2 * 70 + (18 - 2) * 30.0)  # two programs
+    assert run.main(["--plan", "--out", str(out), "--trials", "2", "--keys", "3", "--suites", "v2"]) == 0
+    text = capsys.readouterr().out
+    assert "train humanoid perceptive: 2/2 treatments done" in text
+    assert "train humanoid perceptive-scan0.1: 1/2 treatments done" in text
+    assert "humanoid perceptive 7 walks left" in text and "humanoid perceptive-scan0.1 4 walks left" in text
+    assert run.trained(out) == ([run.train_folder(out, "humanoid", o) for o in run.OBSERVATIONS],
+                                ["humanoid-perceptive-scan0.1"])
+    assert any(p.relative_to(out).parts[:3] == ("train", scan.name, "mixed-dr") for p in run.pack_members(out))
+
+
+def test_write_puts_the_retrains_pages_in_its_folder_and_compares_it(run, tmp_path, monkeypatch, capsys):
+    """``write``: each run's pages in ``--results/<run folder>/<suite>/`` (the original runs' as before), the
+    retrain's against the perceptive base policy, then one comparison page per suite (each retrained treatment, the
+    same at scale 1 and blind) in ``humanoid-perceptive-scan<C>/<suite>-compare/``, v1 beside v2."""
+    out, results = tmp_path / "exp4", tmp_path / "pages"
+    out.mkdir()
+    (out / "humanoid.json").write_text(json.dumps({"treatments": ["mixed-map", "mixed-dr"]}))
+    (out / "scan.json").write_text(json.dumps({"scale": 0.1, "treatments": ["mixed-dr"]}))
+    scan = run.scan_folder(out, 0.1)
+    folders = [run.train_folder(out, "humanoid", o) for o in run.OBSERVATIONS] + [scan]
+    for f in folders:
+        fake_finished(f, ["mixed-map", "mixed-dr"] if f != scan else ["mixed-dr"])
+        for t in ["mixed-map", "mixed-dr"] if f != scan else ["mixed-dr"]:
+            for suite in run.SUITES:
+                (f / t / f"heldout_{suite}").mkdir()
+                (f / t / f"heldout_{suite}" / "fitness.csv.gz").write_text("")
+    for suite in run.SUITES:
+        (out / "eval" / suite).mkdir(parents=True)
+        (out / "eval" / suite / "settings.json").write_text(json.dumps({"backend": "warp"}))
+    walked, calls = [], []
+
+    class Reevaluate:
+        @staticmethod
+        def main(argv):
+            walked.append(argv)
+            return 0
+
+    monkeypatch.setattr(run, "load_reevaluate", lambda: Reevaluate)
+    monkeypatch.setattr(run, "cli", lambda argv, args: calls.append(argv) or 0)
+    assert run.main(["write", "--out", str(out), "--results", str(results)]) == 0
+    assert all(str(scan) in argv for argv in walked) and len(walked) == 2  # the retrain's heldout written too
+    dests = [Path(c[c.index("--out") + 1]).relative_to(results).as_posix() for c in calls]
+    assert dests == ["humanoid-blind/v1", "humanoid-blind/v2", "humanoid-perceptive/v1", "humanoid-perceptive/v2",
+                     "humanoid-perceptive-scan0.1/v1", "humanoid-perceptive-scan0.1/v2",
+                     "humanoid-perceptive-scan0.1/v1-compare", "humanoid-perceptive-scan0.1/v2-compare"]
+    bases = [Path(c[c.index("--base") + 1]).relative_to(out).as_posix() for c in calls]
+    assert bases[:2] == ["base_v1/humanoid", "base_v2/humanoid"]
+    assert set(bases[2:]) <= {"base_v1/humanoid_perceptive", "base_v2/humanoid_perceptive"}
+    assert calls[4][1:3] == [f"mixed-dr={scan / 'mixed-dr'}", "--heldout"]
+    assert calls[7][1:4] == [f"perceptive-mixed-dr-scan0.1={scan / 'mixed-dr'}",
+                             f"perceptive-mixed-dr={run.train_folder(out, 'humanoid', 'perceptive') / 'mixed-dr'}",
+                             f"blind-mixed-dr={run.train_folder(out, 'humanoid', 'blind') / 'mixed-dr'}"]
+    assert calls[7][calls[7].index("--heldout") + 1] == "heldout_v2"
+    assert calls[7][-2:] == ["--beside", f"v1={results / 'humanoid-perceptive-scan0.1' / 'v1-compare'}"]
+    assert all(c[0] == "generalise" for c in calls)

@@ -6,6 +6,7 @@
     PYTHONPATH=. python docs/results/exp4/run.py train humanoid perceptive --time-limit 8 --pack $OUT/exp4.tar.gz
     PYTHONPATH=. python docs/results/exp4/run.py archive steps --robot ant --time-limit 8 ...     # the ant's archives
     PYTHONPATH=. python docs/results/exp4/run.py train ant --ant perceptive/mixed-map blind/steps-map --time-limit 8 ...
+    PYTHONPATH=. python docs/results/exp4/run.py train humanoid perceptive --scan-lr-scale 0.1 --treatments ...
     PYTHONPATH=. python docs/results/exp4/run.py evaluate --time-limit 8 --pack $OUT/exp4.tar.gz   # v2, then v1
     PYTHONPATH=. python docs/results/exp4/run.py write                                   # CPU: docs/results/exp4/
 
@@ -30,6 +31,16 @@ Stages (:data:`STAGES`):
   results, each a ``learn --robot ant`` run on the ant's own archive (``archive GEN --robot ant`` first; an archive's
   fitness is one robot's), ``OUT/train/ant-OBS/TREATMENT/``. The choice is saved in ``OUT/ant.json``; later stages
   read it. ``--shard I/N`` trains only the I-th, (I+N)-th, ... of the ``--ant`` treatments (one per GPU).
+- ``train humanoid perceptive --scan-lr-scale C --treatments T [T ...]`` (C finite, > 0, not 1): the perceptive
+  humanoid's treatments retrained with the height scan's first-layer Adam steps scaled by C (``learn
+  --scan-lr-scale``; docs/results/exp4/scan_diag/README.md), each a ``learn --robot humanoid --observation
+  perceptive`` run on the humanoid's archive of T's generator with T's curriculum (the same config as the
+  ``curriculum`` run's treatment but for the scale), ``OUT/train/humanoid-perceptive-scan<C>/T/``. The choice is
+  saved in ``OUT/scan.json`` (one per ``--out``); later stages read it: ``evaluate`` walks its walkers (the
+  perceptive base policy's walks are the ones already there), ``write`` writes its pages against the perceptive
+  base policy and a comparison page per suite (each T retrained, at scale 1 and blind:
+  ``humanoid-perceptive-scan<C>/<suite>-compare/``). ``--shard I/N`` as for the ant. Without
+  ``--scan-lr-scale``, ``train humanoid perceptive`` is the original ``curriculum`` run above.
 - ``evaluate [--part K/N]``: every walker of the train runs and each robot's shipped base policies, blind and perceptive, with
   ``--keys`` (10) evaluation keys, on suite v2 and then v1 (``suite.load(V, robot=...)``), through
   ``docs/results/suite_v2/reevaluate.py`` (:mod:`jaxterrain.suite.batch`: one result file per walk, written when it
@@ -41,7 +52,8 @@ Stages (:data:`STAGES`):
   each treatment, the base policies in ``OUT/base_<suite>/<robot>[_perceptive]/``), then ``generalise`` per robot,
   observation set and suite against that observation set's base policy (``--base``: its 10 keys), with levels passed
   and trial-level intervals (``levels.csv``, ``intervals.csv``, ``generalisation.md``), into
-  ``--results/<robot>-<obs>/<suite>/`` (default ``docs/results/exp4/``), v1 beside v2 (``--beside``).
+  ``--results/<run folder>/<suite>/`` (``<robot>-<obs>``, or ``humanoid-perceptive-scan<C>``; default
+  ``docs/results/exp4/``), v1 beside v2 (``--beside``).
 - ``--plan``: what is done and the predicted device minutes of the rest (:func:`predict`), from the measured rates of
   :data:`RATES` (or the walks a store recorded), each figure marked measured or assumed.
 
@@ -152,11 +164,16 @@ def parser() -> argparse.ArgumentParser:
                    help=f"train humanoid: a subset of the treatments (default all: {', '.join(TREATMENTS)}; a "
                         f"mixed-* baseline needs mixed-map, which its curriculum run makes too); saved in "
                         f"OUT/humanoid.json at the first train")
+    p.add_argument("--scan-lr-scale", type=float, default=None, metavar="C",
+                   help="train humanoid perceptive: retrain --treatments with learn --scan-lr-scale C (finite, > 0, "
+                        "not 1) into OUT/train/humanoid-perceptive-scan<C>/ (saved in OUT/scan.json; later stages "
+                        "read it); without it, the original curriculum run")
     p.add_argument("--shard", default=None, metavar="I/N",
                    help="train humanoid: only process I's share of its curriculum run (curriculum --shard: whole "
                         "populations, balanced), so that N processes (one per GPU: CUDA_VISIBLE_DEVICES=I) share one "
-                        "run; then the same train without --shard writes the tables (nothing compiles). train ant: "
-                        "only the I-th, (I+N)-th, ... of the --ant treatments")
+                        "run; then the same train without --shard writes the tables (nothing compiles). train ant "
+                        "(and train humanoid perceptive --scan-lr-scale): only the I-th, (I+N)-th, ... of its "
+                        "treatments")
     p.add_argument("--part", default=None, metavar="K/N",
                    help="evaluate: walk only part K of N of the walks (reevaluate.py's --part: every N-th walk from "
                         "the K-th, into the one store), so that N processes, one per GPU, share them")
@@ -212,15 +229,28 @@ def check(p: argparse.ArgumentParser, args) -> None:
     if args.ant is not None and not (words and words[:2] == ("train", "ant")):
         p.error("--ant chooses the ant's treatments of 'train ant' (later stages read OUT/ant.json)")
     args.ant_pairs = None if args.ant is None else parse_ant(p, args.ant)
+    if args.scan_lr_scale is not None:
+        if words != ("train", "humanoid", "perceptive"):
+            p.error("--scan-lr-scale retrains perceptive humanoid treatments: 'train humanoid perceptive "
+                    "--scan-lr-scale C --treatments T ...' (later stages read OUT/scan.json)")
+        if args.treatments is None:
+            p.error("--scan-lr-scale needs --treatments T [T ...]: the perceptive humanoid's treatments to retrain")
+        c = args.scan_lr_scale
+        if not (math.isfinite(c) and c > 0) or c == 1:
+            p.error(f"--scan-lr-scale must be a finite number > 0 other than 1 (1: the original run, without the "
+                    f"flag); got {c}")
     if args.treatments is not None:
         if not (words and words[:2] == ("train", "humanoid")):
             p.error("--treatments chooses the humanoid's treatments of 'train humanoid' (later stages read "
                     "OUT/humanoid.json)")
-        check_treatments(p, args.treatments)
+        if args.scan_lr_scale is None:
+            check_treatments(p, args.treatments)
+        elif len(set(args.treatments)) != len(args.treatments):  # learn runs: no baseline needs mixed-map
+            p.error(f"--treatments: each treatment once; got {' '.join(args.treatments)}")
     if args.shard is not None:
         if not (words and words[0] == "train"):
             p.error("--shard splits a 'train' stage over processes (train humanoid OBS: its curriculum run's "
-                    "populations; train ant: its treatments)")
+                    "populations; train ant, train humanoid perceptive --scan-lr-scale: its treatments)")
         from experiments.common import parse_shard  # curriculum's own parser of I/N
 
         try:
@@ -302,6 +332,14 @@ def check_treatments(p: argparse.ArgumentParser, names: list[str]) -> None:
                 "it is given)")
 
 
+def humanoid_generators(out: Path) -> list[str]:
+    """The humanoid archives its runs need: each map treatment's of the curriculum run, each treatment's of the
+    retrain (``OUT/scan.json``)."""
+    retrain = (scan_choice(out) or (0.0, []))[1]
+    return [g for g in GENERATORS if f"{g}-map" in humanoid_choice(out) or any(t.split("-", 1)[0] == g
+                                                                                for t in retrain)]
+
+
 def humanoid_choice(out: Path) -> list[str]:
     """The humanoid's treatments: ``OUT/humanoid.json``'s (a subset given by ``--treatments``) or all of them."""
     path = out / "humanoid.json"
@@ -360,14 +398,38 @@ def ant_choice(out: Path) -> list[tuple[str, str]] | None:
     return None if not path.is_file() else [tuple(x) for x in json.loads(path.read_text())["treatments"]]
 
 
+def scan_choice(out: Path) -> tuple[float, list[str]] | None:
+    """The perceptive humanoid's retrain (``OUT/scan.json``): ``(scale, [treatments])``, or None before it."""
+    path = out / "scan.json"
+    if not path.is_file():
+        return None
+    saved = json.loads(path.read_text())
+    return float(saved["scale"]), list(saved["treatments"])
+
+
+def scan_folder(out: Path, scale: float) -> Path:
+    """The retrain's run folder, ``OUT/train/humanoid-perceptive-scan<C>`` (C as ``{:g}`` writes it: 0.1)."""
+    return out / "train" / f"humanoid-perceptive-scan{scale:g}"
+
+
 def runs(out: Path) -> list[tuple[str, str, Path, list[str]]]:
-    """Every train run planned: ``(robot, obs, folder, [treatments])``; the ant's once chosen (``OUT/ant.json``)."""
+    """Every train run planned: ``(robot, obs, folder, [treatments])``; the ant's once chosen (``OUT/ant.json``),
+    then the perceptive humanoid's retrain once chosen (``OUT/scan.json``)."""
     plan = [("humanoid", obs, train_folder(out, "humanoid", obs), humanoid_choice(out)) for obs in OBSERVATIONS]
     for obs in OBSERVATIONS:
         names = [t for o, t in ant_choice(out) or [] if o == obs]
         if names:
             plan.append(("ant", obs, train_folder(out, "ant", obs), names))
+    scan = scan_choice(out)
+    if scan is not None:
+        plan.append(("humanoid", "perceptive", scan_folder(out, scan[0]), scan[1]))
     return plan
+
+
+def run_label(robot: str, folder: Path) -> str:
+    """A train run's name after its robot in ``--plan``: its folder's (``blind``, ``perceptive``,
+    ``perceptive-scan0.1``); the part before the first ``-`` is its observation set."""
+    return folder.name.removeprefix(robot + "-")
 
 
 def curriculum_argv(args, obs: str, names: list[str] = TREATMENTS) -> list[str]:
@@ -384,12 +446,15 @@ def curriculum_argv(args, obs: str, names: list[str] = TREATMENTS) -> list[str]:
     return argv + (["--backend", args.backend] if args.backend else [])
 
 
-def learn_argv(args, obs: str, treatment: str) -> list[str]:
-    """The ant's ``learn`` command of one chosen treatment (a fresh run)."""
+def learn_argv(args, robot: str, obs: str, treatment: str, folder: Path, scale: float | None = None) -> list[str]:
+    """The ``learn`` command of one treatment ``<gen>-<curriculum>`` (a fresh run) into ``folder/treatment``: on
+    ``robot``'s archive of ``gen``, with ``--scan-lr-scale scale`` when given (the perceptive humanoid's retrain;
+    the ant's treatments take none)."""
     gen, curriculum = treatment.split("-", 1)
-    argv = ["learn", "--robot", "ant", "--preset", args.preset, "--archive",
-            str(archive_path(args.out, "ant", gen, args.preset)), "--curriculum", curriculum, "--observation", obs,
-            "--trials", str(args.trials), "--out", str(train_folder(args.out, "ant", obs) / treatment)]
+    argv = ["learn", "--robot", robot, "--preset", args.preset, "--archive",
+            str(archive_path(args.out, robot, gen, args.preset)), "--curriculum", curriculum, "--observation", obs,
+            "--trials", str(args.trials), "--out", str(folder / treatment)]
+    argv += [] if scale is None else ["--scan-lr-scale", repr(float(scale))]
     return argv + (["--backend", args.backend] if args.backend else [])
 
 
@@ -443,7 +508,49 @@ def stage_archive(args, gen: str, robot: str) -> int:
     return code
 
 
+def stage_train_scan(args) -> int:
+    """``train humanoid perceptive --scan-lr-scale C --treatments T ...``: one ``learn`` run per treatment (of
+    ``--shard``'s share), resumed where its ``config.json`` is; the choice saved in ``OUT/scan.json``."""
+    scale, names = args.scan_lr_scale, list(args.treatments)
+    saved = scan_choice(args.out)
+    if saved is not None and (saved[0] != scale or sorted(saved[1]) != sorted(names)):
+        print(f"train humanoid perceptive: {args.out}/scan.json chose --scan-lr-scale {saved[0]:g} --treatments "
+              f"{' '.join(saved[1])}; give the same or another --out", file=sys.stderr)
+        return 2
+    missing = [g for g in GENERATORS if any(t.split("-", 1)[0] == g for t in names)
+               and not archive_done(args.out, "humanoid", g, args.preset)]
+    if missing:
+        print(f"train humanoid perceptive: run 'archive {missing[0]}' first (no "
+              f"{archive_path(args.out, 'humanoid', missing[0], args.preset)})", file=sys.stderr)
+        return 2
+    if saved is None:
+        from jaxterrain.runtime.io import atomic_write_text
+
+        args.out.mkdir(parents=True, exist_ok=True)
+        atomic_write_text(args.out / "scan.json", json.dumps({"scale": scale, "treatments": names}) + "\n")
+    else:
+        names = saved[1]  # the saved order: every --shard splits the same list
+    if args.shard is not None:  # process I of N trains the I-th, (I+N)-th, ... of the treatments
+        index, count = args.shard
+        names = names[index::count]
+    run = scan_folder(args.out, scale)
+    label = run_label("humanoid", run)
+    for treatment in names:
+        folder = run / treatment
+        if treatment_done(folder):
+            print(f"train humanoid {label}/{treatment}: done ({folder})", flush=True)
+            continue
+        code = cli(["learn", "--resume", str(folder)] if (folder / "config.json").is_file()
+                   else learn_argv(args, "humanoid", "perceptive", treatment, run, scale), args)
+        if code != 0:
+            return code
+        print(f"train humanoid {label}/{treatment}: done ({folder})", flush=True)
+    return 0
+
+
 def stage_train(args, robot: str, obs: str | None) -> int:
+    if args.scan_lr_scale is not None:
+        return stage_train_scan(args)
     if robot == "humanoid":
         saved = (args.out / "humanoid.json").is_file()
         names = humanoid_choice(args.out) if saved or args.treatments is None else list(args.treatments)
@@ -500,7 +607,7 @@ def stage_train(args, robot: str, obs: str | None) -> int:
             print(f"train ant {obs}/{treatment}: done ({folder})", flush=True)
             continue
         code = cli(["learn", "--resume", str(folder)] if (folder / "config.json").is_file()
-                   else learn_argv(args, obs, treatment), args)
+                   else learn_argv(args, "ant", obs, treatment, train_folder(args.out, "ant", obs)), args)
         if code != 0:
             return code
         print(f"train ant {obs}/{treatment}: done ({folder})", flush=True)
@@ -610,7 +717,7 @@ def stage_write(args) -> int:
             if not all((folder / t / heldout / "fitness.csv.gz").is_file() for t in names):
                 print(f"write: {folder.name} on {suite} not all walked yet", file=sys.stderr)
                 return 2
-            dest = args.results / f"{robot}-{obs}" / suite
+            dest = args.results / folder.name / suite
             argv = ["generalise", *[f"{t}={folder / t}" for t in names], "--heldout", heldout,
                     "--base", str(args.out / f"base_{suite}" / base), "--out", str(dest)]
             argv += [] if previous is None else ["--beside", f"{previous[0]}={previous[1]}"]
@@ -618,7 +725,48 @@ def stage_write(args) -> int:
             if code:
                 return code
             previous = (suite, dest)
+    code = write_compare(args)
+    if code:
+        return code
     print(f"write: done -> {args.results}", flush=True)
+    return 0
+
+
+def compare_treatments(out: Path) -> list[tuple[str, Path]]:
+    """The retrain's comparison (``LABEL``, treatment folder): each retrained treatment T, then T of the original
+    perceptive run and of the blind one where they ran it (``perceptive-T-scan<C>``, ``perceptive-T``,
+    ``blind-T``); empty before ``OUT/scan.json``."""
+    scan = scan_choice(out)
+    if scan is None:
+        return []
+    scale, names = scan
+    ran = humanoid_choice(out)
+    pairs = []
+    for t in names:
+        pairs.append((f"perceptive-{t}-scan{scale:g}", scan_folder(out, scale) / t))
+        pairs += [(f"{obs}-{t}", train_folder(out, "humanoid", obs) / t) for obs in ("perceptive", "blind")
+                  if t in ran]
+    return pairs
+
+
+def write_compare(args) -> int:
+    """One ``generalise`` page per suite of :func:`compare_treatments` against the perceptive base policy, into
+    ``--results/humanoid-perceptive-scan<C>/<suite>-compare/`` (v1 beside v2); nothing before ``OUT/scan.json``."""
+    pairs = compare_treatments(args.out)
+    if not pairs:
+        return 0
+    scale = scan_choice(args.out)[0]
+    previous = None
+    for suite in reversed(args.suites):
+        heldout = f"heldout_{suite}"
+        dest = args.results / scan_folder(args.out, scale).name / f"{suite}-compare"
+        argv = ["generalise", *[f"{label}={folder}" for label, folder in pairs], "--heldout", heldout,
+                "--base", str(args.out / f"base_{suite}" / "humanoid_perceptive"), "--out", str(dest)]
+        argv += [] if previous is None else ["--beside", f"{previous[0]}={previous[1]}"]
+        code = cli(argv, argparse.Namespace(time_limit=None))
+        if code:
+            return code
+        previous = (suite, dest)
     return 0
 
 
@@ -634,11 +782,13 @@ def predict(state: dict, rates: dict = RATES) -> dict:
     ``rates`` (:data:`RATES`). Pure arithmetic, no files:
 
     - an archive left: its seconds (the ant's times ``archive_ant_factor``);
-    - a train run: its treatments not done x ``treatment_s_<train_backend>`` (the humanoid's population times
-      ``population_factor``), plus ``compile_s`` for each command of 480 s less the compile that it needs;
-    - a suite: for each robot with walks left, a build, one first walk per program (observation set) with walks
-      left, and the other walks at ``<suite>_walker_s_<eval_backend>`` (the ant's times ``ant_eval_factor``); the
-      walks a store recorded replace the rates (``state["measured"][suite]``: ``(first_s, (low, high))``);
+    - a train run: its treatments not done x ``treatment_s_<train_backend>`` (the humanoid's ``curriculum`` runs,
+      ``humanoid OBS``, times ``population_factor``; the retrain's ``learn`` runs, ``humanoid perceptive-scan<C>``,
+      not), plus ``compile_s`` for each command of 480 s less the compile that it needs;
+    - a suite: for each robot with walks left, a build, one first walk per program (observation set: a run label's
+      part before ``-``) with walks left, and the other walks at ``<suite>_walker_s_<eval_backend>`` (the ant's
+      times ``ant_eval_factor``); the walks a store recorded replace the rates (``state["measured"][suite]``:
+      ``(first_s, (low, high))``);
     - before the ant's treatments are chosen (``state["ant_pending"]``): two ant treatments, both ant archives and
       the ant's walks (two programs: ``2 x trials`` walkers and ``2 x keys`` base walks per suite)."""
     out = {}
@@ -655,7 +805,8 @@ def predict(state: dict, rates: dict = RATES) -> dict:
         return seconds[0] + n * lo_c, seconds[1] + n * hi_c
 
     for name, left in state["train_left"].items():
-        k = rates["population_factor"][0] if name.startswith("humanoid") else 1.0
+        robot, label = name.split(" ", 1)
+        k = rates["population_factor"][0] if robot == "humanoid" and label in OBSERVATIONS else 1.0
         if left:
             out[f"train {name}"] = train((left * lo_t * k, left * hi_t * k))
     walks_left = {suite: dict(w) for suite, w in state["walks_left"].items()}
@@ -675,9 +826,12 @@ def predict(state: dict, rates: dict = RATES) -> dict:
         lo = hi = 0.0
         for robot in dict.fromkeys(r for r, _ in walks):
             f = rates["ant_eval_factor"][0] if robot == "ant" else 1.0
-            programs = [n for (r, _), n in walks.items() if r == robot and n > 0]
+            programs = {}  # {observation set: walks left}: the retrain's walkers walk on the perceptive program
+            for (r, label), n in walks.items():
+                if r == robot and n > 0:
+                    programs[label.split("-", 1)[0]] = programs.get(label.split("-", 1)[0], 0) + n
             if programs:
-                n, m = sum(programs), len(programs)
+                n, m = sum(programs.values()), len(programs)
                 lo += f * (rates["build_s"][0] + m * first + (n - m) * lo_w)
                 hi += f * (rates["build_s"][0] + m * first + (n - m) * hi_w)
         if lo or hi:
@@ -691,13 +845,14 @@ def commands(seconds: tuple[float, float], limit_s: float = 480.0) -> int:
 
 
 def read_state(args) -> dict:
-    """What ``--out`` holds, for :func:`predict`: archives left, treatments left per train run, walks left per suite
-    and ``(robot, observation set)`` (walkers of the planned runs, and ``--keys`` base walks of both observation sets
-    of each robot that trains), the walk rates recorded in each store, the backends counted (train: ``--backend``,
-    else ``warp``, what ``auto`` picks where MuJoCo Warp is installed; evaluate: ``--backend``, else ``jax``)."""
+    """What ``--out`` holds, for :func:`predict`: archives left, treatments left per train run (``"robot label"``,
+    :func:`run_label`), walks left per suite and ``(robot, label)`` (walkers of the planned runs, and ``--keys`` base
+    walks of both observation sets of each robot that trains, under the observation set's own label), the walk
+    rates recorded in each store, the backends counted (train: ``--backend``, else ``warp``, what ``auto`` picks
+    where MuJoCo Warp is installed; evaluate: ``--backend``, else ``jax``)."""
     out = args.out
     choice = ant_choice(out)
-    needed = [("humanoid", g) for g in GENERATORS if f"{g}-map" in humanoid_choice(out)]
+    needed = [("humanoid", g) for g in humanoid_generators(out)]
     needed += [("ant", g) for g in dict.fromkeys(t.split("-", 1)[0] for _, t in choice or [])]
     state = {"archives_left": [(r, g) for r, g in needed if not archive_done(out, r, g, args.preset)],
              "train_left": {}, "walks_left": {}, "measured": {}, "ant_pending": choice is None,
@@ -706,15 +861,17 @@ def read_state(args) -> dict:
     state["archive_share"] = {(r, g): archive_share_left(out, r, g, args.preset)
                               for r, g in [("humanoid", g) for g in GENERATORS] + [("ant", g) for g in GENERATORS]}
     plan = runs(out)
-    for robot, obs, folder, names in plan:
-        state["train_left"][f"{robot} {obs}"] = sum(not treatment_done(folder / t) for t in names)
+    for robot, _, folder, names in plan:  # keys "robot label": the retrain apart from the original run
+        state["train_left"][f"{robot} {run_label(robot, folder)}"] = sum(not treatment_done(folder / t)
+                                                                         for t in names)
     for suite in args.suites:
         results = out / "eval" / suite / "results"
         have = {p.stem for p in results.glob("*.npz")} if results.is_dir() else set()
         walks = {}
-        for robot, obs, folder, names in plan:
-            walks[(robot, obs)] = sum(_file(str(folder / t / "policies" / f"trial_{k}")) not in have
-                                      for t in names for k in range(args.trials))
+        for robot, _, folder, names in plan:
+            walks[(robot, run_label(robot, folder))] = sum(
+                _file(str(folder / t / "policies" / f"trial_{k}")) not in have for t in names
+                for k in range(args.trials))
         for robot in dict.fromkeys(r for r, _, _, _ in plan):
             for obs in OBSERVATIONS:
                 base = f"base:{robot}" + ("" if obs == "blind" else f":{obs}")
@@ -760,16 +917,15 @@ def print_plan(args) -> int:
                 mark = "done" if left == 0.0 else f"partial ({left:.0%} left)"
                 print(f"  archive {gen} --robot ant: {mark} ({archive_folder(args.out, 'ant', gen)})")
             continue
-        needed = f"{gen}-map" in humanoid_choice(args.out) if robot == "humanoid" else any(
+        needed = gen in humanoid_generators(args.out) if robot == "humanoid" else any(
             t.startswith(gen) for _, t in ant_choice(args.out) or [])
         if needed:
             left = state["archive_share"][(robot, gen)]
             mark = "done" if left == 0.0 else "left" if left == 1.0 else f"partial ({left:.0%} left)"
             print(f"  archive {gen} --robot {robot}: {mark} ({archive_path(args.out, robot, gen, args.preset)})")
-    for name, left in state["train_left"].items():
-        total = len(humanoid_choice(args.out)) if name.startswith("humanoid") else sum(
-            1 for o, _ in ant_choice(args.out) or [] if o == name.split()[1])
-        print(f"  train {name}: {total - left}/{total} treatments done")
+    for robot, _, folder, names in runs(args.out):
+        name = f"{robot} {run_label(robot, folder)}"
+        print(f"  train {name}: {len(names) - state['train_left'][name]}/{len(names)} treatments done")
     if state["ant_pending"]:
         print("  train ant: not chosen yet (train ant --ant OBS/TREATMENT OBS/TREATMENT after the humanoid's "
               "results): predicted at 2 treatments, with their archives")
