@@ -5,7 +5,6 @@ rounding. Each process compiles both programs twice: slow."""
 
 from __future__ import annotations
 
-import os
 import socket
 import subprocess
 import sys
@@ -13,6 +12,7 @@ import textwrap
 from pathlib import Path
 
 import pytest
+from devices import child_env
 
 TESTS = [str(Path(__file__).resolve().parents[1] / d) for d in ("qd", "rl")]  # the unit tests whose fixtures it reuses
 
@@ -62,7 +62,7 @@ def test_two_processes_map_elites_and_ppo_equal_one_process():
     with socket.socket() as s:
         s.bind(("127.0.0.1", 0))
         port = s.getsockname()[1]
-    env = dict(os.environ, XLA_FLAGS="--xla_force_host_platform_device_count=2", JAX_PLATFORMS="cpu")
+    env = child_env(2)
     procs = [subprocess.Popen([sys.executable, "-c", SCRIPT, f"127.0.0.1:{port}", str(i)], env=env,
                               stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True) for i in range(2)]
     outs = [p.communicate(timeout=900) for p in procs]
