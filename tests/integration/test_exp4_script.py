@@ -16,6 +16,20 @@ ROOT = Path(__file__).resolve().parents[2]
 SCRIPT = ROOT / "docs" / "results" / "exp4" / "run.py"
 
 
+def fake_learn(calls: list):
+    """A stand-in for ``run.cli``: records each command; a fresh ``learn`` run leaves a finished treatment."""
+
+    def learn(argv, args):
+        calls.append(argv)
+        if argv[0] == "learn" and argv[1] != "--resume":
+            folder = Path(argv[argv.index("--out") + 1])
+            (folder / "policies").mkdir(parents=True)
+            (folder / "summary.json").write_text("{}")
+        return 0
+
+    return learn
+
+
 @pytest.fixture(scope="module")
 def run():
     module = load_script(SCRIPT, "exp4_run")
@@ -68,6 +82,7 @@ def no_stock_warp_here(run, monkeypatch):
     (["train", "humanoid", "perceptive", "--scan-lr-scale", "0.1", "--treatments", "mixed-dr", "mixed-dr"],
      "--treatments: each treatment once; got mixed-dr mixed-dr"),
 ])
+
 def test_bad_arguments_are_one_line_naming_the_flag(run, argv, message, capsys, tmp_path):
     with pytest.raises(SystemExit) as err:
         run.main([*argv, "--out", str(tmp_path / "out")])
@@ -181,15 +196,7 @@ def test_a_sharded_ant_train_runs_only_its_share_of_the_chosen_treatments(run, t
     """``train ant --ant A B --shard I/2`` trains the I-th of the two chosen treatments (one per GPU); both
     processes save the same choice, and a third process without ``--shard`` finds both done."""
     calls = []
-
-    def learn(argv, args):
-        calls.append(argv)
-        folder = Path(argv[argv.index("--out") + 1])
-        (folder / "policies").mkdir(parents=True)
-        (folder / "summary.json").write_text("{}")
-        return 0
-
-    monkeypatch.setattr(run, "cli", learn)
+    monkeypatch.setattr(run, "cli", fake_learn(calls))
     monkeypatch.setattr(run, "archive_done", lambda *a: True)
     out = tmp_path / "exp4"
     ant = ["--ant", "blind/mixed-dr", "blind/mixed-levels"]
@@ -439,16 +446,7 @@ def test_a_sharded_scan_retrain_trains_its_share_and_keeps_its_choice(run, tmp_p
     original ``train humanoid perceptive`` (no --scan-lr-scale) still runs its curriculum run and writes no
     scan.json."""
     calls = []
-
-    def learn(argv, args):
-        calls.append(argv)
-        if argv[0] == "learn" and argv[1] != "--resume":
-            folder = Path(argv[argv.index("--out") + 1])
-            (folder / "policies").mkdir(parents=True)
-            (folder / "summary.json").write_text("{}")
-        return 0
-
-    monkeypatch.setattr(run, "cli", learn)
+    monkeypatch.setattr(run, "cli", fake_learn(calls))
     monkeypatch.setattr(run, "archive_done", lambda *a: True)
     out = tmp_path / "exp4"
     base = ["train", "humanoid", "perceptive", "--out", str(out)]
