@@ -530,21 +530,27 @@ def stage_train_scan(args) -> int:
         atomic_write_text(args.out / "scan.json", json.dumps({"scale": scale, "treatments": names}) + "\n")
     else:
         names = saved[1]  # the saved order: every --shard splits the same list
-    if args.shard is not None:  # process I of N trains the I-th, (I+N)-th, ... of the treatments
-        index, count = args.shard
-        names = names[index::count]
     run = scan_folder(args.out, scale)
     label = run_label("humanoid", run)
-    for treatment in names:
-        folder = run / treatment
+    return learn_runs(args, [(f"humanoid {label}/{t}", run / t,
+                              learn_argv(args, "humanoid", "perceptive", t, run, scale)) for t in names])
+
+
+def learn_runs(args, jobs: list[tuple[str, Path, list[str]]]) -> int:
+    """One ``learn`` run per job ``(label, folder, its fresh argv)``, of ``--shard I/N``'s share (the I-th, (I+N)-th,
+    ... job): skipped when done, resumed where its ``config.json`` is. The ant's treatments and the perceptive
+    humanoid's retrain. Returns the first failing exit status, else 0."""
+    if args.shard is not None:
+        index, count = args.shard
+        jobs = jobs[index::count]
+    for label, folder, argv in jobs:
         if treatment_done(folder):
-            print(f"train humanoid {label}/{treatment}: done ({folder})", flush=True)
+            print(f"train {label}: done ({folder})", flush=True)
             continue
-        code = cli(["learn", "--resume", str(folder)] if (folder / "config.json").is_file()
-                   else learn_argv(args, "humanoid", "perceptive", treatment, run, scale), args)
+        code = cli(["learn", "--resume", str(folder)] if (folder / "config.json").is_file() else argv, args)
         if code != 0:
             return code
-        print(f"train humanoid {label}/{treatment}: done ({folder})", flush=True)
+        print(f"train {label}: done ({folder})", flush=True)
     return 0
 
 
@@ -598,20 +604,8 @@ def stage_train(args, robot: str, obs: str | None) -> int:
 
         args.out.mkdir(parents=True, exist_ok=True)
         atomic_write_text(args.out / "ant.json", json.dumps({"treatments": [list(x) for x in pairs]}) + "\n")
-    if args.shard is not None:  # process I of N trains the I-th, (I+N)-th, ... of the --ant treatments
-        index, count = args.shard
-        pairs = pairs[index::count]
-    for obs, treatment in pairs:
-        folder = train_folder(args.out, "ant", obs) / treatment
-        if treatment_done(folder):
-            print(f"train ant {obs}/{treatment}: done ({folder})", flush=True)
-            continue
-        code = cli(["learn", "--resume", str(folder)] if (folder / "config.json").is_file()
-                   else learn_argv(args, "ant", obs, treatment, train_folder(args.out, "ant", obs)), args)
-        if code != 0:
-            return code
-        print(f"train ant {obs}/{treatment}: done ({folder})", flush=True)
-    return 0
+    return learn_runs(args, [(f"ant {obs}/{t}", train_folder(args.out, "ant", obs) / t,
+                              learn_argv(args, "ant", obs, t, train_folder(args.out, "ant", obs))) for obs, t in pairs])
 
 
 def load_reevaluate():
