@@ -7,6 +7,9 @@
 # or a fresh one with the returned separate.tar.gz unpacked in the repository root) until both GPUs say done.
 # Returns in $OUT: separate.tar.gz (runs/sep-*, checkpoints of unfinished runs included; runs/shares once all are
 # done), the logs. PRESET=smoke, MIXED=RUN and STEPS=ARCHIVE (smoke-size runs) check the wiring on a CPU.
+# GENS0 / GENS1 (space-separated generators) change which GPU evolves which; FIRST0 / FIRST1 run a command line on
+# that GPU before its generators (e.g. a benchmark; `left` gives its minutes), and EXTRA_OUT names more paths to pack
+# into separate.tar.gz (e.g. that benchmark's output folder).
 # Usage: bash benchmarks/device/separate.sh LIMIT_S
 set -uo pipefail
 here=$(dirname "$0")
@@ -27,14 +30,18 @@ evolve_one() {
   echo "separate $1: done ($d, $((SECONDS - t0)) s this command)"
 }
 export -f evolve_one
-bash "$here/pair.sh" "$limit" \
-  "evolve_one perlin && evolve_one worley && evolve_one gan" \
-  "evolve_one diamond_square && evolve_one cppn"
+line() {  # "FIRST; evolve_one A && evolve_one B ..." (FIRST's exit status does not stop the generators)
+  local out=${1:+$1; }true g
+  for g in $2; do out="$out && evolve_one $g"; done
+  echo "$out"
+}
+bash "$here/pair.sh" "$limit" "$(line "${FIRST0:-}" "${GENS0-perlin worley gan}")" \
+  "$(line "${FIRST1:-}" "${GENS1-diamond_square cppn}")"
 gens="perlin worley gan diamond_square cppn"
 if all=1; for g in $gens; do [ -f "runs/sep-$g/done.json" ] || all=0; done; [ "$all" = 1 ]; then
   python3 -m experiments shares --mixed "$mixed" --separate $(for g in $gens; do echo "runs/sep-$g"; done) \
     "${STEPS:-docs/results/steps_gpushort/archive.npz}" --out runs/shares || echo "separate: shares failed"
 fi
-tar czf "$OUT/separate.tar.gz" runs/sep-* $( [ -d runs/shares ] && echo runs/shares )
+tar czf "$OUT/separate.tar.gz" $(ls -d runs/sep-* 2>/dev/null) $( [ -d runs/shares ] && echo runs/shares ) ${EXTRA_OUT:-}
 cp runs/gpu0.log runs/gpu1.log "$OUT/"
 ls -la "$OUT"
