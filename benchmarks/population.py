@@ -305,7 +305,7 @@ def hardest_rows(out: Path, peers: dict[str, Path]) -> list[dict]:
 
 def part_report(out: Path, sequential: Path | None = None) -> dict:
     """The ratios of the parts done so far, as ``population.json`` and a printed table; six's hardest cells against
-    ``alone`` (same commit) and ``sequential`` (:func:`hardest_rows`)."""
+    ``alone`` (same commit), ``split`` (when done) and ``sequential`` (:func:`hardest_rows`)."""
     got = {p: done(out, p) for p in PARTS[:-1]}
     report = {"environment": environment(), **{p: r for p, r in got.items() if r}}
     rows = []
@@ -327,7 +327,8 @@ def part_report(out: Path, sequential: Path | None = None) -> dict:
         report["six_vs_split_wall"] = got["six"]["wall_s"] / got["split"]["wall_s"]
         rows.append({"what": f"split over {len(got['split']['devices'])} GPUs (whole run)",
                      "wall s": got["split"]["wall_s"]})
-    peers = {"alone": out / "alone", **({"sequential": sequential} if sequential else {})}
+    peers = {"alone": out / "alone", **({"split": out / "split"} if got["split"] else {}),
+             **({"sequential": sequential} if sequential else {})}
     report["hardest"] = hardest_rows(out, peers) if got["six"] else []
     write_json(out / "population.json", report)
     print(markdown_table(rows, ["what", "s per chunk", "physics M steps/s", "of the peak", "wall s"]))

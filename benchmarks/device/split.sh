@@ -11,8 +11,10 @@
 # Each stops LIMIT_S seconds after it starts, less 45 s for packing (`--time-limit` from the deadline).
 set -uo pipefail
 here=$(dirname "$0")
-what=${1:?split|orders}
-limit=${2:?LIMIT_S}
+what=${1:-}
+limit=${2:-}
+case "$what" in split|orders) ;; *) echo "split.sh: the first argument must be split or orders, got '$what'" >&2; exit 2 ;; esac
+[[ "$limit" =~ ^[0-9]+$ ]] || { echo "split.sh: LIMIT_S must be a whole number of seconds, got '$limit'" >&2; exit 2; }
 deadline=$(( $(date +%s) + limit - 45 ))
 minutes() { python3 -c "import time; print(round(max($deadline - time.time(), 6) / 60, 3))"; }
 mkdir -p runs
@@ -32,6 +34,5 @@ case "$what" in
       "$eo --chunks 3 --rounds 5 --archives cppn=jaxterrain/assets/archives/cppn_headings.npz --out runs/eval_order_alone --work /tmp/eo_alone"
     tar czf "$OUT/eval_order.tar.gz" runs/eval_order runs/eval_order_alone 2>/dev/null
     cp runs/gpu0.log runs/gpu1.log "$OUT/" ;;
-  *) echo "split.sh: the first argument must be split or orders, got '$what'" >&2; exit 2 ;;
 esac
 ls -la "$OUT"

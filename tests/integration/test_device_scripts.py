@@ -132,6 +132,43 @@ def test_heldout_script_parses_and_needs_walkers_for_a_new_folder(tmp_path):
     assert got.returncode == 2 and got.stderr == "heldout.sh: no POLICY_DIR given\n"
 
 
+@pytest.mark.parametrize("argv, message", [
+    (["both", "100"], "the first argument must be split or orders, got 'both'"),
+    (["split", "9m"], "LIMIT_S must be a whole number of seconds, got '9m'"),
+    ([], "the first argument must be split or orders, got ''"),
+])
+def test_split_script_parses_and_refuses_bad_arguments(tmp_path, argv, message):
+    """``split.sh split|orders LIMIT_S`` (issue 63's two-GPU split and interleaved orders): valid bash; a bad
+    argument is refused in one line before anything runs."""
+    subprocess.run(["bash", "-n", str(DEVICE / "split.sh")], check=True)
+    got = subprocess.run(["bash", str(DEVICE / "split.sh"), *argv], cwd=tmp_path, capture_output=True, text=True)
+    assert got.returncode == 2 and got.stderr == f"split.sh: {message}\n"
+    assert not (tmp_path / "runs").exists()
+
+
+def test_separate_resumes_a_partial_set_and_runs_first_lines(tmp_path):
+    """``separate.sh`` on a fresh folder unpacks ``PARTIAL`` (an earlier call's ``separate.tar.gz``): a run it marks
+    done is not evolved again; ``GENS0``/``GENS1`` choose each GPU's generators, ``FIRST0`` runs before them on GPU 0
+    (with ``left``), and ``EXTRA_OUT`` travels in the returned tar."""
+    done = tmp_path / "seed" / "runs" / "sep-perlin"
+    done.mkdir(parents=True)
+    (done / "done.json").write_text("{}")
+    with tarfile.open(tmp_path / "partial.tar.gz", "w:gz") as tar:
+        tar.add(done, arcname="runs/sep-perlin")
+    work, out = tmp_path / "work", tmp_path / "out"
+    work.mkdir()
+    out.mkdir()
+    env = {**os.environ, "PATH": f"{Path(sys.executable).parent}:{os.environ['PATH']}", "OUT": str(out),
+           "PARTIAL": str(tmp_path / "partial.tar.gz"), "MIXED": "none", "GENS0": "perlin", "GENS1": "",
+           "FIRST0": 'echo "first0 $(left)" > runs/first0.txt', "EXTRA_OUT": "runs/first0.txt"}
+    subprocess.run(["bash", str(DEVICE / "separate.sh"), "100"], cwd=work, env=env, check=True, capture_output=True)
+    assert "separate perlin: done (runs/sep-perlin)" in (work / "runs" / "gpu0.log").read_text()
+    assert (work / "runs" / "first0.txt").read_text().startswith("first0 0.")  # minutes left of a 100-s deadline
+    with tarfile.open(out / "separate.tar.gz") as tar:
+        names = tar.getnames()
+    assert "runs/first0.txt" in names and "runs/sep-perlin/done.json" in names and not (work / "runs" / "shares").exists()
+
+
 @pytest.mark.slow
 def test_separate_runs_five_archives_and_their_shares_at_smoke_size(tmp_path):
     """``separate.sh`` (issue 64 item 3's separate archives over two GPUs) at smoke size on the CPU: the five paper
