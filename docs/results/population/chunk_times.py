@@ -1,7 +1,7 @@
 """Seconds per chunk of the whole runs `six`, `alone` and `split`, read back from their logs (logs/gpu1.log.gz: six on
 GPU 1; logs/gpu0.log.gz: alone on GPU 0, then Experiment 4's ant archives; logs/split.log.gz: the two processes of
-`split`, one per GPU, whose lines interleave: each line goes to the process whose last printed chunk is below its
-own and nearest, of two as near the one whose last printed hardest cell is nearest).
+`split`, one per GPU, whose lines interleave and name no process: each line goes to the process whose trials' mean
+hardest cell after that chunk, from their history.csv, is the one the line prints).
 
     python docs/results/population/chunk_times.py
 
@@ -15,26 +15,40 @@ time to within 0.05 s x its chunks.
 
 from __future__ import annotations
 
+import csv
 import gzip
+import json
 import re
 from pathlib import Path
 
 HERE = Path(__file__).resolve().parent
 RUNS = {"six": ("gpu1.log.gz", r"population 1: chunk (\d+) of \d+.*?, ([\d.]+) s/chunk"),
         "alone": ("gpu0.log.gz", r"cppn map: chunk (\d+) of \d+.*?, ([\d.]+) s/chunk")}
-SPLIT = ("split.log.gz", r"population 1: chunk (\d+) of \d+, hardest ([\d.]+) cells.*?, ([\d.]+) s/chunk", 2)
+SPLIT = ("split.log.gz", r"population 1: chunk (\d+) of \d+, hardest ([\d.]+) cells.*?, ([\d.]+) s/chunk")
 
 
-def tracks(lines: list[tuple[int, float, float]], n: int) -> list[list[tuple[int, float]]]:
-    """``n`` processes' ``(chunk, hardest, running s/chunk)`` lines of one command, interleaved, apart: each line joins
-    the process whose last chunk is below the line's and nearest to it, of two as near the one whose last hardest
-    cell is nearest."""
-    out: list[list[tuple[int, float, float]]] = [[] for _ in range(n)]
-    for line in lines:
-        free = [t for t in out if not t or t[-1][0] < line[0]]
-        best = min(free, key=lambda t: (line[0] - t[-1][0], abs(t[-1][1] - line[1])) if t else (0, 0.0))
-        best.append(line)
-    return [[(c, s) for c, _, s in t] for t in out]
+def split_hardest() -> list[dict[int, float]]:
+    """Per process of ``split`` (``split<I>of<N>.json``: its treatments, on GPU I), the mean hardest cell of its
+    trials after each chunk (1-based, as the log prints it), from the treatments' ``history.csv``."""
+    out = []
+    for shard in sorted(HERE.glob("split*of*.json")):
+        rows: dict[int, list[float]] = {}
+        for name in json.loads(shard.read_text())["treatments"]:
+            with open(HERE / "split" / name.replace(" ", "-") / "history.csv") as f:
+                for r in csv.DictReader(f):
+                    rows.setdefault(int(r["chunk"]) + 1, []).append(float(r["hardest"]))
+        out.append({c: sum(v) / len(v) for c, v in rows.items()})
+    return out
+
+
+def tracks(lines: list[tuple[int, float, float]], hardest: list[dict[int, float]]) -> list[list[tuple[int, float]]]:
+    """The processes' ``(chunk, hardest, running s/chunk)`` lines of one command, interleaved, apart: each line joins
+    the process whose trials' mean hardest cell after that chunk (:func:`split_hardest`) is the line's."""
+    out: list[list[tuple[int, float]]] = [[] for _ in hardest]
+    for c, h, s in lines:
+        k = min(range(len(hardest)), key=lambda k: abs(hardest[k].get(c, float("inf")) - h))
+        out[k].append((c, s))
+    return out
 
 
 def commands(path: Path, pattern: str) -> list[list[tuple]]:
@@ -73,12 +87,12 @@ def report(run: str, runs: list[list[tuple[int, float]]]) -> None:
 def main() -> None:
     for run, (log, pattern) in RUNS.items():
         report(run, commands(HERE / "logs" / log, pattern))
-    log, pattern, n = SPLIT
+    log, pattern = SPLIT
     if (HERE / "logs" / log).exists():
-        per = [tracks(c, n) for c in commands(HERE / "logs" / log, pattern)]
-        for k in range(n):
-            report(f"split, process {k}", [c[k] for c in per])
-
+        hardest = split_hardest()
+        per = [tracks(c, hardest) for c in commands(HERE / "logs" / log, pattern)]
+        for k in range(len(hardest)):
+            report(f"split, GPU {k}", [c[k] for c in per])
 
 if __name__ == "__main__":
     main()
