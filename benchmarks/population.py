@@ -228,7 +228,9 @@ def part_run(args, out: Path, clock: Clock, which: str) -> dict:
     left = clock.left()
     if which in ("six", "shard"):
         summaries = batch.run_treatments([batch.Treatment(n, r, folder / n.replace(" ", "-")) for n, r in plan],
-                                         left, say=log, progress="plain")
+                                         left, say=log, progress="plain",
+                                         label=f"shard {args.shard[0]}/{args.shard[1]} population"
+                                         if which == "shard" else "population")
     else:
         summaries = [runner.run_treatment(plan[0][1], folder / plan[0][0].replace(" ", "-"), left, desc=plan[0][0],
                                           progress="plain")]

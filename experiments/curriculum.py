@@ -418,7 +418,9 @@ def run_populations(args, cfg: dict, folder: Path, mine: list, left: float | Non
         return batch.run_treatments(treatments, None if left is None else max(left, 1e-3),
                                     max_envs=args.population_envs,
                                     block_seconds=args.block_seconds or batch.BLOCK_SECONDS,
-                                    progress=common.progress_mode(args), say=lambda line: print(line, flush=True))
+                                    progress=common.progress_mode(args), say=lambda line: print(line, flush=True),
+                                    label=f"shard {args.shard[0]}/{args.shard[1]} population" if args.shard
+                                    else "population")
     except runner.BadInput as err:
         print(f"curriculum: {learn.flags_in(str(err), mine[0][2])}", file=sys.stderr)
         return None

@@ -399,7 +399,7 @@ def _snapshot(folder, v: _Valid, ppo, bank, names, states, chunk):
 def run_treatments(treatments: Sequence[Treatment], time_limit_s: Optional[float] = None, *,
                    max_envs: Optional[int] = None, block_seconds: Optional[float] = BLOCK_SECONDS,
                    memory_bytes: Optional[int] = None, progress: bool | str = True,
-                   say: Callable[[str], None] = print) -> list[Optional[dict]]:
+                   say: Callable[[str], None] = print, label: str = "population") -> list[Optional[dict]]:
     """Run (or continue) ``treatments`` in groups, one compiled program each (see the module docstring): their
     summaries in order, None for those the time limit stopped (checkpointed; call again to continue).
 
@@ -409,7 +409,8 @@ def run_treatments(treatments: Sequence[Treatment], time_limit_s: Optional[float
     ``memory_bytes`` (None: :func:`device_memory`) is split in two. ``say`` gets one line per group (which
     treatments share a program) and per split. ``time_limit_s`` counts from this call, set-up and compiles
     included (the first population runs at least one chunk, as ``runner.run_treatment`` does); ``block_seconds``:
-    :func:`drive`'s."""
+    :func:`drive`'s. ``label`` starts every line and progress bar (``"<label> <number>: ..."``): name the process
+    there when several print to one log (e.g. ``"GPU 1 population"``)."""
     t0 = time.perf_counter()
     out: list[Optional[dict]] = [None] * len(treatments)
     todo = []
@@ -434,19 +435,19 @@ def run_treatments(treatments: Sequence[Treatment], time_limit_s: Optional[float
             members, block, budget, trials = _setup([valid[i] for i in group], memory_bytes, say)
         except _TooBig as err:
             half = (len(group) + 1) // 2
-            say(f"population {names}: its program needs {err.need / GIB:.1f} GiB, the device has "
+            say(f"{label} {names}: its program needs {err.need / GIB:.1f} GiB, the device has "
                 f"{err.limit / GIB:.1f} GiB: split into {half} and {len(group) - half} treatments")
             queue[:0] = [group[:half], group[half:]]
             continue
         number += 1
         envs = sum(envs_of(valid[i].run) for i in group)
-        say(f"population {number} of {number + len(queue)}: {names} ({len(group)} treatment"
+        say(f"{label} {number} of {number + len(queue)}: {names} ({len(group)} treatment"
             f"{'s' if len(group) > 1 else ''}, {trials} trials, {envs} envs per physics call) in one program")
         if any(m.done for m in members):
-            say(f"population {number}: resuming " + ", ".join(f"{m.desc} at chunk {m.done} of {m.total}"
+            say(f"{label} {number}: resuming " + ", ".join(f"{m.desc} at chunk {m.done} of {m.total}"
                                                            for m in members))
         finished = drive(members, block, every=int(budget.chunks_per_call), start=t0, time_limit_s=time_limit_s,
-                         block_seconds=block_seconds, desc=f"population {number}", progress=progress,
+                         block_seconds=block_seconds, desc=f"{label} {number}", progress=progress,
                          compact=bool(budget.compact))
         for i, m in zip(group, members):
             out[i] = m.summary

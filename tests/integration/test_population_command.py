@@ -155,6 +155,13 @@ def test_populations_split_in_one_line_where_a_program_does_not_fit(archives, tm
     lines.clear()
     batch.run_treatments(treatments, max_envs=16, say=lines.append)
     assert lines[0].startswith("population a map, b map: its program needs") and len(lines) == 4
+    lines.clear()  # a label names the process in every line and progress bar (several processes, one log)
+    descs = []
+    monkeypatch.setattr(batch, "drive", lambda members, *args, **kwargs: descs.append(kwargs["desc"]) or True)
+    batch.run_treatments(treatments, max_envs=16, say=lines.append, label="shard 1/2 population")
+    assert lines[0].startswith("shard 1/2 population a map, b map: its program needs") and len(lines) == 4
+    assert lines[2] == "shard 1/2 population 2 of 3: b map (1 treatment, 2 trials, 8 envs per physics call) in one program"
+    assert descs == ["shard 1/2 population 1", "shard 1/2 population 2", "shard 1/2 population 3"]
 
 
 def test_population_flags_are_checked_before_a_run_folder(tmp_path, capsys):
