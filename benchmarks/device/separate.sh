@@ -7,7 +7,8 @@
 # or a fresh one with the returned separate.tar.gz unpacked in the repository root) until both GPUs say done.
 # Returns in $OUT: separate.tar.gz (runs/sep-*, checkpoints of unfinished runs included; runs/shares once all are
 # done), the logs; a fresh machine first unpacks PARTIAL (default the committed
-# docs/results/mixed_archive/separate-partial.tar.gz) when no runs/sep-* is there. PRESET=smoke, MIXED=RUN and STEPS=ARCHIVE (smoke-size runs) check the wiring on a CPU.
+# docs/results/mixed_archive/separate-partial.tar.gz) when no runs/sep-* is there. PRESET=smoke, MIXED=RUN and
+# STEPS=ARCHIVE (smoke-size runs) check the wiring on a CPU.
 # GENS0 / GENS1 (space-separated generators) change which GPU evolves which; FIRST0 / FIRST1 run a command line on
 # that GPU before its generators (e.g. a benchmark; `left` gives its minutes), and EXTRA_OUT names more paths to pack
 # into separate.tar.gz (e.g. that benchmark's output folder).
