@@ -278,3 +278,26 @@ def test_eval_order_benchmark_at_cpu_size(tmp_path, capsys):
     assert "| lag |" in (out / "eval_order.md").read_text()
     assert bench.main(["--orders", "sequential,lag", *tiny]) == 0
     assert "done before" in capsys.readouterr().out
+
+
+def test_population_report_sets_six_against_split_trial_by_trial(tmp_path):
+    """``population.py --parts report`` once ``six`` and ``split`` are done: their wall-time ratio, and per treatment
+    six's hardest cells against split's (means over trials, P(a trial of six beats a trial of split)); a treatment
+    whose six trials all beat split's is flagged as a difference."""
+    import json
+
+    bench = load_benchmark("population")
+    for part, wall in (("six", 120.0), ("split", 80.0)):
+        (tmp_path / f"{part}.json").write_text(json.dumps({"done": True, "wall_s": wall, "devices": [0, 1]}))
+        for name, hardest in (("a-map", [5.0, 6.0, 7.0, 8.0]), ("b-map", [3.0, 3.0, 4.0, 4.0])):
+            if part == "split" and name == "b-map":
+                hardest = [1.0, 1.0, 2.0, 2.0]  # every six trial (3-4) above every split trial (1-2)
+            folder = tmp_path / part / name
+            folder.mkdir(parents=True)
+            (folder / "summary.json").write_text(json.dumps({"hardest": hardest}))
+    report = bench.part_report(tmp_path)
+    assert report["six_vs_split_wall"] == pytest.approx(1.5)
+    rows = {(r["treatment"], r["peer"]): r for r in report["hardest"]}
+    assert set(rows) == {("a-map", "split"), ("b-map", "split")}
+    assert rows["a-map", "split"]["six"][0] == pytest.approx(6.5) and not rows["a-map", "split"]["differ"]
+    assert rows["b-map", "split"]["p_six_better"][0] == pytest.approx(1.0) and rows["b-map", "split"]["differ"]
