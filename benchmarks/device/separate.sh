@@ -7,7 +7,7 @@
 # or a fresh one with the returned separate.tar.gz unpacked in the repository root) until both GPUs say done.
 # Returns in $OUT: separate.tar.gz (runs/sep-*, checkpoints of unfinished runs included; runs/shares once all are
 # done), the logs; a fresh machine first unpacks PARTIAL (default the committed
-# docs/results/mixed_archive/separate-partial.tar.gz) when no runs/sep-* is there. PRESET=smoke, MIXED=RUN and
+# docs/results/mixed_archive/separate.tar.gz) when no runs/sep-* is there. PRESET=smoke, MIXED=RUN and
 # STEPS=ARCHIVE (smoke-size runs) check the wiring on a CPU.
 # GENS0 / GENS1 (space-separated generators) change which GPU evolves which; FIRST0 / FIRST1 run a command line on
 # that GPU before its generators (e.g. a benchmark; `left` gives its minutes), and EXTRA_OUT names more paths to pack
@@ -19,7 +19,7 @@ limit=${1:?LIMIT_S}
 export PRESET=${PRESET:-gpu-short}
 mixed=${MIXED:-runs/exp4/archive/humanoid-mixed}
 # an earlier session's unfinished set (in git): the runs it finished stay done, the rest resume from its checkpoints
-partial=${PARTIAL:-docs/results/mixed_archive/separate-partial.tar.gz}
+partial=${PARTIAL:-docs/results/mixed_archive/separate.tar.gz}
 ls -d runs/sep-* >/dev/null 2>&1 || [ ! -f "$partial" ] || tar xzf "$partial"
 [ -n "${MIXED:-}" ] || [ -f "$mixed/archive.npz" ] || tar xzf docs/results/exp4/archives/humanoid-mixed.tar.gz
 # one generator's separate archive: fresh, resumed, or done (evolve exits 0 when it finished, 3 at the time limit;

@@ -9,7 +9,7 @@
 set -euo pipefail
 top=$(git rev-parse --show-toplevel); cd "$top"
 stash="${JT_STASH:-$top/../jt-stash.tar}"
-medium='^(\.gitignore$|jaxterrain/|experiments/|benchmarks/|pyproject\.toml$|docs/results/exp4/run\.py$|docs/results/steps_gpushort/archive\.npz$|docs/results/suite_v2/reevaluate\.py$|docs/results/eval_order/run\.py$|docs/results/exp4/archives/|docs/results/mixed_archive/separate-partial\.tar\.gz$)'
+medium='^(\.gitignore$|jaxterrain/|experiments/|benchmarks/|pyproject\.toml$|docs/results/exp4/run\.py$|docs/results/steps_gpushort/archive\.npz$|docs/results/suite_v2/reevaluate\.py$|docs/results/eval_order/run\.py$|docs/results/exp4/archives/|docs/results/mixed_archive/separate\.tar\.gz$)'
 tiny='^(\.gitignore$|benchmarks/device/)'
 back() { if [ -f "$stash" ]; then tar xf "$stash" && rm -f "$stash"; fi; }
 case "${1:-}" in
