@@ -12,7 +12,7 @@ here=$(dirname "$0")
 exp4='python3 docs/results/exp4/run.py archive'
 # Experiment 4's folder: every packed archive in docs/results/exp4/archives/ (in git; a partial one resumes), or
 # EXP4_TAR: what an earlier call's exp4.tar.gz holds
-[ -d runs/exp4 ] || for t in ${EXP4_TAR:-docs/results/exp4/archives/*.tar.gz}; do tar xzf "$t"; done
+bash "$here/exp4_unpack.sh" || exit 1
 pop='python3 benchmarks/population.py --preset gpu-short --backend warp --out runs/population --time-limit "$(left)"'
 bash "$here/pair.sh" "${1:?LIMIT_S}" \
   "$pop --parts alone && $exp4 steps --robot ant --time-limit \"\$(left)\" --pack $OUT/exp4.tar.gz && $exp4 mixed --robot ant --time-limit \"\$(left)\" --pack $OUT/exp4.tar.gz" \

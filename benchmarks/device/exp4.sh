@@ -19,7 +19,7 @@ case "$obs" in blind|perceptive) ;; *) echo "exp4.sh: OBS must be blind or perce
 run='python3 docs/results/exp4/run.py'
 # Experiment 4's folder: every packed archive in docs/results/exp4/archives/ (in git; a partial one resumes), or
 # EXP4_TAR: what an earlier call's exp4.tar.gz holds
-[ -d runs/exp4 ] || for t in ${EXP4_TAR:-docs/results/exp4/archives/*.tar.gz}; do tar xzf "$t"; done
+bash "$here/exp4_unpack.sh" || exit 1
 extra=${EXTRA1:-"$run archive mixed --robot ant --time-limit \"\$(left)\""}
 bash "$here/pair.sh" "$limit" \
   "$run train humanoid $obs --shard 0/2 --time-limit \"\$(left)\"" \

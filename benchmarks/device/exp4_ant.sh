@@ -15,7 +15,7 @@ set -- $ant
 [ $# = 2 ] || { echo "exp4_ant.sh: give two OBS/TREATMENT (the ant's treatments), got: $ant" >&2; exit 2; }
 start=$(date +%s)
 run='python3 docs/results/exp4/run.py'
-[ -d runs/exp4 ] || for t in ${EXP4_TAR:-docs/results/exp4/archives/*.tar.gz}; do tar xzf "$t"; done
+bash "$here/exp4_unpack.sh" || exit 1
 bash "$here/pair.sh" "$limit" \
   "$run train ant --ant $ant --shard 0/2 --time-limit \"\$(left)\"" \
   "$run train ant --ant $ant --shard 1/2 --time-limit \"\$(left)\""

@@ -9,7 +9,7 @@ set -uo pipefail
 here=$(dirname "$0")
 limit=${1:?LIMIT_S}
 run='python3 docs/results/exp4/run.py'
-[ -d runs/exp4 ] || for t in ${EXP4_TAR:-docs/results/exp4/archives/*.tar.gz}; do tar xzf "$t"; done
+bash "$here/exp4_unpack.sh" || exit 1
 bash "$here/pair.sh" "$limit" \
   "$run evaluate --part 0/2 --time-limit \"\$(left)\"" \
   "$run evaluate --part 1/2 --time-limit \"\$(left)\""

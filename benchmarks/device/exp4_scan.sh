@@ -29,7 +29,7 @@ done
 start=$(date +%s)
 run='python3 docs/results/exp4/run.py'
 train="$run train humanoid perceptive --scan-lr-scale $scale --treatments $treatments"
-[ -d runs/exp4 ] || for t in ${EXP4_TAR:-docs/results/exp4/archives/*.tar.gz}; do tar xzf "$t"; done
+bash "$here/exp4_unpack.sh" || exit 1
 bash "$here/pair.sh" "$limit" \
   "$train --shard 0/2 --time-limit \"\$(left)\"" \
   "$( [ $# = 2 ] && echo "$train --shard 1/2 --time-limit \"\$(left)\"" )"

@@ -195,3 +195,31 @@ def test_separate_runs_five_archives_and_their_shares_at_smoke_size(tmp_path):
     logs = (tmp_path / "runs" / "gpu0.log").read_text() + (tmp_path / "runs" / "gpu1.log").read_text()
     assert all(logs.count(f"separate {g}: done") == 2 for g in gens)  # the second call: done, nothing evolved
     assert logs.count("compiling a MAP-Elites generation") == 5
+
+
+def test_exp4_unpack_takes_the_marker_not_the_folder_for_done(tmp_path):
+    """``exp4_unpack.sh``: a ``runs/exp4`` that holds only ``separate.sh``'s mixed archive does not pass for the whole
+    store (every shipped archive is unpacked, then the marker written); once the marker is there, a second call
+    unpacks nothing (it would overwrite the walks of a run in progress); a tar that cannot be read fails in one line."""
+    seed = tmp_path / "seed" / "runs" / "exp4" / "train" / "humanoid-blind"
+    seed.mkdir(parents=True)
+    (seed / "summary.json").write_text("shipped")
+    archives = tmp_path / "work" / "docs" / "results" / "exp4" / "archives"
+    archives.mkdir(parents=True)
+    with tarfile.open(archives / "humanoid-blind.tar.gz", "w:gz") as tar:
+        tar.add(tmp_path / "seed" / "runs", arcname="runs")
+    work = tmp_path / "work"
+    (work / "runs" / "exp4" / "archive" / "humanoid-mixed").mkdir(parents=True)  # what separate.sh leaves
+    env = {k: v for k, v in os.environ.items() if k != "EXP4_TAR"}
+    run = lambda **extra: subprocess.run(["bash", str(DEVICE / "exp4_unpack.sh")], cwd=work,  # noqa: E731
+                                         env={**env, **extra}, capture_output=True, text=True)
+    assert run().returncode == 0
+    shipped = work / "runs" / "exp4" / "train" / "humanoid-blind" / "summary.json"
+    assert shipped.read_text() == "shipped" and (work / "runs" / "exp4" / ".unpacked").is_file()
+    shipped.write_text("in progress")
+    assert run().returncode == 0 and shipped.read_text() == "in progress"
+    (work / "runs" / "exp4" / ".unpacked").unlink()
+    (tmp_path / "bad.tar.gz").write_text("not a tar")
+    got = run(EXP4_TAR=str(tmp_path / "bad.tar.gz"))
+    assert got.returncode == 1 and f"exp4_unpack.sh: could not unpack {tmp_path / 'bad.tar.gz'}" in got.stderr
+    assert not (work / "runs" / "exp4" / ".unpacked").exists()
