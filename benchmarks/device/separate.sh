@@ -18,7 +18,8 @@ here=$(dirname "$0")
 limit=${1:?LIMIT_S}
 export PRESET=${PRESET:-gpu-short}
 mixed=${MIXED:-runs/exp4/archive/humanoid-mixed}
-# an earlier session's unfinished set (in git): the runs it finished stay done, the rest resume from its checkpoints
+# the committed set of separate runs (all five done since 2026-11-30; a partial set works too): the runs it finished
+# stay done, the rest resume from its checkpoints
 partial=${PARTIAL:-docs/results/mixed_archive/separate.tar.gz}
 ls -d runs/sep-* >/dev/null 2>&1 || [ ! -f "$partial" ] || tar xzf "$partial"
 [ -n "${MIXED:-}" ] || [ -f "$mixed/archive.npz" ] || tar xzf docs/results/exp4/archives/humanoid-mixed.tar.gz
